@@ -1,0 +1,13 @@
+# -DLIBFX_ASAN=ON / -DLIBFX_UBSAN=ON instrument every target (library, CLI, tests).
+set(_libfx_san "")
+if(LIBFX_ASAN)
+  list(APPEND _libfx_san address)
+endif()
+if(LIBFX_UBSAN)
+  list(APPEND _libfx_san undefined)
+endif()
+if(_libfx_san)
+  list(JOIN _libfx_san "," _libfx_san_list)
+  add_compile_options(-fsanitize=${_libfx_san_list} -fno-omit-frame-pointer -fno-sanitize-recover=undefined)
+  add_link_options(-fsanitize=${_libfx_san_list})
+endif()

@@ -1,0 +1,106 @@
+/* The effect class: every effect is one file defining one `const fx_effect_class`.
+ *
+ * An effect declares its parameters once, as a table beside its params struct
+ * (name, type, default, hard and soft range, doc, offset into the struct). The
+ * recipe parser, the C setters, `libfx describe`, the add-on's UI and the docs all
+ * read that table. The stack hands process() the effective parameters (defaults,
+ * then the quality preset, then the user's explicit values), already range-checked.
+ */
+#ifndef LIBFX_EFFECT_H
+#define LIBFX_EFFECT_H
+
+#include "core/internal.h"
+#include "core/mask.h"
+#include "core/passes.h"
+
+#include <stddef.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#define FX_STRING_PARAM_MAX 1024
+
+typedef struct fx_param_def {
+    fx_param_info info;
+    size_t offset; /* FLOAT: float, INT/BOOL/ENUM: int, FLOATS: float[count],
+                      STRING: char[FX_STRING_PARAM_MAX] */
+} fx_param_def;
+
+/* Table-building macros: FX_P_FLOAT(struct, field, "name", default, min, max, soft_min, soft_max, hint, doc) */
+#define FX_P_FLOAT(st, field, nm, def, lo, hi, slo, shi, hint_, doc_)                                      \
+    { { sizeof(fx_param_info), nm, doc_, FX_PARAM_FLOAT, hint_, def, lo, hi, slo, shi, 1, NULL, NULL, 0, NULL }, \
+      offsetof(st, field) }
+#define FX_P_INT(st, field, nm, def, lo, hi, slo, shi, hint_, doc_)                                        \
+    { { sizeof(fx_param_info), nm, doc_, FX_PARAM_INT, hint_, def, lo, hi, slo, shi, 1, NULL, NULL, 0, NULL },   \
+      offsetof(st, field) }
+#define FX_P_BOOL(st, field, nm, def, doc_)                                                                 \
+    { { sizeof(fx_param_info), nm, doc_, FX_PARAM_BOOL, "", def, 0, 1, 0, 1, 1, NULL, NULL, 0, NULL },           \
+      offsetof(st, field) }
+/* items: a static const char *const[]; def: index of the default item */
+#define FX_P_ENUM(st, field, nm, def, items, doc_)                                                          \
+    { { sizeof(fx_param_info), nm, doc_, FX_PARAM_ENUM, "", def, 0, (double)(sizeof(items) / sizeof(items[0]) - 1), \
+        0, (double)(sizeof(items) / sizeof(items[0]) - 1), 1, NULL, items,                                    \
+        (int)(sizeof(items) / sizeof(items[0])), NULL },                                                      \
+      offsetof(st, field) }
+/* defaults: a static const float[count] */
+#define FX_P_FLOATS(st, field, nm, count_, defaults, lo, hi, hint_, doc_)                                   \
+    { { sizeof(fx_param_info), nm, doc_, FX_PARAM_FLOATS, hint_, 0, lo, hi, lo, hi, count_, defaults, NULL, 0, NULL }, \
+      offsetof(st, field) }
+#define FX_P_STRING(st, field, nm, def, hint_, doc_)                                                        \
+    { { sizeof(fx_param_info), nm, doc_, FX_PARAM_STRING, hint_, 0, 0, 0, 0, 0, 1, NULL, NULL, 0, def },      \
+      offsetof(st, field) }
+
+#define FX_COUNT_OF(a) ((int)(sizeof(a) / sizeof((a)[0])))
+
+/* Everything process() gets. */
+typedef struct fx_effect_run {
+    fx_context *ctx;
+    const fx_frame *frame;  /* the input frame: every pass the stack decoded */
+    const float *src;       /* current Combined RGBA (after the previous effects), width*height*4 */
+    float *dst;             /* output RGBA: process() must fill every pixel inside roi */
+    int width, height;
+    fx_rect roi;            /* pixels whose output matters (the mask's bounds; the whole frame
+                               without a mask). The stack copies src outside roi and blends
+                               dst with src inside it by the mask's coverage. */
+    const fx_mask *mask;    /* coverage in [0,1], or NULL: every pixel */
+    const void *params;     /* the effect's params struct, effective values */
+    int quality;            /* fx_quality the preset came from */
+    int index;              /* position in the stack, for messages */
+    fx_frame *debug;        /* add debug passes here ("<name>" is prefixed by the stack), or NULL */
+} fx_effect_run;
+
+typedef struct fx_effect_class {
+    const char *name;            /* recipe name: "gaussian_blur" */
+    const char *doc;             /* one line */
+    size_t params_size;          /* sizeof the params struct */
+    const fx_param_def *params;
+    int param_count;
+    /* Quality presets as JSON objects of parameter values ("{\"steps\": 16}"), or NULL
+     * for effects without a speed/accuracy trade. Index: fx_quality. */
+    const char *presets[4];
+    /* Passes needed beyond Combined for these params (and the mask's, added by the stack). */
+    fx_pass_set (*passes)(const void *params);
+    /* Non-zero if these params need camera matrices. NULL: never. */
+    int (*needs_camera)(const void *params);
+    /* Border pixels read around each output pixel (for tiling and ROI growth). NULL: 0. */
+    int (*halo)(const void *params, int width, int height);
+    /* Checks between parameters (each one's range is checked already). NULL: none.
+     * On failure, writes a message naming the parameter into err. */
+    fx_result (*validate)(const void *params, char *err, size_t err_size);
+    fx_result (*process)(const fx_effect_run *run);
+} fx_effect_class;
+
+/* The registry (effects/effect_list.c). */
+extern const fx_effect_class *const fx_effect_classes[];
+extern const int fx_effect_class_count;
+const fx_effect_class *fx_effect_find(const char *name);
+const fx_param_def *fx_effect_find_param(const fx_effect_class *cls, const char *name);
+
+/* Parameter storage helpers (core/params.c). */
+void fx_params_set_defaults(const fx_effect_class *cls, void *params);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

@@ -1,0 +1,114 @@
+/* Internal structures and helpers shared by the library's parts (never installed). */
+#ifndef LIBFX_INTERNAL_H
+#define LIBFX_INTERNAL_H
+
+#include "libfx/fx.h"
+
+#include <pthread.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#if defined(__GNUC__)
+#  define FX_PRINTF(a, b) __attribute__((format(printf, a, b)))
+#else
+#  define FX_PRINTF(a, b)
+#endif
+
+/* ---- memory: every allocation goes through here (failure injection in tests) ---- */
+void *fx_mem_alloc(size_t n);
+void *fx_mem_calloc(size_t count, size_t size);
+void *fx_mem_realloc(void *p, size_t n);
+void fx_mem_free(void *p);
+char *fx_mem_strdup(const char *s);
+/* Test hook: the Nth allocation from now fails (0 disables). Not exported from the .so. */
+void fx_mem_fail_after(long n);
+/* a * b * c with overflow check; returns 0 and leaves *out untouched on overflow. */
+int fx_size_mul(size_t *out, size_t a, size_t b, size_t c);
+
+/* ---- context ---- */
+typedef struct fx_thread_error {
+    pthread_t thread;
+    int used;
+    char message[1024];
+} fx_thread_error;
+
+#define FX_MAX_ERROR_SLOTS 32
+
+typedef struct fx_pool fx_pool;
+
+struct fx_context {
+    int threads;
+    int max_width, max_height;
+    uint64_t max_bytes;
+    fx_progress_fn progress;
+    void *progress_user;
+    pthread_mutex_t lock;          /* guards errors and warnings */
+    fx_thread_error errors[FX_MAX_ERROR_SLOTS];
+    int next_error_slot;
+    char **warnings;
+    int warning_count, warning_cap;
+    fx_pool *pool;                 /* worker threads, created on first parallel loop */
+};
+
+/* Records the calling thread's error on ctx and returns code. ctx may be NULL. */
+fx_result fx_fail(const fx_context *ctx, fx_result code, const char *fmt, ...) FX_PRINTF(3, 4);
+fx_result fx_failv(const fx_context *ctx, fx_result code, const char *fmt, va_list ap);
+void fx_warn(const fx_context *ctx, const char *fmt, ...) FX_PRINTF(2, 3);
+/* Reports progress; returns FX_ERR_CANCELLED (with a message) if the callback asks to stop. */
+fx_result fx_progress(const fx_context *ctx, const char *stage, double fraction);
+/* Checks `bytes` against the context's budget; fails with FX_ERR_LIMIT naming `what`. */
+fx_result fx_check_budget(const fx_context *ctx, uint64_t bytes, const char *what);
+
+/* ---- frames ---- */
+#define FX_NAME_MAX 96
+
+typedef struct fx_pass {
+    char name[FX_NAME_MAX];  /* canonical name: "Combined", "Depth", "CryptoObject00", ... */
+    int channels;            /* 1..4, interleaved */
+    int from_half;           /* decoded from half floats (written back as half if asked) */
+    float *data;             /* width * height * channels */
+} fx_pass;
+
+typedef struct fx_meta {
+    char *key;
+    char *value;
+} fx_meta;
+
+struct fx_frame {
+    fx_context *ctx;
+    int width, height;
+    int data_window[4], display_window[4];
+    fx_pass *passes;
+    int pass_count, pass_cap;
+    int has_camera;
+    fx_camera camera;
+    double frame_number, fps;
+    fx_meta *meta;
+    int meta_count, meta_cap;
+};
+
+/* Lookup without error reporting; NULL if absent. */
+fx_pass *fx_frame_find_pass(const fx_frame *f, const char *name);
+/* Adds a pass and hands its (uninitialised) buffer back; replaces one of the same name. */
+fx_result fx_frame_alloc_pass(fx_frame *f, const char *name, int channels, float **out);
+/* Takes ownership of `data` (allocated with fx_mem_alloc). */
+fx_result fx_frame_adopt_pass(fx_frame *f, const char *name, int channels, float *data);
+/* New frame with f's size, windows, camera, time and metadata, no passes. */
+fx_result fx_frame_new_like(const fx_frame *f, fx_frame **out);
+
+/* Replaces NaN with 0 and +-Inf with +-FLT_MAX in place; returns how many were replaced.
+ * Runs in parallel on ctx's pool. */
+size_t fx_sanitize_floats(fx_context *ctx, float *data, size_t count);
+
+/* ---- JSON strings handed to callers ---- */
+char *fx_json_strdup(const char *s); /* copy in fx_mem memory for fx_free */
+
+#ifdef __cplusplus
+}
+#endif
+#endif

@@ -1,0 +1,30 @@
+/* The library's own parallel loop. Work is cut into fixed chunks independent of the
+ * thread count, so every chunk is computed by the same code whatever thread runs it:
+ * output is bit-identical for 1 and N threads. Denormals are flushed to zero while a
+ * loop runs (in workers, and on the calling thread with its FP state restored after). */
+#ifndef LIBFX_PARALLEL_H
+#define LIBFX_PARALLEL_H
+
+#include "core/internal.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* fn(user, begin, end) for consecutive ranges of at most `grain` items covering [0, n). */
+typedef void (*fx_range_fn)(void *user, int begin, int end);
+
+/* Runs on ctx's threads; if the pool cannot start, the loop runs on the calling thread. */
+void fx_parallel_for(fx_context *ctx, int n, int grain, fx_range_fn fn, void *user);
+
+void fx_pool_free(fx_pool *pool);
+
+/* A grain that gives each thread several chunks for balance: ~n / (8 * threads), >= 1.
+ * Only for loops whose items are independent: a reduction must use a fixed grain so
+ * its partial sums do not depend on the thread count. */
+int fx_grain_for(const fx_context *ctx, int n);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

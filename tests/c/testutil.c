@@ -1,0 +1,79 @@
+#include "testutil.h"
+
+#include <math.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+int tu_checks, tu_failures;
+
+int tu_contains(const char *haystack, const char *needle)
+{
+    return haystack && needle && strstr(haystack, needle) != NULL;
+}
+
+int tu_finish(const char *name)
+{
+    printf("%s: %d passed, %d failed\n", name, tu_checks - tu_failures, tu_failures);
+    return tu_failures ? 1 : 0;
+}
+
+fx_frame *tu_pattern_frame(fx_context *ctx, int w, int h, unsigned seed)
+{
+    fx_frame *f = NULL;
+    if (fx_frame_new(ctx, w, h, &f) != FX_OK)
+        return NULL;
+    float *px = malloc((size_t)w * h * 4 * sizeof(float));
+    if (!px) {
+        fx_frame_free(f);
+        return NULL;
+    }
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++) {
+            float *p = px + ((size_t)y * w + x) * 4;
+            float fx_ = (float)x / (w > 1 ? w - 1 : 1), fy = (float)y / (h > 1 ? h - 1 : 1);
+            uint32_t hsh = (uint32_t)(x * 73856093u) ^ (uint32_t)(y * 19349663u) ^ (seed * 83492791u);
+            hsh ^= hsh >> 13;
+            hsh *= 0x5bd1e995u;
+            hsh ^= hsh >> 15;
+            p[0] = 0.5f + 0.5f * sinf(6.0f * fx_ + seed);
+            p[1] = fy * 1.5f;
+            p[2] = (float)(hsh & 0xffff) / 65535.0f;
+            p[3] = 1.0f;
+        }
+    fx_frame_add_pass(f, "Combined", 4, px);
+    free(px);
+    return f;
+}
+
+double tu_max_abs_diff(const float *a, const float *b, size_t n)
+{
+    double m = 0;
+    for (size_t i = 0; i < n; i++) {
+        double d = fabs((double)a[i] - (double)b[i]);
+        if (!(d <= m))
+            m = d; /* NaN propagates as "large" */
+    }
+    return m;
+}
+
+int tu_all_finite(const float *a, size_t n)
+{
+    for (size_t i = 0; i < n; i++)
+        if (!isfinite(a[i]))
+            return 0;
+    return 1;
+}
+
+const char *tu_tmpdir(const char *name)
+{
+    static char path[512];
+    snprintf(path, sizeof path, "/tmp/libfx-test-%s-%d", name, (int)getpid());
+    char cmd[600];
+    snprintf(cmd, sizeof cmd, "rm -rf '%s'", path);
+    if (system(cmd) != 0) { /* best effort */ }
+    mkdir(path, 0700);
+    return path;
+}
