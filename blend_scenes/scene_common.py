@@ -58,6 +58,17 @@ def render_settings(scene, samples=SAMPLES):
     cy.use_denoising = False
     cy.use_preview_denoising = False
     cy.seed = 0
+    # Noise control for 16 un-denoised samples: clamp indirect fireflies, blur
+    # glossy paths a little, no caustic paths (libfx adds caustics as an effect).
+    cy.sample_clamp_direct = 0.0
+    cy.sample_clamp_indirect = 0.5
+    cy.blur_glossy = 1.0
+    cy.caustics_reflective = False
+    cy.caustics_refractive = False
+    cy.max_bounces = 6
+    cy.diffuse_bounces = 2
+    cy.glossy_bounces = 4
+    cy.transmission_bounces = 6
     cy.use_animated_seed = False
     scene.render.resolution_x, scene.render.resolution_y = RESOLUTION
     scene.render.resolution_percentage = 100
@@ -195,10 +206,20 @@ def sky_world(name, zenith=(0.18, 0.38, 0.85), horizon=(0.75, 0.85, 1.0),
         total.location = (300, -250)
         links.new(mdisc.outputs["Value"], total.inputs[0])
         links.new(mglow.outputs["Value"], total.inputs[1])
+        # Only camera rays see the disc and glow: as lighting they would be a
+        # tiny, very bright background feature (fireflies at 16 samples); the
+        # Sun lamp does the lighting instead.
+        lp = nodes.new("ShaderNodeLightPath")
+        lp.location = (100, -550)
+        cam_only = nodes.new("ShaderNodeMath")
+        cam_only.operation = 'MULTIPLY'
+        cam_only.location = (400, -400)
+        links.new(total.outputs["Value"], cam_only.inputs[0])
+        links.new(lp.outputs["Is Camera Ray"], cam_only.inputs[1])
         sbg = nodes.new("ShaderNodeBackground")
         sbg.location = (500, -250)
         sbg.inputs["Color"].default_value = (*sun_color, 1.0)
-        links.new(total.outputs["Value"], sbg.inputs["Strength"])
+        links.new(cam_only.outputs["Value"], sbg.inputs["Strength"])
         add = nodes.new("ShaderNodeAddShader")
         add.location = (700, 0)
         links.new(bg.outputs["Background"], add.inputs[0])
@@ -242,6 +263,8 @@ def add_area_light(name, location, target, size=(2.0, 2.0), power=200.0,
     data.cycles.cast_shadow = shadow
     obj = bpy.data.objects.new(name, data)
     bpy.context.scene.collection.objects.link(obj)
+    obj.visible_camera = False
+    obj.visible_glossy = False
     obj.location = location
     look_at(obj, target)
     return obj
