@@ -67,6 +67,7 @@ typedef struct fx_effect_run {
     const void *params;     /* the effect's params struct, effective values */
     int quality;            /* fx_quality the preset came from */
     int index;              /* position in the stack, for messages */
+    const char *effect_name;
     fx_frame *debug;        /* add debug passes here ("<name>" is prefixed by the stack), or NULL */
 } fx_effect_run;
 
@@ -96,6 +97,11 @@ extern const fx_effect_class *const fx_effect_classes[];
 extern const int fx_effect_class_count;
 const fx_effect_class *fx_effect_find(const char *name);
 const fx_param_def *fx_effect_find_param(const fx_effect_class *cls, const char *name);
+
+/* Adds a debug output pass "<index>.<effect>.<name>" to run->debug and returns its
+ * buffer (width*height*channels floats, zeroed); NULL when debug outputs are off
+ * (not an error) or on failure (then *result says why). */
+float *fx_effect_debug_pass(const fx_effect_run *run, const char *name, int channels, fx_result *result);
 
 /* Parameter storage helpers (core/params.c). */
 void fx_params_set_defaults(const fx_effect_class *cls, void *params);

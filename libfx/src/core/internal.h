@@ -3,6 +3,7 @@
 #define LIBFX_INTERNAL_H
 
 #include "libfx/fx.h"
+#include "core/passes.h"
 
 #include <pthread.h>
 #include <stdarg.h>
@@ -104,6 +105,10 @@ fx_result fx_frame_new_like(const fx_frame *f, fx_frame **out);
 /* Replaces NaN with 0 and +-Inf with +-FLT_MAX in place; returns how many were replaced.
  * Runs in parallel on ctx's pool. */
 size_t fx_sanitize_floats(fx_context *ctx, float *data, size_t count);
+
+/* ---- stacks ---- */
+/* Union of the passes the enabled effects and their masks need (Combined always). */
+fx_pass_set fx_stack_pass_set(const fx_stack *s);
 
 /* ---- JSON strings handed to callers ---- */
 char *fx_json_strdup(const char *s); /* copy in fx_mem memory for fx_free */

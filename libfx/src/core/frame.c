@@ -1,0 +1,414 @@
+/* Frames: named float passes, windows, camera, scene time and string metadata. */
+#include "core/internal.h"
+#include "core/parallel.h"
+
+#include <float.h>
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+fx_result fx_frame_new(fx_context *ctx, int width, int height, fx_frame **out)
+{
+    if (!out)
+        return fx_fail(ctx, FX_ERR_INVALID_ARGUMENT, "fx_frame_new: out is NULL");
+    *out = NULL;
+    if (width < 0 || height < 0)
+        return fx_fail(ctx, FX_ERR_INVALID_ARGUMENT, "frame size %d x %d is negative", width, height);
+    if (ctx && (width > ctx->max_width || height > ctx->max_height))
+        return fx_fail(ctx, FX_ERR_LIMIT, "frame size %d x %d is over the limit of %d x %d", width,
+                       height, ctx->max_width, ctx->max_height);
+    fx_frame *f = fx_mem_calloc(1, sizeof *f);
+    if (!f)
+        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "out of memory for a frame");
+    f->ctx = ctx;
+    f->width = width;
+    f->height = height;
+    int win[4] = {0, 0, width - 1, height - 1};
+    memcpy(f->data_window, win, sizeof win);
+    memcpy(f->display_window, win, sizeof win);
+    f->fps = 24.0;
+    f->frame_number = 1.0;
+    *out = f;
+    return FX_OK;
+}
+
+void fx_frame_free(fx_frame *f)
+{
+    if (!f)
+        return;
+    for (int i = 0; i < f->pass_count; i++)
+        fx_mem_free(f->passes[i].data);
+    fx_mem_free(f->passes);
+    for (int i = 0; i < f->meta_count; i++) {
+        fx_mem_free(f->meta[i].key);
+        fx_mem_free(f->meta[i].value);
+    }
+    fx_mem_free(f->meta);
+    fx_mem_free(f);
+}
+
+int fx_frame_width(const fx_frame *f)
+{
+    return f ? f->width : 0;
+}
+
+int fx_frame_height(const fx_frame *f)
+{
+    return f ? f->height : 0;
+}
+
+fx_result fx_frame_set_windows(fx_frame *f, const int data_window[4], const int display_window[4])
+{
+    if (!f || !data_window || !display_window)
+        return FX_ERR_INVALID_ARGUMENT;
+    long long dw = (long long)data_window[2] - data_window[0] + 1;
+    long long dh = (long long)data_window[3] - data_window[1] + 1;
+    if (dw != f->width || dh != f->height)
+        return fx_fail(f->ctx, FX_ERR_INVALID_ARGUMENT,
+                       "data window (%d,%d)-(%d,%d) is not the frame's %d x %d", data_window[0],
+                       data_window[1], data_window[2], data_window[3], f->width, f->height);
+    if (display_window[2] < display_window[0] - 1 || display_window[3] < display_window[1] - 1)
+        return fx_fail(f->ctx, FX_ERR_INVALID_ARGUMENT, "display window (%d,%d)-(%d,%d) is inverted",
+                       display_window[0], display_window[1], display_window[2], display_window[3]);
+    memcpy(f->data_window, data_window, 4 * sizeof(int));
+    memcpy(f->display_window, display_window, 4 * sizeof(int));
+    return FX_OK;
+}
+
+void fx_frame_windows(const fx_frame *f, int data_window[4], int display_window[4])
+{
+    if (!f)
+        return;
+    if (data_window)
+        memcpy(data_window, f->data_window, 4 * sizeof(int));
+    if (display_window)
+        memcpy(display_window, f->display_window, 4 * sizeof(int));
+}
+
+fx_pass *fx_frame_find_pass(const fx_frame *f, const char *name)
+{
+    if (!f || !name)
+        return NULL;
+    for (int i = 0; i < f->pass_count; i++)
+        if (strcmp(f->passes[i].name, name) == 0)
+            return &f->passes[i];
+    return NULL;
+}
+
+fx_result fx_frame_adopt_pass(fx_frame *f, const char *name, int channels, float *data)
+{
+    if (!f || !name || !data || channels < 1 || channels > 4 || !name[0]) {
+        fx_mem_free(data);
+        return fx_fail(f ? f->ctx : NULL, FX_ERR_INVALID_ARGUMENT,
+                       "pass '%s': needs a name and 1 to 4 channels (got %d)", name ? name : "(null)",
+                       channels);
+    }
+    if (strlen(name) >= FX_NAME_MAX) {
+        fx_mem_free(data);
+        return fx_fail(f->ctx, FX_ERR_INVALID_ARGUMENT, "pass name '%.40s...' is longer than %d bytes",
+                       name, FX_NAME_MAX - 1);
+    }
+    fx_pass *p = fx_frame_find_pass(f, name);
+    if (p) {
+        fx_mem_free(p->data);
+    } else {
+        if (f->pass_count == f->pass_cap) {
+            int cap = f->pass_cap ? f->pass_cap * 2 : 8;
+            fx_pass *np = fx_mem_realloc(f->passes, (size_t)cap * sizeof *np);
+            if (!np) {
+                fx_mem_free(data);
+                return fx_fail(f->ctx, FX_ERR_OUT_OF_MEMORY, "out of memory adding pass '%s'", name);
+            }
+            f->passes = np;
+            f->pass_cap = cap;
+        }
+        p = &f->passes[f->pass_count++];
+        memset(p, 0, sizeof *p);
+        strcpy(p->name, name);
+    }
+    p->channels = channels;
+    p->from_half = 0;
+    p->data = data;
+    return FX_OK;
+}
+
+fx_result fx_frame_alloc_pass(fx_frame *f, const char *name, int channels, float **out)
+{
+    if (!f || !out)
+        return FX_ERR_INVALID_ARGUMENT;
+    *out = NULL;
+    size_t bytes;
+    if (!fx_size_mul(&bytes, (size_t)f->width * (size_t)f->height, (size_t)(channels > 0 ? channels : 1),
+                     sizeof(float)))
+        return fx_fail(f->ctx, FX_ERR_LIMIT, "pass '%s' of %d x %d is too large", name, f->width, f->height);
+    char what[160];
+    snprintf(what, sizeof what, "pass '%s'", name ? name : "");
+    fx_result r = fx_check_budget(f->ctx, bytes, what);
+    if (r)
+        return r;
+    float *data = fx_mem_alloc(bytes);
+    if (!data)
+        return fx_fail(f->ctx, FX_ERR_OUT_OF_MEMORY, "out of memory for pass '%s' (%.1f MiB)", name,
+                       (double)bytes / (1 << 20));
+    r = fx_frame_adopt_pass(f, name, channels, data);
+    if (r == FX_OK)
+        *out = data;
+    return r;
+}
+
+fx_result fx_frame_add_pass(fx_frame *f, const char *name, int channels, const float *data)
+{
+    if (!f)
+        return FX_ERR_INVALID_ARGUMENT;
+    if (channels < 1 || channels > 4)
+        return fx_fail(f->ctx, FX_ERR_INVALID_ARGUMENT, "pass '%s': %d channels (1 to 4 allowed)",
+                       name ? name : "(null)", channels);
+    float *dst;
+    fx_result r = fx_frame_alloc_pass(f, name, channels, &dst);
+    if (r)
+        return r;
+    size_t n = (size_t)f->width * f->height * channels;
+    if (data)
+        memcpy(dst, data, n * sizeof(float));
+    else
+        memset(dst, 0, n * sizeof(float));
+    return FX_OK;
+}
+
+fx_result fx_frame_pass(const fx_frame *f, const char *name, float **data, int *channels)
+{
+    if (!f || !name)
+        return FX_ERR_INVALID_ARGUMENT;
+    fx_pass *p = fx_frame_find_pass(f, name);
+    if (!p)
+        return fx_fail(f->ctx, FX_ERR_MISSING_PASS, "the frame has no pass '%s'", name);
+    if (data)
+        *data = p->data;
+    if (channels)
+        *channels = p->channels;
+    return FX_OK;
+}
+
+int fx_frame_pass_count(const fx_frame *f)
+{
+    return f ? f->pass_count : 0;
+}
+
+const char *fx_frame_pass_name(const fx_frame *f, int index)
+{
+    if (!f || index < 0 || index >= f->pass_count)
+        return NULL;
+    return f->passes[index].name;
+}
+
+int fx_frame_pass_channels(const fx_frame *f, int index)
+{
+    if (!f || index < 0 || index >= f->pass_count)
+        return 0;
+    return f->passes[index].channels;
+}
+
+static int all_finite(const float *v, int n)
+{
+    for (int i = 0; i < n; i++)
+        if (!isfinite(v[i]))
+            return 0;
+    return 1;
+}
+
+fx_result fx_frame_set_camera(fx_frame *f, const fx_camera *camera)
+{
+    if (!f)
+        return FX_ERR_INVALID_ARGUMENT;
+    if (!camera) {
+        f->has_camera = 0;
+        return FX_OK;
+    }
+    if (camera->size != sizeof(fx_camera))
+        return fx_fail(f->ctx, FX_ERR_INVALID_ARGUMENT, "fx_camera.size is %zu, expected %zu",
+                       camera->size, sizeof(fx_camera));
+    if (!all_finite(camera->world_to_camera, 16) || !all_finite(camera->projection, 16) ||
+        !isfinite(camera->clip_start) || !isfinite(camera->clip_end))
+        return fx_fail(f->ctx, FX_ERR_INVALID_ARGUMENT, "camera matrices contain NaN or Inf");
+    f->camera = *camera;
+    f->has_camera = 1;
+    return FX_OK;
+}
+
+int fx_frame_camera(const fx_frame *f, fx_camera *out)
+{
+    if (!f || !f->has_camera)
+        return 0;
+    if (out)
+        *out = f->camera;
+    return 1;
+}
+
+void fx_frame_set_time(fx_frame *f, double frame, double fps)
+{
+    if (!f)
+        return;
+    f->frame_number = isfinite(frame) ? frame : 0.0;
+    f->fps = isfinite(fps) && fps > 0 ? fps : 24.0;
+}
+
+void fx_frame_time(const fx_frame *f, double *frame, double *fps)
+{
+    if (!f)
+        return;
+    if (frame)
+        *frame = f->frame_number;
+    if (fps)
+        *fps = f->fps;
+}
+
+fx_result fx_frame_set_meta(fx_frame *f, const char *key, const char *value)
+{
+    if (!f || !key)
+        return FX_ERR_INVALID_ARGUMENT;
+    for (int i = 0; i < f->meta_count; i++) {
+        if (strcmp(f->meta[i].key, key) != 0)
+            continue;
+        if (!value) {
+            fx_mem_free(f->meta[i].key);
+            fx_mem_free(f->meta[i].value);
+            f->meta[i] = f->meta[--f->meta_count];
+            return FX_OK;
+        }
+        char *v = fx_mem_strdup(value);
+        if (!v)
+            return fx_fail(f->ctx, FX_ERR_OUT_OF_MEMORY, "out of memory for metadata '%s'", key);
+        fx_mem_free(f->meta[i].value);
+        f->meta[i].value = v;
+        return FX_OK;
+    }
+    if (!value)
+        return FX_OK;
+    if (f->meta_count == f->meta_cap) {
+        int cap = f->meta_cap ? f->meta_cap * 2 : 8;
+        fx_meta *m = fx_mem_realloc(f->meta, (size_t)cap * sizeof *m);
+        if (!m)
+            return fx_fail(f->ctx, FX_ERR_OUT_OF_MEMORY, "out of memory for metadata '%s'", key);
+        f->meta = m;
+        f->meta_cap = cap;
+    }
+    char *k = fx_mem_strdup(key), *v = fx_mem_strdup(value);
+    if (!k || !v) {
+        fx_mem_free(k);
+        fx_mem_free(v);
+        return fx_fail(f->ctx, FX_ERR_OUT_OF_MEMORY, "out of memory for metadata '%s'", key);
+    }
+    f->meta[f->meta_count].key = k;
+    f->meta[f->meta_count].value = v;
+    f->meta_count++;
+    return FX_OK;
+}
+
+const char *fx_frame_meta(const fx_frame *f, const char *key)
+{
+    if (!f || !key)
+        return NULL;
+    for (int i = 0; i < f->meta_count; i++)
+        if (strcmp(f->meta[i].key, key) == 0)
+            return f->meta[i].value;
+    return NULL;
+}
+
+fx_result fx_frame_new_like(const fx_frame *f, fx_frame **out)
+{
+    if (!f || !out)
+        return FX_ERR_INVALID_ARGUMENT;
+    fx_frame *o;
+    fx_result r = fx_frame_new(f->ctx, f->width, f->height, &o);
+    if (r)
+        return r;
+    memcpy(o->data_window, f->data_window, sizeof o->data_window);
+    memcpy(o->display_window, f->display_window, sizeof o->display_window);
+    o->has_camera = f->has_camera;
+    o->camera = f->camera;
+    o->frame_number = f->frame_number;
+    o->fps = f->fps;
+    for (int i = 0; i < f->meta_count; i++) {
+        r = fx_frame_set_meta(o, f->meta[i].key, f->meta[i].value);
+        if (r) {
+            fx_frame_free(o);
+            return r;
+        }
+    }
+    *out = o;
+    return FX_OK;
+}
+
+fx_result fx_frame_copy_passes(fx_frame *dst, const fx_frame *src)
+{
+    if (!dst || !src)
+        return FX_ERR_INVALID_ARGUMENT;
+    if (dst->width != src->width || dst->height != src->height)
+        return fx_fail(dst->ctx, FX_ERR_INVALID_ARGUMENT, "cannot copy passes from a %d x %d frame into a %d x %d one",
+                       src->width, src->height, dst->width, dst->height);
+    for (int i = 0; i < src->pass_count; i++) {
+        const fx_pass *p = &src->passes[i];
+        if (fx_frame_find_pass(dst, p->name))
+            continue;
+        fx_result r = fx_frame_add_pass(dst, p->name, p->channels, p->data);
+        if (r)
+            return r;
+        fx_frame_find_pass(dst, p->name)->from_half = p->from_half;
+    }
+    return FX_OK;
+}
+
+/* ---- sanitising ---- */
+
+#define SANITIZE_CHUNK 65536
+
+typedef struct sanitize_job {
+    float *data;
+    size_t count;
+    size_t *replaced; /* per chunk: summed in chunk order, so the total is exact */
+} sanitize_job;
+
+static void sanitize_range(void *user, int begin, int end)
+{
+    sanitize_job *j = user;
+    for (int c = begin; c < end; c++) {
+        size_t lo = (size_t)c * SANITIZE_CHUNK, hi = lo + SANITIZE_CHUNK;
+        if (hi > j->count)
+            hi = j->count;
+        size_t n = 0;
+        for (size_t i = lo; i < hi; i++) {
+            float v = j->data[i];
+            if (!isfinite(v)) {
+                j->data[i] = isnan(v) ? 0.0f : (v > 0 ? FLT_MAX : -FLT_MAX);
+                n++;
+            }
+        }
+        j->replaced[c] = n;
+    }
+}
+
+size_t fx_sanitize_floats(fx_context *ctx, float *data, size_t count)
+{
+    if (!data || count == 0)
+        return 0;
+    size_t chunks = (count + SANITIZE_CHUNK - 1) / SANITIZE_CHUNK;
+    if (chunks > (size_t)1 << 30)
+        return 0;
+    size_t *replaced = fx_mem_calloc(chunks, sizeof *replaced);
+    size_t total = 0;
+    if (!replaced) {
+        /* No memory for per-chunk counts: still make the data finite, serially. */
+        for (size_t i = 0; i < count; i++)
+            if (!isfinite(data[i])) {
+                data[i] = isnan(data[i]) ? 0.0f : (data[i] > 0 ? FLT_MAX : -FLT_MAX);
+                total++;
+            }
+        return total;
+    }
+    sanitize_job job = {data, count, replaced};
+    fx_parallel_for(ctx, (int)chunks, 1, sanitize_range, &job);
+    for (size_t c = 0; c < chunks; c++)
+        total += replaced[c];
+    fx_mem_free(replaced);
+    return total;
+}

@@ -1,0 +1,486 @@
+/* Masks: parse a mask spec from a recipe, and evaluate it on a frame into coverage. */
+#include "core/mask.h"
+#include "core/parallel.h"
+
+#include <cjson/cJSON.h>
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+/* ---- Cryptomatte IDs ---- */
+
+static uint32_t rotl32(uint32_t x, int r)
+{
+    return (x << r) | (x >> (32 - r));
+}
+
+uint32_t fx_murmur3_32(const void *data, size_t len, uint32_t seed)
+{
+    const uint8_t *p = data;
+    const uint32_t c1 = 0xcc9e2d51u, c2 = 0x1b873593u;
+    uint32_t h = seed;
+    size_t blocks = len / 4;
+    for (size_t i = 0; i < blocks; i++) {
+        uint32_t k = (uint32_t)p[4 * i] | (uint32_t)p[4 * i + 1] << 8 | (uint32_t)p[4 * i + 2] << 16 |
+                     (uint32_t)p[4 * i + 3] << 24;
+        k *= c1;
+        k = rotl32(k, 15);
+        k *= c2;
+        h ^= k;
+        h = rotl32(h, 13);
+        h = h * 5 + 0xe6546b64u;
+    }
+    const uint8_t *tail = p + blocks * 4;
+    uint32_t k = 0;
+    switch (len & 3) {
+    case 3: k ^= (uint32_t)tail[2] << 16; /* fall through */
+    case 2: k ^= (uint32_t)tail[1] << 8;  /* fall through */
+    case 1:
+        k ^= tail[0];
+        k *= c1;
+        k = rotl32(k, 15);
+        k *= c2;
+        h ^= k;
+    }
+    h ^= (uint32_t)len;
+    h ^= h >> 16;
+    h *= 0x85ebca6bu;
+    h ^= h >> 13;
+    h *= 0xc2b2ae35u;
+    h ^= h >> 16;
+    return h;
+}
+
+float fx_cryptomatte_id(const char *name)
+{
+    uint32_t h = fx_murmur3_32(name, strlen(name), 0);
+    /* Keep the float normal and finite: flip the exponent's low bit when it is 0 or 255. */
+    uint32_t exp = (h >> 23) & 0xffu;
+    if (exp == 0 || exp == 255)
+        h ^= 1u << 23;
+    float f;
+    memcpy(&f, &h, sizeof f);
+    return f;
+}
+
+/* ---- specs ---- */
+
+int fx_mask_spec_is_empty(const fx_mask_spec *s)
+{
+    return !s || (s->material_count == 0 && s->object_count == 0 && s->material_index_count == 0 &&
+                  s->object_index_count == 0 && !s->has_rect && !s->invert);
+}
+
+void fx_mask_spec_clear(fx_mask_spec *s)
+{
+    if (!s)
+        return;
+    for (int i = 0; i < s->material_count; i++)
+        fx_mem_free(s->materials[i]);
+    for (int i = 0; i < s->object_count; i++)
+        fx_mem_free(s->objects[i]);
+    fx_mem_free(s->materials);
+    fx_mem_free(s->objects);
+    fx_mem_free(s->material_indices);
+    fx_mem_free(s->object_indices);
+    memset(s, 0, sizeof *s);
+}
+
+static fx_result parse_names(fx_context *ctx, const cJSON *v, const char *key, const char *where,
+                             char ***out, int *count)
+{
+    int n = cJSON_IsArray(v) ? cJSON_GetArraySize(v) : 1;
+    if (!cJSON_IsArray(v) && !cJSON_IsString(v))
+        return fx_fail(ctx, FX_ERR_BAD_RECIPE, "%s: mask \"%s\" must be a name or a list of names",
+                       where, key);
+    char **names = fx_mem_calloc((size_t)(n ? n : 1), sizeof *names);
+    if (!names)
+        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "out of memory for a mask");
+    *out = names;
+    *count = 0;
+    const cJSON *item = cJSON_IsArray(v) ? v->child : v;
+    for (int i = 0; i < n; i++, item = item->next) {
+        if (!cJSON_IsString(item) || !item->valuestring[0])
+            return fx_fail(ctx, FX_ERR_BAD_RECIPE, "%s: mask \"%s\" entries must be non-empty names",
+                           where, key);
+        names[i] = fx_mem_strdup(item->valuestring);
+        if (!names[i])
+            return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "out of memory for a mask");
+        (*count)++;
+    }
+    return FX_OK;
+}
+
+static fx_result parse_indices(fx_context *ctx, const cJSON *v, const char *key, const char *where,
+                               int **out, int *count)
+{
+    int n = cJSON_IsArray(v) ? cJSON_GetArraySize(v) : 1;
+    if (!cJSON_IsArray(v) && !cJSON_IsNumber(v))
+        return fx_fail(ctx, FX_ERR_BAD_RECIPE, "%s: mask \"%s\" must be an index or a list of indices",
+                       where, key);
+    int *idx = fx_mem_calloc((size_t)(n ? n : 1), sizeof *idx);
+    if (!idx)
+        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "out of memory for a mask");
+    *out = idx;
+    *count = 0;
+    const cJSON *item = cJSON_IsArray(v) ? v->child : v;
+    for (int i = 0; i < n; i++, item = item->next) {
+        if (!cJSON_IsNumber(item) || item->valuedouble != floor(item->valuedouble) ||
+            item->valuedouble < 0 || item->valuedouble > 2147483647.0)
+            return fx_fail(ctx, FX_ERR_BAD_RECIPE,
+                           "%s: mask \"%s\" entries must be pass indices (integers >= 0)", where, key);
+        idx[i] = (int)item->valuedouble;
+        (*count)++;
+    }
+    return FX_OK;
+}
+
+fx_result fx_mask_spec_parse(fx_context *ctx, const cJSON *json, const char *where, fx_mask_spec *out)
+{
+    memset(out, 0, sizeof *out);
+    if (!json || cJSON_IsNull(json))
+        return FX_OK;
+    if (!cJSON_IsObject(json))
+        return fx_fail(ctx, FX_ERR_BAD_RECIPE, "%s: \"mask\" must be an object", where);
+    fx_result r = FX_OK;
+    const cJSON *item;
+    cJSON_ArrayForEach(item, json) {
+        const char *k = item->string;
+        if (strcmp(k, "material") == 0)
+            r = parse_names(ctx, item, k, where, &out->materials, &out->material_count);
+        else if (strcmp(k, "object") == 0)
+            r = parse_names(ctx, item, k, where, &out->objects, &out->object_count);
+        else if (strcmp(k, "material_index") == 0)
+            r = parse_indices(ctx, item, k, where, &out->material_indices, &out->material_index_count);
+        else if (strcmp(k, "object_index") == 0)
+            r = parse_indices(ctx, item, k, where, &out->object_indices, &out->object_index_count);
+        else if (strcmp(k, "invert") == 0) {
+            if (!cJSON_IsBool(item))
+                r = fx_fail(ctx, FX_ERR_BAD_RECIPE, "%s: mask \"invert\" must be true or false", where);
+            else
+                out->invert = cJSON_IsTrue(item);
+        } else if (strcmp(k, "rect") == 0) {
+            int ok = cJSON_IsArray(item) && cJSON_GetArraySize(item) == 4;
+            for (int i = 0; ok && i < 4; i++) {
+                const cJSON *v = cJSON_GetArrayItem(item, i);
+                ok = cJSON_IsNumber(v) && v->valuedouble == floor(v->valuedouble) &&
+                     fabs(v->valuedouble) < 1e8 && (i < 2 || v->valuedouble >= 0);
+                if (ok)
+                    out->rect[i] = (int)v->valuedouble;
+            }
+            if (!ok)
+                r = fx_fail(ctx, FX_ERR_BAD_RECIPE,
+                            "%s: mask \"rect\" must be [x, y, width, height] in whole pixels, "
+                            "width and height >= 0",
+                            where);
+            out->has_rect = ok;
+        } else {
+            r = fx_fail(ctx, FX_ERR_BAD_RECIPE,
+                        "%s: unknown mask key \"%s\" (known: material, object, material_index, "
+                        "object_index, rect, invert)",
+                        where, k);
+        }
+        if (r)
+            break;
+    }
+    if (r)
+        fx_mask_spec_clear(out);
+    return r;
+}
+
+cJSON *fx_mask_spec_to_json(const fx_mask_spec *s)
+{
+    if (fx_mask_spec_is_empty(s))
+        return NULL;
+    cJSON *o = cJSON_CreateObject();
+    if (s->material_count)
+        cJSON_AddItemToObject(o, "material", cJSON_CreateStringArray((const char *const *)s->materials,
+                                                                     s->material_count));
+    if (s->object_count)
+        cJSON_AddItemToObject(o, "object",
+                              cJSON_CreateStringArray((const char *const *)s->objects, s->object_count));
+    if (s->material_index_count)
+        cJSON_AddItemToObject(o, "material_index",
+                              cJSON_CreateIntArray(s->material_indices, s->material_index_count));
+    if (s->object_index_count)
+        cJSON_AddItemToObject(o, "object_index", cJSON_CreateIntArray(s->object_indices, s->object_index_count));
+    if (s->has_rect)
+        cJSON_AddItemToObject(o, "rect", cJSON_CreateIntArray(s->rect, 4));
+    if (s->invert)
+        cJSON_AddBoolToObject(o, "invert", 1);
+    return o;
+}
+
+fx_result fx_mask_spec_copy(fx_mask_spec *dst, const fx_mask_spec *src)
+{
+    memset(dst, 0, sizeof *dst);
+    cJSON *j = fx_mask_spec_to_json(src);
+    if (!j)
+        return FX_OK;
+    fx_result r = fx_mask_spec_parse(NULL, j, "", dst);
+    cJSON_Delete(j);
+    return r;
+}
+
+fx_pass_set fx_mask_spec_passes(const fx_mask_spec *s)
+{
+    fx_pass_set set = 0;
+    if (!s)
+        return 0;
+    if (s->material_count)
+        set |= FX_PASS_BIT(FX_PASS_CRYPTO_MATERIAL);
+    if (s->object_count)
+        set |= FX_PASS_BIT(FX_PASS_CRYPTO_OBJECT);
+    if (s->material_index_count)
+        set |= FX_PASS_BIT(FX_PASS_INDEX_MA);
+    if (s->object_index_count)
+        set |= FX_PASS_BIT(FX_PASS_INDEX_OB);
+    return set;
+}
+
+/* ---- evaluation ---- */
+
+typedef struct crypto_rank {
+    const float *data; /* RGBA: id0, coverage0, id1, coverage1 */
+} crypto_rank;
+
+typedef struct mask_job {
+    const fx_mask_spec *spec;
+    const fx_frame *frame;
+    float *cov;
+    int w, h;
+    crypto_rank *obj_ranks, *mat_ranks;
+    int obj_rank_count, mat_rank_count;
+    float *obj_ids, *mat_ids;
+    const float *index_ob, *index_ma;
+    int selectors;    /* names or indices given */
+    fx_rect rect;     /* in frame pixels, clipped */
+} mask_job;
+
+static float crypto_coverage(const crypto_rank *ranks, int nranks, const float *ids, int nids, size_t i)
+{
+    float c = 0;
+    for (int r = 0; r < nranks; r++) {
+        const float *p = ranks[r].data + i * 4;
+        for (int k = 0; k < nids; k++) {
+            if (p[0] == ids[k])
+                c += p[1];
+            if (p[2] == ids[k])
+                c += p[3];
+        }
+    }
+    return c;
+}
+
+static int index_match(float v, const int *idx, int n)
+{
+    long iv = lroundf(v);
+    for (int k = 0; k < n; k++)
+        if (iv == idx[k])
+            return 1;
+    return 0;
+}
+
+static void mask_rows(void *user, int y0, int y1)
+{
+    mask_job *j = user;
+    const fx_mask_spec *s = j->spec;
+    for (int y = y0; y < y1; y++) {
+        for (int x = 0; x < j->w; x++) {
+            size_t i = (size_t)y * j->w + x;
+            float c = 1.0f;
+            if (j->selectors) {
+                c = 0.0f;
+                if (j->obj_rank_count)
+                    c += crypto_coverage(j->obj_ranks, j->obj_rank_count, j->obj_ids, s->object_count, i);
+                if (j->mat_rank_count)
+                    c += crypto_coverage(j->mat_ranks, j->mat_rank_count, j->mat_ids, s->material_count, i);
+                if (j->index_ob && index_match(j->index_ob[i], s->object_indices, s->object_index_count))
+                    c = 1.0f;
+                if (j->index_ma && index_match(j->index_ma[i], s->material_indices, s->material_index_count))
+                    c = 1.0f;
+                if (!(c >= 0.0f))
+                    c = 0.0f;
+                if (c > 1.0f)
+                    c = 1.0f;
+            }
+            if (s->has_rect && !(x >= j->rect.x0 && x < j->rect.x1 && y >= j->rect.y0 && y < j->rect.y1))
+                c = 0.0f;
+            if (s->invert)
+                c = 1.0f - c;
+            j->cov[i] = c;
+        }
+    }
+}
+
+static fx_result collect_ranks(fx_context *ctx, const fx_frame *f, const char *prefix, const char *what,
+                               const char *where, crypto_rank **out, int *count)
+{
+    int n = 0;
+    char name[FX_NAME_MAX];
+    for (int r = 0; r < 100; r++) {
+        snprintf(name, sizeof name, "%s%02d", prefix, r);
+        const fx_pass *p = fx_frame_find_pass(f, name);
+        if (!p)
+            break;
+        if (p->channels != 4)
+            return fx_fail(ctx, FX_ERR_BAD_FILE, "%s: Cryptomatte pass '%s' has %d channels, not 4",
+                           where, name, p->channels);
+        n++;
+    }
+    if (n == 0) {
+        const char *src = fx_frame_meta(f, "libfx:source");
+        return fx_fail(ctx, FX_ERR_MISSING_PASS,
+                       "%s: a mask by %s name needs the %s pass (Cryptomatte), which %s%s%s does not have",
+                       where, what, prefix, src ? "'" : "", src ? src : "the frame", src ? "'" : "");
+    }
+    *out = fx_mem_calloc((size_t)n, sizeof **out);
+    if (!*out)
+        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "out of memory for a mask");
+    for (int r = 0; r < n; r++) {
+        snprintf(name, sizeof name, "%s%02d", prefix, r);
+        (*out)[r].data = fx_frame_find_pass(f, name)->data;
+    }
+    *count = n;
+    return FX_OK;
+}
+
+static fx_result index_pass(fx_context *ctx, const fx_frame *f, const char *pass, const char *what,
+                            const char *where, const float **out)
+{
+    const fx_pass *p = fx_frame_find_pass(f, pass);
+    if (!p) {
+        const char *src = fx_frame_meta(f, "libfx:source");
+        return fx_fail(ctx, FX_ERR_MISSING_PASS,
+                       "%s: a mask by %s index needs the %s pass, which %s%s%s does not have "
+                       "(Cycles only: with Eevee, mask by name through Cryptomatte)",
+                       where, what, pass, src ? "'" : "", src ? src : "the frame", src ? "'" : "");
+    }
+    *out = p->data;
+    return FX_OK;
+}
+
+static float *ids_for(const char *const *names, int n)
+{
+    float *ids = fx_mem_calloc((size_t)(n ? n : 1), sizeof *ids);
+    if (ids)
+        for (int i = 0; i < n; i++)
+            ids[i] = fx_cryptomatte_id(names[i]);
+    return ids;
+}
+
+/* Warns about names missing from a Cryptomatte manifest: most often a typo. */
+static void check_manifest(fx_context *ctx, const fx_frame *f, const char *type, char **names, int n,
+                           const char *where)
+{
+    char key[128];
+    snprintf(key, sizeof key, "cryptomatte/%s/manifest", type);
+    const char *m = fx_frame_meta(f, key);
+    if (!m)
+        return;
+    cJSON *manifest = cJSON_Parse(m);
+    if (!manifest)
+        return;
+    for (int i = 0; i < n; i++)
+        if (!cJSON_GetObjectItemCaseSensitive(manifest, names[i]))
+            fx_warn(ctx, "%s: mask name '%s' is not in the %s manifest", where, names[i], type);
+    cJSON_Delete(manifest);
+}
+
+fx_result fx_mask_build(fx_context *ctx, const fx_mask_spec *spec, const fx_frame *frame,
+                        const char *where, fx_mask **out)
+{
+    *out = NULL;
+    if (fx_mask_spec_is_empty(spec))
+        return FX_OK;
+    mask_job j;
+    memset(&j, 0, sizeof j);
+    j.spec = spec;
+    j.frame = frame;
+    j.w = frame->width;
+    j.h = frame->height;
+    j.selectors = spec->material_count || spec->object_count || spec->material_index_count ||
+                  spec->object_index_count;
+    fx_result r = FX_OK;
+    if (spec->object_count && !(r = collect_ranks(ctx, frame, "CryptoObject", "object", where,
+                                                  &j.obj_ranks, &j.obj_rank_count)))
+        check_manifest(ctx, frame, "CryptoObject", spec->objects, spec->object_count, where);
+    if (!r && spec->material_count &&
+        !(r = collect_ranks(ctx, frame, "CryptoMaterial", "material", where, &j.mat_ranks, &j.mat_rank_count)))
+        check_manifest(ctx, frame, "CryptoMaterial", spec->materials, spec->material_count, where);
+    if (!r && spec->object_index_count)
+        r = index_pass(ctx, frame, "IndexOB", "object", where, &j.index_ob);
+    if (!r && spec->material_index_count)
+        r = index_pass(ctx, frame, "IndexMA", "material", where, &j.index_ma);
+    fx_mask *m = NULL;
+    if (!r) {
+        j.obj_ids = ids_for((const char *const *)spec->objects, spec->object_count);
+        j.mat_ids = ids_for((const char *const *)spec->materials, spec->material_count);
+        m = fx_mem_calloc(1, sizeof *m);
+        size_t bytes;
+        if (!fx_size_mul(&bytes, (size_t)j.w, (size_t)j.h, sizeof(float)))
+            r = fx_fail(ctx, FX_ERR_LIMIT, "%s: mask too large", where);
+        else if (!(r = fx_check_budget(ctx, bytes, "a mask")) && m)
+            m->coverage = fx_mem_alloc(bytes);
+        if (!r && (!j.obj_ids || !j.mat_ids || !m || !m->coverage))
+            r = fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the mask", where);
+    }
+    if (!r) {
+        if (spec->has_rect) {
+            /* rect is in display-window pixels from its top-left; frame pixel (0,0) is the
+             * data window's corner. */
+            long x0 = (long)frame->display_window[0] + spec->rect[0] - frame->data_window[0];
+            long y0 = (long)frame->display_window[1] + spec->rect[1] - frame->data_window[1];
+            long x1 = x0 + spec->rect[2], y1 = y0 + spec->rect[3];
+            j.rect.x0 = (int)(x0 < 0 ? 0 : x0 > j.w ? j.w : x0);
+            j.rect.y0 = (int)(y0 < 0 ? 0 : y0 > j.h ? j.h : y0);
+            j.rect.x1 = (int)(x1 < j.rect.x0 ? j.rect.x0 : x1 > j.w ? j.w : x1);
+            j.rect.y1 = (int)(y1 < j.rect.y0 ? j.rect.y0 : y1 > j.h ? j.h : y1);
+        }
+        j.cov = m->coverage;
+        m->width = j.w;
+        m->height = j.h;
+        fx_parallel_for(ctx, j.h, fx_grain_for(ctx, j.h), mask_rows, &j);
+        /* bounds of coverage > 0 */
+        fx_rect b = {j.w, j.h, 0, 0};
+        for (int y = 0; y < j.h; y++) {
+            const float *row = m->coverage + (size_t)y * j.w;
+            int first = -1, last = -1;
+            for (int x = 0; x < j.w; x++)
+                if (row[x] > 0.0f) {
+                    if (first < 0)
+                        first = x;
+                    last = x;
+                }
+            if (first < 0)
+                continue;
+            if (first < b.x0) b.x0 = first;
+            if (last + 1 > b.x1) b.x1 = last + 1;
+            if (y < b.y0) b.y0 = y;
+            if (y + 1 > b.y1) b.y1 = y + 1;
+        }
+        if (b.x1 <= b.x0 || b.y1 <= b.y0) {
+            b.x0 = b.x1 = b.y0 = b.y1 = 0;
+            fx_warn(ctx, "%s: the mask selects no pixels in this frame", where);
+        }
+        m->bounds = b;
+    }
+    fx_mem_free(j.obj_ranks);
+    fx_mem_free(j.mat_ranks);
+    fx_mem_free(j.obj_ids);
+    fx_mem_free(j.mat_ids);
+    if (r) {
+        fx_mask_free(m);
+        return r;
+    }
+    *out = m;
+    return FX_OK;
+}
+
+void fx_mask_free(fx_mask *m)
+{
+    if (!m)
+        return;
+    fx_mem_free(m->coverage);
+    fx_mem_free(m);
+}

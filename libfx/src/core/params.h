@@ -1,0 +1,24 @@
+/* Parameters: values in an effect's params struct, set and read through its table. */
+#ifndef LIBFX_PARAMS_H
+#define LIBFX_PARAMS_H
+
+#include "core/effect.h"
+
+#include <cjson/cJSON.h>
+
+/* Sets one parameter from JSON after checking type and range. `where` names the effect
+ * in messages ("effect 2 (pixelate)"). */
+fx_result fx_param_set_json(fx_context *ctx, const fx_param_def *def, void *params,
+                            const cJSON *value, const char *where);
+/* Sets every member of a JSON object; marks each set parameter in `explicit_set`
+ * (indexed like the table) when non-NULL. Unknown names are errors. */
+fx_result fx_params_set_object(fx_context *ctx, const fx_effect_class *cls, void *params,
+                               const cJSON *object, unsigned char *explicit_set, const char *where);
+/* The value of one parameter as JSON (a new item). */
+cJSON *fx_param_to_json(const fx_param_def *def, const void *params);
+/* Copies one parameter's storage from src to dst. */
+void fx_param_copy(const fx_param_def *def, void *dst, const void *src);
+/* Parameter info and defaults as JSON (used by describe). */
+cJSON *fx_param_info_json(const fx_param_def *def);
+
+#endif

@@ -1,0 +1,855 @@
+/* Stacks: ordered effects with their parameters, masks and quality; recipe JSON in
+ * and out; and the run loop that chains effects over a frame's Combined pass. */
+#include "core/effect.h"
+#include "core/mask.h"
+#include "core/parallel.h"
+#include "core/params.h"
+
+#include <cjson/cJSON.h>
+#include <errno.h>
+#include <float.h>
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+#include <time.h>
+
+#define RECIPE_VERSION 1
+#define LABEL_MAX 128
+
+typedef struct fx_entry {
+    const fx_effect_class *cls;
+    void *user_params;           /* values set explicitly (valid where explicit_set[i]) */
+    unsigned char *explicit_set; /* one flag per parameter of the class */
+    int enabled;
+    int quality;                 /* -1: the stack's */
+    char label[LABEL_MAX];
+    fx_mask_spec mask;
+    double last_ms;
+} fx_entry;
+
+struct fx_stack {
+    fx_context *ctx;
+    fx_entry *entries;
+    int count, cap;
+    int quality;
+    int debug;
+};
+
+static void entry_clear(fx_entry *e)
+{
+    fx_mem_free(e->user_params);
+    fx_mem_free(e->explicit_set);
+    fx_mask_spec_clear(&e->mask);
+    memset(e, 0, sizeof *e);
+}
+
+static fx_result entry_init(fx_context *ctx, fx_entry *e, const fx_effect_class *cls)
+{
+    memset(e, 0, sizeof *e);
+    e->cls = cls;
+    e->enabled = 1;
+    e->quality = -1;
+    e->user_params = fx_mem_calloc(1, cls->params_size);
+    e->explicit_set = fx_mem_calloc((size_t)(cls->param_count ? cls->param_count : 1), 1);
+    if (!e->user_params || !e->explicit_set) {
+        entry_clear(e);
+        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "out of memory adding effect '%s'", cls->name);
+    }
+    fx_params_set_defaults(cls, e->user_params);
+    return FX_OK;
+}
+
+static void where_of(char *buf, size_t n, int index, const fx_effect_class *cls)
+{
+    snprintf(buf, n, "effect %d (%s)", index, cls ? cls->name : "?");
+}
+
+fx_result fx_stack_new(fx_context *ctx, fx_stack **out)
+{
+    if (!out)
+        return fx_fail(ctx, FX_ERR_INVALID_ARGUMENT, "fx_stack_new: out is NULL");
+    fx_stack *s = fx_mem_calloc(1, sizeof *s);
+    if (!s)
+        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "out of memory for a stack");
+    s->ctx = ctx;
+    s->quality = FX_QUALITY_FINAL;
+    *out = s;
+    return FX_OK;
+}
+
+static void stack_clear(fx_stack *s)
+{
+    for (int i = 0; i < s->count; i++)
+        entry_clear(&s->entries[i]);
+    fx_mem_free(s->entries);
+    s->entries = NULL;
+    s->count = s->cap = 0;
+}
+
+void fx_stack_free(fx_stack *s)
+{
+    if (!s)
+        return;
+    stack_clear(s);
+    fx_mem_free(s);
+}
+
+static fx_result stack_grow(fx_stack *s)
+{
+    if (s->count < s->cap)
+        return FX_OK;
+    int cap = s->cap ? s->cap * 2 : 4;
+    fx_entry *e = fx_mem_realloc(s->entries, (size_t)cap * sizeof *e);
+    if (!e)
+        return fx_fail(s->ctx, FX_ERR_OUT_OF_MEMORY, "out of memory growing a stack");
+    s->entries = e;
+    s->cap = cap;
+    return FX_OK;
+}
+
+static fx_entry *entry_at(const fx_stack *s, int index, const char *fn)
+{
+    if (!s)
+        return NULL;
+    if (index < 0 || index >= s->count) {
+        fx_fail(s->ctx, FX_ERR_INVALID_ARGUMENT, "%s: effect index %d is out of range (stack has %d)",
+                fn, index, s->count);
+        return NULL;
+    }
+    return &s->entries[index];
+}
+
+/* Effective parameters: defaults, then the quality preset, then explicit values. */
+static fx_result effective_params(const fx_stack *s, const fx_entry *e, int index, int quality, void *out)
+{
+    const fx_effect_class *c = e->cls;
+    char where[128];
+    where_of(where, sizeof where, index, c);
+    fx_params_set_defaults(c, out);
+    const char *preset = c->presets[quality];
+    if (preset) {
+        cJSON *p = cJSON_Parse(preset);
+        if (!p)
+            return fx_fail(s->ctx, FX_ERR_INTERNAL, "%s: preset '%s' is not valid JSON", where,
+                           fx_quality_name(quality));
+        fx_result r = fx_params_set_object(s->ctx, c, out, p, NULL, where);
+        cJSON_Delete(p);
+        if (r)
+            return r;
+    }
+    for (int i = 0; i < c->param_count; i++)
+        if (e->explicit_set[i])
+            fx_param_copy(&c->params[i], out, e->user_params);
+    if (c->validate) {
+        char err[512] = "";
+        fx_result r = c->validate(out, err, sizeof err);
+        if (r)
+            return fx_fail(s->ctx, r, "%s: %s", where, err[0] ? err : "invalid parameters");
+    }
+    return FX_OK;
+}
+
+static int entry_quality(const fx_stack *s, const fx_entry *e)
+{
+    return e->quality >= 0 ? e->quality : s->quality;
+}
+
+/* ---- recipes ---- */
+
+static fx_result parse_quality(fx_context *ctx, const cJSON *v, const char *where, int *out)
+{
+    int q = cJSON_IsString(v) ? fx_quality_from_name(v->valuestring) : -1;
+    if (q < 0)
+        return fx_fail(ctx, FX_ERR_BAD_RECIPE,
+                       "%s: \"quality\" must be one of draft, preview, final, reference", where);
+    *out = q;
+    return FX_OK;
+}
+
+static fx_result parse_entry(fx_stack *s, const cJSON *j, int index, fx_entry *e)
+{
+    char where[128];
+    snprintf(where, sizeof where, "effect %d", index);
+    if (!cJSON_IsObject(j))
+        return fx_fail(s->ctx, FX_ERR_BAD_RECIPE, "recipe: %s must be an object", where);
+    const cJSON *name = cJSON_GetObjectItemCaseSensitive(j, "effect");
+    if (!cJSON_IsString(name))
+        return fx_fail(s->ctx, FX_ERR_BAD_RECIPE, "recipe: %s has no \"effect\" name", where);
+    const fx_effect_class *cls = fx_effect_find(name->valuestring);
+    if (!cls)
+        return fx_fail(s->ctx, FX_ERR_UNKNOWN_EFFECT, "recipe: %s: unknown effect '%s' (see `libfx list`)",
+                       where, name->valuestring);
+    fx_result r = entry_init(s->ctx, e, cls);
+    if (r)
+        return r;
+    where_of(where, sizeof where, index, cls);
+    const cJSON *item;
+    cJSON_ArrayForEach(item, j) {
+        const char *k = item->string;
+        if (strcmp(k, "effect") == 0)
+            continue;
+        if (strcmp(k, "enabled") == 0) {
+            if (!cJSON_IsBool(item))
+                r = fx_fail(s->ctx, FX_ERR_BAD_RECIPE, "%s: \"enabled\" must be true or false", where);
+            else
+                e->enabled = cJSON_IsTrue(item);
+        } else if (strcmp(k, "quality") == 0) {
+            r = parse_quality(s->ctx, item, where, &e->quality);
+        } else if (strcmp(k, "label") == 0) {
+            if (!cJSON_IsString(item) || strlen(item->valuestring) >= LABEL_MAX)
+                r = fx_fail(s->ctx, FX_ERR_BAD_RECIPE, "%s: \"label\" must be a string under %d bytes",
+                            where, LABEL_MAX);
+            else
+                snprintf(e->label, LABEL_MAX, "%s", item->valuestring);
+        } else if (strcmp(k, "params") == 0) {
+            r = fx_params_set_object(s->ctx, cls, e->user_params, item, e->explicit_set, where);
+        } else if (strcmp(k, "mask") == 0) {
+            r = fx_mask_spec_parse(s->ctx, item, where, &e->mask);
+        } else {
+            r = fx_fail(s->ctx, FX_ERR_BAD_RECIPE,
+                        "%s: unknown key \"%s\" (known: effect, enabled, quality, label, params, mask)",
+                        where, k);
+        }
+        if (r)
+            break;
+    }
+    if (r)
+        entry_clear(e);
+    return r;
+}
+
+fx_result fx_stack_load_json(fx_stack *s, const char *json)
+{
+    if (!s || !json)
+        return fx_fail(s ? s->ctx : NULL, FX_ERR_INVALID_ARGUMENT, "fx_stack_load_json: NULL argument");
+    cJSON *root = cJSON_Parse(json);
+    if (!root) {
+        const char *at = cJSON_GetErrorPtr();
+        int line = 1;
+        for (const char *p = json; at && p < at && *p; p++)
+            line += *p == '\n';
+        return fx_fail(s->ctx, FX_ERR_BAD_RECIPE, "recipe: invalid JSON near line %d: \"%.30s\"", line,
+                       at ? at : "");
+    }
+    fx_stack tmp = {s->ctx, NULL, 0, 0, FX_QUALITY_FINAL, s->debug};
+    fx_result r = FX_OK;
+    if (!cJSON_IsObject(root))
+        r = fx_fail(s->ctx, FX_ERR_BAD_RECIPE, "recipe: the top level must be an object");
+    const cJSON *effects = NULL;
+    if (!r) {
+        const cJSON *item;
+        cJSON_ArrayForEach(item, root) {
+            const char *k = item->string;
+            if (strcmp(k, "version") == 0) {
+                if (!cJSON_IsNumber(item) || item->valuedouble != floor(item->valuedouble) ||
+                    item->valuedouble < 1)
+                    r = fx_fail(s->ctx, FX_ERR_BAD_RECIPE, "recipe: \"version\" must be a whole number");
+                else if (item->valuedouble > RECIPE_VERSION)
+                    r = fx_fail(s->ctx, FX_ERR_BAD_RECIPE,
+                                "recipe: version %g is newer than this libfx reads (%d): update libfx",
+                                item->valuedouble, RECIPE_VERSION);
+            } else if (strcmp(k, "quality") == 0) {
+                r = parse_quality(s->ctx, item, "recipe", &tmp.quality);
+            } else if (strcmp(k, "effects") == 0) {
+                if (!cJSON_IsArray(item))
+                    r = fx_fail(s->ctx, FX_ERR_BAD_RECIPE, "recipe: \"effects\" must be a list");
+                effects = item;
+            } else if (strcmp(k, "name") != 0 && strcmp(k, "description") != 0) {
+                r = fx_fail(s->ctx, FX_ERR_BAD_RECIPE,
+                            "recipe: unknown key \"%s\" (known: version, quality, effects, name, description)", k);
+            }
+            if (r)
+                break;
+        }
+        if (!r && !cJSON_GetObjectItemCaseSensitive(root, "version"))
+            r = fx_fail(s->ctx, FX_ERR_BAD_RECIPE, "recipe: \"version\" is missing (use 1)");
+    }
+    if (!r && effects) {
+        int i = 0;
+        const cJSON *item;
+        cJSON_ArrayForEach(item, effects) {
+            if ((r = stack_grow(&tmp)))
+                break;
+            if ((r = parse_entry(&tmp, item, i, &tmp.entries[tmp.count])))
+                break;
+            tmp.count++;
+            i++;
+        }
+    }
+    /* Cross-parameter checks at load, so a bad recipe fails before any render. */
+    for (int i = 0; !r && i < tmp.count; i++) {
+        fx_entry *e = &tmp.entries[i];
+        void *p = fx_mem_alloc(e->cls->params_size);
+        if (!p)
+            r = fx_fail(s->ctx, FX_ERR_OUT_OF_MEMORY, "out of memory checking a recipe");
+        else
+            r = effective_params(&tmp, e, i, entry_quality(&tmp, e), p);
+        fx_mem_free(p);
+    }
+    cJSON_Delete(root);
+    if (r) {
+        stack_clear(&tmp);
+        return r;
+    }
+    stack_clear(s);
+    s->entries = tmp.entries;
+    s->count = tmp.count;
+    s->cap = tmp.cap;
+    s->quality = tmp.quality;
+    return FX_OK;
+}
+
+fx_result fx_stack_load_file(fx_stack *s, const char *path)
+{
+    if (!s || !path)
+        return fx_fail(s ? s->ctx : NULL, FX_ERR_INVALID_ARGUMENT, "fx_stack_load_file: NULL argument");
+    FILE *fp = fopen(path, "rb");
+    if (!fp)
+        return fx_fail(s->ctx, FX_ERR_IO, "cannot open recipe '%s': %s", path, strerror(errno));
+    char *buf = NULL;
+    size_t len = 0, cap = 0;
+    fx_result r = FX_OK;
+    for (;;) {
+        if (len + 4096 + 1 > cap) {
+            cap = cap ? cap * 2 : 8192;
+            if (cap > ((size_t)64 << 20)) {
+                r = fx_fail(s->ctx, FX_ERR_BAD_RECIPE, "recipe '%s' is larger than 64 MiB", path);
+                break;
+            }
+            char *nb = fx_mem_realloc(buf, cap);
+            if (!nb) {
+                r = fx_fail(s->ctx, FX_ERR_OUT_OF_MEMORY, "out of memory reading '%s'", path);
+                break;
+            }
+            buf = nb;
+        }
+        size_t n = fread(buf + len, 1, cap - len - 1, fp);
+        len += n;
+        if (n == 0) {
+            if (ferror(fp))
+                r = fx_fail(s->ctx, FX_ERR_IO, "cannot read recipe '%s'", path);
+            break;
+        }
+    }
+    fclose(fp);
+    if (!r) {
+        buf[len] = '\0';
+        r = fx_stack_load_json(s, buf);
+        if (r) {
+            /* Prefix the file name to the parser's message. */
+            char msg[1024];
+            snprintf(msg, sizeof msg, "%s", fx_context_error(s->ctx));
+            fx_fail(s->ctx, r, "%s: %s", path, msg);
+        }
+    }
+    fx_mem_free(buf);
+    return r;
+}
+
+fx_result fx_stack_to_json(const fx_stack *s, char **out_json)
+{
+    if (!s || !out_json)
+        return fx_fail(s ? s->ctx : NULL, FX_ERR_INVALID_ARGUMENT, "fx_stack_to_json: NULL argument");
+    *out_json = NULL;
+    cJSON *root = cJSON_CreateObject();
+    cJSON_AddNumberToObject(root, "version", RECIPE_VERSION);
+    cJSON_AddStringToObject(root, "quality", fx_quality_name(s->quality));
+    cJSON *effects = cJSON_AddArrayToObject(root, "effects");
+    for (int i = 0; i < s->count; i++) {
+        const fx_entry *e = &s->entries[i];
+        cJSON *o = cJSON_CreateObject();
+        cJSON_AddStringToObject(o, "effect", e->cls->name);
+        cJSON_AddBoolToObject(o, "enabled", e->enabled);
+        if (e->quality >= 0)
+            cJSON_AddStringToObject(o, "quality", fx_quality_name(e->quality));
+        if (e->label[0])
+            cJSON_AddStringToObject(o, "label", e->label);
+        cJSON *params = cJSON_AddObjectToObject(o, "params");
+        for (int k = 0; k < e->cls->param_count; k++)
+            if (e->explicit_set[k])
+                cJSON_AddItemToObject(params, e->cls->params[k].info.name,
+                                      fx_param_to_json(&e->cls->params[k], e->user_params));
+        cJSON *mask = fx_mask_spec_to_json(&e->mask);
+        if (mask)
+            cJSON_AddItemToObject(o, "mask", mask);
+        cJSON_AddItemToArray(effects, o);
+    }
+    char *str = cJSON_Print(root);
+    cJSON_Delete(root);
+    if (str)
+        *out_json = fx_json_strdup(str);
+    cJSON_free(str);
+    return *out_json ? FX_OK : fx_fail(s->ctx, FX_ERR_OUT_OF_MEMORY, "out of memory writing a recipe");
+}
+
+/* ---- editing ---- */
+
+int fx_stack_count(const fx_stack *s)
+{
+    return s ? s->count : 0;
+}
+
+const char *fx_stack_effect(const fx_stack *s, int index)
+{
+    if (!s || index < 0 || index >= s->count)
+        return NULL;
+    return s->entries[index].cls->name;
+}
+
+fx_result fx_stack_append(fx_stack *s, const char *effect, int *out_index)
+{
+    if (!s)
+        return FX_ERR_INVALID_ARGUMENT;
+    const fx_effect_class *cls = fx_effect_find(effect);
+    if (!cls)
+        return fx_fail(s->ctx, FX_ERR_UNKNOWN_EFFECT, "unknown effect '%s' (see `libfx list`)",
+                       effect ? effect : "(null)");
+    fx_result r = stack_grow(s);
+    if (r)
+        return r;
+    r = entry_init(s->ctx, &s->entries[s->count], cls);
+    if (r)
+        return r;
+    if (out_index)
+        *out_index = s->count;
+    s->count++;
+    return FX_OK;
+}
+
+fx_result fx_stack_remove(fx_stack *s, int index)
+{
+    fx_entry *e = entry_at(s, index, "fx_stack_remove");
+    if (!e)
+        return FX_ERR_INVALID_ARGUMENT;
+    entry_clear(e);
+    memmove(e, e + 1, (size_t)(s->count - index - 1) * sizeof *e);
+    s->count--;
+    return FX_OK;
+}
+
+fx_result fx_stack_set_enabled(fx_stack *s, int index, int enabled)
+{
+    fx_entry *e = entry_at(s, index, "fx_stack_set_enabled");
+    if (!e)
+        return FX_ERR_INVALID_ARGUMENT;
+    e->enabled = enabled != 0;
+    return FX_OK;
+}
+
+/* All typed setters funnel through the JSON setter: one place checks types and ranges. */
+static fx_result set_param(fx_stack *s, int index, const char *param, cJSON *value, const char *fn)
+{
+    fx_entry *e = entry_at(s, index, fn);
+    if (!e) {
+        cJSON_Delete(value);
+        return FX_ERR_INVALID_ARGUMENT;
+    }
+    char where[128];
+    where_of(where, sizeof where, index, e->cls);
+    if (!value)
+        return fx_fail(s->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
+    cJSON *obj = cJSON_CreateObject();
+    if (!obj) {
+        cJSON_Delete(value);
+        return fx_fail(s->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
+    }
+    cJSON_AddItemToObject(obj, param ? param : "", value);
+    fx_result r = fx_params_set_object(s->ctx, e->cls, e->user_params, obj, e->explicit_set, where);
+    cJSON_Delete(obj);
+    return r;
+}
+
+fx_result fx_stack_set_float(fx_stack *s, int index, const char *param, double value)
+{
+    return set_param(s, index, param, cJSON_CreateNumber(value), "fx_stack_set_float");
+}
+
+fx_result fx_stack_set_int(fx_stack *s, int index, const char *param, int value)
+{
+    fx_entry *e = s && index >= 0 && index < s->count ? &s->entries[index] : NULL;
+    const fx_param_def *d = e ? fx_effect_find_param(e->cls, param) : NULL;
+    cJSON *v = d && d->info.type == FX_PARAM_BOOL ? cJSON_CreateBool(value) : cJSON_CreateNumber(value);
+    return set_param(s, index, param, v, "fx_stack_set_int");
+}
+
+fx_result fx_stack_set_enum(fx_stack *s, int index, const char *param, const char *item)
+{
+    return set_param(s, index, param, cJSON_CreateString(item ? item : ""), "fx_stack_set_enum");
+}
+
+fx_result fx_stack_set_floats(fx_stack *s, int index, const char *param, const float *values, int count)
+{
+    if (!values || count < 0)
+        return fx_fail(s ? s->ctx : NULL, FX_ERR_INVALID_ARGUMENT, "fx_stack_set_floats: no values");
+    return set_param(s, index, param, cJSON_CreateFloatArray(values, count), "fx_stack_set_floats");
+}
+
+fx_result fx_stack_set_string(fx_stack *s, int index, const char *param, const char *value)
+{
+    return set_param(s, index, param, cJSON_CreateString(value ? value : ""), "fx_stack_set_string");
+}
+
+fx_result fx_stack_set_mask_json(fx_stack *s, int index, const char *mask_json)
+{
+    fx_entry *e = entry_at(s, index, "fx_stack_set_mask_json");
+    if (!e)
+        return FX_ERR_INVALID_ARGUMENT;
+    char where[128];
+    where_of(where, sizeof where, index, e->cls);
+    fx_mask_spec spec;
+    memset(&spec, 0, sizeof spec);
+    if (mask_json && mask_json[0]) {
+        cJSON *j = cJSON_Parse(mask_json);
+        if (!j)
+            return fx_fail(s->ctx, FX_ERR_BAD_RECIPE, "%s: the mask is not valid JSON", where);
+        fx_result r = fx_mask_spec_parse(s->ctx, j, where, &spec);
+        cJSON_Delete(j);
+        if (r)
+            return r;
+    }
+    fx_mask_spec_clear(&e->mask);
+    e->mask = spec;
+    return FX_OK;
+}
+
+fx_result fx_stack_set_effect_quality(fx_stack *s, int index, int quality)
+{
+    fx_entry *e = entry_at(s, index, "fx_stack_set_effect_quality");
+    if (!e)
+        return FX_ERR_INVALID_ARGUMENT;
+    if (quality < -1 || quality > FX_QUALITY_REFERENCE)
+        return fx_fail(s->ctx, FX_ERR_BAD_PARAM, "quality %d is not -1 (the stack's) or 0..3", quality);
+    e->quality = quality;
+    return FX_OK;
+}
+
+fx_result fx_stack_set_quality(fx_stack *s, int quality)
+{
+    if (!s)
+        return FX_ERR_INVALID_ARGUMENT;
+    if (quality < 0 || quality > FX_QUALITY_REFERENCE)
+        return fx_fail(s->ctx, FX_ERR_BAD_PARAM, "quality %d is not 0..3 (draft..reference)", quality);
+    s->quality = quality;
+    return FX_OK;
+}
+
+void fx_stack_set_debug_outputs(fx_stack *s, int enabled)
+{
+    if (s)
+        s->debug = enabled != 0;
+}
+
+/* ---- what a stack needs ---- */
+
+static fx_pass_set entry_passes(const fx_stack *s, const fx_entry *e, int index, int *needs_camera)
+{
+    fx_pass_set set = fx_mask_spec_passes(&e->mask);
+    void *p = fx_mem_alloc(e->cls->params_size);
+    if (!p)
+        return set;
+    /* Parameters were validated at load; if they fail now the run reports it. */
+    if (effective_params(s, e, index, entry_quality(s, e), p) == FX_OK) {
+        if (e->cls->passes)
+            set |= e->cls->passes(p);
+        if (needs_camera && e->cls->needs_camera && e->cls->needs_camera(p))
+            *needs_camera = 1;
+    }
+    fx_mem_free(p);
+    return set;
+}
+
+fx_pass_set fx_stack_pass_set(const fx_stack *s)
+{
+    fx_pass_set set = FX_PASS_BIT(FX_PASS_COMBINED);
+    for (int i = 0; s && i < s->count; i++)
+        if (s->entries[i].enabled)
+            set |= entry_passes(s, &s->entries[i], i, NULL);
+    return set;
+}
+
+fx_result fx_stack_required_passes(const fx_stack *s, char **out_json)
+{
+    if (!s || !out_json)
+        return fx_fail(s ? s->ctx : NULL, FX_ERR_INVALID_ARGUMENT, "fx_stack_required_passes: NULL argument");
+    *out_json = NULL;
+    int camera = 0;
+    fx_pass_set set = FX_PASS_BIT(FX_PASS_COMBINED);
+    for (int i = 0; i < s->count; i++)
+        if (s->entries[i].enabled)
+            set |= entry_passes(s, &s->entries[i], i, &camera);
+    cJSON *o = cJSON_CreateObject();
+    cJSON *passes = cJSON_AddArrayToObject(o, "passes");
+    cJSON *settings = cJSON_AddArrayToObject(o, "blender_settings");
+    for (int i = 0; i < FX_PASS_COUNT; i++) {
+        if (!(set & FX_PASS_BIT(i)))
+            continue;
+        const fx_pass_desc *d = fx_pass_describe((fx_pass_id)i);
+        cJSON_AddItemToArray(passes, cJSON_CreateString(d->name));
+        if (d->blender_setting[0])
+            cJSON_AddItemToArray(settings, cJSON_CreateString(d->blender_setting));
+    }
+    cJSON_AddBoolToObject(o, "camera", camera);
+    char *str = cJSON_PrintUnformatted(o);
+    cJSON_Delete(o);
+    if (str)
+        *out_json = fx_json_strdup(str);
+    cJSON_free(str);
+    return *out_json ? FX_OK : fx_fail(s->ctx, FX_ERR_OUT_OF_MEMORY, "out of memory");
+}
+
+/* ---- running ---- */
+
+typedef struct composite_job {
+    const float *src;
+    float *dst;
+    const fx_mask *mask;
+    fx_rect roi;
+    int width;
+    size_t *bad; /* per row: non-finite values replaced */
+} composite_job;
+
+/* Outside the ROI and where coverage is 0, output is src bit for bit; inside, dst is
+ * blended by coverage. Any non-finite value an effect produced is replaced and counted. */
+static void composite_rows(void *user, int y0, int y1)
+{
+    composite_job *j = user;
+    const size_t w4 = (size_t)j->width * 4;
+    for (int y = y0; y < y1; y++) {
+        const float *s = j->src + (size_t)y * w4;
+        float *d = j->dst + (size_t)y * w4;
+        size_t bad = 0;
+        if (y < j->roi.y0 || y >= j->roi.y1 || j->roi.x1 <= j->roi.x0) {
+            memcpy(d, s, w4 * sizeof(float));
+            j->bad[y] = 0;
+            continue;
+        }
+        if (j->roi.x0 > 0)
+            memcpy(d, s, (size_t)j->roi.x0 * 4 * sizeof(float));
+        if (j->roi.x1 < j->width)
+            memcpy(d + (size_t)j->roi.x1 * 4, s + (size_t)j->roi.x1 * 4,
+                   (size_t)(j->width - j->roi.x1) * 4 * sizeof(float));
+        const float *cov = j->mask ? j->mask->coverage + (size_t)y * j->width : NULL;
+        for (int x = j->roi.x0; x < j->roi.x1; x++) {
+            float *dp = d + (size_t)x * 4;
+            const float *sp = s + (size_t)x * 4;
+            for (int c = 0; c < 4; c++)
+                if (!isfinite(dp[c])) {
+                    dp[c] = isnan(dp[c]) ? 0.0f : (dp[c] > 0 ? FLT_MAX : -FLT_MAX);
+                    bad++;
+                }
+            if (!cov)
+                continue;
+            float m = cov[x];
+            if (m <= 0.0f) {
+                memcpy(dp, sp, 4 * sizeof(float));
+            } else if (m < 1.0f) {
+                for (int c = 0; c < 4; c++) {
+                    float v = sp[c] + m * (dp[c] - sp[c]);
+                    dp[c] = isfinite(v) ? v : (m < 0.5f ? sp[c] : dp[c]);
+                }
+            }
+        }
+        j->bad[y] = bad;
+    }
+}
+
+static double now_ms(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return ts.tv_sec * 1e3 + ts.tv_nsec / 1e6;
+}
+
+float *fx_effect_debug_pass(const fx_effect_run *run, const char *name, int channels, fx_result *result)
+{
+    if (result)
+        *result = FX_OK;
+    if (!run->debug)
+        return NULL;
+    char full[FX_NAME_MAX];
+    snprintf(full, sizeof full, "%d.%s.%s", run->index, run->effect_name, name);
+    float *buf = NULL;
+    fx_result r = fx_frame_alloc_pass(run->debug, full, channels, &buf);
+    if (r) {
+        if (result)
+            *result = r;
+        return NULL;
+    }
+    memset(buf, 0, (size_t)run->width * run->height * channels * sizeof(float));
+    return buf;
+}
+
+static fx_result check_passes(const fx_stack *s, const fx_frame *in, fx_pass_set set, const char *where)
+{
+    for (int i = 0; i < FX_PASS_COUNT; i++) {
+        if (!(set & FX_PASS_BIT(i)) || i == FX_PASS_COMBINED)
+            continue;
+        const fx_pass_desc *d = fx_pass_describe((fx_pass_id)i);
+        char name[FX_NAME_MAX];
+        snprintf(name, sizeof name, d->is_crypto ? "%s00" : "%s", d->name);
+        if (!fx_frame_find_pass(in, name)) {
+            const char *src = fx_frame_meta(in, "libfx:source");
+            return fx_fail(s->ctx, FX_ERR_MISSING_PASS,
+                           "%s needs the %s pass, which %s%s%s does not have (enable it in Blender: "
+                           "View Layer > Passes, or `libfx passes --stack ...`)",
+                           where, d->name, src ? "'" : "", src ? src : "the frame", src ? "'" : "");
+        }
+    }
+    return FX_OK;
+}
+
+fx_result fx_stack_run(fx_stack *s, const fx_frame *in, fx_frame **out)
+{
+    if (!s || !in || !out)
+        return fx_fail(s ? s->ctx : NULL, FX_ERR_INVALID_ARGUMENT, "fx_stack_run: NULL argument");
+    *out = NULL;
+    fx_context *ctx = s->ctx;
+    const fx_pass *combined = fx_frame_find_pass(in, "Combined");
+    if (!combined || combined->channels != 4) {
+        const char *src = fx_frame_meta(in, "libfx:source");
+        return fx_fail(ctx, FX_ERR_MISSING_PASS, "%s%s%s has no RGBA Combined pass to process",
+                       src ? "'" : "", src ? src : "the frame", src ? "'" : "");
+    }
+    const int w = in->width, h = in->height;
+    const size_t n = (size_t)w * h * 4;
+    fx_frame *o = NULL;
+    fx_result r = fx_frame_new_like(in, &o);
+    float *cur = NULL, *spare = NULL;
+    if (!r)
+        r = fx_frame_alloc_pass(o, "Combined", 4, &cur);
+    if (r) {
+        fx_frame_free(o);
+        return r;
+    }
+    /* Effects ping-pong between the output's Combined and one spare buffer. */
+    const float *src = combined->data;
+    int enabled = 0;
+    for (int i = 0; i < s->count; i++)
+        enabled += s->entries[i].enabled;
+    int done = 0;
+    for (int i = 0; i < s->count && !r; i++) {
+        fx_entry *e = &s->entries[i];
+        e->last_ms = 0;
+        if (!e->enabled)
+            continue;
+        double t0 = now_ms();
+        char where[128];
+        where_of(where, sizeof where, i, e->cls);
+        char stage[160];
+        snprintf(stage, sizeof stage, "%s (%d of %d)", where, done + 1, enabled);
+        if ((r = fx_progress(ctx, stage, (double)done / (enabled ? enabled : 1))))
+            break;
+        int quality = entry_quality(s, e);
+        void *params = fx_mem_alloc(e->cls->params_size);
+        if (!params) {
+            r = fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
+            break;
+        }
+        fx_mask *mask = NULL;
+        r = effective_params(s, e, i, quality, params);
+        if (!r)
+            r = check_passes(s, in, e->cls->passes ? e->cls->passes(params) : 0, where);
+        if (!r && e->cls->needs_camera && e->cls->needs_camera(params) && !in->has_camera)
+            r = fx_fail(ctx, FX_ERR_NO_CAMERA,
+                        "%s needs the camera matrices: the file has no worldToCamera/worldToNDC "
+                        "attributes (give a camera sidecar with --camera)",
+                        where);
+        if (!r)
+            r = fx_mask_build(ctx, &e->mask, in, where, &mask);
+        if (!r && mask && mask->bounds.x1 <= mask->bounds.x0) {
+            /* Nothing selected: the effect is skipped and the image passes through. */
+            fx_mask_free(mask);
+            fx_mem_free(params);
+            e->last_ms = now_ms() - t0;
+            done++;
+            continue;
+        }
+        float *dst = NULL;
+        if (!r && src == cur && !spare) {
+            size_t bytes = n * sizeof(float);
+            if (!(r = fx_check_budget(ctx, bytes, "an effect's output"))) {
+                spare = fx_mem_alloc(bytes);
+                if (!spare)
+                    r = fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
+            }
+        }
+        if (!r)
+            dst = src == cur ? spare : cur;
+        if (!r) {
+            fx_effect_run run;
+            memset(&run, 0, sizeof run);
+            run.ctx = ctx;
+            run.frame = in;
+            run.src = src;
+            run.dst = dst;
+            run.width = w;
+            run.height = h;
+            run.roi = mask ? mask->bounds : (fx_rect){0, 0, w, h};
+            run.mask = mask;
+            run.params = params;
+            run.quality = quality;
+            run.index = i;
+            run.effect_name = e->cls->name;
+            run.debug = s->debug ? o : NULL;
+            r = e->cls->process(&run);
+            if (!r) {
+                size_t *bad = fx_mem_calloc((size_t)(h ? h : 1), sizeof *bad);
+                if (!bad) {
+                    r = fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
+                } else {
+                    composite_job job = {src, dst, mask, run.roi, w, bad};
+                    fx_parallel_for(ctx, h, fx_grain_for(ctx, h), composite_rows, &job);
+                    size_t total = 0;
+                    for (int y = 0; y < h; y++)
+                        total += bad[y];
+                    fx_mem_free(bad);
+                    if (total)
+                        fx_warn(ctx, "%s produced %zu non-finite values; they were replaced", where, total);
+                    src = dst;
+                }
+            }
+        }
+        fx_mask_free(mask);
+        fx_mem_free(params);
+        e->last_ms = now_ms() - t0;
+        done++;
+    }
+    if (!r) {
+        if (src == combined->data) {
+            memcpy(cur, src, n * sizeof(float));
+        } else if (src == spare) {
+            /* The result is in the spare buffer: make it the output's Combined. */
+            r = fx_frame_adopt_pass(o, "Combined", 4, spare);
+            spare = NULL;
+        }
+    }
+    if (!r)
+        r = fx_progress(ctx, "done", 1.0);
+    fx_mem_free(spare);
+    if (r) {
+        fx_frame_free(o);
+        return r;
+    }
+    *out = o;
+    return FX_OK;
+}
+
+fx_result fx_stack_timings_json(const fx_stack *s, char **out_json)
+{
+    if (!s || !out_json)
+        return FX_ERR_INVALID_ARGUMENT;
+    cJSON *a = cJSON_CreateArray();
+    for (int i = 0; i < s->count; i++) {
+        cJSON *o = cJSON_CreateObject();
+        cJSON_AddNumberToObject(o, "index", i);
+        cJSON_AddStringToObject(o, "effect", s->entries[i].cls->name);
+        cJSON_AddBoolToObject(o, "enabled", s->entries[i].enabled);
+        cJSON_AddNumberToObject(o, "ms", s->entries[i].last_ms);
+        cJSON_AddItemToArray(a, o);
+    }
+    char *str = cJSON_PrintUnformatted(a);
+    cJSON_Delete(a);
+    *out_json = str ? fx_json_strdup(str) : NULL;
+    cJSON_free(str);
+    return *out_json ? FX_OK : fx_fail(s->ctx, FX_ERR_OUT_OF_MEMORY, "out of memory");
+}
