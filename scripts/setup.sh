@@ -1,0 +1,32 @@
+#!/usr/bin/env bash
+# Installs the Debian 12 packages libfx needs (only the missing ones) and builds
+# libfx into build/ (or $LIBFX_BUILD_DIR). Safe to run again.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+packages=(
+  build-essential cmake pkg-config          # toolchain
+  libopenexr-dev libcjson-dev libpng-dev    # the library's dependencies
+  openimageio-tools python3-openimageio     # oiiotool/idiff and OIIO from Python, for tests and comparisons
+  python3-numpy python3-pytest              # Python tests (run with /usr/bin/python3)
+  blender                                   # Debian's Blender 3.4: the add-on, scenes and renders
+  xvfb                                      # a display for the add-on's UI screenshot
+  libopencv-imgproc-dev                     # OpenCV's GaussianBlur as the benchmark's peer
+  clang                                     # sanitizer builds and the fuzz target
+)
+missing=()
+for p in "${packages[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ ${#missing[@]} -gt 0 ]; then
+  echo "setup: installing ${missing[*]}"
+  SUDO=""
+  [ "$(id -u)" -eq 0 ] || SUDO=sudo
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${missing[@]}"
+fi
+
+build=${LIBFX_BUILD_DIR:-build}
+cmake -B "$build" -S . -DCMAKE_BUILD_TYPE=Release >/dev/null
+cmake --build "$build" -j"$(nproc)"
+echo "setup: built libfx in $build/ (CLI: $build/libfx/libfx)"

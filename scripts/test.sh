@@ -1,0 +1,24 @@
+#!/usr/bin/env bash
+# Sets everything up and runs every test: the C tests (CTest), the same C tests and
+# the damaged-file corpus under AddressSanitizer + UBSan, the Python tests of the
+# CLI, and the headless Blender tests of the add-on and scenes.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash scripts/setup.sh
+
+status=0
+echo "== C tests (release build)"
+ctest --test-dir build --output-on-failure -j2 || status=1
+
+echo "== C tests under AddressSanitizer + UndefinedBehaviorSanitizer"
+cmake -B build-asan -S . -DCMAKE_BUILD_TYPE=Debug -DLIBFX_ASAN=ON -DLIBFX_UBSAN=ON \
+  -DLIBFX_BUILD_BENCH=OFF >/dev/null
+cmake --build build-asan -j"$(nproc)" >/dev/null
+ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1 \
+  ctest --test-dir build-asan --output-on-failure -j2 || status=1
+
+echo "== Python tests (CLI, interop) and Blender tests (add-on, scenes)"
+export LIBFX_CLI="$PWD/build/libfx/libfx" LIBFX_LIBRARY="$PWD/build/libfx/libfx.so"
+/usr/bin/python3 -m pytest -q tests/python tests/blender || status=1
+
+exit $status
