@@ -1,0 +1,356 @@
+/* Core: contexts and errors, recipes (every kind of bad input names what is wrong),
+ * stack editing and JSON round trips, required passes, masks, Cryptomatte IDs and
+ * the thread pool's determinism. */
+#include "testutil.h"
+
+#include "core/effect.h"
+#include "core/mask.h"
+#include "core/parallel.h"
+
+#include <math.h>
+#include <pthread.h>
+#include <stdlib.h>
+#include <string.h>
+
+static void test_context_and_errors(void)
+{
+    fx_context *ctx = NULL;
+    CHECK(fx_context_new(&ctx, 0) == FX_OK);
+    CHECK(fx_context_threads(ctx) >= 1);
+    CHECK(strcmp(fx_context_error(ctx), "") == 0);
+    CHECK(fx_abi_version() == FX_ABI_VERSION);
+    CHECK(strcmp(fx_result_name(FX_ERR_BAD_PARAM), "FX_ERR_BAD_PARAM") == 0);
+    fx_frame *f = NULL;
+    CHECK_FAIL(ctx, fx_frame_new(ctx, -1, 4, &f), FX_ERR_INVALID_ARGUMENT, "negative");
+    CHECK_FAIL(ctx, fx_context_set_limits(ctx, 0, 1, 1), FX_ERR_INVALID_ARGUMENT, "positive");
+    CHECK(fx_context_set_limits(ctx, 100, 100, 1 << 20) == FX_OK);
+    CHECK_FAIL(ctx, fx_frame_new(ctx, 101, 4, &f), FX_ERR_LIMIT, "over the limit");
+    CHECK(fx_frame_new(ctx, 100, 100, &f) == FX_OK);
+    /* 100*100*4 floats = 160 KB < 1 MiB; a budget of 100 KB refuses it */
+    CHECK(fx_context_set_limits(ctx, 100, 100, 100000) == FX_OK);
+    CHECK_FAIL(ctx, fx_frame_add_pass(f, "Combined", 4, NULL), FX_ERR_LIMIT, "memory budget");
+    CHECK_FAIL(ctx, fx_frame_pass(f, "Depth", NULL, NULL), FX_ERR_MISSING_PASS, "Depth");
+    CHECK_FAIL(ctx, fx_frame_add_pass(f, "X", 5, NULL), FX_ERR_INVALID_ARGUMENT, "channels");
+    fx_frame_free(f);
+    fx_frame_free(NULL);
+    fx_stack_free(NULL);
+    fx_context_free(ctx);
+    fx_context_free(NULL);
+}
+
+typedef struct thread_arg {
+    fx_context *ctx;
+    const char *effect;
+    int ok;
+} thread_arg;
+
+static void *error_thread(void *p)
+{
+    thread_arg *a = p;
+    fx_stack *s = NULL;
+    fx_stack_new(a->ctx, &s);
+    for (int i = 0; i < 200; i++) {
+        fx_stack_append(s, a->effect, NULL);
+        /* each thread must read back its own message */
+        if (!strstr(fx_context_error(a->ctx), a->effect))
+            a->ok = 0;
+    }
+    fx_stack_free(s);
+    return NULL;
+}
+
+static void test_errors_are_per_thread(void)
+{
+    fx_context *ctx = NULL;
+    fx_context_new(&ctx, 2);
+    thread_arg a = {ctx, "no_such_effect_a", 1}, b = {ctx, "no_such_effect_b", 1};
+    pthread_t ta, tb;
+    pthread_create(&ta, NULL, error_thread, &a);
+    pthread_create(&tb, NULL, error_thread, &b);
+    pthread_join(ta, NULL);
+    pthread_join(tb, NULL);
+    CHECK(a.ok && b.ok);
+    fx_context_free(ctx);
+}
+
+static void test_recipes(void)
+{
+    fx_context *ctx = NULL;
+    fx_context_new(&ctx, 1);
+    fx_stack *s = NULL;
+    CHECK_OK(ctx, fx_stack_new(ctx, &s));
+    const char *good =
+        "{\"version\": 1, \"quality\": \"draft\", \"effects\": ["
+        "{\"effect\": \"gaussian_blur\", \"params\": {\"sigma\": 3.5}},"
+        "{\"effect\": \"color_matrix\", \"enabled\": false, \"quality\": \"reference\","
+        " \"params\": {\"operator\": \"sepia\", \"mix\": 0.5}, \"mask\": {\"object\": [\"Statue\"], \"invert\": true}},"
+        "{\"effect\": \"pixelate\", \"label\": \"censor\", \"mask\": {\"rect\": [1, 2, 3, 4]}}]}";
+    CHECK_OK(ctx, fx_stack_load_json(s, good));
+    CHECK(fx_stack_count(s) == 3);
+    CHECK(strcmp(fx_stack_effect(s, 1), "color_matrix") == 0);
+
+    /* Bad recipes: each names what is wrong, and the stack keeps its content. */
+    CHECK_FAIL(ctx, fx_stack_load_json(s, "{\"version\": 1, \"effects\": [{\"effect\": \"nope\"}]}"),
+               FX_ERR_UNKNOWN_EFFECT, "'nope'");
+    CHECK_FAIL(ctx, fx_stack_load_json(s, "{\"version\": 1, \"effects\": [{\"effect\": \"gaussian_blur\", \"params\": {\"sigmaa\": 1}}]}"),
+               FX_ERR_BAD_PARAM, "unknown parameter 'sigmaa'");
+    CHECK_FAIL(ctx, fx_stack_load_json(s, "{\"version\": 1, \"effects\": [{\"effect\": \"gaussian_blur\", \"params\": {\"sigma\": -1}}]}"),
+               FX_ERR_BAD_PARAM, "effect 0 (gaussian_blur): parameter 'sigma' = -1 is out of range [0, ");
+    CHECK_FAIL(ctx, fx_stack_load_json(s, "{\"version\": 1, \"effects\": [{\"effect\": \"gaussian_blur\", \"params\": {\"sigma\": \"big\"}}]}"),
+               FX_ERR_BAD_PARAM, "must be a number");
+    CHECK_FAIL(ctx, fx_stack_load_json(s, "{\"version\": 1, \"effects\": [{\"effect\": \"color_matrix\", \"params\": {\"operator\": \"purple\"}}]}"),
+               FX_ERR_BAD_PARAM, "is not one of: grayscale_average");
+    CHECK_FAIL(ctx, fx_stack_load_json(s, "{\"version\": 1, \"effects\": [{\"effect\": \"color_matrix\", \"params\": {\"matrix\": [1, 2, 3]}}]}"),
+               FX_ERR_BAD_PARAM, "needs 16 numbers");
+    CHECK_FAIL(ctx, fx_stack_load_json(s, "{\"version\": 1, \"effects\": [{\"effect\": \"pixelate\", \"params\": {\"cell_size\": 2.5}}]}"),
+               FX_ERR_BAD_PARAM, "must be an integer");
+    CHECK_FAIL(ctx, fx_stack_load_json(s, "{\"version\": 1, \"effects\": [{\"effect\": \"pixelate\", \"mask\": {\"object\": 3}}]}"),
+               FX_ERR_BAD_RECIPE, "mask \"object\"");
+    CHECK_FAIL(ctx, fx_stack_load_json(s, "{\"version\": 1, \"effects\": [{\"effect\": \"pixelate\", \"mask\": {\"rect\": [0, 0, -2, 3]}}]}"),
+               FX_ERR_BAD_RECIPE, "rect");
+    CHECK_FAIL(ctx, fx_stack_load_json(s, "{\"version\": 1, \"effects\": [{\"effect\": \"pixelate\", \"mask\": {\"colour\": 1}}]}"),
+               FX_ERR_BAD_RECIPE, "unknown mask key \"colour\"");
+    CHECK_FAIL(ctx, fx_stack_load_json(s, "{\"version\": 1, \"effects\": [{\"effect\": \"pixelate\", \"speed\": 1}]}"),
+               FX_ERR_BAD_RECIPE, "unknown key \"speed\"");
+    CHECK_FAIL(ctx, fx_stack_load_json(s, "{\"version\": 2, \"effects\": []}"), FX_ERR_BAD_RECIPE, "newer");
+    CHECK_FAIL(ctx, fx_stack_load_json(s, "{\"effects\": []}"), FX_ERR_BAD_RECIPE, "\"version\" is missing");
+    CHECK_FAIL(ctx, fx_stack_load_json(s, "{\"version\": 1, \"quality\": \"ultra\"}"), FX_ERR_BAD_RECIPE, "quality");
+    CHECK_FAIL(ctx, fx_stack_load_json(s, "{\"version\": 1,\n \"effects\": [}"), FX_ERR_BAD_RECIPE, "line 2");
+    CHECK_FAIL(ctx, fx_stack_load_json(s, "[]"), FX_ERR_BAD_RECIPE, "top level");
+    CHECK_FAIL(ctx, fx_stack_load_file(s, "/nonexistent/recipe.json"), FX_ERR_IO, "/nonexistent/recipe.json");
+    CHECK(fx_stack_count(s) == 3);
+
+    /* Round trip: only explicit parameters are written, so presets keep working. */
+    char *json = NULL;
+    CHECK_OK(ctx, fx_stack_to_json(s, &json));
+    CHECK(json && strstr(json, "\"sigma\":\t3.5") && !strstr(json, "box_passes"));
+    CHECK(json && strstr(json, "\"label\":\t\"censor\""));
+    fx_stack *s2 = NULL;
+    fx_stack_new(ctx, &s2);
+    CHECK_OK(ctx, fx_stack_load_json(s2, json));
+    char *json2 = NULL;
+    CHECK_OK(ctx, fx_stack_to_json(s2, &json2));
+    CHECK(json && json2 && strcmp(json, json2) == 0);
+    fx_free(json);
+    fx_free(json2);
+
+    /* Typed setters go through the same checks. */
+    int idx = -1;
+    CHECK_OK(ctx, fx_stack_append(s2, "color_matrix", &idx));
+    CHECK(idx == 3);
+    CHECK_OK(ctx, fx_stack_set_float(s2, idx, "mix", 0.25));
+    CHECK_FAIL(ctx, fx_stack_set_float(s2, idx, "mix", 2), FX_ERR_BAD_PARAM, "[0, 1]");
+    CHECK_OK(ctx, fx_stack_set_enum(s2, idx, "operator", "custom"));
+    float m3[9] = {0, 1, 0, 1, 0, 0, 0, 0, 1};
+    CHECK_OK(ctx, fx_stack_set_floats(s2, idx, "matrix", m3, 9)); /* 3x3 embeds into 4x4 */
+    CHECK_FAIL(ctx, fx_stack_set_int(s2, 99, "mix", 1), FX_ERR_INVALID_ARGUMENT, "out of range");
+    CHECK_FAIL(ctx, fx_stack_set_mask_json(s2, idx, "{\"object_index\": -1}"), FX_ERR_BAD_RECIPE, "integers >= 0");
+    CHECK_OK(ctx, fx_stack_set_mask_json(s2, idx, "{\"object_index\": [2, 3]}"));
+    CHECK_OK(ctx, fx_stack_remove(s2, 0));
+    CHECK(fx_stack_count(s2) == 3);
+
+    /* What the stack needs: the mask by object index asks for IndexOB; a disabled
+     * effect's Cryptomatte mask asks for nothing. */
+    char *need = NULL;
+    CHECK_OK(ctx, fx_stack_required_passes(s2, &need));
+    CHECK(need && strstr(need, "\"IndexOB\"") && strstr(need, "use_pass_object_index"));
+    CHECK(need && !strstr(need, "CryptoObject"));
+    fx_free(need);
+    fx_stack_free(s2);
+    fx_stack_free(s);
+
+    /* Introspection */
+    CHECK(fx_effect_count() >= 3);
+    CHECK(fx_effect_doc("pixelate") != NULL);
+    CHECK(fx_effect_doc("nope") == NULL);
+    CHECK(fx_effect_param_count("nope") == -1);
+    const fx_param_info *pi = fx_effect_param("gaussian_blur", 0);
+    CHECK(pi && pi->size == sizeof(fx_param_info));
+    char *desc = NULL;
+    CHECK_OK(ctx, fx_effect_describe_json(ctx, "gaussian_blur", &desc));
+    CHECK(desc && strstr(desc, "\"presets\"") && strstr(desc, "\"reference\""));
+    fx_free(desc);
+    CHECK_FAIL(ctx, fx_effect_describe_json(ctx, "nope", &desc), FX_ERR_UNKNOWN_EFFECT, "nope");
+    CHECK(fx_quality_from_name("reference") == FX_QUALITY_REFERENCE);
+    CHECK(fx_quality_from_name("best") == -1);
+    fx_context_free(ctx);
+}
+
+static void test_cryptomatte_ids(void)
+{
+    /* Published MurmurHash3_x86_32 vectors */
+    CHECK(fx_murmur3_32("", 0, 0) == 0);
+    CHECK(fx_murmur3_32("hello", 5, 0) == 0x248bfa47u);
+    const char *fox = "The quick brown fox jumps over the lazy dog";
+    CHECK(fx_murmur3_32(fox, strlen(fox), 0) == 0x2e4ff723u);
+    /* IDs are always normal, finite floats */
+    char name[32];
+    for (int i = 0; i < 20000; i++) {
+        snprintf(name, sizeof name, "object_%d", i);
+        float id = fx_cryptomatte_id(name);
+        CHECK(isfinite(id) && (id == 0 || fpclassify(id) == FP_NORMAL));
+    }
+}
+
+static void test_masks(void)
+{
+    fx_context *ctx = NULL;
+    fx_context_new(&ctx, 2);
+    const int w = 8, h = 6;
+    fx_frame *f = tu_pattern_frame(ctx, w, h, 1);
+    /* A Cryptomatte rank: left half "Statue" with coverage 1, the pixel at x=4 shared
+     * 0.25 / 0.75 between "Statue" and "Floor"; an IndexOB pass: 7 on the top row. */
+    float crypto[8 * 6 * 4], index_ob[8 * 6];
+    float statue = fx_cryptomatte_id("Statue"), floor_ = fx_cryptomatte_id("Floor");
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++) {
+            float *p = crypto + (y * w + x) * 4;
+            if (x < 4) { p[0] = statue; p[1] = 1; p[2] = 0; p[3] = 0; }
+            else if (x == 4) { p[0] = floor_; p[1] = 0.75f; p[2] = statue; p[3] = 0.25f; }
+            else { p[0] = floor_; p[1] = 1; p[2] = 0; p[3] = 0; }
+            index_ob[y * w + x] = y == 0 ? 7.0f : 1.0f;
+        }
+    fx_frame_add_pass(f, "CryptoObject00", 4, crypto);
+    fx_frame_add_pass(f, "IndexOB", 1, index_ob);
+    fx_frame_set_meta(f, "cryptomatte/CryptoObject/manifest", "{\"Statue\": \"x\", \"Floor\": \"y\"}");
+
+    cJSON *j = cJSON_Parse("{\"object\": \"Statue\"}");
+    fx_mask_spec spec;
+    CHECK_OK(ctx, fx_mask_spec_parse(ctx, j, "t", &spec));
+    cJSON_Delete(j);
+    fx_mask *m = NULL;
+    CHECK_OK(ctx, fx_mask_build(ctx, &spec, f, "t", &m));
+    CHECK(m && m->coverage[0] == 1.0f && m->coverage[3] == 1.0f && m->coverage[4] == 0.25f &&
+          m->coverage[5] == 0.0f);
+    CHECK(m && m->bounds.x0 == 0 && m->bounds.x1 == 5 && m->bounds.y0 == 0 && m->bounds.y1 == h);
+    fx_mask_free(m);
+    fx_mask_spec_clear(&spec);
+
+    /* index union name, restricted by a rect, inverted */
+    j = cJSON_Parse("{\"object_index\": 7, \"rect\": [5, 0, 2, 6], \"invert\": true}");
+    CHECK_OK(ctx, fx_mask_spec_parse(ctx, j, "t", &spec));
+    cJSON_Delete(j);
+    CHECK_OK(ctx, fx_mask_build(ctx, &spec, f, "t", &m));
+    CHECK(m && m->coverage[5] == 0.0f && m->coverage[6] == 0.0f && m->coverage[7] == 1.0f &&
+          m->coverage[0] == 1.0f && m->coverage[w + 5] == 1.0f);
+    fx_mask_free(m);
+    fx_mask_spec_clear(&spec);
+
+    /* a name not in the manifest warns; a missing pass is an error naming it */
+    j = cJSON_Parse("{\"object\": \"Statu\"}");
+    fx_mask_spec_parse(ctx, j, "effect 0 (pixelate)", &spec);
+    cJSON_Delete(j);
+    fx_context_clear_warnings(ctx);
+    CHECK_OK(ctx, fx_mask_build(ctx, &spec, f, "effect 0 (pixelate)", &m));
+    CHECK(fx_context_warning_count(ctx) >= 1 && tu_contains(fx_context_warning(ctx, 0), "'Statu' is not in"));
+    fx_mask_free(m);
+    fx_mask_spec_clear(&spec);
+    j = cJSON_Parse("{\"material\": \"Water\"}");
+    fx_mask_spec_parse(ctx, j, "effect 2 (pixelate)", &spec);
+    cJSON_Delete(j);
+    CHECK_FAIL(ctx, fx_mask_build(ctx, &spec, f, "effect 2 (pixelate)", &m), FX_ERR_MISSING_PASS,
+               "effect 2 (pixelate): a mask by material name needs the CryptoMaterial pass");
+    fx_mask_spec_clear(&spec);
+    fx_frame_free(f);
+    fx_context_free(ctx);
+}
+
+/* The stack honours masks for every effect: outside bit-identical. */
+static void test_stack_masking(void)
+{
+    fx_context *ctx = NULL;
+    fx_context_new(&ctx, 2);
+    fx_frame *f = tu_pattern_frame(ctx, 37, 23, 3);
+    fx_stack *s = NULL;
+    fx_stack_new(ctx, &s);
+    CHECK_OK(ctx, fx_stack_load_json(s, "{\"version\": 1, \"effects\": ["
+                                        "{\"effect\": \"color_matrix\", \"params\": {\"operator\": \"sepia\"},"
+                                        " \"mask\": {\"rect\": [5, 4, 10, 7]}},"
+                                        "{\"effect\": \"gaussian_blur\", \"params\": {\"sigma\": 2},"
+                                        " \"mask\": {\"rect\": [20, 10, 8, 8], \"invert\": true}}]}"));
+    fx_frame *out = NULL;
+    CHECK_OK(ctx, fx_stack_run(s, f, &out));
+    float *a, *b;
+    fx_frame_pass(f, "Combined", &a, NULL);
+    fx_frame_pass(out, "Combined", &b, NULL);
+    int outside_same = 1, inside_changed = 0;
+    for (int y = 0; y < 23; y++)
+        for (int x = 0; x < 37; x++) {
+            int in1 = x >= 5 && x < 15 && y >= 4 && y < 11;
+            int in2 = !(x >= 20 && x < 28 && y >= 10 && y < 18);
+            size_t i = ((size_t)y * 37 + x) * 4;
+            if (!in1 && !in2 && memcmp(a + i, b + i, 16) != 0)
+                outside_same = 0;
+            if (in1 && memcmp(a + i, b + i, 16) != 0)
+                inside_changed = 1;
+        }
+    CHECK(outside_same);
+    CHECK(inside_changed);
+    char *t = NULL;
+    CHECK_OK(ctx, fx_stack_timings_json(s, &t));
+    CHECK(t && strstr(t, "\"effect\":\"gaussian_blur\""));
+    fx_free(t);
+    fx_frame_free(out);
+
+    /* An empty stack, and a stack whose effects are all disabled, copy the image. */
+    CHECK_OK(ctx, fx_stack_load_json(s, "{\"version\": 1, \"effects\": [{\"effect\": \"pixelate\", \"enabled\": false}]}"));
+    CHECK_OK(ctx, fx_stack_run(s, f, &out));
+    fx_frame_pass(out, "Combined", &b, NULL);
+    CHECK(memcmp(a, b, 37 * 23 * 16) == 0);
+    fx_frame_free(out);
+
+    /* No Combined: a clear error */
+    fx_frame *empty = NULL;
+    fx_frame_new(ctx, 4, 4, &empty);
+    CHECK_FAIL(ctx, fx_stack_run(s, empty, &out), FX_ERR_MISSING_PASS, "Combined");
+    CHECK(out == NULL);
+    fx_frame_free(empty);
+    fx_stack_free(s);
+    fx_frame_free(f);
+    fx_context_free(ctx);
+}
+
+typedef struct sum_job {
+    double *partial;
+} sum_job;
+
+static void sum_range(void *user, int b, int e)
+{
+    sum_job *j = user;
+    for (int i = b; i < e; i++) {
+        double acc = 0;
+        for (int k = 0; k < 1000; k++)
+            acc += sin(i * 0.001 + k);
+        j->partial[i] = acc;
+    }
+}
+
+static void test_parallel_for(void)
+{
+    /* Same results whatever the thread count; nested loops do not deadlock. */
+    double r1[257], r2[257];
+    fx_context *c1 = NULL, *c2 = NULL;
+    fx_context_new(&c1, 1);
+    fx_context_new(&c2, 3);
+    sum_job j1 = {r1}, j2 = {r2};
+    fx_parallel_for(c1, 257, 5, sum_range, &j1);
+    fx_parallel_for(c2, 257, fx_grain_for(c2, 257), sum_range, &j2);
+    CHECK(memcmp(r1, r2, sizeof r1) == 0);
+    for (int rep = 0; rep < 50; rep++)
+        fx_parallel_for(c2, 257, 1, sum_range, &j2);
+    CHECK(memcmp(r1, r2, sizeof r1) == 0);
+    fx_context_free(c1);
+    fx_context_free(c2);
+}
+
+int main(void)
+{
+    test_context_and_errors();
+    test_errors_are_per_thread();
+    test_recipes();
+    test_cryptomatte_ids();
+    test_masks();
+    test_stack_masking();
+    test_parallel_for();
+    return tu_finish("test_core");
+}
