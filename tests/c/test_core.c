@@ -7,6 +7,8 @@
 #include "core/mask.h"
 #include "core/parallel.h"
 
+#include <cjson/cJSON.h>
+
 #include <math.h>
 #include <pthread.h>
 #include <stdlib.h>
