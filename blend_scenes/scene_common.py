@@ -497,6 +497,22 @@ def tex_wood(nt, bsdf, color, bump, scale=3.0):
     _bump(nt, bsdf, n.outputs["Fac"], bump)
 
 
+def transparent_material(name, pass_index, opacity=0.07, tint=(1.0, 1.0, 1.0)):
+    """A see-through veil: one Transparent BSDF whose colour is
+    ``tint * (1 - opacity)``; Cycles treats it as alpha = ``opacity``."""
+    mat = bpy.data.materials.new(name)
+    mat.pass_index = pass_index
+    nt, nodes, links = _nodes(mat)
+    for n in list(nodes):
+        if n.type != 'OUTPUT_MATERIAL':
+            nodes.remove(n)
+    tr = nodes.new("ShaderNodeBsdfTransparent")
+    tr.inputs["Color"].default_value = (*(c * (1.0 - opacity) for c in tint), 1.0)
+    links.new(tr.outputs["BSDF"], nodes.get("Material Output").inputs["Surface"])
+    mat.diffuse_color = (*tint, opacity)
+    return mat
+
+
 def mix_with_transparent(mat, alpha_socket_fn=None, alpha=1.0):
     """Route ``mat``'s Principled output through a Mix with a Transparent BSDF.
     ``alpha_socket_fn(nt)`` returns a socket giving opacity (1 = opaque);
