@@ -1,0 +1,293 @@
+"""The `libfx` CLI: help, version, list/describe/info/passes, and `run` on single files.
+
+Errors are in test_cli_errors.py, sequences and Ctrl-C in test_cli_sequences.py.
+"""
+import json
+
+import numpy as np
+import pytest
+
+from conftest import (EXIT_OK, EXIT_USAGE, combined, make_frame, read_exr, write_exr,
+                      write_recipe)
+
+EFFECTS = ("gaussian_blur", "color_matrix", "pixelate")
+
+
+def describe(run, effect):
+    r = run("describe", "--compact", effect)
+    assert r.returncode == EXIT_OK, r.stderr
+    return json.loads(r.stdout)
+
+
+def param_names(desc):
+    params = desc["params"]
+    return [p["name"] for p in params] if isinstance(params, list) else list(params)
+
+
+# ---- help and version ----------------------------------------------------------------
+
+def test_version(run):
+    r = run("--version")
+    assert r.returncode == EXIT_OK
+    assert r.stdout.startswith("libfx ") and "ABI 1" in r.stdout
+
+
+def test_help_lists_commands_and_exit_codes(run):
+    r = run("--help")
+    assert r.returncode == EXIT_OK
+    for word in ("list", "describe", "info", "passes", "run", "130"):
+        assert word in r.stdout
+    for code in ("  2 ", "  3 ", "  4 ", "  5 "):
+        assert code in r.stdout
+
+
+@pytest.mark.parametrize("cmd", ["list", "describe", "info", "passes", "run"])
+def test_help_per_command(run, cmd):
+    r = run(cmd, "--help")
+    assert r.returncode == EXIT_OK, r.stderr
+    assert r.stdout.startswith(f"usage: libfx {cmd}")
+    assert run("help", cmd).stdout == r.stdout
+
+
+def test_no_command_is_a_usage_error(run):
+    r = run()
+    assert r.returncode == EXIT_USAGE
+    assert "usage:" in r.stderr
+
+
+def test_unknown_command(run):
+    r = run("frobnicate")
+    assert r.returncode == EXIT_USAGE
+    assert r.stderr.strip().splitlines() == ["libfx: error: unknown command 'frobnicate' "
+                                             "(see 'libfx --help')"]
+
+
+# ---- list / describe / info / passes ----------------------------------------------------
+
+def test_list_one_effect_per_line(run):
+    r = run("list")
+    assert r.returncode == EXIT_OK
+    lines = r.stdout.splitlines()
+    names = []
+    for line in lines:
+        name, doc = line.split("\t")
+        assert name and doc.strip(), line
+        names.append(name)
+    for e in EFFECTS:
+        assert e in names
+
+
+@pytest.mark.parametrize("effect", EFFECTS)
+def test_describe_is_json_with_params(run, effect):
+    r = run("describe", effect)
+    assert r.returncode == EXIT_OK, r.stderr
+    desc = json.loads(r.stdout)  # indented for reading, still JSON
+    assert desc.get("name", effect) == effect
+    assert param_names(desc)
+    assert "\n  " in r.stdout  # indented
+    compact = json.loads(run("describe", "--compact", effect).stdout)
+    assert compact == desc
+
+
+def test_info_shapes(run, tmp_path):
+    path = make_frame(tmp_path / "in.exr", width=40, height=24)
+    r = run("info", path)
+    assert r.returncode == EXIT_OK, r.stderr
+    info = json.loads(r.stdout)
+    text = json.dumps(info)
+    for word in ("Combined", "Depth", "IndexOB"):
+        assert word in text
+    assert 40 in _numbers(info) and 24 in _numbers(info)
+
+
+def _numbers(obj):
+    if isinstance(obj, dict):
+        return [n for v in obj.values() for n in _numbers(v)]
+    if isinstance(obj, list):
+        return [n for v in obj for n in _numbers(v)]
+    return [obj] if isinstance(obj, (int, float)) and not isinstance(obj, bool) else []
+
+
+def test_info_corpus_multipart(run, corpus):
+    r = run("info", corpus / "openexr-images" / "Beachball" / "multipart.0001.exr")
+    assert r.returncode == EXIT_OK, r.stderr
+    json.loads(r.stdout)
+
+
+def test_passes_union_with_mask(run, tmp_path):
+    recipe = write_recipe(tmp_path / "r.json", [
+        {"effect": "pixelate", "mask": {"object_index": 1}},
+        {"effect": "gaussian_blur", "params": {"sigma": 2.0}},
+    ])
+    for args in (("--stack", recipe), (recipe,)):
+        r = run("passes", *args)
+        assert r.returncode == EXIT_OK, r.stderr
+        need = json.loads(r.stdout)
+        assert "Combined" in need["passes"] and "IndexOB" in need["passes"]
+        assert need["camera"] is False
+
+
+# ---- run --------------------------------------------------------------------------------
+
+def changing_params(run, effect):
+    """Parameters that make each effect visibly change a frame (names checked against
+    `describe`, so a renamed parameter fails here with a clear message)."""
+    wanted = {
+        "gaussian_blur": {"sigma": 3.0},
+        "pixelate": {"size": 8},
+        "color_matrix": {"saturation": 0.0},
+    }[effect]
+    names = param_names(describe(run, effect))
+    for k in wanted:
+        assert k in names, f"{effect} has no parameter {k!r}: {names}"
+    return wanted
+
+
+@pytest.mark.parametrize("effect", EFFECTS)
+def test_run_each_effect_changes_pixels(run, tmp_path, effect):
+    src = make_frame(tmp_path / "in.exr")
+    recipe = write_recipe(tmp_path / "r.json",
+                          [{"effect": effect, "params": changing_params(run, effect)}])
+    out = tmp_path / "out.exr"
+    r = run("run", "--stack", recipe, src, "-o", out)
+    assert r.returncode == EXIT_OK, r.stderr
+    assert r.stderr == ""
+    a, b = combined(read_exr(src)), combined(read_exr(out))
+    assert a.shape == b.shape
+    assert np.isfinite(b).all()
+    assert np.abs(a[..., :3] - b[..., :3]).max() > 1e-3
+
+
+def test_identity_recipe_is_bit_identical(run, tmp_path):
+    src = make_frame(tmp_path / "in.exr")
+    recipe = write_recipe(tmp_path / "r.json",
+                          [{"effect": "gaussian_blur", "params": {"sigma": 0.0}}])
+    out = tmp_path / "out.exr"
+    r = run("run", "--stack", recipe, src, "-o", out)
+    assert r.returncode == EXIT_OK, r.stderr
+    a, b = combined(read_exr(src)), combined(read_exr(out))
+    assert a.tobytes() == b.tobytes()
+
+
+def test_output_has_only_combined_unless_keep_passes(run, tmp_path):
+    src = make_frame(tmp_path / "in.exr")
+    recipe = write_recipe(tmp_path / "r.json", [{"effect": "pixelate"}])
+    r = run("run", "--stack", recipe, src, "-o", tmp_path / "plain.exr")
+    assert r.returncode == EXIT_OK, r.stderr
+    assert not any("Depth" in n for n in read_exr(tmp_path / "plain.exr"))
+    r = run("run", "--stack", recipe, "--keep-passes", src, "-o", tmp_path / "kept.exr")
+    assert r.returncode == EXIT_OK, r.stderr
+    kept = read_exr(tmp_path / "kept.exr")
+    assert any("Depth" in n for n in kept) and any("IndexOB" in n for n in kept)
+    depth_in = [v for n, v in read_exr(src).items() if "Depth" in n][0]
+    depth_out = [v for n, v in kept.items() if "Depth" in n][0]
+    assert depth_in.tobytes() == depth_out.tobytes()
+
+
+def test_mask_limits_the_effect(run, tmp_path):
+    src = make_frame(tmp_path / "in.exr")
+    recipe = write_recipe(tmp_path / "r.json", [
+        {"effect": "pixelate", "params": {"size": 4}, "mask": {"object_index": 2}}])
+    out = tmp_path / "out.exr"
+    r = run("run", "--stack", recipe, src, "-o", out)
+    assert r.returncode == EXIT_OK, r.stderr
+    a, b = combined(read_exr(src)), combined(read_exr(out))
+    idx = [v for n, v in read_exr(src).items() if n.endswith("IndexOB.X")][0]
+    outside = idx != 2
+    assert np.array_equal(a[outside], b[outside])
+    assert not np.array_equal(a[~outside], b[~outside])
+
+
+def test_thread_count_does_not_change_a_bit(run, tmp_path):
+    src = make_frame(tmp_path / "in.exr", width=97, height=61)
+    recipe = write_recipe(tmp_path / "r.json", [
+        {"effect": "gaussian_blur", "params": {"sigma": 2.5}},
+        {"effect": "pixelate", "params": {"size": 5}, "mask": {"object_index": 1}},
+        {"effect": "color_matrix", "params": {"saturation": 0.5}},
+    ])
+    outs = []
+    for n in (1, 2, 3):
+        out = tmp_path / f"out{n}.exr"
+        r = run("run", "--stack", recipe, "--threads", n, src, "-o", out)
+        assert r.returncode == EXIT_OK, r.stderr
+        outs.append(combined(read_exr(out)).tobytes())
+    assert outs[0] == outs[1] == outs[2]
+
+
+def test_png_preview(run, tmp_path):
+    from conftest import oiio
+    src = make_frame(tmp_path / "in.exr", width=40, height=24)
+    recipe = write_recipe(tmp_path / "r.json", [{"effect": "pixelate"}])
+    png = tmp_path / "preview.png"
+    r = run("run", "--stack", recipe, src, "-o", tmp_path / "out.exr", "--png", png)
+    assert r.returncode == EXIT_OK, r.stderr
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    inp = oiio.ImageInput.open(str(png))
+    spec = inp.spec()
+    inp.close()
+    assert (spec.width, spec.height) == (40, 24)
+
+
+def test_half_output(run, tmp_path):
+    from conftest import oiio
+    src = make_frame(tmp_path / "in.exr")
+    recipe = write_recipe(tmp_path / "r.json", [{"effect": "pixelate"}])
+    out = tmp_path / "out.exr"
+    r = run("run", "--stack", recipe, "--half", src, "-o", out)
+    assert r.returncode == EXIT_OK, r.stderr
+    inp = oiio.ImageInput.open(str(out))
+    fmt = inp.spec().format
+    inp.close()
+    assert fmt == oiio.HALF
+
+
+def test_quality_option_and_verbose_timings(run, tmp_path):
+    src = make_frame(tmp_path / "in.exr")
+    recipe = write_recipe(tmp_path / "r.json", [{"effect": "gaussian_blur"}])
+    r = run("run", "--stack", recipe, "--quality", "draft", "--verbose", src,
+            "-o", tmp_path / "out.exr")
+    assert r.returncode == EXIT_OK, r.stderr
+    line = [ln for ln in r.stdout.splitlines() if ln.startswith("timings: ")][0]
+    timings = json.loads(line[len("timings: "):])
+    assert timings[0]["effect"] == "gaussian_blur" and timings[0]["ms"] >= 0
+
+
+def test_other_layer_names_and_layer_option(run, tmp_path):
+    rgba = np.random.RandomState(3).rand(16, 20, 4).astype(np.float32)
+    src = write_exr(tmp_path / "in.exr", {"Combined": (rgba, "RGBA")}, layer="My.Layer 1")
+    recipe = write_recipe(tmp_path / "r.json", [{"effect": "pixelate"}])
+    r = run("run", "--stack", recipe, "--layer", "My.Layer 1", src, "-o", tmp_path / "o.exr")
+    assert r.returncode == EXIT_OK, r.stderr
+
+
+def test_nan_inf_corpus_file_gives_finite_output_and_a_warning(run, corpus, tmp_path):
+    src = corpus / "openexr-images" / "TestImages" / "BrightRingsNanInf.exr"
+    recipe = write_recipe(tmp_path / "r.json",
+                          [{"effect": "gaussian_blur", "params": {"sigma": 2.0}}])
+    out = tmp_path / "out.exr"
+    r = run("run", "--stack", recipe, src, "-o", out)
+    assert r.returncode == EXIT_OK, r.stderr
+    warnings = [ln for ln in r.stderr.splitlines() if ln.startswith("libfx: warning: ")]
+    assert warnings, r.stderr
+    assert np.isfinite(combined(read_exr(out))).all()
+
+
+@pytest.mark.parametrize("name", ["TestImages/WideFloatRange.exr", "TestImages/AllHalfValues.exr",
+                                  "DisplayWindow/t08.exr"])
+def test_corpus_files_run(run, corpus, tmp_path, name):
+    src = corpus / "openexr-images" / name
+    if not src.exists():
+        pytest.skip(f"{src} is not in this corpus")
+    recipe = write_recipe(tmp_path / "r.json", [{"effect": "pixelate"}])
+    out = tmp_path / "out.exr"
+    r = run("run", "--stack", recipe, src, "-o", out)
+    assert r.returncode == EXIT_OK, r.stderr
+    assert np.isfinite(combined(read_exr(out))).all()
+
+
+def test_processed_file_can_be_processed_again(run, tmp_path):
+    src = make_frame(tmp_path / "in.exr")
+    recipe = write_recipe(tmp_path / "r.json", [{"effect": "pixelate"}])
+    assert run("run", "--stack", recipe, src, "-o", tmp_path / "a.exr").returncode == EXIT_OK
+    r = run("run", "--stack", recipe, tmp_path / "a.exr", "-o", tmp_path / "b.exr")
+    assert r.returncode == EXIT_OK, r.stderr
