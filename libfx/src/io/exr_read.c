@@ -1,0 +1,445 @@
+/* fx_frame_read_exr: an EXR (Blender's multilayer output, a File Output node's file,
+ * or any other tool's) into a frame of float passes.
+ *
+ * Steps: open and summarise the header (exr_common.c), choose the layer and view,
+ * plan which channels feed which pass slots (exr_channels.c), allocate the passes
+ * (budget-checked), decode only the planned channels of each part (OpenEXRCore;
+ * DWAA/DWAB parts through OpenEXR's C++ reader, exr_dwa_fallback.cpp), then replace
+ * non-finite values and attach camera, time and metadata. The frame is the union of
+ * the used parts' data windows; pixels a part does not cover keep the fill value. */
+#include "core/internal.h"
+#include "core/passes.h"
+#include "io/cryptomatte_meta.h"
+#include "io/exr_camera.h"
+#include "io/exr_channels.h"
+#include "io/exr_common.h"
+#include "io/exr_dwa_fallback.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* Provided by the stack (core/stack.c): the passes its enabled effects and masks need. */
+extern fx_pass_set fx_stack_pass_set(const fx_stack *s);
+
+/* Where one planned channel lands. */
+typedef struct chan_dest {
+    float *base;  /* the frame pass's pixels */
+    int stride;   /* the pass's channel count */
+    int slot;
+} chan_dest;
+
+typedef struct reader {
+    fx_context *ctx;
+    fx_exr_file *f;
+    fx_frame *frame;
+    int dw[4];          /* the frame's data window */
+    int width, height;
+    chan_dest *dest;    /* per entry of f->chans; base NULL: not decoded */
+} reader;
+
+static fx_result resolve_view(fx_context *ctx, const fx_exr_file *f, const char *want, const char **out)
+{
+    *out = "";
+    if (f->view_count == 0) {
+        if (want && want[0])
+            return fx_fail(ctx, FX_ERR_INVALID_ARGUMENT, "'%s' has no view '%s' (the file has no views)",
+                           f->path, want);
+        return FX_OK;
+    }
+    if (!want || !want[0]) {
+        *out = f->views[0];
+        return FX_OK;
+    }
+    for (int i = 0; i < f->view_count; i++)
+        if (strcmp(f->views[i], want) == 0) {
+            *out = f->views[i];
+            return FX_OK;
+        }
+    char list[512];
+    size_t len = 0;
+    list[0] = '\0';
+    for (int i = 0; i < f->view_count && len < sizeof list; i++) {
+        int w = snprintf(list + len, sizeof list - len, "%s'%s'", i ? ", " : "", f->views[i]);
+        if (w < 0)
+            break;
+        len += (size_t)w;
+    }
+    return fx_fail(ctx, FX_ERR_INVALID_ARGUMENT, "'%s' has no view '%s' (views: %s)", f->path, want, list);
+}
+
+/* Decodes the planned channels of one scanline or tiled part with OpenEXRCore. */
+static fx_result decode_core_part(reader *rd, int p)
+{
+    fx_exr_file *f = rd->f;
+    const fx_exr_part *pt = &f->parts[p];
+    exr_result_t rv;
+    int tiled = pt->storage == EXR_STORAGE_TILED;
+    int32_t lines = 1;
+    uint32_t tile_w = 0, tile_h = 0;
+    int nx = 1, ny = 0;
+    int64_t pw = (int64_t)pt->dw[2] - pt->dw[0] + 1, ph = (int64_t)pt->dw[3] - pt->dw[1] + 1;
+
+    if (tiled) {
+        int32_t tw = 0, th = 0;
+        if ((rv = exr_get_tile_sizes(f->exr, p, 0, 0, &tw, &th)) != EXR_ERR_SUCCESS || tw <= 0 || th <= 0)
+            return fx_exr_fail(rd->ctx, f, rv, "cannot read the tile size");
+        tile_w = (uint32_t)tw, tile_h = (uint32_t)th;
+        nx = (int)((pw + tw - 1) / tw);
+        ny = (int)((ph + th - 1) / th);
+    } else {
+        if ((rv = exr_get_scanlines_per_chunk(f->exr, p, &lines)) != EXR_ERR_SUCCESS || lines <= 0)
+            return fx_exr_fail(rd->ctx, f, rv, "cannot read the scanlines per chunk");
+        ny = (int)((ph + lines - 1) / lines);
+    }
+
+    exr_decode_pipeline_t dec = EXR_DECODE_PIPELINE_INITIALIZER;
+    int have_decoder = 0;
+    fx_result result = FX_OK;
+    char what[160];
+    for (int ty = 0; ty < ny && result == FX_OK; ty++) {
+        for (int tx = 0; tx < nx && result == FX_OK; tx++) {
+            exr_chunk_info_t ci;
+            int x0, y0;
+            if (tiled) {
+                rv = exr_read_tile_chunk_info(f->exr, p, tx, ty, 0, 0, &ci);
+                /* Tile coordinates are counted from the data window's corner. */
+                x0 = pt->dw[0] + tx * (int)tile_w;
+                y0 = pt->dw[1] + ty * (int)tile_h;
+                snprintf(what, sizeof what, "part %d, tile (%d, %d)", p, tx, ty);
+            } else {
+                y0 = pt->dw[1] + ty * lines;
+                x0 = pt->dw[0];
+                rv = exr_read_scanline_chunk_info(f->exr, p, y0, &ci);
+                snprintf(what, sizeof what, "part %d, scanlines from %d", p, y0);
+            }
+            if (rv != EXR_ERR_SUCCESS) {
+                result = fx_exr_fail(rd->ctx, f, rv, what);
+                break;
+            }
+            rv = have_decoder ? exr_decoding_update(f->exr, p, &ci, &dec)
+                              : exr_decoding_initialize(f->exr, p, &ci, &dec);
+            if (rv != EXR_ERR_SUCCESS) {
+                result = fx_exr_fail(rd->ctx, f, rv, what);
+                break;
+            }
+            have_decoder = 1;
+            /* Never trust the chunk's size: it must sit inside the part's window. */
+            if (ci.width <= 0 || ci.height <= 0 || x0 + (int64_t)ci.width - 1 > pt->dw[2] ||
+                y0 + (int64_t)ci.height - 1 > pt->dw[3]) {
+                result = fx_fail(rd->ctx, FX_ERR_BAD_FILE, "'%s': %s: chunk of %dx%d outside the data window",
+                                 f->path, what, ci.width, ci.height);
+                break;
+            }
+            int any = 0;
+            for (int c = 0; c < dec.channel_count; c++) {
+                exr_coding_channel_info_t *ch = &dec.channels[c];
+                const chan_dest *d = c < pt->channel_count ? &rd->dest[pt->first_chan + c] : NULL;
+                if (!d || !d->base) {
+                    ch->decode_to_ptr = NULL; /* skipped: not decoded at all */
+                    continue;
+                }
+                size_t px = (size_t)(y0 - rd->dw[1]) * (size_t)rd->width + (size_t)(x0 - rd->dw[0]);
+                ch->decode_to_ptr = (uint8_t *)(d->base + px * (size_t)d->stride + (size_t)d->slot);
+                ch->user_pixel_stride = d->stride * (int32_t)sizeof(float);
+                ch->user_line_stride = rd->width * d->stride * (int32_t)sizeof(float);
+                ch->user_data_type = EXR_PIXEL_FLOAT;
+                ch->user_bytes_per_element = sizeof(float);
+                any = 1;
+            }
+            if (!any)
+                continue;
+            if ((rv = exr_decoding_choose_default_routines(f->exr, p, &dec)) != EXR_ERR_SUCCESS ||
+                (rv = exr_decoding_run(f->exr, p, &dec)) != EXR_ERR_SUCCESS)
+                result = fx_exr_fail(rd->ctx, f, rv, what);
+        }
+        if (result == FX_OK && (ty & 15) == 15)
+            result = fx_progress(rd->ctx, "read", (double)(ty + 1) / ny);
+    }
+    if (have_decoder)
+        exr_decoding_destroy(f->exr, &dec);
+    return result;
+}
+
+static fx_result decode_dwa_part(reader *rd, int p)
+{
+    fx_exr_file *f = rd->f;
+    const fx_exr_part *pt = &f->parts[p];
+    fx_dwa_channel *list = fx_mem_calloc((size_t)pt->channel_count, sizeof *list);
+    if (!list)
+        return fx_fail(rd->ctx, FX_ERR_OUT_OF_MEMORY, "'%s': out of memory", f->path);
+    int n = 0;
+    for (int c = 0; c < pt->channel_count; c++) {
+        const chan_dest *d = &rd->dest[pt->first_chan + c];
+        if (!d->base)
+            continue;
+        list[n].name = f->chans[pt->first_chan + c].full;
+        list[n].first = d->base + d->slot;
+        list[n].origin_x = rd->dw[0];
+        list[n].origin_y = rd->dw[1];
+        list[n].pixel_stride = (size_t)d->stride;
+        list[n].line_stride = (size_t)d->stride * (size_t)rd->width;
+        n++;
+    }
+    char err[512] = "";
+    int rc = n ? fx_dwa_read_part(f->path, p, list, n, err, sizeof err) : 0;
+    fx_mem_free(list);
+    if (rc == 2)
+        return fx_fail(rd->ctx, FX_ERR_OUT_OF_MEMORY, "'%s': out of memory decoding DWA part %d", f->path, p);
+    if (rc != 0)
+        return fx_fail(rd->ctx, FX_ERR_BAD_FILE, "'%s': part %d (DWA, OpenEXR C++ reader): %s", f->path, p, err);
+    return FX_OK;
+}
+
+static int part_is_dwa(const fx_exr_part *pt)
+{
+    return pt->compression == EXR_COMPRESSION_DWAA || pt->compression == EXR_COMPRESSION_DWAB;
+}
+
+/* String attributes kept as metadata: everything but the structural ones and the
+ * ones libfx turns into something else (Cryptomatte, time). */
+static int keep_string_attr(const char *name)
+{
+    static const char *const skip[] = {"name", "view", "type", "Frame"};
+    for (size_t i = 0; i < sizeof skip / sizeof skip[0]; i++)
+        if (strcmp(name, skip[i]) == 0)
+            return 0;
+    return strncmp(name, "cryptomatte/", 12) != 0 && strncmp(name, "libfx:", 6) != 0;
+}
+
+static fx_result read_attributes(reader *rd, int part)
+{
+    fx_exr_file *f = rd->f;
+    int32_t n = 0;
+    const exr_attribute_t *w2c = NULL, *ndc = NULL;
+    double frame_no = 0, fps = 0;
+    int have_frame = 0, have_fps = 0;
+    float clip[2] = {0, 0};
+    int have_clip[2] = {0, 0};
+    fx_frame_time(rd->frame, &frame_no, &fps);
+    if (exr_get_attribute_count(f->exr, part, &n) != EXR_ERR_SUCCESS)
+        n = 0;
+    for (int32_t i = 0; i < n; i++) {
+        const exr_attribute_t *a = NULL;
+        if (exr_get_attribute_by_index(f->exr, part, EXR_ATTR_LIST_FILE_ORDER, i, &a) != EXR_ERR_SUCCESS ||
+            !a || !a->name)
+            continue;
+        if (a->type == EXR_ATTR_M44F && strcmp(a->name, "worldToCamera") == 0)
+            w2c = a;
+        else if (a->type == EXR_ATTR_M44F && strcmp(a->name, "worldToNDC") == 0)
+            ndc = a;
+        else if (a->type == EXR_ATTR_DOUBLE && strcmp(a->name, "libfx:frame") == 0)
+            frame_no = a->d, have_frame = 2;
+        else if (a->type == EXR_ATTR_DOUBLE && strcmp(a->name, "libfx:fps") == 0)
+            fps = a->d, have_fps = 1;
+        else if (a->type == EXR_ATTR_FLOAT && strcmp(a->name, "libfx:clipStart") == 0)
+            clip[0] = a->f, have_clip[0] = 1;
+        else if (a->type == EXR_ATTR_FLOAT && strcmp(a->name, "libfx:clipEnd") == 0)
+            clip[1] = a->f, have_clip[1] = 1;
+        else if (a->type == EXR_ATTR_STRING && a->string && a->string->str) {
+            if (strcmp(a->name, "Frame") == 0 && have_frame < 2) {
+                /* Blender's render output: the frame number as text */
+                char *end = NULL;
+                double v = strtod(a->string->str, &end);
+                if (end != a->string->str)
+                    frame_no = v, have_frame = 1;
+            } else if (keep_string_attr(a->name)) {
+                fx_result r = fx_frame_set_meta(rd->frame, a->name, a->string->str);
+                if (r != FX_OK)
+                    return r;
+            }
+        }
+    }
+    if (have_frame || have_fps)
+        fx_frame_set_time(rd->frame, frame_no, fps);
+    if (w2c && ndc && w2c->m44f && ndc->m44f) {
+        fx_camera cam;
+        if (fx_exr_camera_from_file(w2c->m44f->m, ndc->m44f->m, &cam)) {
+            if (have_clip[0])
+                cam.clip_start = clip[0];
+            if (have_clip[1])
+                cam.clip_end = clip[1];
+            fx_result r = fx_frame_set_camera(rd->frame, &cam);
+            if (r != FX_OK)
+                return r;
+        } else {
+            fx_warn(rd->ctx, "'%s': worldToCamera is singular: camera ignored", f->path);
+        }
+    }
+    return FX_OK;
+}
+
+static fx_result read_frame(fx_context *ctx, fx_exr_file *f, const fx_read_options *opts, fx_frame **out)
+{
+    const char *layer = NULL, *view = NULL;
+    fx_result r = resolve_view(ctx, f, opts ? opts->view : NULL, &view);
+    if (r == FX_OK)
+        r = fx_exr_choose_layer(ctx, f->path, f->chans, f->chan_count, opts ? opts->layer : NULL, &layer);
+    if (r != FX_OK)
+        return r;
+
+    fx_exr_select sel = {layer, view, 1, 0};
+    if (opts && opts->stack) {
+        sel.all = 0;
+        sel.wanted = fx_stack_pass_set(opts->stack) | FX_PASS_BIT(FX_PASS_COMBINED);
+    }
+    fx_exr_plan_pass *plan = NULL;
+    int np = 0;
+    if ((r = fx_exr_plan(ctx, f->path, f->chans, f->chan_count, f->cryptos, f->crypto_count, &sel,
+                         &plan, &np)) != FX_OK)
+        return r;
+    const char *where_layer = layer[0] ? layer : "(none)";
+    if (np == 0 || (!sel.all && plan[0].id != FX_PASS_COMBINED)) {
+        int has_combined = 0;
+        for (int i = 0; i < np; i++)
+            has_combined |= plan[i].id == FX_PASS_COMBINED;
+        if (!has_combined && !sel.all) {
+            fx_mem_free(plan);
+            return fx_fail(ctx, FX_ERR_MISSING_PASS, "'%s' has no Combined pass (layer %s%s%s)", f->path,
+                           where_layer, view[0] ? ", view " : "", view);
+        }
+        if (np == 0) {
+            return fx_fail(ctx, FX_ERR_BAD_FILE, "'%s' has no readable channels (layer %s%s%s)", f->path,
+                           where_layer, view[0] ? ", view " : "", view);
+        }
+    }
+
+    /* The frame: the union of the data windows of the parts that feed it. */
+    reader rd = {ctx, f, NULL, {0, 0, -1, -1}, 0, 0, NULL};
+    int first = 1, any_dwa = 0;
+    for (int i = 0; i < np; i++)
+        for (int s = 0; s < plan[i].channels; s++) {
+            if (plan[i].src[s] < 0)
+                continue;
+            const fx_exr_part *pt = &f->parts[f->chans[plan[i].src[s]].part];
+            any_dwa |= part_is_dwa(pt);
+            for (int k = 0; k < 4; k++)
+                if (first || (k < 2 ? pt->dw[k] < rd.dw[k] : pt->dw[k] > rd.dw[k]))
+                    rd.dw[k] = pt->dw[k];
+            first = 0;
+        }
+    if (first) /* no channel in the file at all (fills only): part 0's window */
+        memcpy(rd.dw, f->parts[0].dw, sizeof rd.dw);
+    int64_t w64 = (int64_t)rd.dw[2] - rd.dw[0] + 1, h64 = (int64_t)rd.dw[3] - rd.dw[1] + 1;
+    if (w64 > ctx->max_width || h64 > ctx->max_height) {
+        fx_mem_free(plan);
+        return fx_fail(ctx, FX_ERR_LIMIT, "'%s': data window %lld x %lld is over the limit of %d x %d",
+                       f->path, (long long)w64, (long long)h64, ctx->max_width, ctx->max_height);
+    }
+    rd.width = (int)w64;
+    rd.height = (int)h64;
+
+    /* Budget before any pixel allocation: the total and each pass, with overflow checks. */
+    uint64_t total = 0;
+    for (int i = 0; i < np; i++) {
+        size_t bytes;
+        if (!fx_size_mul(&bytes, (size_t)rd.width, (size_t)rd.height, (size_t)plan[i].channels * sizeof(float))) {
+            fx_mem_free(plan);
+            return fx_fail(ctx, FX_ERR_LIMIT, "'%s': pass %s: size overflows", f->path, plan[i].name);
+        }
+        total += bytes;
+    }
+    char what[FX_NAME_MAX + 1100];
+    snprintf(what, sizeof what, "file '%s' (%d passes, %d x %d)", f->path, np, rd.width, rd.height);
+    if ((r = fx_check_budget(ctx, total, what)) != FX_OK) {
+        fx_mem_free(plan);
+        return r;
+    }
+
+    rd.dest = fx_mem_calloc((size_t)(f->chan_count ? f->chan_count : 1), sizeof *rd.dest);
+    if (!rd.dest) {
+        fx_mem_free(plan);
+        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "'%s': out of memory", f->path);
+    }
+    r = fx_frame_new(ctx, rd.width, rd.height, &rd.frame);
+    if (r == FX_OK) {
+        int disp[4];
+        memcpy(disp, f->parts[0].disp, sizeof disp);
+        r = fx_frame_set_windows(rd.frame, rd.dw, disp);
+    }
+    for (int i = 0; i < np && r == FX_OK; i++) {
+        fx_exr_plan_pass *pp = &plan[i];
+        snprintf(what, sizeof what, "file '%s' pass %s", f->path, pp->name);
+        size_t bytes = (size_t)rd.width * (size_t)rd.height * (size_t)pp->channels * sizeof(float);
+        float *data = NULL;
+        if ((r = fx_check_budget(ctx, bytes, what)) != FX_OK ||
+            (r = fx_frame_alloc_pass(rd.frame, pp->name, pp->channels, &data)) != FX_OK)
+            break;
+        size_t count = (size_t)rd.width * (size_t)rd.height;
+        int nc = pp->channels;
+        int from_half = 1;
+        for (size_t px = 0; px < count; px++)
+            for (int s = 0; s < nc; s++)
+                data[px * nc + s] = pp->src[s] >= 0 ? 0.0f : pp->fill[s];
+        for (int s = 0; s < nc; s++) {
+            if (pp->src[s] < 0)
+                continue;
+            rd.dest[pp->src[s]].base = data;
+            rd.dest[pp->src[s]].stride = nc;
+            rd.dest[pp->src[s]].slot = s;
+            from_half &= f->chans[pp->src[s]].type == EXR_PIXEL_HALF;
+        }
+        fx_pass *fp = fx_frame_find_pass(rd.frame, pp->name);
+        if (fp)
+            fp->from_half = from_half;
+    }
+
+    if (r == FX_OK && any_dwa)
+        fx_warn(ctx, "'%s' is DWA-compressed: lossy, data passes (Depth/Normal/Position) are approximate",
+                f->path);
+    for (int p = 0; p < f->part_count && r == FX_OK; p++) {
+        int used = 0;
+        for (int c = 0; c < f->parts[p].channel_count; c++)
+            used |= rd.dest[f->parts[p].first_chan + c].base != NULL;
+        if (!used)
+            continue;
+        r = part_is_dwa(&f->parts[p]) ? decode_dwa_part(&rd, p) : decode_core_part(&rd, p);
+    }
+
+    for (int i = 0; i < np && r == FX_OK; i++) {
+        float *data = NULL;
+        int nc = 0;
+        if ((r = fx_frame_pass(rd.frame, plan[i].name, &data, &nc)) != FX_OK)
+            break;
+        size_t count = (size_t)rd.width * (size_t)rd.height;
+        for (int s = 0; s < nc; s++)
+            if (plan[i].copy_from[s] >= 0)
+                for (size_t px = 0; px < count; px++)
+                    data[px * nc + s] = data[px * nc + plan[i].copy_from[s]];
+        size_t bad = fx_sanitize_floats(ctx, data, count * (size_t)nc);
+        if (bad)
+            fx_warn(ctx, "'%s': %zu NaN/Inf values in pass %s replaced", f->path, bad, plan[i].name);
+    }
+
+    if (r == FX_OK)
+        r = read_attributes(&rd, 0);
+    if (r == FX_OK)
+        r = fx_exr_cryptos_to_meta(f, layer, rd.frame);
+    fx_mem_free(rd.dest);
+    fx_mem_free(plan);
+    if (r != FX_OK) {
+        fx_frame_free(rd.frame);
+        return r;
+    }
+    *out = rd.frame;
+    return FX_OK;
+}
+
+fx_result fx_frame_read_exr(fx_context *ctx, const char *path, const fx_read_options *opts, fx_frame **out)
+{
+    if (out)
+        *out = NULL;
+    if (!ctx || !path || !out)
+        return fx_fail(ctx, FX_ERR_INVALID_ARGUMENT, "fx_frame_read_exr: ctx, path and out must not be NULL");
+    if (opts && opts->size < sizeof(fx_read_options))
+        return fx_fail(ctx, FX_ERR_INVALID_ARGUMENT,
+                       "fx_frame_read_exr: opts->size is %zu, expected %zu (set it to sizeof(fx_read_options))",
+                       opts->size, sizeof(fx_read_options));
+    fx_exr_file f;
+    fx_result r = fx_exr_file_open(ctx, path, &f);
+    if (r != FX_OK)
+        return r;
+    r = read_frame(ctx, &f, opts, out);
+    fx_exr_file_close(&f);
+    return r;
+}

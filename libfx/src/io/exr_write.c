@@ -1,0 +1,261 @@
+/* fx_frame_write_exr: a frame as one scanline part, ZIP compressed.
+ *
+ * Channel names: `<Pass>.<letter>` with the letters of passes.h ("Combined.R",
+ * "Depth.Z", "Normal.X", "CryptoObject00.R"), passes libfx does not know get R, G, B, A
+ * by count, and debug passes keep their names. No layer prefix: the reader takes such a
+ * file as one layer, and Blender's own File Output node writes the same shape.
+ *
+ * Atomic: the file is written as "<dir>/.<name>.tmp-<pid>-<n>" and renamed over the
+ * destination only when complete; on any failure the temporary file is removed and
+ * the destination (and the input) are untouched. */
+#include "core/internal.h"
+#include "core/passes.h"
+#include "io/cryptomatte_meta.h"
+#include "io/exr_camera.h"
+#include "io/exr_common.h"
+#include "io/atomic_file.h"
+
+#include <errno.h>
+#include <fcntl.h>
+#include <stdio.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+typedef struct out_chan {
+    char name[FX_NAME_MAX + 8];
+    const float *data;
+    int stride, slot;
+    exr_pixel_type_t type;
+} out_chan;
+
+/* Attributes libfx writes itself or OpenEXR owns: metadata never overrides them. */
+static int reserved_attr(const char *key)
+{
+    static const char *const names[] = {
+        "channels", "compression", "dataWindow", "displayWindow", "lineOrder", "pixelAspectRatio",
+        "screenWindowCenter", "screenWindowWidth", "name", "type", "version", "chunkCount",
+        "tiles", "view", "multiView", "worldToCamera", "worldToNDC"};
+    for (size_t i = 0; i < sizeof names / sizeof names[0]; i++)
+        if (strcmp(key, names[i]) == 0)
+            return 1;
+    return strncmp(key, "cryptomatte/", 12) == 0 || strncmp(key, "libfx:", 6) == 0;
+}
+
+static int pass_is_half(const fx_pass *p, int half_color)
+{
+    if (!half_color)
+        return 0;
+    int id = fx_pass_lookup(p->name);
+    if (id < 0)
+        return 0; /* unknown: may be data */
+    const fx_pass_desc *d = fx_pass_describe((fx_pass_id)id);
+    return d->is_color && !d->categorical;
+}
+
+static fx_result build_channels(const fx_frame *f, const fx_write_options *opts, out_chan **out, int *count)
+{
+    int n = 0;
+    for (int i = 0; i < f->pass_count; i++)
+        n += f->passes[i].channels;
+    out_chan *list = fx_mem_calloc((size_t)(n ? n : 1), sizeof *list);
+    if (!list)
+        return fx_fail(f->ctx, FX_ERR_OUT_OF_MEMORY, "out of memory writing an EXR");
+    int k = 0;
+    for (int i = 0; i < f->pass_count; i++) {
+        const fx_pass *p = &f->passes[i];
+        if (opts && opts->only_combined && strcmp(p->name, "Combined") != 0)
+            continue;
+        int id = fx_pass_lookup(p->name);
+        const char *letters = "RGBA";
+        if (id >= 0) {
+            const fx_pass_desc *d = fx_pass_describe((fx_pass_id)id);
+            if (d->channels == p->channels)
+                letters = d->channel_names;
+        }
+        exr_pixel_type_t type = pass_is_half(p, opts ? opts->half_color : 0) ? EXR_PIXEL_HALF : EXR_PIXEL_FLOAT;
+        for (int c = 0; c < p->channels && c < 4; c++) {
+            snprintf(list[k].name, sizeof list[k].name, "%s.%c", p->name, letters[c]);
+            list[k].data = p->data;
+            list[k].stride = p->channels;
+            list[k].slot = c;
+            list[k].type = type;
+            k++;
+        }
+    }
+    *out = list;
+    *count = k;
+    return FX_OK;
+}
+
+static exr_result_t write_attributes(exr_context_t exr, int part, const fx_frame *f, char *failed, size_t cap)
+{
+    exr_result_t rv = EXR_ERR_SUCCESS;
+    fx_camera cam;
+    if (fx_frame_camera(f, &cam)) {
+        exr_attr_m44f_t w2c, ndc;
+        fx_exr_camera_to_file(&cam, w2c.m, ndc.m);
+        snprintf(failed, cap, "camera attributes");
+        if ((rv = exr_attr_set_m44f(exr, part, "worldToCamera", &w2c)) != EXR_ERR_SUCCESS ||
+            (rv = exr_attr_set_m44f(exr, part, "worldToNDC", &ndc)) != EXR_ERR_SUCCESS ||
+            (rv = exr_attr_set_float(exr, part, "libfx:clipStart", cam.clip_start)) != EXR_ERR_SUCCESS ||
+            (rv = exr_attr_set_float(exr, part, "libfx:clipEnd", cam.clip_end)) != EXR_ERR_SUCCESS)
+            return rv;
+    }
+    double frame_no = 0, fps = 0;
+    fx_frame_time(f, &frame_no, &fps);
+    snprintf(failed, cap, "time attributes");
+    if ((rv = exr_attr_set_double(exr, part, "libfx:frame", frame_no)) != EXR_ERR_SUCCESS ||
+        (rv = exr_attr_set_double(exr, part, "libfx:fps", fps)) != EXR_ERR_SUCCESS)
+        return rv;
+    for (int i = 0; i < f->meta_count; i++) {
+        const char *key = f->meta[i].key;
+        if (reserved_attr(key) || strlen(key) > 255)
+            continue;
+        snprintf(failed, cap, "attribute '%s'", key);
+        if ((rv = exr_attr_set_string(exr, part, key, f->meta[i].value)) != EXR_ERR_SUCCESS)
+            return rv;
+    }
+    snprintf(failed, cap, "Cryptomatte attributes");
+    return fx_exr_write_cryptos(exr, part, f);
+}
+
+static fx_result encode_pixels(const fx_frame *f, exr_context_t exr, int part, const out_chan *chans, int nchan,
+                               const char *path)
+{
+    int32_t lines = 0;
+    exr_result_t rv = exr_get_scanlines_per_chunk(exr, part, &lines);
+    if (rv != EXR_ERR_SUCCESS || lines <= 0)
+        return fx_fail(f->ctx, FX_ERR_INTERNAL, "cannot write '%s': scanlines per chunk: %s", path,
+                       exr_get_default_error_message(rv));
+    exr_encode_pipeline_t enc = EXR_ENCODE_PIPELINE_INITIALIZER;
+    int have = 0;
+    fx_result r = FX_OK;
+    int chunk = 0;
+    for (int y = 0; y < f->height && r == FX_OK; y += lines, chunk++) {
+        exr_chunk_info_t ci;
+        int fy = f->data_window[1] + y;
+        if ((rv = exr_write_scanline_chunk_info(exr, part, fy, &ci)) == EXR_ERR_SUCCESS)
+            rv = have ? exr_encoding_update(exr, part, &ci, &enc) : exr_encoding_initialize(exr, part, &ci, &enc);
+        if (rv == EXR_ERR_SUCCESS) {
+            have = 1;
+            for (int c = 0; c < enc.channel_count; c++) {
+                exr_coding_channel_info_t *ch = &enc.channels[c];
+                const out_chan *oc = NULL;
+                for (int k = 0; k < nchan && !oc; k++)
+                    if (strcmp(chans[k].name, ch->channel_name) == 0)
+                        oc = &chans[k];
+                if (!oc) { /* cannot happen: we declared every channel */
+                    rv = EXR_ERR_INVALID_ARGUMENT;
+                    break;
+                }
+                size_t px = (size_t)y * (size_t)f->width;
+                ch->encode_from_ptr = (const uint8_t *)(oc->data + px * (size_t)oc->stride + (size_t)oc->slot);
+                ch->user_pixel_stride = oc->stride * (int32_t)sizeof(float);
+                ch->user_line_stride = f->width * oc->stride * (int32_t)sizeof(float);
+                ch->user_data_type = EXR_PIXEL_FLOAT;
+                ch->user_bytes_per_element = sizeof(float);
+            }
+        }
+        if (rv == EXR_ERR_SUCCESS)
+            rv = exr_encoding_choose_default_routines(exr, part, &enc);
+        if (rv == EXR_ERR_SUCCESS)
+            rv = exr_encoding_run(exr, part, &enc);
+        if (rv != EXR_ERR_SUCCESS) {
+            const char *m = fx_exr_last_error();
+            r = fx_fail(f->ctx, rv == EXR_ERR_WRITE_IO ? FX_ERR_IO : FX_ERR_INTERNAL,
+                        "cannot write '%s': scanlines from %d: %s", path, fy,
+                        m[0] ? m : exr_get_default_error_message(rv));
+        }
+        if (r == FX_OK && (chunk & 15) == 15)
+            r = fx_progress(f->ctx, "write", (double)(y + lines) / f->height);
+    }
+    if (have)
+        exr_encoding_destroy(exr, &enc);
+    return r;
+}
+
+static fx_result write_to(const fx_frame *f, const char *tmp, const char *path, const fx_write_options *opts)
+{
+    out_chan *chans = NULL;
+    int nchan = 0;
+    fx_result r = build_channels(f, opts, &chans, &nchan);
+    if (r != FX_OK)
+        return r;
+    if (nchan == 0) {
+        fx_mem_free(chans);
+        return fx_fail(f->ctx, FX_ERR_MISSING_PASS, "cannot write '%s': the frame has no %s", path,
+                       opts && opts->only_combined ? "Combined pass" : "passes");
+    }
+    fx_exr_clear_error();
+    exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
+    init.error_handler_fn = fx_exr_capture_error;
+    exr_context_t exr = NULL;
+    exr_result_t rv = exr_start_write(&exr, tmp, EXR_WRITE_FILE_DIRECTLY, &init);
+    char failed[300] = "the header";
+    int part = 0;
+    if (rv == EXR_ERR_SUCCESS) {
+        exr_attr_box2i_t dw, disp;
+        exr_attr_v2f_t swc;
+        dw.min.x = f->data_window[0], dw.min.y = f->data_window[1];
+        dw.max.x = f->data_window[2], dw.max.y = f->data_window[3];
+        disp.min.x = f->display_window[0], disp.min.y = f->display_window[1];
+        disp.max.x = f->display_window[2], disp.max.y = f->display_window[3];
+        swc.x = 0.0f, swc.y = 0.0f;
+        snprintf(failed, sizeof failed, "the part");
+        rv = exr_add_part(exr, "libfx", EXR_STORAGE_SCANLINE, &part);
+        if (rv == EXR_ERR_SUCCESS)
+            rv = exr_initialize_required_attr(exr, part, &disp, &dw, 1.0f, &swc, 1.0f,
+                                              EXR_LINEORDER_INCREASING_Y, EXR_COMPRESSION_ZIP);
+        for (int k = 0; k < nchan && rv == EXR_ERR_SUCCESS; k++) {
+            snprintf(failed, sizeof failed, "channel '%s'", chans[k].name);
+            /* The hint for lossy codecs: colour is perceptually logarithmic, data linear. */
+            int ret = exr_add_channel(exr, part, chans[k].name, chans[k].type,
+                                      chans[k].type == EXR_PIXEL_HALF ? EXR_PERCEPTUALLY_LOGARITHMIC
+                                                                      : EXR_PERCEPTUALLY_LINEAR,
+                                      1, 1);
+            if (ret != EXR_ERR_SUCCESS)
+                rv = (exr_result_t)ret;
+        }
+        if (rv == EXR_ERR_SUCCESS)
+            rv = write_attributes(exr, part, f, failed, sizeof failed);
+        if (rv == EXR_ERR_SUCCESS) {
+            snprintf(failed, sizeof failed, "the header");
+            rv = exr_write_header(exr);
+        }
+    }
+    if (rv != EXR_ERR_SUCCESS) {
+        const char *m = fx_exr_last_error();
+        r = fx_fail(f->ctx, rv == EXR_ERR_FILE_ACCESS || rv == EXR_ERR_WRITE_IO ? FX_ERR_IO : FX_ERR_INTERNAL,
+                    "cannot write '%s': %s: %s", path, failed, m[0] ? m : exr_get_default_error_message(rv));
+    } else {
+        r = encode_pixels(f, exr, part, chans, nchan, path);
+    }
+    if (exr) {
+        exr_result_t fin = exr_finish(&exr);
+        if (r == FX_OK && fin != EXR_ERR_SUCCESS)
+            r = fx_fail(f->ctx, FX_ERR_IO, "cannot write '%s': finishing the file: %s", path,
+                        exr_get_default_error_message(fin));
+    }
+    fx_mem_free(chans);
+    return r;
+}
+
+fx_result fx_frame_write_exr(const fx_frame *f, const char *path, const fx_write_options *opts)
+{
+    fx_context *ctx = f ? f->ctx : NULL;
+    if (!f || !path || !path[0])
+        return fx_fail(ctx, FX_ERR_INVALID_ARGUMENT, "fx_frame_write_exr: frame and path must not be NULL");
+    if (opts && opts->size < sizeof(fx_write_options))
+        return fx_fail(ctx, FX_ERR_INVALID_ARGUMENT,
+                       "fx_frame_write_exr: opts->size is %zu, expected %zu (set it to sizeof(fx_write_options))",
+                       opts->size, sizeof(fx_write_options));
+    fx_result r = fx_refuse_input(ctx, path, opts ? opts->input_path : NULL);
+    if (r != FX_OK)
+        return r;
+    char *tmp = NULL;
+    if ((r = fx_temp_create(ctx, path, &tmp)) != FX_OK)
+        return r;
+    r = write_to(f, tmp, path, opts);
+    return fx_temp_commit(ctx, tmp, path, r);
+}

@@ -1,0 +1,327 @@
+/* fx_frame_write_exr: round trips (bit-exact float, half, windows, camera, time,
+ * metadata, Cryptomatte) and refusals (output == input, unwritable folder). */
+#include "testutil.h"
+
+#include <dirent.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+static int count_files(const char *dir)
+{
+    DIR *d = opendir(dir);
+    int n = 0;
+    if (!d)
+        return -1;
+    for (struct dirent *e; (e = readdir(d));)
+        if (strcmp(e->d_name, ".") && strcmp(e->d_name, ".."))
+            n++;
+    closedir(d);
+    return n;
+}
+
+static int has_temp_file(const char *dir)
+{
+    DIR *d = opendir(dir);
+    int found = 0;
+    if (!d)
+        return 0;
+    for (struct dirent *e; (e = readdir(d));)
+        if (strstr(e->d_name, ".tmp-"))
+            found = 1;
+    closedir(d);
+    return found;
+}
+
+static char *slurp(const char *path, size_t *len)
+{
+    FILE *fp = fopen(path, "rb");
+    if (!fp)
+        return NULL;
+    fseek(fp, 0, SEEK_END);
+    long n = ftell(fp);
+    fseek(fp, 0, SEEK_SET);
+    char *b = malloc((size_t)n + 1);
+    if (b && fread(b, 1, (size_t)n, fp) != (size_t)n) {
+        free(b);
+        b = NULL;
+    }
+    fclose(fp);
+    *len = (size_t)n;
+    return b;
+}
+
+/* A frame with awkward values and several kinds of passes. */
+static fx_frame *rich_frame(fx_context *ctx, int w, int h)
+{
+    fx_frame *f = tu_pattern_frame(ctx, w, h, 7);
+    if (!f)
+        return NULL;
+    float *c = NULL;
+    int nc = 0;
+    fx_frame_pass(f, "Combined", &c, &nc);
+    /* values half cannot hold: float must round-trip bit-exactly */
+    c[0] = 1e-30f, c[1] = 3.4e38f, c[2] = -2.5e-42f /* denormal */, c[3] = 0.1f;
+    size_t n = (size_t)w * h;
+    float *depth = malloc(n * sizeof *depth), *normal = malloc(n * 3 * sizeof *normal);
+    float *idx = malloc(n * sizeof *idx), *crypto = malloc(n * 4 * sizeof *crypto), *custom = malloc(n * 2 * sizeof *custom);
+    for (size_t i = 0; i < n; i++) {
+        depth[i] = 1.0f + (float)i * 0.37f;
+        normal[i * 3] = 0.6f, normal[i * 3 + 1] = -0.8f, normal[i * 3 + 2] = (float)i / n;
+        idx[i] = (float)(i % 5);
+        uint32_t bits = 0x3f000000u + (uint32_t)i * 2654435761u % 0x00800000u;
+        float id;
+        memcpy(&id, &bits, 4);
+        crypto[i * 4] = id, crypto[i * 4 + 1] = 0.75f, crypto[i * 4 + 2] = -id, crypto[i * 4 + 3] = 0.25f;
+        custom[i * 2] = (float)i, custom[i * 2 + 1] = -(float)i;
+    }
+    fx_frame_add_pass(f, "Depth", 1, depth);
+    fx_frame_add_pass(f, "Normal", 3, normal);
+    fx_frame_add_pass(f, "IndexOB", 1, idx);
+    fx_frame_add_pass(f, "CryptoObject00", 4, crypto);
+    fx_frame_add_pass(f, "my custom", 2, custom);
+    free(depth), free(normal), free(idx), free(crypto), free(custom);
+    return f;
+}
+
+static void same_pass(fx_context *ctx, const fx_frame *a, const fx_frame *b, const char *name, int exact)
+{
+    float *pa = NULL, *pb = NULL;
+    int ca = 0, cb = 0;
+    CHECK_OK(ctx, fx_frame_pass(a, name, &pa, &ca));
+    CHECK_OK(ctx, fx_frame_pass(b, name, &pb, &cb));
+    CHECK(ca == cb);
+    if (!pa || !pb || ca != cb)
+        return;
+    size_t n = (size_t)fx_frame_width(a) * fx_frame_height(a) * ca;
+    if (exact) {
+        int ok = memcmp(pa, pb, n * sizeof(float)) == 0;
+        if (!ok)
+            fprintf(stderr, "pass %s differs\n", name);
+        CHECK(ok);
+    } else {
+        CHECK(tu_max_abs_diff(pa, pb, n) < 1e-2);
+    }
+}
+
+static void test_round_trip(fx_context *ctx, const char *dir)
+{
+    fx_frame *f = rich_frame(ctx, 37, 23);
+    CHECK(f != NULL);
+    if (!f)
+        return;
+    int dw[4] = {-5, 7, -5 + 36, 7 + 22}, disp[4] = {0, 0, 31, 39};
+    CHECK_OK(ctx, fx_frame_set_windows(f, dw, disp));
+    fx_camera cam;
+    memset(&cam, 0, sizeof cam);
+    cam.size = sizeof cam;
+    const float w2c[16] = {0.6859f, 0.7277f, 0, -0.0060f, -0.3240f, 0.3054f, 0.8954f, -0.0089f,
+                           0.6516f, -0.6142f, 0.4453f, -11.2360f, 0, 0, 0, 1};
+    const float proj[16] = {2.7778f, 0, 0, 0, 0, 4.9383f, 0, 0, 0, 0, -1.0020f, -0.2002f, 0, 0, -1, 0};
+    memcpy(cam.world_to_camera, w2c, sizeof w2c);
+    memcpy(cam.projection, proj, sizeof proj);
+    cam.clip_start = 0.1f, cam.clip_end = 100.0f;
+    CHECK_OK(ctx, fx_frame_set_camera(f, &cam));
+    fx_frame_set_time(f, 42.5, 24.0);
+    CHECK_OK(ctx, fx_frame_set_meta(f, "BlenderMultiChannel", "Blender V3.4.1"));
+    CHECK_OK(ctx, fx_frame_set_meta(f, "cryptomatte/CryptoObject/manifest", "{\"Cube\":\"3f800000\"}"));
+
+    char path[600];
+    snprintf(path, sizeof path, "%s/round.exr", dir);
+    fx_write_options wo = {sizeof wo, 0, 0, NULL};
+    CHECK_OK(ctx, fx_frame_write_exr(f, path, &wo));
+    CHECK(!has_temp_file(dir));
+
+    fx_frame *g = NULL;
+    CHECK_OK(ctx, fx_frame_read_exr(ctx, path, NULL, &g));
+    if (g) {
+        CHECK(fx_frame_width(g) == 37 && fx_frame_height(g) == 23);
+        int gdw[4], gdisp[4];
+        fx_frame_windows(g, gdw, gdisp);
+        CHECK(memcmp(gdw, dw, sizeof dw) == 0);
+        CHECK(memcmp(gdisp, disp, sizeof disp) == 0);
+        same_pass(ctx, f, g, "Combined", 1);
+        same_pass(ctx, f, g, "Depth", 1);
+        same_pass(ctx, f, g, "Normal", 1);
+        same_pass(ctx, f, g, "IndexOB", 1);
+        same_pass(ctx, f, g, "CryptoObject00", 1);
+        same_pass(ctx, f, g, "my custom", 1);
+        CHECK(fx_frame_pass_count(g) == 6);
+        fx_camera c2;
+        CHECK(fx_frame_camera(g, &c2) == 1);
+        CHECK(tu_max_abs_diff(c2.world_to_camera, cam.world_to_camera, 16) < 1e-5);
+        CHECK(tu_max_abs_diff(c2.projection, cam.projection, 16) < 1e-5);
+        CHECK(fabsf(c2.clip_start - 0.1f) < 1e-6f && fabsf(c2.clip_end - 100.0f) < 1e-4f);
+        CHECK(c2.orthographic == 0);
+        double fr = 0, fps = 0;
+        fx_frame_time(g, &fr, &fps);
+        CHECK(fr == 42.5 && fps == 24.0);
+        CHECK(tu_contains(fx_frame_meta(g, "BlenderMultiChannel"), "Blender V3.4.1"));
+        CHECK(tu_contains(fx_frame_meta(g, "cryptomatte/CryptoObject/manifest"), "\"Cube\""));
+        CHECK(tu_contains(fx_frame_meta(g, "cryptomatte/CryptoObject/layer"), "CryptoObject"));
+        fx_frame_free(g);
+    }
+
+    /* half_color: Combined becomes half, data passes stay float (bit-exact) */
+    char hpath[600];
+    snprintf(hpath, sizeof hpath, "%s/half.exr", dir);
+    fx_write_options ho = {sizeof ho, 1, 0, NULL};
+    CHECK_OK(ctx, fx_frame_write_exr(f, hpath, &ho));
+    char *info = NULL;
+    CHECK_OK(ctx, fx_exr_info_json(ctx, hpath, &info));
+    CHECK(tu_contains(info, "{\"name\":\"Combined.R\",\"type\":\"half\"}"));
+    CHECK(tu_contains(info, "{\"name\":\"Depth.Z\",\"type\":\"float\"}"));
+    CHECK(tu_contains(info, "{\"name\":\"CryptoObject00.R\",\"type\":\"float\"}"));
+    CHECK(tu_contains(info, "\"camera\":true"));
+    fx_free(info);
+    g = NULL;
+    CHECK_OK(ctx, fx_frame_read_exr(ctx, hpath, NULL, &g));
+    if (g) {
+        same_pass(ctx, f, g, "Depth", 1);
+        same_pass(ctx, f, g, "CryptoObject00", 1);
+        same_pass(ctx, f, g, "IndexOB", 1);
+        float *a = NULL, *b = NULL;
+        int na = 0, nb = 0;
+        fx_frame_pass(f, "Combined", &a, &na);
+        fx_frame_pass(g, "Combined", &b, &nb);
+        /* skip pixel 0 (values half cannot hold); the rest is within half's precision */
+        double md = 0;
+        for (size_t i = 4; a && b && i < (size_t)37 * 23 * 4; i++) {
+            double d = fabs((double)a[i] - b[i]) / (fabs((double)a[i]) + 1e-3);
+            if (d > md)
+                md = d;
+        }
+        CHECK(md < 1e-3);
+        fx_frame_free(g);
+    }
+
+    /* only_combined */
+    fx_write_options oc = {sizeof oc, 0, 1, NULL};
+    CHECK_OK(ctx, fx_frame_write_exr(f, hpath, &oc));
+    g = NULL;
+    CHECK_OK(ctx, fx_frame_read_exr(ctx, hpath, NULL, &g));
+    CHECK(g && fx_frame_pass_count(g) == 1);
+    fx_frame_free(g);
+
+    /* orthographic camera */
+    fx_camera ortho = cam;
+    const float op[16] = {0.2f, 0, 0, 0, 0, 0.3556f, 0, 0, 0, 0, -0.02002f, -1.002f, 0, 0, 0, 1};
+    memcpy(ortho.projection, op, sizeof op);
+    ortho.orthographic = 1;
+    CHECK_OK(ctx, fx_frame_set_camera(f, &ortho));
+    CHECK_OK(ctx, fx_frame_write_exr(f, path, &wo));
+    g = NULL;
+    CHECK_OK(ctx, fx_frame_read_exr(ctx, path, NULL, &g));
+    if (g) {
+        fx_camera c3;
+        CHECK(fx_frame_camera(g, &c3) == 1);
+        CHECK(c3.orthographic == 1);
+        CHECK(tu_max_abs_diff(c3.projection, op, 16) < 1e-5);
+        fx_frame_free(g);
+    }
+    fx_frame_free(f);
+}
+
+static void test_refusals(fx_context *ctx, const char *dir)
+{
+    fx_frame *f = tu_pattern_frame(ctx, 8, 8, 1);
+    char in[600], alias[600];
+    snprintf(in, sizeof in, "%s/input.exr", dir);
+    snprintf(alias, sizeof alias, "%s/./input.exr", dir);
+    fx_write_options wo = {sizeof wo, 0, 0, NULL};
+    CHECK_OK(ctx, fx_frame_write_exr(f, in, &wo));
+    size_t len0 = 0, len1 = 0;
+    char *before = slurp(in, &len0);
+
+    fx_frame *g = tu_pattern_frame(ctx, 8, 8, 2);
+    fx_write_options same = {sizeof same, 0, 0, in};
+    CHECK_FAIL(ctx, fx_frame_write_exr(g, alias, &same), FX_ERR_INVALID_ARGUMENT,
+               "refusing to overwrite the input file");
+    char *after = slurp(in, &len1);
+    CHECK(before && after && len0 == len1 && memcmp(before, after, len0) == 0);
+    free(before), free(after);
+
+    /* a hard link is the same file too */
+    char link_path[600];
+    snprintf(link_path, sizeof link_path, "%s/hardlink.exr", dir);
+    if (link(in, link_path) == 0) {
+        CHECK_FAIL(ctx, fx_frame_write_exr(g, link_path, &same), FX_ERR_INVALID_ARGUMENT, "refusing");
+        unlink(link_path);
+    }
+
+    /* unwritable folder: FX_ERR_IO naming the path, nothing left behind */
+    char ro[600], out[700];
+    snprintf(ro, sizeof ro, "%s/readonly", dir);
+    mkdir(ro, 0500);
+    snprintf(out, sizeof out, "%s/out.exr", ro);
+    if (access(ro, W_OK) != 0) { /* root ignores permissions */
+        CHECK_FAIL(ctx, fx_frame_write_exr(g, out, &wo), FX_ERR_IO, out);
+        CHECK(count_files(ro) == 0);
+        CHECK_FAIL(ctx, fx_frame_write_png(g, "/proc/nonexistent-dir/x.png", NULL, 0), FX_ERR_IO, "x.png");
+    }
+    char missing[700];
+    snprintf(missing, sizeof missing, "%s/no/such/dir/out.exr", dir);
+    CHECK_FAIL(ctx, fx_frame_write_exr(g, missing, &wo), FX_ERR_IO, missing);
+
+    /* a failure after the temporary file exists leaves nothing: only_combined without Combined */
+    fx_frame *empty = NULL;
+    CHECK_OK(ctx, fx_frame_new(ctx, 4, 4, &empty));
+    CHECK_OK(ctx, fx_frame_add_pass(empty, "Depth", 1, NULL));
+    char e[600];
+    snprintf(e, sizeof e, "%s/empty.exr", dir);
+    fx_write_options oc = {sizeof oc, 0, 1, NULL};
+    CHECK_FAIL(ctx, fx_frame_write_exr(empty, e, &oc), FX_ERR_MISSING_PASS, "Combined");
+    CHECK(access(e, F_OK) != 0);
+    CHECK(!has_temp_file(dir));
+    fx_write_options bad = {3, 0, 0, NULL};
+    CHECK_FAIL(ctx, fx_frame_write_exr(g, e, &bad), FX_ERR_INVALID_ARGUMENT, "size");
+    fx_frame_free(empty);
+    fx_frame_free(f);
+    fx_frame_free(g);
+}
+
+static void test_png(fx_context *ctx, const char *dir)
+{
+    fx_frame *f = NULL;
+    CHECK_OK(ctx, fx_frame_new(ctx, 4, 2, &f));
+    const float px[4 * 2 * 4] = {0, 0, 0, 1, 1, 1, 1, 0.5f, 0.5f, 0.5f, 0.5f, 1, 0.0031308f, 2, -1, 1,
+                                 0.18f, 0.18f, 0.18f, 1, 0.25f, 0.25f, 0.25f, 1, NAN, 0, 0, 1, 0, 0, 0, 0};
+    CHECK_OK(ctx, fx_frame_add_pass(f, "Combined", 4, px));
+    const float d[8] = {0, 1, 0.5f, 0.25f, 0, 0, 0, 1};
+    CHECK_OK(ctx, fx_frame_add_pass(f, "Depth", 1, d));
+    char path[600];
+    snprintf(path, sizeof path, "%s/p.png", dir);
+    CHECK_OK(ctx, fx_frame_write_png(f, path, NULL, 0.0f));
+    struct stat st;
+    CHECK(stat(path, &st) == 0 && st.st_size > 50);
+    FILE *fp = fopen(path, "rb");
+    unsigned char sig[8] = {0};
+    if (fp) {
+        CHECK(fread(sig, 1, 8, fp) == 8);
+        fclose(fp);
+    }
+    CHECK(sig[1] == 'P' && sig[2] == 'N' && sig[3] == 'G');
+    CHECK_OK(ctx, fx_frame_write_png(f, path, "Depth", -1.0f));
+    CHECK_FAIL(ctx, fx_frame_write_png(f, path, "Nope", 0.0f), FX_ERR_MISSING_PASS, "Nope");
+    CHECK_FAIL(ctx, fx_frame_write_png(f, path, NULL, NAN), FX_ERR_INVALID_ARGUMENT, "exposure");
+    CHECK(!has_temp_file(dir));
+    fx_frame_free(f);
+}
+
+int main(void)
+{
+    fx_context *ctx = NULL;
+    if (fx_context_new(&ctx, 2) != FX_OK)
+        return 1;
+    const char *dir = tu_tmpdir("exr_write");
+    char d[512];
+    snprintf(d, sizeof d, "%s", dir);
+    test_round_trip(ctx, d);
+    test_refusals(ctx, d);
+    test_png(ctx, d);
+    fx_context_free(ctx);
+    return tu_finish("test_exr_write");
+}
