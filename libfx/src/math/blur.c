@@ -1,0 +1,698 @@
+/* Separable Gaussian blur (see blur.h for the algorithms and their references).
+ *
+ * Every algorithm is written once, as a "lane kernel": it filters a buffer of n steps
+ * x L lanes (element (i, l) at buf[i * L + l]) along i, with the inner loop running over
+ * the lanes, in double. The vertical pass feeds it strips of columns straight from the
+ * image rows; the horizontal pass gathers R rows into an x-major buffer (pixel by pixel,
+ * 16-byte copies: a cheap partial transpose that lives in L2) so the same kernel runs
+ * along x with R * channels lanes. Lanes never mix, so SSE2 and AVX2 builds of a kernel
+ * give identical bits (ISO C mode: no FMA contraction).
+ */
+#include "math/blur.h"
+
+#include "core/parallel.h"
+
+#include <float.h>
+#include <math.h>
+#include <stdatomic.h>
+#include <string.h>
+
+/* Runtime dispatch: an AVX2 clone of the lane kernels next to the baseline x86-64 one.
+ * No FMA (not in the "avx2" target), so both produce the same bits. */
+#if defined(__GNUC__) && !defined(__clang__) && (defined(__x86_64__) || defined(__i386__)) && \
+    !defined(FX_NO_CLONES)
+#  define FX_CLONES __attribute__((target_clones("avx2", "default")))
+#else
+#  define FX_CLONES
+#endif
+
+#define FX_BLUR_MAX_SIGMA 1.0e5 /* larger sigmas are clamped: the result is already the limit */
+#define V_LANES 64              /* floats per vertical strip */
+#define H_LANES 16              /* target floats per horizontal block (rows * channels) */
+#define PAD 4                   /* rows before/after the data in a lane buffer (recursion state) */
+
+/* ---- kernels' parameters ------------------------------------------------------------- */
+
+int fx_gaussian_radius(double sigma)
+{
+    if (!(sigma > 0))
+        return 1;
+    if (sigma > FX_BLUR_MAX_SIGMA)
+        sigma = FX_BLUR_MAX_SIGMA;
+    int r = (int)ceil(FX_BLUR_EXACT_SIGMAS * sigma);
+    return r < 1 ? 1 : r;
+}
+
+void fx_gaussian_taps(double sigma, int radius, double *taps)
+{
+    double inv = 1.0 / (2.0 * sigma * sigma);
+    for (int k = 0; k <= radius; k++) {
+        double v = exp(-(double)k * (double)k * inv);
+        taps[radius + k] = v;
+        taps[radius - k] = v;
+    }
+    double sum = 0; /* small tails first */
+    for (int k = radius; k >= 1; k--)
+        sum += 2.0 * taps[radius + k];
+    sum += taps[radius];
+    for (int k = 0; k <= 2 * radius; k++)
+        taps[k] /= sum;
+}
+
+void fx_extended_box(double var, int *r_out, double *alpha_out)
+{
+    /* Plain box of radius r has variance r(r+1)/3; take the largest r below var, then the
+     * end-tap weight alpha that makes [1 ... 1] + alpha at +-(r+1) have variance var. */
+    if (!(var > 0)) {
+        *r_out = 0;
+        *alpha_out = 0;
+        return;
+    }
+    int r = (int)floor((sqrt(1.0 + 12.0 * var) - 1.0) * 0.5);
+    if (r < 0)
+        r = 0;
+    while ((double)r * (r + 1) / 3.0 > var && r > 0)
+        r--;
+    while ((double)(r + 1) * (r + 2) / 3.0 <= var)
+        r++;
+    double rp1 = r + 1.0;
+    double alpha = (2.0 * r + 1.0) * (var - r * rp1 / 3.0) / (2.0 * (rp1 * rp1 - var));
+    if (alpha < 0)
+        alpha = 0;
+    if (alpha > 1)
+        alpha = 1;
+    *r_out = r;
+    *alpha_out = alpha;
+}
+
+void fx_deriche_coefficients(double sigma, double n[4], double m[4], double d[4])
+{
+    /* Deriche (1993), zero order, the optimised constants as tabulated in ITK's
+     * RecursiveGaussianImageFilter; normalised to unit DC gain (causal + anticausal). */
+    const double a1 = 1.3530, b1 = 1.8151, w1 = 0.6681, l1 = -1.3932;
+    const double a2 = -0.3531, b2 = 0.0902, w2 = 2.0787, l2 = -1.3732;
+    double s1 = sin(w1 / sigma), s2 = sin(w2 / sigma);
+    double c1 = cos(w1 / sigma), c2 = cos(w2 / sigma);
+    double e1 = exp(l1 / sigma), e2 = exp(l2 / sigma);
+    double n0 = a1 + a2;
+    double n1 = e2 * (b2 * s2 - (a2 + 2 * a1) * c2) + e1 * (b1 * s1 - (a1 + 2 * a2) * c1);
+    double n2 = 2 * e1 * e2 * ((a1 + a2) * c2 * c1 - b1 * c2 * s1 - b2 * c1 * s2) +
+                a2 * e1 * e1 + a1 * e2 * e2;
+    double n3 = e2 * e1 * e1 * (b2 * s2 - a2 * c2) + e1 * e2 * e2 * (b1 * s1 - a1 * c1);
+    double d4 = e1 * e1 * e2 * e2;
+    double d3 = -2 * c1 * e1 * e2 * e2 - 2 * c2 * e2 * e1 * e1;
+    double d2 = 4 * c2 * c1 * e1 * e2 + e1 * e1 + e2 * e2;
+    double d1 = -2 * (e2 * c2 + e1 * c1);
+    double sn = n0 + n1 + n2 + n3, sd = 1.0 + d1 + d2 + d3 + d4;
+    double gain = 2.0 * sn / sd - n0; /* causal + anticausal DC gain */
+    n0 /= gain, n1 /= gain, n2 /= gain, n3 /= gain;
+    n[0] = n0, n[1] = n1, n[2] = n2, n[3] = n3;
+    d[0] = d1, d[1] = d2, d[2] = d3, d[3] = d4;
+    m[0] = n1 - d1 * n0;
+    m[1] = n2 - d2 * n0;
+    m[2] = n3 - d3 * n0;
+    m[3] = -d4 * n0;
+}
+
+/* ---- plan: everything an algorithm needs for one sigma --------------------------------- */
+
+typedef struct blur_plan {
+    fx_blur_algorithm alg; /* effective algorithm */
+    int identity;
+    /* exact */
+    int R;
+    double *taps; /* 2R+1 */
+    double *pre;  /* pre[m] = sum taps[0..m-1], 2R+2 entries */
+    double *suf;  /* suf[m] = sum taps[m..2R], 2R+2 entries */
+    /* box */
+    int passes, r;
+    double alpha, norm;
+    int resum; /* recompute the running sum from scratch every `resum` steps */
+    /* recursive (Deriche 4th order: causal n[], anticausal m[], shared d[]) */
+    double dn[4], dm[4], dd[4], gain_c, gain_a;
+    int halo;
+} blur_plan;
+
+static void plan_free(blur_plan *p)
+{
+    fx_mem_free(p->taps);
+    fx_mem_free(p->pre);
+    fx_mem_free(p->suf);
+    p->taps = p->pre = p->suf = NULL;
+}
+
+static fx_result plan_init(blur_plan *p, const fx_blur_spec *spec)
+{
+    memset(p, 0, sizeof *p);
+    double sigma = spec->sigma;
+    if (!(sigma >= FX_BLUR_MIN_SIGMA)) { /* also NaN */
+        p->identity = 1;
+        return FX_OK;
+    }
+    if (sigma > FX_BLUR_MAX_SIGMA)
+        sigma = FX_BLUR_MAX_SIGMA;
+    p->alg = spec->algorithm;
+    if (p->alg == FX_BLUR_RECURSIVE && sigma < FX_BLUR_RECURSIVE_MIN_SIGMA)
+        p->alg = FX_BLUR_EXACT;
+    if (p->alg == FX_BLUR_BOX) {
+        int passes = spec->box_passes < 2 ? 2 : spec->box_passes > 6 ? 6 : spec->box_passes;
+        p->passes = passes;
+        fx_extended_box(sigma * sigma / passes, &p->r, &p->alpha);
+        p->norm = 1.0 / (2.0 * p->r + 1.0 + 2.0 * p->alpha);
+        p->resum = 2 * p->r + 1 < 64 ? 64 : 2 * p->r + 1;
+        p->halo = passes * (p->r + 1);
+        return FX_OK;
+    }
+    if (p->alg == FX_BLUR_RECURSIVE) {
+        fx_deriche_coefficients(sigma, p->dn, p->dm, p->dd);
+        double sd = 1.0 + p->dd[0] + p->dd[1] + p->dd[2] + p->dd[3];
+        p->gain_c = (p->dn[0] + p->dn[1] + p->dn[2] + p->dn[3]) / sd;
+        p->gain_a = (p->dm[0] + p->dm[1] + p->dm[2] + p->dm[3]) / sd;
+        p->halo = fx_gaussian_radius(sigma);
+        return FX_OK;
+    }
+    p->alg = FX_BLUR_EXACT;
+    int R = fx_gaussian_radius(sigma);
+    p->R = R;
+    p->halo = R;
+    p->taps = fx_mem_alloc((2 * (size_t)R + 1) * sizeof(double));
+    p->pre = fx_mem_alloc((2 * (size_t)R + 2) * sizeof(double));
+    p->suf = fx_mem_alloc((2 * (size_t)R + 2) * sizeof(double));
+    if (!p->taps || !p->pre || !p->suf) {
+        plan_free(p);
+        return FX_ERR_OUT_OF_MEMORY;
+    }
+    fx_gaussian_taps(sigma, R, p->taps);
+    p->pre[0] = 0;
+    for (int m = 1; m <= 2 * R + 1; m++)
+        p->pre[m] = p->pre[m - 1] + p->taps[m - 1];
+    p->suf[2 * R + 1] = 0;
+    for (int m = 2 * R; m >= 0; m--)
+        p->suf[m] = p->suf[m + 1] + p->taps[m];
+    return FX_OK;
+}
+
+int fx_blur_is_identity(const fx_blur_spec *spec)
+{
+    return !spec || !(spec->sigma >= FX_BLUR_MIN_SIGMA);
+}
+
+int fx_blur_halo(const fx_blur_spec *spec)
+{
+    if (fx_blur_is_identity(spec))
+        return 0;
+    double sigma = spec->sigma > FX_BLUR_MAX_SIGMA ? FX_BLUR_MAX_SIGMA : spec->sigma;
+    if (spec->algorithm == FX_BLUR_BOX) {
+        int passes = spec->box_passes < 2 ? 2 : spec->box_passes > 6 ? 6 : spec->box_passes;
+        int r;
+        double alpha;
+        fx_extended_box(sigma * sigma / passes, &r, &alpha);
+        return passes * (r + 1);
+    }
+    return fx_gaussian_radius(sigma);
+}
+
+/* ---- lane kernels ---------------------------------------------------------------------- */
+/* A lane buffer holds rows -PAD .. n+PAD-1 of L doubles; `buf` points at row 0. */
+
+FX_CLONES
+static void exact_lanes(const blur_plan *p, const double *restrict in, double *restrict out, int n,
+                        int L)
+{
+    const int R = p->R;
+    const double *last = in + (size_t)(n - 1) * L;
+    for (int i = 0; i < n; i++) {
+        double *restrict o = out + (size_t)i * L;
+        int j0 = i - R < 0 ? 0 : i - R;
+        int j1 = i + R > n - 1 ? n - 1 : i + R;
+        /* taps falling left of 0 / right of n-1 all read the edge sample (replicate) */
+        double wl = i - R < 0 ? p->pre[R - i] : 0.0;
+        double wr = i + R > n - 1 ? p->suf[n - i + R] : 0.0;
+        for (int l = 0; l < L; l++)
+            o[l] = wl * in[l] + wr * last[l];
+        for (int j = j0; j <= j1; j++) {
+            const double w = p->taps[j - i + R];
+            const double *restrict x = in + (size_t)j * L;
+            for (int l = 0; l < L; l++)
+                o[l] += w * x[l];
+        }
+    }
+}
+
+/* Sum of in[clamp(k)] for k in [lo, hi], per lane, into s. */
+static inline void window_sum(const double *restrict in, double *restrict s, int n, int L, int lo,
+                              int hi)
+{
+    int nl = lo < 0 ? (hi < 0 ? hi - lo + 1 : -lo) : 0;
+    int nr = hi > n - 1 ? (lo > n - 1 ? hi - lo + 1 : hi - (n - 1)) : 0;
+    int a = lo < 0 ? 0 : lo, b = hi > n - 1 ? n - 1 : hi;
+    const double *first = in, *last = in + (size_t)(n - 1) * L;
+    for (int l = 0; l < L; l++)
+        s[l] = (double)nl * first[l] + (double)nr * last[l];
+    for (int k = a; k <= b; k++) {
+        const double *restrict x = in + (size_t)k * L;
+        for (int l = 0; l < L; l++)
+            s[l] += x[l];
+    }
+}
+
+/* One extended box: out[i] = norm * (sum_{|k|<=r} in[i+k] + alpha (in[i-r-1] + in[i+r+1])).
+ * Running sum in double; recomputed from scratch every `resum` steps so that a huge
+ * value (1e38) leaving the window cannot leave its rounding residue behind for long. */
+FX_CLONES
+static void box_lanes(const blur_plan *p, const double *restrict in, double *restrict out, int n,
+                      int L, double *restrict s)
+{
+    const int r = p->r;
+    const double alpha = p->alpha, norm = p->norm;
+    for (int i = 0; i < n; i++) {
+        if (i % p->resum == 0) {
+            window_sum(in, s, n, L, i - r, i + r);
+        } else {
+            int kin = i + r > n - 1 ? n - 1 : i + r;
+            int kout = i - r - 1 < 0 ? 0 : i - r - 1;
+            const double *restrict xi = in + (size_t)kin * L;
+            const double *restrict xo = in + (size_t)kout * L;
+            for (int l = 0; l < L; l++)
+                s[l] += xi[l] - xo[l];
+        }
+        int ka = i - r - 1 < 0 ? 0 : i - r - 1;
+        int kb = i + r + 1 > n - 1 ? n - 1 : i + r + 1;
+        const double *restrict ea = in + (size_t)(ka > n - 1 ? n - 1 : ka) * L;
+        const double *restrict eb = in + (size_t)(kb < 0 ? 0 : kb) * L;
+        double *restrict o = out + (size_t)i * L;
+        for (int l = 0; l < L; l++)
+            o[l] = (s[l] + alpha * (ea[l] + eb[l])) * norm;
+    }
+}
+
+/* Deriche: causal + anticausal 4th-order recursions, summed. The replicate extension is
+ * exact: the causal part only sees the left constant (its steady state is x0 * gain_c),
+ * the anticausal part only the right one. x has PAD rows each side (overwritten with
+ * the edge values); the result goes to y; s holds 4 * L doubles. */
+FX_CLONES
+static void deriche_lanes(const blur_plan *p, double *x, double *y, int n, int L,
+                          double *restrict s)
+{
+    const double n0 = p->dn[0], n1 = p->dn[1], n2 = p->dn[2], n3 = p->dn[3];
+    const double m1 = p->dm[0], m2 = p->dm[1], m3 = p->dm[2], m4 = p->dm[3];
+    const double d1 = p->dd[0], d2 = p->dd[1], d3 = p->dd[2], d4 = p->dd[3];
+    const ptrdiff_t Ls = L;
+    const double *first = x, *last = x + (n - 1) * Ls;
+    for (int k = 1; k <= 4; k++) {
+        double *restrict xl = x - k * Ls, *restrict yl = y - k * Ls;
+        double *restrict xr = x + (n - 1 + k) * Ls;
+        for (int l = 0; l < L; l++) {
+            xl[l] = first[l];
+            yl[l] = first[l] * p->gain_c;
+            xr[l] = last[l];
+        }
+    }
+    for (int i = 0; i < n; i++) {
+        const double *restrict x0 = x + i * Ls, *restrict x1 = x0 - Ls, *restrict x2 = x0 - 2 * Ls,
+                            *restrict x3 = x0 - 3 * Ls;
+        const double *restrict y1 = y + (i - 1) * Ls, *restrict y2 = y1 - Ls, *restrict y3 = y1 - 2 * Ls,
+                            *restrict y4 = y1 - 3 * Ls;
+        double *restrict y0 = y + i * Ls;
+        for (int l = 0; l < L; l++)
+            y0[l] = n0 * x0[l] + n1 * x1[l] + n2 * x2[l] + n3 * x3[l] -
+                    (d1 * y1[l] + d2 * y2[l] + d3 * y3[l] + d4 * y4[l]);
+    }
+    double *s1 = s, *s2 = s + Ls, *s3 = s + 2 * Ls, *s4 = s + 3 * Ls;
+    for (int l = 0; l < L; l++)
+        s1[l] = s2[l] = s3[l] = s4[l] = last[l] * p->gain_a;
+    for (int i = n - 1; i >= 0; i--) {
+        const double *restrict xa = x + (i + 1) * Ls, *restrict xb = xa + Ls, *restrict xc = xa + 2 * Ls,
+                            *restrict xd = xa + 3 * Ls;
+        double *restrict y0 = y + i * Ls;
+        double *restrict o = s4; /* the oldest state becomes the newest */
+        const double *restrict q1 = s1, *restrict q2 = s2, *restrict q3 = s3;
+        for (int l = 0; l < L; l++) {
+            double v = m1 * xa[l] + m2 * xb[l] + m3 * xc[l] + m4 * xd[l] -
+                       (d1 * q1[l] + d2 * q2[l] + d3 * q3[l] + d4 * o[l]);
+            o[l] = v;
+            y0[l] += v;
+        }
+        s4 = s3;
+        s3 = s2;
+        s2 = s1;
+        s1 = o;
+    }
+}
+
+/* Runs the plan on buffer a (rows 0..n-1 of L lanes, PAD rows each side); b is scratch of
+ * the same shape; s and xplus hold L doubles. Returns the buffer holding the result. */
+static double *filter_lanes(const blur_plan *p, double *a, double *b, int n, int L, double *s)
+{
+    switch (p->alg) {
+    case FX_BLUR_EXACT:
+        exact_lanes(p, a, b, n, L);
+        return b;
+    case FX_BLUR_RECURSIVE:
+        deriche_lanes(p, a, b, n, L, s);
+        return b;
+    case FX_BLUR_BOX:
+    default:
+        for (int k = 0; k < p->passes; k++) {
+            box_lanes(p, a, b, n, L, s);
+            double *t = a;
+            a = b;
+            b = t;
+        }
+        return a;
+    }
+}
+
+static inline float to_float_clamped(double v)
+{
+    /* finite in, finite out: double sums of floats cannot overflow, the cast could.
+     * Written as selects so the loops around it vectorise (min/max). */
+    v = v > (double)FLT_MAX ? (double)FLT_MAX : v;
+    v = v < -(double)FLT_MAX ? -(double)FLT_MAX : v;
+    return (float)v;
+}
+
+/* ---- the image passes ------------------------------------------------------------------ */
+
+typedef struct blur_job {
+    const blur_plan *plan;
+    const float *src;
+    float *dst;
+    float *tmp;       /* vertical result: rows oy0..oy1-1, full row length */
+    int width, height, channels;
+    int ox0, ox1, oy0, oy1; /* output region */
+    int sx0, sx1, sy0, sy1; /* computed (halo-grown, clamped) region */
+    int strip_lanes;  /* vertical: floats per strip */
+    int block_rows;   /* horizontal: rows per block */
+    atomic_int failed;
+} blur_job;
+
+static double *lane_buffer(int n, int L)
+{
+    return fx_mem_alloc(((size_t)n + 2 * PAD) * (size_t)L * sizeof(double));
+}
+
+/* Vertical pass: strips of columns [c, c + L) (in floats) of rows sy0..sy1-1 -> tmp rows
+ * oy0..oy1-1. */
+static void vertical_range(void *user, int begin, int end)
+{
+    blur_job *j = user;
+    const int C = j->channels;
+    const size_t row = (size_t)j->width * C;
+    const int n = j->sy1 - j->sy0;
+    const int c_first = j->sx0 * C, c_end = j->sx1 * C;
+    const int Lmax = j->strip_lanes;
+    double *A = lane_buffer(n, Lmax), *Bf = lane_buffer(n, Lmax);
+    double *s = fx_mem_alloc(4 * (size_t)Lmax * sizeof(double));
+    if (!A || !Bf || !s) {
+        atomic_store(&j->failed, 1);
+        goto done;
+    }
+    for (int strip = begin; strip < end; strip++) {
+        int c0 = c_first + strip * Lmax;
+        int L = c_end - c0 < Lmax ? c_end - c0 : Lmax;
+        double *a = A + (size_t)PAD * L, *b = Bf + (size_t)PAD * L;
+        for (int i = 0; i < n; i++) {
+            const float *restrict in = j->src + (size_t)(j->sy0 + i) * row + c0;
+            double *restrict o = a + (size_t)i * L;
+            /* rows are a page or more apart: no hardware prefetcher follows that stride */
+            if (i + 8 < n)
+                __builtin_prefetch(in + 8 * row);
+            for (int l = 0; l < L; l++)
+                o[l] = in[l];
+        }
+        const double *res = filter_lanes(j->plan, a, b, n, L, s);
+        for (int y = j->oy0; y < j->oy1; y++) {
+            const double *restrict v = res + (size_t)(y - j->sy0) * L;
+            float *restrict o = j->tmp + (size_t)(y - j->oy0) * row + c0;
+            for (int l = 0; l < L; l++)
+                o[l] = to_float_clamped(v[l]);
+        }
+    }
+done:
+    fx_mem_free(A);
+    fx_mem_free(Bf);
+    fx_mem_free(s);
+}
+
+/* Horizontal pass: blocks of block_rows rows of tmp -> dst, columns sx0..sx1-1 computed,
+ * ox0..ox1-1 written. */
+static void horizontal_range(void *user, int begin, int end)
+{
+    blur_job *j = user;
+    const int C = j->channels;
+    const size_t row = (size_t)j->width * C;
+    const int n = j->sx1 - j->sx0;
+    const int R = j->block_rows, Lmax = R * C;
+    const int rows = j->oy1 - j->oy0;
+    double *A = lane_buffer(n, Lmax), *Bf = lane_buffer(n, Lmax);
+    double *s = fx_mem_alloc(4 * (size_t)Lmax * sizeof(double));
+    if (!A || !Bf || !s) {
+        atomic_store(&j->failed, 1);
+        goto done;
+    }
+    for (int blk = begin; blk < end; blk++) {
+        int r0 = blk * R;
+        int nr = rows - r0 < R ? rows - r0 : R;
+        int L = nr * C;
+        double *a = A + (size_t)PAD * L, *b = Bf + (size_t)PAD * L;
+        for (int r = 0; r < nr; r++) {
+            const float *restrict in = j->tmp + (size_t)(r0 + r) * row + (size_t)j->sx0 * C;
+            for (int i = 0; i < n; i++)
+                for (int c = 0; c < C; c++)
+                    a[(size_t)i * L + r * C + c] = in[(size_t)i * C + c];
+        }
+        const double *res = filter_lanes(j->plan, a, b, n, L, s);
+        for (int r = 0; r < nr; r++) {
+            float *restrict o = j->dst + (size_t)(j->oy0 + r0 + r) * row;
+            for (int x = j->ox0; x < j->ox1; x++)
+                for (int c = 0; c < C; c++)
+                    o[(size_t)x * C + c] =
+                        to_float_clamped(res[(size_t)(x - j->sx0) * L + r * C + c]);
+        }
+    }
+done:
+    fx_mem_free(A);
+    fx_mem_free(Bf);
+    fx_mem_free(s);
+}
+
+static void copy_roi(const float *src, float *dst, int width, int channels, const fx_rect *r)
+{
+    if (src == dst)
+        return;
+    size_t row = (size_t)width * channels;
+    for (int y = r->y0; y < r->y1; y++)
+        memcpy(dst + y * row + (size_t)r->x0 * channels, src + y * row + (size_t)r->x0 * channels,
+               (size_t)(r->x1 - r->x0) * channels * sizeof(float));
+}
+
+static int clampi(int v, int lo, int hi)
+{
+    return v < lo ? lo : v > hi ? hi : v;
+}
+
+fx_result fx_blur_image(fx_context *ctx, const float *src, float *dst, int width, int height,
+                        int channels, const fx_blur_spec *spec, const fx_rect *roi,
+                        const char *where)
+{
+    if (!where)
+        where = "blur";
+    if (!src || !dst || !spec || width <= 0 || height <= 0 || channels < 1 || channels > 4)
+        return fx_fail(ctx, FX_ERR_INVALID_ARGUMENT, "%s: bad blur arguments", where);
+    fx_rect r = { 0, 0, width, height };
+    if (roi) {
+        r.x0 = clampi(roi->x0, 0, width);
+        r.x1 = clampi(roi->x1, r.x0, width);
+        r.y0 = clampi(roi->y0, 0, height);
+        r.y1 = clampi(roi->y1, r.y0, height);
+    }
+    if (r.x0 >= r.x1 || r.y0 >= r.y1)
+        return FX_OK;
+    blur_plan plan;
+    if (plan_init(&plan, spec) != FX_OK)
+        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the blur kernel (sigma %g)",
+                       where, spec->sigma);
+    if (plan.identity) {
+        copy_roi(src, dst, width, channels, &r);
+        return FX_OK;
+    }
+    const int H = plan.halo;
+    blur_job *j = fx_mem_calloc(1, sizeof *j);
+    if (!j) {
+        plan_free(&plan);
+        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
+    }
+    j->plan = &plan;
+    j->src = src;
+    j->dst = dst;
+    j->width = width;
+    j->height = height;
+    j->channels = channels;
+    j->ox0 = r.x0, j->ox1 = r.x1, j->oy0 = r.y0, j->oy1 = r.y1;
+    /* Halo growth in 64-bit: H can be large. */
+    j->sx0 = (int)((long long)r.x0 - H < 0 ? 0 : (long long)r.x0 - H);
+    j->sx1 = (int)((long long)r.x1 + H > width ? width : (long long)r.x1 + H);
+    j->sy0 = (int)((long long)r.y0 - H < 0 ? 0 : (long long)r.y0 - H);
+    j->sy1 = (int)((long long)r.y1 + H > height ? height : (long long)r.y1 + H);
+    j->strip_lanes = V_LANES;
+    j->block_rows = H_LANES / channels < 1 ? 1 : H_LANES / channels;
+    atomic_init(&j->failed, 0);
+
+    fx_result res = FX_OK;
+    size_t tmp_bytes;
+    if (!fx_size_mul(&tmp_bytes, (size_t)(r.y1 - r.y0), (size_t)width * channels, sizeof(float))) {
+        res = fx_fail(ctx, FX_ERR_LIMIT, "%s: blur buffer size overflows", where);
+        goto out;
+    }
+    res = fx_check_budget(ctx, tmp_bytes, where);
+    if (res != FX_OK)
+        goto out;
+    j->tmp = fx_mem_alloc(tmp_bytes);
+    if (!j->tmp) {
+        res = fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for a %zu-byte blur buffer",
+                      where, tmp_bytes);
+        goto out;
+    }
+    int cols = (j->sx1 - j->sx0) * channels;
+    int strips = (cols + V_LANES - 1) / V_LANES;
+    fx_parallel_for(ctx, strips, fx_grain_for(ctx, strips), vertical_range, j);
+    if (!atomic_load(&j->failed)) {
+        int blocks = (r.y1 - r.y0 + j->block_rows - 1) / j->block_rows;
+        fx_parallel_for(ctx, blocks, fx_grain_for(ctx, blocks), horizontal_range, j);
+    }
+    if (atomic_load(&j->failed))
+        res = fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for blur scratch buffers", where);
+out:
+    fx_mem_free(j->tmp);
+    fx_mem_free(j);
+    plan_free(&plan);
+    return res;
+}
+
+fx_result fx_blur_line(fx_context *ctx, const float *in, float *out, int n, int stride,
+                       const fx_blur_spec *spec, const char *where)
+{
+    if (!where)
+        where = "blur";
+    if (!in || !out || !spec || n <= 0 || stride < 1)
+        return fx_fail(ctx, FX_ERR_INVALID_ARGUMENT, "%s: bad blur arguments", where);
+    blur_plan plan;
+    if (plan_init(&plan, spec) != FX_OK)
+        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the blur kernel", where);
+    if (plan.identity) {
+        if (in != out)
+            for (int i = 0; i < n; i++)
+                out[(size_t)i * stride] = in[(size_t)i * stride];
+        return FX_OK;
+    }
+    double *A = lane_buffer(n, 1), *Bf = lane_buffer(n, 1);
+    double s[4];
+    if (!A || !Bf) {
+        fx_mem_free(A);
+        fx_mem_free(Bf);
+        plan_free(&plan);
+        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
+    }
+    double *a = A + PAD, *b = Bf + PAD;
+    for (int i = 0; i < n; i++)
+        a[i] = in[(size_t)i * stride];
+    const double *res = filter_lanes(&plan, a, b, n, 1, s);
+    for (int i = 0; i < n; i++)
+        out[(size_t)i * stride] = to_float_clamped(res[i]);
+    fx_mem_free(A);
+    fx_mem_free(Bf);
+    plan_free(&plan);
+    return FX_OK;
+}
+
+/* ---- small 2-D convolution ------------------------------------------------------------- */
+
+typedef struct conv_job {
+    const float *src;
+    float *dst;
+    int width, height, channels;
+    const double *kernel;
+    int ksize;
+    fx_rect roi;
+    atomic_int failed;
+} conv_job;
+
+FX_CLONES
+static void conv_rows(void *user, int begin, int end)
+{
+    conv_job *j = user;
+    const int C = j->channels, h = j->ksize / 2, W = j->width;
+    const int rw = j->roi.x1 - j->roi.x0;
+    const size_t row = (size_t)W * C;
+    double *acc = fx_mem_alloc((size_t)rw * C * sizeof(double));
+    double *pad = fx_mem_alloc(((size_t)rw + 2 * h) * C * sizeof(double));
+    if (!acc || !pad) {
+        atomic_store(&j->failed, 1);
+        fx_mem_free(acc);
+        fx_mem_free(pad);
+        return;
+    }
+    for (int y = j->roi.y0 + begin; y < j->roi.y0 + end; y++) {
+        memset(acc, 0, (size_t)rw * C * sizeof(double));
+        for (int ky = 0; ky < j->ksize; ky++) {
+            int ys = clampi(y + ky - h, 0, j->height - 1);
+            const float *in = j->src + (size_t)ys * row;
+            for (int i = 0; i < rw + 2 * h; i++) {
+                int xs = clampi(j->roi.x0 + i - h, 0, W - 1);
+                for (int c = 0; c < C; c++)
+                    pad[(size_t)i * C + c] = in[(size_t)xs * C + c];
+            }
+            for (int kx = 0; kx < j->ksize; kx++) {
+                const double w = j->kernel[ky * j->ksize + kx];
+                const double *restrict p = pad + (size_t)kx * C;
+                double *restrict a = acc;
+                for (int i = 0; i < rw * C; i++)
+                    a[i] += w * p[i];
+            }
+        }
+        float *o = j->dst + (size_t)y * row + (size_t)j->roi.x0 * C;
+        for (int i = 0; i < rw * C; i++)
+            o[i] = to_float_clamped(acc[i]);
+    }
+    fx_mem_free(acc);
+    fx_mem_free(pad);
+}
+
+fx_result fx_convolve_2d(fx_context *ctx, const float *src, float *dst, int width, int height,
+                         int channels, const double *kernel, int ksize, const fx_rect *roi,
+                         const char *where)
+{
+    if (!where)
+        where = "convolve";
+    if (!src || !dst || src == dst || !kernel || width <= 0 || height <= 0 || channels < 1 ||
+        channels > 4 || ksize < 1 || ksize > 15 || ksize % 2 == 0)
+        return fx_fail(ctx, FX_ERR_INVALID_ARGUMENT, "%s: bad convolution arguments", where);
+    conv_job *j = fx_mem_calloc(1, sizeof *j);
+    if (!j)
+        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
+    j->src = src;
+    j->dst = dst;
+    j->width = width;
+    j->height = height;
+    j->channels = channels;
+    j->kernel = kernel;
+    j->ksize = ksize;
+    j->roi = (fx_rect){ 0, 0, width, height };
+    if (roi) {
+        j->roi.x0 = clampi(roi->x0, 0, width);
+        j->roi.x1 = clampi(roi->x1, j->roi.x0, width);
+        j->roi.y0 = clampi(roi->y0, 0, height);
+        j->roi.y1 = clampi(roi->y1, j->roi.y0, height);
+    }
+    atomic_init(&j->failed, 0);
+    int rows = j->roi.y1 - j->roi.y0;
+    fx_result res = FX_OK;
+    if (rows > 0 && j->roi.x1 > j->roi.x0) {
+        fx_parallel_for(ctx, rows, fx_grain_for(ctx, rows), conv_rows, j);
+        if (atomic_load(&j->failed))
+            res = fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for convolution rows", where);
+    }
+    fx_mem_free(j);
+    return res;
+}
