@@ -39,8 +39,10 @@ const char *fx_exr_compression_name(exr_compression_t c)
 fx_result fx_exr_fail(fx_context *ctx, fx_exr_file *f, exr_result_t rv, const char *what)
 {
     const char *detail = last_error[0] ? last_error : exr_get_default_error_message(rv);
-    fx_result code = rv == EXR_ERR_OUT_OF_MEMORY ? FX_ERR_OUT_OF_MEMORY : FX_ERR_BAD_FILE;
-    return fx_fail(ctx, code, "'%s': %s: %s", f->path, what, detail);
+    /* Every failure here comes from the file's content (sizes are limited and budgeted
+     * before anything is allocated; OpenEXRCore 3.1.5 even says "out of memory" for a
+     * chunk that does not decompress), so it is a bad file. */
+    return fx_fail(ctx, FX_ERR_BAD_FILE, "'%s': %s: %s", f->path, what, detail);
 }
 
 const char *fx_exr_string_attr(const fx_exr_file *f, int part, const char *name)

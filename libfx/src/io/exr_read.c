@@ -93,10 +93,29 @@ static fx_result decode_core_part(reader *rd, int p)
         ny = (int)((ph + lines - 1) / lines);
     }
 
+    /* Scratch for one chunk: a plane per decoded channel. */
+    int used = 0;
+    for (int c = 0; c < pt->channel_count; c++)
+        used += rd->dest[pt->first_chan + c].base != NULL;
+    int64_t cw = tiled ? (int64_t)tile_w : pw, chh = tiled ? (int64_t)tile_h : lines;
+    if (cw > pw)
+        cw = pw;
+    if (chh > ph)
+        chh = ph;
+    size_t scratch_bytes;
+    if (!fx_size_mul(&scratch_bytes, (size_t)cw * (size_t)chh, (size_t)used, sizeof(float)))
+        return fx_fail(rd->ctx, FX_ERR_LIMIT, "'%s': part %d: chunk size overflows", f->path, p);
+    char what[1200];
+    snprintf(what, sizeof what, "file '%s' part %d decoding", f->path, p);
+    fx_result result = fx_check_budget(rd->ctx, scratch_bytes, what);
+    if (result != FX_OK)
+        return result;
+    float *scratch = fx_mem_alloc(scratch_bytes ? scratch_bytes : 1);
+    if (!scratch)
+        return fx_fail(rd->ctx, FX_ERR_OUT_OF_MEMORY, "'%s': out of memory decoding part %d", f->path, p);
+
     exr_decode_pipeline_t dec = EXR_DECODE_PIPELINE_INITIALIZER;
     int have_decoder = 0;
-    fx_result result = FX_OK;
-    char what[160];
     for (int ty = 0; ty < ny && result == FX_OK; ty++) {
         for (int tx = 0; tx < nx && result == FX_OK; tx++) {
             exr_chunk_info_t ci;
@@ -125,13 +144,20 @@ static fx_result decode_core_part(reader *rd, int p)
             }
             have_decoder = 1;
             /* Never trust the chunk's size: it must sit inside the part's window. */
-            if (ci.width <= 0 || ci.height <= 0 || x0 + (int64_t)ci.width - 1 > pt->dw[2] ||
+            if (ci.width <= 0 || ci.height <= 0 || ci.width > cw || ci.height > chh ||
+                x0 + (int64_t)ci.width - 1 > pt->dw[2] ||
                 y0 + (int64_t)ci.height - 1 > pt->dw[3]) {
                 result = fx_fail(rd->ctx, FX_ERR_BAD_FILE, "'%s': %s: chunk of %dx%d outside the data window",
                                  f->path, what, ci.width, ci.height);
                 break;
             }
-            int any = 0;
+            /* Decode into planes of a scratch buffer, then scatter into the passes.
+             * Straight into the interleaved passes would be faster, but OpenEXRCore
+             * 3.1.5's interleaved fast paths (unpack_half_to_float_4chan_interleave...)
+             * assume the file's channel order is the memory order: a file stored as
+             * A,B,G,R came out with alpha in red (ColorCodedLevels.exr). */
+            int planes = 0;
+            size_t plane = (size_t)ci.width * (size_t)ci.height;
             for (int c = 0; c < dec.channel_count; c++) {
                 exr_coding_channel_info_t *ch = &dec.channels[c];
                 const chan_dest *d = c < pt->channel_count ? &rd->dest[pt->first_chan + c] : NULL;
@@ -139,25 +165,43 @@ static fx_result decode_core_part(reader *rd, int p)
                     ch->decode_to_ptr = NULL; /* skipped: not decoded at all */
                     continue;
                 }
-                size_t px = (size_t)(y0 - rd->dw[1]) * (size_t)rd->width + (size_t)(x0 - rd->dw[0]);
-                ch->decode_to_ptr = (uint8_t *)(d->base + px * (size_t)d->stride + (size_t)d->slot);
-                ch->user_pixel_stride = d->stride * (int32_t)sizeof(float);
-                ch->user_line_stride = rd->width * d->stride * (int32_t)sizeof(float);
+                ch->decode_to_ptr = (uint8_t *)(scratch + (size_t)planes * plane);
+                ch->user_pixel_stride = (int32_t)sizeof(float);
+                ch->user_line_stride = ci.width * (int32_t)sizeof(float);
                 ch->user_data_type = EXR_PIXEL_FLOAT;
                 ch->user_bytes_per_element = sizeof(float);
-                any = 1;
+                planes++;
             }
-            if (!any)
+            if (!planes)
                 continue;
             if ((rv = exr_decoding_choose_default_routines(f->exr, p, &dec)) != EXR_ERR_SUCCESS ||
-                (rv = exr_decoding_run(f->exr, p, &dec)) != EXR_ERR_SUCCESS)
+                (rv = exr_decoding_run(f->exr, p, &dec)) != EXR_ERR_SUCCESS) {
                 result = fx_exr_fail(rd->ctx, f, rv, what);
+                break;
+            }
+            planes = 0;
+            for (int c = 0; c < dec.channel_count && c < pt->channel_count; c++) {
+                const chan_dest *d = &rd->dest[pt->first_chan + c];
+                if (!d->base)
+                    continue;
+                const float *src = scratch + (size_t)planes++ * plane;
+                for (int y = 0; y < ci.height; y++) {
+                    float *dst = d->base +
+                                 ((size_t)(y0 + y - rd->dw[1]) * (size_t)rd->width + (size_t)(x0 - rd->dw[0])) *
+                                     (size_t)d->stride +
+                                 (size_t)d->slot;
+                    const float *row = src + (size_t)y * (size_t)ci.width;
+                    for (int x = 0; x < ci.width; x++)
+                        dst[(size_t)x * (size_t)d->stride] = row[x];
+                }
+            }
         }
         if (result == FX_OK && (ty & 15) == 15)
             result = fx_progress(rd->ctx, "read", (double)(ty + 1) / ny);
     }
     if (have_decoder)
         exr_decoding_destroy(f->exr, &dec);
+    fx_mem_free(scratch);
     return result;
 }
 
