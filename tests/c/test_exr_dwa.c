@@ -1,0 +1,97 @@
+/* DWAA/DWAB files: OpenEXRCore 3.1.5 cannot decode them, libfx reads them through
+ * OpenEXR's C++ reader and warns that data passes are lossy. The DWA files are made
+ * at run time with oiiotool (a build dependency) from a file libfx writes. */
+#include "testutil.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static int warned(fx_context *ctx, const char *needle)
+{
+    for (int i = 0; i < fx_context_warning_count(ctx); i++)
+        if (tu_contains(fx_context_warning(ctx, i), needle))
+            return 1;
+    return 0;
+}
+
+int main(void)
+{
+    fx_context *ctx = NULL;
+    if (fx_context_new(&ctx, 2) != FX_OK)
+        return 1;
+    char dir[512], src[600], cmd[2048];
+    snprintf(dir, sizeof dir, "%s", tu_tmpdir("exr_dwa"));
+    snprintf(src, sizeof src, "%s/src.exr", dir);
+
+    int w = 96, h = 40;
+    fx_frame *f = tu_pattern_frame(ctx, w, h, 3);
+    float *depth = malloc((size_t)w * h * sizeof *depth);
+    for (int i = 0; i < w * h; i++)
+        depth[i] = 2.0f + 0.01f * (float)(i % w);
+    CHECK_OK(ctx, fx_frame_add_pass(f, "Depth", 1, depth));
+    int dw[4] = {10, -3, 10 + w - 1, -3 + h - 1}, disp[4] = {0, 0, 119, 49};
+    CHECK_OK(ctx, fx_frame_set_windows(f, dw, disp));
+    fx_write_options wo = {sizeof wo, 0, 0, NULL};
+    CHECK_OK(ctx, fx_frame_write_exr(f, src, &wo));
+
+    const char *codecs[2] = {"dwaa", "dwab"};
+    for (int k = 0; k < 2; k++) {
+        char dst[700];
+        snprintf(dst, sizeof dst, "%s/x_%s.exr", dir, codecs[k]);
+        snprintf(cmd, sizeof cmd, "oiiotool '%s' --compression %s -o '%s' >/dev/null 2>&1", src, codecs[k], dst);
+        int rc = system(cmd);
+        CHECK(rc == 0);
+        if (rc != 0) {
+            fprintf(stderr, "oiiotool failed (is OpenImageIO's oiiotool installed?): %s\n", cmd);
+            continue;
+        }
+        char *info = NULL;
+        CHECK_OK(ctx, fx_exr_info_json(ctx, dst, &info));
+        CHECK(tu_contains(info, codecs[k]));
+        fx_free(info);
+
+        fx_context_clear_warnings(ctx);
+        fx_frame *g = NULL;
+        CHECK_OK(ctx, fx_frame_read_exr(ctx, dst, NULL, &g));
+        CHECK(warned(ctx, "is DWA-compressed: lossy, data passes (Depth/Normal/Position) are approximate"));
+        CHECK(warned(ctx, dst));
+        if (!g)
+            continue;
+        int gdw[4], gdisp[4];
+        fx_frame_windows(g, gdw, gdisp);
+        CHECK(memcmp(gdw, dw, sizeof dw) == 0 && memcmp(gdisp, disp, sizeof disp) == 0);
+        float *a = NULL, *b = NULL;
+        int ca = 0, cb = 0;
+        CHECK_OK(ctx, fx_frame_pass(f, "Combined", &a, &ca));
+        CHECK_OK(ctx, fx_frame_pass(g, "Combined", &b, &cb));
+        CHECK(ca == 4 && cb == 4);
+        if (a && b) {
+            double err = tu_max_abs_diff(a, b, (size_t)w * h * 4);
+            CHECK(err < 0.1); /* lossy but close; alpha exact */
+            CHECK(b[3] == 1.0f);
+        }
+        CHECK_OK(ctx, fx_frame_pass(g, "Depth", &b, &cb));
+        if (b)
+            CHECK(tu_max_abs_diff(depth, b, (size_t)w * h) < 0.05);
+        fx_frame_free(g);
+    }
+
+    /* a stack-limited read of a DWA file decodes Combined only */
+    fx_stack *s = NULL;
+    CHECK_OK(ctx, fx_stack_new(ctx, &s));
+    fx_read_options ro = {sizeof ro, NULL, NULL, s};
+    char dst[700];
+    snprintf(dst, sizeof dst, "%s/x_dwaa.exr", dir);
+    fx_frame *g = NULL;
+    CHECK_OK(ctx, fx_frame_read_exr(ctx, dst, &ro, &g));
+    CHECK(g && fx_frame_pass_count(g) == 1);
+    fx_frame_free(g);
+    fx_stack_free(s);
+
+    free(depth);
+    fx_frame_free(f);
+    fx_context_free(ctx);
+    return tu_finish("test_exr_dwa");
+}
