@@ -168,7 +168,7 @@ static fx_result plan_init(blur_plan *p, const fx_blur_spec *spec)
         double sd = 1.0 + p->dd[0] + p->dd[1] + p->dd[2] + p->dd[3];
         p->gain_c = (p->dn[0] + p->dn[1] + p->dn[2] + p->dn[3]) / sd;
         p->gain_a = (p->dm[0] + p->dm[1] + p->dm[2] + p->dm[3]) / sd;
-        p->halo = fx_gaussian_radius(sigma);
+        p->halo = (int)ceil(FX_BLUR_RECURSIVE_HALO_SIGMAS * sigma);
         return FX_OK;
     }
     p->alg = FX_BLUR_EXACT;
@@ -209,6 +209,8 @@ int fx_blur_halo(const fx_blur_spec *spec)
         fx_extended_box(sigma * sigma / passes, &r, &alpha);
         return passes * (r + 1);
     }
+    if (spec->algorithm == FX_BLUR_RECURSIVE && sigma >= FX_BLUR_RECURSIVE_MIN_SIGMA)
+        return (int)ceil(FX_BLUR_RECURSIVE_HALO_SIGMAS * sigma);
     return fx_gaussian_radius(sigma);
 }
 

@@ -37,6 +37,9 @@ extern "C" {
 #define FX_BLUR_MIN_SIGMA 0.2
 /* The exact FIR's radius in sigmas (tail mass beyond: 5.7e-7). */
 #define FX_BLUR_EXACT_SIGMAS 5.0
+/* The recursive filter's halo in sigmas: its impulse response (a fit, with small
+ * oscillating tails) truncated there changes the result by < 2e-5 of the signal. */
+#define FX_BLUR_RECURSIVE_HALO_SIGMAS 8.0
 /* recursive switches to the exact FIR below this sigma. */
 #define FX_BLUR_RECURSIVE_MIN_SIGMA 2.0
 
@@ -53,8 +56,7 @@ typedef struct fx_blur_spec {
 } fx_blur_spec;
 
 /* Pixels read on each side of an output pixel: the exact support for box and exact,
- * ceil(5 sigma) for recursive (whose impulse response never ends: beyond 5 sigma its
- * weight is below 1e-6). 0 for the identity. */
+ * ceil(8 sigma) for recursive (whose impulse response never ends). 0 for the identity. */
 int fx_blur_halo(const fx_blur_spec *spec);
 int fx_blur_is_identity(const fx_blur_spec *spec);
 
@@ -62,7 +64,7 @@ int fx_blur_is_identity(const fx_blur_spec *spec);
  * roi (NULL: everything) is the region of dst to write; the rest of dst is untouched.
  * Rows and columns are computed only over roi grown by the halo, so for box and exact
  * the roi's result is exactly the full-image one; for recursive it differs by the
- * Gaussian's tail beyond the halo (< 1e-6 of the signal). dst may equal src.
+ * filter's tail beyond the halo (< 2e-5 of the signal). dst may equal src.
  * Output is finite for any finite input (double accumulation, clamped to +-FLT_MAX) and
  * bit-identical for any thread count. `where` names the caller in error messages. */
 fx_result fx_blur_image(fx_context *ctx, const float *src, float *dst, int width, int height,
