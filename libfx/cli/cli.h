@@ -124,6 +124,7 @@ typedef struct cli_progress {
     int total, done;  /* frames */
     long frame;       /* number of the frame in work */
     int show_number;  /* show it (sequences) */
+    int phase;        /* 0 read, 1 effects, 2 write: where the library's fractions go */
     double start, last_draw, fraction;
     const char *stage;
     int drawn;        /* a bar is on screen (to be erased before messages) */
@@ -131,6 +132,8 @@ typedef struct cli_progress {
 
 void cli_progress_init(cli_progress *p, int total, int tty, int summaries);
 void cli_progress_frame_begin(cli_progress *p, long frame, int show_number);
+/* Marks the start of a frame's read (0), effects (1) or write (2). */
+void cli_progress_phase(cli_progress *p, int phase, const char *stage);
 /* fx_progress_fn: redraws the bar (throttled); returns non-zero after Ctrl-C. */
 int cli_progress_callback(void *user, const char *stage, double fraction);
 void cli_progress_frame_end(cli_progress *p, double seconds, const char *out_path);

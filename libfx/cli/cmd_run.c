@@ -210,6 +210,9 @@ static int build_items(const run_opts *o, run_item **out_items, int *out_count, 
                                  kout ? o->out : o->png, o->in);
         } else if (o->has_range) {
             rc = cli_usage_error("run", "--frames needs a sequence input such as shot.####.exr");
+        } else if (!cli_file_exists(o->in)) {
+            cli_error("cannot open '%s': %s", o->in, strerror(errno));
+            rc = CLI_EXIT_INPUT;
         } else {
             run_item *it = calloc(1, sizeof *it);
             if (it) {
@@ -347,6 +350,8 @@ static int run_frame(run_job *job, const run_item *it)
     ro.stack = o->keep_passes ? NULL : job->stack;
     r = fx_frame_read_exr(ctx, it->in, &ro, &in);
     cli_flush_warnings(ctx);
+    if (r == FX_ERR_CANCELLED)
+        goto interrupted;
     if (r != FX_OK) {
         rc = cli_fail(ctx, r, CLI_PHASE_INPUT, it->in);
         goto done;
@@ -361,9 +366,11 @@ static int run_frame(run_job *job, const run_item *it)
     if (cli_interrupted())
         goto interrupted;
 
-    job->progress.stage = "effects";
+    cli_progress_phase(&job->progress, 1, "effects");
     r = fx_stack_run(job->stack, in, &out);
     cli_flush_warnings(ctx);
+    if (r == FX_ERR_CANCELLED)
+        goto interrupted;
     if (r != FX_OK) {
         rc = cli_fail(ctx, r, CLI_PHASE_PROCESS, it->in);
         goto done;
@@ -376,7 +383,7 @@ static int run_frame(run_job *job, const run_item *it)
     if (cli_interrupted())
         goto interrupted;
 
-    job->progress.stage = "writing";
+    cli_progress_phase(&job->progress, 2, "write");
     fx_write_options wo;
     memset(&wo, 0, sizeof wo);
     wo.size = sizeof wo;
@@ -385,6 +392,8 @@ static int run_frame(run_job *job, const run_item *it)
     wo.input_path = it->in;
     r = fx_frame_write_exr(out, it->out, &wo);
     cli_flush_warnings(ctx);
+    if (r == FX_ERR_CANCELLED)
+        goto interrupted;
     if (r != FX_OK) {
         rc = cli_fail(ctx, r, CLI_PHASE_OUTPUT, it->out);
         goto done;
@@ -392,6 +401,11 @@ static int run_frame(run_job *job, const run_item *it)
     if (it->png) {
         r = fx_frame_write_png(out, it->png, NULL, 0.0f);
         cli_flush_warnings(ctx);
+        if (r == FX_ERR_CANCELLED) { /* the EXR is complete; the PNG is not written */
+            cli_error("interrupted: '%s' written, preview '%s' not", it->out, it->png);
+            rc = CLI_EXIT_INTERRUPTED;
+            goto done;
+        }
         if (r != FX_OK) {
             rc = cli_fail(ctx, r, CLI_PHASE_OUTPUT, it->png);
             goto done;
@@ -465,11 +479,12 @@ int cli_cmd_run(int argc, char **argv)
     job.o = &o;
     if ((rc = build_items(&o, &items, &count, &job.sequence)) != 0)
         return rc;
+    /* input errors (3) before output errors (4), both before any pixel is read */
+    if ((rc = setup(&job)) != 0)
+        goto done;
     if ((rc = check_outputs(&o, items, count)) != 0)
         goto done;
     cli_install_sigint();
-    if ((rc = setup(&job)) != 0)
-        goto done;
 
     int tty = !o.quiet && isatty(STDERR_FILENO);
     int summaries = !o.quiet && !tty && job.sequence;

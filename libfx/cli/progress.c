@@ -56,7 +56,7 @@ static void draw(cli_progress *p)
     char number[32] = "";
     if (p->show_number)
         snprintf(number, sizeof number, " (#%ld)", p->frame);
-    fprintf(stderr, "\r\033[Kframe %d/%d%s [%s] %3d%%  ETA %s  %.24s", index, p->total, number, bar,
+    fprintf(stderr, "\r\033[Kframe %d/%d%s [%s] %3d%%  ETA %s  %.48s", index, p->total, number, bar,
             (int)(done * 100.0), eta, p->stage ? p->stage : "");
     fflush(stderr);
     p->drawn = 1;
@@ -69,17 +69,30 @@ void cli_progress_frame_begin(cli_progress *p, long frame, int show_number)
     p->frame = frame;
     p->show_number = show_number;
     p->fraction = 0;
-    p->stage = "reading";
+    p->phase = 0;
+    p->stage = "read";
     if (p->tty)
         draw(p);
 }
 
+void cli_progress_phase(cli_progress *p, int phase, const char *stage)
+{
+    p->phase = phase;
+    p->stage = stage;
+    cli_progress_callback(p, stage, 0.0);
+}
+
 int cli_progress_callback(void *user, const char *stage, double fraction)
 {
+    /* The library reports each call's own 0..1 (read, effects, write): map them onto
+     * one frame as 0-15 %, 15-90 %, 90-100 %. */
+    static const double base[3] = { 0.0, 0.15, 0.90 }, span[3] = { 0.15, 0.75, 0.10 };
     cli_progress *p = user;
     if (p && p->tty) {
+        int ph = p->phase < 0 ? 0 : p->phase > 2 ? 2 : p->phase;
+        fraction = fraction < 0 ? 0 : fraction > 1 ? 1 : fraction;
         p->stage = stage;
-        p->fraction = fraction < 0 ? 0 : fraction > 1 ? 1 : fraction;
+        p->fraction = base[ph] + span[ph] * fraction;
         if (cli_now() - p->last_draw > 0.1)
             draw(p);
     }

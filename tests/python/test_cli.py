@@ -134,8 +134,8 @@ def changing_params(run, effect):
     `describe`, so a renamed parameter fails here with a clear message)."""
     wanted = {
         "gaussian_blur": {"sigma": 3.0},
-        "pixelate": {"size": 8},
-        "color_matrix": {"saturation": 0.0},
+        "pixelate": {"mode": "cells", "cell_size": 8},
+        "color_matrix": {"operator": "sepia"},
     }[effect]
     names = param_names(describe(run, effect))
     for k in wanted:
@@ -187,7 +187,7 @@ def test_output_has_only_combined_unless_keep_passes(run, tmp_path):
 def test_mask_limits_the_effect(run, tmp_path):
     src = make_frame(tmp_path / "in.exr")
     recipe = write_recipe(tmp_path / "r.json", [
-        {"effect": "pixelate", "params": {"size": 4}, "mask": {"object_index": 2}}])
+        {"effect": "pixelate", "params": {"mode": "cells", "cell_size": 4}, "mask": {"object_index": 2}}])
     out = tmp_path / "out.exr"
     r = run("run", "--stack", recipe, src, "-o", out)
     assert r.returncode == EXIT_OK, r.stderr
@@ -202,8 +202,8 @@ def test_thread_count_does_not_change_a_bit(run, tmp_path):
     src = make_frame(tmp_path / "in.exr", width=97, height=61)
     recipe = write_recipe(tmp_path / "r.json", [
         {"effect": "gaussian_blur", "params": {"sigma": 2.5}},
-        {"effect": "pixelate", "params": {"size": 5}, "mask": {"object_index": 1}},
-        {"effect": "color_matrix", "params": {"saturation": 0.5}},
+        {"effect": "pixelate", "params": {"mode": "cells", "cell_size": 5}, "mask": {"object_index": 1}},
+        {"effect": "color_matrix", "params": {"operator": "sepia", "mix": 0.5}},
     ])
     outs = []
     for n in (1, 2, 3):

@@ -2,6 +2,10 @@
 file, parameter or pass, and no output (partial or temporary) left behind."""
 import json
 import os
+import pathlib
+import shutil
+import subprocess
+import tempfile
 
 import pytest
 
@@ -76,6 +80,9 @@ def test_missing_input_file(run, tmp_path, recipe):
     assert r.returncode == EXIT_INPUT
     assert str(missing) in one_error_line(r)
     assert listing(tmp_path) == ["recipe.json"]
+    # input errors come before output errors
+    r = run("run", "--stack", recipe, missing, "-o", tmp_path / "no" / "dir" / "o.exr")
+    assert r.returncode == EXIT_INPUT and str(missing) in one_error_line(r)
 
 
 def test_empty_input_file(run, tmp_path, recipe):
@@ -124,9 +131,35 @@ def test_damaged_corpus_files(run, corpus, tmp_path, recipe, name):
     assert name in one_error_line(r)
     assert listing(tmp_path) == ["recipe.json"]  # no output, no temporary file
     assert src.read_bytes() == before
+    # `info` reads only the header: some damaged files have a sound one
     r = run("info", src)
-    assert r.returncode == EXIT_INPUT, (r.returncode, r.stderr)
-    assert name in one_error_line(r)
+    if r.returncode == EXIT_OK:
+        json.loads(r.stdout)
+    else:
+        assert r.returncode == EXIT_INPUT, (r.returncode, r.stderr)
+        assert name in one_error_line(r)
+
+
+# Damaged files whose error the reader maps to another class than "bad file" (a bug to
+# fix in io/, reported): OpenEXRCore says EXR_ERR_OUT_OF_MEMORY when a corrupt block
+# fails to decompress, which reads as exit 5 instead of 3.
+DAMAGED_KNOWN_MISMAPPED = {"openexr_2.2.0_heap_buffer_overflow_exr"}
+
+
+def test_every_damaged_corpus_file_is_rejected_cleanly(run, corpus, tmp_path, recipe):
+    folder = corpus / "openexr-images" / "Damaged"
+    names = sorted(p.name for p in folder.iterdir() if p.name != "README.rst")
+    assert len(names) > 50
+    out = tmp_path / "o.exr"
+    wrong = []
+    for name in names:
+        r = run("run", "--stack", recipe, folder / name, "-o", out)
+        assert r.returncode > 0, (name, r.returncode, r.stderr)  # no crash (signal), no success
+        assert name in one_error_line(r), name
+        assert listing(tmp_path) == ["recipe.json"], name
+        if r.returncode != EXIT_INPUT and name not in DAMAGED_KNOWN_MISMAPPED:
+            wrong.append((name, r.returncode, r.stderr.strip()))
+    assert not wrong, wrong
 
 
 def test_missing_recipe(run, tmp_path, frame):
@@ -270,22 +303,36 @@ def test_output_is_a_directory(run, tmp_path, recipe, frame):
     assert listing(tmp_path / "d.exr") == []
 
 
-@pytest.mark.skipif(os.geteuid() == 0, reason="running as root: permission bits do not "
-                                               "stop writes (the missing-directory test covers "
-                                               "exit code 4)")
-def test_unwritable_output_directory(run, tmp_path, recipe, frame):
-    ro = tmp_path / "ro"
-    ro.mkdir()
-    before = frame.read_bytes()
-    ro.chmod(0o555)
+def test_unwritable_output_directory(cli, tmp_path):
+    """A read-only output folder: exit 4, input unchanged, nothing left in the folder.
+    As root, permission bits do not stop writes, so the CLI runs as `nobody` (setpriv)."""
+    prefix = []
+    work = tmp_path
+    if os.geteuid() == 0:
+        setpriv = shutil.which("setpriv")
+        if not setpriv:
+            pytest.skip("running as root without setpriv: permission bits would not stop writes")
+        prefix = [setpriv, "--reuid=65534", "--regid=65534", "--clear-groups"]
+        work = pathlib.Path(tempfile.mkdtemp(prefix="libfx-ro-"))
+        work.chmod(0o777)
     try:
-        r = run("run", "--stack", recipe, frame, "-o", ro / "o.exr")
-        assert r.returncode == EXIT_OUTPUT
+        src = make_frame(work / "in.exr")
+        rec = write_recipe(work / "r.json", [{"effect": "pixelate"}])
+        ro = work / "ro"
+        ro.mkdir()
+        ro.chmod(0o555)
+        before = src.read_bytes()
+        r = subprocess.run(prefix + [cli, "run", "--stack", str(rec), str(src), "-o",
+                                     str(ro / "o.exr")], capture_output=True, text=True, timeout=60)
+        if r.returncode != EXIT_OUTPUT and "Permission denied" in r.stderr and prefix:
+            pytest.skip(f"`nobody` cannot run the CLI from here: {r.stderr.strip()}")
+        assert r.returncode == EXIT_OUTPUT, r.stderr
         assert "o.exr" in one_error_line(r)
         assert listing(ro) == []  # no output, no temporary file
+        assert src.read_bytes() == before
     finally:
-        ro.chmod(0o755)
-    assert frame.read_bytes() == before
+        if work != tmp_path:
+            shutil.rmtree(work, ignore_errors=True)
 
 
 def test_failed_run_leaves_no_files(run, tmp_path):

@@ -24,7 +24,7 @@ def shots(tmp_path):
 
 @pytest.fixture
 def recipe(tmp_path):
-    return write_recipe(tmp_path / "r.json", [{"effect": "pixelate", "params": {"size": 4}}])
+    return write_recipe(tmp_path / "r.json", [{"effect": "pixelate", "params": {"mode": "cells", "cell_size": 4}}])
 
 
 def test_sequence_expands_and_names_outputs(run, tmp_path, shots, recipe):
