@@ -1,0 +1,430 @@
+"""The only ctypes file of the add-on: finds libfx.so, binds the public C API
+(libfx/include/libfx/fx.h) and wraps it in a few small Python classes.
+
+Nothing here imports bpy, so the module can be used by plain Python tools and
+tests.  Every function used is declared with ``argtypes``/``restype`` at load
+time; a missing or mismatched library never raises at import: ``load()``
+returns None and ``load_error()`` says why, so the add-on can still register
+and show the message in its panel.
+"""
+
+import ctypes
+import json
+import os
+import threading
+
+#: The ABI this module was written for (FX_ABI_VERSION in fx.h).
+ABI_VERSION = 1
+
+_HERE = os.path.dirname(os.path.abspath(__file__))
+
+c_char_p = ctypes.c_char_p
+c_int = ctypes.c_int
+c_void_p = ctypes.c_void_p
+c_double = ctypes.c_double
+c_float = ctypes.c_float
+
+
+class LibfxError(RuntimeError):
+    """A failed libfx call; ``code`` is the fx_result name ("FX_ERR_BAD_PARAM")."""
+
+    def __init__(self, message, code="FX_ERR_INTERNAL"):
+        super().__init__(message)
+        self.code = code
+
+
+class fx_camera(ctypes.Structure):
+    _fields_ = [("size", ctypes.c_size_t),
+                ("world_to_camera", c_float * 16),
+                ("projection", c_float * 16),
+                ("clip_start", c_float),
+                ("clip_end", c_float),
+                ("orthographic", c_int)]
+
+
+class fx_read_options(ctypes.Structure):
+    _fields_ = [("size", ctypes.c_size_t),
+                ("layer", c_char_p),
+                ("view", c_char_p),
+                ("stack", c_void_p)]
+
+
+class fx_write_options(ctypes.Structure):
+    _fields_ = [("size", ctypes.c_size_t),
+                ("half_color", c_int),
+                ("only_combined", c_int),
+                ("input_path", c_char_p)]
+
+
+P = ctypes.POINTER
+_PP = P(c_void_p)          # fx_xxx **out
+_PSTR = P(c_void_p)        # char **out_json (freed with fx_free)
+
+# name: (restype, argtypes).  fx_result is an int.
+_SIGNATURES = {
+    "fx_abi_version": (c_int, []),
+    "fx_version_string": (c_char_p, []),
+    "fx_result_name": (c_char_p, [c_int]),
+    "fx_free": (None, [c_void_p]),
+    "fx_context_new": (c_int, [_PP, c_int]),
+    "fx_context_free": (None, [c_void_p]),
+    "fx_context_threads": (c_int, [c_void_p]),
+    "fx_context_error": (c_char_p, [c_void_p]),
+    "fx_context_warning_count": (c_int, [c_void_p]),
+    "fx_context_warning": (c_char_p, [c_void_p, c_int]),
+    "fx_context_clear_warnings": (None, [c_void_p]),
+    "fx_effect_count": (c_int, []),
+    "fx_effect_name": (c_char_p, [c_int]),
+    "fx_effect_describe_json": (c_int, [c_void_p, c_char_p, _PSTR]),
+    "fx_quality_from_name": (c_int, [c_char_p]),
+    "fx_quality_name": (c_char_p, [c_int]),
+    "fx_camera_from_json": (c_int, [c_void_p, c_char_p, P(fx_camera)]),
+    "fx_frame_free": (None, [c_void_p]),
+    "fx_frame_width": (c_int, [c_void_p]),
+    "fx_frame_height": (c_int, [c_void_p]),
+    "fx_frame_pass_count": (c_int, [c_void_p]),
+    "fx_frame_pass_name": (c_char_p, [c_void_p, c_int]),
+    "fx_frame_pass_channels": (c_int, [c_void_p, c_int]),
+    "fx_frame_pass": (c_int, [c_void_p, c_char_p, P(P(c_float)), P(c_int)]),
+    "fx_frame_set_camera": (c_int, [c_void_p, P(fx_camera)]),
+    "fx_frame_camera": (c_int, [c_void_p, P(fx_camera)]),
+    "fx_frame_set_time": (None, [c_void_p, c_double, c_double]),
+    "fx_frame_read_exr": (c_int, [c_void_p, c_char_p, P(fx_read_options), _PP]),
+    "fx_frame_write_exr": (c_int, [c_void_p, c_char_p, P(fx_write_options)]),
+    "fx_frame_copy_passes": (c_int, [c_void_p, c_void_p]),
+    "fx_stack_new": (c_int, [c_void_p, _PP]),
+    "fx_stack_free": (None, [c_void_p]),
+    "fx_stack_load_json": (c_int, [c_void_p, c_char_p]),
+    "fx_stack_to_json": (c_int, [c_void_p, _PSTR]),
+    "fx_stack_count": (c_int, [c_void_p]),
+    "fx_stack_required_passes": (c_int, [c_void_p, _PSTR]),
+    "fx_stack_run": (c_int, [c_void_p, c_void_p, _PP]),
+    "fx_stack_timings_json": (c_int, [c_void_p, _PSTR]),
+}
+
+_lock = threading.Lock()
+_lib = None
+_lib_path = None
+_load_error = None
+_tried = False
+
+
+def candidate_paths():
+    """Where the library is looked for, in order."""
+    out = []
+    env = os.environ.get("LIBFX_LIBRARY")
+    if env:
+        return [env]  # an explicit choice is never second-guessed
+    out.append(os.path.join(_HERE, "lib", "libfx.so.1"))       # installed zip
+    out.append(os.path.join(_HERE, "lib", "libfx.so"))
+    root = os.path.dirname(os.path.dirname(_HERE))              # source tree
+    for build in ("build", "build-addon"):
+        out.append(os.path.join(root, build, "libfx", "libfx.so.1"))
+        out.append(os.path.join(root, build, "libfx", "libfx.so"))
+    return out
+
+
+def _declare(lib):
+    missing = []
+    for name, (restype, argtypes) in _SIGNATURES.items():
+        fn = getattr(lib, name, None)
+        if fn is None:
+            missing.append(name)
+            continue
+        fn.restype = restype
+        fn.argtypes = argtypes
+    return missing
+
+
+def load():
+    """The bound library, or None (then see load_error())."""
+    global _lib, _lib_path, _load_error, _tried
+    with _lock:
+        if _tried:
+            return _lib
+        _tried = True
+        tried = []
+        for path in candidate_paths():
+            if not os.path.exists(path):
+                tried.append(path)
+                continue
+            try:
+                lib = ctypes.CDLL(path)
+            except OSError as e:
+                _load_error = "libfx library at %s cannot be loaded: %s" % (path, e)
+                return None
+            missing = _declare(lib)
+            if "fx_abi_version" in missing:
+                _load_error = "%s is not libfx (no fx_abi_version)" % path
+                return None
+            abi = lib.fx_abi_version()
+            if abi != ABI_VERSION:
+                _load_error = ("libfx at %s has ABI %d; this add-on was written for ABI %d: "
+                               "install the matching add-on zip" % (path, abi, ABI_VERSION))
+                return None
+            if missing:
+                _load_error = "libfx at %s lacks functions: %s" % (path, ", ".join(missing))
+                return None
+            _lib, _lib_path = lib, path
+            return lib
+        _load_error = ("libfx library not found (set LIBFX_LIBRARY or install the add-on zip "
+                       "that contains lib/libfx.so.1); looked in: " + ", ".join(tried))
+        return None
+
+
+def load_error():
+    return _load_error
+
+
+def library_path():
+    return _lib_path
+
+
+def retry_if_failed():
+    """A later registration looks again (the library may have been installed since)."""
+    global _tried, _load_error
+    with _lock:
+        if _lib is None:
+            _tried = False
+            _load_error = None
+
+
+def _reset_for_tests():
+    global _lib, _lib_path, _load_error, _tried
+    with _lock:
+        _lib = _lib_path = _load_error = None
+        _tried = False
+
+
+def lib():
+    L = load()
+    if L is None:
+        raise LibfxError(_load_error or "libfx is not loaded", "FX_ERR_INTERNAL")
+    return L
+
+
+def _s(b):
+    return b.decode("utf-8", "replace") if b is not None else None
+
+
+def _take_string(ptr):
+    """A char* the library allocated: copy it, then fx_free it."""
+    if not ptr:
+        return None
+    try:
+        return ctypes.string_at(ptr).decode("utf-8", "replace")
+    finally:
+        lib().fx_free(ptr)
+
+
+def version():
+    return _s(lib().fx_version_string())
+
+
+def result_name(code):
+    return _s(lib().fx_result_name(code)) or str(code)
+
+
+def effect_names():
+    L = lib()
+    return [_s(L.fx_effect_name(i)) for i in range(L.fx_effect_count())]
+
+
+def quality_names():
+    L = lib()
+    out = []
+    for i in range(16):
+        n = L.fx_quality_name(i)
+        if not n:
+            break
+        out.append(_s(n))
+    return out
+
+
+class Context:
+    """fx_context: threads, per-thread errors, warnings."""
+
+    def __init__(self, threads=0):
+        L = lib()
+        self._L = L
+        self._ptr = c_void_p()
+        r = L.fx_context_new(ctypes.byref(self._ptr), int(threads))
+        if r != 0:
+            raise LibfxError("fx_context_new failed: %s" % result_name(r), result_name(r))
+
+    @property
+    def ptr(self):
+        return self._ptr
+
+    def error(self):
+        return _s(self._L.fx_context_error(self._ptr)) or ""
+
+    def check(self, r, what):
+        if r != 0:
+            msg = self.error() or what
+            raise LibfxError(msg, result_name(r))
+
+    def warnings(self, clear=True):
+        n = self._L.fx_context_warning_count(self._ptr)
+        out = [_s(self._L.fx_context_warning(self._ptr, i)) for i in range(n)]
+        if clear:
+            self._L.fx_context_clear_warnings(self._ptr)
+        return out
+
+    def describe(self, effect):
+        out = c_void_p()
+        self.check(self._L.fx_effect_describe_json(self._ptr, effect.encode(), ctypes.byref(out)),
+                   "describe %s" % effect)
+        return json.loads(_take_string(out.value))
+
+    def close(self):
+        if getattr(self, "_ptr", None):
+            self._L.fx_context_free(self._ptr)
+            self._ptr = None
+
+    __del__ = close
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def camera_struct(world_to_camera, projection, clip_start, clip_end, orthographic=False):
+    """fx_camera from row lists (4x4 nested or 16 flat)."""
+    cam = fx_camera()
+    cam.size = ctypes.sizeof(fx_camera)
+
+    def flat(m):
+        vals = [float(v) for row in m for v in row] if hasattr(m[0], "__len__") else [float(v) for v in m]
+        if len(vals) != 16:
+            raise LibfxError("camera matrix must have 16 values, got %d" % len(vals), "FX_ERR_INVALID_ARGUMENT")
+        return vals
+
+    cam.world_to_camera[:] = flat(world_to_camera)
+    cam.projection[:] = flat(projection)
+    cam.clip_start = float(clip_start)
+    cam.clip_end = float(clip_end)
+    cam.orthographic = 1 if orthographic else 0
+    return cam
+
+
+class Stack:
+    """fx_stack loaded from recipe JSON."""
+
+    def __init__(self, ctx, recipe=None):
+        self._ctx = ctx
+        self._L = ctx._L
+        self._ptr = c_void_p()
+        ctx.check(self._L.fx_stack_new(ctx.ptr, ctypes.byref(self._ptr)), "fx_stack_new")
+        if recipe is not None:
+            self.load(recipe)
+
+    @property
+    def ptr(self):
+        return self._ptr
+
+    def load(self, recipe):
+        text = recipe if isinstance(recipe, str) else json.dumps(recipe)
+        self._ctx.check(self._L.fx_stack_load_json(self._ptr, text.encode("utf-8")), "load recipe")
+
+    def to_json(self):
+        out = c_void_p()
+        self._ctx.check(self._L.fx_stack_to_json(self._ptr, ctypes.byref(out)), "fx_stack_to_json")
+        return json.loads(_take_string(out.value))
+
+    def __len__(self):
+        return self._L.fx_stack_count(self._ptr)
+
+    def required(self):
+        """{"passes": [...], "camera": bool, ...} as the library says."""
+        out = c_void_p()
+        self._ctx.check(self._L.fx_stack_required_passes(self._ptr, ctypes.byref(out)),
+                        "fx_stack_required_passes")
+        return json.loads(_take_string(out.value))
+
+    def run(self, frame):
+        out = c_void_p()
+        self._ctx.check(self._L.fx_stack_run(self._ptr, frame.ptr, ctypes.byref(out)), "fx_stack_run")
+        return Frame(self._ctx, out)
+
+    def timings(self):
+        out = c_void_p()
+        self._ctx.check(self._L.fx_stack_timings_json(self._ptr, ctypes.byref(out)), "timings")
+        return json.loads(_take_string(out.value))
+
+    def close(self):
+        if getattr(self, "_ptr", None):
+            self._L.fx_stack_free(self._ptr)
+            self._ptr = None
+
+    __del__ = close
+
+
+class Frame:
+    """fx_frame: named float passes + camera + time."""
+
+    def __init__(self, ctx, ptr):
+        self._ctx = ctx
+        self._L = ctx._L
+        self._ptr = ptr
+
+    @property
+    def ptr(self):
+        return self._ptr
+
+    @classmethod
+    def read(cls, ctx, path, stack=None, layer=None):
+        """Reads an EXR, decoding only what ``stack`` needs (all passes without one)."""
+        opts = fx_read_options()
+        opts.size = ctypes.sizeof(fx_read_options)
+        opts.layer = layer.encode() if layer else None
+        opts.view = None
+        opts.stack = stack.ptr if stack is not None else None
+        out = c_void_p()
+        ctx.check(ctx._L.fx_frame_read_exr(ctx.ptr, os.fsencode(path), ctypes.byref(opts),
+                                           ctypes.byref(out)), "read %s" % path)
+        return cls(ctx, out)
+
+    @property
+    def width(self):
+        return self._L.fx_frame_width(self._ptr)
+
+    @property
+    def height(self):
+        return self._L.fx_frame_height(self._ptr)
+
+    def pass_names(self):
+        return [_s(self._L.fx_frame_pass_name(self._ptr, i))
+                for i in range(self._L.fx_frame_pass_count(self._ptr))]
+
+    def set_camera(self, cam):
+        self._ctx.check(self._L.fx_frame_set_camera(self._ptr, ctypes.byref(cam)), "set camera")
+
+    def camera(self):
+        cam = fx_camera()
+        cam.size = ctypes.sizeof(fx_camera)
+        return cam if self._L.fx_frame_camera(self._ptr, ctypes.byref(cam)) else None
+
+    def set_time(self, frame, fps):
+        self._L.fx_frame_set_time(self._ptr, float(frame), float(fps))
+
+    def copy_passes_from(self, other):
+        self._ctx.check(self._L.fx_frame_copy_passes(self._ptr, other.ptr), "copy passes")
+
+    def write_exr(self, path, half_color=False, only_combined=False, input_path=None):
+        opts = fx_write_options()
+        opts.size = ctypes.sizeof(fx_write_options)
+        opts.half_color = 1 if half_color else 0
+        opts.only_combined = 1 if only_combined else 0
+        opts.input_path = os.fsencode(input_path) if input_path else None
+        self._ctx.check(self._L.fx_frame_write_exr(self._ptr, os.fsencode(path), ctypes.byref(opts)),
+                        "write %s" % path)
+
+    def close(self):
+        if getattr(self, "_ptr", None):
+            self._L.fx_frame_free(self._ptr)
+            self._ptr = None
+
+    __del__ = close

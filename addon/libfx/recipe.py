@@ -1,0 +1,247 @@
+"""The scene's effect stack <-> the library's recipe JSON.
+
+One code path for the UI, F12, batch runs and the CLI: whatever runs, runs the
+JSON that ``to_recipe`` makes.  Only parameters the user set are written (the
+rest are left to the effect's defaults and quality presets); ``from_recipe``
+sets exactly the parameters the recipe names.
+"""
+
+import json
+import struct
+
+import bpy
+
+from . import native, props
+
+RECIPE_VERSION = 1
+TEXT_NAME = "libfx_recipe.json"
+
+
+class RecipeError(ValueError):
+    pass
+
+
+def _f32(v):
+    """The shortest decimal that is the same float32 (clean JSON from float32 RNA values)."""
+    v = float(v)
+    packed = struct.pack("<f", v)
+    for digits in range(6, 10):
+        s = float("%.*g" % (digits, v))
+        if struct.pack("<f", s) == packed:
+            return s
+    return v
+
+
+def _indices(text, what):
+    out = []
+    for tok in text.replace(";", ",").split(","):
+        tok = tok.strip()
+        if not tok:
+            continue
+        try:
+            out.append(int(tok))
+        except ValueError:
+            raise RecipeError("%s: '%s' is not an integer pass index" % (what, tok))
+    return out
+
+
+def _one_or_list(values):
+    return values[0] if len(values) == 1 else list(values)
+
+
+def mask_to_json(item):
+    kinds = item.mask_kinds
+    m = {}
+    where = "effect '%s' mask" % item.effect
+    if "MATERIAL" in kinds:
+        names = [n.name for n in item.mask_materials if n.name]
+        if names:
+            m["material"] = _one_or_list(names)
+    if "OBJECT" in kinds:
+        names = [n.name for n in item.mask_objects if n.name]
+        if names:
+            m["object"] = _one_or_list(names)
+    if "MATERIAL_INDEX" in kinds:
+        idx = _indices(item.mask_material_indices, where + " material indices")
+        if idx:
+            m["material_index"] = _one_or_list(idx)
+    if "OBJECT_INDEX" in kinds:
+        idx = _indices(item.mask_object_indices, where + " object indices")
+        if idx:
+            m["object_index"] = _one_or_list(idx)
+    if "RECT" in kinds:
+        m["rect"] = list(item.mask_rect)
+    if m and item.mask_invert:
+        m["invert"] = True
+    return m
+
+
+def _value_to_json(p, v, resolve_paths):
+    if p.type == "float":
+        return _f32(v)
+    if p.type == "int":
+        return int(v)
+    if p.type == "bool":
+        return bool(v)
+    if p.type == "enum":
+        return str(v)
+    if p.type == "floats":
+        return [_f32(x) for x in v]
+    s = str(v)
+    if resolve_paths and p.hint == "path" and s:
+        s = bpy.path.abspath(s)
+    return s
+
+
+def item_to_json(item, resolve_paths=True):
+    cat = props.catalog()
+    eff = cat.effects.get(item.effect) if cat else None
+    if eff is None:
+        if item.raw_json:
+            entry = json.loads(item.raw_json)
+            entry["enabled"] = bool(item.enabled)
+            return entry
+        return {"effect": item.effect, "enabled": bool(item.enabled)}
+    entry = {"effect": item.effect, "enabled": bool(item.enabled)}
+    if item.label:
+        entry["label"] = item.label
+    if item.quality != "STACK":
+        entry["quality"] = item.quality
+    group = props.effect_group(item)
+    params = {}
+    for p in eff.params:
+        if group is not None and group.is_property_set(p.prop):
+            params[p.name] = _value_to_json(p, getattr(group, p.prop), resolve_paths)
+    if params:
+        entry["params"] = params
+    mask = mask_to_json(item)
+    if mask:
+        entry["mask"] = mask
+    return entry
+
+
+def to_recipe(scene, resolve_paths=True):
+    """The scene's stack as a recipe dict (paths made absolute unless exporting)."""
+    s = scene.libfx
+    return {"version": RECIPE_VERSION, "quality": s.quality,
+            "effects": [item_to_json(item, resolve_paths) for item in s.stack]}
+
+
+def to_json_text(scene, resolve_paths=True):
+    return json.dumps(to_recipe(scene, resolve_paths), indent=2) + "\n"
+
+
+def _set_param(group, p, value, where):
+    try:
+        if p.type == "float":
+            v = float(value)
+        elif p.type == "int":
+            v = int(value)
+        elif p.type == "bool":
+            v = bool(value)
+        elif p.type == "enum":
+            v = p.items[int(value)] if isinstance(value, (int, float)) else str(value)
+        elif p.type == "floats":
+            v = [float(x) for x in value]
+        else:
+            v = str(value)
+        setattr(group, p.prop, v)
+    except (TypeError, ValueError, IndexError) as e:
+        raise RecipeError("%s: parameter '%s' = %r: %s" % (where, p.name, value, e))
+
+
+def _fill_names(coll, value):
+    coll.clear()
+    for n in value if isinstance(value, list) else [value]:
+        coll.add().name = str(n)
+
+
+def _fill_mask(item, mask):
+    kinds = set()
+    if "material" in mask:
+        kinds.add("MATERIAL")
+        _fill_names(item.mask_materials, mask["material"])
+    if "object" in mask:
+        kinds.add("OBJECT")
+        _fill_names(item.mask_objects, mask["object"])
+    for key, kind, attr in (("material_index", "MATERIAL_INDEX", "mask_material_indices"),
+                            ("object_index", "OBJECT_INDEX", "mask_object_indices")):
+        if key in mask:
+            kinds.add(kind)
+            v = mask[key]
+            setattr(item, attr, ", ".join(str(int(x)) for x in (v if isinstance(v, list) else [v])))
+    if "rect" in mask:
+        kinds.add("RECT")
+        item.mask_rect = [int(x) for x in mask["rect"]]
+    item.mask_invert = bool(mask.get("invert", False))
+    item.mask_kinds = kinds
+
+
+def fill_item(item, entry, n=0):
+    """Sets a stack item from one recipe entry (only the parameters it names)."""
+    cat = props.catalog()
+    name = entry.get("effect", "")
+    where = "effect %d (%s)" % (n, name)
+    with props.suspended():
+        item.effect = name
+        item.enabled = bool(entry.get("enabled", True))
+        item.label = str(entry.get("label", ""))
+        q = entry.get("quality")
+        item.quality = q if (q and cat and q in cat.qualities) else "STACK"
+        _fill_mask(item, entry.get("mask") or {})
+        eff = cat.effects.get(name) if cat else None
+        if eff is None:
+            item.raw_json = json.dumps(entry)
+            return
+        group = props.effect_group(item)
+        for pname, value in (entry.get("params") or {}).items():
+            p = eff.param(pname)
+            if p is None:
+                raise RecipeError("%s: unknown parameter '%s'" % (where, pname))
+            _set_param(group, p, value, where)
+
+
+def parse(text):
+    try:
+        recipe = json.loads(text)
+    except ValueError as e:
+        raise RecipeError("recipe is not JSON: %s" % e)
+    if not isinstance(recipe, dict) or not isinstance(recipe.get("effects", []), list):
+        raise RecipeError("recipe must be an object with an 'effects' list")
+    return recipe
+
+
+def validate(recipe):
+    """Lets the library check the recipe (messages name effect, parameter, range)."""
+    if native.load() is None:
+        return
+    with native.Context(1) as ctx:
+        native.Stack(ctx, recipe).close()
+
+
+def from_recipe(scene, recipe, check=True):
+    """Replaces the scene's stack with the recipe's effects."""
+    if isinstance(recipe, str):
+        recipe = parse(recipe)
+    if check:
+        validate(recipe)
+    cat = props.catalog()
+    s = scene.libfx
+    with props.suspended():
+        s.stack.clear()
+        if "quality" in recipe and cat and recipe["quality"] in cat.qualities:
+            s.quality = recipe["quality"]
+        for n, entry in enumerate(recipe.get("effects", [])):
+            fill_item(s.stack.add(), entry, n)
+        s.active_index = 0
+    from . import scene_setup
+    scene_setup.request_sync(scene)
+
+
+def load_text_block(scene, force=False):
+    """Imports the scene's Text datablock libfx_recipe.json if the stack is empty."""
+    text = bpy.data.texts.get(TEXT_NAME)
+    if text is None or (len(scene.libfx.stack) and not force):
+        return False
+    from_recipe(scene, text.as_string())
+    return True

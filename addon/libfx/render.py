@@ -1,0 +1,300 @@
+"""Render handlers: camera per frame, node setup, running the stack after a render.
+
+Order (GUIDE §3): ``-b -f/-a``: render_init, then per frame frame_change_post ->
+render_pre -> render_post -> render_write, render_complete; all on the main
+thread.  F12: no render_write and the handlers run on the render thread, so
+anything touching UI data (images, editors, reports) goes through
+bpy.app.timers.  A handler's exception does not change Blender's exit code:
+results are recorded in RESULTS and batch.py turns failures into an exit code.
+"""
+
+import json
+import os
+import sys
+import threading
+import time
+
+import bpy
+from bpy.app.handlers import persistent
+
+from . import native, recipe, scene_setup
+
+RESULT_IMAGE = "libfx Result"
+
+_lock = threading.Lock()
+CAMERAS = {}     # (scene name, frame) -> camera dict (rows)
+RESULTS = {}     # (scene name, frame) -> {"ok": bool, "error": str, "paths": {...}, "timings": [...]}
+_ui_queue = []   # callables to run on the main thread (F12)
+
+
+def log(msg, err=False):
+    stream = sys.stderr if err else sys.stdout
+    print("libfx: " + msg, file=stream)
+    stream.flush()
+
+
+# ---------------------------------------------------------------- camera
+
+def camera_dict(scene, depsgraph):
+    """The frame's camera as the camera sidecar JSON wants it (matrices as rows)."""
+    cam = scene.camera
+    if cam is None:
+        return None
+    ev = cam.evaluated_get(depsgraph) if depsgraph is not None else cam
+    r = scene.render
+    x = int(r.resolution_x * r.resolution_percentage / 100)
+    y = int(r.resolution_y * r.resolution_percentage / 100)
+    proj = ev.calc_matrix_camera(depsgraph, x=x, y=y, scale_x=r.pixel_aspect_x,
+                                 scale_y=r.pixel_aspect_y)
+    w2c = ev.matrix_world.inverted()
+    data = ev.data
+    return {
+        "world_to_camera": [list(row) for row in w2c],
+        "projection": [list(row) for row in proj],
+        "clip_start": float(getattr(data, "clip_start", 0.1)),
+        "clip_end": float(getattr(data, "clip_end", 1000.0)),
+        "orthographic": getattr(data, "type", "PERSP") == "ORTHO",
+    }
+
+
+@persistent
+def on_frame_change_post(scene, depsgraph=None):
+    if not scene_setup.has_stack(scene):
+        return
+    try:
+        cam = camera_dict(scene, depsgraph)
+    except Exception as e:  # a light as camera, no depsgraph...
+        log("frame %d: camera matrices unavailable: %s" % (scene.frame_current, e), err=True)
+        return
+    if cam is not None:
+        with _lock:
+            CAMERAS[(scene.name, scene.frame_current)] = cam
+
+
+# ---------------------------------------------------------------- render
+
+@persistent
+def on_render_init(scene, *args):
+    if not scene_setup.has_stack(scene):
+        scene_setup.remove_nodes(scene)
+        return
+    if native.load() is None:
+        _record(scene, scene.frame_current, error=native.load_error())
+        return
+    req = scene_setup.sync(scene)
+    st = scene_setup.status(scene)
+    if req is None:
+        _record(scene, scene.frame_current, error="stack cannot run: %s" % st.get("error"))
+        return
+    missing = scene_setup.ensure_nodes(scene, req.get("passes", []))
+    for w in st.get("warnings", []):
+        log("warning: " + w, err=True)
+    if missing:
+        log("warning: %s does not render pass(es) %s that the stack needs" %
+            (scene.render.engine, ", ".join(missing)), err=True)
+    if scene.camera is not None and (scene.name, scene.frame_current) not in CAMERAS:
+        # F12 of the current frame: the evaluated camera of the current frame.
+        try:
+            dg = bpy.context.evaluated_depsgraph_get()
+            with _lock:
+                CAMERAS[(scene.name, scene.frame_current)] = camera_dict(scene, dg)
+        except Exception:
+            pass
+
+
+def _record(scene, frame, error=None, **kw):
+    rec = {"ok": error is None, "error": error, "frame": frame}
+    rec.update(kw)
+    with _lock:
+        RESULTS[(scene.name, frame)] = rec
+    if error:
+        log("frame %d: %s" % (frame, error), err=True)
+        if not bpy.app.background:
+            _to_ui(lambda: _ui_report("ERROR", "libfx: frame %d: %s" % (frame, error)))
+    return rec
+
+
+def process_frame(scene, frame, recipe_dict=None, passes_file=None, camera=None, fps=None):
+    """Runs the scene's stack on the File Output EXR of a frame and writes the results.
+    Returns the result record; raises nothing."""
+    paths = scene_setup.result_paths(scene, frame)
+    passes_file = passes_file or scene_setup.passes_path(scene, frame)
+    recipe_dict = recipe_dict or recipe.to_recipe(scene)
+    if camera is None:
+        with _lock:
+            camera = CAMERAS.get((scene.name, frame))
+    fps = fps or scene.render.fps / (scene.render.fps_base or 1.0)
+    try:
+        if not os.path.exists(passes_file):
+            raise native.LibfxError("the passes file %s was not written (is the compositor on, "
+                                    "and the node '%s' unmuted?)" % (passes_file, scene_setup.FO_NODE))
+        t0 = time.perf_counter()
+        with native.Context(scene.libfx.threads) as ctx:
+            stack = native.Stack(ctx, recipe_dict)
+            fin = native.Frame.read(ctx, passes_file, stack)
+            if camera is not None:
+                fin.set_camera(native.camera_struct(camera["world_to_camera"], camera["projection"],
+                                                    camera["clip_start"], camera["clip_end"],
+                                                    camera.get("orthographic", False)))
+            fin.set_time(frame, fps)
+            fout = stack.run(fin)
+            fout.copy_passes_from(fin)
+            os.makedirs(os.path.dirname(paths["exr"]) or ".", exist_ok=True)
+            fout.write_exr(paths["exr"], input_path=passes_file)
+            timings = stack.timings()
+            warnings = ctx.warnings()
+            fout.close()
+            fin.close()
+            stack.close()
+        if camera is not None:
+            _write_json(paths["camera"], camera)
+        _write_json(paths["recipe"], recipe_dict)
+        total = (time.perf_counter() - t0) * 1000.0
+        log("frame %d: %s (%.1f ms in all) -> %s" % (
+            frame, ", ".join("%s %.1f ms" % (t.get("effect"), t.get("ms", 0.0))
+                             for t in timings if t.get("enabled", True)) or "no effect",
+            total, paths["exr"]))
+        for w in warnings:
+            log("frame %d: warning: %s" % (frame, w), err=True)
+        return _record(scene, frame, paths=paths, timings=timings, warnings=warnings,
+                       passes_file=passes_file)
+    except native.LibfxError as e:
+        return _record(scene, frame, error=str(e), paths=paths)
+    except Exception as e:  # never let a handler die silently
+        return _record(scene, frame, error="%s: %s" % (type(e).__name__, e), paths=paths)
+
+
+def _write_json(path, obj):
+    tmp = path + ".tmp"
+    with open(tmp, "w", encoding="utf-8") as f:
+        json.dump(obj, f, indent=2)
+        f.write("\n")
+    os.replace(tmp, path)
+
+
+def save_image(scene, exr_path, image_path):
+    """The result in the scene's output format, through Blender's colour management.
+    Main thread only."""
+    img = bpy.data.images.load(exr_path, check_existing=False)
+    try:
+        img.save_render(image_path, scene=scene)
+    finally:
+        bpy.data.images.remove(img)
+
+
+@persistent
+def on_render_post(scene, *args):
+    if not scene_setup.has_stack(scene):
+        return
+    frame = scene.frame_current
+    rec = process_frame(scene, frame)
+    if not rec["ok"]:
+        return
+    if scene_setup.writes_image(scene):
+        if bpy.app.background:
+            try:
+                save_image(scene, rec["paths"]["exr"], rec["paths"]["image"])
+            except Exception as e:
+                _record(scene, frame, error="cannot save %s: %s" % (rec["paths"]["image"], e))
+        else:
+            name, exr, image = scene.name, rec["paths"]["exr"], rec["paths"]["image"]
+            _to_ui(lambda: _ui_save_image(name, exr, image))
+    if not bpy.app.background and scene.libfx.show_result:
+        exr = rec["paths"]["exr"]
+        _to_ui(lambda: _ui_show_result(exr))
+
+
+@persistent
+def on_load_post(*args):
+    for scene in bpy.data.scenes:
+        if getattr(scene, "libfx", None) is None:
+            continue
+        try:
+            if recipe.load_text_block(scene):
+                log("imported the recipe of scene '%s' from the text '%s'" % (scene.name, recipe.TEXT_NAME))
+        except Exception as e:
+            scene_setup.STATUS.setdefault(scene.name, {})["error"] = "recipe text: %s" % e
+            log("scene '%s': recipe text %s: %s" % (scene.name, recipe.TEXT_NAME, e), err=True)
+
+
+# ---------------------------------------------------------------- UI side (main thread)
+
+def _to_ui(fn):
+    with _lock:
+        _ui_queue.append(fn)
+    try:
+        if not bpy.app.timers.is_registered(_drain_ui):
+            bpy.app.timers.register(_drain_ui, first_interval=0.05)
+    except Exception:
+        pass
+
+
+def _drain_ui():
+    with _lock:
+        todo = list(_ui_queue)
+        _ui_queue.clear()
+    for fn in todo:
+        try:
+            fn()
+        except Exception as e:
+            log("UI update failed: %s" % e, err=True)
+    return None
+
+
+def _ui_report(kind, message):
+    wm = bpy.context.window_manager
+    win = wm.windows[0] if wm and wm.windows else None
+    if win is None:
+        return
+    with bpy.context.temp_override(window=win):
+        bpy.ops.libfx.report("INVOKE_DEFAULT", kind=kind, message=message)
+
+
+def _ui_save_image(scene_name, exr, image):
+    scene = bpy.data.scenes.get(scene_name)
+    if scene is not None:
+        try:
+            save_image(scene, exr, image)
+        except Exception as e:
+            _ui_report("ERROR", "libfx: cannot save %s: %s" % (image, e))
+
+
+def _ui_show_result(exr_path):
+    img = bpy.data.images.get(RESULT_IMAGE)
+    if img is None:
+        img = bpy.data.images.load(exr_path, check_existing=False)
+        img.name = RESULT_IMAGE
+    else:
+        img.filepath = exr_path
+        img.reload()
+    wm = bpy.context.window_manager
+    for win in wm.windows:
+        for area in win.screen.areas:
+            if area.type == "IMAGE_EDITOR":
+                space = area.spaces.active
+                if space.image is None or space.image.type == "RENDER_RESULT" or space.image == img:
+                    space.image = img
+                    area.tag_redraw()
+                    return
+
+
+HANDLERS = (("frame_change_post", on_frame_change_post),
+            ("render_init", on_render_init),
+            ("render_post", on_render_post),
+            ("load_post", on_load_post))
+
+
+def register():
+    unregister()  # a reload must never leave two copies
+    for name, fn in HANDLERS:
+        getattr(bpy.app.handlers, name).append(fn)
+
+
+def unregister():
+    """Removes only our handlers, also those of an older copy of this module (reload)."""
+    for name, fn in HANDLERS:
+        lst = getattr(bpy.app.handlers, name)
+        for h in list(lst):
+            if h is fn or (getattr(h, "__module__", "") == fn.__module__ and
+                           getattr(h, "__name__", "") == fn.__name__):
+                lst.remove(h)

@@ -1,0 +1,298 @@
+"""What the scene must render for its stack, and the compositor nodes that write it.
+
+- ``sync(scene)`` asks the library which passes the stack needs
+  (fx_stack_required_passes) and turns on exactly those view-layer passes,
+  remembering what it turned on so it can turn it off again.
+- ``ensure_nodes(scene)`` (called from render_init: GUIDE §3) adds one labelled
+  Render Layers node and one File Output node "libfx passes" writing those
+  passes as 32-bit ZIP multilayer EXR beside the scene's output path.
+- ``restore(scene)`` undoes all of it (stack emptied, add-on disabled).
+"""
+
+import json
+import os
+import re
+
+import bpy
+
+from . import native, props
+
+RL_NODE = "libfx Render Layers"
+FO_NODE = "libfx passes"
+
+# Per scene name: {"error": str|None, "warnings": [...], "passes": [...], "camera": bool}
+STATUS = {}
+
+
+def status(scene):
+    return STATUS.get(scene.name, {})
+
+
+def _set_status(scene, **kw):
+    st = STATUS.setdefault(scene.name, {})
+    st.update(kw)
+
+
+# ---------------------------------------------------------------- output paths
+
+def output_prefix(scene):
+    """Absolute prefix of libfx's files, derived from the scene's output path:
+    '//render/bath_' -> '/abs/render/bath_', '/tmp/out' -> '/tmp/out_'."""
+    p = bpy.path.abspath(scene.render.filepath or "//")
+    p = re.sub(r"#+", "", p)
+    if not p:
+        p = bpy.app.tempdir
+    if p.endswith((os.sep, "_", ".", "-")):
+        return p
+    if os.path.isdir(p):
+        return p + os.sep
+    return p + "_"
+
+
+def passes_base(scene):
+    return output_prefix(scene) + "libfx_passes."
+
+
+def passes_path(scene, frame):
+    """The File Output node's EXR for a frame (Blender appends 4 digits + .exr)."""
+    return "%s%04d.exr" % (passes_base(scene), frame)
+
+
+def result_paths(scene, frame):
+    base = "%slibfx.%04d" % (output_prefix(scene), frame)
+    return {"exr": base + ".exr", "camera": base + ".camera.json",
+            "image": base + scene.render.file_extension,
+            "recipe": output_prefix(scene) + "libfx_recipe.json"}
+
+
+def writes_image(scene):
+    """Whether the scene's output format needs a separate image beside the EXR."""
+    return scene.render.image_settings.file_format not in ("OPEN_EXR", "OPEN_EXR_MULTILAYER")
+
+
+# ---------------------------------------------------------------- owned state
+
+def _owned(scene):
+    try:
+        d = json.loads(scene.libfx.owned or "{}")
+    except ValueError:
+        d = {}
+    d.setdefault("settings", {})
+    return d
+
+
+def _save_owned(scene, d):
+    text = json.dumps(d, sort_keys=True)
+    if scene.libfx.owned != text:
+        scene.libfx.owned = text
+
+
+def render_view_layer(scene):
+    for vl in scene.view_layers:
+        if vl.use:
+            return vl
+    return scene.view_layers[0]
+
+
+def _setting_holder(view_layer, setting):
+    for holder in (view_layer, getattr(view_layer, "cycles", None), getattr(view_layer, "eevee", None)):
+        if holder is not None and hasattr(holder, setting):
+            return holder
+    return None
+
+
+def has_stack(scene):
+    s = getattr(scene, "libfx", None)
+    return bool(s) and any(it.enabled for it in s.stack)
+
+
+# ---------------------------------------------------------------- sync
+
+def query(scene):
+    from . import recipe
+    ctx = native.Context(1)
+    stack = native.Stack(ctx, recipe.to_recipe(scene))
+    try:
+        return stack.required()
+    finally:
+        stack.close()
+        ctx.close()
+
+
+def request_sync(scene):
+    """From property updates and imports: keep the view layer passes in step."""
+    try:
+        sync(scene)
+    except Exception as e:  # never let a UI update raise
+        _set_status(scene, error=str(e))
+
+
+def sync(scene):
+    """Enables exactly the passes the stack needs; returns the library's answer or None."""
+    if native.load() is None:
+        _set_status(scene, error=native.load_error())
+        return None
+    if not has_stack(scene):
+        _restore_settings(scene, keep=set())
+        _set_status(scene, error=None, warnings=[], passes=[], camera=False)
+        return None
+    try:
+        req = query(scene)
+    except (native.LibfxError, ValueError) as e:
+        _set_status(scene, error=str(e))
+        return None
+    warnings = []
+    vl = render_view_layer(scene)
+    settings = req.get("blender_settings")
+    if settings is None:
+        warnings.append("the library does not name the Blender pass settings (blender_settings): "
+                        "enable the passes by hand: " + ", ".join(req.get("passes", [])))
+        settings = []
+    owned = _owned(scene)
+    mine = set(owned["settings"].get(vl.name, []))
+    keep = set()
+    for setting in settings:
+        if not setting:
+            continue  # Combined, Alpha: always there
+        holder = _setting_holder(vl, setting)
+        if holder is None:
+            warnings.append("this Blender has no view layer setting '%s'" % setting)
+            continue
+        keep.add(setting)
+        if not getattr(holder, setting):
+            setattr(holder, setting, True)
+            mine.add(setting)
+    owned["settings"][vl.name] = sorted(mine)
+    _save_owned(scene, owned)
+    _restore_settings(scene, keep={(vl.name, s) for s in keep})
+    warnings += engine_warnings(scene, req.get("passes", []))
+    _set_status(scene, error=None, warnings=warnings, passes=req.get("passes", []),
+                camera=bool(req.get("camera", False)))
+    return req
+
+
+def engine_warnings(scene, passes):
+    out = []
+    engine = scene.render.engine
+    if engine != "CYCLES":
+        idx = [p for p in passes if p in ("IndexOB", "IndexMA")]
+        if idx:
+            out.append("%s renders no %s pass: mask by object/material name instead "
+                       "(Cryptomatte works in every engine)" % (engine.replace("BLENDER_", "").title(),
+                                                                 "/".join(idx)))
+    if not scene.render.use_compositing:
+        out.append("Post Processing > Compositing is off: libfx cannot get the passes")
+    return out
+
+
+def _restore_settings(scene, keep):
+    """Turns off what the add-on turned on and is not in keep {(view_layer, setting)}."""
+    owned = _owned(scene)
+    changed = False
+    for vl_name, settings in list(owned["settings"].items()):
+        vl = scene.view_layers.get(vl_name)
+        left = []
+        for s in settings:
+            if (vl_name, s) in keep:
+                left.append(s)
+                continue
+            holder = _setting_holder(vl, s) if vl else None
+            if holder is not None and getattr(holder, s):
+                setattr(holder, s, False)
+            changed = True
+        if left:
+            owned["settings"][vl_name] = left
+        else:
+            del owned["settings"][vl_name]
+            changed = True
+    if changed:
+        _save_owned(scene, owned)
+
+
+# ---------------------------------------------------------------- nodes
+
+def _sockets_for(rl, pass_name):
+    """Render Layers outputs carrying a canonical pass: Combined is 'Image';
+    Cryptomatte types are their ranks (CryptoObject00, 01, ...)."""
+    if pass_name == "Combined":
+        names = ["Image"]
+    elif pass_name.startswith("Crypto") and not pass_name[-2:].isdigit():
+        names = [s.name for s in rl.outputs if re.fullmatch(re.escape(pass_name) + r"\d\d", s.name)]
+    else:
+        names = [pass_name]
+    out = []
+    for n in names:
+        sock = rl.outputs.get(n)
+        if sock is not None and sock.enabled:
+            slot = "Combined" if n == "Image" else n
+            out.append((slot, sock))
+    return out
+
+
+def ensure_nodes(scene, passes):
+    """Adds/updates the libfx Render Layers + File Output nodes. Returns (missing passes)."""
+    owned = _owned(scene)
+    if not scene.use_nodes:
+        scene.use_nodes = True
+        owned["use_nodes"] = True
+        _save_owned(scene, owned)
+    nt = scene.node_tree
+    vl = render_view_layer(scene)
+    rl = nt.nodes.get(RL_NODE)
+    if rl is None or rl.bl_idname != "CompositorNodeRLayers":
+        rl = nt.nodes.new("CompositorNodeRLayers")
+        rl.name = RL_NODE
+        rl.location = (-300, -500)
+    rl.label = "libfx"
+    rl.layer = vl.name
+    rl.mute = False
+    fo = nt.nodes.get(FO_NODE)
+    if fo is None or fo.bl_idname != "CompositorNodeOutputFile":
+        fo = nt.nodes.new("CompositorNodeOutputFile")
+        fo.name = FO_NODE
+        fo.location = (0, -500)
+    fo.label = "libfx passes (written by the libfx add-on)"
+    fo.mute = False
+    fmt = fo.format
+    fmt.file_format = "OPEN_EXR_MULTILAYER"
+    fmt.color_depth = "32"
+    fmt.exr_codec = "ZIP"
+    fo.base_path = passes_base(scene)
+    wanted = []
+    missing = []
+    for p in ["Combined"] + [p for p in passes if p != "Combined"]:
+        socks = _sockets_for(rl, p)
+        if not socks:
+            missing.append(p)
+        wanted.extend(socks)
+    current = [s.name for s in fo.layer_slots]
+    if current != [w[0] for w in wanted]:
+        fo.layer_slots.clear()
+        for slot, _ in wanted:
+            fo.layer_slots.new(slot)
+    for slot, sock in wanted:
+        inp = fo.inputs.get(slot)
+        if not inp.is_linked or inp.links[0].from_socket != sock:
+            nt.links.new(sock, inp)
+    return missing
+
+
+def remove_nodes(scene):
+    nt = scene.node_tree if scene.use_nodes or scene.node_tree else None
+    if nt is not None:
+        for name in (FO_NODE, RL_NODE):
+            n = nt.nodes.get(name)
+            if n is not None:
+                nt.nodes.remove(n)
+    owned = _owned(scene)
+    if owned.pop("use_nodes", False):
+        scene.use_nodes = False
+    _save_owned(scene, owned)
+
+
+def restore(scene):
+    """Undo everything the add-on changed in the scene."""
+    if getattr(scene, "libfx", None) is None:
+        return
+    _restore_settings(scene, keep=set())
+    remove_nodes(scene)
