@@ -128,6 +128,7 @@ typedef struct blur_plan {
     int passes, r;
     double alpha, norm;
     int resum; /* recompute the running sum from scratch every `resum` steps */
+    int ext;   /* rows of a lane buffer before and after the data (>= PAD) */
     /* recursive (Deriche 4th order: causal n[], anticausal m[], shared d[]) */
     double dn[4], dm[4], dd[4], gain_c, gain_a;
     int halo;
@@ -152,6 +153,7 @@ static fx_result plan_init(blur_plan *p, const fx_blur_spec *spec)
     if (sigma > FX_BLUR_MAX_SIGMA)
         sigma = FX_BLUR_MAX_SIGMA;
     p->alg = spec->algorithm;
+    p->ext = PAD;
     if (p->alg == FX_BLUR_RECURSIVE && sigma < FX_BLUR_RECURSIVE_MIN_SIGMA)
         p->alg = FX_BLUR_EXACT;
     if (p->alg == FX_BLUR_BOX) {
@@ -161,6 +163,7 @@ static fx_result plan_init(blur_plan *p, const fx_blur_spec *spec)
         p->norm = 1.0 / (2.0 * p->r + 1.0 + 2.0 * p->alpha);
         p->resum = 2 * p->r + 1 < 64 ? 64 : 2 * p->r + 1;
         p->halo = passes * (p->r + 1);
+        p->ext = p->halo > PAD ? p->halo : PAD;
         return FX_OK;
     }
     if (p->alg == FX_BLUR_RECURSIVE) {
@@ -215,7 +218,7 @@ int fx_blur_halo(const fx_blur_spec *spec)
 }
 
 /* ---- lane kernels ---------------------------------------------------------------------- */
-/* A lane buffer holds rows -PAD .. n+PAD-1 of L doubles; `buf` points at row 0. */
+/* A lane buffer holds rows -ext .. n+ext-1 of L doubles (plan.ext >= PAD); `buf` points at row 0. */
 
 FX_CLONES
 static void exact_lanes(const blur_plan *p, const double *restrict in, double *restrict out, int n,
@@ -342,7 +345,7 @@ static void deriche_lanes(const blur_plan *p, double *x, double *y, int n, int L
     }
 }
 
-/* Runs the plan on buffer a (rows 0..n-1 of L lanes, PAD rows each side); b is scratch of
+/* Runs the plan on buffer a (rows 0..n-1 of L lanes, plan.ext rows each side); b is scratch of
  * the same shape; s and xplus hold L doubles. Returns the buffer holding the result. */
 static double *filter_lanes(const blur_plan *p, double *a, double *b, int n, int L, double *s)
 {
@@ -354,14 +357,27 @@ static double *filter_lanes(const blur_plan *p, double *a, double *b, int n, int
         deriche_lanes(p, a, b, n, L, s);
         return b;
     case FX_BLUR_BOX:
-    default:
-        for (int k = 0; k < p->passes; k++) {
-            box_lanes(p, a, b, n, L, s);
-            double *t = a;
-            a = b;
-            b = t;
+    default: {
+        /* Each pass must see the replicate extension of its own input as the cascade on
+         * the extended original would: run the passes over the line padded with
+         * passes * (r + 1) copies of each edge value (clamping beyond that is exact, the
+         * padding's far end stays constant). Clamping each pass at the line's own ends
+         * instead errs by up to 10% of the signal near the border. */
+        const int P = p->halo;
+        const ptrdiff_t Ls = L;
+        for (int k = 1; k <= P; k++) {
+            memcpy(a - k * Ls, a, (size_t)L * sizeof(double));
+            memcpy(a + (n - 1 + k) * Ls, a + (n - 1) * Ls, (size_t)L * sizeof(double));
         }
-        return a;
+        double *ea = a - P * Ls, *eb = b - P * Ls;
+        for (int k = 0; k < p->passes; k++) {
+            box_lanes(p, ea, eb, n + 2 * P, L, s);
+            double *t = ea;
+            ea = eb;
+            eb = t;
+        }
+        return ea + P * Ls;
+    }
     }
 }
 
@@ -389,9 +405,9 @@ typedef struct blur_job {
     atomic_int failed;
 } blur_job;
 
-static double *lane_buffer(int n, int L)
+static double *lane_buffer(int n, int L, int ext)
 {
-    return fx_mem_alloc(((size_t)n + 2 * PAD) * (size_t)L * sizeof(double));
+    return fx_mem_alloc(((size_t)n + 2 * (size_t)ext) * (size_t)L * sizeof(double));
 }
 
 /* Vertical pass: strips of columns [c, c + L) (in floats) of rows sy0..sy1-1 -> tmp rows
@@ -404,7 +420,7 @@ static void vertical_range(void *user, int begin, int end)
     const int n = j->sy1 - j->sy0;
     const int c_first = j->sx0 * C, c_end = j->sx1 * C;
     const int Lmax = j->strip_lanes;
-    double *A = lane_buffer(n, Lmax), *Bf = lane_buffer(n, Lmax);
+    double *A = lane_buffer(n, Lmax, j->plan->ext), *Bf = lane_buffer(n, Lmax, j->plan->ext);
     double *s = fx_mem_alloc(4 * (size_t)Lmax * sizeof(double));
     if (!A || !Bf || !s) {
         atomic_store(&j->failed, 1);
@@ -413,7 +429,7 @@ static void vertical_range(void *user, int begin, int end)
     for (int strip = begin; strip < end; strip++) {
         int c0 = c_first + strip * Lmax;
         int L = c_end - c0 < Lmax ? c_end - c0 : Lmax;
-        double *a = A + (size_t)PAD * L, *b = Bf + (size_t)PAD * L;
+        double *a = A + (size_t)j->plan->ext * L, *b = Bf + (size_t)j->plan->ext * L;
         for (int i = 0; i < n; i++) {
             const float *restrict in = j->src + (size_t)(j->sy0 + i) * row + c0;
             double *restrict o = a + (size_t)i * L;
@@ -447,7 +463,7 @@ static void horizontal_range(void *user, int begin, int end)
     const int n = j->sx1 - j->sx0;
     const int R = j->block_rows, Lmax = R * C;
     const int rows = j->oy1 - j->oy0;
-    double *A = lane_buffer(n, Lmax), *Bf = lane_buffer(n, Lmax);
+    double *A = lane_buffer(n, Lmax, j->plan->ext), *Bf = lane_buffer(n, Lmax, j->plan->ext);
     double *s = fx_mem_alloc(4 * (size_t)Lmax * sizeof(double));
     if (!A || !Bf || !s) {
         atomic_store(&j->failed, 1);
@@ -457,7 +473,7 @@ static void horizontal_range(void *user, int begin, int end)
         int r0 = blk * R;
         int nr = rows - r0 < R ? rows - r0 : R;
         int L = nr * C;
-        double *a = A + (size_t)PAD * L, *b = Bf + (size_t)PAD * L;
+        double *a = A + (size_t)j->plan->ext * L, *b = Bf + (size_t)j->plan->ext * L;
         for (int r = 0; r < nr; r++) {
             const float *restrict in = j->tmp + (size_t)(r0 + r) * row + (size_t)j->sx0 * C;
             for (int i = 0; i < n; i++)
@@ -588,7 +604,7 @@ fx_result fx_blur_line(fx_context *ctx, const float *in, float *out, int n, int 
                 out[(size_t)i * stride] = in[(size_t)i * stride];
         return FX_OK;
     }
-    double *A = lane_buffer(n, 1), *Bf = lane_buffer(n, 1);
+    double *A = lane_buffer(n, 1, plan.ext), *Bf = lane_buffer(n, 1, plan.ext);
     double s[4];
     if (!A || !Bf) {
         fx_mem_free(A);
@@ -596,7 +612,7 @@ fx_result fx_blur_line(fx_context *ctx, const float *in, float *out, int n, int 
         plan_free(&plan);
         return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
     }
-    double *a = A + PAD, *b = Bf + PAD;
+    double *a = A + plan.ext, *b = Bf + plan.ext;
     for (int i = 0; i < n; i++)
         a[i] = in[(size_t)i * stride];
     const double *res = filter_lanes(&plan, a, b, n, 1, s);

@@ -1,0 +1,78 @@
+/* Helpers shared by the effect tests (test_gaussian_blur, test_color_matrix, test_pixelate):
+ * run one effect through the public stack API on a frame built from pixels. Header-only
+ * (static functions) so each test stays one CTest executable. */
+#ifndef LIBFX_FX_EFFECT_TEST_H
+#define LIBFX_FX_EFFECT_TEST_H
+
+#include "testutil.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+static fx_frame *et_frame(fx_context *ctx, int w, int h, const float *rgba)
+{
+    fx_frame *f = NULL;
+    if (fx_frame_new(ctx, w, h, &f) != FX_OK)
+        return NULL;
+    if (fx_frame_add_pass(f, "Combined", 4, rgba) != FX_OK) {
+        fx_frame_free(f);
+        return NULL;
+    }
+    return f;
+}
+
+static const float *et_combined(const fx_frame *f)
+{
+    float *d = NULL;
+    int c = 0;
+    if (!f || fx_frame_pass(f, "Combined", &d, &c) != FX_OK || c != 4)
+        return NULL;
+    return d;
+}
+
+/* A stack holding one effect; the caller sets parameters on index 0. */
+static fx_stack *et_stack(fx_context *ctx, const char *effect)
+{
+    fx_stack *s = NULL;
+    int idx = -1;
+    if (fx_stack_new(ctx, &s) != FX_OK)
+        return NULL;
+    if (fx_stack_append(s, effect, &idx) != FX_OK || idx != 0) {
+        fprintf(stderr, "append %s: %s\n", effect, fx_context_error(ctx));
+        fx_stack_free(s);
+        return NULL;
+    }
+    return s;
+}
+
+/* Runs s on in; returns a malloc'ed copy of the output Combined (NULL on failure). */
+static float *et_run(fx_context *ctx, fx_stack *s, const fx_frame *in)
+{
+    fx_frame *out = NULL;
+    if (fx_stack_run(s, in, &out) != FX_OK) {
+        fprintf(stderr, "fx_stack_run: %s\n", fx_context_error(ctx));
+        return NULL;
+    }
+    const float *d = et_combined(out);
+    size_t n = (size_t)fx_frame_width(out) * fx_frame_height(out) * 4;
+    float *copy = d ? malloc(n * sizeof(float)) : NULL;
+    if (copy)
+        memcpy(copy, d, n * sizeof(float));
+    fx_frame_free(out);
+    return copy;
+}
+
+/* 1 if every pixel outside rect [x, y, w, h] is bit-identical in a and b. */
+static int et_outside_equal(const float *a, const float *b, int W, int H, int rx, int ry, int rw, int rh)
+{
+    for (int y = 0; y < H; y++)
+        for (int x = 0; x < W; x++) {
+            if (x >= rx && x < rx + rw && y >= ry && y < ry + rh)
+                continue;
+            if (memcmp(a + ((size_t)y * W + x) * 4, b + ((size_t)y * W + x) * 4, 4 * sizeof(float)))
+                return 0;
+        }
+    return 1;
+}
+
+#endif
