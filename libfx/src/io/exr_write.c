@@ -88,7 +88,8 @@ static fx_result build_channels(const fx_frame *f, const fx_write_options *opts,
     return FX_OK;
 }
 
-static exr_result_t write_attributes(exr_context_t exr, int part, const fx_frame *f, char *failed, size_t cap)
+static exr_result_t write_attributes(exr_context_t exr, int part, const fx_frame *f, const char *path,
+                                     char *failed, size_t cap)
 {
     exr_result_t rv = EXR_ERR_SUCCESS;
     fx_camera cam;
@@ -112,9 +113,9 @@ static exr_result_t write_attributes(exr_context_t exr, int part, const fx_frame
         const char *key = f->meta[i].key;
         if (reserved_attr(key) || strlen(key) > 255)
             continue;
-        snprintf(failed, cap, "attribute '%s'", key);
-        if ((rv = exr_attr_set_string(exr, part, key, f->meta[i].value)) != EXR_ERR_SUCCESS)
-            return rv;
+        /* Metadata is a courtesy: one attribute OpenEXR refuses must not lose the image. */
+        if (exr_attr_set_string(exr, part, key, f->meta[i].value) != EXR_ERR_SUCCESS)
+            fx_warn(f->ctx, "'%s': metadata '%s' not written: %s", path, key, fx_exr_last_error());
     }
     snprintf(failed, cap, "Cryptomatte attributes");
     return fx_exr_write_cryptos(exr, part, f);
@@ -203,7 +204,11 @@ static fx_result write_to(const fx_frame *f, const char *tmp, const char *path, 
         disp.max.x = f->display_window[2], disp.max.y = f->display_window[3];
         swc.x = 0.0f, swc.y = 0.0f;
         snprintf(failed, sizeof failed, "the part");
-        rv = exr_add_part(exr, "libfx", EXR_STORAGE_SCANLINE, &part);
+        /* Names up to 255 bytes (Blender writes "cycles.ViewLayer.synchronization_time");
+         * readers since OpenEXR 1.7 accept them. */
+        rv = exr_set_longname_support(exr, 1);
+        if (rv == EXR_ERR_SUCCESS)
+            rv = exr_add_part(exr, "libfx", EXR_STORAGE_SCANLINE, &part);
         if (rv == EXR_ERR_SUCCESS)
             rv = exr_initialize_required_attr(exr, part, &disp, &dw, 1.0f, &swc, 1.0f,
                                               EXR_LINEORDER_INCREASING_Y, EXR_COMPRESSION_ZIP);
@@ -218,7 +223,7 @@ static fx_result write_to(const fx_frame *f, const char *tmp, const char *path, 
                 rv = (exr_result_t)ret;
         }
         if (rv == EXR_ERR_SUCCESS)
-            rv = write_attributes(exr, part, f, failed, sizeof failed);
+            rv = write_attributes(exr, part, f, path, failed, sizeof failed);
         if (rv == EXR_ERR_SUCCESS) {
             snprintf(failed, sizeof failed, "the header");
             rv = exr_write_header(exr);
