@@ -1,6 +1,7 @@
-/* DWAA/DWAB files: OpenEXRCore 3.1.5 cannot decode them, libfx reads them through
- * OpenEXR's C++ reader and warns that data passes are lossy. The DWA files are made
- * at run time with oiiotool (a build dependency) from a file libfx writes. */
+/* Files made at run time with oiiotool (a build dependency) from a file libfx writes:
+ * DWAA/DWAB (OpenEXRCore 3.1.5 cannot decode them, libfx reads them through OpenEXR's
+ * C++ reader and warns that data passes are lossy), and tiled/mipmapped copies of a
+ * file whose data window is off the origin (tile coordinates start at its corner). */
 #include "testutil.h"
 
 #include <math.h>
@@ -89,6 +90,38 @@ int main(void)
     CHECK(g && fx_frame_pass_count(g) == 1);
     fx_frame_free(g);
     fx_stack_free(s);
+
+    /* tiled and mipmapped, data window at (10, -3): same pixels as the scanline source */
+    /* -otex writes a mipmapped tiled texture, padded out to the display window */
+    const char *tiling[2] = {"--tile 32 16 --compression zip -o", "--compression zip -otex:fileformatname=openexr"};
+    for (int k = 0; k < 2; k++) {
+        char dst2[700];
+        snprintf(dst2, sizeof dst2, "%s/tiled%d.exr", dir, k);
+        snprintf(cmd, sizeof cmd, "oiiotool '%s' %s '%s' >/dev/null 2>&1", src, tiling[k], dst2);
+        CHECK(system(cmd) == 0);
+        fx_frame *t = NULL;
+        CHECK_OK(ctx, fx_frame_read_exr(ctx, dst2, NULL, &t));
+        if (!t)
+            continue;
+        int tdw[4], tdisp[4];
+        fx_frame_windows(t, tdw, tdisp);
+        CHECK(k == 1 || memcmp(tdw, dw, sizeof dw) == 0);
+        CHECK(tdw[0] <= dw[0] && tdw[1] <= dw[1] && tdw[2] >= dw[2] && tdw[3] >= dw[3]);
+        float *a = NULL, *b = NULL, *tz = NULL;
+        int ca = 0, cb = 0, cz = 0;
+        CHECK_OK(ctx, fx_frame_pass(f, "Combined", &a, &ca));
+        CHECK_OK(ctx, fx_frame_pass(t, "Combined", &b, &cb));
+        CHECK_OK(ctx, fx_frame_pass(t, "Depth", &tz, &cz));
+        int tw = fx_frame_width(t), diff = 0;
+        for (int y = 0; a && b && tz && y < h; y++)
+            for (int x = 0; x < w; x++) {
+                size_t ti = (size_t)(y + dw[1] - tdw[1]) * tw + (size_t)(x + dw[0] - tdw[0]);
+                diff += memcmp(&a[((size_t)y * w + x) * 4], &b[ti * 4], 4 * sizeof(float)) != 0;
+                diff += depth[(size_t)y * w + x] != tz[ti];
+            }
+        CHECK(a && b && tz && diff == 0);
+        fx_frame_free(t);
+    }
 
     free(depth);
     fx_frame_free(f);
