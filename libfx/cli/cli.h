@@ -49,7 +49,7 @@ int cli_fail(const fx_context *ctx, fx_result r, cli_phase phase, const char *su
 /* Prints and clears the warnings collected on ctx. */
 void cli_flush_warnings(fx_context *ctx);
 
-/* ---- option parsing: "--opt value", "--opt=value", "-o value", "--" ---- */
+/* ---- option parsing: "--opt value", "--opt=value", "-o value", "-j2", "--" ---- */
 typedef struct cli_args {
     const char *cmd;          /* for messages */
     int argc;

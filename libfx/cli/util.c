@@ -155,7 +155,13 @@ int cli_args_next(cli_args *a, const char **opt, const char **pos)
             continue;
         }
         const char *eq = (s[1] == '-') ? strchr(s, '=') : NULL;
-        if (eq) {
+        if (s[1] != '-' && s[2] != '\0') { /* "-j2": a short option with its value attached */
+            a->opt_buf[0] = '-';
+            a->opt_buf[1] = s[1];
+            a->opt_buf[2] = '\0';
+            a->inline_value = s + 2;
+            *opt = a->opt_buf;
+        } else if (eq) {
             size_t n = (size_t)(eq - s);
             if (n >= sizeof a->opt_buf)
                 n = sizeof a->opt_buf - 1;

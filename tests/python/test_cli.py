@@ -205,13 +205,15 @@ def test_thread_count_does_not_change_a_bit(run, tmp_path):
         {"effect": "pixelate", "params": {"mode": "cells", "cell_size": 5}, "mask": {"object_index": 1}},
         {"effect": "color_matrix", "params": {"operator": "sepia", "mix": 0.5}},
     ])
-    outs = []
-    for n in (1, 2, 3):
+    outs, files = [], []
+    for n, args in ((1, ["--threads", "1"]), (2, ["-j2"]), (3, ["--threads=3"])):
         out = tmp_path / f"out{n}.exr"
-        r = run("run", "--stack", recipe, "--threads", n, src, "-o", out)
+        r = run("run", "--stack", recipe, *args, src, "-o", out)
         assert r.returncode == EXIT_OK, r.stderr
         outs.append(combined(read_exr(out)).tobytes())
-    assert outs[0] == outs[1] == outs[2]
+        files.append(out.read_bytes())
+    assert outs[0] == outs[1] == outs[2]  # the pixels, as OpenImageIO decodes them
+    assert files[0] == files[1] == files[2]  # and the files themselves
 
 
 def test_png_preview(run, tmp_path):

@@ -140,24 +140,18 @@ def test_damaged_corpus_files(run, corpus, tmp_path, recipe, name):
         assert name in one_error_line(r)
 
 
-# Damaged files whose error the reader maps to another class than "bad file" (a bug to
-# fix in io/, reported): OpenEXRCore says EXR_ERR_OUT_OF_MEMORY when a corrupt block
-# fails to decompress, which reads as exit 5 instead of 3.
-DAMAGED_KNOWN_MISMAPPED = {"openexr_2.2.0_heap_buffer_overflow_exr"}
-
-
 def test_every_damaged_corpus_file_is_rejected_cleanly(run, corpus, tmp_path, recipe):
     folder = corpus / "openexr-images" / "Damaged"
     names = sorted(p.name for p in folder.iterdir() if p.name != "README.rst")
     assert len(names) > 50
     out = tmp_path / "o.exr"
-    wrong = []
+    wrong = []  # collected, to see every misclassified file at once
     for name in names:
         r = run("run", "--stack", recipe, folder / name, "-o", out)
         assert r.returncode > 0, (name, r.returncode, r.stderr)  # no crash (signal), no success
         assert name in one_error_line(r), name
         assert listing(tmp_path) == ["recipe.json"], name
-        if r.returncode != EXIT_INPUT and name not in DAMAGED_KNOWN_MISMAPPED:
+        if r.returncode != EXIT_INPUT:
             wrong.append((name, r.returncode, r.stderr.strip()))
     assert not wrong, wrong
 
