@@ -293,3 +293,31 @@ def test_processed_file_can_be_processed_again(run, tmp_path):
     assert run("run", "--stack", recipe, src, "-o", tmp_path / "a.exr").returncode == EXIT_OK
     r = run("run", "--stack", recipe, tmp_path / "a.exr", "-o", tmp_path / "b.exr")
     assert r.returncode == EXIT_OK, r.stderr
+
+
+def test_camera_sidecar_is_written_to_the_output(run, tmp_path):
+    src = make_frame(tmp_path / "in.exr")
+    cam = tmp_path / "cam.json"
+    cam.write_text(json.dumps({
+        "world_to_camera": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, -5], [0, 0, 0, 1]],
+        "projection": [[1.5, 0, 0, 0], [0, 2.0, 0, 0], [0, 0, -1.002, -0.2002], [0, 0, -1, 0]],
+        "clip_start": 0.1, "clip_end": 100.0}))
+    recipe = write_recipe(tmp_path / "r.json", [{"effect": "pixelate"}])
+    assert json.loads(run("info", "--compact", src).stdout)["camera"] is False
+    out = tmp_path / "out.exr"
+    r = run("run", "--stack", recipe, "--camera", cam, "--frame", "12", src, "-o", out)
+    assert r.returncode == EXIT_OK, r.stderr
+    assert json.loads(run("info", "--compact", out).stdout)["camera"] is True
+
+
+def test_debug_outputs_option(run, tmp_path):
+    """--debug-outputs turns the stack's debug passes on; today's three effects add none,
+    so this checks the option runs and never removes a pass."""
+    src = make_frame(tmp_path / "in.exr")
+    recipe = write_recipe(tmp_path / "r.json",
+                          [{"effect": "pixelate", "mask": {"object_index": 1}}])
+    plain, debug = tmp_path / "plain.exr", tmp_path / "debug.exr"
+    assert run("run", "--stack", recipe, src, "-o", plain).returncode == EXIT_OK
+    r = run("run", "--stack", recipe, "--debug-outputs", src, "-o", debug)
+    assert r.returncode == EXIT_OK, r.stderr
+    assert len(read_exr(debug)) >= len(read_exr(plain))
