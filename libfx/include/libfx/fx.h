@@ -241,7 +241,7 @@ FX_API fx_result fx_stack_set_quality(fx_stack *s, int quality);
  * ...], "camera": bool}. Cryptomatte is named by type (CryptoObject/CryptoMaterial/CryptoAsset). */
 FX_API fx_result fx_stack_required_passes(const fx_stack *s, char **out_json);
 /* Debug outputs (hit masks, ray lengths, mattes...) added to the output frame as
- * "<effect index>.<effect>.<name>" passes. Off by default. */
+ * "fx<effect index>_<effect>_<name>" passes (e.g. "fx2_pixelate_cells"). Off by default. */
 FX_API void fx_stack_set_debug_outputs(fx_stack *s, int enabled);
 /* Runs the enabled effects in order on `in` (never modified) and returns a new frame
  * with the result as "Combined", plus the debug passes when enabled. The output has

@@ -98,7 +98,8 @@ extern const int fx_effect_class_count;
 const fx_effect_class *fx_effect_find(const char *name);
 const fx_param_def *fx_effect_find_param(const fx_effect_class *cls, const char *name);
 
-/* Adds a debug output pass "<index>.<effect>.<name>" to run->debug and returns its
+/* Adds a debug output pass "fx<index>_<effect>_<name>" to run->debug (no dots: a dot
+ * would read back as a layer separator) and returns its
  * buffer (width*height*channels floats, zeroed); NULL when debug outputs are off
  * (not an error) or on failure (then *result says why). */
 float *fx_effect_debug_pass(const fx_effect_run *run, const char *name, int channels, fx_result *result);

@@ -667,7 +667,7 @@ float *fx_effect_debug_pass(const fx_effect_run *run, const char *name, int chan
     if (!run->debug)
         return NULL;
     char full[FX_NAME_MAX];
-    snprintf(full, sizeof full, "%d.%s.%s", run->index, run->effect_name, name);
+    snprintf(full, sizeof full, "fx%d_%s_%s", run->index, run->effect_name, name);
     float *buf = NULL;
     fx_result r = fx_frame_alloc_pass(run->debug, full, channels, &buf);
     if (r) {
@@ -823,8 +823,8 @@ fx_result fx_stack_run(fx_stack *s, const fx_frame *in, fx_frame **out)
             spare = NULL;
         }
     }
-    if (!r)
-        r = fx_progress(ctx, "done", 1.0);
+    if (!r && ctx->progress)
+        ctx->progress(ctx->progress_user, "done", 1.0); /* the work is finished: no cancel now */
     fx_mem_free(spare);
     if (r) {
         fx_frame_free(o);

@@ -20,7 +20,6 @@
 #include <string.h>
 
 /* Provided by the stack (core/stack.c): the passes its enabled effects and masks need. */
-extern fx_pass_set fx_stack_pass_set(const fx_stack *s);
 
 /* Where one planned channel lands. */
 typedef struct chan_dest {
