@@ -327,6 +327,21 @@ static void sum_range(void *user, int b, int e)
     }
 }
 
+typedef struct worker_job {
+    int workers;
+    int bad;
+    int *count; /* per item: how many times it ran */
+} worker_job;
+
+static void worker_range(void *user, int b, int e, int worker)
+{
+    worker_job *j = user;
+    if (worker < 0 || worker >= j->workers)
+        j->bad = 1;
+    for (int i = b; i < e; i++)
+        j->count[i]++;
+}
+
 static void test_parallel_for(void)
 {
     /* Same results whatever the thread count; nested loops do not deadlock. */
@@ -341,6 +356,16 @@ static void test_parallel_for(void)
     for (int rep = 0; rep < 50; rep++)
         fx_parallel_for(c2, 257, 1, sum_range, &j2);
     CHECK(memcmp(r1, r2, sizeof r1) == 0);
+    /* worker indices stay below fx_parallel_workers; every item runs exactly once */
+    int count[1000] = {0};
+    worker_job wj = {fx_parallel_workers(c2), 0, count};
+    CHECK(wj.workers == 3);
+    for (int rep = 0; rep < 20; rep++)
+        fx_parallel_for_worker(c2, 1000, 7, worker_range, &wj);
+    int all20 = 1;
+    for (int i = 0; i < 1000; i++)
+        all20 &= count[i] == 20;
+    CHECK(!wj.bad && all20);
     fx_context_free(c1);
     fx_context_free(c2);
 }

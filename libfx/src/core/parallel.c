@@ -20,6 +20,7 @@
 
 struct fx_pool {
     pthread_t *threads;
+    struct worker_start *starts;
     int count;
     pthread_mutex_t mutex;
     pthread_cond_t work_cv, done_cv;
@@ -28,7 +29,7 @@ struct fx_pool {
     int quit;
     int pending;
     /* the current loop */
-    fx_range_fn fn;
+    fx_worker_range_fn fn;
     void *user;
     int n, grain, chunks;
     atomic_int next;
@@ -36,7 +37,7 @@ struct fx_pool {
 
 static _Thread_local int in_parallel_loop;
 
-static void run_chunks(fx_pool *p)
+static void run_chunks(fx_pool *p, int worker)
 {
     for (;;) {
         int c = atomic_fetch_add(&p->next, 1);
@@ -46,13 +47,20 @@ static void run_chunks(fx_pool *p)
         int end = begin + p->grain;
         if (end > p->n || end < begin)
             end = p->n;
-        p->fn(p->user, begin, end);
+        p->fn(p->user, begin, end, worker);
     }
 }
 
+typedef struct worker_start {
+    fx_pool *pool;
+    int index;
+} worker_start;
+
 static void *worker_main(void *arg)
 {
-    fx_pool *p = arg;
+    worker_start *ws = arg;
+    fx_pool *p = ws->pool;
+    int worker = ws->index;
 #ifdef FX_HAVE_MXCSR
     _mm_setcsr(_mm_getcsr() | FX_MXCSR_FTZ_DAZ);
 #endif
@@ -66,7 +74,7 @@ static void *worker_main(void *arg)
             break;
         seen = p->generation;
         pthread_mutex_unlock(&p->mutex);
-        run_chunks(p);
+        run_chunks(p, worker);
         pthread_mutex_lock(&p->mutex);
         if (--p->pending == 0)
             pthread_cond_signal(&p->done_cv);
@@ -81,7 +89,10 @@ static fx_pool *pool_new(int workers)
     if (!p)
         return NULL;
     p->threads = fx_mem_calloc((size_t)workers, sizeof *p->threads);
-    if (!p->threads) {
+    p->starts = fx_mem_calloc((size_t)workers, sizeof *p->starts);
+    if (!p->threads || !p->starts) {
+        fx_mem_free(p->threads);
+        fx_mem_free(p->starts);
         fx_mem_free(p);
         return NULL;
     }
@@ -90,7 +101,9 @@ static fx_pool *pool_new(int workers)
     pthread_cond_init(&p->work_cv, NULL);
     pthread_cond_init(&p->done_cv, NULL);
     for (int i = 0; i < workers; i++) {
-        if (pthread_create(&p->threads[i], NULL, worker_main, p) != 0)
+        p->starts[i].pool = p;
+        p->starts[i].index = i + 1; /* worker 0 is the calling thread */
+        if (pthread_create(&p->threads[i], NULL, worker_main, &p->starts[i]) != 0)
             break;
         p->count++;
     }
@@ -116,20 +129,26 @@ void fx_pool_free(fx_pool *p)
     pthread_mutex_destroy(&p->mutex);
     pthread_mutex_destroy(&p->busy);
     fx_mem_free(p->threads);
+    fx_mem_free(p->starts);
     fx_mem_free(p);
 }
 
-static void run_serial(int n, int grain, fx_range_fn fn, void *user)
+static void run_serial(int n, int grain, fx_worker_range_fn fn, void *user)
 {
     for (int begin = 0; begin < n; begin += grain) {
         int end = begin + grain;
         if (end > n || end < begin)
             end = n;
-        fn(user, begin, end);
+        fn(user, begin, end, 0);
     }
 }
 
-void fx_parallel_for(fx_context *ctx, int n, int grain, fx_range_fn fn, void *user)
+int fx_parallel_workers(const fx_context *ctx)
+{
+    return ctx && ctx->threads > 1 ? ctx->threads : 1;
+}
+
+void fx_parallel_for_worker(fx_context *ctx, int n, int grain, fx_worker_range_fn fn, void *user)
 {
     if (n <= 0 || !fn)
         return;
@@ -164,7 +183,7 @@ void fx_parallel_for(fx_context *ctx, int n, int grain, fx_range_fn fn, void *us
             pthread_mutex_unlock(&p->mutex);
 
             in_parallel_loop = 1;
-            run_chunks(p);
+            run_chunks(p, 0);
             in_parallel_loop = 0;
 
             pthread_mutex_lock(&p->mutex);
@@ -177,6 +196,27 @@ void fx_parallel_for(fx_context *ctx, int n, int grain, fx_range_fn fn, void *us
 #ifdef FX_HAVE_MXCSR
     _mm_setcsr(saved_csr);
 #endif
+}
+
+/* Plain loops ride on the worker-aware one. */
+typedef struct plain_loop {
+    fx_range_fn fn;
+    void *user;
+} plain_loop;
+
+static void plain_range(void *user, int begin, int end, int worker)
+{
+    (void)worker;
+    plain_loop *l = user;
+    l->fn(l->user, begin, end);
+}
+
+void fx_parallel_for(fx_context *ctx, int n, int grain, fx_range_fn fn, void *user)
+{
+    if (!fn)
+        return;
+    plain_loop l = {fn, user};
+    fx_parallel_for_worker(ctx, n, grain, plain_range, &l);
 }
 
 int fx_grain_for(const fx_context *ctx, int n)

@@ -17,6 +17,13 @@ typedef void (*fx_range_fn)(void *user, int begin, int end);
 /* Runs on ctx's threads; if the pool cannot start, the loop runs on the calling thread. */
 void fx_parallel_for(fx_context *ctx, int n, int grain, fx_range_fn fn, void *user);
 
+/* The same, telling fn which worker runs it: 0 <= worker < fx_parallel_workers(ctx),
+ * for per-worker scratch buffers. Which worker runs a chunk varies between runs, so
+ * the result must not depend on it. */
+typedef void (*fx_worker_range_fn)(void *user, int begin, int end, int worker);
+void fx_parallel_for_worker(fx_context *ctx, int n, int grain, fx_worker_range_fn fn, void *user);
+int fx_parallel_workers(const fx_context *ctx);
+
 void fx_pool_free(fx_pool *pool);
 
 /* A grain that gives each thread several chunks for balance: ~n / (8 * threads), >= 1.
