@@ -310,11 +310,24 @@ class LIBFX_MT_add(bpy.types.Menu):
 # ---------------------------------------------------------------- drawing
 
 def _fmt(v):
+    if isinstance(v, bool):
+        return str(v)
+    if isinstance(v, (int, float)):
+        v = float(v)
     if isinstance(v, float):
         return "%g" % v
     if isinstance(v, list):
         return ", ".join(_fmt(x) for x in v)
     return str(v)
+
+
+def _current(group, p):
+    v = getattr(group, p.prop)
+    if p.type == "floats":
+        return [float(x) for x in v]
+    if p.type in ("float", "int"):
+        return float(v)
+    return v
 
 
 def _draw_params(layout, context, item, eff):
@@ -335,7 +348,7 @@ def _draw_params(layout, context, item, eff):
         if is_set:
             op = row.operator(LIBFX_OT_param_reset.bl_idname, text="", icon="LOOP_BACK")
             op.param = p.prop
-        elif preset is not None:
+        elif preset is not None and _fmt(preset) != _fmt(_current(group, p)):
             row.label(text="", icon="PRESET")
             col.label(text="   %s preset: %s = %s" % (quality, p.label(), _fmt(preset)))
         else:
@@ -375,7 +388,15 @@ def _draw_mask(layout, item):
     box.prop(item, "mask_invert")
 
 
+def _chars(context):
+    """How many characters of label text fit the region's width."""
+    region = getattr(context, "region", None)
+    scale = (context.preferences.system.ui_scale if context.preferences else 0.0) or 1.0
+    return max(24, int((region.width if region else 300) / (6.5 * scale)) - 6)
+
+
 def draw_stack(layout, context):
+    width = _chars(context)
     s = _settings(context)
     cat = props.catalog()
     scene = context.scene
@@ -386,7 +407,7 @@ def draw_stack(layout, context):
         box = layout.box()
         box.alert = True
         box.label(text="libfx library unavailable", icon="ERROR")
-        for line in _wrap(cat.error, 60):
+        for line in _wrap(cat.error, width):
             box.label(text=line)
     st = scene_setup.status(scene)
 
@@ -410,7 +431,7 @@ def draw_stack(layout, context):
             box.alert = True
             box.label(text="Unknown effect '%s' (kept as written in the recipe)" % item.effect, icon="ERROR")
         else:
-            for i, line in enumerate(_wrap(eff.doc, 70)):
+            for i, line in enumerate(_wrap(eff.doc, width)):
                 box.label(text=line, icon="INFO" if i == 0 else "BLANK1")
             r = box.row()
             r.prop(item, "label")
@@ -421,14 +442,16 @@ def draw_stack(layout, context):
     if st.get("error"):
         b = layout.box()
         b.alert = True
-        for i, line in enumerate(_wrap(st["error"], 70)):
+        for i, line in enumerate(_wrap(st["error"], width)):
             b.label(text=line, icon="ERROR" if i == 0 else "BLANK1")
     for w in st.get("warnings", []):
-        for i, line in enumerate(_wrap(w, 70)):
+        for i, line in enumerate(_wrap(w, width)):
             layout.label(text=line, icon="ERROR" if i == 0 else "BLANK1")
     if st.get("passes"):
-        layout.label(text="Renders: " + ", ".join(st["passes"]) +
-                     ("  + camera" if st.get("camera") else ""), icon="RENDERLAYERS")
+        row = layout.row()
+        row.label(text="Renders: " + ", ".join(st["passes"]) +
+                  ("  + camera" if st.get("camera") else ""), icon="RENDERLAYERS")
+        row.operator(LIBFX_OT_restore_scene.bl_idname, text="", icon="TRASH")
 
     row = layout.row(align=True)
     row.operator(LIBFX_OT_recipe_import.bl_idname, icon="IMPORT", text="Import")

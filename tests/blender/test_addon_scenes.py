@@ -1,6 +1,8 @@
 """Batch renders of every test scene through the add-on, checked against the plain
 render and against the CLI on the same input."""
 import json
+import os
+import shutil
 import subprocess
 
 import numpy as np
@@ -129,3 +131,17 @@ def test_image_in_scene_format_through_colour_management(blender, library, tmp_p
     outside = ~support
     assert np.abs(a - b)[outside].max() <= 1.0 / 65535 + 1e-7, np.abs(a - b)[outside].max()
     assert np.abs(a - b)[support].max() > 1e-3   # the blur shows inside the mask
+
+
+@pytest.mark.skipif(not shutil.which("xvfb-run"), reason="xvfb-run is not installed")
+@pytest.mark.skipif(not (T.SCENES_DIR / "greek_bath" / "greek_bath.blend").is_file(), reason="no greek_bath")
+def test_f12_in_the_ui_shows_the_result(blender, library, tmp_path):
+    """F12 with a window (xvfb): handlers on the render thread, result via timers."""
+    shot = tmp_path / "panel.png"
+    cmd = ["xvfb-run", "-a", "-s", "-screen 0 1600x900x24", T.blender_path(), "--factory-startup",
+           str(T.SCENES_DIR / "greek_bath" / "greek_bath.blend"),
+           "--python", str(T.REPO / "tests" / "blender" / "panel_screenshot.py"), "--", str(shot)]
+    env = dict(os.environ, **T.addon_env(library))
+    p = subprocess.run(cmd, capture_output=True, text=True, timeout=300, env=env)
+    assert p.returncode == 0, (p.stdout + p.stderr)[-4000:]
+    assert "F12 result image: True" in p.stdout and shot.is_file()

@@ -1,0 +1,111 @@
+"""UI check + documentation screenshot (needs a display: run under xvfb).
+
+    xvfb-run -s "-screen 0 1600x900x24" blender --factory-startup \
+        blend_scenes/greek_bath/greek_bath.blend --python tests/blender/panel_screenshot.py \
+        -- docs/images/addon_panel.png
+
+Registers the add-on from this tree, adds a second effect, renders F12-style
+(INVOKE_DEFAULT: handlers on the render thread, results through timers), waits
+for "libfx Result" to appear in the Image Editor, then saves a screenshot of the
+window and quits (exit code 1 if the F12 path did not produce the result).
+"""
+import os
+import sys
+
+import bpy
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(HERE)), "addon"))
+import libfx  # noqa: E402
+
+OUT = sys.argv[sys.argv.index("--") + 1] if "--" in sys.argv else "addon_panel.png"
+OUT = os.path.abspath(OUT)
+state = {"t": 0, "phase": "setup", "ok": False}
+
+
+def log(*a):
+    print("screenshot:", *a)
+    sys.stdout.flush()
+
+
+def areas(kind):
+    return [a for a in bpy.context.window_manager.windows[0].screen.areas if a.type == kind]
+
+
+def setup():
+    libfx.register()
+    libfx.render.on_load_post()
+    scene = bpy.context.scene
+    scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = 320, 180, 100
+    scene.cycles.samples = 4
+    scene.render.filepath = os.path.join(bpy.app.tempdir, "shot_")
+    bpy.context.preferences.view.render_display_type = "NONE"
+    s = scene.libfx
+    item = s.stack.add()
+    item.effect = "gaussian_blur"
+    item.label = "Soft statue"
+    g = libfx.props.effect_group(item)
+    g.sigma = 1.5
+    item.mask_kinds = {"OBJECT"}
+    item.mask_objects.add().name = "Statue"
+    s.active_index = len(s.stack) - 1
+    libfx.scene_setup.request_sync(scene)
+    win = bpy.context.window_manager.windows[0]
+    big = max(win.screen.areas, key=lambda a: a.width * a.height)
+    with bpy.context.temp_override(window=win, area=big):
+        bpy.ops.screen.area_split(direction="VERTICAL", factor=0.5)
+    halves = sorted((a for a in win.screen.areas if a.type == big.type), key=lambda a: a.x)
+    halves[0].type = "IMAGE_EDITOR"
+    halves[-1].type = "PROPERTIES"
+
+
+def scroll_properties():
+    win = bpy.context.window_manager.windows[0]
+    for a in areas("PROPERTIES"):
+        region = [r for r in a.regions if r.type == "WINDOW"][0]
+        with bpy.context.temp_override(window=win, area=a, region=region):
+            for _ in range(25):
+                bpy.ops.view2d.scroll_down(deltay=60)
+
+
+def tick():
+    state["t"] += 1
+    try:
+        if state["phase"] == "setup":
+            setup()
+            state["phase"] = "render"
+            return 1.0
+        if state["phase"] == "render":
+            for a in areas("PROPERTIES"):
+                a.spaces.active.context = "OUTPUT"
+            win = bpy.context.window_manager.windows[0]
+            with bpy.context.temp_override(window=win):
+                bpy.ops.render.render("INVOKE_DEFAULT")
+            state["phase"] = "wait"
+            return 1.0
+        if state["phase"] == "wait":
+            done = "libfx Result" in bpy.data.images and not bpy.app.is_job_running("RENDER")
+            if done or state["t"] > 120:
+                state["ok"] = done
+                log("F12 result image:", done)
+                scroll_properties()
+                state["phase"] = "shot"
+            return 1.0
+        if state["phase"] == "shot":
+            os.makedirs(os.path.dirname(OUT), exist_ok=True)
+            win = bpy.context.window_manager.windows[0]
+            with bpy.context.temp_override(window=win, area=win.screen.areas[0]):
+                bpy.ops.screen.screenshot(filepath=OUT)
+            log("saved", OUT)
+            rec = libfx.render.RESULTS.get((bpy.context.scene.name, bpy.context.scene.frame_current))
+            log("result record:", rec and {k: rec[k] for k in ("ok", "error")})
+            sys.stdout.flush()
+            os._exit(0 if state["ok"] and rec and rec["ok"] else 1)
+    except Exception:
+        import traceback
+        traceback.print_exc()
+        os._exit(2)
+    return 1.0
+
+
+bpy.app.timers.register(tick, first_interval=1.0)
