@@ -238,6 +238,19 @@ static void test_masks(void)
     fx_mask_free(m);
     fx_mask_spec_clear(&spec);
 
+    /* a relative rect scales with the display window: the right quarter of 8 px */
+    j = cJSON_Parse("{\"rect_relative\": [0.75, 0, 0.25, 1]}");
+    CHECK_OK(ctx, fx_mask_spec_parse(ctx, j, "t", &spec));
+    cJSON_Delete(j);
+    CHECK_OK(ctx, fx_mask_build(ctx, &spec, f, "t", &m));
+    CHECK(m && m->coverage[5] == 0.0f && m->coverage[6] == 1.0f && m->coverage[7] == 1.0f &&
+          m->bounds.x0 == 6 && m->bounds.x1 == 8);
+    fx_mask_free(m);
+    fx_mask_spec_clear(&spec);
+    j = cJSON_Parse("{\"rect_relative\": [0.5, 0, -1, 1]}");
+    CHECK_FAIL(ctx, fx_mask_spec_parse(ctx, j, "t", &spec), FX_ERR_BAD_RECIPE, "rect_relative");
+    cJSON_Delete(j);
+
     /* a name not in the manifest warns; a missing pass is an error naming it */
     j = cJSON_Parse("{\"object\": \"Statu\"}");
     fx_mask_spec_parse(ctx, j, "effect 0 (pixelate)", &spec);

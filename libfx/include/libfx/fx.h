@@ -232,7 +232,8 @@ FX_API fx_result fx_stack_set_enum(fx_stack *s, int index, const char *param, co
 FX_API fx_result fx_stack_set_floats(fx_stack *s, int index, const char *param, const float *values, int count);
 FX_API fx_result fx_stack_set_string(fx_stack *s, int index, const char *param, const char *value);
 /* Mask JSON: {"material": "Name"|[...], "object": ..., "material_index": n|[...],
- * "object_index": ..., "rect": [x, y, w, h], "invert": bool}; "{}" or NULL: everything. */
+ * "object_index": ..., "rect": [x, y, w, h] (pixels), "rect_relative": [x, y, w, h] (fractions
+ * of the display window), "invert": bool}; "{}" or NULL: everything. */
 FX_API fx_result fx_stack_set_mask_json(fx_stack *s, int index, const char *mask_json);
 /* Per-effect quality (-1: the stack's); the stack's quality (default final). */
 FX_API fx_result fx_stack_set_effect_quality(fx_stack *s, int index, int quality);

@@ -3,6 +3,7 @@
 #include "core/parallel.h"
 
 #include <cjson/cJSON.h>
+#include <limits.h>
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
@@ -68,7 +69,7 @@ float fx_cryptomatte_id(const char *name)
 int fx_mask_spec_is_empty(const fx_mask_spec *s)
 {
     return !s || (s->material_count == 0 && s->object_count == 0 && s->material_index_count == 0 &&
-                  s->object_index_count == 0 && !s->has_rect && !s->invert);
+                  s->object_index_count == 0 && !s->has_rect && !s->has_rect_relative && !s->invert);
 }
 
 void fx_mask_spec_clear(fx_mask_spec *s)
@@ -174,10 +175,25 @@ fx_result fx_mask_spec_parse(fx_context *ctx, const cJSON *json, const char *whe
                             "width and height >= 0",
                             where);
             out->has_rect = ok;
+        } else if (strcmp(k, "rect_relative") == 0) {
+            int ok = cJSON_IsArray(item) && cJSON_GetArraySize(item) == 4;
+            for (int i = 0; ok && i < 4; i++) {
+                const cJSON *v = cJSON_GetArrayItem(item, i);
+                ok = cJSON_IsNumber(v) && isfinite(v->valuedouble) && fabs(v->valuedouble) <= 16 &&
+                     (i < 2 || v->valuedouble >= 0);
+                if (ok)
+                    out->rect_relative[i] = (float)v->valuedouble;
+            }
+            if (!ok)
+                r = fx_fail(ctx, FX_ERR_BAD_RECIPE,
+                            "%s: mask \"rect_relative\" must be [x, y, width, height] as fractions of "
+                            "the display window (0..1), width and height >= 0",
+                            where);
+            out->has_rect_relative = ok;
         } else {
             r = fx_fail(ctx, FX_ERR_BAD_RECIPE,
                         "%s: unknown mask key \"%s\" (known: material, object, material_index, "
-                        "object_index, rect, invert)",
+                        "object_index, rect, rect_relative, invert)",
                         where, k);
         }
         if (r)
@@ -206,6 +222,8 @@ cJSON *fx_mask_spec_to_json(const fx_mask_spec *s)
         cJSON_AddItemToObject(o, "object_index", cJSON_CreateIntArray(s->object_indices, s->object_index_count));
     if (s->has_rect)
         cJSON_AddItemToObject(o, "rect", cJSON_CreateIntArray(s->rect, 4));
+    if (s->has_rect_relative)
+        cJSON_AddItemToObject(o, "rect_relative", cJSON_CreateFloatArray(s->rect_relative, 4));
     if (s->invert)
         cJSON_AddBoolToObject(o, "invert", 1);
     return o;
@@ -304,7 +322,8 @@ static void mask_rows(void *user, int y0, int y1)
                 if (c > 1.0f)
                     c = 1.0f;
             }
-            if (s->has_rect && !(x >= j->rect.x0 && x < j->rect.x1 && y >= j->rect.y0 && y < j->rect.y1))
+            if ((s->has_rect || s->has_rect_relative) &&
+                !(x >= j->rect.x0 && x < j->rect.x1 && y >= j->rect.y0 && y < j->rect.y1))
                 c = 0.0f;
             if (s->invert)
                 c = 1.0f - c;
@@ -426,12 +445,30 @@ fx_result fx_mask_build(fx_context *ctx, const fx_mask_spec *spec, const fx_fram
             r = fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the mask", where);
     }
     if (!r) {
-        if (spec->has_rect) {
-            /* rect is in display-window pixels from its top-left; frame pixel (0,0) is the
-             * data window's corner. */
-            long x0 = (long)frame->display_window[0] + spec->rect[0] - frame->data_window[0];
-            long y0 = (long)frame->display_window[1] + spec->rect[1] - frame->data_window[1];
-            long x1 = x0 + spec->rect[2], y1 = y0 + spec->rect[3];
+        if (spec->has_rect || spec->has_rect_relative) {
+            /* Rects are in display-window pixels from its top-left; frame pixel (0,0) is
+             * the data window's corner. A relative rect scales with the display window;
+             * both together intersect. */
+            long dx = (long)frame->display_window[0] - frame->data_window[0];
+            long dy = (long)frame->display_window[1] - frame->data_window[1];
+            long x0 = LONG_MIN / 4, y0 = LONG_MIN / 4, x1 = LONG_MAX / 4, y1 = LONG_MAX / 4;
+            if (spec->has_rect) {
+                x0 = dx + spec->rect[0];
+                y0 = dy + spec->rect[1];
+                x1 = x0 + spec->rect[2];
+                y1 = y0 + spec->rect[3];
+            }
+            if (spec->has_rect_relative) {
+                double dw = (double)frame->display_window[2] - frame->display_window[0] + 1;
+                double dh = (double)frame->display_window[3] - frame->display_window[1] + 1;
+                const float *q = spec->rect_relative;
+                long rx0 = dx + lround(q[0] * dw), ry0 = dy + lround(q[1] * dh);
+                long rx1 = dx + lround((q[0] + q[2]) * dw), ry1 = dy + lround((q[1] + q[3]) * dh);
+                if (rx0 > x0) x0 = rx0;
+                if (ry0 > y0) y0 = ry0;
+                if (rx1 < x1) x1 = rx1;
+                if (ry1 < y1) y1 = ry1;
+            }
             j.rect.x0 = (int)(x0 < 0 ? 0 : x0 > j.w ? j.w : x0);
             j.rect.y0 = (int)(y0 < 0 ? 0 : y0 > j.h ? j.h : y0);
             j.rect.x1 = (int)(x1 < j.rect.x0 ? j.rect.x0 : x1 > j.w ? j.w : x1);

@@ -1,6 +1,6 @@
 /* Masks: which pixels an effect may change, as coverage in [0,1].
  * Selected by material/object name (Cryptomatte), material/object pass index, and a
- * screen rectangle. Names and indices are unioned; the rectangle then restricts
+ * screen rectangle (in pixels, or as fractions of the display window). Names and indices are unioned; the rectangle then restricts
  * them (alone it selects itself); invert applies last. */
 #ifndef LIBFX_MASK_H
 #define LIBFX_MASK_H
@@ -27,6 +27,8 @@ typedef struct fx_mask_spec {
     int object_index_count;
     int has_rect;
     int rect[4];   /* x, y, w, h in display-window pixels, top-left origin */
+    int has_rect_relative;
+    float rect_relative[4]; /* the same as fractions of the display window (survives resizing) */
     int invert;
 } fx_mask_spec;
 
