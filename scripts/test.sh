@@ -17,8 +17,11 @@ cmake --build build-asan -j"$(nproc)" >/dev/null
 ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1 \
   ctest --test-dir build-asan --output-on-failure -j2 || status=1
 
-echo "== Python tests (CLI, interop) and Blender tests (add-on, scenes)"
 export LIBFX_CLI="$PWD/build/libfx/libfx" LIBFX_LIBRARY="$PWD/build/libfx/libfx.so"
-/usr/bin/python3 -m pytest -q tests/python tests/blender || status=1
+# Two runs: each folder has its own conftest.py.
+echo "== Python tests (CLI, interop)"
+/usr/bin/python3 -m pytest -q -p no:cacheprovider tests/python || status=1
+echo "== Blender tests (add-on, scenes; headless)"
+/usr/bin/python3 -m pytest -q -p no:cacheprovider tests/blender || status=1
 
 exit $status
