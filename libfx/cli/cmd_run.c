@@ -35,8 +35,7 @@ typedef struct run_job {
     const run_opts *o;
     fx_context *ctx;
     fx_stack *stack;
-    fx_camera camera;
-    int has_camera;
+    int has_camera; /* a scene sidecar (--camera) applies to every frame */
     int sequence;
     cli_progress progress;
 } run_job;
@@ -356,7 +355,7 @@ static int run_frame(run_job *job, const run_item *it)
         rc = cli_fail(ctx, r, CLI_PHASE_INPUT, it->in);
         goto done;
     }
-    if (job->has_camera && (r = fx_frame_set_camera(in, &job->camera)) != FX_OK) {
+    if (job->has_camera && (r = fx_frame_apply_sidecar_file(in, o->camera_path)) != FX_OK) {
         rc = cli_fail(ctx, r, CLI_PHASE_INPUT, o->camera_path);
         goto done;
     }
@@ -452,9 +451,12 @@ static int setup(run_job *job)
         return cli_fail(job->ctx, r, CLI_PHASE_INPUT, o->stack_path);
     fx_stack_set_debug_outputs(job->stack, o->debug_outputs);
     if (o->camera_path) {
-        memset(&job->camera, 0, sizeof job->camera);
-        job->camera.size = sizeof job->camera;
-        if ((r = fx_camera_load_file(job->ctx, o->camera_path, &job->camera)) != FX_OK)
+        /* Check the sidecar (camera, lights, time) once, before any frame is read. */
+        fx_frame *probe = NULL;
+        if ((r = fx_frame_new(job->ctx, 1, 1, &probe)) == FX_OK)
+            r = fx_frame_apply_sidecar_file(probe, o->camera_path);
+        fx_frame_free(probe);
+        if (r != FX_OK)
             return cli_fail(job->ctx, r, CLI_PHASE_INPUT, o->camera_path);
         job->has_camera = 1;
     }

@@ -383,8 +383,39 @@ static void test_parallel_for(void)
     fx_context_free(c2);
 }
 
+static void test_sidecar(void)
+{
+    fx_context *ctx = NULL;
+    fx_context_new(&ctx, 1);
+    fx_frame *f = NULL;
+    fx_frame_new(ctx, 4, 4, &f);
+    const char *good =
+        "{\"world_to_camera\": [[1,0,0,0],[0,1,0,0],[0,0,1,-5],[0,0,0,1]],"
+        " \"projection\": [[1,0,0,0],[0,1.7,0,0],[0,0,-1.002,-0.2002],[0,0,-1,0]],"
+        " \"clip_start\": 0.1, \"clip_end\": 100, \"frame\": 12, \"fps\": 25,"
+        " \"lights\": [{\"name\": \"Sun\", \"type\": \"SUN\", \"direction\": [0, 0.5, -1]}]}";
+    CHECK_OK(ctx, fx_frame_apply_sidecar(f, good));
+    fx_camera cam;
+    CHECK(fx_frame_camera(f, &cam) && cam.world_to_camera[11] == -5.0f && !cam.orthographic);
+    double frame = 0, fps = 0;
+    fx_frame_time(f, &frame, &fps);
+    CHECK(frame == 12 && fps == 25);
+    CHECK(tu_contains(fx_frame_meta(f, "libfx:lights"), "\"Sun\""));
+    /* bad sidecars change nothing and name the problem */
+    CHECK_FAIL(ctx, fx_frame_apply_sidecar(f, "{\"lights\": [{\"name\": \"L\", \"type\": \"POINT\", \"position\": [1, 2]}]}"),
+               FX_ERR_BAD_RECIPE, "lights[0].position");
+    CHECK_FAIL(ctx, fx_frame_apply_sidecar(f, "{\"camera_pos\": 1}"), FX_ERR_BAD_RECIPE, "unknown key \"camera_pos\"");
+    CHECK_FAIL(ctx, fx_frame_apply_sidecar(f, "{\"world_to_camera\": [1, 2]}"), FX_ERR_BAD_RECIPE, "world_to_camera");
+    CHECK_FAIL(ctx, fx_frame_apply_sidecar_file(f, "/nonexistent/cam.json"), FX_ERR_IO, "/nonexistent/cam.json");
+    fx_frame_time(f, &frame, &fps);
+    CHECK(frame == 12);
+    fx_frame_free(f);
+    fx_context_free(ctx);
+}
+
 int main(void)
 {
+    test_sidecar();
     test_context_and_errors();
     test_errors_are_per_thread();
     test_recipes();

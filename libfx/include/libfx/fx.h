@@ -150,6 +150,7 @@ FX_API fx_result fx_camera_from_json(fx_context *ctx, const char *json, fx_camer
 FX_API fx_result fx_camera_load_file(fx_context *ctx, const char *path, fx_camera *out);
 
 /* ---- Frames ------------------------------------------------------------- */
+/* (fx_frame_apply_sidecar, below the frame functions, applies a whole scene sidecar.) */
 
 /* A frame holds planes of float pixels named by canonical pass names
  * ("Combined" RGBA, "Depth", "Normal" XYZ, "Position", "IndexOB", "IndexMA",
@@ -176,6 +177,14 @@ FX_API int fx_frame_camera(const fx_frame *f, fx_camera *out);
 /* Scene time, for animated effects: frame number and frames per second. */
 FX_API void fx_frame_set_time(fx_frame *f, double frame, double fps);
 FX_API void fx_frame_time(const fx_frame *f, double *frame, double *fps);
+/* Scene sidecar JSON, what Blender's EXRs lack: the camera (as fx_camera_from_json),
+ * and optionally "lights": [{"name": "Sun", "type": "SUN"|"POINT"|"SPOT"|"AREA",
+ * "position": [x,y,z], "direction": [x,y,z] (world, the way the light travels),
+ * "color": [r,g,b], "energy": f, "angle": f}] and "frame", "fps". The camera is set,
+ * the lights are kept as the frame's "libfx:lights" metadata (a JSON array, written to
+ * and read from EXR headers), the time is set. Keys other than these are errors. */
+FX_API fx_result fx_frame_apply_sidecar(fx_frame *f, const char *json);
+FX_API fx_result fx_frame_apply_sidecar_file(fx_frame *f, const char *path);
 /* String metadata (e.g. "cryptomatte/CryptoObject/manifest"); NULL value removes. */
 FX_API fx_result fx_frame_set_meta(fx_frame *f, const char *key, const char *value);
 FX_API const char *fx_frame_meta(const fx_frame *f, const char *key); /* NULL if absent */

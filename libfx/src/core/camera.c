@@ -33,6 +33,9 @@ static int read_matrix(const cJSON *v, float out[16])
     return n == 16;
 }
 
+static const char *const sidecar_keys[] = {"world_to_camera", "projection", "clip_start", "clip_end",
+                                            "orthographic", "lights", "frame", "fps", "scene", "camera"};
+
 fx_result fx_camera_from_json(fx_context *ctx, const char *json, fx_camera *out)
 {
     if (!json || !out)
@@ -91,5 +94,122 @@ fx_result fx_camera_load_file(fx_context *ctx, const char *path, fx_camera *out)
         snprintf(msg, sizeof msg, "%s", fx_context_error(ctx));
         fx_fail(ctx, r, "%s: %s", path, msg);
     }
+    return r;
+}
+
+static fx_result check_vec(fx_context *ctx, const cJSON *light, const char *key, int n, int i)
+{
+    const cJSON *v = cJSON_GetObjectItemCaseSensitive(light, key);
+    if (!v)
+        return FX_OK;
+    int ok = cJSON_IsArray(v) && cJSON_GetArraySize(v) == n;
+    const cJSON *x;
+    cJSON_ArrayForEach(x, v) ok = ok && cJSON_IsNumber(x) && isfinite(x->valuedouble);
+    if (!ok)
+        return fx_fail(ctx, FX_ERR_BAD_RECIPE, "sidecar: lights[%d].%s must be %d finite numbers", i, key, n);
+    return FX_OK;
+}
+
+/* Checks the lights array now, so effects can trust its shape later. */
+static fx_result check_lights(fx_context *ctx, const cJSON *lights)
+{
+    if (!cJSON_IsArray(lights))
+        return fx_fail(ctx, FX_ERR_BAD_RECIPE, "sidecar: \"lights\" must be a list");
+    int i = 0;
+    const cJSON *l;
+    cJSON_ArrayForEach(l, lights) {
+        const cJSON *name = cJSON_GetObjectItemCaseSensitive(l, "name");
+        const cJSON *type = cJSON_GetObjectItemCaseSensitive(l, "type");
+        if (!cJSON_IsObject(l) || !cJSON_IsString(name) || !cJSON_IsString(type))
+            return fx_fail(ctx, FX_ERR_BAD_RECIPE, "sidecar: lights[%d] needs a \"name\" and a \"type\"", i);
+        fx_result r;
+        if ((r = check_vec(ctx, l, "position", 3, i)) || (r = check_vec(ctx, l, "direction", 3, i)) ||
+            (r = check_vec(ctx, l, "color", 3, i)))
+            return r;
+        i++;
+    }
+    return FX_OK;
+}
+
+fx_result fx_frame_apply_sidecar(fx_frame *f, const char *json)
+{
+    if (!f || !json)
+        return fx_fail(f ? f->ctx : NULL, FX_ERR_INVALID_ARGUMENT, "fx_frame_apply_sidecar: NULL argument");
+    fx_context *ctx = f->ctx;
+    cJSON *root = cJSON_Parse(json);
+    if (!root || !cJSON_IsObject(root)) {
+        cJSON_Delete(root);
+        return fx_fail(ctx, FX_ERR_BAD_RECIPE, "sidecar: not a JSON object");
+    }
+    fx_result r = FX_OK;
+    const cJSON *item;
+    cJSON_ArrayForEach(item, root) {
+        int known = 0;
+        for (size_t k = 0; k < sizeof sidecar_keys / sizeof sidecar_keys[0]; k++)
+            known |= strcmp(item->string, sidecar_keys[k]) == 0;
+        if (!known) {
+            r = fx_fail(ctx, FX_ERR_BAD_RECIPE,
+                        "sidecar: unknown key \"%s\" (known: world_to_camera, projection, clip_start, "
+                        "clip_end, orthographic, lights, frame, fps, scene, camera)",
+                        item->string);
+            break;
+        }
+    }
+    fx_camera cam;
+    int has_camera = cJSON_GetObjectItemCaseSensitive(root, "world_to_camera") != NULL;
+    if (!r && has_camera)
+        r = fx_camera_from_json(ctx, json, &cam);
+    const cJSON *lights = cJSON_GetObjectItemCaseSensitive(root, "lights");
+    if (!r && lights)
+        r = check_lights(ctx, lights);
+    const cJSON *frame = cJSON_GetObjectItemCaseSensitive(root, "frame");
+    const cJSON *fps = cJSON_GetObjectItemCaseSensitive(root, "fps");
+    if (!r && ((frame && (!cJSON_IsNumber(frame) || !isfinite(frame->valuedouble))) ||
+               (fps && (!cJSON_IsNumber(fps) || !(fps->valuedouble > 0)))))
+        r = fx_fail(ctx, FX_ERR_BAD_RECIPE, "sidecar: \"frame\" must be a number and \"fps\" positive");
+    char *lights_text = NULL;
+    if (!r && lights && !(lights_text = cJSON_PrintUnformatted(lights)))
+        r = fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "sidecar: out of memory");
+    /* Everything checked: apply it all. */
+    if (!r && has_camera)
+        r = fx_frame_set_camera(f, &cam);
+    if (!r && lights_text)
+        r = fx_frame_set_meta(f, "libfx:lights", lights_text);
+    if (!r && (frame || fps))
+        fx_frame_set_time(f, frame ? frame->valuedouble : f->frame_number, fps ? fps->valuedouble : f->fps);
+    cJSON_free(lights_text);
+    cJSON_Delete(root);
+    return r;
+}
+
+fx_result fx_frame_apply_sidecar_file(fx_frame *f, const char *path)
+{
+    if (!f || !path)
+        return fx_fail(f ? f->ctx : NULL, FX_ERR_INVALID_ARGUMENT, "fx_frame_apply_sidecar_file: NULL argument");
+    FILE *fp = fopen(path, "rb");
+    if (!fp)
+        return fx_fail(f->ctx, FX_ERR_IO, "cannot open sidecar '%s': %s", path, strerror(errno));
+    size_t cap = (size_t)4 << 20;
+    char *buf = fx_mem_alloc(cap);
+    if (!buf) {
+        fclose(fp);
+        return fx_fail(f->ctx, FX_ERR_OUT_OF_MEMORY, "out of memory reading '%s'", path);
+    }
+    size_t n = fread(buf, 1, cap - 1, fp);
+    int too_big = !feof(fp);
+    fclose(fp);
+    fx_result r;
+    if (too_big) {
+        r = fx_fail(f->ctx, FX_ERR_BAD_RECIPE, "sidecar '%s' is larger than 4 MiB", path);
+    } else {
+        buf[n] = '\0';
+        r = fx_frame_apply_sidecar(f, buf);
+        if (r) {
+            char msg[1024];
+            snprintf(msg, sizeof msg, "%s", fx_context_error(f->ctx));
+            fx_fail(f->ctx, r, "%s: %s", path, msg);
+        }
+    }
+    fx_mem_free(buf);
     return r;
 }
