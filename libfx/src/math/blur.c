@@ -15,6 +15,7 @@
 #include <float.h>
 #include <math.h>
 #include <stdatomic.h>
+#include <stdint.h>
 #include <string.h>
 
 /* Runtime dispatch: an AVX2 clone of the lane kernels next to the baseline x86-64 one.
@@ -27,7 +28,8 @@
 #endif
 
 #define FX_BLUR_MAX_SIGMA 1.0e5 /* larger sigmas are clamped: the result is already the limit */
-#define V_LANES 64              /* floats per vertical strip */
+#define V_LANES 32              /* floats per vertical strip (lane kernels) */
+#define V_LANES_REC 32          /* floats per vertical strip (recursive, row-wise) */
 #define H_LANES 16              /* target floats per horizontal block (rows * channels) */
 #define PAD 4                   /* rows before/after the data in a lane buffer (recursion state) */
 
@@ -320,8 +322,8 @@ static void deriche_lanes(const blur_plan *p, double *x, double *y, int n, int L
                             *restrict y4 = y1 - 3 * Ls;
         double *restrict y0 = y + i * Ls;
         for (int l = 0; l < L; l++)
-            y0[l] = n0 * x0[l] + n1 * x1[l] + n2 * x2[l] + n3 * x3[l] -
-                    (d1 * y1[l] + d2 * y2[l] + d3 * y3[l] + d4 * y4[l]);
+            y0[l] = (n0 * x0[l] + n1 * x1[l] + n2 * x2[l] + n3 * x3[l]) -
+                    ((d4 * y4[l] + d3 * y3[l] + d2 * y2[l]) + d1 * y1[l]);
     }
     double *s1 = s, *s2 = s + Ls, *s3 = s + 2 * Ls, *s4 = s + 3 * Ls;
     for (int l = 0; l < L; l++)
@@ -333,8 +335,8 @@ static void deriche_lanes(const blur_plan *p, double *x, double *y, int n, int L
         double *restrict o = s4; /* the oldest state becomes the newest */
         const double *restrict q1 = s1, *restrict q2 = s2, *restrict q3 = s3;
         for (int l = 0; l < L; l++) {
-            double v = m1 * xa[l] + m2 * xb[l] + m3 * xc[l] + m4 * xd[l] -
-                       (d1 * q1[l] + d2 * q2[l] + d3 * q3[l] + d4 * o[l]);
+            double v = (m1 * xa[l] + m2 * xb[l] + m3 * xc[l] + m4 * xd[l]) -
+                       ((d4 * o[l] + d3 * q3[l] + d2 * q2[l]) + d1 * q1[l]);
             o[l] = v;
             y0[l] += v;
         }
@@ -392,17 +394,34 @@ static inline float to_float_clamped(double v)
 
 /* ---- the image passes ------------------------------------------------------------------ */
 
+/* GCC vector extensions: one RGBA pixel in double is a v4d (one AVX register, two SSE2
+ * ones in the baseline clone; the same IEEE operations either way). */
+/* Only used inside always-inline helpers and the kernels: no v4d crosses a call (the
+ * ABI note GCC gives for that case does not apply). */
+#if defined(__GNUC__) && !defined(__clang__)
+#  pragma GCC diagnostic ignored "-Wpsabi"
+#endif
+typedef double v4d __attribute__((vector_size(32)));
+typedef long long v4di __attribute__((vector_size(32)));
+typedef float v4f __attribute__((vector_size(16)));
+
+#define H_ROWS 4 /* rows per block of the RGBA horizontal recursive pass */
+
 typedef struct blur_job {
     const blur_plan *plan;
     const float *src;
     float *dst;
-    float *tmp;       /* vertical result: rows oy0..oy1-1, full row length */
+    float *vbuf;      /* vertical result: rows oy0..oy1-1, columns sx0..sx1-1 */
+    size_t vstride;   /* floats per vbuf row */
+    float *vorigin;   /* vbuf address of (row oy0, column 0), may point before vbuf */
     int width, height, channels;
     int ox0, ox1, oy0, oy1; /* output region */
     int sx0, sx1, sy0, sy1; /* computed (halo-grown, clamped) region */
     int strip_lanes;  /* vertical: floats per strip */
     int block_rows;   /* horizontal: rows per block */
-    atomic_int failed;
+    int fast_v, fast_h; /* recursive: direct row-wise kernels */
+    char *scratch;    /* per worker: scratch_bytes each */
+    size_t scratch_bytes;
 } blur_job;
 
 static double *lane_buffer(int n, int L, int ext)
@@ -410,9 +429,171 @@ static double *lane_buffer(int n, int L, int ext)
     return fx_mem_alloc(((size_t)n + 2 * (size_t)ext) * (size_t)L * sizeof(double));
 }
 
-/* Vertical pass: strips of columns [c, c + L) (in floats) of rows sy0..sy1-1 -> tmp rows
+static void *worker_scratch(const blur_job *j, int worker)
+{
+    return j->scratch + (size_t)worker * j->scratch_bytes;
+}
+
+static size_t round_up64(size_t b)
+{
+    return (b + 63) & ~(size_t)63;
+}
+
+static inline __attribute__((always_inline)) v4d load4(const float *p)
+{
+    v4f f;
+    memcpy(&f, p, sizeof f);
+    return __builtin_convertvector(f, v4d);
+}
+
+static inline __attribute__((always_inline)) void store4_clamped(float *p, v4d v)
+{
+    const v4d hi = { (double)FLT_MAX, (double)FLT_MAX, (double)FLT_MAX, (double)FLT_MAX };
+    v4di mh = v > hi, ml = v < -hi;
+    v4di b = (v4di)v;
+    b = (b & ~mh) | ((v4di)hi & mh);
+    b = (b & ~ml) | ((v4di)(-hi) & ml);
+    v4f f = __builtin_convertvector((v4d)b, v4f);
+    memcpy(p, &f, sizeof f);
+}
+
+/* Deriche, vertical, straight from the image rows: strip of L floats (any channels), rows
+ * 0..n-1 of `in` (`stride` floats apart), output rows o0..o1-1 to out (row o0 at `out`).
+ * The causal pass copies the strip to xs (contiguous, (n + 7) x L4 floats, L4 = L rounded
+ * up to 4: 3 edge rows before, 4 after; strided rows would thrash L2's sets on the way
+ * back) and keeps the output rows' y+ in cb ((o1-o0) x L4/4 v4d); the anticausal pass adds
+ * y- and stores. Same operations as deriche_lanes, lane by lane, so the same bits.
+ * out may alias in (in is only read in the causal pass). st holds 5 x L4/4 v4d. */
+FX_CLONES
+static void deriche_vertical(const blur_plan *p, const float *in, size_t stride, int n, int o0,
+                             int o1, float *out, size_t ostride, int L, v4d *cb, v4d *st,
+                             float *xs)
+{
+    const double n0 = p->dn[0], n1 = p->dn[1], n2 = p->dn[2], n3 = p->dn[3];
+    const double m1 = p->dm[0], m2 = p->dm[1], m3 = p->dm[2], m4 = p->dm[3];
+    const double d1 = p->dd[0], d2 = p->dd[1], d3 = p->dd[2], d4 = p->dd[3];
+    const int V = (L + 3) / 4, L4 = 4 * V;
+    const ptrdiff_t Ls = L4;
+    v4d *y1 = st, *y2 = st + V, *y3 = st + 2 * V, *y4 = st + 3 * V, *dummy = st + 4 * V;
+    float *x = xs + 3 * Ls; /* row 0 */
+    for (int i = -3; i < 0; i++) {
+        memcpy(x + i * Ls, in, (size_t)L * sizeof(float));
+        memset(x + i * Ls + L, 0, (size_t)(L4 - L) * sizeof(float));
+    }
+    for (int v = 0; v < V; v++)
+        y1[v] = y2[v] = y3[v] = y4[v] = load4(x - Ls + 4 * v) * p->gain_c;
+    for (int i = 0; i < n; i++) {
+        const float *f = in + (size_t)i * stride;
+        if (i + 8 < n) /* rows are a page or more apart: no prefetcher follows that stride */
+            for (int l = 0; l < L; l += 16)
+                __builtin_prefetch(f + 8 * stride + l);
+        float *x0 = x + i * Ls;
+        memcpy(x0, f, (size_t)L * sizeof(float));
+        memset(x0 + L, 0, (size_t)(L4 - L) * sizeof(float));
+        v4d *c = i >= o0 && i < o1 ? cb + (size_t)(i - o0) * V : dummy;
+        for (int v = 0; v < V; v++) {
+            const float *xv = x0 + 4 * v;
+            v4d r = (n0 * load4(xv) + n1 * load4(xv - Ls) + n2 * load4(xv - 2 * Ls) +
+                     n3 * load4(xv - 3 * Ls)) -
+                    ((d4 * y4[v] + d3 * y3[v] + d2 * y2[v]) + d1 * y1[v]);
+            y4[v] = r; /* the oldest slot becomes the newest */
+            c[v] = r;
+        }
+        v4d *t = y4;
+        y4 = y3, y3 = y2, y2 = y1, y1 = t;
+    }
+    for (int k = 0; k < 4; k++)
+        memcpy(x + (n + k) * Ls, x + (n - 1) * Ls, (size_t)L4 * sizeof(float));
+    /* anticausal: q1..q4 hold y-[i+1..i+4] */
+    v4d *q1 = y1, *q2 = y2, *q3 = y3, *q4 = y4;
+    for (int v = 0; v < V; v++)
+        q1[v] = q2[v] = q3[v] = q4[v] = load4(x + (n - 1) * Ls + 4 * v) * p->gain_a;
+    for (int i = n - 1; i >= o0; i--) {
+        const float *x1 = x + (i + 1) * Ls;
+        if (i < o1) {
+            const v4d *c = cb + (size_t)(i - o0) * V;
+            float *o = out + (size_t)(i - o0) * ostride;
+            for (int v = 0; v < V; v++) {
+                const float *xv = x1 + 4 * v;
+                v4d r = (m1 * load4(xv) + m2 * load4(xv + Ls) + m3 * load4(xv + 2 * Ls) +
+                         m4 * load4(xv + 3 * Ls)) -
+                        ((d4 * q4[v] + d3 * q3[v] + d2 * q2[v]) + d1 * q1[v]);
+                q4[v] = r;
+                if (4 * v + 4 <= L) {
+                    store4_clamped(o + 4 * v, c[v] + r);
+                } else {
+                    float tail[4];
+                    store4_clamped(tail, c[v] + r);
+                    memcpy(o + 4 * v, tail, (size_t)(L - 4 * v) * sizeof(float));
+                }
+            }
+        } else {
+            for (int v = 0; v < V; v++) {
+                const float *xv = x1 + 4 * v;
+                q4[v] = (m1 * load4(xv) + m2 * load4(xv + Ls) + m3 * load4(xv + 2 * Ls) +
+                         m4 * load4(xv + 3 * Ls)) -
+                        ((d4 * q4[v] + d3 * q3[v] + d2 * q2[v]) + d1 * q1[v]);
+            }
+        }
+        v4d *t = q4;
+        q4 = q3, q3 = q2, q2 = q1, q1 = t;
+    }
+}
+
+/* Deriche, horizontal, RGBA: H_ROWS rows at once, one v4d per pixel and row (independent
+ * recursions to hide the latency). in[r]: row r at column sx0 (n pixels); out[r]: row r
+ * at column sx0 (NULL: row absent), written for pixels o0..o1-1; cb holds (o1-o0) x H_ROWS
+ * v4d. Same operations as deriche_lanes per lane. out may alias in. */
+FX_CLONES
+static void deriche_rows4(const blur_plan *p, const float *const *in, float *const *out, int n,
+                          int o0, int o1, v4d *cb)
+{
+    const double n0 = p->dn[0], n1 = p->dn[1], n2 = p->dn[2], n3 = p->dn[3];
+    const double m1 = p->dm[0], m2 = p->dm[1], m3 = p->dm[2], m4 = p->dm[3];
+    const double d1 = p->dd[0], d2 = p->dd[1], d3 = p->dd[2], d4 = p->dd[3];
+    v4d X1[H_ROWS], X2[H_ROWS], X3[H_ROWS], X4[H_ROWS], Y1[H_ROWS], Y2[H_ROWS], Y3[H_ROWS],
+        Y4[H_ROWS];
+    for (int r = 0; r < H_ROWS; r++) {
+        v4d v = load4(in[r]);
+        X1[r] = X2[r] = X3[r] = v;
+        Y1[r] = Y2[r] = Y3[r] = Y4[r] = v * p->gain_c;
+    }
+    for (int i = 0; i < n; i++) {
+        v4d *c = i >= o0 && i < o1 ? cb + (size_t)(i - o0) * H_ROWS : NULL;
+#pragma GCC unroll 4
+        for (int r = 0; r < H_ROWS; r++) {
+            v4d x0 = load4(in[r] + (size_t)i * 4);
+            v4d v = (n0 * x0 + n1 * X1[r] + n2 * X2[r] + n3 * X3[r]) -
+                    ((d4 * Y4[r] + d3 * Y3[r] + d2 * Y2[r]) + d1 * Y1[r]);
+            X3[r] = X2[r], X2[r] = X1[r], X1[r] = x0;
+            Y4[r] = Y3[r], Y3[r] = Y2[r], Y2[r] = Y1[r], Y1[r] = v;
+            if (c)
+                c[r] = v;
+        }
+    }
+    for (int r = 0; r < H_ROWS; r++) {
+        v4d v = load4(in[r] + (size_t)(n - 1) * 4);
+        X1[r] = X2[r] = X3[r] = X4[r] = v;
+        Y1[r] = Y2[r] = Y3[r] = Y4[r] = v * p->gain_a;
+    }
+    for (int i = n - 1; i >= o0; i--) {
+        const v4d *c = i < o1 ? cb + (size_t)(i - o0) * H_ROWS : NULL;
+#pragma GCC unroll 4
+        for (int r = 0; r < H_ROWS; r++) {
+            v4d v = (m1 * X1[r] + m2 * X2[r] + m3 * X3[r] + m4 * X4[r]) -
+                    ((d4 * Y4[r] + d3 * Y3[r] + d2 * Y2[r]) + d1 * Y1[r]);
+            v4d x0 = load4(in[r] + (size_t)i * 4); /* before out[r] is written */
+            X4[r] = X3[r], X3[r] = X2[r], X2[r] = X1[r], X1[r] = x0;
+            Y4[r] = Y3[r], Y3[r] = Y2[r], Y2[r] = Y1[r], Y1[r] = v;
+            if (c && out[r])
+                store4_clamped(out[r] + (size_t)i * 4, c[r] + v);
+        }
+    }
+}
+
+/* Vertical pass: strips of columns [c, c + L) (in floats) of rows sy0..sy1-1 -> vbuf rows
  * oy0..oy1-1. */
-static void vertical_range(void *user, int begin, int end)
+static void vertical_range(void *user, int begin, int end, int worker)
 {
     blur_job *j = user;
     const int C = j->channels;
@@ -420,20 +601,23 @@ static void vertical_range(void *user, int begin, int end)
     const int n = j->sy1 - j->sy0;
     const int c_first = j->sx0 * C, c_end = j->sx1 * C;
     const int Lmax = j->strip_lanes;
-    double *A = lane_buffer(n, Lmax, j->plan->ext), *Bf = lane_buffer(n, Lmax, j->plan->ext);
-    double *s = fx_mem_alloc(4 * (size_t)Lmax * sizeof(double));
-    if (!A || !Bf || !s) {
-        atomic_store(&j->failed, 1);
-        goto done;
-    }
+    const int ext = j->plan->ext;
+    double *A = worker_scratch(j, worker);
     for (int strip = begin; strip < end; strip++) {
         int c0 = c_first + strip * Lmax;
         int L = c_end - c0 < Lmax ? c_end - c0 : Lmax;
-        double *a = A + (size_t)j->plan->ext * L, *b = Bf + (size_t)j->plan->ext * L;
+        if (j->fast_v) {
+            v4d *st = (v4d *)A, *cb = st + 5 * (size_t)(Lmax / 4);
+            float *xs = (float *)(cb + (size_t)(j->oy1 - j->oy0) * (Lmax / 4));
+            deriche_vertical(j->plan, j->src + (size_t)j->sy0 * row + c0, row, n, j->oy0 - j->sy0,
+                             j->oy1 - j->sy0, j->vorigin + c0, j->vstride, L, cb, st, xs);
+            continue;
+        }
+        size_t lb = ((size_t)n + 2 * (size_t)ext) * (size_t)Lmax;
+        double *a = A + (size_t)ext * L, *b = A + lb + (size_t)ext * L, *s = A + 2 * lb;
         for (int i = 0; i < n; i++) {
             const float *restrict in = j->src + (size_t)(j->sy0 + i) * row + c0;
             double *restrict o = a + (size_t)i * L;
-            /* rows are a page or more apart: no hardware prefetcher follows that stride */
             if (i + 8 < n)
                 __builtin_prefetch(in + 8 * row);
             for (int l = 0; l < L; l++)
@@ -442,20 +626,16 @@ static void vertical_range(void *user, int begin, int end)
         const double *res = filter_lanes(j->plan, a, b, n, L, s);
         for (int y = j->oy0; y < j->oy1; y++) {
             const double *restrict v = res + (size_t)(y - j->sy0) * L;
-            float *restrict o = j->tmp + (size_t)(y - j->oy0) * row + c0;
+            float *restrict o = j->vorigin + (size_t)(y - j->oy0) * j->vstride + c0;
             for (int l = 0; l < L; l++)
                 o[l] = to_float_clamped(v[l]);
         }
     }
-done:
-    fx_mem_free(A);
-    fx_mem_free(Bf);
-    fx_mem_free(s);
 }
 
-/* Horizontal pass: blocks of block_rows rows of tmp -> dst, columns sx0..sx1-1 computed,
+/* Horizontal pass: blocks of block_rows rows of vbuf -> dst, columns sx0..sx1-1 computed,
  * ox0..ox1-1 written. */
-static void horizontal_range(void *user, int begin, int end)
+static void horizontal_range(void *user, int begin, int end, int worker)
 {
     blur_job *j = user;
     const int C = j->channels;
@@ -463,36 +643,51 @@ static void horizontal_range(void *user, int begin, int end)
     const int n = j->sx1 - j->sx0;
     const int R = j->block_rows, Lmax = R * C;
     const int rows = j->oy1 - j->oy0;
-    double *A = lane_buffer(n, Lmax, j->plan->ext), *Bf = lane_buffer(n, Lmax, j->plan->ext);
-    double *s = fx_mem_alloc(4 * (size_t)Lmax * sizeof(double));
-    if (!A || !Bf || !s) {
-        atomic_store(&j->failed, 1);
-        goto done;
-    }
+    const int ext = j->plan->ext;
+    double *A = worker_scratch(j, worker);
     for (int blk = begin; blk < end; blk++) {
         int r0 = blk * R;
         int nr = rows - r0 < R ? rows - r0 : R;
+        if (j->fast_h) {
+            const float *in[H_ROWS];
+            float *out[H_ROWS];
+            for (int r = 0; r < H_ROWS; r++) {
+                int rr = r < nr ? r : 0;
+                in[r] = j->vorigin + (size_t)(r0 + rr) * j->vstride + (size_t)j->sx0 * 4;
+                out[r] = r < nr ? j->dst + (size_t)(j->oy0 + r0 + r) * row + (size_t)j->sx0 * 4 : NULL;
+            }
+            deriche_rows4(j->plan, in, out, n, j->ox0 - j->sx0, j->ox1 - j->sx0, (v4d *)A);
+            continue;
+        }
         int L = nr * C;
-        double *a = A + (size_t)j->plan->ext * L, *b = Bf + (size_t)j->plan->ext * L;
+        size_t lb = ((size_t)n + 2 * (size_t)ext) * (size_t)Lmax;
+        double *a = A + (size_t)ext * L, *b = A + lb + (size_t)ext * L, *s = A + 2 * lb;
         for (int r = 0; r < nr; r++) {
-            const float *restrict in = j->tmp + (size_t)(r0 + r) * row + (size_t)j->sx0 * C;
-            for (int i = 0; i < n; i++)
-                for (int c = 0; c < C; c++)
-                    a[(size_t)i * L + r * C + c] = in[(size_t)i * C + c];
+            const float *restrict in = j->vorigin + (size_t)(r0 + r) * j->vstride + (size_t)j->sx0 * C;
+            double *restrict o = a + r * C;
+            if (C == 4)
+                for (int i = 0; i < n; i++)
+                    for (int c = 0; c < 4; c++)
+                        o[(size_t)i * L + c] = in[(size_t)i * 4 + c];
+            else
+                for (int i = 0; i < n; i++)
+                    for (int c = 0; c < C; c++)
+                        o[(size_t)i * L + c] = in[(size_t)i * C + c];
         }
         const double *res = filter_lanes(j->plan, a, b, n, L, s);
         for (int r = 0; r < nr; r++) {
-            float *restrict o = j->dst + (size_t)(j->oy0 + r0 + r) * row;
-            for (int x = j->ox0; x < j->ox1; x++)
-                for (int c = 0; c < C; c++)
-                    o[(size_t)x * C + c] =
-                        to_float_clamped(res[(size_t)(x - j->sx0) * L + r * C + c]);
+            float *restrict o = j->dst + (size_t)(j->oy0 + r0 + r) * row + (size_t)j->ox0 * C;
+            const double *restrict v = res + (size_t)(j->ox0 - j->sx0) * L + r * C;
+            if (C == 4)
+                for (int x = 0; x < j->ox1 - j->ox0; x++)
+                    for (int c = 0; c < 4; c++)
+                        o[(size_t)x * 4 + c] = to_float_clamped(v[(size_t)x * L + c]);
+            else
+                for (int x = 0; x < j->ox1 - j->ox0; x++)
+                    for (int c = 0; c < C; c++)
+                        o[(size_t)x * C + c] = to_float_clamped(v[(size_t)x * L + c]);
         }
     }
-done:
-    fx_mem_free(A);
-    fx_mem_free(Bf);
-    fx_mem_free(s);
 }
 
 static void copy_roi(const float *src, float *dst, int width, int channels, const fx_rect *r)
@@ -509,6 +704,10 @@ static int clampi(int v, int lo, int hi)
 {
     return v < lo ? lo : v > hi ? hi : v;
 }
+
+#ifndef FX_BLUR_FAST
+#  define FX_BLUR_FAST 1 /* 0: every algorithm through the lane kernels (for comparisons) */
+#endif
 
 fx_result fx_blur_image(fx_context *ctx, const float *src, float *dst, int width, int height,
                         int channels, const fx_blur_spec *spec, const fx_rect *roi,
@@ -536,11 +735,8 @@ fx_result fx_blur_image(fx_context *ctx, const float *src, float *dst, int width
         return FX_OK;
     }
     const int H = plan.halo;
-    blur_job *j = fx_mem_calloc(1, sizeof *j);
-    if (!j) {
-        plan_free(&plan);
-        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
-    }
+    blur_job job, *j = &job;
+    memset(j, 0, sizeof *j);
     j->plan = &plan;
     j->src = src;
     j->dst = dst;
@@ -553,37 +749,67 @@ fx_result fx_blur_image(fx_context *ctx, const float *src, float *dst, int width
     j->sx1 = (int)((long long)r.x1 + H > width ? width : (long long)r.x1 + H);
     j->sy0 = (int)((long long)r.y0 - H < 0 ? 0 : (long long)r.y0 - H);
     j->sy1 = (int)((long long)r.y1 + H > height ? height : (long long)r.y1 + H);
-    j->strip_lanes = V_LANES;
-    j->block_rows = H_LANES / channels < 1 ? 1 : H_LANES / channels;
-    atomic_init(&j->failed, 0);
+    j->fast_v = FX_BLUR_FAST && plan.alg == FX_BLUR_RECURSIVE;
+    j->fast_h = j->fast_v && channels == 4;
+    j->strip_lanes = j->fast_v ? V_LANES_REC : V_LANES;
+    j->block_rows = j->fast_h ? H_ROWS : (H_LANES / channels < 1 ? 1 : H_LANES / channels);
 
+    /* Scratch per worker, sized for both passes. */
+    const int workers = fx_parallel_workers(ctx);
+    const size_t d = sizeof(double);
+    size_t nv = (size_t)(j->sy1 - j->sy0), nh = (size_t)(j->sx1 - j->sx0), ext = (size_t)plan.ext;
+    size_t sv, sh;
+    if (j->fast_v)
+        sv = (5 + (size_t)(r.y1 - r.y0)) * j->strip_lanes * d + (nv + 7) * j->strip_lanes * sizeof(float);
+    else
+        sv = (2 * (nv + 2 * ext) + 4) * (size_t)j->strip_lanes * d;
+    size_t Lh = (size_t)j->block_rows * channels;
+    if (j->fast_h)
+        sh = (size_t)(r.x1 - r.x0) * H_ROWS * sizeof(v4d);
+    else
+        sh = (2 * (nh + 2 * ext) + 4) * Lh * d;
+    j->scratch_bytes = round_up64(sv > sh ? sv : sh);
+
+    /* The vertical result goes straight to dst when the computed columns are the written
+     * ones (a full-width roi: the usual case), else to a buffer of the roi's rows. */
     fx_result res = FX_OK;
-    size_t tmp_bytes;
-    if (!fx_size_mul(&tmp_bytes, (size_t)(r.y1 - r.y0), (size_t)width * channels, sizeof(float))) {
-        res = fx_fail(ctx, FX_ERR_LIMIT, "%s: blur buffer size overflows", where);
-        goto out;
+    float *tmp = NULL;
+    size_t tmp_bytes = 0, scratch_total;
+    if (!fx_size_mul(&scratch_total, j->scratch_bytes, (size_t)workers, 1) ||
+        !fx_size_mul(&tmp_bytes, (size_t)(r.y1 - r.y0), nh * channels, sizeof(float))) {
+        plan_free(&plan);
+        return fx_fail(ctx, FX_ERR_LIMIT, "%s: blur buffer size overflows", where);
     }
-    res = fx_check_budget(ctx, tmp_bytes, where);
+    int direct = j->sx0 == j->ox0 && j->sx1 == j->ox1;
+    if (direct)
+        tmp_bytes = 0;
+    res = fx_check_budget(ctx, tmp_bytes + scratch_total, where);
     if (res != FX_OK)
         goto out;
-    j->tmp = fx_mem_alloc(tmp_bytes);
-    if (!j->tmp) {
-        res = fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for a %zu-byte blur buffer",
-                      where, tmp_bytes);
+    void *scratch_raw = fx_mem_alloc(scratch_total + 64);
+    if (!scratch_raw || (!direct && !(tmp = fx_mem_alloc(tmp_bytes)))) {
+        fx_mem_free(scratch_raw);
+        scratch_raw = NULL;
+        res = fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for blur buffers (%zu bytes)",
+                      where, tmp_bytes + scratch_total);
         goto out;
     }
-    int cols = (j->sx1 - j->sx0) * channels;
-    int strips = (cols + V_LANES - 1) / V_LANES;
-    fx_parallel_for(ctx, strips, fx_grain_for(ctx, strips), vertical_range, j);
-    if (!atomic_load(&j->failed)) {
-        int blocks = (r.y1 - r.y0 + j->block_rows - 1) / j->block_rows;
-        fx_parallel_for(ctx, blocks, fx_grain_for(ctx, blocks), horizontal_range, j);
+    j->scratch = (char *)(((uintptr_t)scratch_raw + 63) & ~(uintptr_t)63);
+    if (direct) {
+        j->vstride = (size_t)width * channels;
+        j->vorigin = dst + (size_t)r.y0 * j->vstride;
+    } else {
+        j->vstride = nh * channels;
+        j->vorigin = tmp - (size_t)j->sx0 * channels;
     }
-    if (atomic_load(&j->failed))
-        res = fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for blur scratch buffers", where);
+    int cols = (j->sx1 - j->sx0) * channels;
+    int strips = (cols + j->strip_lanes - 1) / j->strip_lanes;
+    fx_parallel_for_worker(ctx, strips, fx_grain_for(ctx, strips), vertical_range, j);
+    int blocks = (r.y1 - r.y0 + j->block_rows - 1) / j->block_rows;
+    fx_parallel_for_worker(ctx, blocks, fx_grain_for(ctx, blocks), horizontal_range, j);
+    fx_mem_free(scratch_raw);
 out:
-    fx_mem_free(j->tmp);
-    fx_mem_free(j);
+    fx_mem_free(tmp);
     plan_free(&plan);
     return res;
 }

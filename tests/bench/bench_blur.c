@@ -1,0 +1,224 @@
+/* bench_blur: gaussian_blur alone at 1920x1080 RGBA float: time per algorithm/preset and
+ * sigma (median of N runs after a warm-up) as a ratio to a memcpy of the frame measured in
+ * the same run, the error against `exact` at the same sigma, and OpenCV's GaussianBlur.
+ *
+ *   bench_blur [runs=7] [threads=2] [sigmas=2,8.5,16.7,50] [out.csv|-] [only=substring]
+ *
+ * Errors: max and mean absolute error over all channels of a test image with values in
+ * [0, 1] (smooth gradients + a per-pixel hash texture), and the max error of a centred
+ * impulse relative to its exact peak ("impulse"). */
+#include "core/effect.h"
+#include "libfx/fx.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#ifdef LIBFX_BENCH_OPENCV
+void bench_cv_set_threads(int n);
+void bench_cv_gaussian(const float *src, float *dst, int w, int h, int ksize);
+#endif
+
+static double now_ms(void)
+{
+    struct timespec t;
+    clock_gettime(CLOCK_MONOTONIC, &t);
+    return t.tv_sec * 1e3 + t.tv_nsec / 1e6;
+}
+
+static int cmp_d(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return x < y ? -1 : x > y;
+}
+
+static const int W = 1920, H = 1080;
+static int RUNS = 7;
+static FILE *g_csv;
+
+typedef struct algo {
+    const char *label;
+    const char *alg;
+    int passes;
+} algo;
+
+static double run_blur(fx_context *ctx, const float *src, float *dst, double sigma, const algo *a,
+                       int runs)
+{
+    const fx_effect_class *cls = fx_effect_find("gaussian_blur");
+    void *params = calloc(1, cls->params_size);
+    fx_params_set_defaults(cls, params);
+    const fx_param_def *d = fx_effect_find_param(cls, "sigma");
+    *(float *)((char *)params + d->offset) = (float)sigma;
+    d = fx_effect_find_param(cls, "algorithm");
+    for (int i = 0; i < d->info.enum_count; i++)
+        if (strcmp(d->info.enum_items[i], a->alg) == 0)
+            *(int *)((char *)params + d->offset) = i;
+    d = fx_effect_find_param(cls, "box_passes");
+    *(int *)((char *)params + d->offset) = a->passes;
+    fx_effect_run run;
+    memset(&run, 0, sizeof run);
+    run.ctx = ctx;
+    run.src = src;
+    run.dst = dst;
+    run.width = W;
+    run.height = H;
+    run.roi = (fx_rect){ 0, 0, W, H };
+    run.params = params;
+    run.quality = FX_QUALITY_FINAL;
+    double t[64];
+    runs = runs > 64 ? 64 : runs;
+    if (cls->process(&run) != FX_OK) { /* warm-up */
+        fprintf(stderr, "%s failed: %s\n", a->label, fx_context_error(ctx));
+        exit(1);
+    }
+    for (int i = 0; i < runs; i++) {
+        double t0 = now_ms();
+        cls->process(&run);
+        t[i] = now_ms() - t0;
+    }
+    free(params);
+    qsort(t, runs, sizeof(double), cmp_d);
+    return t[runs / 2];
+}
+
+static double memcpy_ms(const float *src, float *dst)
+{
+    size_t bytes = (size_t)W * H * 16;
+    double t[64];
+    int runs = RUNS > 64 ? 64 : RUNS;
+    memcpy(dst, src, bytes);
+    for (int i = 0; i < runs; i++) {
+        double t0 = now_ms();
+        memcpy(dst, src, bytes);
+        t[i] = now_ms() - t0;
+    }
+    qsort(t, runs, sizeof(double), cmp_d);
+    return t[runs / 2];
+}
+
+static void row(const char *what, double sigma, int threads, double ms, double floor_ms, double mean,
+                double max, double imp)
+{
+    char s[16] = "-", e1[16] = "-", e2[16] = "-", e3[16] = "-";
+    if (sigma > 0)
+        snprintf(s, sizeof s, "%g", sigma);
+    if (mean >= 0) {
+        snprintf(e1, sizeof e1, "%.2e", mean);
+        snprintf(e2, sizeof e2, "%.2e", max);
+        snprintf(e3, sizeof e3, "%.2e", imp);
+    }
+    printf("| %-34s | %5s | %d | %8.2f | %6.2fx | %9s | %9s | %9s |\n", what, s, threads, ms,
+           ms / floor_ms, e1, e2, e3);
+    fflush(stdout);
+    if (g_csv)
+        fprintf(g_csv, "%s,%s,%d,%.3f,%.3f,%s,%s,%s\n", what, s, threads, ms, ms / floor_ms,
+                mean >= 0 ? e1 : "", mean >= 0 ? e2 : "", mean >= 0 ? e3 : "");
+}
+
+int main(int argc, char **argv)
+{
+    int threads = 2;
+    double sigmas[8] = { 2.0, 8.5, 16.7, 50.0 };
+    int ns = 4;
+    if (argc > 1) RUNS = atoi(argv[1]) < 1 ? 1 : atoi(argv[1]);
+    if (argc > 2) threads = atoi(argv[2]) < 1 ? 1 : atoi(argv[2]);
+    if (argc > 3) {
+        ns = 0;
+        for (char *p = argv[3]; *p && ns < 8;) {
+            sigmas[ns++] = strtod(p, &p);
+            if (*p == ',') p++;
+            else break;
+        }
+    }
+    const char *only = argc > 5 ? argv[5] : NULL;
+    if (argc > 4 && strcmp(argv[4], "-") != 0) {
+        g_csv = fopen(argv[4], "w");
+        if (!g_csv) {
+            perror(argv[4]);
+            return 1;
+        }
+        fprintf(g_csv, "case,sigma,threads,median_ms,x_memcpy,mean_abs_err,max_abs_err,impulse_rel_err\n");
+    }
+    size_t n = (size_t)W * H * 4;
+    float *src = malloc(n * 4), *dst = malloc(n * 4), *ref = malloc(n * 4);
+    float *imp = calloc(n, 4), *impref = malloc(n * 4);
+    for (int y = 0; y < H; y++)
+        for (int x = 0; x < W; x++) {
+            float *p = src + ((size_t)y * W + x) * 4;
+            unsigned h = (unsigned)x * 73856093u ^ (unsigned)y * 19349663u;
+            h ^= h >> 13, h *= 0x5bd1e995u, h ^= h >> 15;
+            p[0] = 0.5f + 0.5f * sinf(x * 0.01f) * cosf(y * 0.013f);
+            p[1] = (float)y / H;
+            p[2] = (float)(h & 0xffff) / 65535.0f;
+            p[3] = 1.0f;
+        }
+    for (int c = 0; c < 4; c++)
+        imp[((size_t)(H / 2) * W + W / 2) * 4 + c] = 1.0f;
+    memset(dst, 0, n * 4), memset(ref, 0, n * 4), memset(impref, 0, n * 4);
+    fx_context *ctx = NULL;
+    fx_context_new(&ctx, threads);
+    printf("bench_blur %dx%d RGBA float, %d threads, median of %d runs\n\n", W, H, threads, RUNS);
+    printf("| %-34s | sigma | threads | ms (median) | x memcpy | mean abs err | max abs err | impulse err / peak |\n",
+           "case");
+    printf("|---|---|---|---|---|---|---|---|\n");
+    double floor_ms = memcpy_ms(src, dst);
+    row("memcpy (the bandwidth floor)", 0, threads, floor_ms, floor_ms, -1, -1, -1);
+    static const algo algos[] = {
+        { "box 3 (draft)", "box", 3 },   { "box 4", "box", 4 }, { "box 5", "box", 5 },
+        { "box 6", "box", 6 },           { "recursive (final)", "recursive", 3 },
+    };
+    const algo exact = { "exact (reference)", "exact", 3 };
+    for (int si = 0; si < ns; si++) {
+        double sg = sigmas[si];
+        run_blur(ctx, imp, impref, sg, &exact, 0);
+        double tref = run_blur(ctx, src, ref, sg, &exact, sg > 20 ? 1 : 3);
+        row(exact.label, sg, threads, tref, floor_ms, -1, -1, -1);
+        double peak = impref[((size_t)(H / 2) * W + W / 2) * 4];
+        for (size_t k = 0; k < sizeof algos / sizeof algos[0]; k++) {
+            if (only && !strstr(algos[k].label, only))
+                continue;
+            double ms = run_blur(ctx, src, dst, sg, &algos[k], RUNS);
+            double s = 0, m = 0;
+            for (size_t i = 0; i < n; i++) {
+                double d = fabs((double)dst[i] - ref[i]);
+                s += d;
+                m = d > m ? d : m;
+            }
+            run_blur(ctx, imp, dst, sg, &algos[k], 0);
+            double mi = 0;
+            for (size_t i = 0; i < n; i++) {
+                double d = fabs((double)dst[i] - impref[i]);
+                mi = d > mi ? d : mi;
+            }
+            row(algos[k].label, sg, threads, ms, floor_ms, s / n, m, mi / peak);
+        }
+    }
+#ifdef LIBFX_BENCH_OPENCV
+    bench_cv_set_threads(threads);
+    const int ks[] = { 11, 51, 101 };
+    for (int k = 0; k < (only && !strstr("opencv", only) ? 0 : 3); k++) {
+        double t[64];
+        int runs = RUNS > 64 ? 64 : RUNS;
+        bench_cv_gaussian(src, dst, W, H, ks[k]);
+        for (int i = 0; i < runs; i++) {
+            double t0 = now_ms();
+            bench_cv_gaussian(src, dst, W, H, ks[k]);
+            t[i] = now_ms() - t0;
+        }
+        qsort(t, runs, sizeof(double), cmp_d);
+        char label[64];
+        snprintf(label, sizeof label, "cv::GaussianBlur %dx%d (CV_32FC4)", ks[k], ks[k]);
+        row(label, 0, threads, t[runs / 2], floor_ms, -1, -1, -1);
+    }
+#endif
+    floor_ms = memcpy_ms(src, dst);
+    row("memcpy again (end of run)", 0, threads, floor_ms, floor_ms, -1, -1, -1);
+    fx_context_free(ctx);
+    if (g_csv)
+        fclose(g_csv);
+    free(src), free(dst), free(ref), free(imp), free(impref);
+    return 0;
+}
