@@ -87,6 +87,7 @@ _SIGNATURES = {
     "fx_frame_pass_channels": (c_int, [c_void_p, c_int]),
     "fx_frame_pass": (c_int, [c_void_p, c_char_p, P(P(c_float)), P(c_int)]),
     "fx_frame_set_camera": (c_int, [c_void_p, P(fx_camera)]),
+    "fx_frame_apply_sidecar": (c_int, [c_void_p, c_char_p]),
     "fx_frame_camera": (c_int, [c_void_p, P(fx_camera)]),
     "fx_frame_set_time": (None, [c_void_p, c_double, c_double]),
     "fx_frame_read_exr": (c_int, [c_void_p, c_char_p, P(fx_read_options), _PP]),
@@ -401,6 +402,11 @@ class Frame:
 
     def set_camera(self, cam):
         self._ctx.check(self._L.fx_frame_set_camera(self._ptr, ctypes.byref(cam)), "set camera")
+
+    def apply_sidecar(self, sidecar):
+        """Camera, lights and time from a scene sidecar dict (docs/recipes.md)."""
+        text = json.dumps(sidecar).encode("utf-8")
+        self._ctx.check(self._L.fx_frame_apply_sidecar(self._ptr, text), "apply the scene sidecar")
 
     def camera(self):
         cam = fx_camera()

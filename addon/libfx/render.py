@@ -35,8 +35,29 @@ def log(msg, err=False):
 
 # ---------------------------------------------------------------- camera
 
+def lights_list(scene, depsgraph):
+    """The scene's rendered lights for the sidecar: position, travel direction (-Z of
+    the light's matrix), colour, energy; effects find a light by name."""
+    out = []
+    for ob in scene.objects:
+        if ob.type != "LIGHT" or ob.hide_render:
+            continue
+        ev = ob.evaluated_get(depsgraph) if depsgraph is not None else ob
+        mw = ev.matrix_world
+        d = -mw.col[2].xyz
+        if d.length > 0:
+            d.normalize()
+        data = ev.data
+        light = {"name": ob.name, "type": data.type, "position": list(mw.translation),
+                 "direction": list(d), "color": list(data.color), "energy": float(data.energy)}
+        if data.type == "SUN":
+            light["angle"] = float(data.angle)
+        out.append(light)
+    return out
+
+
 def camera_dict(scene, depsgraph):
-    """The frame's camera as the camera sidecar JSON wants it (matrices as rows)."""
+    """The frame's scene sidecar: camera (matrices as rows), lights and time."""
     cam = scene.camera
     if cam is None:
         return None
@@ -54,6 +75,9 @@ def camera_dict(scene, depsgraph):
         "clip_start": float(getattr(data, "clip_start", 0.1)),
         "clip_end": float(getattr(data, "clip_end", 1000.0)),
         "orthographic": getattr(data, "type", "PERSP") == "ORTHO",
+        "lights": lights_list(scene, depsgraph),
+        "frame": scene.frame_current,
+        "fps": r.fps / (r.fps_base or 1.0),
     }
 
 
@@ -133,9 +157,7 @@ def process_frame(scene, frame, recipe_dict=None, passes_file=None, camera=None,
             stack = native.Stack(ctx, recipe_dict)
             fin = native.Frame.read(ctx, passes_file, stack)
             if camera is not None:
-                fin.set_camera(native.camera_struct(camera["world_to_camera"], camera["projection"],
-                                                    camera["clip_start"], camera["clip_end"],
-                                                    camera.get("orthographic", False)))
+                fin.apply_sidecar(camera)
             fin.set_time(frame, fps)
             fout = stack.run(fin)
             fout.copy_passes_from(fin)

@@ -127,6 +127,7 @@ static void test_round_trip(fx_context *ctx, const char *dir)
     CHECK_OK(ctx, fx_frame_set_camera(f, &cam));
     fx_frame_set_time(f, 42.5, 24.0);
     CHECK_OK(ctx, fx_frame_set_meta(f, "BlenderMultiChannel", "Blender V3.4.1"));
+    CHECK_OK(ctx, fx_frame_set_meta(f, "libfx:lights", "[{\"name\":\"Sun\",\"type\":\"SUN\"}]"));
     CHECK_OK(ctx, fx_frame_set_meta(f, "cryptomatte/CryptoObject/manifest", "{\"Cube\":\"3f800000\"}"));
 
     char path[600];
@@ -160,6 +161,8 @@ static void test_round_trip(fx_context *ctx, const char *dir)
         fx_frame_time(g, &fr, &fps);
         CHECK(fr == 42.5 && fps == 24.0);
         CHECK(tu_contains(fx_frame_meta(g, "BlenderMultiChannel"), "Blender V3.4.1"));
+        CHECK(tu_contains(fx_frame_meta(g, "libfx:lights"), "\"Sun\""));
+        CHECK(tu_contains(fx_frame_meta(g, "libfx:source"), ".exr"));
         CHECK(tu_contains(fx_frame_meta(g, "cryptomatte/CryptoObject/manifest"), "\"Cube\""));
         CHECK(tu_contains(fx_frame_meta(g, "cryptomatte/CryptoObject/layer"), "CryptoObject"));
         fx_frame_free(g);

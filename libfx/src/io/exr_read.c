@@ -247,6 +247,8 @@ static int keep_string_attr(const char *name)
     for (size_t i = 0; i < sizeof skip / sizeof skip[0]; i++)
         if (strcmp(name, skip[i]) == 0)
             return 0;
+    if (strcmp(name, "libfx:lights") == 0)
+        return 1; /* the scene's lights travel with the frame */
     return strncmp(name, "cryptomatte/", 12) != 0 && strncmp(name, "libfx:", 6) != 0;
 }
 
@@ -400,6 +402,9 @@ static fx_result read_frame(fx_context *ctx, fx_exr_file *f, const fx_read_optio
         memcpy(disp, f->parts[0].disp, sizeof disp);
         r = fx_frame_set_windows(rd.frame, rd.dw, disp);
     }
+    /* Messages about missing passes name the file (never written back: libfx:* is reserved). */
+    if (r == FX_OK)
+        r = fx_frame_set_meta(rd.frame, "libfx:source", f->path);
     for (int i = 0; i < np && r == FX_OK; i++) {
         fx_exr_plan_pass *pp = &plan[i];
         snprintf(what, sizeof what, "file '%s' pass %s", f->path, pp->name);

@@ -39,6 +39,10 @@ static int reserved_attr(const char *key)
     for (size_t i = 0; i < sizeof names / sizeof names[0]; i++)
         if (strcmp(key, names[i]) == 0)
             return 1;
+    /* libfx:* are written from the frame's own fields, except the scene's lights,
+     * which are metadata (fx_frame_apply_sidecar). */
+    if (strcmp(key, "libfx:lights") == 0)
+        return 0;
     return strncmp(key, "cryptomatte/", 12) == 0 || strncmp(key, "libfx:", 6) == 0;
 }
 
