@@ -4,6 +4,7 @@
 #include "testutil.h"
 
 #include "core/effect.h"
+#include "core/lights.h"
 #include "core/mask.h"
 #include "core/parallel.h"
 
@@ -409,6 +410,17 @@ static void test_sidecar(void)
     CHECK_FAIL(ctx, fx_frame_apply_sidecar_file(f, "/nonexistent/cam.json"), FX_ERR_IO, "/nonexistent/cam.json");
     fx_frame_time(f, &frame, &fps);
     CHECK(frame == 12);
+    /* lights by name, or the first sun */
+    fx_light light;
+    CHECK_OK(ctx, fx_frame_find_light(f, NULL, "effect 0 (god_rays)", &light));
+    CHECK(light.type == FX_LIGHT_SUN && strcmp(light.name, "Sun") == 0 && light.direction.z < -0.8f);
+    CHECK_FAIL(ctx, fx_frame_find_light(f, "Lamp", "effect 0 (god_rays)", &light), FX_ERR_BAD_PARAM,
+               "no light named 'Lamp' in the scene (lights: Sun)");
+    fx_frame *bare = NULL;
+    fx_frame_new(ctx, 1, 1, &bare);
+    CHECK_FAIL(ctx, fx_frame_find_light(bare, NULL, "effect 1 (vsm_shadows)", &light), FX_ERR_NO_CAMERA,
+               "effect 1 (vsm_shadows) needs the scene's lights");
+    fx_frame_free(bare);
     fx_frame_free(f);
     fx_context_free(ctx);
 }
