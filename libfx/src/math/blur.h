@@ -21,7 +21,8 @@
  * Layout: interleaved float pixels of 1..4 channels, rows top to bottom. The vertical
  * pass runs on strips of columns (the inner loop runs across a strip's lanes, so it
  * vectorises); the horizontal pass gathers blocks of rows into an x-major buffer and
- * runs the very same lane kernel. No transposes of the image.
+ * runs the very same lane kernel. Recursive has direct row-wise kernels (vertical: any
+ * channels; horizontal: 4 channels, 4 rows at once) giving the same bits. No transposes.
  */
 #ifndef LIBFX_MATH_BLUR_H
 #define LIBFX_MATH_BLUR_H
