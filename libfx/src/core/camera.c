@@ -78,22 +78,14 @@ fx_result fx_camera_load_file(fx_context *ctx, const char *path, fx_camera *out)
 {
     if (!path)
         return fx_fail(ctx, FX_ERR_INVALID_ARGUMENT, "fx_camera_load_file: path is NULL");
-    FILE *fp = fopen(path, "rb");
-    if (!fp)
-        return fx_fail(ctx, FX_ERR_IO, "cannot open camera file '%s': %s", path, strerror(errno));
-    char buf[65536];
-    size_t n = fread(buf, 1, sizeof buf - 1, fp);
-    int too_big = !feof(fp);
-    fclose(fp);
-    if (too_big)
-        return fx_fail(ctx, FX_ERR_BAD_RECIPE, "camera file '%s' is larger than 64 KiB", path);
-    buf[n] = '\0';
-    fx_result r = fx_camera_from_json(ctx, buf, out);
-    if (r) {
-        char msg[1024];
-        snprintf(msg, sizeof msg, "%s", fx_context_error(ctx));
-        fx_fail(ctx, r, "%s: %s", path, msg);
-    }
+    char *text = NULL;
+    fx_result r = fx_read_text_file(ctx, path, (size_t)4 << 20, "camera file", &text);
+    if (r)
+        return r;
+    r = fx_camera_from_json(ctx, text, out);
+    if (r)
+        fx_fail_prefix(ctx, r, path);
+    fx_mem_free(text);
     return r;
 }
 
@@ -186,30 +178,13 @@ fx_result fx_frame_apply_sidecar_file(fx_frame *f, const char *path)
 {
     if (!f || !path)
         return fx_fail(f ? f->ctx : NULL, FX_ERR_INVALID_ARGUMENT, "fx_frame_apply_sidecar_file: NULL argument");
-    FILE *fp = fopen(path, "rb");
-    if (!fp)
-        return fx_fail(f->ctx, FX_ERR_IO, "cannot open sidecar '%s': %s", path, strerror(errno));
-    size_t cap = (size_t)4 << 20;
-    char *buf = fx_mem_alloc(cap);
-    if (!buf) {
-        fclose(fp);
-        return fx_fail(f->ctx, FX_ERR_OUT_OF_MEMORY, "out of memory reading '%s'", path);
-    }
-    size_t n = fread(buf, 1, cap - 1, fp);
-    int too_big = !feof(fp);
-    fclose(fp);
-    fx_result r;
-    if (too_big) {
-        r = fx_fail(f->ctx, FX_ERR_BAD_RECIPE, "sidecar '%s' is larger than 4 MiB", path);
-    } else {
-        buf[n] = '\0';
-        r = fx_frame_apply_sidecar(f, buf);
-        if (r) {
-            char msg[1024];
-            snprintf(msg, sizeof msg, "%s", fx_context_error(f->ctx));
-            fx_fail(f->ctx, r, "%s: %s", path, msg);
-        }
-    }
-    fx_mem_free(buf);
+    char *text = NULL;
+    fx_result r = fx_read_text_file(f->ctx, path, (size_t)4 << 20, "sidecar", &text);
+    if (r)
+        return r;
+    r = fx_frame_apply_sidecar(f, text);
+    if (r)
+        fx_fail_prefix(f->ctx, r, path);
+    fx_mem_free(text);
     return r;
 }

@@ -106,6 +106,14 @@ fx_result fx_frame_new_like(const fx_frame *f, fx_frame **out);
  * Runs in parallel on ctx's pool. */
 size_t fx_sanitize_floats(fx_context *ctx, float *data, size_t count);
 
+/* ---- text files ---- */
+/* Reads a whole text file (NUL-terminated, freed with fx_mem_free); `what` names it in
+ * messages ("recipe", "sidecar"). Larger than max_bytes: FX_ERR_BAD_RECIPE. */
+fx_result fx_read_text_file(const fx_context *ctx, const char *path, size_t max_bytes, const char *what,
+                            char **out);
+/* Re-records the calling thread's last message as "<prefix>: <message>". */
+void fx_fail_prefix(const fx_context *ctx, fx_result code, const char *prefix);
+
 /* ---- stacks ---- */
 /* Union of the passes the enabled effects and their masks need (Combined always). */
 fx_pass_set fx_stack_pass_set(const fx_stack *s);

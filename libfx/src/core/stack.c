@@ -303,46 +303,14 @@ fx_result fx_stack_load_file(fx_stack *s, const char *path)
 {
     if (!s || !path)
         return fx_fail(s ? s->ctx : NULL, FX_ERR_INVALID_ARGUMENT, "fx_stack_load_file: NULL argument");
-    FILE *fp = fopen(path, "rb");
-    if (!fp)
-        return fx_fail(s->ctx, FX_ERR_IO, "cannot open recipe '%s': %s", path, strerror(errno));
-    char *buf = NULL;
-    size_t len = 0, cap = 0;
-    fx_result r = FX_OK;
-    for (;;) {
-        if (len + 4096 + 1 > cap) {
-            cap = cap ? cap * 2 : 8192;
-            if (cap > ((size_t)64 << 20)) {
-                r = fx_fail(s->ctx, FX_ERR_BAD_RECIPE, "recipe '%s' is larger than 64 MiB", path);
-                break;
-            }
-            char *nb = fx_mem_realloc(buf, cap);
-            if (!nb) {
-                r = fx_fail(s->ctx, FX_ERR_OUT_OF_MEMORY, "out of memory reading '%s'", path);
-                break;
-            }
-            buf = nb;
-        }
-        size_t n = fread(buf + len, 1, cap - len - 1, fp);
-        len += n;
-        if (n == 0) {
-            if (ferror(fp))
-                r = fx_fail(s->ctx, FX_ERR_IO, "cannot read recipe '%s'", path);
-            break;
-        }
-    }
-    fclose(fp);
-    if (!r) {
-        buf[len] = '\0';
-        r = fx_stack_load_json(s, buf);
-        if (r) {
-            /* Prefix the file name to the parser's message. */
-            char msg[1024];
-            snprintf(msg, sizeof msg, "%s", fx_context_error(s->ctx));
-            fx_fail(s->ctx, r, "%s: %s", path, msg);
-        }
-    }
-    fx_mem_free(buf);
+    char *text = NULL;
+    fx_result r = fx_read_text_file(s->ctx, path, (size_t)64 << 20, "recipe", &text);
+    if (r)
+        return r;
+    r = fx_stack_load_json(s, text);
+    if (r)
+        fx_fail_prefix(s->ctx, r, path);
+    fx_mem_free(text);
     return r;
 }
 
