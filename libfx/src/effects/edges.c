@@ -1,0 +1,205 @@
+/* edges: outlines from colour luminance, relative depth jumps, normal angles and object /
+ * material ID boundaries (the seed's Laplace M4/M8, Sobel, sparse 7x7), drawn over the
+ * image or output as a matte. The operators live in math/edge_ops.c (shared with
+ * cel_shading and the cel/edge mirror). docs/effects/edges.md. */
+#include "core/effect.h"
+#include "core/parallel.h"
+#include "math/edge_ops.h"
+
+#include <float.h>
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+typedef struct edges_params {
+    int op;
+    int luminance, depth, normal, object_id, material_id, id_source;
+    float luminance_threshold, depth_threshold, normal_threshold, id_threshold;
+    float softness, line_width;
+    float line_color[4];
+    int output;
+    float opacity;
+} edges_params;
+
+enum { OUT_OVER = 0, OUT_MATTE };
+
+static const char *const op_items[] = FX_EDGE_OPERATOR_ITEMS;
+static const char *const id_items[] = { "cryptomatte", "index" };
+static const char *const out_items[] = { "over", "matte" };
+static const float black4[4] = { 0, 0, 0, 1 };
+
+static const fx_param_def edges_param_defs[] = {
+    FX_P_ENUM(edges_params, op, "operator", FX_EDGE_SOBEL, op_items,
+              "Kernel for luminance and depth: sobel (magnitude), sobel_x, sobel_y, laplace4 (M4), "
+              "laplace8 (M8), sparse7 (8 taps 3 px away: thick depth outlines). Unit-step normalised"),
+    FX_P_BOOL(edges_params, luminance, "luminance", 1, "Edges of the colour's luminance (sRGB-encoded)"),
+    FX_P_FLOAT(edges_params, luminance_threshold, "luminance_threshold", 0.15, 0.0, 1000.0, 0.0, 1.0,
+               "", "Encoded-luminance step that makes an edge"),
+    FX_P_BOOL(edges_params, depth, "depth", 0, "Edges of the Depth pass, as relative depth jumps"),
+    FX_P_FLOAT(edges_params, depth_threshold, "depth_threshold", 0.05, 0.0, 1000.0, 0.0, 1.0, "",
+               "Relative depth jump ln(d1/d0) that makes an edge (0.05: 5%; scale-free)"),
+    FX_P_BOOL(edges_params, normal, "normal", 0, "Edges where the Normal pass turns"),
+    FX_P_FLOAT(edges_params, normal_threshold, "normal_threshold", 30.0, 0.0, 180.0, 0.0, 90.0, "",
+               "Angle in degrees between neighbouring normals that makes an edge"),
+    FX_P_BOOL(edges_params, object_id, "object_id", 0, "Edges between objects"),
+    FX_P_BOOL(edges_params, material_id, "material_id", 0, "Edges between materials"),
+    FX_P_ENUM(edges_params, id_source, "id_source", FX_EDGE_ID_CRYPTOMATTE, id_items,
+              "IDs from cryptomatte (both engines, coverage-aware at anti-aliased edges) or from the "
+              "index passes IndexOB/IndexMA (Cycles only, hard)"),
+    FX_P_FLOAT(edges_params, id_threshold, "id_threshold", 0.25, 0.0, 1.0, 0.0, 1.0, "factor",
+               "Coverage difference between neighbours that makes an ID edge"),
+    FX_P_FLOAT(edges_params, softness, "softness", 0.5, 0.0, 100.0, 0.0, 2.0, "",
+               "Ramp from no line to full line, as a fraction of each threshold (0: hard)"),
+    FX_P_FLOAT(edges_params, line_width, "line_width", 2.0, 0.0, 64.0, 1.0, 12.0, "pixels",
+               "Line width; 2 is the operators' own width, wider lines grow by a disc"),
+    FX_P_FLOATS(edges_params, line_color, "line_color", 4, black4, -65504.0, 65504.0, "color",
+                "Line colour (RGBA) for output over"),
+    FX_P_ENUM(edges_params, output, "output", OUT_OVER, out_items,
+              "over: lines drawn over the image; matte: the edge matte as gray (alpha 1)"),
+    FX_P_FLOAT(edges_params, opacity, "opacity", 1.0, 0.0, 1.0, 0.0, 1.0, "factor",
+               "Strength of the effect; 0 is the identity"),
+};
+
+static void settings_of(const edges_params *p, fx_edge_settings *s)
+{
+    memset(s, 0, sizeof *s);
+    s->op = (fx_edge_operator)p->op;
+    s->use_luminance = p->luminance;
+    s->use_depth = p->depth;
+    s->use_normal = p->normal;
+    s->use_object = p->object_id;
+    s->use_material = p->material_id;
+    s->id_source = p->id_source;
+    s->luminance_threshold = p->luminance_threshold;
+    s->depth_threshold = p->depth_threshold;
+    s->normal_threshold = p->normal_threshold;
+    s->id_threshold = p->id_threshold;
+    s->softness = p->softness;
+    s->line_width = p->line_width;
+}
+
+static fx_pass_set edges_passes(const void *params)
+{
+    fx_edge_settings s;
+    settings_of(params, &s);
+    return ((const edges_params *)params)->opacity > 0.0f ? fx_edge_passes(&s) : 0;
+}
+
+static int edges_halo(const void *params, int width, int height)
+{
+    (void)width;
+    (void)height;
+    fx_edge_settings s;
+    settings_of(params, &s);
+    return fx_edge_halo(&s);
+}
+
+/* NaN -> 0, +-Inf and overflow -> +-FLT_MAX: the effect never emits non-finite values. */
+static inline float finite_or(float v)
+{
+    v = v == v ? v : 0.0f;
+    return v > FLT_MAX ? FLT_MAX : v < -FLT_MAX ? -FLT_MAX : v;
+}
+
+typedef struct draw_job {
+    const fx_effect_run *run;
+    const edges_params *p;
+    const float *matte;
+} draw_job;
+
+static void draw_rows(void *user, int begin, int end)
+{
+    const draw_job *j = user;
+    const fx_effect_run *run = j->run;
+    const fx_rect *roi = &run->roi;
+    const float op = j->p->opacity;
+    const float *lc = j->p->line_color;
+    for (int y = roi->y0 + begin; y < roi->y0 + end; y++) {
+        const size_t row = (size_t)y * run->width;
+        for (int x = roi->x0; x < roi->x1; x++) {
+            const float *s = run->src + (row + x) * 4;
+            float *d = run->dst + (row + x) * 4;
+            float e = j->matte[row + x];
+            if (j->p->output == OUT_MATTE) {
+                float t[4] = { e, e, e, 1.0f };
+                for (int k = 0; k < 4; k++)
+                    d[k] = finite_or(s[k] + op * (t[k] - s[k]));
+            } else {
+                float a = e * op;
+                for (int k = 0; k < 4; k++)
+                    d[k] = finite_or(s[k] + a * (lc[k] - s[k]));
+            }
+        }
+    }
+}
+
+static fx_result edges_process(const fx_effect_run *run)
+{
+    const edges_params *p = run->params;
+    const fx_rect *roi = &run->roi;
+    if (roi->x1 <= roi->x0 || roi->y1 <= roi->y0)
+        return FX_OK;
+    if (!(p->opacity > 0.0f) ||
+        !(p->luminance || p->depth || p->normal || p->object_id || p->material_id)) {
+        for (int y = roi->y0; y < roi->y1; y++)
+            memcpy(run->dst + ((size_t)y * run->width + roi->x0) * 4,
+                   run->src + ((size_t)y * run->width + roi->x0) * 4,
+                   (size_t)(roi->x1 - roi->x0) * 4 * sizeof(float));
+        return FX_OK;
+    }
+    char where[96];
+    snprintf(where, sizeof where, "effect %d (edges)", run->index);
+    fx_edge_settings s;
+    settings_of(p, &s);
+    fx_edge_sources src;
+    fx_result r = fx_edge_sources_from_frame(run->frame, run->src, &s, &src, where);
+    if (r)
+        return r;
+    fx_result dr = FX_OK;
+    float *strengths = fx_effect_debug_pass(run, "strengths", 4, &dr);
+    if (dr)
+        return dr;
+    float *matte = fx_effect_debug_pass(run, "matte", 1, &dr);
+    if (dr)
+        return dr;
+    float *own = NULL;
+    if (!matte) {
+        own = fx_mem_alloc((size_t)run->width * run->height * sizeof(float));
+        if (!own)
+            return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the matte", where);
+        matte = own;
+    }
+    r = fx_edge_matte(run->ctx, &src, &s, roi, matte, strengths, where);
+    if (!r) {
+        draw_job j = { run, p, matte };
+        int rows = roi->y1 - roi->y0;
+        fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), draw_rows, &j);
+    }
+    fx_mem_free(own);
+    return r;
+}
+
+static fx_result edges_validate(const void *params, char *err, size_t err_size)
+{
+    const edges_params *p = params;
+    for (int i = 0; i < 4; i++)
+        if (!isfinite(p->line_color[i])) {
+            snprintf(err, err_size, "line_color[%d] is not finite", i);
+            return FX_ERR_BAD_PARAM;
+        }
+    return FX_OK;
+}
+
+const fx_effect_class fx_effect_edges = {
+    .name = "edges",
+    .doc = "Outlines from luminance, relative depth, normals and object/material IDs (Sobel, Laplace, sparse 7x7)",
+    .params_size = sizeof(edges_params),
+    .params = edges_param_defs,
+    .param_count = FX_COUNT_OF(edges_param_defs),
+    .presets = { NULL, NULL, NULL, NULL },
+    .passes = edges_passes,
+    .needs_camera = NULL,
+    .halo = edges_halo,
+    .validate = edges_validate,
+    .process = edges_process,
+};

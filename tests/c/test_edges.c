@@ -1,0 +1,372 @@
+/* edges (and math/edge_ops) through the public API: exact kernel responses on steps and
+ * impulses, scale-free depth, normals at AA edges, coverage-aware Cryptomatte IDs, index IDs,
+ * identity, masks, extremes, thread invariance. */
+#include "fx_effect_test.h"
+
+#include <float.h>
+#include <math.h>
+
+/* Runs a one-effect stack from a recipe JSON on f; returns a copy of `pass` of the output
+ * (NULL: Combined). */
+static float *run_pass(fx_context *ctx, const fx_frame *f, const char *recipe, const char *pass)
+{
+    fx_stack *s = NULL;
+    float *copy = NULL;
+    fx_frame *out = NULL;
+    if (fx_stack_new(ctx, &s) != FX_OK || fx_stack_load_json(s, recipe) != FX_OK) {
+        fprintf(stderr, "recipe: %s\n", fx_context_error(ctx));
+        goto done;
+    }
+    fx_stack_set_debug_outputs(s, pass != NULL);
+    if (fx_stack_run(s, f, &out) != FX_OK) {
+        fprintf(stderr, "run: %s\n", fx_context_error(ctx));
+        goto done;
+    }
+    float *d = NULL;
+    int c = 0;
+    if (fx_frame_pass(out, pass ? pass : "Combined", &d, &c) != FX_OK) {
+        fprintf(stderr, "pass %s: %s\n", pass, fx_context_error(ctx));
+        goto done;
+    }
+    size_t n = (size_t)fx_frame_width(out) * fx_frame_height(out) * c;
+    copy = malloc(n * sizeof(float));
+    memcpy(copy, d, n * sizeof(float));
+done:
+    fx_frame_free(out);
+    fx_stack_free(s);
+    return copy;
+}
+
+static char *recipe(const char *params, const char *mask)
+{
+    static char buf[2048];
+    snprintf(buf, sizeof buf, "{\"version\":1,\"effects\":[{\"effect\":\"edges\",\"params\":{%s}%s%s}]}",
+             params, mask ? ",\"mask\":" : "", mask ? mask : "");
+    return buf;
+}
+
+static fx_frame *step_frame(fx_context *ctx, int w, int h, int step_x, float lo, float hi)
+{
+    float *px = malloc((size_t)w * h * 4 * sizeof(float));
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++) {
+            float v = x < step_x ? lo : hi;
+            float *p = px + ((size_t)y * w + x) * 4;
+            p[0] = p[1] = p[2] = v;
+            p[3] = 1;
+        }
+    fx_frame *f = et_frame(ctx, w, h, px);
+    free(px);
+    return f;
+}
+
+static void test_kernels(fx_context *ctx)
+{
+    const int w = 10, h = 6;
+    fx_frame *f = step_frame(ctx, w, h, 5, 0.0f, 1.0f); /* step between columns 4 and 5 */
+    struct { const char *op; int x0, x1; } cases[] = {
+        { "sobel", 4, 5 }, { "sobel_x", 4, 5 }, { "laplace4", 4, 5 }, { "laplace8", 4, 5 }, { "sparse7", 2, 7 },
+    };
+    for (int c = 0; c < 5; c++) {
+        char p[256];
+        snprintf(p, sizeof p, "\"operator\":\"%s\"", cases[c].op);
+        float *st = run_pass(ctx, f, recipe(p, NULL), "fx0_edges_strengths");
+        int ok = st != NULL;
+        for (int y = 0; ok && y < h; y++)
+            for (int x = 0; x < w; x++) {
+                float want = x >= cases[c].x0 && x <= cases[c].x1 ? 1.0f : 0.0f;
+                if (fabsf(st[((size_t)y * w + x) * 4] - want) > 1e-6f) {
+                    fprintf(stderr, "%s (%d,%d): %g want %g\n", cases[c].op, x, y, st[((size_t)y * w + x) * 4], want);
+                    ok = 0;
+                    break;
+                }
+            }
+        CHECK(ok);
+        free(st);
+    }
+    /* sobel_y sees nothing on a vertical step */
+    float *st = run_pass(ctx, f, recipe("\"operator\":\"sobel_y\"", NULL), "fx0_edges_strengths");
+    int zero = st != NULL;
+    for (int i = 0; st && i < w * h; i++)
+        zero &= st[4 * i] == 0.0f;
+    CHECK(zero);
+    free(st);
+    /* matte: threshold 0.5, hard */
+    float *m = run_pass(ctx, f, recipe("\"output\":\"matte\",\"luminance_threshold\":0.5,\"softness\":0", NULL), NULL);
+    int ok = m != NULL;
+    for (int y = 0; ok && y < h; y++)
+        for (int x = 0; x < w; x++) {
+            float want = (x == 4 || x == 5) ? 1.0f : 0.0f;
+            ok &= m[((size_t)y * w + x) * 4] == want && m[((size_t)y * w + x) * 4 + 3] == 1.0f;
+        }
+    CHECK(ok);
+    free(m);
+    /* over with red lines, width 4 (disc radius 1: a 3x3 square) -> columns 3..6 */
+    m = run_pass(ctx, f, recipe("\"luminance_threshold\":0.5,\"softness\":0,\"line_width\":4,\"line_color\":[1,0,0,1]", NULL), NULL);
+    ok = m != NULL;
+    for (int y = 0; ok && y < h; y++)
+        for (int x = 0; x < w; x++) {
+            const float *o = m + ((size_t)y * w + x) * 4;
+            int line = x >= 3 && x <= 6;
+            float base = x < 5 ? 0.0f : 1.0f;
+            ok &= line ? (o[0] == 1 && o[1] == 0 && o[2] == 0) : (o[0] == base && o[1] == base);
+        }
+    CHECK(ok);
+    free(m);
+    fx_frame_free(f);
+
+    /* impulse: Sobel at the diagonal neighbour is sqrt(2)/4 */
+    float px[9 * 7 * 4] = { 0 };
+    px[(3 * 9 + 4) * 4 + 0] = px[(3 * 9 + 4) * 4 + 1] = px[(3 * 9 + 4) * 4 + 2] = 1.0f;
+    f = et_frame(ctx, 9, 7, px);
+    st = run_pass(ctx, f, recipe("\"operator\":\"sobel\"", NULL), "fx0_edges_strengths");
+    CHECK(st && fabsf(st[(4 * 9 + 5) * 4] - sqrtf(2.0f) / 4) < 1e-6f);
+    CHECK(st && fabsf(st[(3 * 9 + 5) * 4] - 0.5f) < 1e-6f); /* gx = 2 */
+    CHECK(st && st[(3 * 9 + 4) * 4] == 0.0f);                /* centre: symmetric */
+    free(st);
+    st = run_pass(ctx, f, recipe("\"operator\":\"laplace4\"", NULL), "fx0_edges_strengths");
+    CHECK(st && fabsf(st[(3 * 9 + 4) * 4] - 4.0f) < 1e-6f && fabsf(st[(3 * 9 + 5) * 4] - 1.0f) < 1e-6f && st[(4 * 9 + 5) * 4] == 0.0f);
+    free(st);
+    st = run_pass(ctx, f, recipe("\"operator\":\"laplace8\"", NULL), "fx0_edges_strengths");
+    CHECK(st && fabsf(st[(3 * 9 + 4) * 4] - 8.0f / 3) < 1e-6f && fabsf(st[(4 * 9 + 5) * 4] - 1.0f / 3) < 1e-6f);
+    free(st);
+    fx_frame_free(f);
+}
+
+static fx_frame *depth_frame(fx_context *ctx, int w, int h, float near, float far)
+{
+    fx_frame *f = tu_pattern_frame(ctx, w, h, 3);
+    float *d = malloc((size_t)w * h * sizeof(float));
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++)
+            d[y * w + x] = x < w / 2 ? near : far;
+    fx_frame_add_pass(f, "Depth", 1, d);
+    free(d);
+    return f;
+}
+
+static void test_depth_normals(fx_context *ctx)
+{
+    const char *p = "\"luminance\":false,\"depth\":true,\"operator\":\"sobel\"";
+    fx_frame *a = depth_frame(ctx, 8, 4, 2.0f, 4.0f), *b = depth_frame(ctx, 8, 4, 20.0f, 40.0f);
+    float *sa = run_pass(ctx, a, recipe(p, NULL), "fx0_edges_strengths");
+    float *sb = run_pass(ctx, b, recipe(p, NULL), "fx0_edges_strengths");
+    CHECK(sa && sb && fabsf(sa[(1 * 8 + 3) * 4 + 1] - logf(2.0f)) < 1e-5f);
+    CHECK(sa && sb && fabsf(sa[(1 * 8 + 3) * 4 + 1] - sb[(1 * 8 + 3) * 4 + 1]) < 1e-5f); /* scale-free */
+    free(sa);
+    free(sb);
+    fx_frame_free(a);
+    fx_frame_free(b);
+    /* background: Cycles 1e10 and Eevee 65504 read the same */
+    a = depth_frame(ctx, 8, 4, 5.0f, 1e10f);
+    b = depth_frame(ctx, 8, 4, 5.0f, 65504.0f);
+    sa = run_pass(ctx, a, recipe(p, NULL), "fx0_edges_strengths");
+    sb = run_pass(ctx, b, recipe(p, NULL), "fx0_edges_strengths");
+    CHECK(sa && sb && memcmp(sa, sb, 8 * 4 * 4 * sizeof(float)) == 0 && sa[(1 * 8 + 3) * 4 + 1] > 5.0f);
+    free(sa);
+    free(sb);
+    fx_frame_free(a);
+    fx_frame_free(b);
+    /* missing pass: a clear error */
+    fx_frame *f = tu_pattern_frame(ctx, 4, 4, 1);
+    fx_stack *s = NULL;
+    fx_stack_new(ctx, &s);
+    fx_stack_load_json(s, recipe(p, NULL));
+    fx_frame *out = NULL;
+    CHECK_FAIL(ctx, fx_stack_run(s, f, &out), FX_ERR_MISSING_PASS, "Depth");
+    fx_stack_free(s);
+
+    /* normals: (0,0,1) | (1,0,0) at 90 degrees; half-length (AA) and zero (background) */
+    float n[8 * 4 * 3] = { 0 };
+    for (int y = 0; y < 4; y++)
+        for (int x = 0; x < 8; x++) {
+            float *v = n + (y * 8 + x) * 3;
+            if (x < 3)
+                v[2] = 1.0f;
+            else if (x == 3)
+                v[2] = 0.5f; /* anti-aliased: shorter, same direction */
+            else if (x < 6)
+                v[0] = 1.0f;
+            /* x >= 6: background, zero */
+        }
+    fx_frame_add_pass(f, "Normal", 3, NULL);
+    fx_frame *g = NULL;
+    fx_frame_new(ctx, 8, 4, &g);
+    float *rgba = calloc(8 * 4 * 4, sizeof(float));
+    fx_frame_add_pass(g, "Combined", 4, rgba);
+    fx_frame_add_pass(g, "Normal", 3, n);
+    float *st = run_pass(ctx, g, recipe("\"luminance\":false,\"normal\":true", NULL), "fx0_edges_strengths");
+    CHECK(st && st[(1 * 8 + 1) * 4 + 2] == 0.0f);                       /* flat */
+    CHECK(st && st[(1 * 8 + 2) * 4 + 2] == 0.0f);                       /* next to the AA pixel */
+    CHECK(st && fabsf(st[(1 * 8 + 3) * 4 + 2] - 90.0f) < 1e-3f);        /* the turn */
+    CHECK(st && fabsf(st[(1 * 8 + 4) * 4 + 2] - 90.0f) < 1e-3f);
+    CHECK(st && st[(1 * 8 + 7) * 4 + 2] == 0.0f);                       /* background inside */
+    CHECK(st && tu_all_finite(st, 8 * 4 * 4));
+    free(st);
+    free(rgba);
+    fx_frame_free(g);
+    fx_frame_free(f);
+}
+
+static void test_ids(fx_context *ctx)
+{
+    /* CryptoObject00: ids A | half A half B | B; coverage-aware differences */
+    const int w = 7, h = 3;
+    const float A = 1.5f, B = -2.25f;
+    float c[7 * 3 * 4] = { 0 }, idx[7 * 3];
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++) {
+            float *p = c + (y * w + x) * 4;
+            if (x < 3) {
+                p[0] = A; p[1] = 1.0f;
+            } else if (x == 3) {
+                p[0] = A; p[1] = 0.5f; p[2] = B; p[3] = 0.5f;
+            } else {
+                p[0] = B; p[1] = 1.0f;
+            }
+            idx[y * w + x] = x < 4 ? 1.0f : 2.0f;
+        }
+    fx_frame *f = tu_pattern_frame(ctx, w, h, 2);
+    fx_frame_add_pass(f, "CryptoObject00", 4, c);
+    fx_frame_add_pass(f, "IndexOB", 1, idx);
+    float *st = run_pass(ctx, f, recipe("\"luminance\":false,\"object_id\":true", NULL), "fx0_edges_strengths");
+    CHECK(st && st[(1 * w + 1) * 4 + 3] == 0.0f);
+    CHECK(st && fabsf(st[(1 * w + 2) * 4 + 3] - 0.5f) < 1e-6f);
+    CHECK(st && fabsf(st[(1 * w + 3) * 4 + 3] - 0.5f) < 1e-6f);
+    CHECK(st && fabsf(st[(1 * w + 4) * 4 + 3] - 0.5f) < 1e-6f);
+    CHECK(st && st[(1 * w + 5) * 4 + 3] == 0.0f);
+    free(st);
+    st = run_pass(ctx, f, recipe("\"luminance\":false,\"object_id\":true,\"id_source\":\"index\"", NULL),
+                  "fx0_edges_strengths");
+    CHECK(st && st[(1 * w + 2) * 4 + 3] == 0.0f && st[(1 * w + 3) * 4 + 3] == 1.0f &&
+          st[(1 * w + 4) * 4 + 3] == 1.0f && st[(1 * w + 5) * 4 + 3] == 0.0f);
+    free(st);
+    /* an uncovered pixel is background, distinct from any object, equal to another uncovered one */
+    memset(c, 0, sizeof c);
+    for (int y = 0; y < h; y++) {
+        c[(y * w + 6) * 4] = A;
+        c[(y * w + 6) * 4 + 1] = 1.0f;
+    }
+    fx_frame_add_pass(f, "CryptoObject00", 4, c);
+    st = run_pass(ctx, f, recipe("\"luminance\":false,\"object_id\":true", NULL), "fx0_edges_strengths");
+    CHECK(st && st[(1 * w + 2) * 4 + 3] == 0.0f && st[(1 * w + 5) * 4 + 3] == 1.0f);
+    free(st);
+    fx_frame_free(f);
+}
+
+static void test_properties(fx_context *c1, fx_context *c2)
+{
+    const int w = 97, h = 61;
+    fx_frame *f = tu_pattern_frame(c1, w, h, 11);
+    float *d = malloc((size_t)w * h * sizeof(float)), *n = malloc((size_t)w * h * 3 * sizeof(float));
+    for (int i = 0; i < w * h; i++) {
+        d[i] = 1.0f + (float)((i * 7919) % 97) * 0.05f;
+        n[3 * i] = sinf((float)i * 0.01f);
+        n[3 * i + 1] = cosf((float)i * 0.013f);
+        n[3 * i + 2] = 0.3f;
+    }
+    fx_frame_add_pass(f, "Depth", 1, d);
+    fx_frame_add_pass(f, "Normal", 3, n);
+    const float *src = et_combined(f);
+    size_t np = (size_t)w * h * 4;
+    const char *all = "\"depth\":true,\"normal\":true,\"line_width\":5.5,\"line_color\":[0.2,0.1,0,1]";
+    /* identity at zero opacity */
+    char p[512];
+    snprintf(p, sizeof p, "%s,\"opacity\":0", all);
+    float *o = run_pass(c1, f, recipe(p, NULL), NULL);
+    CHECK(o && memcmp(o, src, np * sizeof(float)) == 0);
+    free(o);
+    /* threads */
+    float *a = run_pass(c1, f, recipe(all, NULL), NULL), *b = run_pass(c2, f, recipe(all, NULL), NULL);
+    CHECK(a && b && memcmp(a, b, np * sizeof(float)) == 0 && memcmp(a, src, np * sizeof(float)) != 0);
+    /* mask: outside bit-exact, inside equal to the unmasked run (the halo reads outside) */
+    float *m = run_pass(c1, f, recipe(all, "{\"rect\":[10,7,30,20]}"), NULL);
+    CHECK(m && et_outside_equal(m, src, w, h, 10, 7, 30, 20));
+    int inside = m && a;
+    for (int y = 7; inside && y < 27; y++)
+        inside &= memcmp(m + ((size_t)y * w + 10) * 4, a + ((size_t)y * w + 10) * 4, 30 * 4 * sizeof(float)) == 0;
+    CHECK(inside);
+    free(a);
+    free(b);
+    free(m);
+    free(d);
+    free(n);
+    fx_frame_free(f);
+}
+
+static void test_extremes(fx_context *ctx)
+{
+    /* 1x1, any operator, any width */
+    const float one[4] = { 0.5f, 0.2f, 0.1f, 1 };
+    fx_frame *f = et_frame(ctx, 1, 1, one);
+    const char *ops[] = { "sobel", "sobel_x", "sobel_y", "laplace4", "laplace8", "sparse7" };
+    for (int k = 0; k < 6; k++) {
+        char p[256];
+        snprintf(p, sizeof p, "\"operator\":\"%s\",\"line_width\":64,\"luminance_threshold\":0", ops[k]);
+        float *o = run_pass(ctx, f, recipe(p, NULL), NULL);
+        CHECK(o && memcmp(o, one, sizeof one) == 0); /* no neighbours, no edge */
+        free(o);
+    }
+    fx_frame_free(f);
+    /* constant image, threshold 0: nothing drawn */
+    float *px = malloc(16 * 16 * 4 * sizeof(float));
+    for (int i = 0; i < 16 * 16 * 4; i++)
+        px[i] = 0.3337f;
+    f = et_frame(ctx, 16, 16, px);
+    float *o = run_pass(ctx, f, recipe("\"luminance_threshold\":0,\"softness\":0,\"line_color\":[1,0,0,1]", NULL), NULL);
+    CHECK(o && memcmp(o, px, 16 * 16 * 4 * sizeof(float)) == 0);
+    free(o);
+    fx_frame_free(f);
+    /* NaN / Inf / 1e38 / denormals in colour and depth: finite */
+    const float bad[] = { NAN, INFINITY, -INFINITY, 1e38f, -1e38f, 1e-40f, 0.0f, 3.4e38f };
+    for (int i = 0; i < 16 * 16; i++)
+        for (int k = 0; k < 4; k++)
+            px[i * 4 + k] = bad[(i * 3 + k) % 8];
+    f = et_frame(ctx, 16, 16, px);
+    float dep[256], nor[256 * 3];
+    for (int i = 0; i < 256; i++) {
+        dep[i] = bad[i % 8];
+        for (int k = 0; k < 3; k++)
+            nor[i * 3 + k] = bad[(i + k) % 8];
+    }
+    fx_frame_add_pass(f, "Depth", 1, dep);
+    fx_frame_add_pass(f, "Normal", 3, nor);
+    const char *ps[] = { "\"depth\":true,\"normal\":true", "\"operator\":\"laplace8\",\"depth\":true,\"output\":\"matte\"",
+                         "\"operator\":\"sparse7\",\"depth\":true,\"line_width\":9" };
+    for (int k = 0; k < 3; k++) {
+        float *st = run_pass(ctx, f, recipe(ps[k], NULL), "fx0_edges_strengths");
+        CHECK(st && tu_all_finite(st, 256 * 4));
+        free(st);
+        fx_frame *out = NULL;
+        fx_stack *s = NULL;
+        fx_stack_new(ctx, &s);
+        fx_stack_load_json(s, recipe(ps[k], NULL));
+        int before = fx_context_warning_count(ctx);
+        CHECK_OK(ctx, fx_stack_run(s, f, &out));
+        /* the effect itself produced nothing non-finite (the stack would warn) */
+        int warned = 0;
+        for (int i = before; i < fx_context_warning_count(ctx); i++)
+            warned |= tu_contains(fx_context_warning(ctx, i), "non-finite");
+        CHECK(!warned);
+        CHECK(out && tu_all_finite(et_combined(out), 256 * 4) == 1);
+        fx_frame_free(out);
+        fx_stack_free(s);
+    }
+    free(px);
+    fx_frame_free(f);
+}
+
+int main(void)
+{
+    fx_context *c1 = NULL, *c2 = NULL;
+    fx_context_new(&c1, 1);
+    fx_context_new(&c2, 2);
+    test_kernels(c1);
+    test_depth_normals(c1);
+    test_ids(c1);
+    test_properties(c1, c2);
+    test_extremes(c1);
+    fx_context_free(c1);
+    fx_context_free(c2);
+    return tu_finish("test_edges");
+}
