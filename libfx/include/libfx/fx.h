@@ -263,6 +263,23 @@ FX_API fx_result fx_stack_timings_json(const fx_stack *s, char **out_json);
 /* Copies every pass of src that dst does not have (to keep input passes in an output). */
 FX_API fx_result fx_frame_copy_passes(fx_frame *dst, const fx_frame *src);
 
+/* ---- Auxiliary views (issue 7: shadows and rain) --------------------------
+ * Extra depth renders of the scene from another viewpoint, each an EXR with a Depth
+ * pass (planar depth along the view's -Z) plus its camera: "light:<light name>" (the
+ * light's shadow view: orthographic for a sun, perspective for a spot) and "rain_map"
+ * (a top-down orthographic view over the rain area). The scene sidecar lists them as
+ * "aux_views": [{"name": "light:Sun", "path": "/abs/light.exr", "world_to_camera": [...],
+ * "projection": [...], "clip_start": f, "clip_end": f, "orthographic": bool}]; they are
+ * kept as the frame's "libfx/aux_views" metadata (written to and read from EXR headers)
+ * and effects load them when they run. */
+/* Adds (or replaces, by name) one aux view of the frame. */
+FX_API fx_result fx_frame_set_aux_view(fx_frame *f, const char *name, const char *exr_path,
+                                       const fx_camera *camera);
+/* The aux views the enabled effects need: {"aux_views": [{"name": "light:Sun", "kind":
+ * "light", "light": "Sun"}, {"name": "rain_map", "kind": "rain_map"}]}. A light name ""
+ * ("light:") means the scene's first sun. Renderers make only these. */
+FX_API fx_result fx_stack_required_aux_views(const fx_stack *s, char **out_json);
+
 #ifdef __cplusplus
 }
 #endif

@@ -1,5 +1,6 @@
 /* Camera sidecar JSON: the matrices Blender's EXRs lack, written by the add-on. */
 #include "core/internal.h"
+#include "core/aux_view.h"
 
 #include <cjson/cJSON.h>
 #include <errno.h>
@@ -34,7 +35,8 @@ static int read_matrix(const cJSON *v, float out[16])
 }
 
 static const char *const sidecar_keys[] = {"world_to_camera", "projection", "clip_start", "clip_end",
-                                            "orthographic", "lights", "frame", "fps", "scene", "camera"};
+                                            "orthographic", "lights", "frame", "fps", "scene", "camera",
+                                            "aux_views"};
 
 fx_result fx_camera_from_json(fx_context *ctx, const char *json, fx_camera *out)
 {
@@ -142,7 +144,7 @@ fx_result fx_frame_apply_sidecar(fx_frame *f, const char *json)
         if (!known) {
             r = fx_fail(ctx, FX_ERR_BAD_RECIPE,
                         "sidecar: unknown key \"%s\" (known: world_to_camera, projection, clip_start, "
-                        "clip_end, orthographic, lights, frame, fps, scene, camera)",
+                        "clip_end, orthographic, lights, frame, fps, scene, camera, aux_views)",
                         item->string);
             break;
         }
@@ -159,6 +161,9 @@ fx_result fx_frame_apply_sidecar(fx_frame *f, const char *json)
     if (!r && ((frame && (!cJSON_IsNumber(frame) || !isfinite(frame->valuedouble))) ||
                (fps && (!cJSON_IsNumber(fps) || !(fps->valuedouble > 0)))))
         r = fx_fail(ctx, FX_ERR_BAD_RECIPE, "sidecar: \"frame\" must be a number and \"fps\" positive");
+    const cJSON *aux = cJSON_GetObjectItemCaseSensitive(root, "aux_views");
+    if (!r && aux)
+        r = fx_aux_views_check(ctx, aux);
     char *lights_text = NULL;
     if (!r && lights && !(lights_text = cJSON_PrintUnformatted(lights)))
         r = fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "sidecar: out of memory");
@@ -167,6 +172,8 @@ fx_result fx_frame_apply_sidecar(fx_frame *f, const char *json)
         r = fx_frame_set_camera(f, &cam);
     if (!r && lights_text)
         r = fx_frame_set_meta(f, "libfx:lights", lights_text);
+    if (!r && aux)
+        r = fx_aux_views_apply(f, aux);
     if (!r && (frame || fps))
         fx_frame_set_time(f, frame ? frame->valuedouble : f->frame_number, fps ? fps->valuedouble : f->fps);
     cJSON_free(lights_text);

@@ -6,6 +6,7 @@
 extern const fx_effect_class fx_effect_gaussian_blur;
 extern const fx_effect_class fx_effect_color_matrix;
 extern const fx_effect_class fx_effect_pixelate;
+extern const fx_effect_class fx_effect_vsm_shadows;
 extern const fx_effect_class fx_effect_edges;
 
 const fx_effect_class *const fx_effect_classes[] = {
@@ -13,6 +14,7 @@ const fx_effect_class *const fx_effect_classes[] = {
     &fx_effect_color_matrix,
     &fx_effect_pixelate,
     &fx_effect_edges,
+    &fx_effect_vsm_shadows,
 };
 const int fx_effect_class_count = (int)(sizeof(fx_effect_classes) / sizeof(fx_effect_classes[0]));
 

@@ -1,0 +1,250 @@
+/* vsm_shadows: shadows of a light from its auxiliary depth view (core/aux_view.h), as
+ * variance shadow maps (Donnelly & Lauritzen 2006) filtered by a box through a
+ * summed-area table or by a separable Gaussian, with the min-variance clamp, the
+ * max-depth test with epsilon, light-bleeding reduction by remapping p_max and the
+ * derivative bias on the second moment; PCF and the hard test as references.
+ * docs/effects/vsm_shadows.md.
+ *
+ * Each pixel's surface (math/surface.h) is moved along its normal by normal_offset (when
+ * the frame has normals), projected into the light view, and gets a visibility v in
+ * [0, 1]. Applied as:
+ *  - sun_diffuse: removes the light's unshadowed direct diffuse, DiffCol * colour * energy
+ *    * max(N.L, 0) / pi (Cycles' sun: strength is irradiance in W/m^2), times (1 - v):
+ *    for renders where the light casts no ray-traced shadow (the atrium's Sun);
+ *  - combined: scales Combined by 1 - strength (1 - v): for any render. */
+#include "core/aux_view.h"
+#include "core/effect.h"
+#include "core/lights.h"
+#include "core/parallel.h"
+#include "math/shadow_map.h"
+#include "math/surface.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+typedef struct vsm_params {
+    char light[FX_STRING_PARAM_MAX];
+    int method;
+    int filter;
+    float filter_size;
+    float min_std;
+    float bleed;
+    float depth_bias;
+    int derivative_bias;
+    float normal_offset;
+    int apply;
+    float strength;
+} vsm_params;
+
+enum { METHOD_VSM = 0, METHOD_PCF, METHOD_HARD };
+enum { APPLY_SUN_DIFFUSE = 0, APPLY_COMBINED };
+
+static const char *const method_items[] = {"vsm", "pcf", "hard"};
+static const char *const filter_items[] = {"box_sat", "gaussian"};
+static const char *const apply_items[] = {"sun_diffuse", "combined"};
+
+static const fx_param_def vsm_param_defs[] = {
+    FX_P_STRING(vsm_params, light, "light", "", "",
+                "The light's name in the scene (its aux view 'light:<name>'); empty: the first sun"),
+    FX_P_ENUM(vsm_params, method, "method", METHOD_VSM, method_items,
+              "vsm: variance shadow map (filtered moments, Chebyshev bound); pcf: percentage-closer "
+              "filtering over the same box (cost grows with its area; the accuracy reference); hard: one "
+              "depth test"),
+    FX_P_ENUM(vsm_params, filter, "filter", 0, filter_items,
+              "How the moments are filtered: box_sat: a box through a summed-area table (centred, "
+              "double); gaussian: separable recursive Gaussian of the box's variance"),
+    FX_P_FLOAT(vsm_params, filter_size, "filter_size", 5.0, 1.0, 1025.0, 1.0, 65.0, "pixels",
+               "Filter width in light-map texels (box: rounded to odd); sets the penumbra width"),
+    FX_P_FLOAT(vsm_params, min_std, "min_std", 0.01, 0.0, 10.0, 0.0, 0.1, "",
+               "Minimum standard deviation of the occluder depth, metres (the min-variance clamp)"),
+    FX_P_FLOAT(vsm_params, bleed, "bleed_reduction", 0.3, 0.0, 0.99, 0.0, 0.8, "factor",
+               "Light-bleeding reduction: p_max below this is shadow, above it is rescaled to [0, 1]"),
+    FX_P_FLOAT(vsm_params, depth_bias, "depth_bias", 0.05, 0.0, 10.0, 0.0, 0.5, "",
+               "Epsilon of the max-depth test, metres: receivers this close behind the mean occluder "
+               "are lit"),
+    FX_P_BOOL(vsm_params, derivative_bias, "derivative_bias", 1,
+              "Add 0.25 (dz/dx^2 + dz/dy^2) to the second moment (slope-scaled bias against acne)"),
+    FX_P_FLOAT(vsm_params, normal_offset, "normal_offset", 0.03, 0.0, 10.0, 0.0, 0.2, "",
+               "Move each receiver this far along its normal (metres) before the lookup, when the "
+               "frame has normals"),
+    FX_P_ENUM(vsm_params, apply, "apply", APPLY_SUN_DIFFUSE, apply_items,
+              "sun_diffuse: remove the light's direct diffuse where shadowed (needs Normal, DiffCol and "
+              "the scene's lights; for lights that cast no ray-traced shadow); combined: darken "
+              "Combined by strength"),
+    FX_P_FLOAT(vsm_params, strength, "strength", 1.0, 0.0, 1.0, 0.0, 1.0, "factor",
+               "How much of the shadowed light is removed (1: all)"),
+};
+
+static fx_pass_set vsm_passes(const void *params)
+{
+    const vsm_params *p = params;
+    fx_pass_set s = FX_PASS_BIT(FX_PASS_DEPTH);
+    if (p->apply == APPLY_SUN_DIFFUSE)
+        s |= FX_PASS_BIT(FX_PASS_NORMAL) | FX_PASS_BIT(FX_PASS_DIFF_COL);
+    return s;
+}
+
+static int vsm_needs_camera(const void *params)
+{
+    (void)params;
+    return 1;
+}
+
+typedef struct vsm_job {
+    const fx_effect_run *run;
+    const vsm_params *p;
+    const fx_aux_view *av;
+    const fx_shadow_map *sm;
+    fx_surface_src surf;
+    const float *diffcol;
+    fx_vec3 sun_rad; /* colour * energy / pi */
+    fx_vec3 to_light;
+    float min_var, eps, bias_norm;
+    int pcf_radius;
+    float *vis_out; /* debug, or NULL */
+} vsm_job;
+
+static float visibility_at(const vsm_job *j, int x, int y, int *has_surface)
+{
+    fx_vec3 w;
+    float d;
+    *has_surface = fx_surface_world(&j->surf, x, y, &w, &d);
+    if (!*has_surface)
+        return 1.0f;
+    fx_vec3 n;
+    if (j->p->normal_offset > 0.0f && fx_surface_normal(&j->surf, x, y, &n))
+        w = fx_v3_add(w, fx_v3_scale(n, j->p->normal_offset));
+    float px, py, ld;
+    if (!fx_aux_view_project(j->av, w, &px, &py, &ld))
+        return 1.0f;
+    if (px < 0.0f || py < 0.0f || px > (float)j->sm->width || py > (float)j->sm->height)
+        return 1.0f; /* outside the light view: not shadowed by anything it saw */
+    float t = fx_shadow_map_norm(j->sm, ld);
+    switch (j->p->method) {
+    case METHOD_HARD:
+        return fx_shadow_map_hard(j->sm, px, py, t, j->eps);
+    case METHOD_PCF:
+        return fx_shadow_map_pcf(j->sm, px, py, t, j->pcf_radius, j->eps);
+    default: {
+        float m1, m2;
+        fx_shadow_map_moments(j->sm, px, py, &m1, &m2);
+        return fx_vsm_visibility(m1, m2, t, j->min_var, j->p->bleed, j->eps);
+    }
+    }
+}
+
+static void vsm_rows(void *user, int y0, int y1)
+{
+    vsm_job *j = user;
+    const fx_effect_run *run = j->run;
+    const fx_rect *roi = &run->roi;
+    for (int y = roi->y0 + y0; y < roi->y0 + y1; y++)
+        for (int x = roi->x0; x < roi->x1; x++) {
+            size_t i = (size_t)y * run->width + x;
+            const float *s = run->src + 4 * i;
+            float *o = run->dst + 4 * i;
+            int has;
+            float v = visibility_at(j, x, y, &has);
+            if (j->vis_out)
+                j->vis_out[i] = v;
+            float k = j->p->strength * (1.0f - v);
+            if (j->p->apply == APPLY_COMBINED) {
+                for (int c = 0; c < 3; c++)
+                    o[c] = s[c] * (1.0f - k);
+            } else {
+                fx_vec3 n;
+                float ndl = 0.0f;
+                if (k > 0.0f && fx_surface_normal(&j->surf, x, y, &n))
+                    ndl = fx_v3_dot(n, j->to_light);
+                ndl = ndl > 0.0f ? ndl : 0.0f;
+                const float *dc = j->diffcol + 3 * i;
+                float rad[3] = {j->sun_rad.x, j->sun_rad.y, j->sun_rad.z};
+                for (int c = 0; c < 3; c++) {
+                    float r = s[c] - k * ndl * dc[c] * rad[c];
+                    o[c] = s[c] >= 0.0f && r < 0.0f ? 0.0f : r;
+                }
+            }
+            o[3] = s[3];
+        }
+}
+
+static fx_result vsm_process(const fx_effect_run *run)
+{
+    const vsm_params *p = run->params;
+    const fx_rect *roi = &run->roi;
+    if (roi->x1 <= roi->x0 || roi->y1 <= roi->y0)
+        return FX_OK;
+    char where[96];
+    snprintf(where, sizeof where, "effect %d (vsm_shadows)", run->index);
+    vsm_job j;
+    memset(&j, 0, sizeof j);
+    j.run = run;
+    j.p = p;
+    if (!fx_surface_src_init(&j.surf, run->frame))
+        return fx_fail(run->ctx, FX_ERR_NO_CAMERA, "%s needs the camera and the Depth pass", where);
+    char name[FX_STRING_PARAM_MAX + 8];
+    snprintf(name, sizeof name, "light:%s", p->light);
+    fx_aux_view *av = NULL;
+    fx_result r = fx_aux_view_load(run->frame, name, where, &av);
+    if (r)
+        return r;
+    j.av = av;
+    if (p->apply == APPLY_SUN_DIFFUSE) {
+        fx_light light;
+        if ((r = fx_frame_find_light(run->frame, av->name + 6, where, &light))) {
+            fx_aux_view_free(av);
+            return r;
+        }
+        fx_pass *dc = fx_frame_find_pass(run->frame, "DiffCol");
+        if (!dc || dc->channels < 3) {
+            fx_aux_view_free(av);
+            return fx_fail(run->ctx, FX_ERR_MISSING_PASS, "%s: apply sun_diffuse needs the DiffCol pass", where);
+        }
+        j.diffcol = dc->data;
+        float e = light.energy * 0.318309886f /* 1/pi */;
+        j.sun_rad = fx_v3(light.color.x * e, light.color.y * e, light.color.z * e);
+        j.to_light = fx_v3_scale(light.direction, -1.0f);
+        if (light.type != FX_LIGHT_SUN)
+            fx_warn(run->ctx, "%s: light '%s' is not a sun: sun_diffuse treats it as one", where, light.name);
+    }
+    fx_shadow_map sm;
+    r = fx_shadow_map_build(run->ctx, av->depth, av->width, av->height, av->view.cam.clip_start,
+                            av->view.cam.clip_end, p->derivative_bias, &sm, where);
+    if (!r && p->method == METHOD_VSM)
+        r = fx_shadow_map_filter(run->ctx, &sm, (fx_shadow_filter)p->filter, p->filter_size, where);
+    if (r) {
+        fx_aux_view_free(av);
+        return r;
+    }
+    j.sm = &sm;
+    float ms = fx_shadow_map_norm_dist(&sm, p->min_std);
+    j.min_var = ms * ms > 1e-12f ? ms * ms : 1e-12f;
+    j.eps = fx_shadow_map_norm_dist(&sm, p->depth_bias);
+    j.pcf_radius = (int)lrintf((p->filter_size - 1.0f) * 0.5f);
+    j.vis_out = fx_effect_debug_pass(run, "visibility", 1, &r);
+    if (!j.vis_out && r) {
+        fx_shadow_map_free(&sm);
+        fx_aux_view_free(av);
+        return r;
+    }
+    int rows = roi->y1 - roi->y0;
+    fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), vsm_rows, &j);
+    fx_shadow_map_free(&sm);
+    fx_aux_view_free(av);
+    return FX_OK;
+}
+
+const fx_effect_class fx_effect_vsm_shadows = {
+    .name = "vsm_shadows",
+    .doc = "Shadows of a light from its depth view: variance shadow maps (SAT box or Gaussian), PCF or hard",
+    .params_size = sizeof(vsm_params),
+    .params = vsm_param_defs,
+    .param_count = FX_COUNT_OF(vsm_param_defs),
+    .presets = {NULL, NULL, NULL, "{\"method\": \"pcf\"}"},
+    .passes = vsm_passes,
+    .needs_camera = vsm_needs_camera,
+    .halo = NULL,
+    .validate = NULL,
+    .process = vsm_process,
+};

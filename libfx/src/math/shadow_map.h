@@ -1,0 +1,104 @@
+/* Shadow maps from a depth view (a light's, or the rain map seen as a light shining
+ * straight down): variance shadow maps (Donnelly & Lauritzen 2006; GPU Gems 3 ch. 8),
+ * percentage-closer filtering as the accuracy reference, and the hard test.
+ *
+ * Depth is normalised and centred (GUIDE §4): z = 2 (d - near) / (far - near) - 1 in
+ * [-1, 1] (d beyond far, e.g. Cycles' 1e10 background, is 1: nothing occludes), so the
+ * second moment keeps its precision in float (at raw depths ~1000 the variance of a few
+ * centimetres vanishes in float32 cancellation). Moments may get the derivative bias
+ * m2 += 0.25 (dz/dx^2 + dz/dy^2) (GPU Gems 3, "ComputeMoments"), with each derivative the
+ * smaller of the forward and backward difference so depth edges do not blow it up. */
+#ifndef LIBFX_MATH_SHADOW_MAP_H
+#define LIBFX_MATH_SHADOW_MAP_H
+
+#include "core/internal.h"
+#include "math/vec.h"
+
+typedef enum fx_shadow_filter {
+    FX_SHADOW_FILTER_BOX_SAT = 0,  /* box of (2r+1)^2 texels through a summed-area table */
+    FX_SHADOW_FILTER_GAUSSIAN = 1  /* separable recursive Gaussian (math/blur), sigma = width / sqrt(12) */
+} fx_shadow_filter;
+
+typedef struct fx_shadow_map {
+    int width, height;
+    float znear, zfar;
+    float *depth;    /* normalised depth, width * height */
+    float *moments;  /* filtered (E[z], E[z^2]), width * height * 2 */
+} fx_shadow_map;
+
+/* Normalised depth of a raw planar depth. */
+static inline float fx_shadow_map_norm(const fx_shadow_map *sm, float d)
+{
+    float range = sm->zfar - sm->znear;
+    float z = range > 1e-20f ? 2.0f * (d - sm->znear) / range - 1.0f : 0.0f;
+    return isfinite(z) ? fx_clampf(z, -1.0f, 1.0f) : 1.0f;
+}
+
+/* A world distance along the view's axis as a normalised depth difference. */
+static inline float fx_shadow_map_norm_dist(const fx_shadow_map *sm, float metres)
+{
+    float range = sm->zfar - sm->znear;
+    return range > 1e-20f ? 2.0f * metres / range : 0.0f;
+}
+
+/* Builds depth and moments (unfiltered) from raw planar depth. */
+fx_result fx_shadow_map_build(fx_context *ctx, const float *raw_depth, int width, int height, float znear,
+                              float zfar, int derivative_bias, fx_shadow_map *out, const char *where);
+/* Filters the moments with a box (width rounded to an odd number of texels) or a Gaussian
+ * of the same variance. width <= 1: unfiltered. */
+fx_result fx_shadow_map_filter(fx_context *ctx, fx_shadow_map *sm, fx_shadow_filter filter, float width,
+                               const char *where);
+void fx_shadow_map_free(fx_shadow_map *sm);
+
+/* Bilinear lookup of the filtered moments at continuous texel coordinates (texel x's
+ * centre at x + 0.5), clamped to the map. */
+static inline void fx_shadow_map_moments(const fx_shadow_map *sm, float px, float py, float *m1, float *m2)
+{
+    float fx = px - 0.5f, fy = py - 0.5f;
+    fx = fx_clampf(fx, 0.0f, (float)(sm->width - 1));
+    fy = fx_clampf(fy, 0.0f, (float)(sm->height - 1));
+    int x0 = (int)fx, y0 = (int)fy;
+    int x1 = x0 + 1 < sm->width ? x0 + 1 : x0, y1 = y0 + 1 < sm->height ? y0 + 1 : y0;
+    float tx = fx - (float)x0, ty = fy - (float)y0;
+    const float *a = sm->moments + ((size_t)y0 * sm->width + x0) * 2;
+    const float *b = sm->moments + ((size_t)y0 * sm->width + x1) * 2;
+    const float *c = sm->moments + ((size_t)y1 * sm->width + x0) * 2;
+    const float *d = sm->moments + ((size_t)y1 * sm->width + x1) * 2;
+    float top0 = a[0] + (b[0] - a[0]) * tx, bot0 = c[0] + (d[0] - c[0]) * tx;
+    float top1 = a[1] + (b[1] - a[1]) * tx, bot1 = c[1] + (d[1] - c[1]) * tx;
+    *m1 = top0 + (bot0 - top0) * ty;
+    *m2 = top1 + (bot1 - top1) * ty;
+}
+
+/* Chebyshev's upper bound p_max = var / (var + (t - m1)^2) for a receiver at normalised
+ * depth t, with var clamped below at min_var (also when m2 < m1^2 by rounding), 1 where
+ * t <= m1 + eps (the max-depth test), light-bleeding reduction by remapping p_max from
+ * [bleed, 1] to [0, 1] (GPU Gems 3, 8.4.3; bleed in [0, 1)). Always in [0, 1], finite. */
+static inline float fx_vsm_visibility(float m1, float m2, float t, float min_var, float bleed, float eps)
+{
+    if (!(t > m1 + eps))
+        return 1.0f; /* also for NaN */
+    float var = m2 - m1 * m1;
+    if (!(var > min_var))
+        var = min_var > 0.0f ? min_var : 1e-12f;
+    float d = t - m1;
+    float p = var / (var + d * d);
+    if (bleed > 0.0f)
+        p = (p - bleed) / (1.0f - bleed);
+    return isfinite(p) ? fx_saturate(p) : 0.0f;
+}
+
+/* Hard test at the nearest texel: 1 lit, 0 shadowed. */
+static inline float fx_shadow_map_hard(const fx_shadow_map *sm, float px, float py, float t, float eps)
+{
+    int x = (int)floorf(px), y = (int)floorf(py);
+    x = x < 0 ? 0 : x >= sm->width ? sm->width - 1 : x;
+    y = y < 0 ? 0 : y >= sm->height ? sm->height - 1 : y;
+    return t <= sm->depth[(size_t)y * sm->width + x] + eps ? 1.0f : 0.0f;
+}
+
+/* Percentage-closer filtering: the lit fraction of the (2r+1)^2 texels around the nearest
+ * one (clipped to the map). Cost O(r^2): the reference VSM is measured against. */
+float fx_shadow_map_pcf(const fx_shadow_map *sm, float px, float py, float t, int radius, float eps);
+
+#endif

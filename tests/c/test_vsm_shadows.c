@@ -1,0 +1,380 @@
+/* vsm_shadows and the maths under it: a synthetic light view with a known occluder gives
+ * shadow exactly where geometry says (hard limit) and soft edges of the requested width;
+ * the variance clamp at constant depth; SAT precision at 4096^2; light-bleeding reduction
+ * against the multi-occluder leak; aux views through the sidecar; threads; NaN input. */
+#include "fx_effect_test.h"
+
+#include "core/aux_view.h"
+#include "math/sat.h"
+#include "math/shadow_map.h"
+
+#include <float.h>
+#include <math.h>
+
+#define N 64          /* light-map and frame size */
+#define L 5.0f        /* both views cover x, y in [-L, L] */
+#define CAM_Z 10.0f   /* both look straight down from here */
+
+/* Orthographic top-down camera at (0, 0, CAM_Z), near 0.1, far 20. */
+static fx_camera top_camera(void)
+{
+    fx_camera c;
+    memset(&c, 0, sizeof c);
+    c.size = sizeof c;
+    float w2c[16] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, -CAM_Z, 0, 0, 0, 1};
+    float n = 0.1f, f = 20.0f;
+    float proj[16] = {1 / L, 0, 0, 0, 0, 1 / L, 0, 0, 0, 0, -2 / (f - n), -(f + n) / (f - n), 0, 0, 0, 1};
+    memcpy(c.world_to_camera, w2c, sizeof w2c);
+    memcpy(c.projection, proj, sizeof proj);
+    c.clip_start = n;
+    c.clip_end = f;
+    c.orthographic = 1;
+    return c;
+}
+
+/* Writes a light view of heights h (N x N, z of the topmost surface per texel) and returns
+ * the EXR path (static). */
+static const char *write_light_view(fx_context *ctx, const float *height, const char *name)
+{
+    static char path[512];
+    snprintf(path, sizeof path, "%s/%s.exr", tu_tmpdir("vsm_light_views"), name);
+    fx_frame *f = NULL;
+    fx_frame_new(ctx, N, N, &f);
+    float *d = malloc(N * N * sizeof(float));
+    for (int i = 0; i < N * N; i++)
+        d[i] = CAM_Z - height[i];
+    fx_frame_add_pass(f, "Depth", 1, d);
+    CHECK_OK(ctx, fx_frame_write_exr(f, path, NULL));
+    free(d);
+    fx_frame_free(f);
+    return path;
+}
+
+/* A frame seeing the floor (z = 0) everywhere through the same camera, Combined = 1. */
+static fx_frame *floor_frame(fx_context *ctx, const char *light_path)
+{
+    float *rgba = malloc(N * N * 4 * sizeof(float)), *d = malloc(N * N * sizeof(float));
+    for (int i = 0; i < N * N * 4; i++)
+        rgba[i] = 1.0f;
+    for (int i = 0; i < N * N; i++)
+        d[i] = CAM_Z;
+    fx_frame *f = et_frame(ctx, N, N, rgba);
+    fx_frame_add_pass(f, "Depth", 1, d);
+    fx_camera cam = top_camera();
+    fx_frame_set_camera(f, &cam);
+    CHECK_OK(ctx, fx_frame_set_aux_view(f, "light:Sun", light_path, &cam));
+    free(rgba);
+    free(d);
+    return f;
+}
+
+/* Visibility per pixel (Combined R with apply combined, strength 1). */
+static float *run_vsm(fx_context *ctx, fx_frame *f, const char *method, const char *filter, float size, float bleed,
+                      float min_std)
+{
+    fx_stack *s = et_stack(ctx, "vsm_shadows");
+    CHECK_OK(ctx, fx_stack_set_enum(s, 0, "apply", "combined"));
+    CHECK_OK(ctx, fx_stack_set_enum(s, 0, "method", method));
+    CHECK_OK(ctx, fx_stack_set_enum(s, 0, "filter", filter));
+    CHECK_OK(ctx, fx_stack_set_float(s, 0, "filter_size", size));
+    CHECK_OK(ctx, fx_stack_set_float(s, 0, "bleed_reduction", bleed));
+    CHECK_OK(ctx, fx_stack_set_float(s, 0, "min_std", min_std));
+    float *o = et_run(ctx, s, f);
+    fx_stack_free(s);
+    return o;
+}
+
+static void test_hard_limit(fx_context *ctx)
+{
+    /* a 2 m square occluder at z = 2 over x, y in [-1, 1] (texels 25.6 .. 38.4: 26..38) */
+    float h[N * N];
+    for (int y = 0; y < N; y++)
+        for (int x = 0; x < N; x++) {
+            float wx = -L + (x + 0.5f) * 2 * L / N, wy = L - (y + 0.5f) * 2 * L / N;
+            h[y * N + x] = fabsf(wx) < 1.0f && fabsf(wy) < 1.0f ? 2.0f : 0.0f;
+        }
+    fx_frame *f = floor_frame(ctx, write_light_view(ctx, h, "square"));
+    for (int m = 0; m < 3; m++) {
+        const char *method = m == 0 ? "vsm" : m == 1 ? "pcf" : "hard";
+        float *o = run_vsm(ctx, f, method, "box_sat", 1.0f, 0.3f, 0.01f);
+        CHECK(o != NULL);
+        int wrong = 0;
+        for (int i = 0; o && i < N * N; i++)
+            wrong += o[4 * i] != (h[i] > 0 ? 0.0f : 1.0f);
+        if (wrong)
+            fprintf(stderr, "hard limit (%s): %d pixels wrong\n", method, wrong);
+        CHECK(wrong == 0);
+        free(o);
+    }
+    fx_frame_free(f);
+}
+
+static void test_soft_edge_width(fx_context *ctx)
+{
+    /* half-plane occluder at z = 2 over texel columns x < 32 */
+    float h[N * N];
+    for (int i = 0; i < N * N; i++)
+        h[i] = (i % N) < N / 2 ? 2.0f : 0.0f;
+    fx_frame *f = floor_frame(ctx, write_light_view(ctx, h, "half"));
+    int width = 9, r = 4;
+    float *o = run_vsm(ctx, f, "vsm", "box_sat", (float)width, 0.0f, 0.0f);
+    float *pcf = run_vsm(ctx, f, "pcf", "box_sat", (float)width, 0.0f, 0.0f);
+    CHECK(o && pcf);
+    double err = 0, perr = 0;
+    int y = N / 2;
+    for (int x = 0; o && pcf && x < N; x++) {
+        int occ = 0;
+        for (int k = x - r; k <= x + r; k++)
+            occ += k < N / 2;
+        /* the box is clipped at the map's border: count only texels inside */
+        int inside = 0;
+        for (int k = x - r; k <= x + r; k++)
+            inside += k >= 0 && k < N;
+        occ = 0;
+        for (int k = x - r; k <= x + r; k++)
+            occ += k >= 0 && k < N / 2;
+        double want = 1.0 - (double)occ / inside;
+        err = fmax(err, fabs(o[4 * (y * N + x)] - want));
+        perr = fmax(perr, fabs(pcf[4 * (y * N + x)] - want));
+    }
+    /* one planar occluder over a planar receiver: VSM is exactly the box's lit fraction */
+    fprintf(stderr, "soft edge: max |vsm - lit fraction| = %.2e, pcf %.2e\n", err, perr);
+    CHECK(err < 1e-4);
+    CHECK(perr < 1e-6);
+    /* full shadow up to x = 27, full light from 36: the penumbra is the filter's width */
+    CHECK(o && o[4 * (y * N + 27)] == 0.0f && o[4 * (y * N + 28)] > 0.0f);
+    CHECK(o && o[4 * (y * N + 36)] == 1.0f && o[4 * (y * N + 35)] < 1.0f);
+    free(o);
+    free(pcf);
+    /* the Gaussian of the same variance: monotone, 10-90 % over 2 * 1.2816 sigma */
+    float *g = run_vsm(ctx, f, "vsm", "gaussian", 25.0f, 0.0f, 0.0f);
+    CHECK(g != NULL);
+    if (g) {
+        int mono = 1;
+        float x10 = -1, x90 = -1;
+        for (int x = 1; x < N; x++) {
+            float a = g[4 * (y * N + x - 1)], b = g[4 * (y * N + x)];
+            mono &= b >= a - 1e-6f;
+            if (a < 0.1f && b >= 0.1f)
+                x10 = x - 1 + (0.1f - a) / (b - a);
+            if (a < 0.9f && b >= 0.9f)
+                x90 = x - 1 + (0.9f - a) / (b - a);
+        }
+        double want = 2 * 1.2816 * 25.0 / sqrt(12.0);
+        fprintf(stderr, "gaussian 25: 10-90%% width %.2f texels (Gaussian CDF: %.2f)\n", x90 - x10, want);
+        CHECK(mono);
+        CHECK(fabs((x90 - x10) - want) < 0.15 * want);
+    }
+    free(g);
+    fx_frame_free(f);
+}
+
+static void test_variance_clamp(fx_context *ctx)
+{
+    /* constant depth: zero variance everywhere */
+    float h[N * N];
+    for (int i = 0; i < N * N; i++)
+        h[i] = 0.0f;
+    fx_frame *f = floor_frame(ctx, write_light_view(ctx, h, "flat"));
+    float *o = run_vsm(ctx, f, "vsm", "box_sat", 17.0f, 0.0f, 0.0f);
+    int lit = 1;
+    for (int i = 0; o && i < N * N; i++)
+        lit &= o[4 * i] == 1.0f;
+    CHECK(o && lit);
+    free(o);
+    fx_frame_free(f);
+    /* the bound itself: rounding that makes m2 < m1^2, zero variance, t just behind */
+    float cases[][3] = {{0.5f, 0.2499999f, 0.6f}, {0.5f, 0.25f, 0.5000001f}, {-1, 1, 1}, {0.3f, 0.0f, 0.9f},
+                        {NAN, 0.1f, 0.5f}, {0.1f, NAN, 0.5f}, {0.1f, 0.01f, NAN}, {1e30f, 1e30f, 1}};
+    for (size_t k = 0; k < sizeof cases / sizeof cases[0]; k++)
+        for (int b = 0; b < 2; b++) {
+            float p = fx_vsm_visibility(cases[k][0], cases[k][1], cases[k][2], 1e-8f, b ? 0.5f : 0.0f, 0.0f);
+            CHECK(isfinite(p) && p >= 0.0f && p <= 1.0f);
+        }
+    /* normalised, centred depth keeps the variance at raw depth ~1000 */
+    float raw[N * N];
+    for (int i = 0; i < N * N; i++)
+        raw[i] = 1000.0f + ((i + i / N) % 2 ? 0.02f : -0.02f); /* checkerboard: std 0.02 m */
+    fx_shadow_map sm;
+    CHECK_OK(ctx, fx_shadow_map_build(ctx, raw, N, N, 990.0f, 1010.0f, 0, &sm, "test"));
+    CHECK_OK(ctx, fx_shadow_map_filter(ctx, &sm, FX_SHADOW_FILTER_BOX_SAT, 5.0f, "test"));
+    float m1, m2;
+    fx_shadow_map_moments(&sm, N / 2 + 0.5f, N / 2 + 0.5f, &m1, &m2);
+    double std_m = sqrt(fmax(0.0, m2 - (double)m1 * m1)) * (1010.0 - 990.0) / 2.0;
+    /* raw float moments lose it: E[d^2] - E[d]^2 at d ~ 1000 in float */
+    float e1 = 0, e2 = 0;
+    for (int i = 0; i < 25; i++) {
+        float d = raw[i];
+        e1 += d / 25.0f;
+        e2 += d * d / 25.0f;
+    }
+    fprintf(stderr, "std at depth 1000 (true 0.0196 over a 5x5 box): normalised %.5f m, raw float %.5f m\n",
+            std_m, sqrt(fmax(0.0, (double)e2 - (double)e1 * e1)));
+    CHECK(fabs(std_m - 0.02 * sqrt(1.0 - 1.0 / 625.0)) < 0.002);
+    fx_shadow_map_free(&sm);
+}
+
+static void test_sat_precision(fx_context *ctx)
+{
+    const int S = 4096;
+    float *img = malloc((size_t)S * S * sizeof(float));
+    uint32_t st = 12345;
+    for (size_t i = 0; i < (size_t)S * S; i++) {
+        st = st * 1664525u + 1013904223u;
+        img[i] = 500.0f + (float)(st >> 8) / 16777216.0f; /* depth-like: offset + detail */
+    }
+    fx_sat sat;
+    CHECK_OK(ctx, fx_sat_build(ctx, img, S, S, 1, &sat, "test"));
+    /* float32 SAT of the raw values, for the record */
+    double worst = 0, worst_f = 0;
+    int boxes[][4] = {{0, 0, S, S}, {S - 7, S - 9, S, S}, {1000, 2000, 1003, 2001}, {4000, 4000, 4096, 4096},
+                      {17, 3000, 4090, 3011}, {2048, 0, 2049, 4096}, {100, 100, 3100, 3900}};
+    float *colsum = NULL;
+    (void)colsum;
+    for (size_t b = 0; b < sizeof boxes / sizeof boxes[0]; b++) {
+        int *q = boxes[b];
+        double direct = 0;
+        for (int y = q[1]; y < q[3]; y++)
+            for (int x = q[0]; x < q[2]; x++)
+                direct += img[(size_t)y * S + x];
+        double n = (double)(q[2] - q[0]) * (q[3] - q[1]);
+        direct /= n;
+        double m;
+        fx_sat_box_mean(&sat, q[0], q[1], q[2], q[3], &m);
+        worst = fmax(worst, fabs(m - direct));
+    }
+    /* what a float32 SAT does at the far corner: S(4096, 4096) - S(4096, 4095) ... */
+    {
+        float acc = 0;
+        for (size_t i = 0; i < (size_t)S * S; i++)
+            acc += img[i];
+        float acc2 = acc;
+        for (int x = 0; x < S; x++)
+            acc2 -= img[(size_t)(S - 1) * S + x];
+        double last_row = 0;
+        for (int x = 0; x < S; x++)
+            last_row += img[(size_t)(S - 1) * S + x];
+        worst_f = fabs(((double)acc - acc2) / S - last_row / S);
+    }
+    fprintf(stderr, "SAT 4096^2 (values 500 + [0,1)): max error of box means %.2e (double, centred); "
+                    "float32 running sum, last-row mean: %.2e\n", worst, worst_f);
+    CHECK(worst < 1e-9);
+    CHECK(worst_f > 1e-3); /* why the guide insists */
+    fx_sat_free(&sat);
+    free(img);
+}
+
+static void test_bleeding(fx_context *ctx)
+{
+    /* two occluders: A at z = 8 over x < 32, B at z = 2 over x >= 32; the floor (z = 0)
+     * everywhere is in full shadow. Where the filter mixes A and B, Chebyshev leaks. */
+    float h[N * N];
+    for (int i = 0; i < N * N; i++)
+        h[i] = (i % N) < N / 2 ? 8.0f : 2.0f;
+    fx_frame *f = floor_frame(ctx, write_light_view(ctx, h, "two"));
+    float leak[3];
+    float bleeds[3] = {0.0f, 0.3f, 0.6f};
+    for (int b = 0; b < 3; b++) {
+        float *o = run_vsm(ctx, f, "vsm", "box_sat", 15.0f, bleeds[b], 0.01f);
+        leak[b] = 0;
+        for (int i = 0; o && i < N * N; i++)
+            leak[b] = fmaxf(leak[b], o[4 * i]);
+        free(o);
+    }
+    fprintf(stderr, "multi-occluder leak (max light on a fully shadowed floor): bleed 0 %.3f, 0.3 %.3f, 0.6 %.3f\n",
+            leak[0], leak[1], leak[2]);
+    CHECK(leak[0] > 0.1f);
+    CHECK(leak[1] < 0.5f * leak[0]);
+    CHECK(leak[2] <= leak[1] && leak[2] < 0.05f);
+    fx_frame_free(f);
+}
+
+static void test_sidecar_threads_errors(fx_context *ctx)
+{
+    float h[N * N];
+    for (int i = 0; i < N * N; i++)
+        h[i] = (i / N) < N / 3 ? 3.0f : 0.0f;
+    const char *path = write_light_view(ctx, h, "rows");
+    fx_frame *f = floor_frame(ctx, path);
+    /* the same view through the sidecar JSON */
+    fx_frame *g = NULL;
+    fx_frame_new(ctx, N, N, &g);
+    fx_frame_copy_passes(g, f);
+    char json[4096];
+    snprintf(json, sizeof json,
+             "{\"world_to_camera\": [[1,0,0,0],[0,1,0,0],[0,0,1,-10],[0,0,0,1]], \"projection\": "
+             "[[0.2,0,0,0],[0,0.2,0,0],[0,0,%.9g,%.9g],[0,0,0,1]], \"clip_start\": 0.1, \"clip_end\": 20, "
+             "\"aux_views\": [{\"name\": \"light:Sun\", \"path\": \"%s\", \"world_to_camera\": "
+             "[[1,0,0,0],[0,1,0,0],[0,0,1,-10],[0,0,0,1]], \"projection\": [[0.2,0,0,0],[0,0.2,0,0],[0,0,%.9g,%.9g],"
+             "[0,0,0,1]], \"clip_start\": 0.1, \"clip_end\": 20, \"orthographic\": true}]}",
+             -2 / 19.9, -20.1 / 19.9, path, -2 / 19.9, -20.1 / 19.9);
+    CHECK_OK(ctx, fx_frame_apply_sidecar(g, json));
+    float *a = run_vsm(ctx, f, "vsm", "box_sat", 7.0f, 0.3f, 0.01f);
+    float *b = run_vsm(ctx, g, "vsm", "box_sat", 7.0f, 0.3f, 0.01f);
+    CHECK(a && b && tu_max_abs_diff(a, b, N * N * 4) < 1e-5);
+    /* thread count does not change a bit */
+    fx_context *c1 = NULL;
+    fx_context_new(&c1, 1);
+    fx_frame *f1 = floor_frame(c1, path);
+    float *a1 = run_vsm(c1, f1, "vsm", "box_sat", 7.0f, 0.3f, 0.01f);
+    float *g1 = run_vsm(c1, f1, "vsm", "gaussian", 7.0f, 0.3f, 0.01f);
+    float *g2 = run_vsm(ctx, f, "vsm", "gaussian", 7.0f, 0.3f, 0.01f);
+    CHECK(a && a1 && memcmp(a, a1, N * N * 4 * sizeof(float)) == 0);
+    CHECK(g1 && g2 && memcmp(g1, g2, N * N * 4 * sizeof(float)) == 0);
+    free(a1);
+    free(g1);
+    free(g2);
+    fx_frame_free(f1);
+    fx_context_free(c1);
+    free(a);
+    free(b);
+    /* unknown keys in a view, no view, no Depth in the view: clear errors */
+    CHECK_FAIL(ctx, fx_frame_apply_sidecar(g, "{\"aux_views\": [{\"name\": \"x\", \"path\": \"/p\", \"bogus\": 1}]}"),
+               FX_ERR_BAD_RECIPE, "bogus");
+    fx_frame *none = NULL;
+    fx_frame_new(ctx, N, N, &none);
+    fx_frame_copy_passes(none, f);
+    fx_camera cam = top_camera();
+    fx_frame_set_camera(none, &cam);
+    fx_stack *s = et_stack(ctx, "vsm_shadows");
+    fx_stack_set_enum(s, 0, "apply", "combined");
+    fx_frame *out = NULL;
+    CHECK_FAIL(ctx, fx_stack_run(s, none, &out), FX_ERR_NO_CAMERA, "light:");
+    /* required aux views */
+    char *req = NULL;
+    CHECK_OK(ctx, fx_stack_required_aux_views(s, &req));
+    CHECK(req && tu_contains(req, "\"light:\""));
+    fx_free(req);
+    fx_stack_set_enabled(s, 0, 0);
+    CHECK_OK(ctx, fx_stack_required_aux_views(s, &req));
+    CHECK(req && strcmp(req, "{\"aux_views\":[]}") == 0);
+    fx_free(req);
+    fx_stack_free(s);
+    fx_frame_free(none);
+    /* NaN depth in the frame: finite output */
+    float *d = NULL;
+    int ch = 0;
+    fx_frame_pass(f, "Depth", &d, &ch);
+    d[5] = NAN;
+    d[6] = INFINITY;
+    d[7] = -1.0f;
+    float *o = run_vsm(ctx, f, "vsm", "box_sat", 7.0f, 0.3f, 0.01f);
+    CHECK(o && tu_all_finite(o, N * N * 4));
+    free(o);
+    fx_frame_free(f);
+    fx_frame_free(g);
+}
+
+int main(void)
+{
+    fx_context *ctx = NULL;
+    fx_context_new(&ctx, 2);
+    test_hard_limit(ctx);
+    test_soft_edge_width(ctx);
+    test_variance_clamp(ctx);
+    test_bleeding(ctx);
+    test_sidecar_threads_errors(ctx);
+    test_sat_precision(ctx);
+    fx_context_free(ctx);
+    return tu_finish("test_vsm_shadows");
+}
