@@ -5,6 +5,7 @@
 #include "core/effect.h"
 #include "core/parallel.h"
 #include "math/color.h"
+#include "math/color_ops.h"
 
 #include <float.h>
 #include <math.h>
@@ -35,31 +36,20 @@ static const fx_param_def color_matrix_param_defs[] = {
                "Blend between the original (0) and the transformed colour (1)"),
 };
 
-/* The effective matrix of the params (row-major, on RGBA). */
+/* The effective matrix of the params (row-major, on RGBA); named operators come from
+ * math/color_ops.h (shared with ssr_mirror). */
 static void matrix_of(const color_matrix_params *p, float m[16])
 {
-    memcpy(m, identity16, sizeof identity16);
     switch (p->op) {
     case OP_GRAY_AVERAGE:
-        for (int r = 0; r < 3; r++)
-            for (int c = 0; c < 3; c++)
-                m[r * 4 + c] = 1.0f / 3.0f;
+        fx_color_op_matrix(FX_COLOR_OP_GRAY_AVERAGE, m);
         break;
     case OP_GRAY_LUMINANCE:
-        for (int r = 0; r < 3; r++) {
-            m[r * 4 + 0] = FX_LUMA_R;
-            m[r * 4 + 1] = FX_LUMA_G;
-            m[r * 4 + 2] = FX_LUMA_B;
-        }
+        fx_color_op_matrix(FX_COLOR_OP_GRAY_LUMINANCE, m);
         break;
-    case OP_SEPIA: {
-        static const float sepia[9] = { 0.393f, 0.769f, 0.189f, 0.349f, 0.686f,
-                                        0.168f, 0.272f, 0.534f, 0.131f };
-        for (int r = 0; r < 3; r++)
-            for (int c = 0; c < 3; c++)
-                m[r * 4 + c] = sepia[r * 3 + c];
+    case OP_SEPIA:
+        fx_color_op_matrix(FX_COLOR_OP_SEPIA, m);
         break;
-    }
     case OP_CUSTOM:
     default:
         memcpy(m, p->matrix, sizeof identity16);

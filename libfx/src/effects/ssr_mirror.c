@@ -1,0 +1,710 @@
+/* ssr_mirror: screen-space ray-traced mirrors (after McGuire & Mara 2014) for the pixels
+ * of one mirror (the entry's mask). docs/effects/ssr_mirror.md.
+ *
+ * Per mirror pixel: view-space position from planar Depth and the projection, the
+ * Normal pass (world) turned to view space, optionally bent from the pixel's position
+ * on the mirror face (curved mirrors), the view ray reflected about it and traced from
+ * an origin pushed `bias` pixel footprints along the normal (math/ssr_trace.h). The
+ * reflected colour is the current Combined sampled bilinearly at the hit coordinates
+ * (from a Gaussian-blurred copy for glossy mirrors: the lookup is blurred, not the
+ * result), faded towards the fallback (the mirror's own texture or an environment
+ * colour) as the hit nears the frame border, put through the colour operator, and
+ * mixed by w = reflectivity x Fresnel: C = C_texture (1 - w) + C_reflection w.
+ *
+ * One stack entry is one mirror kind: many mirrors are many entries, each with its own
+ * mask and parameters (the add-on's UI, `libfx describe` and the docs keep working on
+ * plain parameter tables). Double reflections: `mirror_surfaces` is a mask naming every
+ * mirror of the scene; a ray whose hit lands on one of them is traced again from there
+ * (`bounces` 2..3), and with bounces 1 it takes that pixel's current colour, which is
+ * the other mirror's finished reflection when its entry ran earlier in the stack.
+ *
+ * Cost follows the mirror: rays are traced only for masked pixels (or one per cell of
+ * 1/resolution_scale pixels); the blurred copy for glossy mirrors covers only the
+ * bounding box of the hits. Output is bit-identical for any thread count (per-pixel
+ * work, serial double-precision reductions) and finite for any input. */
+#include "core/effect.h"
+#include "core/parallel.h"
+#include "math/blur.h"
+#include "math/camera.h"
+#include "math/color.h"
+#include "math/color_ops.h"
+#include "math/depth_edge.h"
+#include "math/ssr_trace.h"
+
+#include <cjson/cJSON.h>
+#include <float.h>
+#include <math.h>
+#include <stdatomic.h>
+#include <stdio.h>
+#include <string.h>
+
+typedef struct ssr_params {
+    float reflectivity;
+    float glossiness;
+    int fresnel;
+    float f0;
+    float fresnel_power;
+    int op;
+    int cel_levels;
+    float edge_threshold;
+    float bend;
+    int fallback;
+    float environment[3];
+    float edge_fade;
+    float bias;
+    char mirror_surfaces[FX_STRING_PARAM_MAX];
+    int bounces;
+    /* quality */
+    int max_steps;
+    float stride;
+    float growth;
+    int refine;
+    float thickness;
+    float max_distance;
+    float resolution_scale;
+} ssr_params;
+
+enum { OP_NONE = 0, OP_SEPIA, OP_GRAYSCALE, OP_CEL };
+enum { FALLBACK_TEXTURE = 0, FALLBACK_ENVIRONMENT };
+
+static const char *const op_items[] = { "none", "sepia", "grayscale", "cel" };
+static const char *const fallback_items[] = { "texture", "environment" };
+static const float env_default[3] = { 0.5f, 0.6f, 0.75f };
+
+static const fx_param_def ssr_param_defs[] = {
+    FX_P_FLOAT(ssr_params, reflectivity, "reflectivity", 1.0, 0.0, 1.0, 0.0, 1.0, "factor",
+               "R in C = C_texture (1 - R) + C_reflection R (times the Fresnel term when fresnel is on)"),
+    FX_P_FLOAT(ssr_params, glossiness, "glossiness", 0.0, 0.0, 256.0, 0.0, 24.0, "pixels",
+               "Sigma of the Gaussian blur of the reflected image, sampled through the hit "
+               "coordinates (the lookup is blurred, not the result); 0: a sharp mirror"),
+    FX_P_BOOL(ssr_params, fresnel, "fresnel", 0,
+              "Multiply the reflectivity by Schlick's F = f0 + (1 - f0)(1 - N.V)^fresnel_power"),
+    FX_P_FLOAT(ssr_params, f0, "f0", 0.04, 0.0, 1.0, 0.0, 1.0, "factor",
+               "Reflectance head-on (0.04: glass, IOR 1.5)"),
+    FX_P_FLOAT(ssr_params, fresnel_power, "fresnel_power", 5.0, 0.01, 64.0, 1.0, 10.0, "",
+               "Exponent P of the Fresnel term (5: Schlick)"),
+    FX_P_ENUM(ssr_params, op, "operator", OP_NONE, op_items,
+              "Colour operator on the reflection only: none; sepia; grayscale (Rec.709 luminance); "
+              "cel (luminance quantised to cel_levels bands, depth-edge outlines of the reflected image)"),
+    FX_P_INT(ssr_params, cel_levels, "cel_levels", 4, 1, 64, 2, 8, "", "Luminance bands of the cel operator"),
+    FX_P_FLOAT(ssr_params, edge_threshold, "edge_threshold", 0.05, 0.0, 10.0, 0.005, 0.5, "",
+               "Cel outlines: relative depth step (|Sobel depth| / 8 depth) that draws a line"),
+    FX_P_FLOAT(ssr_params, bend, "bend", 0.0, -4.0, 4.0, -1.0, 1.0, "",
+               "Curved mirror from a flat one: the normal tilts by bend x (position on the face "
+               "from its centre, -1..1); > 0 bulges out (convex, wider view), < 0 in (concave)"),
+    FX_P_ENUM(ssr_params, fallback, "fallback", FALLBACK_TEXTURE, fallback_items,
+              "Where a ray misses (or leaves the frame): texture: the mirror's own pixel; "
+              "environment: environment_color"),
+    FX_P_FLOATS(ssr_params, environment, "environment_color", 3, env_default, 0.0, 65504.0, "color",
+                "Reflection colour of missed rays when fallback is environment (linear RGB)"),
+    FX_P_FLOAT(ssr_params, edge_fade, "edge_fade", 0.08, 0.0, 0.5, 0.0, 0.2, "factor",
+               "Hits closer to the frame border than this fraction of the frame fade smoothly to the fallback"),
+    FX_P_FLOAT(ssr_params, bias, "bias", 0.5, 0.0, 64.0, 0.0, 4.0, "pixels",
+               "Ray origin pushed off the surface along the normal, in pixel footprints at its depth"),
+    FX_P_STRING(ssr_params, mirror_surfaces, "mirror_surfaces", "", "",
+                "Mask JSON naming every mirror of the scene (as a stack mask: {\"material\": [...]}); "
+                "hits on these pixels bounce again (bounces > 1). Empty: no second bounce"),
+    FX_P_INT(ssr_params, bounces, "bounces", 1, 1, 3, 1, 3, "",
+             "Reflections per ray: 1 takes the colour where the ray lands (another mirror's finished "
+             "reflection if its entry ran earlier); 2-3 trace again from mirror_surfaces pixels"),
+    FX_P_INT(ssr_params, max_steps, "max_steps", 96, 1, 65536, 8, 1024, "", "Steps per ray at most"),
+    FX_P_FLOAT(ssr_params, stride, "stride", 1.5, 0.5, 256.0, 0.5, 16.0, "pixels", "First step along the ray's 2-D line"),
+    FX_P_FLOAT(ssr_params, growth, "growth", 1.04, 1.0, 2.0, 1.0, 1.3, "",
+               "Step multiplier per step (steps grow with distance)"),
+    FX_P_INT(ssr_params, refine, "refine", 6, 0, 24, 0, 10, "", "Binary refinement iterations after a hit"),
+    FX_P_FLOAT(ssr_params, thickness, "thickness", 0.35, 0.0, 1e6, 0.01, 2.0, "",
+               "Metres a surface is assumed solid behind its front: rays passing further behind are not hits"),
+    FX_P_FLOAT(ssr_params, max_distance, "max_distance", 100.0, 0.001, 1e7, 1.0, 1000.0, "",
+               "Longest ray in metres (view space)"),
+    FX_P_FLOAT(ssr_params, resolution_scale, "resolution_scale", 1.0, 0.0625, 1.0, 0.125, 1.0, "factor",
+               "Rays per pixel side: 0.5 traces one ray per 2x2 cell and interpolates the hit coordinates"),
+};
+
+/* ---- helpers ---- */
+
+typedef struct ssr_frame {
+    fx_view view;
+    fx_ssr_scene scene;
+    const float *depth;
+    const float *normal; /* world space */
+    int nch;
+    int w, h;
+} ssr_frame;
+
+static inline fx_vec3 view_pos_at(const ssr_frame *F, int x, int y, float *depth_out)
+{
+    float d = F->depth[(size_t)y * F->w + x];
+    if (depth_out)
+        *depth_out = d;
+    fx_vec2 ndc = fx_view_pixel_to_ndc(&F->view, (float)x + 0.5f, (float)y + 0.5f);
+    return fx_view_position(&F->view, ndc, d);
+}
+
+/* View-space unit normal at a pixel; 0 if there is none (background, NaN, zero). */
+static inline int view_normal_at(const ssr_frame *F, int x, int y, fx_vec3 *n)
+{
+    const float *p = F->normal + ((size_t)y * F->w + x) * F->nch;
+    fx_vec3 nw = fx_v3(p[0], p[1], p[2]);
+    if (!(fx_v3_dot(nw, nw) > 0.01f) || !isfinite(fx_v3_dot(nw, nw))) /* |N| >= 0.1 (AA edges: ~0.5) */
+        return 0;
+    *n = fx_v3_normalize_or(fx_world_dir_to_view(&F->view, nw), fx_v3(0, 0, 0));
+    return n->x != 0.0f || n->y != 0.0f || n->z != 0.0f;
+}
+
+static inline void sample_bilinear(const float *img, int w, int h, float px, float py, float out[3])
+{
+    float fx = px - 0.5f, fy = py - 0.5f;
+    fx = fx < 0 ? 0 : fx > w - 1 ? (float)(w - 1) : fx;
+    fy = fy < 0 ? 0 : fy > h - 1 ? (float)(h - 1) : fy;
+    int x0 = (int)fx, y0 = (int)fy;
+    int x1 = x0 + 1 < w ? x0 + 1 : x0, y1 = y0 + 1 < h ? y0 + 1 : y0;
+    float ax = fx - x0, ay = fy - y0;
+    const float *a = img + ((size_t)y0 * w + x0) * 4, *b = img + ((size_t)y0 * w + x1) * 4;
+    const float *c = img + ((size_t)y1 * w + x0) * 4, *d = img + ((size_t)y1 * w + x1) * 4;
+    for (int k = 0; k < 3; k++) {
+        float top = a[k] + (b[k] - a[k]) * ax, bot = c[k] + (d[k] - c[k]) * ax;
+        out[k] = top + (bot - top) * ay;
+    }
+}
+
+/* The mirror face's frame for bending: centre, tangent, bitangent (view space) and the
+ * half extents along them. */
+typedef struct face_frame {
+    int valid;
+    fx_vec3 c, t, b;
+    float et, eb;
+} face_frame;
+
+/* Per traced cell. */
+typedef struct cell_hit {
+    float px, py;   /* hit coordinates */
+    float conf;     /* 0 miss .. 1 full (border fade) */
+    float length;
+    int state;      /* 0: not a mirror cell, 1: traced (conf may be 0) */
+} cell_hit;
+
+typedef struct ssr_job {
+    const fx_effect_run *run;
+    const ssr_params *p;
+    const ssr_frame *F;
+    fx_ssr_settings st;
+    face_frame face;
+    const fx_mask *surfaces;   /* other mirrors (double reflections), or NULL */
+    int cell;                  /* cell size in pixels */
+    int cx0, cy0, ncx, ncy;    /* cell grid over the roi */
+    cell_hit *cells;
+    const float *lookup;       /* image the reflection is sampled from (blurred for glossy) */
+    float opm[16];
+    float *dbg_hit, *dbg_xy, *dbg_len;
+} ssr_job;
+
+static inline int in_mask(const fx_mask *m, int w, int x, int y)
+{
+    return !m || m->coverage[(size_t)y * w + x] > 0.0f;
+}
+
+/* The shading normal of a mirror pixel (bent on the face if asked), facing the viewer. */
+static int shading_normal(const ssr_job *j, int x, int y, fx_vec3 pos, fx_vec3 incident, fx_vec3 *n)
+{
+    if (!view_normal_at(j->F, x, y, n))
+        return 0;
+    if (j->p->bend != 0.0f && j->face.valid) {
+        fx_vec3 d = fx_v3_sub(pos, j->face.c);
+        float u = fx_clampf(fx_v3_dot(d, j->face.t) / j->face.et, -1.0f, 1.0f);
+        float v = fx_clampf(fx_v3_dot(d, j->face.b) / j->face.eb, -1.0f, 1.0f);
+        fx_vec3 tilt = fx_v3_add(fx_v3_scale(j->face.t, u), fx_v3_scale(j->face.b, v));
+        *n = fx_v3_normalize_or(fx_v3_add(*n, fx_v3_scale(tilt, j->p->bend)), *n);
+    }
+    if (fx_v3_dot(*n, incident) > 0.0f)
+        *n = fx_v3_scale(*n, -1.0f);
+    return 1;
+}
+
+/* Traces the reflection of pixel (x, y) of this mirror; fills *h. */
+static void trace_pixel(const ssr_job *j, int x, int y, cell_hit *h)
+{
+    const ssr_frame *F = j->F;
+    h->state = 1;
+    h->conf = 0.0f;
+    h->px = h->py = h->length = 0.0f;
+    float d;
+    fx_vec3 pos = view_pos_at(F, x, y, &d);
+    if (fx_ssr_is_background(d) || !isfinite(pos.x + pos.y + pos.z))
+        return;
+    fx_vec3 inc = F->view.orthographic ? fx_v3(0, 0, -1) : fx_v3_normalize_or(pos, fx_v3(0, 0, -1));
+    fx_vec3 n;
+    if (!shading_normal(j, x, y, pos, inc, &n))
+        return;
+    fx_vec3 r = fx_v3_reflect(inc, n);
+    fx_vec3 o = fx_v3_add(pos, fx_v3_scale(n, j->p->bias * fx_ssr_pixel_footprint(&F->view, d)));
+    fx_ssr_hit hit;
+    if (!fx_ssr_trace(&F->scene, &j->st, o, r, &hit))
+        return;
+    float fade = 1.0f;
+    if (j->p->edge_fade > 0.0f) {
+        float ex = fminf(hit.px, (float)F->w - hit.px) / (j->p->edge_fade * (float)F->w);
+        float ey = fminf(hit.py, (float)F->h - hit.py) / (j->p->edge_fade * (float)F->h);
+        fade = fx_smoothstep(0.0f, 1.0f, fminf(ex, ey));
+    }
+    /* a surface seen from behind (its normal along the ray) is not what a mirror shows */
+    fx_vec3 hn;
+    if (view_normal_at(F, hit.ix, hit.iy, &hn) && fx_v3_dot(hn, r) > 0.25f)
+        fade = 0.0f;
+    h->px = hit.px;
+    h->py = hit.py;
+    h->conf = fade;
+    h->length = hit.length;
+}
+
+static void trace_cells(void *user, int begin, int end)
+{
+    ssr_job *j = user;
+    const int w = j->F->w, h = j->F->h, c = j->cell;
+    const fx_mask *m = j->run->mask;
+    for (int cy = begin; cy < end; cy++)
+        for (int cx = 0; cx < j->ncx; cx++) {
+            cell_hit *ch = &j->cells[(size_t)cy * j->ncx + cx];
+            ch->state = 0;
+            int x0 = (j->cx0 + cx) * c, y0 = (j->cy0 + cy) * c;
+            /* the cell's centre pixel if it is a mirror pixel, else the first one */
+            int bx = -1, by = -1;
+            int mx = x0 + c / 2, my = y0 + c / 2;
+            if (mx < w && my < h && in_mask(m, w, mx, my)) {
+                bx = mx;
+                by = my;
+            }
+            for (int yy = y0; bx < 0 && yy < y0 + c && yy < h; yy++)
+                for (int xx = x0; xx < x0 + c && xx < w; xx++)
+                    if (in_mask(m, w, xx, yy)) {
+                        bx = xx;
+                        by = yy;
+                        break;
+                    }
+            if (bx >= 0)
+                trace_pixel(j, bx, by, ch);
+        }
+}
+
+/* Hit coordinates of pixel (x, y): its own trace at full resolution; with cells, the
+ * bilinear blend of the 4 surrounding cells when all hit and agree within 2 cells,
+ * else its own cell. */
+static cell_hit pixel_hit(const ssr_job *j, int x, int y)
+{
+    const int c = j->cell;
+    int gx = x / c - j->cx0, gy = y / c - j->cy0;
+    cell_hit own = j->cells[(size_t)gy * j->ncx + gx];
+    if (c == 1)
+        return own;
+    float fx = ((float)x + 0.5f) / (float)c - 0.5f - (float)j->cx0;
+    float fy = ((float)y + 0.5f) / (float)c - 0.5f - (float)j->cy0;
+    int ax = (int)floorf(fx), ay = (int)floorf(fy);
+    if (ax < 0 || ay < 0 || ax + 1 >= j->ncx || ay + 1 >= j->ncy)
+        return own;
+    const cell_hit *q[4] = { &j->cells[(size_t)ay * j->ncx + ax], &j->cells[(size_t)ay * j->ncx + ax + 1],
+                             &j->cells[(size_t)(ay + 1) * j->ncx + ax],
+                             &j->cells[(size_t)(ay + 1) * j->ncx + ax + 1] };
+    float lim = 2.0f * (float)c;
+    for (int k = 0; k < 4; k++) {
+        if (q[k]->state != 1 || q[k]->conf <= 0.0f)
+            return own;
+        if (fabsf(q[k]->px - q[0]->px) > lim || fabsf(q[k]->py - q[0]->py) > lim)
+            return own;
+    }
+    float tx = fx - ax, ty = fy - ay;
+    float wts[4] = { (1 - tx) * (1 - ty), tx * (1 - ty), (1 - tx) * ty, tx * ty };
+    cell_hit r = { 0, 0, 0, 0, 1 };
+    for (int k = 0; k < 4; k++) {
+        r.px += wts[k] * q[k]->px;
+        r.py += wts[k] * q[k]->py;
+        r.conf += wts[k] * q[k]->conf;
+        r.length += wts[k] * q[k]->length;
+    }
+    return r;
+}
+
+/* Second (and third) bounce from a hit that landed on another mirror's pixel. */
+static int bounce(const ssr_job *j, fx_vec3 from, int hx, int hy, int left, float rgb[3])
+{
+    const ssr_frame *F = j->F;
+    float d;
+    fx_vec3 pos = view_pos_at(F, hx, hy, &d);
+    if (fx_ssr_is_background(d))
+        return 0;
+    fx_vec3 inc = fx_v3_normalize_or(fx_v3_sub(pos, from), fx_v3(0, 0, -1));
+    fx_vec3 n;
+    if (!view_normal_at(F, hx, hy, &n))
+        return 0;
+    if (fx_v3_dot(n, inc) > 0.0f)
+        n = fx_v3_scale(n, -1.0f);
+    fx_vec3 r = fx_v3_reflect(inc, n);
+    fx_vec3 o = fx_v3_add(pos, fx_v3_scale(n, j->p->bias * fx_ssr_pixel_footprint(&F->view, d)));
+    fx_ssr_hit hit;
+    if (!fx_ssr_trace(&F->scene, &j->st, o, r, &hit))
+        return 0;
+    fx_vec3 hn;
+    if (view_normal_at(F, hit.ix, hit.iy, &hn) && fx_v3_dot(hn, r) > 0.25f)
+        return 0;
+    if (left > 1 && j->surfaces && j->surfaces->coverage[(size_t)hit.iy * F->w + hit.ix] > 0.5f) {
+        fx_vec3 hp = view_pos_at(F, hit.ix, hit.iy, NULL);
+        float tex[3];
+        sample_bilinear(j->lookup, F->w, F->h, hit.px, hit.py, tex);
+        if (bounce(j, pos, hit.ix, hit.iy, left - 1, rgb)) {
+            float R = j->p->reflectivity;
+            for (int k = 0; k < 3; k++)
+                rgb[k] = tex[k] * (1.0f - R) + rgb[k] * R;
+            return 1;
+        }
+        (void)hp;
+    }
+    sample_bilinear(j->lookup, F->w, F->h, hit.px, hit.py, rgb);
+    return 1;
+}
+
+static void apply_operator(const ssr_job *j, float px, float py, float rgb[3])
+{
+    const ssr_params *p = j->p;
+    if (p->op == OP_SEPIA || p->op == OP_GRAYSCALE) {
+        fx_color_op_apply3(j->opm, rgb, rgb);
+    } else if (p->op == OP_CEL) {
+        float L = fx_luminance_rgb(rgb);
+        if (L > 1e-6f && isfinite(L)) {
+            float lv = (float)p->cel_levels;
+            float q = ceilf(fx_clampf(L, 0.0f, 1.0f) * lv) / lv;
+            if (L > 1.0f)
+                q = L; /* above white: keep (quantising HDR makes no sense) */
+            float s = q / L;
+            for (int k = 0; k < 3; k++)
+                rgb[k] *= s;
+        }
+        const ssr_frame *F = j->F;
+        int ix = (int)fx_clampf(floorf(px), 0.0f, (float)(F->w - 1));
+        int iy = (int)fx_clampf(floorf(py), 0.0f, (float)(F->h - 1));
+        float e = fx_depth_edge_strength(F->depth, F->w, F->h, ix, iy, FX_SSR_BACKGROUND_DEPTH);
+        float t = p->edge_threshold;
+        float line = t > 0.0f ? fx_smoothstep(t, 1.5f * t, e) : (e > 0.0f ? 1.0f : 0.0f);
+        for (int k = 0; k < 3; k++)
+            rgb[k] *= 1.0f - line;
+    }
+}
+
+static void shade_rows(void *user, int begin, int end)
+{
+    ssr_job *j = user;
+    const fx_effect_run *run = j->run;
+    const ssr_params *p = j->p;
+    const ssr_frame *F = j->F;
+    const int w = run->width;
+    const fx_mask *m = run->mask;
+    for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++)
+        for (int x = run->roi.x0; x < run->roi.x1; x++) {
+            size_t i = (size_t)y * w + x;
+            const float *s = run->src + i * 4;
+            float *o = run->dst + i * 4;
+            memcpy(o, s, 4 * sizeof(float));
+            if (!in_mask(m, w, x, y))
+                continue;
+            cell_hit h = pixel_hit(j, x, y);
+            float d;
+            fx_vec3 pos = view_pos_at(F, x, y, &d);
+            fx_vec3 inc = F->view.orthographic ? fx_v3(0, 0, -1) : fx_v3_normalize_or(pos, fx_v3(0, 0, -1));
+            fx_vec3 n;
+            if (fx_ssr_is_background(d) || !shading_normal(j, x, y, pos, inc, &n))
+                continue; /* no surface: the texture stays */
+            float refl[3], fb[3];
+            if (p->fallback == FALLBACK_ENVIRONMENT)
+                memcpy(fb, p->environment, sizeof fb);
+            else
+                memcpy(fb, s, sizeof fb);
+            float conf = h.state == 1 ? h.conf : 0.0f;
+            if (conf > 0.0f) {
+                int hx = (int)fx_clampf(floorf(h.px), 0.0f, (float)(F->w - 1));
+                int hy = (int)fx_clampf(floorf(h.py), 0.0f, (float)(F->h - 1));
+                sample_bilinear(j->lookup, F->w, F->h, h.px, h.py, refl);
+                if (p->bounces > 1 && j->surfaces && j->surfaces->coverage[(size_t)hy * w + hx] > 0.5f) {
+                    float b[3];
+                    if (bounce(j, pos, hx, hy, p->bounces - 1, b))
+                        for (int k = 0; k < 3; k++)
+                            refl[k] = refl[k] * (1.0f - p->reflectivity) + b[k] * p->reflectivity;
+                }
+                if (p->op != OP_NONE)
+                    apply_operator(j, h.px, h.py, refl);
+                for (int k = 0; k < 3; k++)
+                    refl[k] = fb[k] + (refl[k] - fb[k]) * conf;
+            } else {
+                memcpy(refl, fb, sizeof refl);
+            }
+            float wgt = p->reflectivity;
+            if (p->fresnel) {
+                float ndv = fx_saturate(-fx_v3_dot(n, inc));
+                float base = 1.0f - ndv;
+                wgt *= p->f0 + (1.0f - p->f0) * powf(base, p->fresnel_power);
+            }
+            for (int k = 0; k < 3; k++) {
+                float v = s[k] * (1.0f - wgt) + refl[k] * wgt;
+                o[k] = isfinite(v) ? v : s[k];
+            }
+            if (j->dbg_hit)
+                j->dbg_hit[i] = conf;
+            if (j->dbg_xy) {
+                j->dbg_xy[i * 3] = conf > 0 ? h.px : 0.0f;
+                j->dbg_xy[i * 3 + 1] = conf > 0 ? h.py : 0.0f;
+                j->dbg_xy[i * 3 + 2] = conf > 0 ? 1.0f : 0.0f;
+            }
+            if (j->dbg_len)
+                j->dbg_len[i] = conf > 0 ? h.length : 0.0f;
+        }
+}
+
+/* Centre, axes and extents of the mirror face (view space), serial in double: the same
+ * bits for any thread count. */
+static void fit_face(ssr_job *j)
+{
+    const fx_effect_run *run = j->run;
+    const ssr_frame *F = j->F;
+    double sp[3] = { 0, 0, 0 }, sn[3] = { 0, 0, 0 }, cnt = 0;
+    for (int y = run->roi.y0; y < run->roi.y1; y++)
+        for (int x = run->roi.x0; x < run->roi.x1; x++) {
+            if (!in_mask(run->mask, F->w, x, y))
+                continue;
+            float d;
+            fx_vec3 p = view_pos_at(F, x, y, &d);
+            fx_vec3 n;
+            if (fx_ssr_is_background(d) || !view_normal_at(F, x, y, &n))
+                continue;
+            sp[0] += p.x, sp[1] += p.y, sp[2] += p.z;
+            sn[0] += n.x, sn[1] += n.y, sn[2] += n.z;
+            cnt += 1;
+        }
+    j->face.valid = 0;
+    if (cnt < 1)
+        return;
+    fx_vec3 c = fx_v3((float)(sp[0] / cnt), (float)(sp[1] / cnt), (float)(sp[2] / cnt));
+    fx_vec3 n = fx_v3_normalize_or(fx_v3((float)sn[0], (float)sn[1], (float)sn[2]), fx_v3(0, 0, 1));
+    /* tangent: the view's up x n (horizontal on the face), bitangent n x t */
+    fx_vec3 up = fabsf(n.y) < 0.95f ? fx_v3(0, 1, 0) : fx_v3(1, 0, 0);
+    fx_vec3 t = fx_v3_normalize_or(fx_v3_cross(up, n), fx_v3(1, 0, 0));
+    fx_vec3 b = fx_v3_normalize_or(fx_v3_cross(n, t), fx_v3(0, 1, 0));
+    double et = 0, eb = 0;
+    for (int y = run->roi.y0; y < run->roi.y1; y++)
+        for (int x = run->roi.x0; x < run->roi.x1; x++) {
+            if (!in_mask(run->mask, F->w, x, y))
+                continue;
+            float d;
+            fx_vec3 p = view_pos_at(F, x, y, &d);
+            if (fx_ssr_is_background(d) || !isfinite(p.x + p.y + p.z))
+                continue;
+            fx_vec3 q = fx_v3_sub(p, c);
+            double a = fabs(fx_v3_dot(q, t)), bb = fabs(fx_v3_dot(q, b));
+            et = a > et ? a : et;
+            eb = bb > eb ? bb : eb;
+        }
+    if (!(et > 1e-9) || !(eb > 1e-9) || !isfinite(et) || !isfinite(eb))
+        return;
+    j->face = (face_frame){ 1, c, t, b, (float)et, (float)eb };
+}
+
+static fx_result parse_surfaces(fx_context *ctx, const char *json, const char *where, fx_mask_spec *spec,
+                                int *has)
+{
+    *has = 0;
+    memset(spec, 0, sizeof *spec);
+    if (!json || !json[0])
+        return FX_OK;
+    cJSON *j = cJSON_Parse(json);
+    if (!j)
+        return fx_fail(ctx, FX_ERR_BAD_PARAM, "%s: mirror_surfaces is not valid JSON (a mask object)", where);
+    fx_result r = fx_mask_spec_parse(ctx, j, where, spec);
+    cJSON_Delete(j);
+    if (!r)
+        *has = !fx_mask_spec_is_empty(spec);
+    return r;
+}
+
+static fx_pass_set ssr_passes(const void *params)
+{
+    const ssr_params *p = params;
+    fx_pass_set set = FX_PASS_BIT(FX_PASS_DEPTH) | FX_PASS_BIT(FX_PASS_NORMAL);
+    fx_mask_spec spec;
+    int has = 0;
+    if (p->mirror_surfaces[0] && parse_surfaces(NULL, p->mirror_surfaces, "", &spec, &has) == FX_OK) {
+        if (has)
+            set |= fx_mask_spec_passes(&spec);
+        fx_mask_spec_clear(&spec);
+    }
+    return set;
+}
+
+static int ssr_needs_camera(const void *params)
+{
+    (void)params;
+    return 1;
+}
+
+/* Rays reach anywhere on the frame. */
+static int ssr_halo(const void *params, int width, int height)
+{
+    (void)params;
+    return width > height ? width : height;
+}
+
+static fx_result ssr_validate(const void *params, char *err, size_t err_size)
+{
+    const ssr_params *p = params;
+    for (int k = 0; k < 3; k++)
+        if (!isfinite(p->environment[k])) {
+            snprintf(err, err_size, "environment_color[%d] is not finite", k);
+            return FX_ERR_BAD_PARAM;
+        }
+    if (p->mirror_surfaces[0]) {
+        cJSON *j = cJSON_Parse(p->mirror_surfaces);
+        int ok = j && cJSON_IsObject(j);
+        cJSON_Delete(j);
+        if (!ok) {
+            snprintf(err, err_size, "mirror_surfaces must be a mask JSON object, e.g. "
+                                    "{\"material\": [\"Mirror_A\", \"Mirror_B\"]}");
+            return FX_ERR_BAD_PARAM;
+        }
+    }
+    return FX_OK;
+}
+
+static fx_result ssr_process(const fx_effect_run *run)
+{
+    const ssr_params *p = run->params;
+    const fx_rect *roi = &run->roi;
+    if (roi->x1 <= roi->x0 || roi->y1 <= roi->y0)
+        return FX_OK;
+    char where[96];
+    snprintf(where, sizeof where, "effect %d (ssr_mirror)", run->index);
+    ssr_frame F;
+    memset(&F, 0, sizeof F);
+    F.w = run->width;
+    F.h = run->height;
+    if (!fx_view_init(&F.view, run->frame))
+        return fx_fail(run->ctx, FX_ERR_NO_CAMERA, "%s: the frame has no usable camera (missing or singular matrices)",
+                       where);
+    fx_pass *dp = fx_frame_find_pass(run->frame, "Depth");
+    fx_pass *np = fx_frame_find_pass(run->frame, "Normal");
+    if (!dp || !np)
+        return fx_fail(run->ctx, FX_ERR_MISSING_PASS, "%s needs the %s pass", where, !dp ? "Depth" : "Normal");
+    if (np->channels < 3)
+        return fx_fail(run->ctx, FX_ERR_MISSING_PASS, "%s: the Normal pass has %d channels, 3 needed", where,
+                       np->channels);
+    F.depth = dp->data;
+    F.normal = np->data;
+    F.nch = np->channels;
+    F.scene = (fx_ssr_scene){ &F.view, F.depth, F.w, F.h };
+    /* the fx_ssr_scene points at F.view: F must not move from here on */
+
+    ssr_job j;
+    memset(&j, 0, sizeof j);
+    j.run = run;
+    j.p = p;
+    j.F = &F;
+    j.st = (fx_ssr_settings){ p->max_steps, p->stride, p->growth, p->refine, p->thickness, p->max_distance };
+    fx_color_op_matrix(p->op == OP_SEPIA ? FX_COLOR_OP_SEPIA : FX_COLOR_OP_GRAY_LUMINANCE, j.opm);
+    if (p->bend != 0.0f)
+        fit_face(&j);
+
+    fx_result r = FX_OK;
+    fx_mask *surfaces = NULL;
+    float *blurred = NULL;
+    fx_mask_spec spec;
+    int has_surfaces = 0;
+    if (p->bounces > 1 && (r = parse_surfaces(run->ctx, p->mirror_surfaces, where, &spec, &has_surfaces)))
+        return r;
+    if (has_surfaces) {
+        r = fx_mask_build(run->ctx, &spec, run->frame, where, &surfaces);
+        fx_mask_spec_clear(&spec);
+        if (r)
+            return r;
+        j.surfaces = surfaces;
+    }
+
+    int cell = 1;
+    while (cell < 16 && (float)(cell * 2) <= 1.0f / p->resolution_scale + 1e-4f)
+        cell *= 2;
+    j.cell = cell;
+    j.cx0 = roi->x0 / cell;
+    j.cy0 = roi->y0 / cell;
+    j.ncx = (roi->x1 - 1) / cell - j.cx0 + 1;
+    j.ncy = (roi->y1 - 1) / cell - j.cy0 + 1;
+    j.cells = fx_mem_calloc((size_t)j.ncx * j.ncy, sizeof *j.cells);
+    if (!j.cells) {
+        r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for %d x %d ray cells", where, j.ncx, j.ncy);
+        goto out;
+    }
+    fx_parallel_for(run->ctx, j.ncy, 1, trace_cells, &j);
+
+    j.lookup = run->src;
+    fx_blur_spec bs = { p->glossiness, FX_BLUR_RECURSIVE, 3 };
+    if (!fx_blur_is_identity(&bs)) {
+        /* blur only the hits' bounding box (+1 px for the bilinear lookup) */
+        float bx0 = 1e30f, by0 = 1e30f, bx1 = -1e30f, by1 = -1e30f;
+        for (size_t k = 0; k < (size_t)j.ncx * j.ncy; k++) {
+            const cell_hit *c = &j.cells[k];
+            if (c->state == 1 && c->conf > 0.0f) {
+                bx0 = fminf(bx0, c->px), by0 = fminf(by0, c->py);
+                bx1 = fmaxf(bx1, c->px), by1 = fmaxf(by1, c->py);
+            }
+        }
+        if (bx1 >= bx0) {
+            fx_rect br = { (int)floorf(bx0) - 2 - cell, (int)floorf(by0) - 2 - cell, (int)ceilf(bx1) + 2 + cell,
+                           (int)ceilf(by1) + 2 + cell };
+            br.x0 = br.x0 < 0 ? 0 : br.x0;
+            br.y0 = br.y0 < 0 ? 0 : br.y0;
+            br.x1 = br.x1 > F.w ? F.w : br.x1;
+            br.y1 = br.y1 > F.h ? F.h : br.y1;
+            size_t bytes = (size_t)F.w * F.h * 4 * sizeof(float);
+            if ((r = fx_check_budget(run->ctx, bytes, "the glossy reflection lookup")))
+                goto out;
+            blurred = fx_mem_alloc(bytes);
+            if (!blurred) {
+                r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the glossy lookup", where);
+                goto out;
+            }
+            /* outside br the lookup is never read (hits lie inside, bilinear reads +1) */
+            for (int y = br.y0; y < br.y1; y++)
+                memcpy(blurred + ((size_t)y * F.w + br.x0) * 4, run->src + ((size_t)y * F.w + br.x0) * 4,
+                       (size_t)(br.x1 - br.x0) * 4 * sizeof(float));
+            if ((r = fx_blur_image(run->ctx, run->src, blurred, F.w, F.h, 4, &bs, &br, where)))
+                goto out;
+            j.lookup = blurred;
+        }
+    }
+
+    j.dbg_hit = fx_effect_debug_pass(run, "hit", 1, &r);
+    if (!r)
+        j.dbg_xy = fx_effect_debug_pass(run, "hit_xy", 3, &r);
+    if (!r)
+        j.dbg_len = fx_effect_debug_pass(run, "ray_length", 1, &r);
+    if (r)
+        goto out;
+    int rows = roi->y1 - roi->y0;
+    fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), shade_rows, &j);
+out:
+    fx_mem_free(j.cells);
+    fx_mem_free(blurred);
+    fx_mask_free(surfaces);
+    return r;
+}
+
+const fx_effect_class fx_effect_ssr_mirror = {
+    .name = "ssr_mirror",
+    .doc = "Screen-space ray-traced mirror (McGuire & Mara 2014) on the masked pixels: reflectivity, "
+           "glossiness, Fresnel, colour operator, bending, double reflections",
+    .params_size = sizeof(ssr_params),
+    .params = ssr_param_defs,
+    .param_count = FX_COUNT_OF(ssr_param_defs),
+    .presets = {
+        "{\"max_steps\": 24, \"stride\": 4, \"growth\": 1.15, \"refine\": 2, \"resolution_scale\": 0.5}",
+        "{\"max_steps\": 48, \"stride\": 2, \"growth\": 1.08, \"refine\": 4, \"resolution_scale\": 0.5}",
+        "{\"max_steps\": 96, \"stride\": 1.5, \"growth\": 1.04, \"refine\": 6, \"resolution_scale\": 1}",
+        "{\"max_steps\": 4096, \"stride\": 1, \"growth\": 1, \"refine\": 10, \"resolution_scale\": 1}",
+    },
+    .passes = ssr_passes,
+    .needs_camera = ssr_needs_camera,
+    .halo = ssr_halo,
+    .validate = ssr_validate,
+    .process = ssr_process,
+};

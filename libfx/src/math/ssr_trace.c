@@ -1,0 +1,217 @@
+/* Screen-space ray tracing: see ssr_trace.h. The line set-up and the march run in
+ * double: a ray from 1e4 m deep or of 1e-4 px/step must not lose its direction. */
+#include "math/ssr_trace.h"
+
+#include <math.h>
+#include <string.h>
+
+float fx_ssr_pixel_footprint(const fx_view *v, float depth)
+{
+    float p11 = fabsf(v->cam.projection[5]);
+    if (!(p11 > 1e-20f) || !(v->disp_h > 0.0f))
+        return 0.0f;
+    float h = 2.0f / (p11 * v->disp_h);
+    float r = v->orthographic ? h : h * depth;
+    return isfinite(r) ? r : 0.0f;
+}
+
+typedef struct line_state {
+    double p0[2], dp[2];   /* permuted pixel position and its derivative per major-axis pixel */
+    double q0[3], dq[3];   /* homogeneous view position (view / w) and derivative */
+    double k0, dk;         /* 1 / w and derivative */
+    int swap;              /* x and y swapped (major axis is y) */
+    int w, h;
+} line_state;
+
+static void pixel_at(const line_state *L, double s, double *x, double *y)
+{
+    double a = L->p0[0] + L->dp[0] * s, b = L->p0[1] + L->dp[1] * s;
+    *x = L->swap ? b : a;
+    *y = L->swap ? a : b;
+}
+
+static double depth_at(const line_state *L, double s)
+{
+    double k = L->k0 + L->dk * s;
+    double z = L->q0[2] + L->dq[2] * s;
+    return k > 0.0 ? -z / k : INFINITY;
+}
+
+static int pixel_index(const line_state *L, double s, int *ix, int *iy)
+{
+    double x, y;
+    pixel_at(L, s, &x, &y);
+    if (!(x > -1.0 && x < L->w + 1.0 && y > -1.0 && y < L->h + 1.0))
+        return 0;
+    int i = (int)floor(x), j = (int)floor(y);
+    *ix = i < 0 ? 0 : i >= L->w ? L->w - 1 : i;
+    *iy = j < 0 ? 0 : j >= L->h ? L->h - 1 : j;
+    return 1;
+}
+
+/* Liang-Barsky: shrinks [t0, t1] of p(t) = a + t (b - a) to the box [lo, hi]. */
+static int clip_axis(double a, double b, double lo, double hi, double *t0, double *t1)
+{
+    double d = b - a;
+    if (fabs(d) < 1e-300)
+        return a >= lo && a <= hi;
+    double ta = (lo - a) / d, tb = (hi - a) / d;
+    if (ta > tb) {
+        double t = ta;
+        ta = tb;
+        tb = t;
+    }
+    if (ta > *t0)
+        *t0 = ta;
+    if (tb < *t1)
+        *t1 = tb;
+    return *t0 <= *t1;
+}
+
+static int finite3(fx_vec3 v) { return isfinite(v.x) && isfinite(v.y) && isfinite(v.z); }
+
+int fx_ssr_trace(const fx_ssr_scene *s, const fx_ssr_settings *st, fx_vec3 origin, fx_vec3 dir,
+                 fx_ssr_hit *out)
+{
+    memset(out, 0, sizeof *out);
+    const fx_view *v = s->view;
+    if (!finite3(origin) || !finite3(dir) || s->width <= 0 || s->height <= 0)
+        return 0;
+    dir = fx_v3_normalize_or(dir, fx_v3(0.0f, 0.0f, 0.0f));
+    if (dir.x == 0.0f && dir.y == 0.0f && dir.z == 0.0f)
+        return 0;
+    double near = v->cam.clip_start > 0.0f && isfinite(v->cam.clip_start) ? v->cam.clip_start : 1e-3;
+    double len = st->max_distance > 0.0f && isfinite(st->max_distance) ? st->max_distance : 1e3;
+    /* near-plane clipping: view z must stay <= -near */
+    if (!((double)origin.z <= -near))
+        return 0;
+    if (origin.z + dir.z * len > -near)
+        len = (-near - origin.z) / dir.z; /* dir.z > 0 here */
+    if (!(len > 1e-6))
+        return 0;
+    double e[3] = {origin.x + dir.x * len, origin.y + dir.y * len, origin.z + dir.z * len};
+    const float *P = v->cam.projection;
+    double o[3] = {origin.x, origin.y, origin.z};
+    double h0[4], h1[4];
+    for (int r = 0; r < 4; r++) {
+        h0[r] = P[r * 4] * o[0] + P[r * 4 + 1] * o[1] + P[r * 4 + 2] * o[2] + P[r * 4 + 3];
+        h1[r] = P[r * 4] * e[0] + P[r * 4 + 1] * e[1] + P[r * 4 + 2] * e[2] + P[r * 4 + 3];
+    }
+    if (!(h0[3] > 1e-30) || !(h1[3] > 1e-30))
+        return 0;
+    double k0 = 1.0 / h0[3], k1 = 1.0 / h1[3];
+    double q0[3] = {o[0] * k0, o[1] * k0, o[2] * k0}, q1[3] = {e[0] * k1, e[1] * k1, e[2] * k1};
+    /* NDC -> frame pixels (as fx_view_ndc_to_pixel, in double) */
+    double a0[2] = {(h0[0] * k0 + 1.0) * 0.5 * v->disp_w - v->off_x, (1.0 - h0[1] * k0) * 0.5 * v->disp_h - v->off_y};
+    double a1[2] = {(h1[0] * k1 + 1.0) * 0.5 * v->disp_w - v->off_x, (1.0 - h1[1] * k1) * 0.5 * v->disp_h - v->off_y};
+    if (!isfinite(a0[0]) || !isfinite(a0[1]) || !isfinite(a1[0]) || !isfinite(a1[1]))
+        return 0;
+    /* degenerate 2-D line (ray along the view direction): nudge */
+    if ((a1[0] - a0[0]) * (a1[0] - a0[0]) + (a1[1] - a0[1]) * (a1[1] - a0[1]) < 1e-4)
+        a1[0] += 0.01;
+    /* clip the 2-D line to the frame */
+    double t0 = 0.0, t1 = 1.0;
+    if (!clip_axis(a0[0], a1[0], 0.0, (double)s->width, &t0, &t1) ||
+        !clip_axis(a0[1], a1[1], 0.0, (double)s->height, &t0, &t1))
+        return 0;
+    if (t0 > 1e-9) /* the origin itself is off the frame */
+        return 0;
+    int clipped = t1 < 1.0;
+    if (clipped) {
+        for (int i = 0; i < 2; i++)
+            a1[i] = a0[i] + (a1[i] - a0[i]) * t1;
+        for (int i = 0; i < 3; i++)
+            q1[i] = q0[i] + (q1[i] - q0[i]) * t1;
+        k1 = k0 + (k1 - k0) * t1;
+    }
+    line_state L;
+    L.w = s->width;
+    L.h = s->height;
+    double dx = a1[0] - a0[0], dy = a1[1] - a0[1];
+    L.swap = fabs(dx) < fabs(dy);
+    if (L.swap) {
+        double t = dx;
+        dx = dy;
+        dy = t;
+        L.p0[0] = a0[1];
+        L.p0[1] = a0[0];
+    } else {
+        L.p0[0] = a0[0];
+        L.p0[1] = a0[1];
+    }
+    double s_end = fabs(dx);
+    if (!(s_end > 1e-12))
+        return 0;
+    double sgn = dx > 0 ? 1.0 : -1.0, inv = sgn / dx;
+    L.dp[0] = sgn;
+    L.dp[1] = dy * inv;
+    for (int i = 0; i < 3; i++) {
+        L.q0[i] = q0[i];
+        L.dq[i] = (q1[i] - q0[i]) * inv;
+    }
+    L.k0 = k0;
+    L.dk = (k1 - k0) * inv;
+
+    const double thick = st->thickness > 0.0f ? st->thickness : 0.0;
+    double stride = st->stride > 0.5f ? st->stride : 0.5;
+    const double growth = st->growth >= 1.0f && isfinite(st->growth) ? st->growth : 1.0;
+    const int max_steps = st->max_steps > 0 ? st->max_steps : 1;
+    const int refine = st->refine < 0 ? 0 : st->refine > 30 ? 30 : st->refine;
+    double s_prev = 0.0, d_prev = -(double)origin.z;
+    for (int i = 0; i < max_steps; i++) {
+        double s_cur = s_prev + stride;
+        if (s_cur > s_end)
+            s_cur = s_end;
+        out->steps = i + 1;
+        double d_cur = depth_at(&L, s_cur);
+        int ix, iy;
+        if (!pixel_index(&L, s_cur, &ix, &iy))
+            break;
+        double sd = fx_ssr_depth_at(s, ix, iy);
+        double dmin = d_prev < d_cur ? d_prev : d_cur, dmax = d_prev < d_cur ? d_cur : d_prev;
+        if (isfinite(sd) && dmax >= sd && dmin <= sd + thick) {
+            double lo = s_prev, hi = s_cur;
+            for (int r = 0; r < refine; r++) {
+                double mid = 0.5 * (lo + hi);
+                int mx, my;
+                if (!pixel_index(&L, mid, &mx, &my))
+                    break;
+                double smid = fx_ssr_depth_at(s, mx, my);
+                if (isfinite(smid) && depth_at(&L, mid) >= smid)
+                    hi = mid;
+                else
+                    lo = mid;
+            }
+            int hx, hy;
+            double slop = fabs(d_cur - d_prev) / (double)(1u << refine);
+            if (pixel_index(&L, hi, &hx, &hy)) {
+                double sh = fx_ssr_depth_at(s, hx, hy), dh = depth_at(&L, hi);
+                if (isfinite(sh) && dh >= sh - slop && dh <= sh + thick + slop) {
+                    double x, y;
+                    pixel_at(&L, hi, &x, &y);
+                    double k = L.k0 + L.dk * hi;
+                    double vx = (L.q0[0] + L.dq[0] * hi) / k - o[0];
+                    double vy = (L.q0[1] + L.dq[1] * hi) / k - o[1];
+                    double vz = (L.q0[2] + L.dq[2] * hi) / k - o[2];
+                    out->hit = 1;
+                    out->px = (float)x;
+                    out->py = (float)y;
+                    out->ix = hx;
+                    out->iy = hy;
+                    double l = sqrt(vx * vx + vy * vy + vz * vz);
+                    out->length = isfinite(l) ? (float)l : 0.0f;
+                    return 1;
+                }
+            }
+        }
+        if (s_cur >= s_end)
+            break;
+        s_prev = s_cur;
+        d_prev = d_cur;
+        stride *= growth;
+        if (stride > 1e7)
+            stride = 1e7;
+    }
+    out->left_screen = clipped;
+    return 0;
+}
