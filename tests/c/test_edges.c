@@ -25,7 +25,7 @@ static float *run_pass(fx_context *ctx, const fx_frame *f, const char *recipe, c
     float *d = NULL;
     int c = 0;
     if (fx_frame_pass(out, pass ? pass : "Combined", &d, &c) != FX_OK) {
-        fprintf(stderr, "pass %s: %s\n", pass, fx_context_error(ctx));
+        fprintf(stderr, "pass %s: %s\n", pass ? pass : "Combined", fx_context_error(ctx));
         goto done;
     }
     size_t n = (size_t)fx_frame_width(out) * fx_frame_height(out) * c;

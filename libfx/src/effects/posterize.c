@@ -1,0 +1,132 @@
+/* posterize: N colour levels per channel, or of the gray (mean or Rec.709 luminance): the
+ * seed's banding, in sRGB-encoded or linear steps, with optional ordered dithering.
+ * Memory-bound: one pass, quantiser tables from math/levels.h. docs/effects/posterize.md. */
+#include "core/effect.h"
+#include "core/parallel.h"
+#include "math/color.h"
+#include "math/levels.h"
+
+#include <float.h>
+#include <stdio.h>
+#include <string.h>
+
+typedef struct posterize_params {
+    int mode;
+    int levels;
+    int space;
+    float white;
+    float dither;
+    int keep_hdr;
+    float mix;
+} posterize_params;
+
+enum { MODE_COLOR = 0, MODE_LUMINANCE, MODE_MEAN };
+enum { SPACE_SRGB = 0, SPACE_LINEAR };
+
+static const char *const mode_items[] = { "color", "luminance", "mean" };
+static const char *const space_items[] = { "srgb", "linear" };
+
+static const fx_param_def posterize_param_defs[] = {
+    FX_P_ENUM(posterize_params, mode, "mode", MODE_COLOR, mode_items,
+              "color: each of R, G, B quantised; luminance: gray from Rec.709 luminance, quantised; "
+              "mean: gray from (R+G+B)/3, quantised"),
+    FX_P_INT(posterize_params, levels, "levels", 4, 2, 256, 2, 16, "",
+             "Number of levels (a ramp from 0 to white takes exactly this many values)"),
+    FX_P_ENUM(posterize_params, space, "space", SPACE_SRGB, space_items,
+              "Steps equal in sRGB-encoded values (even to the eye) or in linear values"),
+    FX_P_FLOAT(posterize_params, white, "white", 1.0, 1e-6, 65504.0, 0.1, 16.0, "",
+               "Linear value of the top level"),
+    FX_P_FLOAT(posterize_params, dither, "dither", 0.0, 0.0, 1.0, 0.0, 1.0, "factor",
+               "Ordered (8x8 Bayer) dither amplitude in bands: 0 hard bands, 1 full dither"),
+    FX_P_BOOL(posterize_params, keep_hdr, "keep_hdr", 1,
+              "Values above white pass unchanged (highlights stay for bloom); off: they take the top level"),
+    FX_P_FLOAT(posterize_params, mix, "mix", 1.0, 0.0, 1.0, 0.0, 1.0, "factor",
+               "Blend between the original (0, the identity) and the posterized colour (1)"),
+};
+
+typedef struct post_job {
+    const fx_effect_run *run;
+    const posterize_params *p;
+    fx_levels q;
+} post_job;
+
+static inline float finite_or(float v)
+{
+    v = v == v ? v : 0.0f;
+    return v > FLT_MAX ? FLT_MAX : v < -FLT_MAX ? -FLT_MAX : v;
+}
+
+static void post_rows(void *user, int begin, int end)
+{
+    const post_job *j = user;
+    const fx_effect_run *run = j->run;
+    const fx_levels *q = &j->q;
+    const int mode = j->p->mode;
+    const float mix = j->p->mix;
+    const int x0 = run->roi.x0, x1 = run->roi.x1;
+    for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++) {
+        const float *restrict s = run->src + (size_t)y * run->width * 4;
+        float *restrict d = run->dst + (size_t)y * run->width * 4;
+        for (int x = x0; x < x1; x++) {
+            const float r = s[4 * x], g = s[4 * x + 1], b = s[4 * x + 2];
+            const float dd = fx_bayer8(x, y);
+            float o0, o1, o2;
+            if (mode == MODE_COLOR) {
+                o0 = fx_levels_apply(q, r, dd);
+                o1 = fx_levels_apply(q, g, dd);
+                o2 = fx_levels_apply(q, b, dd);
+            } else {
+                float gray = mode == MODE_LUMINANCE ? fx_luminance(r, g, b) : (r + g + b) * (1.0f / 3.0f);
+                o0 = o1 = o2 = fx_levels_apply(q, gray, dd);
+            }
+            if (mix < 1.0f) {
+                o0 = r + mix * (o0 - r);
+                o1 = g + mix * (o1 - g);
+                o2 = b + mix * (o2 - b);
+            }
+            d[4 * x] = finite_or(o0);
+            d[4 * x + 1] = finite_or(o1);
+            d[4 * x + 2] = finite_or(o2);
+            d[4 * x + 3] = finite_or(s[4 * x + 3]);
+        }
+    }
+}
+
+static fx_result posterize_process(const fx_effect_run *run)
+{
+    const posterize_params *p = run->params;
+    const fx_rect *roi = &run->roi;
+    if (roi->x1 <= roi->x0 || roi->y1 <= roi->y0)
+        return FX_OK;
+    if (!(p->mix > 0.0f)) {
+        for (int y = roi->y0; y < roi->y1; y++)
+            memcpy(run->dst + ((size_t)y * run->width + roi->x0) * 4,
+                   run->src + ((size_t)y * run->width + roi->x0) * 4,
+                   (size_t)(roi->x1 - roi->x0) * 4 * sizeof(float));
+        return FX_OK;
+    }
+    post_job *j = fx_mem_alloc(sizeof *j);
+    if (!j)
+        return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "effect %d (posterize): out of memory", run->index);
+    j->run = run;
+    j->p = p;
+    fx_levels_init(&j->q, p->levels, p->space == SPACE_SRGB, p->white, p->dither, p->keep_hdr);
+    int rows = roi->y1 - roi->y0;
+    fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), post_rows, j);
+    fx_mem_free(j);
+    return FX_OK;
+}
+
+const fx_effect_class fx_effect_posterize = {
+    .name = "posterize",
+    .doc = "Posterize: N levels per channel or of the gray (mean or luminance), sRGB or linear steps, ordered dither",
+    .params_size = sizeof(posterize_params),
+    .params = posterize_param_defs,
+    .param_count = FX_COUNT_OF(posterize_param_defs),
+    .presets = { NULL, NULL, NULL, NULL },
+    .passes = NULL,
+    .needs_camera = NULL,
+    .halo = NULL,
+    .validate = NULL,
+    .process = posterize_process,
+};
