@@ -1,0 +1,185 @@
+/* rain_splashes: splashes of raindrops on exposed up-facing surfaces, in world space.
+ * docs/effects/rain_splashes.md.
+ *
+ * The ground plane (world XY) is cut into cells `spacing` metres wide. Each cell runs
+ * splashes one after the other, each `lifetime` seconds long, with a per-cell phase; the
+ * splash of cycle c in cell (i, j) exists with probability `rate` and sits at a point of
+ * the cell, all from a hash of (i, j, c, seed): deterministic per (cell, cycle), so
+ * consecutive frames of a batch render show the same splashes growing (temporally
+ * coherent). A splash is an expanding ring on the surface (radius size * sqrt(age),
+ * fading as (1 - age)^1.5) evaluated at each pixel's world position (from the Position
+ * pass or Depth + camera): it is drawn in perspective by construction. Only pixels whose
+ * surface faces up (normal Z >= up_threshold) and is exposed in the rain map get splashes.
+ * Additive. */
+#include "core/effect.h"
+#include "core/parallel.h"
+#include "math/hash.h"
+#include "math/rain_map.h"
+#include "math/surface.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+typedef struct splash_params {
+    float spacing;
+    float rate;
+    float size;
+    float lifetime;
+    float brightness;
+    float up_threshold;
+    float color[3];
+    int seed;
+} splash_params;
+
+static const float default_splash_color[3] = {0.85f, 0.88f, 0.92f};
+
+static const fx_param_def splash_param_defs[] = {
+    FX_P_FLOAT(splash_params, spacing, "spacing", 0.35, 0.01, 100.0, 0.1, 2.0, "",
+               "Cell size in metres: at most one splash per cell at a time (density = rate / spacing^2 per "
+               "lifetime)"),
+    FX_P_FLOAT(splash_params, rate, "rate", 0.7, 0.0, 1.0, 0.0, 1.0, "factor",
+               "Probability that a cell shows a splash in a cycle"),
+    FX_P_FLOAT(splash_params, size, "size", 0.12, 0.001, 10.0, 0.02, 0.5, "",
+               "Final ring radius, metres (at most half the spacing)"),
+    FX_P_FLOAT(splash_params, lifetime, "lifetime", 0.25, 0.01, 100.0, 0.05, 1.0, "", "Seconds a splash lasts"),
+    FX_P_FLOAT(splash_params, brightness, "brightness", 0.6, 0.0, 100.0, 0.0, 2.0, "", "Added radiance of the ring"),
+    FX_P_FLOAT(splash_params, up_threshold, "up_threshold", 0.7, 0.0, 1.0, 0.3, 0.99, "",
+               "Surfaces with a world normal Z at least this are ground"),
+    FX_P_FLOATS(splash_params, color, "color", 3, default_splash_color, 0.0, 1e4, "color", "Splash colour"),
+    FX_P_INT(splash_params, seed, "seed", 11, -2147483647, 2147483647, 0, 100, "", "Seed"),
+};
+
+static fx_pass_set splash_passes(const void *params)
+{
+    (void)params;
+    return FX_PASS_BIT(FX_PASS_DEPTH) | FX_PASS_BIT(FX_PASS_NORMAL);
+}
+
+static int splash_needs_camera(const void *params)
+{
+    (void)params;
+    return 1;
+}
+
+static fx_result splash_validate(const void *params, char *err, size_t n)
+{
+    const splash_params *p = params;
+    if (p->size > 0.5f * p->spacing) {
+        snprintf(err, n, "size (%g) must be at most half the spacing (%g): a ring must stay within its cell's "
+                 "neighbours", p->size, p->spacing);
+        return FX_ERR_BAD_PARAM;
+    }
+    return FX_OK;
+}
+
+typedef struct splash_job {
+    const fx_effect_run *run;
+    const splash_params *p;
+    fx_surface_src surf;
+    fx_rain_map rm;
+    double t;
+    float *dbg;
+} splash_job;
+
+/* Splash intensity at world point w (on an up-facing surface). */
+static float splash_at(const splash_job *j, fx_vec3 w)
+{
+    const splash_params *p = j->p;
+    int ci = (int)floorf(w.x / p->spacing), cj = (int)floorf(w.y / p->spacing);
+    float best = 0.0f;
+    float ring_w = 0.2f * p->size;
+    for (int dj = -1; dj <= 1; dj++)
+        for (int di = -1; di <= 1; di++) {
+            int i = ci + di, k = cj + dj;
+            float phase = fx_rand4(i, k, 0x5eed, p->seed);
+            double cyc = j->t / p->lifetime + phase;
+            double fc = floor(cyc);
+            int c = (int)fc;
+            float age = (float)(cyc - fc);
+            uint32_t h = fx_hash4(i, k, c, p->seed);
+            if (fx_hash_to_unit(h) >= p->rate)
+                continue;
+            uint32_t h1 = fx_hash_u32(h), h2 = fx_hash_u32(h1);
+            float sx = ((float)i + 0.1f + 0.8f * fx_hash_to_unit(h1)) * p->spacing;
+            float sy = ((float)k + 0.1f + 0.8f * fx_hash_to_unit(h2)) * p->spacing;
+            float dx = w.x - sx, dy = w.y - sy;
+            float dist = sqrtf(dx * dx + dy * dy);
+            float r = p->size * sqrtf(age);
+            float e = (dist - r) / ring_w;
+            float fade = 1.0f - age;
+            float v = expf(-e * e) * fade * sqrtf(fade);
+            best = v > best ? v : best;
+        }
+    return best;
+}
+
+static void splash_rows(void *user, int y0, int y1)
+{
+    splash_job *j = user;
+    const fx_effect_run *run = j->run;
+    const splash_params *p = j->p;
+    const fx_rect *roi = &run->roi;
+    for (int y = roi->y0 + y0; y < roi->y0 + y1; y++)
+        for (int x = roi->x0; x < roi->x1; x++) {
+            size_t i = (size_t)y * run->width + x;
+            const float *s = run->src + 4 * i;
+            float *o = run->dst + 4 * i;
+            memcpy(o, s, 4 * sizeof(float));
+            fx_vec3 w, n;
+            float d, v = 0.0f;
+            if (fx_surface_world(&j->surf, x, y, &w, &d) && fx_surface_normal(&j->surf, x, y, &n) &&
+                n.z >= p->up_threshold && fx_rain_map_exposed(&j->rm, fx_v3_add(w, fx_v3_scale(n, 0.05f))) > 0.0f) {
+                v = splash_at(j, w);
+                for (int c = 0; c < 3; c++)
+                    o[c] = s[c] + v * p->brightness * p->color[c];
+            }
+            if (j->dbg)
+                j->dbg[i] = v;
+        }
+}
+
+static fx_result splash_process(const fx_effect_run *run)
+{
+    const splash_params *p = run->params;
+    const fx_rect *roi = &run->roi;
+    if (roi->x1 <= roi->x0 || roi->y1 <= roi->y0)
+        return FX_OK;
+    char where[96];
+    snprintf(where, sizeof where, "effect %d (rain_splashes)", run->index);
+    splash_job j;
+    memset(&j, 0, sizeof j);
+    j.run = run;
+    j.p = p;
+    if (!fx_surface_src_init(&j.surf, run->frame) || !j.surf.normal)
+        return fx_fail(run->ctx, FX_ERR_NO_CAMERA, "%s needs the camera and the Depth and Normal passes", where);
+    fx_result r = fx_rain_map_load(run->frame, 0.0f, where, &j.rm);
+    if (r)
+        return r;
+    double frame = 1, fps = 24;
+    fx_frame_time(run->frame, &frame, &fps);
+    j.t = frame / (fps > 0 ? fps : 24.0);
+    j.dbg = fx_effect_debug_pass(run, "splashes", 1, &r);
+    if (!j.dbg && r) {
+        fx_rain_map_free(&j.rm);
+        return r;
+    }
+    int rows = roi->y1 - roi->y0;
+    fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), splash_rows, &j);
+    fx_rain_map_free(&j.rm);
+    return FX_OK;
+}
+
+const fx_effect_class fx_effect_rain_splashes = {
+    .name = "rain_splashes",
+    .doc = "Raindrop splashes (expanding rings) on exposed up-facing surfaces, deterministic per cell and cycle",
+    .params_size = sizeof(splash_params),
+    .params = splash_param_defs,
+    .param_count = FX_COUNT_OF(splash_param_defs),
+    .presets = {NULL, NULL, NULL, NULL},
+    .passes = splash_passes,
+    .needs_camera = splash_needs_camera,
+    .halo = NULL,
+    .validate = splash_validate,
+    .process = splash_process,
+};

@@ -1,0 +1,311 @@
+/* rain, wet_surfaces, rain_splashes on synthetic frames with a synthetic rain map: rain
+ * draws nothing in front of nearer geometry or under cover; the same frame twice gives
+ * the same bits (and any thread count); splashes and wetness only on exposed (up-facing)
+ * pixels; finite output; clear errors without a rain map. */
+#include "fx_effect_test.h"
+
+#include <math.h>
+
+#define N 64
+
+static void ortho(fx_camera *c, const float w2c[16], float half, float n, float f)
+{
+    memset(c, 0, sizeof *c);
+    c->size = sizeof *c;
+    memcpy(c->world_to_camera, w2c, 16 * sizeof(float));
+    float p[16] = {1 / half, 0, 0, 0, 0, 1 / half, 0, 0, 0, 0, -2 / (f - n), -(f + n) / (f - n), 0, 0, 0, 1};
+    memcpy(c->projection, p, sizeof p);
+    c->clip_start = n;
+    c->clip_end = f;
+    c->orthographic = 1;
+}
+
+/* Rain map: top-down from z = 40 over x, y in [-20, 20]; cover at height `roof_z` where
+ * world y < roof_y (else ground at 0). */
+static const char *rain_map(fx_context *ctx, float roof_y, float roof_z, fx_camera *cam, const char *name)
+{
+    static char path[512];
+    snprintf(path, sizeof path, "%s/%s.exr", tu_tmpdir("rain_maps"), name);
+    float w2c[16] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, -40, 0, 0, 0, 1};
+    ortho(cam, w2c, 20.0f, 1.0f, 60.0f);
+    float *d = malloc(N * N * sizeof(float));
+    for (int y = 0; y < N; y++) {
+        float wy = 20.0f - (y + 0.5f) * 40.0f / N;
+        for (int x = 0; x < N; x++)
+            d[y * N + x] = 40.0f - (wy < roof_y ? roof_z : 0.0f);
+    }
+    fx_frame *f = NULL;
+    fx_frame_new(ctx, N, N, &f);
+    fx_frame_add_pass(f, "Depth", 1, d);
+    CHECK_OK(ctx, fx_frame_write_exr(f, path, NULL));
+    fx_frame_free(f);
+    free(d);
+    return path;
+}
+
+/* Camera at (0, -10, 1) looking along +Y (orthographic, 10 m wide): left half sees a wall
+ * at planar depth `wall`, right half the sky. */
+static fx_frame *street_frame(fx_context *ctx, float wall, const char *map, const fx_camera *map_cam, double frame)
+{
+    float *rgba = malloc(N * N * 4 * sizeof(float)), *d = malloc(N * N * sizeof(float));
+    for (int i = 0; i < N * N; i++) {
+        rgba[4 * i] = 0.2f;
+        rgba[4 * i + 1] = 0.3f;
+        rgba[4 * i + 2] = 0.4f;
+        rgba[4 * i + 3] = 1.0f;
+        d[i] = (i % N) < N / 2 ? wall : 1e10f;
+    }
+    fx_frame *f = et_frame(ctx, N, N, rgba);
+    fx_frame_add_pass(f, "Depth", 1, d);
+    float w2c[16] = {1, 0, 0, 0, 0, 0, 1, -1, 0, -1, 0, -10, 0, 0, 0, 1};
+    fx_camera cam;
+    ortho(&cam, w2c, 5.0f, 0.1f, 100.0f);
+    fx_frame_set_camera(f, &cam);
+    fx_frame_set_time(f, frame, 24.0);
+    CHECK_OK(ctx, fx_frame_set_aux_view(f, "rain_map", map, map_cam));
+    free(rgba);
+    free(d);
+    return f;
+}
+
+static float *run_rain(fx_context *ctx, const fx_frame *f)
+{
+    fx_stack *s = et_stack(ctx, "rain");
+    CHECK_OK(ctx, fx_stack_set_string(s, 0, "cover_material", ""));
+    CHECK_OK(ctx, fx_stack_set_float(s, 0, "density", 1.0));
+    CHECK_OK(ctx, fx_stack_set_float(s, 0, "streak_length", 8.0));
+    CHECK_OK(ctx, fx_stack_set_float(s, 0, "streak_width", 2.0));
+    float *o = et_run(ctx, s, f);
+    fx_stack_free(s);
+    return o;
+}
+
+static int count_changed(const float *a, const fx_frame *in, int half) /* half: 0 left, 1 right, 2 all */
+{
+    const float *src = et_combined(in);
+    int n = 0;
+    for (int i = 0; i < N * N; i++) {
+        int right = (i % N) >= N / 2;
+        if (half != 2 && right != half)
+            continue;
+        n += memcmp(a + 4 * i, src + 4 * i, 4 * sizeof(float)) != 0;
+    }
+    return n;
+}
+
+static void test_rain(fx_context *ctx)
+{
+    fx_camera mc;
+    /* open sky: a wall nearer than every layer hides them all; the sky shows streaks */
+    const char *open = rain_map(ctx, -100.0f, 0.0f, &mc, "open");
+    fx_frame *f = street_frame(ctx, 1.5f, open, &mc, 10);
+    float *o = run_rain(ctx, f);
+    CHECK(o && tu_all_finite(o, N * N * 4));
+    CHECK(o && count_changed(o, f, 0) == 0);
+    CHECK(o && count_changed(o, f, 1) > 50);
+    int sky_changed = o ? count_changed(o, f, 1) : 0;
+    /* the same frame twice: the same bits; one thread: the same bits; next frame: moved */
+    float *o2 = run_rain(ctx, f);
+    CHECK(o && o2 && memcmp(o, o2, N * N * 4 * sizeof(float)) == 0);
+    fx_context *c1 = NULL;
+    fx_context_new(&c1, 1);
+    fx_frame *f1 = street_frame(c1, 1.5f, open, &mc, 10);
+    float *o1 = run_rain(c1, f1);
+    CHECK(o && o1 && memcmp(o, o1, N * N * 4 * sizeof(float)) == 0);
+    fx_frame *fn = street_frame(ctx, 1.5f, open, &mc, 11);
+    float *on = run_rain(ctx, fn);
+    CHECK(o && on && memcmp(o, on, N * N * 4 * sizeof(float)) != 0);
+    free(o1);
+    free(on);
+    fx_frame_free(f1);
+    fx_frame_free(fn);
+    fx_context_free(c1);
+    free(o2);
+    free(o);
+    fx_frame_free(f);
+    /* a wall at 3 m: only the near layer (2 m) may show in front of it */
+    f = street_frame(ctx, 3.0f, open, &mc, 10);
+    o = run_rain(ctx, f);
+    CHECK(o && count_changed(o, f, 0) > 0);
+    free(o);
+    fx_frame_free(f);
+    /* a roof over everything (y < 100 at z 50): nothing anywhere */
+    const char *roofed = rain_map(ctx, 100.0f, 50.0f, &mc, "roofed");
+    f = street_frame(ctx, 3.0f, roofed, &mc, 10);
+    o = run_rain(ctx, f);
+    CHECK(o && count_changed(o, f, 2) == 0);
+    free(o);
+    fx_frame_free(f);
+    /* a roof over y < -6 at z = 5: the near layer (y = -8) is covered below z = 5; above the
+     * roof's height and on farther layers streaks remain */
+    const char *arcade = rain_map(ctx, -6.0f, 5.0f, &mc, "arcade");
+    f = street_frame(ctx, 3.0f, arcade, &mc, 10);
+    o = run_rain(ctx, f);
+    int below_left = 0;
+    for (int y = 0; o && y < N; y++) {
+        float wz = 1.0f + 5.0f - (y + 0.5f) * 10.0f / N;
+        for (int x = 0; x < N / 2; x++)
+            if (wz < 4.8f)
+                below_left += memcmp(o + 4 * (y * N + x), et_combined(f) + 4 * (y * N + x), 16) != 0;
+    }
+    CHECK(o && below_left == 0);
+    CHECK(o && count_changed(o, f, 1) > 0 && count_changed(o, f, 1) <= sky_changed);
+    free(o);
+    fx_frame_free(f);
+    /* no rain map: a clear error */
+    fx_frame *bare = NULL;
+    fx_frame_new(ctx, N, N, &bare);
+    f = street_frame(ctx, 3.0f, open, &mc, 10);
+    fx_frame_copy_passes(bare, f);
+    fx_camera cam;
+    fx_frame_camera(f, &cam);
+    fx_frame_set_camera(bare, &cam);
+    fx_stack *s = et_stack(ctx, "rain");
+    fx_stack_set_string(s, 0, "cover_material", "");
+    fx_frame *out = NULL;
+    CHECK_FAIL(ctx, fx_stack_run(s, bare, &out), FX_ERR_NO_CAMERA, "rain_map");
+    char *req = NULL;
+    CHECK_OK(ctx, fx_stack_required_aux_views(s, &req));
+    CHECK(req && tu_contains(req, "rain_map"));
+    fx_free(req);
+    fx_stack_free(s);
+    fx_frame_free(bare);
+    fx_frame_free(f);
+}
+
+/* Top-down camera at z = 10 over x, y in [-5, 5] seeing the floor (z = 0, normal up),
+ * except a band of wall (normal +X) at columns 40..47; the rain map covers y > 1 at z = 3. */
+static fx_frame *ground_frame(fx_context *ctx, const char *map, const fx_camera *map_cam, double frame)
+{
+    float *rgba = malloc(N * N * 4 * sizeof(float)), *d = malloc(N * N * sizeof(float));
+    float *nrm = malloc(N * N * 3 * sizeof(float));
+    for (int i = 0; i < N * N; i++) {
+        int x = i % N;
+        for (int c = 0; c < 3; c++)
+            rgba[4 * i + c] = 0.3f;
+        rgba[4 * i + 3] = 1.0f;
+        d[i] = 10.0f;
+        int wall = x >= 40 && x < 48;
+        nrm[3 * i] = wall ? 1.0f : 0.0f;
+        nrm[3 * i + 1] = 0.0f;
+        nrm[3 * i + 2] = wall ? 0.0f : 1.0f;
+    }
+    fx_frame *f = et_frame(ctx, N, N, rgba);
+    fx_frame_add_pass(f, "Depth", 1, d);
+    fx_frame_add_pass(f, "Normal", 3, nrm);
+    float w2c[16] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, -10, 0, 0, 0, 1};
+    fx_camera cam;
+    ortho(&cam, w2c, 5.0f, 0.1f, 100.0f);
+    fx_frame_set_camera(f, &cam);
+    fx_frame_set_time(f, frame, 24.0);
+    CHECK_OK(ctx, fx_frame_set_aux_view(f, "rain_map", map, map_cam));
+    free(rgba);
+    free(d);
+    free(nrm);
+    return f;
+}
+
+/* the roof covers world y > 1 (top of the image is y = 5), up to a rain-map texel */
+static int covered_row(int y) { return 5.0f - (y + 0.5f) * 10.0f / N > 1.0f + 0.16f; }
+
+static void test_splashes_and_wet(fx_context *ctx)
+{
+    fx_camera mc;
+    /* rain map with a roof over y > 1 at z = 3: rain_map() covers y < roof_y, so mirror it */
+    char path[512];
+    snprintf(path, sizeof path, "%s/roof_north.exr", tu_tmpdir("rain_maps2"));
+    {
+        float w2c[16] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, -40, 0, 0, 0, 1};
+        ortho(&mc, w2c, 20.0f, 1.0f, 60.0f);
+        const int M = 256; /* texel 0.156 m */
+        float *d = malloc(M * M * sizeof(float));
+        for (int y = 0; y < M; y++) {
+            float wy = 20.0f - (y + 0.5f) * 40.0f / M;
+            for (int x = 0; x < M; x++)
+                d[y * M + x] = 40.0f - (wy > 1.0f ? 3.0f : 0.0f);
+        }
+        fx_frame *m = NULL;
+        fx_frame_new(ctx, M, M, &m);
+        fx_frame_add_pass(m, "Depth", 1, d);
+        CHECK_OK(ctx, fx_frame_write_exr(m, path, NULL));
+        fx_frame_free(m);
+        free(d);
+    }
+    int total = 0;
+    for (int fr = 1; fr <= 6; fr++) {
+        fx_frame *f = ground_frame(ctx, path, &mc, fr);
+        fx_stack *s = et_stack(ctx, "rain_splashes");
+        CHECK_OK(ctx, fx_stack_set_float(s, 0, "spacing", 1.0));
+        CHECK_OK(ctx, fx_stack_set_float(s, 0, "size", 0.45));
+        CHECK_OK(ctx, fx_stack_set_float(s, 0, "rate", 1.0));
+        float *o = et_run(ctx, s, f);
+        float *o2 = et_run(ctx, s, f);
+        CHECK(o && o2 && memcmp(o, o2, N * N * 4 * sizeof(float)) == 0);
+        const float *src = et_combined(f);
+        int bad = 0;
+        for (int y = 0; o && y < N; y++)
+            for (int x = 0; x < N; x++) {
+                int changed = memcmp(o + 4 * (y * N + x), src + 4 * (y * N + x), 16) != 0;
+                int allowed = !covered_row(y) && !(x >= 40 && x < 48);
+                if (changed && !allowed && bad++ < 3)
+                    fprintf(stderr, "splash at covered/wall pixel %d,%d\n", x, y);
+                total += changed;
+            }
+        CHECK(bad == 0);
+        CHECK(o && tu_all_finite(o, N * N * 4));
+        free(o);
+        free(o2);
+        fx_stack_free(s);
+        fx_frame_free(f);
+    }
+    CHECK(total > 20);
+    /* wet: covered floor (more than edge_softness from the edge) untouched, open floor darker
+     * or brighter, walls less wet than floors */
+    fx_frame *f = ground_frame(ctx, path, &mc, 1);
+    fx_stack *s = et_stack(ctx, "wet_surfaces");
+    CHECK_OK(ctx, fx_stack_set_float(s, 0, "edge_softness", 1.0));
+    fx_stack_set_debug_outputs(s, 1);
+    fx_frame *out = NULL;
+    CHECK_OK(ctx, fx_stack_run(s, f, &out));
+    float *wet = NULL;
+    int ch = 0;
+    CHECK_OK(ctx, fx_frame_pass(out, "fx0_wet_surfaces_wetness", &wet, &ch));
+    const float *o = et_combined(out);
+    const float *src = et_combined(f);
+    int bad = 0;
+    for (int y = 0; wet && y < N; y++)
+        for (int x = 0; x < N; x++) {
+            float wy = 5.0f - (y + 0.5f) * 10.0f / N;
+            int i = y * N + x;
+            if (wy > 1.0f + 0.8f)
+                bad += wet[i] != 0.0f || memcmp(o + 4 * i, src + 4 * i, 16) != 0;
+            if (wy < 1.0f - 0.8f)
+                bad += x >= 40 && x < 48 ? !(wet[i] > 0.2f && wet[i] < 0.6f) : !(wet[i] > 0.99f);
+        }
+    CHECK(bad == 0);
+    /* soft edge: the wetness rises monotonically across the cover boundary on the floor */
+    int mono = 1;
+    for (int y = 1; wet && y < N; y++)
+        mono &= wet[y * N + 10] >= wet[(y - 1) * N + 10] - 1e-6f;
+    CHECK(mono);
+    if (wet)
+        fprintf(stderr, "wet column 10: rows 20 %.3f 26 %.3f 34 %.3f\n", wet[20 * N + 10], wet[26 * N + 10], wet[34 * N + 10]);
+    int partial = 0;
+    for (int y = 0; wet && y < N; y++)
+        partial += wet[y * N + 10] > 0.05f && wet[y * N + 10] < 0.95f;
+    CHECK(partial >= 3); /* about 1 m of transition at 0.156 m per pixel */
+    CHECK(o && tu_all_finite(o, N * N * 4));
+    fx_frame_free(out);
+    fx_stack_free(s);
+    fx_frame_free(f);
+}
+
+int main(void)
+{
+    fx_context *ctx = NULL;
+    fx_context_new(&ctx, 2);
+    test_rain(ctx);
+    test_splashes_and_wet(ctx);
+    fx_context_free(ctx);
+    return tu_finish("test_rain");
+}
