@@ -6,9 +6,7 @@
 extern const fx_effect_class fx_effect_gaussian_blur;
 extern const fx_effect_class fx_effect_color_matrix;
 extern const fx_effect_class fx_effect_pixelate;
-extern const fx_effect_class fx_effect_rain_splashes;
-extern const fx_effect_class fx_effect_wet_surfaces;
-extern const fx_effect_class fx_effect_rain;
+extern const fx_effect_class fx_effect_ssr_mirror;
 extern const fx_effect_class fx_effect_vsm_shadows;
 extern const fx_effect_class fx_effect_edges;
 extern const fx_effect_class fx_effect_posterize;
@@ -18,13 +16,11 @@ const fx_effect_class *const fx_effect_classes[] = {
     &fx_effect_gaussian_blur,
     &fx_effect_color_matrix,
     &fx_effect_pixelate,
+    &fx_effect_ssr_mirror,
     &fx_effect_edges,
     &fx_effect_posterize,
     &fx_effect_sin_city,
     &fx_effect_vsm_shadows,
-    &fx_effect_rain,
-    &fx_effect_wet_surfaces,
-    &fx_effect_rain_splashes,
 };
 const int fx_effect_class_count = (int)(sizeof(fx_effect_classes) / sizeof(fx_effect_classes[0]));
 
