@@ -11,7 +11,7 @@ extern const fx_effect_class fx_effect_vsm_shadows;
 extern const fx_effect_class fx_effect_edges;
 extern const fx_effect_class fx_effect_posterize;
 extern const fx_effect_class fx_effect_sin_city;
-
+extern const fx_effect_class fx_effect_rain;
 const fx_effect_class *const fx_effect_classes[] = {
     &fx_effect_gaussian_blur,
     &fx_effect_color_matrix,
@@ -21,6 +21,9 @@ const fx_effect_class *const fx_effect_classes[] = {
     &fx_effect_posterize,
     &fx_effect_sin_city,
     &fx_effect_vsm_shadows,
+    &fx_effect_rain,
+    &fx_effect_wet_surfaces,
+    &fx_effect_rain_splashes,
 };
 const int fx_effect_class_count = (int)(sizeof(fx_effect_classes) / sizeof(fx_effect_classes[0]));
 
