@@ -12,6 +12,8 @@ extern const fx_effect_class fx_effect_edges;
 extern const fx_effect_class fx_effect_posterize;
 extern const fx_effect_class fx_effect_sin_city;
 extern const fx_effect_class fx_effect_rain;
+extern const fx_effect_class fx_effect_wet_surfaces;
+extern const fx_effect_class fx_effect_rain_splashes;
 const fx_effect_class *const fx_effect_classes[] = {
     &fx_effect_gaussian_blur,
     &fx_effect_color_matrix,
