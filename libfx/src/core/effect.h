@@ -58,7 +58,8 @@ typedef struct fx_effect_run {
     fx_context *ctx;
     const fx_frame *frame;  /* the input frame: every pass the stack decoded */
     const float *src;       /* current Combined RGBA (after the previous effects), width*height*4 */
-    float *dst;             /* output RGBA: process() must fill every pixel inside roi */
+    float *dst;             /* output RGBA: process() must fill every pixel inside roi and
+                               write nothing outside it (the stack copies only what changed) */
     int width, height;
     fx_rect roi;            /* pixels whose output matters (the mask's bounds; the whole frame
                                without a mask). The stack copies src outside roi and blends

@@ -273,12 +273,15 @@ typedef struct mask_job {
     const float *index_ob, *index_ma;
     int selectors;    /* names or indices given */
     fx_rect rect;     /* in frame pixels, clipped */
+    int *row_first, *row_last; /* per row: first and last x with coverage > 0, or -1 */
 } mask_job;
 
+/* Ranks hold (id, coverage) pairs sorted by coverage: once the coverage seen in a pixel
+ * reaches 1, later ranks hold nothing, so most pixels read rank 0 only. */
 static float crypto_coverage(const crypto_rank *ranks, int nranks, const float *ids, int nids, size_t i)
 {
-    float c = 0;
-    for (int r = 0; r < nranks; r++) {
+    float c = 0, seen = 0;
+    for (int r = 0; r < nranks && seen < 0.99999f; r++) {
         const float *p = ranks[r].data + i * 4;
         for (int k = 0; k < nids; k++) {
             if (p[0] == ids[k])
@@ -286,6 +289,7 @@ static float crypto_coverage(const crypto_rank *ranks, int nranks, const float *
             if (p[2] == ids[k])
                 c += p[3];
         }
+        seen += p[1] + p[3];
     }
     return c;
 }
@@ -329,6 +333,16 @@ static void mask_rows(void *user, int y0, int y1)
                 c = 1.0f - c;
             j->cov[i] = c;
         }
+        int first = -1, last = -1;
+        const float *row = j->cov + (size_t)y * j->w;
+        for (int x = 0; x < j->w; x++)
+            if (row[x] > 0.0f) {
+                if (first < 0)
+                    first = x;
+                last = x;
+            }
+        j->row_first[y] = first;
+        j->row_last[y] = last;
     }
 }
 
@@ -441,7 +455,11 @@ fx_result fx_mask_build(fx_context *ctx, const fx_mask_spec *spec, const fx_fram
             r = fx_fail(ctx, FX_ERR_LIMIT, "%s: mask too large", where);
         else if (!(r = fx_check_budget(ctx, bytes, "a mask")) && m)
             m->coverage = fx_mem_alloc(bytes);
-        if (!r && (!j.obj_ids || !j.mat_ids || !m || !m->coverage))
+        if (!r) {
+            j.row_first = fx_mem_alloc((size_t)(j.h ? j.h : 1) * sizeof(int));
+            j.row_last = fx_mem_alloc((size_t)(j.h ? j.h : 1) * sizeof(int));
+        }
+        if (!r && (!j.obj_ids || !j.mat_ids || !m || !m->coverage || !j.row_first || !j.row_last))
             r = fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the mask", where);
     }
     if (!r) {
@@ -478,17 +496,10 @@ fx_result fx_mask_build(fx_context *ctx, const fx_mask_spec *spec, const fx_fram
         m->width = j.w;
         m->height = j.h;
         fx_parallel_for(ctx, j.h, fx_grain_for(ctx, j.h), mask_rows, &j);
-        /* bounds of coverage > 0 */
+        /* bounds of coverage > 0, from the rows' extents */
         fx_rect b = {j.w, j.h, 0, 0};
         for (int y = 0; y < j.h; y++) {
-            const float *row = m->coverage + (size_t)y * j.w;
-            int first = -1, last = -1;
-            for (int x = 0; x < j.w; x++)
-                if (row[x] > 0.0f) {
-                    if (first < 0)
-                        first = x;
-                    last = x;
-                }
+            int first = j.row_first[y], last = j.row_last[y];
             if (first < 0)
                 continue;
             if (first < b.x0) b.x0 = first;
@@ -506,6 +517,8 @@ fx_result fx_mask_build(fx_context *ctx, const fx_mask_spec *spec, const fx_fram
     fx_mem_free(j.mat_ranks);
     fx_mem_free(j.obj_ids);
     fx_mem_free(j.mat_ids);
+    fx_mem_free(j.row_first);
+    fx_mem_free(j.row_last);
     if (r) {
         fx_mask_free(m);
         return r;

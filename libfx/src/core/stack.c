@@ -572,32 +572,43 @@ typedef struct composite_job {
     float *dst;
     const fx_mask *mask;
     fx_rect roi;
+    fx_rect stale; /* where dst may differ from src before this effect (outside the ROI) */
     int width;
-    size_t *bad; /* per row: non-finite values replaced */
+    size_t *bad;   /* per row: non-finite values replaced */
 } composite_job;
 
-/* Outside the ROI and where coverage is 0, output is src bit for bit; inside, dst is
+static void copy_span(const float *s, float *d, int x0, int x1)
+{
+    if (x1 > x0)
+        memcpy(d + (size_t)x0 * 4, s + (size_t)x0 * 4, (size_t)(x1 - x0) * 4 * sizeof(float));
+}
+
+/* Outside the ROI and where coverage is 0, output is src bit for bit: only the stale
+ * part of dst needs copying (it already equals src elsewhere). Inside the ROI, dst is
  * blended by coverage. Any non-finite value an effect produced is replaced and counted. */
 static void composite_rows(void *user, int y0, int y1)
 {
     composite_job *j = user;
     const size_t w4 = (size_t)j->width * 4;
+    const fx_rect *st = &j->stale, *roi = &j->roi;
     for (int y = y0; y < y1; y++) {
         const float *s = j->src + (size_t)y * w4;
         float *d = j->dst + (size_t)y * w4;
-        size_t bad = 0;
-        if (y < j->roi.y0 || y >= j->roi.y1 || j->roi.x1 <= j->roi.x0) {
-            memcpy(d, s, w4 * sizeof(float));
-            j->bad[y] = 0;
+        j->bad[y] = 0;
+        int in_stale = y >= st->y0 && y < st->y1 && st->x1 > st->x0;
+        int in_roi = y >= roi->y0 && y < roi->y1 && roi->x1 > roi->x0;
+        if (!in_roi) {
+            if (in_stale)
+                copy_span(s, d, st->x0, st->x1);
             continue;
         }
-        if (j->roi.x0 > 0)
-            memcpy(d, s, (size_t)j->roi.x0 * 4 * sizeof(float));
-        if (j->roi.x1 < j->width)
-            memcpy(d + (size_t)j->roi.x1 * 4, s + (size_t)j->roi.x1 * 4,
-                   (size_t)(j->width - j->roi.x1) * 4 * sizeof(float));
+        if (in_stale) {
+            copy_span(s, d, st->x0, st->x1 < roi->x0 ? st->x1 : roi->x0);
+            copy_span(s, d, st->x0 > roi->x1 ? st->x0 : roi->x1, st->x1);
+        }
+        size_t bad = 0;
         const float *cov = j->mask ? j->mask->coverage + (size_t)y * j->width : NULL;
-        for (int x = j->roi.x0; x < j->roi.x1; x++) {
+        for (int x = roi->x0; x < roi->x1; x++) {
             float *dp = d + (size_t)x * 4;
             const float *sp = s + (size_t)x * 4;
             for (int c = 0; c < 4; c++)
@@ -619,6 +630,17 @@ static void composite_rows(void *user, int y0, int y1)
         }
         j->bad[y] = bad;
     }
+}
+
+static fx_rect rect_union(fx_rect a, fx_rect b)
+{
+    if (a.x1 <= a.x0 || a.y1 <= a.y0)
+        return b;
+    if (b.x1 <= b.x0 || b.y1 <= b.y0)
+        return a;
+    fx_rect r = {a.x0 < b.x0 ? a.x0 : b.x0, a.y0 < b.y0 ? a.y0 : b.y0, a.x1 > b.x1 ? a.x1 : b.x1,
+                 a.y1 > b.y1 ? a.y1 : b.y1};
+    return r;
 }
 
 static double now_ms(void)
@@ -689,8 +711,12 @@ fx_result fx_stack_run(fx_stack *s, const fx_frame *in, fx_frame **out)
         fx_frame_free(o);
         return r;
     }
-    /* Effects ping-pong between the output's Combined and one spare buffer. */
+    /* Effects ping-pong between the output's Combined and one spare buffer. Each buffer
+     * keeps the rect where it may differ from the current image, so an effect limited to
+     * a small mask copies only what is stale, not the frame. */
     const float *src = combined->data;
+    const fx_rect full = {0, 0, w, h};
+    fx_rect stale_cur = full, stale_spare = full;
     int enabled = 0;
     for (int i = 0; i < s->count; i++)
         enabled += s->entries[i].enabled;
@@ -765,8 +791,15 @@ fx_result fx_stack_run(fx_stack *s, const fx_frame *in, fx_frame **out)
                 if (!bad) {
                     r = fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
                 } else {
-                    composite_job job = {src, dst, mask, run.roi, w, bad};
+                    fx_rect *stale_dst = dst == cur ? &stale_cur : &stale_spare;
+                    composite_job job = {src, dst, mask, run.roi, *stale_dst, w, bad};
                     fx_parallel_for(ctx, h, fx_grain_for(ctx, h), composite_rows, &job);
+                    /* dst now is the image; the buffer src came from (if ours) lags by the ROI */
+                    *stale_dst = (fx_rect){0, 0, 0, 0};
+                    if (src == cur || src == spare) {
+                        fx_rect *stale_src = src == cur ? &stale_cur : &stale_spare;
+                        *stale_src = rect_union(*stale_src, run.roi);
+                    }
                     size_t total = 0;
                     for (int y = 0; y < h; y++)
                         total += bad[y];
