@@ -1,0 +1,406 @@
+/* god_rays: crepuscular rays as a screen-space radial blur of an occlusion map towards the
+ * light (GPU Gems 3 ch. 13). docs/effects/god_rays.md.
+ *
+ * 1. Light: the scene's light (a sun's direction or a point/spot/area light's position,
+ *    from the frame's lights, by name) projected with the frame's camera, or an artist's
+ *    screen position. Light behind the camera fades the effect out (forward cosine over
+ *    behind_fade; 0: identity); a light far off screen is bounded (radial_blur.h).
+ * 2. Occlusion map: the colour of the pixels that emit the light. "luminance" (the seed's):
+ *    pixels brighter than threshold; "sky": background pixels (Depth beyond sky_distance)
+ *    brighter than threshold, plus the pixels of light_material, so bright walls cast no
+ *    rays. A soft knee, a clamp of the source's luminance (HDR sun discs), an optional
+ *    radial falloff around the light.
+ * 3. Radial blur: naive (samples, jitter) or polar (exact in the limit, cost independent
+ *    of samples); composite "add" (src + rays) or "screen" (src + rays (1 - sat(src))). */
+#include "core/effect.h"
+#include "core/lights.h"
+#include "core/parallel.h"
+#include "math/camera.h"
+#include "math/radial_blur.h"
+
+#include <float.h>
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+typedef struct god_rays_params {
+    char light[FX_STRING_PARAM_MAX];
+    int light_source;
+    float light_position[2];
+    float behind_fade;
+    int occlusion;
+    float threshold, knee, max_source;
+    float sky_distance;
+    char light_material[FX_STRING_PARAM_MAX];
+    float source_radius;
+    int method;
+    int samples;
+    float decay, weight, density, exposure;
+    int composite;
+    int jitter, seed;
+    float polar_resolution;
+    int polar_levels;
+} god_rays_params;
+
+enum { SRC_SCENE = 0, SRC_SCREEN };
+enum { OCC_SKY = 0, OCC_LUMINANCE };
+enum { METHOD_POLAR = 0, METHOD_NAIVE };
+enum { COMP_ADD = 0, COMP_SCREEN };
+
+static const char *const source_items[] = {"scene", "screen"};
+static const char *const occlusion_items[] = {"sky", "luminance"};
+static const char *const method_items[] = {"polar", "naive"};
+static const char *const composite_items[] = {"add", "screen"};
+static const float default_position[2] = {0.5f, 0.3f};
+
+static const fx_param_def god_rays_param_defs[] = {
+    FX_P_STRING(god_rays_params, light, "light", "", "",
+                "Scene light the rays come from (by object name; empty: the first sun). The "
+                "lights come with the scene sidecar (the add-on writes it; CLI --camera)"),
+    FX_P_ENUM(god_rays_params, light_source, "light_source", SRC_SCENE, source_items,
+              "scene: project the light with the frame's camera; screen: light_position"),
+    FX_P_FLOATS(god_rays_params, light_position, "light_position", 2, default_position, -1000.0, 1000.0,
+                "factor",
+                "Artist override (light_source screen): x, y as fractions of the display window "
+                "from its top-left corner; outside [0, 1] is off screen"),
+    FX_P_FLOAT(god_rays_params, behind_fade, "behind_fade", 0.2, 0.0, 1.0, 0.0, 1.0, "factor",
+               "The effect fades out as the light turns away from the view: full strength when "
+               "the cosine between view axis and light is >= this, none at <= 0 (behind)"),
+    FX_P_ENUM(god_rays_params, occlusion, "occlusion", OCC_SKY, occlusion_items,
+              "sky: background pixels (Depth > sky_distance) and light_material emit; "
+              "luminance: every pixel brighter than threshold (the seed's; bright walls glow too)"),
+    FX_P_FLOAT(god_rays_params, threshold, "threshold", 0.8, 0.0, 1e6, 0.0, 10.0, "",
+               "Luminance above which a pixel emits (both occlusion modes)"),
+    FX_P_FLOAT(god_rays_params, knee, "knee", 0.25, 0.0, 1e6, 0.0, 2.0, "",
+               "Soft ramp above threshold (0: a hard step)"),
+    FX_P_FLOAT(god_rays_params, max_source, "max_source", 8.0, 0.0, 1e6, 0.5, 50.0, "",
+               "Emitting colours are scaled down to at most this luminance (HDR sun discs)"),
+    FX_P_FLOAT(god_rays_params, sky_distance, "sky_distance", 1000.0, 0.0, 1e30, 10.0, 1e5, "",
+               "occlusion sky: planar depth (scene units) beyond which a pixel is sky"),
+    FX_P_STRING(god_rays_params, light_material, "light_material", "", "",
+                "occlusion sky: a material whose pixels also emit (an emissive window); empty: none"),
+    FX_P_FLOAT(god_rays_params, source_radius, "source_radius", 0.0, 0.0, 100.0, 0.0, 1.0, "factor",
+               "Emission falls off smoothly to 0 at this distance from the light, as a fraction "
+               "of the frame's diagonal (0: no falloff)"),
+    FX_P_ENUM(god_rays_params, method, "method", METHOD_POLAR, method_items,
+              "polar: epipolar lines through the light, exact in the limit, cost independent of "
+              "samples; naive: GPU Gems' per-pixel loop of `samples` samples"),
+    FX_P_INT(god_rays_params, samples, "samples", 100, 1, 65536, 8, 400, "",
+             "naive: samples per pixel (the seed: 100)"),
+    FX_P_FLOAT(god_rays_params, decay, "decay", 0.97, 0.0, 1.0, 0.9, 1.0, "factor",
+               "Illumination decay per sample at 100 samples (rescaled for other counts)"),
+    FX_P_FLOAT(god_rays_params, weight, "weight", 1.0, 0.0, 1e4, 0.0, 10.0, "",
+               "Weight of each sample (0: identity)"),
+    FX_P_FLOAT(god_rays_params, density, "density", 0.9, 0.0, 1.0, 0.3, 1.0, "factor",
+               "Fraction of the way to the light the samples cover"),
+    FX_P_FLOAT(god_rays_params, exposure, "exposure", 0.01, 0.0, 1e4, 0.0, 0.1, "",
+               "Overall scale (rays = 100 weight exposure x the decayed mean; 0: identity)"),
+    FX_P_ENUM(god_rays_params, composite, "composite", COMP_ADD, composite_items,
+              "add: src + rays; screen: src + rays (1 - clamp(src, 0, 1)) (no clipping of bright areas)"),
+    FX_P_BOOL(god_rays_params, jitter, "jitter", 0,
+              "naive: offset each pixel's samples by a seeded hash (banding becomes noise)"),
+    FX_P_INT(god_rays_params, seed, "seed", 0, -2147483647, 2147483647, 0, 100, "", "Jitter seed"),
+    FX_P_FLOAT(god_rays_params, polar_resolution, "polar_resolution", 1.0, 0.05, 16.0, 0.25, 4.0, "",
+               "polar: lines per pixel of arc at the farthest pixel"),
+    FX_P_INT(god_rays_params, polar_levels, "polar_levels", 3, 1, 32, 1, 8, "",
+             "polar: decay rates per octave of distance (accuracy of the decay)"),
+};
+
+static fx_pass_set god_rays_passes(const void *params)
+{
+    const god_rays_params *p = params;
+    fx_pass_set s = 0;
+    if (p->occlusion == OCC_SKY) {
+        s |= FX_PASS_BIT(FX_PASS_DEPTH);
+        if (p->light_material[0])
+            s |= FX_PASS_BIT(FX_PASS_CRYPTO_MATERIAL);
+    }
+    return s;
+}
+
+static int god_rays_needs_camera(const void *params)
+{
+    const god_rays_params *p = params;
+    return p->light_source == SRC_SCENE;
+}
+
+static int god_rays_halo(const void *params, int width, int height)
+{
+    (void)params;
+    return width > height ? width : height; /* rays come from anywhere in the frame */
+}
+
+static int identity_params(const god_rays_params *p)
+{
+    return p->weight == 0.0f || p->exposure == 0.0f;
+}
+
+/* Light in frame pixels and the fade factor; returns FX_OK or an error. */
+static fx_result find_light(const fx_effect_run *run, const god_rays_params *p, const char *where, double *lx,
+                            double *ly, double *fade)
+{
+    const fx_frame *f = run->frame;
+    if (p->light_source == SRC_SCREEN) {
+        double dw = f->display_window[2] - f->display_window[0] + 1;
+        double dh = f->display_window[3] - f->display_window[1] + 1;
+        *lx = p->light_position[0] * dw - (f->data_window[0] - f->display_window[0]);
+        *ly = p->light_position[1] * dh - (f->data_window[1] - f->display_window[1]);
+        *fade = 1.0;
+        return FX_OK;
+    }
+    fx_view v;
+    if (!fx_view_init(&v, f))
+        return fx_fail(run->ctx, FX_ERR_NO_CAMERA,
+                       "%s needs the frame's camera (light_source scene); give the scene sidecar with "
+                       "--camera, or set light_source to screen",
+                       where);
+    fx_light L;
+    fx_result r = fx_frame_find_light(f, p->light, where, &L);
+    if (r != FX_OK)
+        return r;
+    fx_vec3 to_light; /* view space, from the eye */
+    int at_infinity = L.type == FX_LIGHT_SUN;
+    if (at_infinity)
+        to_light = fx_world_dir_to_view(&v, fx_v3_scale(L.direction, -1.0f));
+    else
+        to_light = fx_world_to_view(&v, L.position);
+    double len = sqrt((double)to_light.x * to_light.x + (double)to_light.y * to_light.y +
+                      (double)to_light.z * to_light.z);
+    double cosv = len > 1e-30 ? -to_light.z / len : 0.0;
+    *fade = p->behind_fade > 0.0f ? fx_smoothstep(0.0f, p->behind_fade, (float)cosv) : (cosv > 0.0 ? 1.0 : 0.0);
+    if (*fade <= 0.0) {
+        *lx = *ly = 0.0;
+        return FX_OK;
+    }
+    /* clip coordinates in double: w -> 0 gives a far (bounded) light, not Inf */
+    const float *P = v.cam.projection;
+    double hw = at_infinity ? 0.0 : 1.0;
+    double cx = P[0] * to_light.x + P[1] * to_light.y + P[2] * to_light.z + P[3] * hw;
+    double cy = P[4] * to_light.x + P[5] * to_light.y + P[6] * to_light.z + P[7] * hw;
+    double cw = P[12] * to_light.x + P[13] * to_light.y + P[14] * to_light.z + P[15] * hw;
+    double nx, ny;
+    if (v.orthographic || !(cw > 0.0)) {
+        /* no finite projection (orthographic camera and a sun): parallel rays, light far
+         * along the light's on-screen direction */
+        double dx = to_light.x, dy = to_light.y, l2 = hypot(dx, dy);
+        if (l2 < 1e-30) {
+            nx = ny = 0.0;
+        } else {
+            nx = dx / l2 * 1e9;
+            ny = dy / l2 * 1e9;
+        }
+    } else {
+        nx = cx / fmax(cw, 1e-300);
+        ny = cy / fmax(cw, 1e-300);
+        if (!isfinite(nx) || !isfinite(ny) || fabs(nx) > 1e12 || fabs(ny) > 1e12) {
+            double l2 = hypot(cx, cy);
+            nx = l2 > 0 ? cx / l2 * 1e12 : 0.0;
+            ny = l2 > 0 ? cy / l2 * 1e12 : 0.0;
+        }
+    }
+    *lx = (nx + 1.0) * 0.5 * v.disp_w - v.off_x;
+    *ly = (1.0 - ny) * 0.5 * v.disp_h - v.off_y;
+    return FX_OK;
+}
+
+typedef struct occ_job {
+    const fx_effect_run *run;
+    const god_rays_params *p;
+    const float *depth;
+    const fx_mask *material;
+    float *occ;
+    double lx, ly, radius;
+} occ_job;
+
+static void occ_rows(void *user, int begin, int end)
+{
+    const occ_job *j = user;
+    const god_rays_params *p = j->p;
+    const int w = j->run->width;
+    for (int y = begin; y < end; y++)
+        for (int x = 0; x < w; x++) {
+            size_t i = (size_t)y * w + x;
+            const float *c = j->run->src + i * 4;
+            float *o = j->occ + i * 3;
+            float r = fmaxf(c[0], 0.0f), g = fmaxf(c[1], 0.0f), b = fmaxf(c[2], 0.0f);
+            if (!(r <= FLT_MAX)) r = 0.0f;
+            if (!(g <= FLT_MAX)) g = 0.0f;
+            if (!(b <= FLT_MAX)) b = 0.0f;
+            float lum = 0.2126f * r + 0.7152f * g + 0.0722f * b;
+            float m = p->knee > 0.0f ? fx_smoothstep(p->threshold, p->threshold + p->knee, lum)
+                                     : (lum > p->threshold ? 1.0f : 0.0f);
+            if (p->occlusion == OCC_SKY) {
+                float sky = j->depth && j->depth[i] > p->sky_distance ? 1.0f : 0.0f;
+                if (j->material)
+                    sky = fmaxf(sky, j->material->coverage[i]);
+                m *= sky;
+            }
+            if (j->radius > 0.0 && m > 0.0f) {
+                double d = hypot(x + 0.5 - j->lx, y + 0.5 - j->ly) / j->radius;
+                m *= d >= 1.0 ? 0.0f : (float)((1.0 - d * d) * (1.0 - d * d));
+            }
+            float k = m;
+            if (lum > p->max_source && lum > 0.0f)
+                k *= p->max_source / lum;
+            o[0] = r * k;
+            o[1] = g * k;
+            o[2] = b * k;
+        }
+}
+
+typedef struct comp_job {
+    const fx_effect_run *run;
+    const float *rays;
+    double fade;
+    int screen;
+} comp_job;
+
+static void comp_rows(void *user, int begin, int end)
+{
+    const comp_job *j = user;
+    const fx_effect_run *run = j->run;
+    const int w = run->width;
+    for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++)
+        for (int x = run->roi.x0; x < run->roi.x1; x++) {
+            size_t i = (size_t)y * w + x;
+            const float *s = run->src + i * 4;
+            const float *ry = j->rays + i * 3;
+            float *d = run->dst + i * 4;
+            for (int ch = 0; ch < 3; ch++) {
+                double add = ry[ch] * j->fade;
+                if (j->screen)
+                    add *= 1.0 - fx_saturate(s[ch]);
+                double v = s[ch] + add;
+                d[ch] = v > FLT_MAX ? FLT_MAX : v < -FLT_MAX ? -FLT_MAX : (float)v;
+            }
+            d[3] = s[3];
+        }
+}
+
+static void copy_roi(const fx_effect_run *run)
+{
+    for (int y = run->roi.y0; y < run->roi.y1; y++)
+        memcpy(run->dst + ((size_t)y * run->width + run->roi.x0) * 4,
+               run->src + ((size_t)y * run->width + run->roi.x0) * 4,
+               (size_t)(run->roi.x1 - run->roi.x0) * 4 * sizeof(float));
+}
+
+static fx_result god_rays_process(const fx_effect_run *run)
+{
+    const god_rays_params *p = run->params;
+    const int w = run->width, h = run->height;
+    if (run->roi.x1 <= run->roi.x0 || run->roi.y1 <= run->roi.y0)
+        return FX_OK;
+    char where[96];
+    snprintf(where, sizeof where, "effect %d (god_rays)", run->index);
+    if (identity_params(p)) {
+        copy_roi(run);
+        return FX_OK;
+    }
+    double lx = 0, ly = 0, fade = 0;
+    fx_result r = find_light(run, p, where, &lx, &ly, &fade);
+    if (r != FX_OK)
+        return r;
+    if (!(fade > 0.0)) {
+        copy_roi(run);
+        return FX_OK;
+    }
+    fx_radial_blur_bound_light(&lx, &ly, w, h);
+
+    occ_job oj;
+    memset(&oj, 0, sizeof oj);
+    oj.run = run;
+    oj.p = p;
+    oj.lx = lx;
+    oj.ly = ly;
+    oj.radius = p->source_radius * hypot(w, h);
+    fx_mask *material = NULL;
+    if (p->occlusion == OCC_SKY) {
+        const fx_pass *dp = fx_frame_find_pass(run->frame, "Depth");
+        if (!dp)
+            return fx_fail(run->ctx, FX_ERR_MISSING_PASS,
+                           "%s: occlusion sky needs the Depth pass (or set occlusion to luminance)", where);
+        oj.depth = dp->data;
+        if (p->light_material[0]) {
+            char *names[1] = {(char *)p->light_material};
+            fx_mask_spec spec;
+            memset(&spec, 0, sizeof spec);
+            spec.materials = names;
+            spec.material_count = 1;
+            r = fx_mask_build(run->ctx, &spec, run->frame, where, &material);
+            if (r != FX_OK)
+                return r;
+            oj.material = material;
+        }
+    }
+    size_t n3 = 0;
+    if (!fx_size_mul(&n3, (size_t)w, (size_t)h, 3)) {
+        fx_mask_free(material);
+        return fx_fail(run->ctx, FX_ERR_LIMIT, "%s: frame too large", where);
+    }
+    float *occ = fx_mem_alloc(n3 * sizeof(float));
+    float *rays = fx_mem_calloc(n3, sizeof(float));
+    if (!occ || !rays) {
+        fx_mem_free(occ);
+        fx_mem_free(rays);
+        fx_mask_free(material);
+        return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the occlusion map", where);
+    }
+    oj.occ = occ;
+    fx_parallel_for(run->ctx, h, fx_grain_for(run->ctx, h), occ_rows, &oj);
+    fx_mask_free(material);
+
+    fx_radial_blur rb;
+    memset(&rb, 0, sizeof rb);
+    rb.light_x = lx;
+    rb.light_y = ly;
+    rb.samples = p->samples;
+    rb.decay = p->decay;
+    rb.density = p->density;
+    rb.scale = (double)FX_RAYS_REFERENCE_SAMPLES * p->weight * p->exposure;
+    rb.jitter = p->jitter;
+    rb.seed = (uint32_t)p->seed;
+    double frame_no = run->frame->frame_number;
+    rb.frame = isfinite(frame_no) && fabs(frame_no) < 2e9 ? (int)floor(frame_no) : 0;
+    rb.angular = 1.0 / p->polar_resolution;
+    rb.levels = p->polar_levels;
+    if (p->method == METHOD_NAIVE)
+        r = fx_radial_blur_naive(run->ctx, occ, rays, w, h, &rb, &run->roi, where);
+    else
+        r = fx_radial_blur_polar(run->ctx, occ, rays, w, h, &rb, &run->roi, where);
+    if (r == FX_OK) {
+        comp_job cj = {run, rays, fade, p->composite == COMP_SCREEN};
+        int rows = run->roi.y1 - run->roi.y0;
+        fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), comp_rows, &cj);
+        if (run->debug) {
+            float *dbg = fx_effect_debug_pass(run, "occlusion", 3, &r);
+            if (dbg)
+                memcpy(dbg, occ, n3 * sizeof(float));
+            float *dr = r == FX_OK ? fx_effect_debug_pass(run, "rays", 3, &r) : NULL;
+            if (dr)
+                memcpy(dr, rays, n3 * sizeof(float));
+        }
+    }
+    fx_mem_free(occ);
+    fx_mem_free(rays);
+    return r;
+}
+
+const fx_effect_class fx_effect_god_rays = {
+    .name = "god_rays",
+    .doc = "Crepuscular rays: radial blur of the sky/bright pixels towards the scene's light (GPU Gems 3 ch. 13)",
+    .params_size = sizeof(god_rays_params),
+    .params = god_rays_param_defs,
+    .param_count = FX_COUNT_OF(god_rays_param_defs),
+    .presets = {
+        "{\"method\": \"polar\", \"polar_resolution\": 0.5, \"polar_levels\": 1}",
+        "{\"method\": \"polar\", \"polar_resolution\": 1, \"polar_levels\": 2}",
+        "{\"method\": \"polar\", \"polar_resolution\": 2, \"polar_levels\": 3}",
+        "{\"method\": \"naive\", \"samples\": 2000, \"jitter\": false}",
+    },
+    .passes = god_rays_passes,
+    .needs_camera = god_rays_needs_camera,
+    .halo = god_rays_halo,
+    .validate = NULL,
+    .process = god_rays_process,
+};

@@ -1,0 +1,508 @@
+/* Radial blur towards a light: naive (GPU Gems 3 ch. 13) and polar (epipolar lines with
+ * a bank of exponential recursions). The model and the two methods: radial_blur.h. */
+#include "math/radial_blur.h"
+
+#include "core/parallel.h"
+#include "math/hash.h"
+
+#include <float.h>
+#include <math.h>
+#include <stdatomic.h>
+#include <string.h>
+
+#ifndef M_PI
+#define M_PI 3.14159265358979323846
+#endif
+
+void fx_radial_blur_bound_light(double *lx, double *ly, int width, int height)
+{
+    double cx = 0.5 * width, cy = 0.5 * height;
+    if (!isfinite(*lx) || !isfinite(*ly)) {
+        *lx = cx;
+        *ly = cy;
+        return;
+    }
+    double dx = *lx - cx, dy = *ly - cy;
+    double d = hypot(dx, dy);
+    if (d > FX_RAYS_MAX_LIGHT_DISTANCE) {
+        double s = FX_RAYS_MAX_LIGHT_DISTANCE / d;
+        *lx = cx + dx * s;
+        *ly = cy + dy * s;
+    }
+}
+
+double fx_radial_blur_mass(double decay)
+{
+    if (!(decay > 0.0))
+        return 0.0;
+    if (decay >= 1.0)
+        return 1.0;
+    double a = -(double)FX_RAYS_REFERENCE_SAMPLES * log(decay); /* > 0 */
+    return -expm1(-a) / a;
+}
+
+/* acc += wt * bilinear(occ, x, y), zero outside the image. (x, y) continuous frame pixels. */
+static inline void sample_add(const float *occ, int w, int h, double x, double y, double wt, double acc[3])
+{
+    double fx = x - 0.5, fy = y - 0.5;
+    double x0f = floor(fx), y0f = floor(fy);
+    if (!(x0f >= -1.0 && x0f < (double)w && y0f >= -1.0 && y0f < (double)h))
+        return;
+    int x0 = (int)x0f, y0 = (int)y0f;
+    double tx = fx - x0f, ty = fy - y0f;
+    for (int dy = 0; dy < 2; dy++) {
+        int yi = y0 + dy;
+        if (yi < 0 || yi >= h)
+            continue;
+        double wy = (dy ? ty : 1.0 - ty) * wt;
+        for (int dx = 0; dx < 2; dx++) {
+            int xi = x0 + dx;
+            if (xi < 0 || xi >= w)
+                continue;
+            double ww = (dx ? tx : 1.0 - tx) * wy;
+            const float *q = occ + ((size_t)yi * w + xi) * 3;
+            acc[0] += ww * q[0];
+            acc[1] += ww * q[1];
+            acc[2] += ww * q[2];
+        }
+    }
+}
+
+static inline float to_float(double v)
+{
+    if (!(v == v))
+        return 0.0f;
+    return v > FLT_MAX ? FLT_MAX : v < -FLT_MAX ? -FLT_MAX : (float)v;
+}
+
+/* Range of s where p - s * d lies in [lo, hi] on one axis, intersected into [*s0, *s1]. */
+static void clip_axis(double p, double d, double lo, double hi, double *s0, double *s1)
+{
+    if (fabs(d) < 1e-300) {
+        if (p < lo || p > hi) {
+            *s0 = 1.0;
+            *s1 = 0.0;
+        }
+        return;
+    }
+    double a = (p - hi) / d, b = (p - lo) / d;
+    if (a > b) {
+        double t = a;
+        a = b;
+        b = t;
+    }
+    if (a > *s0)
+        *s0 = a;
+    if (b < *s1)
+        *s1 = b;
+}
+
+/* ---- naive ---- */
+
+typedef struct naive_job {
+    const float *occ;
+    float *rays;
+    int w, h;
+    const fx_radial_blur *rb;
+    fx_rect roi;
+    double step_decay; /* decay^(100 / N) */
+} naive_job;
+
+static void naive_rows(void *user, int begin, int end)
+{
+    const naive_job *j = user;
+    const fx_radial_blur *rb = j->rb;
+    const int n = rb->samples;
+    const double inv_n = 1.0 / n;
+    for (int yy = begin; yy < end; yy++) {
+        int y = j->roi.y0 + yy;
+        for (int x = j->roi.x0; x < j->roi.x1; x++) {
+            double px = x + 0.5, py = y + 0.5;
+            double dx = (px - rb->light_x) * rb->density * inv_n;
+            double dy = (py - rb->light_y) * rb->density * inv_n;
+            double jit = rb->jitter ? fx_rand4(x, y, rb->frame, (int32_t)rb->seed) : 0.0;
+            /* samples i with s = i + jit inside the slab where bilinear taps can be non-zero */
+            double s0 = 0.0, s1 = (double)n;
+            clip_axis(px, dx, -0.5, j->w + 0.5, &s0, &s1);
+            clip_axis(py, dy, -0.5, j->h + 0.5, &s0, &s1);
+            double acc[3] = {0, 0, 0};
+            if (s1 >= s0) {
+                double i0f = ceil(s0 - jit) - 1.0, i1f = floor(s1 - jit) + 1.0;
+                int i0 = i0f < 0 ? 0 : (int)i0f;
+                int i1 = i1f > n - 1 ? n - 1 : (int)i1f;
+                double wt = i0 == 0 ? 1.0 : pow(j->step_decay, (double)i0);
+                for (int i = i0; i <= i1; i++) {
+                    double s = i + jit;
+                    sample_add(j->occ, j->w, j->h, px - s * dx, py - s * dy, wt, acc);
+                    wt *= j->step_decay;
+                }
+            }
+            float *o = j->rays + ((size_t)y * j->w + x) * 3;
+            double k = rb->scale * inv_n;
+            o[0] = to_float(acc[0] * k);
+            o[1] = to_float(acc[1] * k);
+            o[2] = to_float(acc[2] * k);
+        }
+    }
+}
+
+static fx_rect whole_or(const fx_rect *roi, int w, int h)
+{
+    fx_rect r = {0, 0, w, h};
+    if (roi) {
+        r = *roi;
+        if (r.x0 < 0) r.x0 = 0;
+        if (r.y0 < 0) r.y0 = 0;
+        if (r.x1 > w) r.x1 = w;
+        if (r.y1 > h) r.y1 = h;
+    }
+    return r;
+}
+
+fx_result fx_radial_blur_naive(fx_context *ctx, const float *occ, float *rays, int width, int height,
+                               const fx_radial_blur *rb, const fx_rect *roi, const char *where)
+{
+    (void)where;
+    naive_job j = {occ, rays, width, height, rb, whole_or(roi, width, height), 0.0};
+    if (j.roi.x1 <= j.roi.x0 || j.roi.y1 <= j.roi.y0)
+        return FX_OK;
+    j.step_decay = rb->decay >= 1.0 ? 1.0 : rb->decay <= 0.0 ? 0.0
+                 : pow(rb->decay, (double)FX_RAYS_REFERENCE_SAMPLES / rb->samples);
+    int rows = j.roi.y1 - j.roi.y0;
+    fx_parallel_for(ctx, rows, fx_grain_for(ctx, rows), naive_rows, &j);
+    return FX_OK;
+}
+
+/* ---- polar (epipolar lines through the light) ----
+ * Everything along a line is in bin units: bin m of a line lies at radius (b0 + m) * hr
+ * from the light (hr = 1 / resolution px); a pixel at rho bins has a path of d * rho
+ * bins and the decay rate a / (d * rho) per bin. */
+
+typedef struct polar_line {
+    int b0;        /* radius of bin 0, in bins */
+    int count;     /* bins b0 .. b0 + count - 1; 0: the line misses the image */
+    size_t offset; /* into the results (3 floats per bin) */
+} polar_line;
+
+typedef struct polar_job {
+    const float *occ;
+    int w, h;
+    const fx_radial_blur *rb;
+    double lx, ly;
+    double hr;                  /* radial bin size, px */
+    double phi0, dphi, theta_c; /* line a has angle theta_c + phi0 + a * dphi */
+    int lines, full_circle;
+    polar_line *line;
+    float *res;
+    double a;                   /* -100 ln(decay) (0: decay 1) */
+    double hstep;               /* ln 2 / levels */
+    int max_levels, max_count;
+    double *scratch;            /* per worker: max_count * 3 (occ) + max_levels * max_count * 3 (F) */
+    size_t scratch_per_worker;
+    fx_rect roi;
+    float *rays;
+} polar_job;
+
+/* [r_in, r_out] of the ray L + r (c, s), r >= 0, inside the slab [-0.5, w + 0.5] x [-0.5, h + 0.5]. */
+static int clip_ray(double lx, double ly, double c, double s, int w, int h, double *r_in, double *r_out)
+{
+    double s0 = 0.0, s1 = 1e300;
+    clip_axis(lx, -c, -0.5, w + 0.5, &s0, &s1);
+    clip_axis(ly, -s, -0.5, h + 0.5, &s0, &s1);
+    if (!(s1 >= s0))
+        return 0;
+    *r_in = s0;
+    *r_out = s1;
+    return 1;
+}
+
+/* Continuous level index of the rate a / (d rho) per bin: lambda_k = exp(k * hstep). */
+static inline double level_of(const polar_job *j, double rho)
+{
+    return log(j->a / (j->rb->density * rho)) / j->hstep;
+}
+
+static inline double oat(const double *o, int m, int ch)
+{
+    return m >= 0 ? o[3 * m + ch] : 0.0;
+}
+
+/* Kernel-weighted mean of occ over the path [b_lo, m] (bins), kernel exp(-lam (m - x)),
+ * trapezoid rule over the whole bins and the fractional end. Fk: running sums
+ * Fk[i] = sum_{i' <= i} o[i'] exp(-lam (i - i')). */
+static void path_mean(const double *Fk, const double *o, double lam, int m, double b_lo, double out[3])
+{
+    double m0f = ceil(b_lo);
+    double f = m0f - b_lo;
+    int m0 = (int)m0f;
+    int n = m - m0 + 1;
+    if (n <= 1 && f < 1e-9) {
+        for (int ch = 0; ch < 3; ch++)
+            out[ch] = o[3 * m + ch];
+        return;
+    }
+    double e1n = exp(-lam * (n - 1)), ef = exp(-lam * (n - 1 + f)), en = exp(-lam * n);
+    double t1 = lam < 1e-12 ? (double)n : expm1(-lam * n) / expm1(-lam);
+    double den = t1 - 0.5 - 0.5 * e1n + 0.5 * f * (e1n + ef);
+    for (int ch = 0; ch < 3; ch++) {
+        double t = Fk[3 * m + ch] - (m0 >= 1 ? en * Fk[3 * (m0 - 1) + ch] : 0.0);
+        double om0 = oat(o, m0, ch);
+        double olo = f * oat(o, m0 - 1, ch) + (1.0 - f) * om0;
+        double num = t - 0.5 * o[3 * m + ch] - 0.5 * om0 * e1n + 0.5 * f * (om0 * e1n + olo * ef);
+        out[ch] = den > 1e-300 ? num / den : o[3 * m + ch];
+    }
+}
+
+static void polar_lines(void *user, int begin, int end, int worker)
+{
+    polar_job *j = user;
+    const fx_radial_blur *rb = j->rb;
+    const double d = rb->density;
+    const double mass = fx_radial_blur_mass(rb->decay);
+    double *o = j->scratch + (size_t)worker * j->scratch_per_worker;
+    double *F = o + (size_t)j->max_count * 3;
+    for (int a = begin; a < end; a++) {
+        const polar_line *ln = &j->line[a];
+        if (ln->count <= 0)
+            continue;
+        double th = j->theta_c + j->phi0 + a * j->dphi;
+        double c = cos(th), s = sin(th);
+        const int cnt = ln->count;
+        for (int m = 0; m < cnt; m++) {
+            double acc[3] = {0, 0, 0};
+            double r = (ln->b0 + m) * j->hr;
+            sample_add(j->occ, j->w, j->h, j->lx + r * c, j->ly + r * s, 1.0, acc);
+            o[3 * m] = acc[0];
+            o[3 * m + 1] = acc[1];
+            o[3 * m + 2] = acc[2];
+        }
+        float *out = j->res + ln->offset * 3;
+        if (j->a <= 0.0) {
+            /* decay 1: one rate, 0: prefix sums */
+            double run[3] = {0, 0, 0};
+            for (int m = 0; m < cnt; m++)
+                for (int ch = 0; ch < 3; ch++) {
+                    run[ch] += o[3 * m + ch];
+                    F[3 * m + ch] = run[ch];
+                }
+            for (int m = 0; m < cnt; m++) {
+                double rho = ln->b0 + m, v[3];
+                path_mean(F, o, 0.0, m, m - d * rho, v);
+                for (int ch = 0; ch < 3; ch++)
+                    out[3 * m + ch] = to_float(rb->scale * v[ch]);
+            }
+            continue;
+        }
+        /* levels k_lo .. k_hi cover the rates of every bin (rho >= 1) with the cubic's
+         * neighbours; level k runs only up to the last bin that uses it */
+        double rho_min = ln->b0 < 1 ? 1.0 : (double)ln->b0;
+        double rho_max = fmax((double)(ln->b0 + cnt - 1), rho_min);
+        int k_lo = (int)floor(level_of(j, rho_max)) - 1;
+        int k_hi = (int)floor(level_of(j, rho_min)) + 2;
+        int K = k_hi - k_lo + 1;
+        if (K > j->max_levels)
+            K = j->max_levels;
+        for (int kk = 0; kk < K; kk++) {
+            int k = k_lo + kk;
+            double e1 = exp(-exp(k * j->hstep));
+            double last = j->a / (d * exp((k - 2) * j->hstep)) - ln->b0;
+            int e_k = last >= cnt - 2 ? cnt - 1 : last < 0 ? 0 : (int)floor(last) + 1;
+            double *Fk = F + (size_t)kk * j->max_count * 3;
+            double run[3] = {0, 0, 0};
+            for (int m = 0; m <= e_k; m++)
+                for (int ch = 0; ch < 3; ch++) {
+                    run[ch] = run[ch] * e1 + o[3 * m + ch];
+                    Fk[3 * m + ch] = run[ch];
+                }
+        }
+        for (int m = 0; m < cnt; m++) {
+            double rho = ln->b0 + m;
+            if (rho < 0.5) { /* at the light: a path of length 0 */
+                for (int ch = 0; ch < 3; ch++)
+                    out[3 * m + ch] = to_float(rb->scale * mass * o[3 * m + ch]);
+                continue;
+            }
+            double kappa = level_of(j, rho);
+            int kb = (int)floor(kappa);
+            double t = kappa - kb;
+            double v[4][3];
+            for (int q = 0; q < 4; q++) {
+                int kk = kb - 1 + q - k_lo;
+                kk = kk < 0 ? 0 : kk >= K ? K - 1 : kk;
+                path_mean(F + (size_t)kk * j->max_count * 3, o, exp((k_lo + kk) * j->hstep), m, m - d * rho, v[q]);
+            }
+            for (int ch = 0; ch < 3; ch++) {
+                /* Catmull-Rom in log(rate), clamped to the two middle values */
+                double p0 = v[0][ch], p1 = v[1][ch], p2 = v[2][ch], p3 = v[3][ch];
+                double val = p1 + 0.5 * t * (p2 - p0 + t * (2 * p0 - 5 * p1 + 4 * p2 - p3 + t * (3 * (p1 - p2) + p3 - p0)));
+                double lo = fmin(p1, p2), hi = fmax(p1, p2);
+                val = val < lo ? lo : val > hi ? hi : val;
+                out[3 * m + ch] = to_float(rb->scale * mass * val);
+            }
+        }
+    }
+}
+
+static inline double line_value(const polar_job *j, int a, double rho, int ch)
+{
+    const polar_line *ln = &j->line[a];
+    if (ln->count <= 0)
+        return 0.0;
+    double b = rho - ln->b0;
+    if (b <= 0.0)
+        return j->res[ln->offset * 3 + ch];
+    if (b >= ln->count - 1)
+        return j->res[(ln->offset + ln->count - 1) * 3 + ch];
+    int i = (int)b;
+    double t = b - i;
+    const float *q = j->res + (ln->offset + i) * 3 + ch;
+    return q[0] + t * ((double)q[3] - q[0]);
+}
+
+static void polar_back(void *user, int begin, int end)
+{
+    const polar_job *j = user;
+    for (int yy = begin; yy < end; yy++) {
+        int y = j->roi.y0 + yy;
+        for (int x = j->roi.x0; x < j->roi.x1; x++) {
+            double vx = x + 0.5 - j->lx, vy = y + 0.5 - j->ly;
+            double rho = hypot(vx, vy) / j->hr;
+            double th = atan2(vy, vx) - j->theta_c;
+            if (!j->full_circle) {
+                while (th > M_PI) th -= 2 * M_PI;
+                while (th <= -M_PI) th += 2 * M_PI;
+            }
+            double af = (th - j->phi0) / j->dphi;
+            double a0f = floor(af);
+            double t = af - a0f;
+            int a0 = (int)a0f, a1 = a0 + 1;
+            if (j->full_circle) {
+                a0 = ((a0 % j->lines) + j->lines) % j->lines;
+                a1 = (a0 + 1) % j->lines;
+            }
+            float *o = j->rays + ((size_t)y * j->w + x) * 3;
+            for (int ch = 0; ch < 3; ch++) {
+                double v0 = a0 >= 0 && a0 < j->lines ? line_value(j, a0, rho, ch) : 0.0;
+                double v1 = a1 >= 0 && a1 < j->lines ? line_value(j, a1, rho, ch) : 0.0;
+                o[ch] = to_float(v0 + t * (v1 - v0));
+            }
+        }
+    }
+}
+
+fx_result fx_radial_blur_polar(fx_context *ctx, const float *occ, float *rays, int width, int height,
+                               const fx_radial_blur *rb, const fx_rect *roi, const char *where)
+{
+    polar_job j;
+    memset(&j, 0, sizeof j);
+    j.occ = occ;
+    j.w = width;
+    j.h = height;
+    j.rb = rb;
+    j.roi = whole_or(roi, width, height);
+    j.rays = rays;
+    if (j.roi.x1 <= j.roi.x0 || j.roi.y1 <= j.roi.y0)
+        return FX_OK;
+    j.lx = rb->light_x;
+    j.ly = rb->light_y;
+    const double W = width + 0.5, H = height + 0.5, X0 = -0.5, Y0 = -0.5;
+    const double cx[4] = {X0, W, W, X0}, cy[4] = {Y0, Y0, H, H};
+    double r_far = 0.0;
+    for (int i = 0; i < 4; i++)
+        r_far = fmax(r_far, hypot(cx[i] - j.lx, cy[i] - j.ly));
+    j.hr = rb->angular > 0.0 ? rb->angular : 1.0;
+    double dphi_target = j.hr / fmax(r_far, 1.0);
+    int inside = j.lx >= X0 - 1.0 && j.lx <= W + 1.0 && j.ly >= Y0 - 1.0 && j.ly <= H + 1.0;
+    if (inside) {
+        j.full_circle = 1;
+        j.theta_c = 0.0;
+        double n = ceil(2 * M_PI / dphi_target);
+        j.lines = n < 8 ? 8 : n > 4e6 ? 4000000 : (int)n;
+        j.dphi = 2 * M_PI / j.lines;
+        j.phi0 = -M_PI;
+    } else {
+        j.theta_c = atan2(0.5 * height - j.ly, 0.5 * width - j.lx);
+        double lo = M_PI, hi = -M_PI;
+        for (int i = 0; i < 4; i++) {
+            double t = atan2(cy[i] - j.ly, cx[i] - j.lx) - j.theta_c;
+            while (t > M_PI) t -= 2 * M_PI;
+            while (t <= -M_PI) t += 2 * M_PI;
+            lo = fmin(lo, t);
+            hi = fmax(hi, t);
+        }
+        j.dphi = dphi_target;
+        double n = ceil((hi - lo) / j.dphi) + 5.0;
+        if (n > 4e6) {
+            n = 4e6;
+            j.dphi = (hi - lo) / (n - 5.0);
+        }
+        j.lines = (int)n;
+        j.phi0 = lo - 2.0 * j.dphi;
+    }
+    j.line = fx_mem_calloc((size_t)j.lines, sizeof *j.line);
+    if (!j.line)
+        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for %d polar lines", where, j.lines);
+    size_t total = 0;
+    int max_count = 1;
+    for (int a = 0; a < j.lines; a++) {
+        double th = j.theta_c + j.phi0 + a * j.dphi;
+        double r_in, r_out;
+        polar_line *ln = &j.line[a];
+        ln->offset = total;
+        if (!clip_ray(j.lx, j.ly, cos(th), sin(th), width, height, &r_in, &r_out))
+            continue;
+        double b0 = floor(r_in / j.hr);
+        ln->b0 = (int)b0;
+        ln->count = (int)(floor(r_out / j.hr) - b0) + 2; /* one bin past the end for interpolation */
+        total += (size_t)ln->count;
+        if (ln->count > max_count)
+            max_count = ln->count;
+    }
+    j.a = rb->decay >= 1.0 ? 0.0 : rb->decay <= 0.0 ? 0.0 : -(double)FX_RAYS_REFERENCE_SAMPLES * log(rb->decay);
+    int levels = rb->levels < 1 ? 1 : rb->levels;
+    j.hstep = log(2.0) / levels;
+    /* levels per line: from the rate at the line's far end to the rate at r = 1 */
+    int max_levels = 1;
+    if (j.a > 0.0 && rb->density > 0.0) {
+        double span = log(fmax(r_far / j.hr + 2.0, 2.0)) / j.hstep;
+        max_levels = (int)ceil(span) + 6;
+    }
+    j.max_levels = max_levels;
+    j.max_count = max_count;
+    j.scratch_per_worker = (size_t)max_count * 3 * (1 + (size_t)max_levels);
+    int workers = fx_parallel_workers(ctx);
+    uint64_t bytes = (uint64_t)total * 3 * sizeof(float) +
+                     (uint64_t)workers * j.scratch_per_worker * sizeof(double);
+    fx_result r = fx_check_budget(ctx, bytes, where);
+    if (r != FX_OK) {
+        fx_mem_free(j.line);
+        return r;
+    }
+    j.res = fx_mem_alloc((total ? total : 1) * 3 * sizeof(float));
+    j.scratch = fx_mem_alloc((size_t)workers * j.scratch_per_worker * sizeof(double));
+    if (!j.res || !j.scratch) {
+        fx_mem_free(j.res);
+        fx_mem_free(j.scratch);
+        fx_mem_free(j.line);
+        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the polar grid (%zu bins)", where, total);
+    }
+    if (rb->decay <= 0.0 || rb->density <= 0.0) {
+        /* decay 0: the kernel has no mass (the limit of the naive sum). density 0: every
+         * sample is the pixel itself. Both are plain per-pixel products. */
+        double k = rb->decay <= 0.0 ? 0.0 : rb->scale * fx_radial_blur_mass(rb->decay);
+        for (int y = j.roi.y0; y < j.roi.y1; y++)
+            for (int x = j.roi.x0; x < j.roi.x1; x++)
+                for (int ch = 0; ch < 3; ch++) {
+                    size_t i = ((size_t)y * width + x) * 3 + ch;
+                    rays[i] = to_float(k * occ[i]);
+                }
+    } else {
+        fx_parallel_for_worker(ctx, j.lines, 16, polar_lines, &j);
+        int rows = j.roi.y1 - j.roi.y0;
+        fx_parallel_for(ctx, rows, fx_grain_for(ctx, rows), polar_back, &j);
+    }
+    fx_mem_free(j.res);
+    fx_mem_free(j.scratch);
+    fx_mem_free(j.line);
+    return FX_OK;
+}

@@ -1,0 +1,73 @@
+/* Radial blur towards a light (GPU Gems 3 ch. 13, "Volumetric Light Scattering as a
+ * Post-Process"), in two methods that converge to the same integral.
+ *
+ * The continuous model: for an output pixel p and the light L (frame pixels),
+ *
+ *     rays(p) = scale * integral_0^1 occ(p - t * density * (p - L)) * decay^(100 t) dt
+ *
+ * where occ is the 3-channel occlusion map (zero outside the image) and scale =
+ * 100 * weight * exposure. `decay` is the per-sample decay at the seed's 100 samples:
+ *  - naive (GPU Gems): N samples q_i = p - (i + j) * density * (p - L) / N, i = 0..N-1,
+ *    j a per-pixel jitter in [0, 1) (0 without jitter), each weighted
+ *    scale / N * decay^(100 i / N). At N = 100 this is exactly the book's loop (with the
+ *    first sample weighted too, so weight 0 is the identity). Cost O(N) per pixel;
+ *    samples outside the image are skipped by clipping the segment (a light far off
+ *    screen costs no more than one inside it, and gives the same bounded sum).
+ *  - polar (epipolar): the occlusion map is resampled along lines through L (one bin per
+ *    pixel of radius, lines spaced `angular` px apart at the farthest pixel). Along a
+ *    line the integral is a truncated exponential sum with rate a/(density r) (a = -100
+ *    ln decay): computed for a bank of rates lambda_k = 2^(k / levels) by one recursion
+ *    each (O(1) per bin), normalised by the kernel's exact discrete mass, and
+ *    interpolated in log(rate) (cubic, clamped); decay 1 needs one rate (prefix sums).
+ *    The result is resampled back to the pixels. Exact in the limit of fine lines and
+ *    many levels; cost O(levels) per bin, independent of the sample count.
+ * Both are deterministic and bit-identical for any thread count. */
+#ifndef LIBFX_MATH_RADIAL_BLUR_H
+#define LIBFX_MATH_RADIAL_BLUR_H
+
+#include "core/internal.h"
+#include "core/mask.h"
+
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* The book's reference sample count: decay is per sample at this count. */
+#define FX_RAYS_REFERENCE_SAMPLES 100
+/* The light is kept within this many pixels of the image centre (direction kept): a
+ * light at infinity on screen, or with clip w -> 0, gives parallel, bounded rays. */
+#define FX_RAYS_MAX_LIGHT_DISTANCE 1.0e6
+
+typedef struct fx_radial_blur {
+    double light_x, light_y; /* frame pixels, continuous (pixel x's centre is x + 0.5) */
+    int samples;             /* naive: N >= 1 */
+    double decay;            /* [0, 1], per sample at 100 samples */
+    double density;          /* (0, 1]: fraction of the way to the light */
+    double scale;            /* 100 * weight * exposure (>= 0) */
+    int jitter;              /* naive: per-pixel jitter of the samples */
+    uint32_t seed;           /* jitter hash seed (with the frame number) */
+    int frame;
+    double angular;          /* polar: line spacing in px at the farthest pixel (> 0) */
+    int levels;              /* polar: rates per octave (>= 1) */
+} fx_radial_blur;
+
+/* Moves (lx, ly) towards the image centre so that it lies within
+ * FX_RAYS_MAX_LIGHT_DISTANCE of it; non-finite positions become the centre. */
+void fx_radial_blur_bound_light(double *lx, double *ly, int width, int height);
+
+/* integral_0^1 decay^(100 t) dt: the kernel's mass (1 for decay 1, 0 for decay 0). */
+double fx_radial_blur_mass(double decay);
+
+/* rays (3 channels, width x height) over roi (NULL: all) from occ (3 channels). Outside
+ * roi, rays is untouched. Finite for finite occ. */
+fx_result fx_radial_blur_naive(fx_context *ctx, const float *occ, float *rays, int width, int height,
+                               const fx_radial_blur *rb, const fx_rect *roi, const char *where);
+fx_result fx_radial_blur_polar(fx_context *ctx, const float *occ, float *rays, int width, int height,
+                               const fx_radial_blur *rb, const fx_rect *roi, const char *where);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

@@ -1,0 +1,402 @@
+/* god_rays through the public API: rays brighten towards the light and shafts follow
+ * occluders; weight/exposure 0 and a light behind the camera are the identity; the scene
+ * light is projected with the camera; extremes (samples 1..2000, decay/density 0 and 1, a
+ * light far off screen) stay finite and bounded; naive and polar converge to the same
+ * image; bit-identical for 1 and 2 threads. */
+#include "fx_effect_test.h"
+
+#include <float.h>
+#include <math.h>
+
+#ifndef M_PI
+#define M_PI 3.14159265358979323846
+#endif
+
+#define W 96
+#define H 64
+
+/* black image with a bright disc (radius 4) around (cx, cy) and a grey floor */
+static float *spot_image(double cx, double cy)
+{
+    float *p = calloc((size_t)W * H * 4, sizeof(float));
+    for (int y = 0; y < H; y++)
+        for (int x = 0; x < W; x++) {
+            float *q = p + ((size_t)y * W + x) * 4;
+            double d = hypot(x + 0.5 - cx, y + 0.5 - cy);
+            float v = d < 4.0 ? 4.0f : 0.05f;
+            q[0] = q[1] = q[2] = v;
+            q[3] = 1.0f;
+        }
+    return p;
+}
+
+static float lum(const float *img, int x, int y)
+{
+    const float *q = img + ((size_t)y * W + x) * 4;
+    return 0.2126f * q[0] + 0.7152f * q[1] + 0.0722f * q[2];
+}
+
+typedef struct rset {
+    const char *method;
+    int samples;
+    double decay, density, weight, exposure;
+    float lx, ly;
+    int jitter;
+    double polar_res;
+    int levels;
+} rset;
+
+static rset defaults(void)
+{
+    rset r = {"naive", 100, 0.97, 0.9, 1.0, 0.02, 0.5f, 0.3f, 0, 0, 0};
+    return r;
+}
+
+static fx_stack *rays_stack(fx_context *ctx, rset r)
+{
+    fx_stack *s = et_stack(ctx, "god_rays");
+    float pos[2] = {r.lx, r.ly};
+    if (!s)
+        return NULL;
+    fx_result e = FX_OK;
+    e |= fx_stack_set_enum(s, 0, "light_source", "screen");
+    e |= fx_stack_set_enum(s, 0, "occlusion", "luminance");
+    e |= fx_stack_set_floats(s, 0, "light_position", pos, 2);
+    e |= fx_stack_set_enum(s, 0, "method", r.method);
+    e |= fx_stack_set_int(s, 0, "samples", r.samples);
+    e |= fx_stack_set_float(s, 0, "decay", r.decay);
+    e |= fx_stack_set_float(s, 0, "density", r.density);
+    e |= fx_stack_set_float(s, 0, "weight", r.weight);
+    e |= fx_stack_set_float(s, 0, "exposure", r.exposure);
+    e |= fx_stack_set_int(s, 0, "jitter", r.jitter);
+    if (r.polar_res > 0)
+        e |= fx_stack_set_float(s, 0, "polar_resolution", r.polar_res);
+    if (r.levels > 0)
+        e |= fx_stack_set_int(s, 0, "polar_levels", r.levels);
+    if (e != FX_OK) {
+        fprintf(stderr, "setup: %s\n", fx_context_error(ctx));
+        fx_stack_free(s);
+        return NULL;
+    }
+    return s;
+}
+
+static float *run_rays(fx_context *ctx, const float *img, rset r)
+{
+    fx_frame *f = et_frame(ctx, W, H, img);
+    fx_stack *s = rays_stack(ctx, r);
+    float *o = s && f ? et_run(ctx, s, f) : NULL;
+    fx_stack_free(s);
+    fx_frame_free(f);
+    return o;
+}
+
+static void test_brighter_towards_light(fx_context *ctx)
+{
+    for (int m = 0; m < 2; m++) {
+        rset r = defaults();
+        r.method = m ? "polar" : "naive";
+        double cx = 0.5 * W, cy = 0.3 * H;
+        float *img = spot_image(cx, cy);
+        float *o = run_rays(ctx, img, r);
+        CHECK(o != NULL);
+        if (!o) {
+            free(img);
+            continue;
+        }
+        int ok = 1;
+        for (int k = 0; k < 8; k++) {
+            double a = k * M_PI / 4 + 0.3;
+            float prev = FLT_MAX;
+            for (int rad = 8; rad <= 36; rad += 4) {
+                int x = (int)floor(cx + rad * cos(a)), y = (int)floor(cy + rad * sin(a));
+                if (x < 0 || x >= W || y < 0 || y >= H)
+                    break;
+                float v = lum(o, x, y) - lum(img, x, y);
+                if (!(v > 0.0f && v < prev)) {
+                    fprintf(stderr, "%s: dir %d r %d: rays %g (prev %g)\n", r.method, k, rad, v, prev);
+                    ok = 0;
+                }
+                prev = v;
+            }
+        }
+        CHECK(ok);
+        free(o);
+        free(img);
+    }
+}
+
+/* A bright sky band at the top with a dark column in it: the column's shaft is darker. */
+static void test_shafts_follow_occluders(fx_context *ctx)
+{
+    float *img = calloc((size_t)W * H * 4, sizeof(float));
+    for (int y = 0; y < H; y++)
+        for (int x = 0; x < W; x++) {
+            float *q = img + ((size_t)y * W + x) * 4;
+            float v = (y < 20 && !(x >= 44 && x < 52)) ? 3.0f : 0.02f;
+            q[0] = q[1] = q[2] = v;
+            q[3] = 1;
+        }
+    for (int m = 0; m < 2; m++) {
+        rset r = defaults();
+        r.method = m ? "polar" : "naive";
+        r.lx = 0.5f;
+        r.ly = 0.05f; /* light above the column */
+        float *o = run_rays(ctx, img, r);
+        CHECK(o != NULL);
+        if (o) {
+            /* below the column (x = 48) vs beside it (x = 30), same row */
+            float shadow = lum(o, 48, 45) - lum(img, 48, 45);
+            float lit = lum(o, 28, 45) - lum(img, 28, 45);
+            CHECK(lit > 2.0f * shadow && lit > 0.0f);
+            free(o);
+        }
+    }
+    free(img);
+}
+
+static void test_identity(fx_context *ctx)
+{
+    float *img = spot_image(40, 20);
+    const char *methods[2] = {"naive", "polar"};
+    for (int m = 0; m < 2; m++) {
+        rset r = defaults();
+        r.method = methods[m];
+        r.weight = 0.0;
+        float *o = run_rays(ctx, img, r);
+        CHECK(o && memcmp(o, img, (size_t)W * H * 4 * sizeof(float)) == 0);
+        free(o);
+        r = defaults();
+        r.method = methods[m];
+        r.exposure = 0.0;
+        o = run_rays(ctx, img, r);
+        CHECK(o && memcmp(o, img, (size_t)W * H * 4 * sizeof(float)) == 0);
+        free(o);
+    }
+    free(img);
+}
+
+/* Camera at the origin looking down -Z, 60 degree vertical field of view. */
+static const char *camera_json(const char *sun_direction, char *buf, size_t n)
+{
+    double f = 1.0 / tan(M_PI / 6), aspect = (double)W / H, zn = 0.1, zf = 100;
+    snprintf(buf, n,
+             "{\"world_to_camera\": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]],"
+             " \"projection\": [[%.17g,0,0,0],[0,%.17g,0,0],[0,0,%.17g,%.17g],[0,0,-1,0]],"
+             " \"clip_start\": 0.1, \"clip_end\": 100,"
+             " \"lights\": [{\"name\": \"Sun\", \"type\": \"SUN\", \"direction\": %s}]}",
+             f / aspect, f, (zf + zn) / (zn - zf), 2 * zf * zn / (zn - zf), sun_direction);
+    return buf;
+}
+
+static float *run_scene_light(fx_context *ctx, const float *img, const char *sun_dir, const char *method)
+{
+    char json[1024];
+    fx_frame *f = et_frame(ctx, W, H, img);
+    fx_stack *s = et_stack(ctx, "god_rays");
+    float *o = NULL;
+    if (f && s && fx_frame_apply_sidecar(f, camera_json(sun_dir, json, sizeof json)) == FX_OK &&
+        fx_stack_set_enum(s, 0, "occlusion", "luminance") == FX_OK &&
+        fx_stack_set_enum(s, 0, "method", method) == FX_OK &&
+        fx_stack_set_string(s, 0, "light", "Sun") == FX_OK && fx_stack_set_float(s, 0, "exposure", 0.02) == FX_OK)
+        o = et_run(ctx, s, f);
+    else
+        fprintf(stderr, "scene light setup: %s\n", fx_context_error(ctx));
+    fx_stack_free(s);
+    fx_frame_free(f);
+    return o;
+}
+
+static void test_scene_light(fx_context *ctx)
+{
+    float *img = spot_image(0.5 * W, 0.5 * H);
+    /* the sun travels +Z: it shines from -Z, straight ahead: symmetric rays about the centre */
+    float *o = run_scene_light(ctx, img, "[0, 0, 1]", "naive");
+    CHECK(o != NULL);
+    if (o) {
+        float a = lum(o, W / 2 + 12, H / 2) - lum(img, W / 2 + 12, H / 2);
+        float b = lum(o, W / 2 - 13, H / 2) - lum(img, W / 2 - 13, H / 2);
+        CHECK(a > 0.0f && fabsf(a - b) < 0.02f * a);
+        free(o);
+    }
+    /* the sun travels -Z: it is behind the camera: identity, bit for bit, both methods */
+    for (int m = 0; m < 2; m++) {
+        o = run_scene_light(ctx, img, "[0, 0, -1]", m ? "polar" : "naive");
+        CHECK(o && memcmp(o, img, (size_t)W * H * 4 * sizeof(float)) == 0);
+        free(o);
+        /* sideways (90 degrees): also faded out completely */
+        o = run_scene_light(ctx, img, "[1, 0, 0]", m ? "polar" : "naive");
+        CHECK(o && memcmp(o, img, (size_t)W * H * 4 * sizeof(float)) == 0);
+        free(o);
+    }
+    /* almost sideways: light far off screen, w -> 0+: finite and bounded */
+    o = run_scene_light(ctx, img, "[0.99999, 0, 0.0045]", "polar");
+    CHECK(o && tu_all_finite(o, (size_t)W * H * 4));
+    free(o);
+    /* no lights in the frame: a clear error */
+    fx_frame *f = et_frame(ctx, W, H, img);
+    fx_stack *s = et_stack(ctx, "god_rays");
+    fx_stack_set_enum(s, 0, "occlusion", "luminance");
+    fx_frame *out = NULL;
+    CHECK_FAIL(ctx, fx_stack_run(s, f, &out), FX_ERR_NO_CAMERA, "camera");
+    fx_frame_free(out);
+    out = NULL;
+    /* the sky occlusion without Depth names the pass */
+    fx_stack_set_enum(s, 0, "occlusion", "sky");
+    fx_stack_set_enum(s, 0, "light_source", "screen");
+    CHECK_FAIL(ctx, fx_stack_run(s, f, &out), FX_ERR_MISSING_PASS, "Depth");
+    fx_frame_free(out);
+    fx_stack_free(s);
+    fx_frame_free(f);
+    free(img);
+}
+
+static void test_extremes(fx_context *ctx)
+{
+    float *img = spot_image(30, 20);
+    /* bound: rays <= scale * max(occ) * mass; max luminance of the source 4 (<= max_source 8) */
+    const int samples[] = {1, 2, 7, 100, 2000};
+    const double decays[] = {0.0, 0.5, 1.0};
+    const double dens[] = {0.0, 0.01, 1.0};
+    const float far[][2] = {{0.5f, 0.3f}, {1000.0f, -1000.0f}, {-1000.0f, 0.5f}, {1.2f, 0.5f}};
+    int ok = 1;
+    for (int m = 0; m < 2; m++)
+        for (int si = 0; si < 5; si++)
+            for (int di = 0; di < 3; di++)
+                for (int ni = 0; ni < 3; ni++)
+                    for (int fi = 0; fi < 4; fi++) {
+                        if (m == 1 && si != 3)
+                            continue; /* polar ignores samples */
+                        rset r = defaults();
+                        r.method = m ? "polar" : "naive";
+                        r.samples = samples[si];
+                        r.decay = decays[di];
+                        r.density = dens[ni];
+                        r.lx = far[fi][0];
+                        r.ly = far[fi][1];
+                        r.weight = 3.0;
+                        float *o = run_rays(ctx, img, r);
+                        /* rays <= scale * max(occ): the sample weights are <= 1 / N each */
+                        double bound = 100.0 * 3.0 * 0.02 * 4.0 + 4.0 + 1e-3;
+                        int good = o && tu_all_finite(o, (size_t)W * H * 4);
+                        for (size_t i = 0; good && i < (size_t)W * H * 4; i++)
+                            if (o[i] > bound || o[i] < 0.0f)
+                                good = 0;
+                        if (!good) {
+                            fprintf(stderr, "extreme: %s samples %d decay %g density %g light %g,%g\n", r.method,
+                                    r.samples, r.decay, r.density, r.lx, r.ly);
+                            ok = 0;
+                        }
+                        free(o);
+                    }
+    CHECK(ok);
+    /* inputs with Inf/NaN/huge values: finite output */
+    float *bad = spot_image(30, 20);
+    bad[0] = INFINITY;
+    bad[5] = NAN;
+    bad[4 * 200] = 1e38f;
+    bad[4 * 201 + 1] = -1e38f;
+    for (int m = 0; m < 2; m++) {
+        rset r = defaults();
+        r.method = m ? "polar" : "naive";
+        float *o = run_rays(ctx, bad, r);
+        CHECK(o && tu_all_finite(o, (size_t)W * H * 4));
+        free(o);
+    }
+    free(bad);
+    free(img);
+}
+
+static double max_rays_diff(const float *a, const float *b, const float *img, double *peak)
+{
+    double m = 0, pk = 0;
+    for (size_t i = 0; i < (size_t)W * H; i++)
+        for (int k = 0; k < 3; k++) {
+            double ra = a[i * 4 + k] - img[i * 4 + k], rb = b[i * 4 + k] - img[i * 4 + k];
+            m = fmax(m, fabs(ra - rb));
+            pk = fmax(pk, fabs(rb));
+        }
+    *peak = pk;
+    return m;
+}
+
+static void test_methods_converge(fx_context *ctx)
+{
+    float *img = calloc((size_t)W * H * 4, sizeof(float));
+    for (int y = 0; y < H; y++)
+        for (int x = 0; x < W; x++) {
+            float *q = img + ((size_t)y * W + x) * 4;
+            float v = (y < 24 && ((x / 8) % 3 != 0)) ? 2.0f : 0.0f;
+            q[0] = v;
+            q[1] = 0.8f * v;
+            q[2] = 0.5f * v;
+            q[3] = 1;
+        }
+    const float lights[][2] = {{0.45f, 0.12f}, {0.3f, -0.4f}, {1.5f, 0.2f}};
+    const double decays[] = {1.0, 0.97, 0.9};
+    for (int li = 0; li < 3; li++)
+        for (int di = 0; di < 3; di++) {
+            rset r = defaults();
+            r.lx = lights[li][0];
+            r.ly = lights[li][1];
+            r.decay = decays[di];
+            r.samples = 2000;
+            float *ref = run_rays(ctx, img, r);
+            r.method = "polar";
+            r.polar_res = 8;
+            r.levels = 8;
+            float *fine = run_rays(ctx, img, r);
+            r.polar_res = 1;
+            r.levels = 2;
+            float *coarse = run_rays(ctx, img, r);
+            CHECK(ref && fine && coarse);
+            if (ref && fine && coarse) {
+                double peak, ef = max_rays_diff(fine, ref, img, &peak), ec = max_rays_diff(coarse, ref, img, &peak);
+                fprintf(stderr, "light %g,%g decay %g: polar fine %.4f coarse %.4f of peak %.3f\n", r.lx, r.ly, r.decay,
+                        ef, ec, peak);
+                CHECK(ef < 0.06 * peak);
+                CHECK(ec < 0.25 * peak);
+            }
+            free(ref);
+            free(fine);
+            free(coarse);
+        }
+    free(img);
+}
+
+static void test_threads(void)
+{
+    float *img = spot_image(50, 10);
+    for (int m = 0; m < 2; m++) {
+        float *outs[2] = {NULL, NULL};
+        for (int t = 0; t < 2; t++) {
+            fx_context *c = NULL;
+            fx_context_new(&c, t + 1);
+            rset r = defaults();
+            r.method = m ? "polar" : "naive";
+            r.jitter = 1;
+            outs[t] = run_rays(c, img, r);
+            fx_context_free(c);
+        }
+        CHECK(outs[0] && outs[1] && memcmp(outs[0], outs[1], (size_t)W * H * 4 * sizeof(float)) == 0);
+        free(outs[0]);
+        free(outs[1]);
+    }
+    free(img);
+}
+
+int main(void)
+{
+    fx_context *ctx = NULL;
+    if (fx_context_new(&ctx, 2) != FX_OK)
+        return 1;
+    test_brighter_towards_light(ctx);
+    test_shafts_follow_occluders(ctx);
+    test_identity(ctx);
+    test_scene_light(ctx);
+    test_extremes(ctx);
+    test_methods_converge(ctx);
+    test_threads();
+    fx_context_free(ctx);
+    return tu_finish("test_god_rays");
+}
