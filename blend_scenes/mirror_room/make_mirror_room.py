@@ -13,6 +13,7 @@ FacingA, Grayscale, BentOut.  Right wall (x = +3.5): FacingB (exactly opposite
 FacingA), Cel, BentIn.
 """
 
+import json
 import math
 import os
 import sys
@@ -47,19 +48,38 @@ MIRRORS = [
 ]
 MIRROR_INDEX0 = 20                  # Mirror_* objects and materials: 20..30 in list order
 
+ALL_MIRRORS = [m[0] for m in MIRRORS]
+
+
+def ssr(name, label, **params):
+    """One ssr_mirror entry: one mirror kind on its own material mask."""
+    return {"effect": "ssr_mirror", "enabled": True, "label": label, "params": params,
+            "mask": {"material": name}}
+
+
+# Every mirror kind as one ssr_mirror entry (docs/effects/ssr_mirror.md). The facing
+# pair traces a second bounce when a ray lands on another mirror (mirror_surfaces).
+# The bent panels are curved geometry: their Normal pass already carries the
+# curvature, so they need no `bend` (which curves flat panels).
 RECIPE = {
     "version": 1,
     "quality": "final",
     "effects": [
-        {"effect": "color_matrix", "enabled": True,
-         "params": {"operator": "sepia", "mix": 1.0},
-         "mask": {"material": "Mirror_Sepia"}},
-        {"effect": "color_matrix", "enabled": True,
-         "params": {"operator": "grayscale_luminance", "mix": 1.0},
-         "mask": {"material": "Mirror_Grayscale"}},
-        {"effect": "gaussian_blur", "enabled": True,
-         "params": {"sigma": 6.0},
-         "mask": {"material": "Mirror_Blurred"}},
+        ssr("Mirror_Clear", "clear mirror"),
+        ssr("Mirror_Low", "low reflectivity", reflectivity=0.25),
+        ssr("Mirror_Blurred", "blurred (glossy) mirror", glossiness=6.0),
+        ssr("Mirror_Fresnel", "Fresnel-only (glass, IOR 1.5)", fresnel=True, f0=0.04,
+            fresnel_power=5.0),
+        ssr("Mirror_Sepia", "sepia reflection", operator="sepia"),
+        ssr("Mirror_Grayscale", "grayscale reflection", operator="grayscale"),
+        ssr("Mirror_Cel", "cel/edge reflection", operator="cel", cel_levels=4,
+            edge_threshold=0.05),
+        ssr("Mirror_BentOut", "convex (curved geometry)"),
+        ssr("Mirror_BentIn", "concave (curved geometry)"),
+        ssr("Mirror_FacingA", "facing pair A (double reflections)", bounces=2,
+            mirror_surfaces=json.dumps({"material": ALL_MIRRORS})),
+        ssr("Mirror_FacingB", "facing pair B (double reflections)", bounces=2,
+            mirror_surfaces=json.dumps({"material": ALL_MIRRORS})),
     ],
 }
 

@@ -28,7 +28,7 @@
 #include "math/camera.h"
 #include "math/color.h"
 #include "math/color_ops.h"
-#include "math/depth_edge.h"
+#include "math/edge_ops.h"
 #include "math/ssr_trace.h"
 
 #include <cjson/cJSON.h>
@@ -88,7 +88,7 @@ static const fx_param_def ssr_param_defs[] = {
               "cel (luminance quantised to cel_levels bands, depth-edge outlines of the reflected image)"),
     FX_P_INT(ssr_params, cel_levels, "cel_levels", 4, 1, 64, 2, 8, "", "Luminance bands of the cel operator"),
     FX_P_FLOAT(ssr_params, edge_threshold, "edge_threshold", 0.05, 0.0, 10.0, 0.005, 0.5, "",
-               "Cel outlines: relative depth step (|Sobel depth| / 8 depth) that draws a line"),
+               "Cel outlines: relative depth jump (Sobel on ln depth, math/edge_ops) that draws a line"),
     FX_P_FLOAT(ssr_params, bend, "bend", 0.0, -4.0, 4.0, -1.0, 1.0, "",
                "Curved mirror from a flat one: the normal tilts by bend x (position on the face "
                "from its centre, -1..1); > 0 bulges out (convex, wider view), < 0 in (concave)"),
@@ -379,7 +379,18 @@ static void apply_operator(const ssr_job *j, float px, float py, float rgb[3])
         const ssr_frame *F = j->F;
         int ix = (int)fx_clampf(floorf(px), 0.0f, (float)(F->w - 1));
         int iy = (int)fx_clampf(floorf(py), 0.0f, (float)(F->h - 1));
-        float e = fx_depth_edge_strength(F->depth, F->w, F->h, ix, iy, FX_SSR_BACKGROUND_DEPTH);
+        /* the shared depth edge operator (math/edge_ops: Sobel on ln depth, i.e. the
+         * relative depth jump) on the 3x3 around the hit, borders replicated */
+        float patch[9];
+        for (int dy = -1; dy <= 1; dy++)
+            for (int dx = -1; dx <= 1; dx++) {
+                int xx = (int)fx_clampf((float)(ix + dx), 0.0f, (float)(F->w - 1));
+                int yy = (int)fx_clampf((float)(iy + dy), 0.0f, (float)(F->h - 1));
+                float dv = F->depth[(size_t)yy * F->w + xx];
+                dv = !(dv < FX_EDGE_FAR_DEPTH) ? FX_EDGE_FAR_DEPTH : dv < FX_EDGE_NEAR_DEPTH ? FX_EDGE_NEAR_DEPTH : dv;
+                patch[(dy + 1) * 3 + dx + 1] = logf(dv);
+            }
+        float e = fx_edge_response_at(patch, 1, 3, 3, 1, 1, FX_EDGE_SOBEL);
         float t = p->edge_threshold;
         float line = t > 0.0f ? fx_smoothstep(t, 1.5f * t, e) : (e > 0.0f ? 1.0f : 0.0f);
         for (int k = 0; k < 3; k++)
