@@ -1,0 +1,56 @@
+/* Periodic 2-D Voronoi (Worley) noise over a jittered grid, with a Minkowski metric.
+ *
+ * The feature points: a G x G grid of cells over a periodic tile of G x G cell units, one
+ * point per cell, wandering inside its cell with time (each coordinate 0.5 + 0.44 sin(...)
+ * of the cell, so a point never leaves it). Two searches find the nearest and second
+ * nearest point of a query:
+ *  - brute force: every point, O(G^2);
+ *  - grid: rings of cells around the query's cell, stopping once a ring's nearest
+ *    possible point (ring - 1 cells away along an axis: every Minkowski norm, p > 0, is at
+ *    least the largest coordinate) is farther than the second best. O(1) for p >= 1.
+ * Both compute each candidate's distance by the same code from the same wrapped offset and
+ * order candidates by (distance, index), so they return the same indices and the same
+ * distance bits (tested).
+ *
+ * Minkowski distance in the scaled form m (sum (|x_i| / m)^p)^(1/p), m = max |x_i|: no
+ * overflow or underflow of the sum for any p; p = INFINITY is Chebyshev (m); p <= 0 or NaN
+ * is rejected by callers (for p < 1 it is not a metric: no triangle inequality; the grid's
+ * bound still holds, it only needs |x|_p >= |x|_inf). */
+#ifndef LIBFX_MATH_VORONOI_H
+#define LIBFX_MATH_VORONOI_H
+
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef struct fx_voronoi {
+    int grid;       /* G >= 1: G x G cells, one point each; the tile is G cell units wide */
+    uint32_t seed;
+    double time;    /* animation time (seconds) */
+    double speed;   /* wandering speed (radians per second of the points' sines) */
+    double p;       /* Minkowski exponent > 0; INFINITY: Chebyshev */
+} fx_voronoi;
+
+typedef struct fx_voronoi_hit {
+    int i1, i2;     /* nearest and second nearest point (index y * G + x); i2 = i1 if G == 1 */
+    double f1, f2;  /* their distances in cell units (f2 = f1 + 1 if G == 1) */
+} fx_voronoi_hit;
+
+double fx_minkowski2(double dx, double dy, double p);
+/* Point `index` at the voronoi's time, in tile coordinates [0, G). */
+void fx_voronoi_point(const fx_voronoi *v, int index, double *x, double *y);
+/* Nearest two points of (x, y) (cell units, any real: the tile repeats). */
+void fx_voronoi_brute(const fx_voronoi *v, double x, double y, fx_voronoi_hit *out);
+void fx_voronoi_grid(const fx_voronoi *v, double x, double y, fx_voronoi_hit *out);
+/* Rounded square root of a point count: the grid size G (>= 1). */
+int fx_voronoi_grid_for_points(int points);
+
+/* Smooth value noise in [0, 1] (bilinear over hashed lattice values, smoothstep weights). */
+double fx_value_noise2(double x, double y, uint32_t seed);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

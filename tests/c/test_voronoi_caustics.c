@@ -1,0 +1,356 @@
+/* voronoi_caustics: brute force == grid search exactly; Minkowski extremes (0.1 ... 1000,
+ * infinity) finite and correct; d <= 0 rejected; the pattern is anchored to the world (two
+ * cameras see the same value at the same world point, from Position and from Depth);
+ * animated by the frame time; untouched outside the mask; threads. */
+#include "fx_effect_test.h"
+#include "math/hash.h"
+#include "math/voronoi.h"
+
+#include <float.h>
+#include <math.h>
+
+#ifndef M_PI
+#define M_PI 3.14159265358979323846
+#endif
+
+static void test_brute_equals_grid(void)
+{
+    const int grids[] = {1, 2, 3, 5, 14, 40};
+    const double ps[] = {0.1, 0.5, 1.0, 1.5, 2.0, 20.0, 1000.0, INFINITY};
+    int mismatches = 0, total = 0;
+    for (int gi = 0; gi < 6; gi++)
+        for (int pi = 0; pi < 8; pi++) {
+            fx_voronoi v = {grids[gi], 42u + (uint32_t)gi, 1.25 * pi, 1.3, ps[pi]};
+            for (int q = 0; q < 400; q++) {
+                double x = (fx_rand4(q, gi, pi, 1) - 0.3) * 3.0 * grids[gi];
+                double y = (fx_rand4(q, gi, pi, 2) - 0.3) * 3.0 * grids[gi];
+                if (q == 0) { x = 0.0; y = 0.0; }
+                if (q == 1) { x = -1e-12; y = grids[gi]; }
+                fx_voronoi_hit a, b;
+                fx_voronoi_brute(&v, x, y, &a);
+                fx_voronoi_grid(&v, x, y, &b);
+                total++;
+                if (a.i1 != b.i1 || a.i2 != b.i2 || memcmp(&a.f1, &b.f1, sizeof(double)) ||
+                    memcmp(&a.f2, &b.f2, sizeof(double)) || !isfinite(a.f1) || !isfinite(a.f2)) {
+                    if (mismatches++ < 5)
+                        fprintf(stderr, "G %d p %g (%g, %g): brute %d/%d %.17g/%.17g grid %d/%d %.17g/%.17g\n",
+                                grids[gi], ps[pi], x, y, a.i1, a.i2, a.f1, a.f2, b.i1, b.i2, b.f1, b.f2);
+                }
+            }
+        }
+    CHECK(mismatches == 0);
+    CHECK(total == 6 * 8 * 400);
+}
+
+static void test_minkowski(void)
+{
+    CHECK(fx_minkowski2(3, 4, 2.0) == 5.0);
+    CHECK(fabs(fx_minkowski2(3, -4, 1.0) - 7.0) < 1e-12);
+    CHECK(fx_minkowski2(3, 4, INFINITY) == 4.0);
+    CHECK(fabs(fx_minkowski2(3, 4, 1000.0) - 4.0) < 1e-9);
+    CHECK(fabs(fx_minkowski2(3, 4, 1.5) - pow(pow(3, 1.5) + pow(4, 1.5), 1 / 1.5)) < 1e-12);
+    CHECK(fabs(fx_minkowski2(1, 1, 0.1) - 1024.0) < 1e-9);
+    CHECK(fabs(fx_minkowski2(1, 1, 20.0) - pow(2.0, 0.05)) < 1e-12);
+    CHECK(fx_minkowski2(0, 0, 0.1) == 0.0);
+    double tiny = fx_minkowski2(1e-300, 1e-300, 2.0), huge = fx_minkowski2(1e300, -1e300, 2.0);
+    CHECK(tiny > 0 && isfinite(tiny) && fabs(tiny / 1e-300 - sqrt(2.0)) < 1e-12);
+    CHECK(isfinite(huge) && fabs(huge / 1e300 - sqrt(2.0)) < 1e-12);
+    CHECK(isfinite(fx_minkowski2(1e300, 1e300, 0.1))); /* 1e300 * 1024 */
+    /* monotone in p (for p >= 1 the unit ball grows towards the square) */
+    const double ps[] = {0.1, 1.0, 1.5, 2.0, 20.0, 1000.0, INFINITY};
+    for (int i = 0; i + 1 < 7; i++)
+        CHECK(fx_minkowski2(0.3, 0.7, ps[i]) >= fx_minkowski2(0.3, 0.7, ps[i + 1]));
+}
+
+/* ---- frames seen by a camera looking straight down at the plane z = 0 ---- */
+
+#define W 160
+#define H 120
+
+typedef struct cam {
+    double pos[3];
+    double yaw; /* rotation about world Z */
+    double f;   /* projection focal (y) */
+} cam;
+
+static void cam_axes(const cam *c, double R[3][3])
+{
+    /* camera -Z = world -Z; camera X rotated by yaw in the XY plane */
+    double cs = cos(c->yaw), sn = sin(c->yaw);
+    double r[3][3] = {{cs, -sn, 0}, {sn, cs, 0}, {0, 0, 1}}; /* columns: camera axes in world */
+    memcpy(R, r, sizeof r);
+}
+
+static void camera_sidecar(const cam *c, char *buf, size_t n)
+{
+    double R[3][3];
+    cam_axes(c, R);
+    double t[3];
+    for (int i = 0; i < 3; i++) /* -R^T pos */
+        t[i] = -(R[0][i] * c->pos[0] + R[1][i] * c->pos[1] + R[2][i] * c->pos[2]);
+    double aspect = (double)W / H, zn = 0.1, zf = 100;
+    snprintf(buf, n,
+             "{\"world_to_camera\": [[%.17g,%.17g,%.17g,%.17g],[%.17g,%.17g,%.17g,%.17g],[%.17g,%.17g,%.17g,%.17g],[0,0,0,1]],"
+             " \"projection\": [[%.17g,0,0,0],[0,%.17g,0,0],[0,0,%.17g,%.17g],[0,0,-1,0]],"
+             " \"clip_start\": 0.1, \"clip_end\": 100, \"frame\": 3, \"fps\": 24}",
+             R[0][0], R[1][0], R[2][0], t[0], R[0][1], R[1][1], R[2][1], t[1], R[0][2], R[1][2], R[2][2], t[2],
+             c->f / aspect, c->f, (zf + zn) / (zn - zf), 2 * zf * zn / (zn - zf));
+}
+
+/* world point seen at continuous pixel (px, py) on z = 0, and its planar depth */
+static double pixel_to_world(const cam *c, double px, double py, double X[3])
+{
+    double aspect = (double)W / H;
+    double nx = px / W * 2 - 1, ny = 1 - py / H * 2;
+    double dv[3] = {nx * aspect / c->f, ny / c->f, -1.0};
+    double R[3][3];
+    cam_axes(c, R);
+    double dw[3];
+    for (int i = 0; i < 3; i++)
+        dw[i] = R[i][0] * dv[0] + R[i][1] * dv[1] + R[i][2] * dv[2];
+    double t = -c->pos[2] / dw[2];
+    for (int i = 0; i < 3; i++)
+        X[i] = c->pos[i] + t * dw[i];
+    return t; /* dv.z = -1: planar depth = t */
+}
+
+static int world_to_pixel(const cam *c, const double X[3], double *px, double *py)
+{
+    double R[3][3];
+    cam_axes(c, R);
+    double d[3] = {X[0] - c->pos[0], X[1] - c->pos[1], X[2] - c->pos[2]}, v[3];
+    for (int i = 0; i < 3; i++)
+        v[i] = R[0][i] * d[0] + R[1][i] * d[1] + R[2][i] * d[2];
+    if (v[2] >= 0)
+        return 0;
+    double aspect = (double)W / H;
+    double nx = v[0] / -v[2] * c->f / aspect, ny = v[1] / -v[2] * c->f;
+    *px = (nx + 1) * 0.5 * W;
+    *py = (1 - ny) * 0.5 * H;
+    return 1;
+}
+
+static fx_frame *plane_frame(fx_context *ctx, const cam *c)
+{
+    float *rgba = malloc((size_t)W * H * 4 * sizeof(float));
+    float *pos = malloc((size_t)W * H * 3 * sizeof(float));
+    float *depth = malloc((size_t)W * H * sizeof(float));
+    for (int y = 0; y < H; y++)
+        for (int x = 0; x < W; x++) {
+            size_t i = (size_t)y * W + x;
+            double X[3];
+            depth[i] = (float)pixel_to_world(c, x + 0.5, y + 0.5, X);
+            pos[i * 3] = (float)X[0];
+            pos[i * 3 + 1] = (float)X[1];
+            pos[i * 3 + 2] = (float)X[2];
+            rgba[i * 4] = rgba[i * 4 + 1] = rgba[i * 4 + 2] = 0.5f;
+            rgba[i * 4 + 3] = 1.0f;
+        }
+    fx_frame *f = et_frame(ctx, W, H, rgba);
+    char json[2048];
+    camera_sidecar(c, json, sizeof json);
+    if (f && (fx_frame_add_pass(f, "Position", 3, pos) != FX_OK || fx_frame_add_pass(f, "Depth", 1, depth) != FX_OK ||
+              fx_frame_apply_sidecar(f, json) != FX_OK)) {
+        fprintf(stderr, "plane frame: %s\n", fx_context_error(ctx));
+        fx_frame_free(f);
+        f = NULL;
+    }
+    free(rgba);
+    free(pos);
+    free(depth);
+    return f;
+}
+
+static float *run_caustics(fx_context *ctx, fx_frame *f, const char *source, const char *extra_json)
+{
+    char recipe[1024];
+    snprintf(recipe, sizeof recipe,
+             "{\"version\": 1, \"effects\": [{\"effect\": \"voronoi_caustics\", \"params\": {\"position_source\": "
+             "\"%s\", \"points\": 100, \"line_width\": 0.3%s%s}}]}",
+             source, extra_json ? ", " : "", extra_json ? extra_json : "");
+    fx_stack *s = NULL;
+    float *o = NULL;
+    if (fx_stack_new(ctx, &s) == FX_OK && fx_stack_load_json(s, recipe) == FX_OK)
+        o = et_run(ctx, s, f);
+    else
+        fprintf(stderr, "caustics recipe: %s\n", fx_context_error(ctx));
+    fx_stack_free(s);
+    return o;
+}
+
+static double bilinear_r(const float *img, double px, double py)
+{
+    double fx = px - 0.5, fy = py - 0.5;
+    int x0 = (int)floor(fx), y0 = (int)floor(fy);
+    double tx = fx - x0, ty = fy - y0;
+    const float *a = img + ((size_t)y0 * W + x0) * 4, *b = a + 4, *c = a + W * 4, *d = c + 4;
+    return (a[0] * (1 - tx) + b[0] * tx) * (1 - ty) + (c[0] * (1 - tx) + d[0] * tx) * ty;
+}
+
+static int cmp_double(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return x < y ? -1 : x > y;
+}
+
+static void test_world_anchoring(fx_context *ctx)
+{
+    cam A = {{0.3, -0.2, 4.0}, 0.0, 1.2}, B = {{1.0, 0.4, 5.0}, 0.35, 1.5};
+    fx_frame *fa = plane_frame(ctx, &A), *fb = plane_frame(ctx, &B);
+    CHECK(fa && fb);
+    const char *sources[2] = {"position", "depth"};
+    for (int si = 0; fa && fb && si < 2; si++) {
+        /* cells of ~1.2 m: ~20 px, so that comparing through bilinear interpolation is fair */
+        const char *big = "\"tile_size\": 12";
+        float *oa = run_caustics(ctx, fa, sources[si], big), *ob = run_caustics(ctx, fb, sources[si], big);
+        CHECK(oa && ob);
+        if (!oa || !ob) {
+            free(oa);
+            free(ob);
+            continue;
+        }
+        double *err = malloc(sizeof(double) * W * H), *screen = malloc(sizeof(double) * W * H);
+        int n = 0;
+        double range_lo = 1e9, range_hi = -1e9;
+        for (int y = 2; y < H - 2; y++)
+            for (int x = 2; x < W - 2; x++) {
+                double X[3], qx, qy;
+                pixel_to_world(&A, x + 0.5, y + 0.5, X);
+                if (!world_to_pixel(&B, X, &qx, &qy) || qx < 2 || qy < 2 || qx > W - 2 || qy > H - 2)
+                    continue;
+                double va = oa[((size_t)y * W + x) * 4];
+                err[n] = fabs(va - bilinear_r(ob, qx, qy));
+                screen[n] = fabs(va - ob[((size_t)y * W + x) * 4]); /* same pixel: not the same point */
+                range_lo = fmin(range_lo, va);
+                range_hi = fmax(range_hi, va);
+                n++;
+            }
+        qsort(err, (size_t)n, sizeof(double), cmp_double);
+        qsort(screen, (size_t)n, sizeof(double), cmp_double);
+        double med = err[n / 2], p95 = err[(int)(n * 0.95)], smed = screen[n / 2];
+        fprintf(stderr, "anchoring (%s): %d shared pixels, value range %.3f..%.3f, |A - B| median %.5f p95 %.5f; "
+                        "same pixel (unanchored) median %.4f\n",
+                sources[si], n, range_lo, range_hi, med, p95, smed);
+        CHECK(n > W * H / 4);
+        CHECK(range_hi - range_lo > 0.2);  /* there is a pattern to compare */
+        CHECK(med < 0.005 && p95 < 0.03);  /* same world point, same value */
+        CHECK(smed > 10 * med);            /* the test can tell */
+        free(err);
+        free(screen);
+        free(oa);
+        free(ob);
+    }
+    /* animated: another frame time changes the pattern; the same time reproduces it */
+    if (fa) {
+        float *o1 = run_caustics(ctx, fa, "position", NULL);
+        fx_frame_set_time(fa, 9, 24);
+        float *o2 = run_caustics(ctx, fa, "position", NULL);
+        fx_frame_set_time(fa, 3, 24);
+        float *o3 = run_caustics(ctx, fa, "position", NULL);
+        CHECK(o1 && o2 && o3 && tu_max_abs_diff(o1, o2, (size_t)W * H * 4) > 0.05);
+        CHECK(o1 && o3 && memcmp(o1, o3, (size_t)W * H * 4 * sizeof(float)) == 0);
+        free(o1);
+        free(o2);
+        free(o3);
+    }
+    fx_frame_free(fa);
+    fx_frame_free(fb);
+}
+
+static void test_extremes_and_mask(fx_context *ctx)
+{
+    cam A = {{0.3, -0.2, 4.0}, 0.0, 1.2};
+    fx_frame *f = plane_frame(ctx, &A);
+    CHECK(f != NULL);
+    if (!f)
+        return;
+    const char *exps[] = {"\"exponent\": 0.1", "\"exponent\": 1", "\"exponent\": 1.5", "\"exponent\": 2",
+                          "\"exponent\": 20", "\"exponent\": 1000", "\"metric\": \"chebyshev\"",
+                          "\"exponent\": 1.5, \"mode\": \"seed\"", "\"exponent\": 0.1, \"mode\": \"seed\"",
+                          "\"exponent\": 2, \"method\": \"brute\"", "\"points\": 1", "\"points\": 5000",
+                          "\"environment_strength\": 1.0"};
+    float *first = NULL;
+    for (int i = 0; i < (int)(sizeof exps / sizeof exps[0]); i++) {
+        if (i == 12) { /* environment needs Normal */
+            float *nrm = malloc((size_t)W * H * 3 * sizeof(float));
+            for (size_t k = 0; k < (size_t)W * H; k++) {
+                nrm[k * 3] = nrm[k * 3 + 1] = 0.0f;
+                nrm[k * 3 + 2] = 1.0f;
+            }
+            fx_frame_add_pass(f, "Normal", 3, nrm);
+            free(nrm);
+        }
+        float *o = run_caustics(ctx, f, "position", exps[i]);
+        int ok = o && tu_all_finite(o, (size_t)W * H * 4);
+        for (size_t k = 0; ok && k < (size_t)W * H * 4; k++)
+            ok = o[k] >= 0.0f && o[k] < 100.0f;
+        if (!ok)
+            fprintf(stderr, "extreme %s: not finite/bounded\n", exps[i]);
+        CHECK(ok);
+        if (i == 3)
+            first = o; /* exponent 2 grid ... */
+        else if (i == 9) {
+            CHECK(first && o && memcmp(first, o, (size_t)W * H * 4 * sizeof(float)) == 0); /* ... == brute */
+            free(o);
+        } else
+            free(o);
+    }
+    free(first);
+    /* strength 0: identity */
+    float *o = run_caustics(ctx, f, "position", "\"strength\": 0");
+    const float *in = et_combined(f);
+    CHECK(o && memcmp(o, in, (size_t)W * H * 4 * sizeof(float)) == 0);
+    free(o);
+    /* d <= 0 rejected, with the parameter named */
+    fx_stack *s = et_stack(ctx, "voronoi_caustics");
+    CHECK_FAIL(ctx, fx_stack_set_float(s, 0, "exponent", -1.0), FX_ERR_BAD_PARAM, "exponent");
+    CHECK_FAIL(ctx, fx_stack_set_float(s, 0, "exponent", NAN), FX_ERR_BAD_PARAM, "exponent");
+    fx_result r = fx_stack_set_float(s, 0, "exponent", 0.0);
+    fx_frame *out = NULL;
+    if (r == FX_OK)
+        r = fx_stack_run(s, f, &out);
+    CHECK(r == FX_ERR_BAD_PARAM && tu_contains(fx_context_error(ctx), "exponent"));
+    fx_frame_free(out);
+    fx_stack_free(s);
+    /* outside the mask: untouched, bit for bit */
+    s = et_stack(ctx, "voronoi_caustics");
+    CHECK_OK(ctx, fx_stack_set_mask_json(s, 0, "{\"rect\": [40, 30, 50, 40]}"));
+    o = et_run(ctx, s, f);
+    CHECK(o && et_outside_equal(o, in, W, H, 40, 30, 50, 40));
+    CHECK(o && tu_max_abs_diff(o, in, (size_t)W * H * 4) > 0.05);
+    free(o);
+    fx_stack_free(s);
+    /* threads: bit-identical */
+    fx_context *c1 = NULL;
+    fx_context_new(&c1, 1);
+    fx_frame *f1 = plane_frame(c1, &A);
+    float *a = run_caustics(c1, f1, "depth", NULL);
+    float *b = run_caustics(ctx, f, "depth", NULL);
+    CHECK(a && b && memcmp(a, b, (size_t)W * H * 4 * sizeof(float)) == 0);
+    free(a);
+    free(b);
+    fx_frame_free(f1);
+    fx_context_free(c1);
+    /* missing Position names the pass */
+    fx_frame *bare = et_frame(ctx, W, H, in);
+    s = et_stack(ctx, "voronoi_caustics");
+    out = NULL;
+    CHECK_FAIL(ctx, fx_stack_run(s, bare, &out), FX_ERR_MISSING_PASS, "Position");
+    fx_frame_free(out);
+    fx_stack_free(s);
+    fx_frame_free(bare);
+    fx_frame_free(f);
+}
+
+int main(void)
+{
+    fx_context *ctx = NULL;
+    if (fx_context_new(&ctx, 2) != FX_OK)
+        return 1;
+    test_brute_equals_grid();
+    test_minkowski();
+    test_world_anchoring(ctx);
+    test_extremes_and_mask(ctx);
+    fx_context_free(ctx);
+    return tu_finish("test_voronoi_caustics");
+}
