@@ -6,6 +6,8 @@
 extern const fx_effect_class fx_effect_gaussian_blur;
 extern const fx_effect_class fx_effect_color_matrix;
 extern const fx_effect_class fx_effect_pixelate;
+extern const fx_effect_class fx_effect_god_rays;
+extern const fx_effect_class fx_effect_voronoi_caustics;
 extern const fx_effect_class fx_effect_ssr_mirror;
 extern const fx_effect_class fx_effect_vsm_shadows;
 extern const fx_effect_class fx_effect_edges;
@@ -18,6 +20,8 @@ const fx_effect_class *const fx_effect_classes[] = {
     &fx_effect_gaussian_blur,
     &fx_effect_color_matrix,
     &fx_effect_pixelate,
+    &fx_effect_god_rays,
+    &fx_effect_voronoi_caustics,
     &fx_effect_ssr_mirror,
     &fx_effect_edges,
     &fx_effect_posterize,
