@@ -138,6 +138,9 @@ def main():
         r.resolution_x, r.resolution_y, ", ".join(st.get("passes", []))))
     sys.stdout.flush()
     failures = []
+    # The aux views cover the camera over the scene's whole range (and the frames asked
+    # for), so every frame and every later run can reuse them.
+    span = sorted(set(frames) | set(range(scene.frame_start, scene.frame_end + 1)))
     for frame in frames:
         paths = fx.scene_setup.result_paths(scene, frame)
         wanted = [paths["exr"]] + ([paths["image"]] if fx.scene_setup.writes_image(scene) else [])
@@ -145,6 +148,16 @@ def main():
             print("libfx batch: frame %d: exists, skipped" % frame)
             continue
         fx.render.RESULTS.pop((scene.name, frame), None)
+        # Auxiliary views (light view, rain map) only when the stack needs them; reused
+        # while light and geometry do not move.
+        try:
+            scene.frame_set(frame)
+            aux = fx.aux_views.prepare(scene, span)
+        except Exception as e:
+            failures.append("frame %d: auxiliary views: %s" % (frame, e))
+            continue
+        with fx.render._lock:
+            fx.render.AUX[(scene.name, frame)] = aux
         # A one-frame animation: Blender numbers the file (a still would not) and
         # frame_change_post gives this frame's camera.
         scene.frame_start = scene.frame_end = frame

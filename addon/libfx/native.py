@@ -99,6 +99,7 @@ _SIGNATURES = {
     "fx_stack_to_json": (c_int, [c_void_p, _PSTR]),
     "fx_stack_count": (c_int, [c_void_p]),
     "fx_stack_required_passes": (c_int, [c_void_p, _PSTR]),
+    "fx_stack_required_aux_views": (c_int, [c_void_p, _PSTR]),
     "fx_stack_run": (c_int, [c_void_p, c_void_p, _PP]),
     "fx_stack_timings_json": (c_int, [c_void_p, _PSTR]),
 }
@@ -344,6 +345,14 @@ class Stack:
         self._ctx.check(self._L.fx_stack_required_passes(self._ptr, ctypes.byref(out)),
                         "fx_stack_required_passes")
         return json.loads(_take_string(out.value))
+
+    def required_aux_views(self):
+        """[{"name": "light:Sun", "kind": "light", "light": "Sun"}, {"name": "rain_map", ...}]:
+        the auxiliary views the enabled effects need (empty for most stacks)."""
+        out = c_void_p()
+        self._ctx.check(self._L.fx_stack_required_aux_views(self._ptr, ctypes.byref(out)),
+                        "fx_stack_required_aux_views")
+        return json.loads(_take_string(out.value)).get("aux_views", [])
 
     def run(self, frame):
         out = c_void_p()

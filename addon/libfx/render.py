@@ -17,12 +17,13 @@ import time
 import bpy
 from bpy.app.handlers import persistent
 
-from . import native, recipe, scene_setup
+from . import aux_views, native, recipe, scene_setup
 
 RESULT_IMAGE = "libfx Result"
 
 _lock = threading.Lock()
 CAMERAS = {}     # (scene name, frame) -> camera dict (rows)
+AUX = {}         # (scene name, frame) -> aux view sidecar entries (aux_views.prepare)
 RESULTS = {}     # (scene name, frame) -> {"ok": bool, "error": str, "paths": {...}, "timings": [...]}
 _ui_queue = []   # callables to run on the main thread (F12)
 
@@ -83,6 +84,8 @@ def camera_dict(scene, depsgraph):
 
 @persistent
 def on_frame_change_post(scene, depsgraph=None):
+    if aux_views.BUSY["on"]:
+        return  # a depth render of an auxiliary view
     if not scene_setup.has_stack(scene):
         return
     try:
@@ -99,6 +102,8 @@ def on_frame_change_post(scene, depsgraph=None):
 
 @persistent
 def on_render_init(scene, *args):
+    if aux_views.BUSY["on"]:
+        return  # a depth render of an auxiliary view
     if not scene_setup.has_stack(scene):
         scene_setup.remove_nodes(scene)
         return
@@ -147,6 +152,15 @@ def process_frame(scene, frame, recipe_dict=None, passes_file=None, camera=None,
     if camera is None:
         with _lock:
             camera = CAMERAS.get((scene.name, frame))
+    with _lock:
+        aux = AUX.get((scene.name, frame))
+    if aux is None and camera is not None:
+        try:
+            aux = aux_views.from_disk(scene)
+        except Exception as e:
+            log("frame %d: aux views: %s" % (frame, e), err=True)
+    if aux and camera is not None:
+        camera = dict(camera, aux_views=aux)
     fps = fps or scene.render.fps / (scene.render.fps_base or 1.0)
     try:
         if not os.path.exists(passes_file):
@@ -206,6 +220,8 @@ def save_image(scene, exr_path, image_path):
 
 @persistent
 def on_render_post(scene, *args):
+    if aux_views.BUSY["on"]:
+        return  # a depth render of an auxiliary view
     if not scene_setup.has_stack(scene):
         return
     frame = scene.frame_current

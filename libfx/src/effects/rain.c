@@ -116,22 +116,27 @@ static float streak(const rain_job *j, float x, float y, int layer, float scale)
     float cw = 14.0f, ch = 1.5f * p->length;
     int ci = (int)floorf(u / cw), cj = (int)floorf(v / ch);
     float best = 0.0f;
+    float wmin = 1.0f / k, we = p->width > wmin ? p->width : wmin;
+    int reach = we > 0.15f * cw ? 1 : 0; /* wide streaks reach into the next columns */
+    for (int di = -reach; di <= reach; di++)
     for (int dj = -1; dj <= 0; dj++) {
-        int cy = cj + dj;
-        uint32_t h = fx_hash4(ci, cy, layer, p->seed);
+        int cy = cj + dj, cx = ci + di;
+        uint32_t h = fx_hash4(cx, cy, layer, p->seed);
         if (fx_hash_to_unit(h) >= p->density)
             continue;
         uint32_t h1 = fx_hash_u32(h), h2 = fx_hash_u32(h1), h3 = fx_hash_u32(h2);
-        float x0 = ((float)ci + 0.15f + 0.7f * fx_hash_to_unit(h1)) * cw;
+        float x0 = ((float)cx + 0.15f + 0.7f * fx_hash_to_unit(h1)) * cw;
         float y0 = ((float)cy + fx_hash_to_unit(h2)) * ch;
         float len = p->length * (0.7f + 0.6f * fx_hash_to_unit(h3));
         float a = (v - y0) / len;
         if (a <= 0.0f || a >= 1.0f)
             continue;
-        float across = 1.0f - fabsf(u - x0) / p->width;
+        /* a streak narrower than a pixel is drawn a pixel wide and dimmer (its coverage),
+         * so it does not alias into speckle at small sizes */
+        float across = 1.0f - fabsf(u - x0) / we;
         if (across <= 0.0f)
             continue;
-        float i = across * 4.0f * a * (1.0f - a);
+        float i = across * (p->width / we) * 4.0f * a * (1.0f - a);
         best = i > best ? i : best;
     }
     return best;

@@ -1,0 +1,327 @@
+"""Auxiliary views: depth renders from a light (shadow maps) and from above (rain map).
+
+The library says which views the stack needs (fx_stack_required_aux_views): this
+module renders exactly those, and nothing when the stack needs none.  Each view
+is a Cycles depth render (1 sample, Depth pass through a File Output node) of a
+temporary scene that links the objects which cast shadows (``visible_shadow``;
+the rain covers do not), so alpha-clipped leaves are discarded by Cycles' pass
+alpha threshold exactly as in the main render and cast leaf-shaped shadows.
+
+- ``light:<name>``: a sun gets an orthographic view along its direction, a spot
+  a perspective one from its position.  Extent: the scene's shadow casters'
+  bounding box intersected with the union of the camera frusta over the frames
+  being rendered, seen from the light; depth range: the casters' box (tight, for
+  VSM precision).  Resolution: from the render's size (max(W, H) * 1.5 rounded to
+  64, 256..4096) or the scene's ID property ``libfx_light_map_size``.
+- ``rain_map``: orthographic, straight down, over the same region in XY, ~5 cm
+  texels (128..2048) or ``libfx_rain_map_size``.
+
+A view is rendered once and reused while its signature (camera, resolution, the
+light, every linked object's transform, mesh size and materials) does not
+change: frames 2..N of a batch cost no extra render.  Log lines say which.
+"""
+
+import hashlib
+import json
+import math
+import os
+import time
+
+import bpy
+from mathutils import Matrix, Vector
+
+from . import native, scene_setup
+
+AUX_SCENE = "libfx aux view"
+BUSY = {"on": False}   # the render handlers ignore renders made here
+
+
+def log(msg):
+    print("libfx: " + msg, flush=True)
+
+
+def needed(scene):
+    """[{"name", "kind", "light"?}] the scene's stack needs (library's answer)."""
+    from . import recipe
+    if not scene_setup.has_stack(scene) or native.load() is None:
+        return []
+    ctx = native.Context(1)
+    try:
+        stack = native.Stack(ctx, recipe.to_recipe(scene))
+        try:
+            return stack.required_aux_views()
+        finally:
+            stack.close()
+    finally:
+        ctx.close()
+
+
+# ---------------------------------------------------------------- geometry
+
+def casters(scene):
+    out = []
+    for ob in scene.objects:
+        if ob.type not in ("MESH", "CURVE", "SURFACE", "META", "FONT") or ob.hide_render:
+            continue
+        if not getattr(ob, "visible_shadow", True):
+            continue  # camera-only helpers (the rain covers)
+        out.append(ob)
+    return sorted(out, key=lambda o: o.name)
+
+
+def world_box(objs):
+    lo = Vector((math.inf,) * 3)
+    hi = Vector((-math.inf,) * 3)
+    for ob in objs:
+        for c in ob.bound_box:
+            p = ob.matrix_world @ Vector(c)
+            lo = Vector(map(min, lo, p))
+            hi = Vector(map(max, hi, p))
+    return lo, hi
+
+
+def frustum_points(scene, cam_ob, far):
+    """World corners of the camera frustum from clip_start to `far`."""
+    r = scene.render
+    data = cam_ob.data
+    frame = data.view_frame(scene=scene)  # 4 points at distance 1 (perspective) in camera space
+    mw = cam_ob.matrix_world
+    pts = []
+    if data.type == "ORTHO":
+        for c in frame:
+            for z in (-data.clip_start, -far):
+                pts.append(mw @ Vector((c.x, c.y, z)))
+    else:
+        for c in frame:
+            for d in (data.clip_start, far):
+                s = d / max(1e-6, -c.z)
+                pts.append(mw @ Vector((c.x * s, c.y * s, -d)))
+    return pts
+
+
+def frusta_box(scene, frames, geo_lo, geo_hi):
+    """World AABB of the camera frusta over `frames`, clipped to the geometry box."""
+    cam = scene.camera
+    if cam is None:
+        return geo_lo, geo_hi
+    keep = scene.frame_current
+    pts = []
+    diag = (geo_hi - geo_lo).length
+    for f in frames:
+        scene.frame_set(f)
+        far = min(cam.data.clip_end, (cam.matrix_world.translation - (geo_lo + geo_hi) / 2).length + diag)
+        pts += frustum_points(scene, cam, far)
+    scene.frame_set(keep)
+    lo = Vector(map(max, geo_lo, Vector(map(min, *zip(*pts))))) if pts else geo_lo
+    hi = Vector(map(min, geo_hi, Vector(map(max, *zip(*pts))))) if pts else geo_hi
+    if any(lo[i] >= hi[i] for i in range(3)):
+        return geo_lo, geo_hi
+    return lo, hi
+
+
+def box_corners(lo, hi):
+    return [Vector((x, y, z)) for x in (lo.x, hi.x) for y in (lo.y, hi.y) for z in (lo.z, hi.z)]
+
+
+def ortho_projection(half_x, half_y, near, far):
+    return [[1.0 / half_x, 0, 0, 0], [0, 1.0 / half_y, 0, 0],
+            [0, 0, -2.0 / (far - near), -(far + near) / (far - near)], [0, 0, 0, 1]]
+
+
+def _round64(v, lo, hi):
+    return int(max(lo, min(hi, 64 * math.ceil(v / 64.0))))
+
+
+def view_spec(scene, view, frames, objs):
+    """Camera matrices, resolution and the camera object's placement for one view."""
+    geo_lo, geo_hi = world_box(objs)
+    reg_lo, reg_hi = frusta_box(scene, frames, geo_lo, geo_hi)
+    r = scene.render
+    rw = int(r.resolution_x * r.resolution_percentage / 100)
+    rh = int(r.resolution_y * r.resolution_percentage / 100)
+    if view["kind"] == "rain_map":
+        rot = Matrix.Identity(3)                      # looks down -Z
+        ext = Vector((reg_hi.x - reg_lo.x, reg_hi.y - reg_lo.y))
+        centre = Vector(((reg_lo.x + reg_hi.x) / 2, (reg_lo.y + reg_hi.y) / 2, geo_hi.z + 1.0))
+        near, far = 0.5, geo_hi.z - geo_lo.z + 2.0
+        size = scene.get("libfx_rain_map_size") or _round64(max(ext) / 0.05, 128, 2048)
+        light = None
+    else:
+        lname = view.get("light") or ""
+        light = None
+        for ob in scene.objects:
+            if ob.type == "LIGHT" and not ob.hide_render and (ob.name == lname or (not lname and ob.data.type == "SUN")):
+                light = ob
+                break
+        if light is None:
+            raise native.LibfxError("the stack needs the light view '%s' but the scene has no such light" % view["name"])
+        if light.data.type != "SUN":
+            raise native.LibfxError("light views are made for sun lights only so far ('%s' is %s)"
+                                    % (light.name, light.data.type))
+        d = -light.matrix_world.col[2].xyz.normalized()
+        rot = d.to_track_quat('-Z', 'Y').to_matrix()
+        inv = rot.transposed()
+        # receivers: the region the cameras see; casters: the whole geometry box
+        rc = [inv @ p for p in box_corners(reg_lo, reg_hi)]
+        gc = [inv @ p for p in box_corners(geo_lo, geo_hi)]
+        lo = Vector(map(min, *zip(*rc)))
+        hi = Vector(map(max, *zip(*rc)))
+        zmax = max(p.z for p in gc) + 1.0            # nearest caster to the light (view looks down -Z)
+        zmin = min(p.z for p in gc) - 1.0
+        ext = Vector((hi.x - lo.x, hi.y - lo.y))
+        centre = rot @ Vector(((lo.x + hi.x) / 2, (lo.y + hi.y) / 2, zmax + 0.5))
+        near, far = 0.5, zmax - zmin + 0.5
+        size = scene.get("libfx_light_map_size") or _round64(max(rw, rh) * 1.5, 256, 4096)
+    size = int(size)
+    if ext.x >= ext.y:
+        w, h = size, max(16, int(round(size * ext.y / max(ext.x, 1e-6))))
+        half_x = ext.x / 2 * 1.02
+        half_y = half_x * h / w
+    else:
+        h, w = size, max(16, int(round(size * ext.x / max(ext.y, 1e-6))))
+        half_y = ext.y / 2 * 1.02
+        half_x = half_y * w / h
+    mw = Matrix.Translation(centre) @ rot.to_4x4()
+    return {
+        "name": view["name"], "kind": view["kind"], "width": w, "height": h,
+        "matrix_world": [list(row) for row in mw],
+        "world_to_camera": [list(row) for row in mw.inverted()],
+        "projection": ortho_projection(half_x, half_y, near, far),
+        "clip_start": near, "clip_end": far, "orthographic": True,
+        "ortho_scale": 2 * max(half_x, half_y),
+        "light": None if light is None else [light.name, [list(r) for r in light.matrix_world]],
+    }
+
+
+def signature(spec, objs):
+    geo = []
+    for ob in objs:
+        me = ob.data
+        geo.append([ob.name, [round(v, 5) for row in ob.matrix_world for v in row],
+                    len(getattr(me, "vertices", [])), len(getattr(me, "polygons", [])),
+                    [s.material.name if s.material else "" for s in ob.material_slots]])
+    text = json.dumps([{k: v for k, v in spec.items()}, geo], sort_keys=True, default=str)
+    return hashlib.sha1(text.encode("utf-8")).hexdigest()
+
+
+# ---------------------------------------------------------------- render
+
+def _render(scene, spec, objs, path):
+    aux = bpy.data.scenes.new(AUX_SCENE)
+    cam_data = bpy.data.cameras.new(AUX_SCENE)
+    cam = bpy.data.objects.new(AUX_SCENE, cam_data)
+    try:
+        for ob in objs:
+            aux.collection.objects.link(ob)
+        aux.collection.objects.link(cam)
+        cam_data.type = "ORTHO"
+        cam_data.ortho_scale = spec["ortho_scale"]
+        cam_data.sensor_fit = "HORIZONTAL" if spec["width"] >= spec["height"] else "VERTICAL"
+        cam_data.clip_start = spec["clip_start"]
+        cam_data.clip_end = spec["clip_end"]
+        cam.matrix_world = Matrix(spec["matrix_world"])
+        aux.camera = cam
+        aux.world = scene.world
+        r = aux.render
+        r.engine = "CYCLES"
+        r.resolution_x, r.resolution_y, r.resolution_percentage = spec["width"], spec["height"], 100
+        r.use_compositing = True
+        r.filepath = os.path.join(os.path.dirname(path), "")
+        aux.cycles.samples = 1
+        aux.cycles.use_adaptive_sampling = False
+        aux.cycles.use_denoising = False
+        aux.cycles.max_bounces = 0
+        aux.cycles.transparent_max_bounces = scene.cycles.transparent_max_bounces
+        aux.cycles.filter_width = 0.01            # one sample at each texel's centre
+        aux.cycles.seed = 0
+        aux.frame_start = aux.frame_end = aux.frame_current = 1
+        vl = aux.view_layers[0]
+        vl.use_pass_z = True
+        aux.use_nodes = True
+        nt = aux.node_tree
+        for n in list(nt.nodes):
+            nt.nodes.remove(n)
+        rl = nt.nodes.new("CompositorNodeRLayers")
+        rl.scene = aux
+        comp = nt.nodes.new("CompositorNodeComposite")
+        nt.links.new(rl.outputs["Image"], comp.inputs["Image"])
+        fo = nt.nodes.new("CompositorNodeOutputFile")
+        fo.format.file_format = "OPEN_EXR_MULTILAYER"
+        fo.format.color_depth = "32"
+        fo.format.exr_codec = "ZIP"
+        base = path[:-len(".exr")] + ".tmp."
+        fo.base_path = base
+        fo.layer_slots.clear()
+        fo.layer_slots.new("Depth")
+        nt.links.new(rl.outputs["Depth"], fo.inputs["Depth"])
+        BUSY["on"] = True
+        try:
+            bpy.ops.render.render(write_still=False, scene=aux.name)
+        finally:
+            BUSY["on"] = False
+        written = base + "0001.exr"
+        if not os.path.exists(written):
+            raise native.LibfxError("the aux view render of '%s' wrote no file (%s)" % (spec["name"], written))
+        os.replace(written, path)
+    finally:
+        bpy.data.scenes.remove(aux)
+        bpy.data.objects.remove(cam)
+        bpy.data.cameras.remove(cam_data)
+
+
+def _file_name(view_name):
+    return "".join(c if c.isalnum() or c in "-_" else "_" for c in view_name)
+
+
+def prepare(scene, frames):
+    """Renders (or reuses) every aux view the stack needs for `frames`; returns the
+    sidecar entries. An empty list, and no render, when the stack needs none."""
+    views = needed(scene)
+    if not views:
+        return []
+    objs = casters(scene)
+    entries = []
+    for view in views:
+        spec = view_spec(scene, view, frames, objs)
+        sig = signature(spec, objs)
+        path = "%slibfx_aux_%s.exr" % (scene_setup.output_prefix(scene), _file_name(view["name"]))
+        meta_path = path[:-4] + ".json"
+        old = None
+        if os.path.exists(path) and os.path.exists(meta_path):
+            try:
+                with open(meta_path, encoding="utf-8") as f:
+                    old = json.load(f)
+            except (OSError, ValueError):
+                old = None
+        if old and old.get("signature") == sig:
+            log("aux view '%s' reused (light and geometry unchanged): %s" % (view["name"], path))
+        else:
+            os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
+            t0 = time.perf_counter()
+            _render(scene, spec, objs, path)
+            log("aux view '%s' rendered %dx%d in %.2f s: %s" % (view["name"], spec["width"], spec["height"],
+                                                              time.perf_counter() - t0, path))
+        entry = {"name": view["name"], "path": path, "world_to_camera": spec["world_to_camera"],
+                 "projection": spec["projection"], "clip_start": spec["clip_start"],
+                 "clip_end": spec["clip_end"], "orthographic": True, "kind": view["kind"], "signature": sig}
+        with open(meta_path + ".tmp", "w", encoding="utf-8") as f:
+            json.dump(entry, f, indent=1)
+        os.replace(meta_path + ".tmp", meta_path)
+        entries.append(entry)
+    return entries
+
+
+def from_disk(scene):
+    """The views a previous batch run left beside the output (for F12, which cannot
+    render them from inside a render)."""
+    out = []
+    for view in needed(scene):
+        meta_path = "%slibfx_aux_%s.json" % (scene_setup.output_prefix(scene), _file_name(view["name"]))
+        try:
+            with open(meta_path, encoding="utf-8") as f:
+                out.append(json.load(f))
+            log("aux view '%s' from disk (F12 cannot render it; a batch run re-renders it when it is stale)"
+                % view["name"])
+        except (OSError, ValueError):
+            pass
+    return out
