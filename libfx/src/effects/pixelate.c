@@ -5,7 +5,10 @@
  * (cell i spans floor(i W / N) .. floor((i+1) W / N)); "cells"/"average" use square cells
  * of cell_size px whose grid has a corner at the origin: (0, 0) for anchor "image", the
  * centre of the mask's bounds (rounded down to a pixel) for anchor "mask", so the grid
- * travels with a masked object instead of crawling over it as it moves.
+ * travels with a masked object instead of crawling over it as it moves; for anchor "world"
+ * the projection of a world point (world_point, or the coverage-weighted mean of the mask's
+ * Position pass), so the grid sticks to the object as the camera moves even when its
+ * silhouette changes (the bounds' midpoint jumps whenever an extreme pixel appears).
  * Centre sample: the continuous centre of the cell (clamped into the image for cells that
  * straddle the border): a pixel for odd sizes, the mean of the 2 (or 2x2) middle pixels for
  * even ones. Average: the mean of the cell's pixels inside the image, weighted by the
@@ -14,6 +17,9 @@
  * takes the plain mean. Sums in double: finite for any finite input. */
 #include "core/effect.h"
 #include "core/parallel.h"
+#include "math/camera.h"
+
+#include <math.h>
 
 #include <stdatomic.h>
 #include <stdio.h>
@@ -24,13 +30,16 @@ typedef struct pixelate_params {
     int columns, rows;
     int cell_size;
     int anchor;
+    float world_point[3];
+    int world_point_auto;
 } pixelate_params;
 
 enum { MODE_SLICES = 0, MODE_CELLS, MODE_AVERAGE };
-enum { ANCHOR_IMAGE = 0, ANCHOR_MASK };
+enum { ANCHOR_IMAGE = 0, ANCHOR_MASK, ANCHOR_WORLD };
 
 static const char *const mode_items[] = { "slices", "cells", "average" };
-static const char *const anchor_items[] = { "image", "mask" };
+static const char *const anchor_items[] = { "image", "mask", "world" };
+static const float default_world_point[3] = { 0.0f, 0.0f, 0.0f };
 
 static const fx_param_def pixelate_param_defs[] = {
     FX_P_ENUM(pixelate_params, mode, "mode", MODE_SLICES, mode_items,
@@ -45,8 +54,72 @@ static const fx_param_def pixelate_param_defs[] = {
              "Cell edge in pixels (modes cells and average); 1 is the identity"),
     FX_P_ENUM(pixelate_params, anchor, "anchor", ANCHOR_IMAGE, anchor_items,
               "Grid origin for cells/average: image: the top-left corner; mask: the centre of the "
-              "mask's bounds, so the grid moves with the object (no mask: image)"),
+              "mask's bounds, so the grid moves with the object (no mask: image); world: the "
+              "projection of a world point, so the grid sticks to the object as the camera moves "
+              "(needs the camera)"),
+    FX_P_FLOATS(pixelate_params, world_point, "world_point", 3, default_world_point, -1e30, 1e30, "",
+                "anchor world: the world point a cell corner sits on (with world_point_auto off)"),
+    FX_P_BOOL(pixelate_params, world_point_auto, "world_point_auto", 1,
+              "anchor world: use the coverage-weighted mean of the mask's Position pass instead of "
+              "world_point"),
 };
+
+static fx_pass_set pixelate_passes(const void *params)
+{
+    const pixelate_params *p = params;
+    return p->anchor == ANCHOR_WORLD && p->world_point_auto ? FX_PASS_BIT(FX_PASS_POSITION) : 0;
+}
+
+static int pixelate_needs_camera(const void *params)
+{
+    const pixelate_params *p = params;
+    return p->anchor == ANCHOR_WORLD;
+}
+
+/* Grid origin for anchor world: the projected anchor point, rounded down to a pixel.
+ * Returns 0 (fall back to the mask's bounds) when the point is behind the camera or the
+ * mask has no Position coverage. */
+static fx_result world_origin(const fx_effect_run *run, const pixelate_params *p, const char *where, int *ox,
+                              int *oy, int *ok)
+{
+    *ok = 0;
+    fx_view v;
+    if (!fx_view_init(&v, run->frame))
+        return fx_fail(run->ctx, FX_ERR_NO_CAMERA,
+                       "%s: anchor world needs the frame's camera (give the scene sidecar with --camera)", where);
+    fx_vec3 P = fx_v3(p->world_point[0], p->world_point[1], p->world_point[2]);
+    if (p->world_point_auto) {
+        const fx_pass *pp = fx_frame_find_pass(run->frame, "Position");
+        if (!pp || pp->channels < 3)
+            return fx_fail(run->ctx, FX_ERR_MISSING_PASS,
+                           "%s: anchor world with world_point_auto needs the Position pass", where);
+        double acc[3] = {0, 0, 0}, wsum = 0;
+        const fx_rect b = run->mask ? run->mask->bounds : (fx_rect){0, 0, run->width, run->height};
+        for (int y = b.y0; y < b.y1; y++)
+            for (int x = b.x0; x < b.x1; x++) {
+                size_t i = (size_t)y * run->width + x;
+                double c = run->mask ? run->mask->coverage[i] : 1.0;
+                const float *q = pp->data + i * pp->channels;
+                if (!(c > 0.0) || !isfinite(q[0]) || !isfinite(q[1]) || !isfinite(q[2]))
+                    continue;
+                acc[0] += c * q[0];
+                acc[1] += c * q[1];
+                acc[2] += c * q[2];
+                wsum += c;
+            }
+        if (!(wsum > 0.0))
+            return FX_OK;
+        P = fx_v3((float)(acc[0] / wsum), (float)(acc[1] / wsum), (float)(acc[2] / wsum));
+    }
+    fx_vec2 px = {0.0f, 0.0f};
+    float w = fx_view_project(&v, fx_world_to_view(&v, P), &px);
+    if (!(w > 1e-6f) || !isfinite(px.x) || !isfinite(px.y) || fabsf(px.x) > 1e9f || fabsf(px.y) > 1e9f)
+        return FX_OK;
+    *ox = (int)floorf(px.x);
+    *oy = (int)floorf(px.y);
+    *ok = 1;
+    return FX_OK;
+}
 
 /* One cell along one axis. */
 typedef struct axis_cell {
@@ -229,8 +302,13 @@ static fx_result pixelate_process(const fx_effect_run *run)
         return FX_OK;
     char where[96];
     snprintf(where, sizeof where, "effect %d (pixelate)", run->index);
-    int ox = 0, oy = 0;
-    if (p->anchor == ANCHOR_MASK && run->mask && run->mask->bounds.x1 > run->mask->bounds.x0) {
+    int ox = 0, oy = 0, have_origin = 0;
+    if (p->anchor == ANCHOR_WORLD && p->mode != MODE_SLICES) {
+        fx_result wr = world_origin(run, p, where, &ox, &oy, &have_origin);
+        if (wr != FX_OK)
+            return wr;
+    }
+    if (!have_origin && p->anchor != ANCHOR_IMAGE && run->mask && run->mask->bounds.x1 > run->mask->bounds.x0) {
         const fx_rect *b = &run->mask->bounds;
         ox = (int)floor_div((long long)b->x0 + b->x1, 2);
         oy = (int)floor_div((long long)b->y0 + b->y1, 2);
@@ -266,8 +344,8 @@ const fx_effect_class fx_effect_pixelate = {
     .params = pixelate_param_defs,
     .param_count = FX_COUNT_OF(pixelate_param_defs),
     .presets = { NULL, NULL, NULL, NULL },
-    .passes = NULL,
-    .needs_camera = NULL,
+    .passes = pixelate_passes,
+    .needs_camera = pixelate_needs_camera,
     .halo = pixelate_halo,
     .validate = NULL,
     .process = pixelate_process,
