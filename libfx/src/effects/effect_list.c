@@ -16,6 +16,7 @@ extern const fx_effect_class fx_effect_sin_city;
 extern const fx_effect_class fx_effect_rain;
 extern const fx_effect_class fx_effect_wet_surfaces;
 extern const fx_effect_class fx_effect_rain_splashes;
+extern const fx_effect_class fx_effect_bloom;
 const fx_effect_class *const fx_effect_classes[] = {
     &fx_effect_gaussian_blur,
     &fx_effect_color_matrix,
@@ -30,6 +31,7 @@ const fx_effect_class *const fx_effect_classes[] = {
     &fx_effect_rain,
     &fx_effect_wet_surfaces,
     &fx_effect_rain_splashes,
+    &fx_effect_bloom,
 };
 const int fx_effect_class_count = (int)(sizeof(fx_effect_classes) / sizeof(fx_effect_classes[0]));
 

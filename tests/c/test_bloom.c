@@ -1,0 +1,164 @@
+/* bloom through the public API: black stays black, a constant image gains exactly
+ * intensity x its bright pass, energy added is bounded by intensity, the seed's pass and the
+ * soft knee values, threshold 0 / luminance 0, huge and zero radii, 1x1, NaN/Inf/1e38,
+ * identity, masks, thread invariance. */
+#include "fx_effect_test.h"
+
+#include <float.h>
+#include <math.h>
+
+static float *run_px(fx_context *ctx, const float *px, int w, int h, const char *params, const char *mask)
+{
+    char buf[1024];
+    snprintf(buf, sizeof buf, "{\"version\":1,\"effects\":[{\"effect\":\"bloom\",\"params\":{%s}%s%s}]}",
+             params, mask ? ",\"mask\":" : "", mask ? mask : "");
+    fx_frame *f = et_frame(ctx, w, h, px);
+    fx_stack *s = NULL;
+    float *o = NULL;
+    if (f && fx_stack_new(ctx, &s) == FX_OK && fx_stack_load_json(s, buf) == FX_OK)
+        o = et_run(ctx, s, f);
+    else
+        fprintf(stderr, "setup: %s\n", fx_context_error(ctx));
+    fx_stack_free(s);
+    fx_frame_free(f);
+    return o;
+}
+
+static float *filled(int w, int h, float r, float g, float b, float a)
+{
+    float *px = malloc((size_t)w * h * 4 * sizeof(float));
+    for (int i = 0; i < w * h; i++) {
+        px[4 * i] = r;
+        px[4 * i + 1] = g;
+        px[4 * i + 2] = b;
+        px[4 * i + 3] = a;
+    }
+    return px;
+}
+
+static void test_energy(fx_context *ctx)
+{
+    const int w = 64, h = 48;
+    float *px = filled(w, h, 0, 0, 0, 1);
+    const char *ps[] = { "", "\"mode\":\"seed\"", "\"threshold\":0", "\"mode\":\"seed\",\"threshold\":0",
+                         "\"composite\":\"screen\",\"radius\":1000" };
+    for (int k = 0; k < 5; k++) {
+        float *o = run_px(ctx, px, w, h, ps[k], NULL);
+        CHECK(o && memcmp(o, px, (size_t)w * h * 16) == 0); /* black stays black */
+        free(o);
+    }
+    free(px);
+    /* constant 2.0 with threshold 1, knee 0: bright pass (2-1)/2 x 2 = 1; glow = intensity */
+    px = filled(w, h, 2, 2, 2, 1);
+    float *o = run_px(ctx, px, w, h, "\"knee\":0,\"intensity\":0.5", NULL);
+    int ok = o != NULL;
+    for (int i = 0; ok && i < w * h; i++)
+        ok &= fabsf(o[4 * i] - 2.5f) < 1e-4f && o[4 * i + 3] == 1.0f;
+    CHECK(ok);
+    free(o);
+    /* soft knee: b = threshold -> (k^2/4k) / b with k = t * knee */
+    float one[4] = { 1, 1, 1, 1 };
+    o = run_px(ctx, one, 1, 1, "\"knee\":0.5,\"intensity\":1,\"radius\":0", NULL);
+    CHECK(o && fabsf(o[0] - (1.0f + 0.125f)) < 1e-4f);
+    free(o);
+    /* seed: middle grey 0.18 at scene luminance 0.18 (exposure 1), white 1: x = 2(1 + 2) - 0.5 = 5.5 -> 5.5/6.5 */
+    float two[4] = { 2, 2, 2, 1 };
+    o = run_px(ctx, two, 1, 1, "\"mode\":\"seed\",\"scene_luminance\":0.18,\"intensity\":1,\"radius\":0", NULL);
+    CHECK(o && fabsf(o[0] - (2.0f + 5.5f / 6.5f)) < 1e-5f);
+    free(o);
+    /* measured scene luminance: a constant image's log-average is itself */
+    o = run_px(ctx, two, 1, 1, "\"mode\":\"seed\",\"middle_grey\":2,\"intensity\":1,\"radius\":0", NULL);
+    CHECK(o && fabsf(o[0] - (2.0f + 5.5f / 6.5f)) < 1e-4f);
+    free(o);
+    /* screen: white pixels gain nothing; the glow adds at most glow x (1 - colour) */
+    o = run_px(ctx, px, w, h, "\"composite\":\"screen\"", NULL);
+    CHECK(o && o[0] == 2.0f);
+    free(o);
+    free(px);
+    /* energy: a bright spot; total added <= intensity x total of the bright pass <= intensity x total */
+    px = filled(w, h, 0.1f, 0.1f, 0.1f, 1);
+    for (int y = 20; y < 26; y++)
+        for (int x = 30; x < 36; x++)
+            px[(y * w + x) * 4] = px[(y * w + x) * 4 + 1] = px[(y * w + x) * 4 + 2] = 50.0f;
+    double total = 0, bright = 0;
+    for (int i = 0; i < w * h * 4; i++)
+        if (i % 4 != 3) {
+            total += px[i];
+            bright += px[i] > 1 ? px[i] - 1 : 0; /* knee 0: (b - t) per channel for gray */
+        }
+    for (int r = 2; r <= 64; r *= 4) {
+        char p[128];
+        snprintf(p, sizeof p, "\"knee\":0,\"intensity\":0.8,\"radius\":%d", r);
+        o = run_px(ctx, px, w, h, p, NULL);
+        double added = 0;
+        for (int i = 0; o && i < w * h * 4; i++)
+            if (i % 4 != 3)
+                added += (double)o[i] - px[i];
+        /* bounded by intensity x bright pass (borders and odd level sizes lose a little) */
+        CHECK(o && added >= 0.85 * 0.8 * bright && added <= 1.001 * 0.8 * bright && added <= 0.8 * total);
+        free(o);
+    }
+    free(px);
+}
+
+static void test_properties(fx_context *c1, fx_context *c2)
+{
+    int w = 90, h = 61;
+    fx_frame *f = tu_pattern_frame(c1, w, h, 7);
+    size_t n = (size_t)w * h * 4;
+    float *px = malloc(n * sizeof(float));
+    memcpy(px, et_combined(f), n * sizeof(float));
+    for (size_t i = 0; i < n; i += 4)
+        px[i] *= 4.0f;
+    fx_frame_free(f);
+    const char *ps[] = { "\"threshold\":0.8", "\"mode\":\"seed\",\"radius\":300", "\"composite\":\"screen\",\"radius\":7" };
+    for (int k = 0; k < 3; k++) {
+        float *a = run_px(c1, px, w, h, ps[k], NULL), *b = run_px(c2, px, w, h, ps[k], NULL);
+        CHECK(a && b && memcmp(a, b, n * sizeof(float)) == 0 && memcmp(a, px, n * sizeof(float)) != 0);
+        float *m = run_px(c2, px, w, h, ps[k], "{\"rect\":[10,5,40,30]}");
+        CHECK(m && et_outside_equal(m, px, w, h, 10, 5, 40, 30));
+        int inside = m && a;
+        for (int y = 5; inside && y < 35; y++)
+            inside &= memcmp(m + ((size_t)y * w + 10) * 4, a + ((size_t)y * w + 10) * 4, 40 * 16) == 0;
+        CHECK(inside); /* the glow comes from the whole frame */
+        free(a);
+        free(b);
+        free(m);
+    }
+    float *o = run_px(c1, px, w, h, "\"intensity\":0", NULL);
+    CHECK(o && memcmp(o, px, n * sizeof(float)) == 0);
+    free(o);
+    free(px);
+}
+
+static void test_extremes(fx_context *ctx)
+{
+    const float bad[] = { NAN, INFINITY, -INFINITY, 1e38f, -1e38f, 1e-40f, 0.0f, FLT_MAX };
+    float px[13 * 7 * 4];
+    for (int i = 0; i < 13 * 7 * 4; i++)
+        px[i] = bad[(i * 3) % 8];
+    const char *ps[] = { "", "\"mode\":\"seed\"", "\"threshold\":0,\"knee\":0", "\"mode\":\"seed\",\"threshold\":0",
+                         "\"radius\":65536,\"intensity\":100,\"clamp\":3e38", "\"radius\":0",
+                         "\"composite\":\"screen\",\"level_sigma\":8", "\"mode\":\"seed\",\"scene_luminance\":65504,\"middle_grey\":100" };
+    for (int k = 0; k < 8; k++) {
+        float *o = run_px(ctx, px, 13, 7, ps[k], NULL);
+        CHECK(o && tu_all_finite(o, 13 * 7 * 4));
+        free(o);
+        o = run_px(ctx, px, 1, 1, ps[k], NULL);
+        CHECK(o && tu_all_finite(o, 4));
+        free(o);
+    }
+}
+
+int main(void)
+{
+    fx_context *c1 = NULL, *c2 = NULL;
+    fx_context_new(&c1, 1);
+    fx_context_new(&c2, 2);
+    test_energy(c1);
+    test_properties(c1, c2);
+    test_extremes(c1);
+    fx_context_free(c1);
+    fx_context_free(c2);
+    return tu_finish("test_bloom");
+}
