@@ -57,17 +57,21 @@ int cli_cmd_list(int argc, char **argv)
     return fflush(stdout) == 0 ? 0 : CLI_EXIT_OUTPUT;
 }
 
-int cli_cmd_describe(int argc, char **argv)
+/* describe and info: one positional argument in, the library's JSON out. */
+typedef fx_result (*json_query_fn)(fx_context *ctx, const char *subject, char **out_json);
+
+static int json_query(int argc, char **argv, const char *cmd, const char *missing, const char *one_at_a_time,
+                      json_query_fn query)
 {
     cli_args a;
-    const char *opt, *pos, *effect = NULL;
+    const char *opt, *pos, *subject = NULL;
     int help = 0, compact = 0;
-    cli_args_init(&a, "describe", argc, argv);
+    cli_args_init(&a, cmd, argc, argv);
     while (cli_args_next(&a, &opt, &pos)) {
         if (pos) {
-            if (effect)
-                return cli_usage_error(a.cmd, "unexpected argument '%s' (one effect at a time)", pos);
-            effect = pos;
+            if (subject)
+                return cli_usage_error(a.cmd, "unexpected argument '%s' (%s)", pos, one_at_a_time);
+            subject = pos;
             continue;
         }
         int c = common_option(&a, opt, &compact, &help);
@@ -80,60 +84,17 @@ int cli_cmd_describe(int argc, char **argv)
         cli_help_command(stdout, a.cmd);
         return 0;
     }
-    if (!effect)
-        return cli_usage_error(a.cmd, "which effect? ('libfx list' shows them)");
+    if (!subject)
+        return cli_usage_error(a.cmd, "%s", missing);
 
     fx_context *ctx = NULL;
     int rc = new_context(&ctx);
     if (rc)
         return rc;
     char *json = NULL;
-    fx_result r = fx_effect_describe_json(ctx, effect, &json);
+    fx_result r = query(ctx, subject, &json);
     if (r != FX_OK) {
-        rc = cli_fail(ctx, r, CLI_PHASE_INPUT, effect);
-    } else {
-        cli_print_json(stdout, json, compact);
-        rc = fflush(stdout) == 0 ? 0 : CLI_EXIT_OUTPUT;
-    }
-    fx_free(json);
-    fx_context_free(ctx);
-    return rc;
-}
-
-int cli_cmd_info(int argc, char **argv)
-{
-    cli_args a;
-    const char *opt, *pos, *path = NULL;
-    int help = 0, compact = 0;
-    cli_args_init(&a, "info", argc, argv);
-    while (cli_args_next(&a, &opt, &pos)) {
-        if (pos) {
-            if (path)
-                return cli_usage_error(a.cmd, "unexpected argument '%s' (one file at a time)", pos);
-            path = pos;
-            continue;
-        }
-        int c = common_option(&a, opt, &compact, &help);
-        if (c < 0)
-            return CLI_EXIT_USAGE;
-        if (c == 0)
-            return cli_usage_error(a.cmd, "unknown option '%s'", opt);
-    }
-    if (help) {
-        cli_help_command(stdout, a.cmd);
-        return 0;
-    }
-    if (!path)
-        return cli_usage_error(a.cmd, "which file?");
-
-    fx_context *ctx = NULL;
-    int rc = new_context(&ctx);
-    if (rc)
-        return rc;
-    char *json = NULL;
-    fx_result r = fx_exr_info_json(ctx, path, &json);
-    if (r != FX_OK) {
-        rc = cli_fail(ctx, r, CLI_PHASE_INPUT, path);
+        rc = cli_fail(ctx, r, CLI_PHASE_INPUT, subject);
     } else {
         cli_flush_warnings(ctx);
         cli_print_json(stdout, json, compact);
@@ -142,6 +103,17 @@ int cli_cmd_info(int argc, char **argv)
     fx_free(json);
     fx_context_free(ctx);
     return rc;
+}
+
+int cli_cmd_describe(int argc, char **argv)
+{
+    return json_query(argc, argv, "describe", "which effect? ('libfx list' shows them)",
+                      "one effect at a time", fx_effect_describe_json);
+}
+
+int cli_cmd_info(int argc, char **argv)
+{
+    return json_query(argc, argv, "info", "which file?", "one file at a time", fx_exr_info_json);
 }
 
 int cli_cmd_passes(int argc, char **argv)
