@@ -1,0 +1,298 @@
+/* cel_shading: the seed's q-map: a 1-D ramp (N bands, or a user ramp) applied to diffuse
+ * lighting, times Sobel outlines from depth and normals (math/edge_ops.c).
+ * Lighting "diffuse_passes" (Cycles' Diffuse Direct and Color; Eevee's Diffuse Light and
+ * Color): the direct diffuse term DiffCol x DiffDir is replaced by DiffCol x q(l) x tint with
+ * l = luminance(DiffDir) / white and tint = DiffDir / luminance (the light's colour), so
+ * textures, indirect light, gloss and emission survive. Lighting "normal_light": l = N.L
+ * from the Normal pass and the sun (the scene sidecar's light, or a direction), and
+ * Combined is scaled by (ambient + q(l)) / (ambient + l). docs/effects/cel_shading.md. */
+#include "core/effect.h"
+#include "core/lights.h"
+#include "core/parallel.h"
+#include "math/color.h"
+#include "math/edge_ops.h"
+#include "math/vec.h"
+
+#include <float.h>
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+#define RAMP_MAX 8
+
+typedef struct cel_params {
+    int lighting;
+    int bands;
+    int ramp_mode;
+    float ramp[RAMP_MAX];
+    float band_softness;
+    float white;
+    char light[FX_STRING_PARAM_MAX];
+    float direction[3];
+    int use_direction;
+    float ambient;
+    float outline_width;
+    float outline_color[4];
+    float depth_sensitivity, normal_sensitivity;
+    float mix;
+} cel_params;
+
+enum { LIGHT_DIFFUSE_PASSES = 0, LIGHT_NORMAL };
+enum { RAMP_BANDS = 0, RAMP_CUSTOM };
+
+static const char *const lighting_items[] = { "diffuse_passes", "normal_light" };
+static const char *const ramp_items[] = { "bands", "custom" };
+static const float ramp_default[RAMP_MAX] = { 0.0f, 0.35f, 0.7f, 1.0f, 1.0f, 1.0f, 1.0f, 1.0f };
+static const float dir_default[3] = { 0.3f, 0.4f, -0.87f };
+static const float black4[4] = { 0, 0, 0, 1 };
+
+static const fx_param_def cel_param_defs[] = {
+    FX_P_ENUM(cel_params, lighting, "lighting", LIGHT_DIFFUSE_PASSES, lighting_items,
+              "diffuse_passes: re-band the DiffDir pass under DiffCol (textures survive; Cycles or Eevee "
+              "with the diffuse passes on); normal_light: N.L from the Normal pass and the sun"),
+    FX_P_INT(cel_params, bands, "bands", 3, 1, RAMP_MAX, 2, RAMP_MAX, "", "Number of bands of the ramp"),
+    FX_P_ENUM(cel_params, ramp_mode, "ramp_mode", RAMP_BANDS, ramp_items,
+              "bands: band k of N has the value k/(N-1); custom: band k takes ramp[k]"),
+    FX_P_FLOATS(cel_params, ramp, "ramp", RAMP_MAX, ramp_default, 0.0, 100.0, "",
+                "ramp_mode custom: the value of each band (the first `bands` entries)"),
+    FX_P_FLOAT(cel_params, band_softness, "band_softness", 0.02, 0.0, 0.5, 0.0, 0.1, "",
+               "Width of the transition between bands, in lighting units (anti-aliases band edges)"),
+    FX_P_FLOAT(cel_params, white, "white", 1.0, 1e-6, 65504.0, 0.1, 10.0, "",
+               "Lighting mapped to the top of the ramp (diffuse_passes: luminance of DiffDir)"),
+    FX_P_STRING(cel_params, light, "light", "", "",
+                "normal_light: the light's name in the scene sidecar (empty: the first sun)"),
+    FX_P_BOOL(cel_params, use_direction, "use_direction", 0,
+              "normal_light: use the direction parameter instead of the scene's light"),
+    FX_P_FLOATS(cel_params, direction, "direction", 3, dir_default, -1e6, 1e6, "",
+                "normal_light: world direction the light travels (with use_direction)"),
+    FX_P_FLOAT(cel_params, ambient, "ambient", 0.15, 0.0, 10.0, 0.0, 1.0, "",
+               "normal_light: light that N.L does not model (keeps shadow sides from going black)"),
+    FX_P_FLOAT(cel_params, outline_width, "outline_width", 2.0, 0.0, 64.0, 0.0, 8.0, "pixels",
+               "Outline thickness; 0: no outlines"),
+    FX_P_FLOATS(cel_params, outline_color, "outline_color", 4, black4, -65504.0, 65504.0, "color", "Outline colour"),
+    FX_P_FLOAT(cel_params, depth_sensitivity, "depth_sensitivity", 10.0, 0.0, 1e6, 0.0, 50.0, "",
+               "Outlines where depth jumps by more than 1/sensitivity (relative); 0: off"),
+    FX_P_FLOAT(cel_params, normal_sensitivity, "normal_sensitivity", 0.5, 0.0, 1.0, 0.0, 1.0, "factor",
+               "Outlines where normals turn by more than 90 x (1 - sensitivity) degrees; 0: off"),
+    FX_P_FLOAT(cel_params, mix, "mix", 1.0, 0.0, 1.0, 0.0, 1.0, "factor", "0: the identity; 1: the full effect"),
+};
+
+static void edge_settings(const cel_params *p, fx_edge_settings *s)
+{
+    memset(s, 0, sizeof *s);
+    s->op = FX_EDGE_SOBEL;
+    s->use_depth = p->outline_width > 0.0f && p->depth_sensitivity > 0.0f;
+    s->use_normal = p->outline_width > 0.0f && p->normal_sensitivity > 0.0f;
+    s->depth_threshold = p->depth_sensitivity > 0.0f ? 1.0f / p->depth_sensitivity : 0.0f;
+    s->normal_threshold = 90.0f * (1.0f - p->normal_sensitivity);
+    s->softness = 0.5f;
+    s->line_width = p->outline_width;
+}
+
+static fx_pass_set cel_passes(const void *params)
+{
+    const cel_params *p = params;
+    if (!(p->mix > 0.0f))
+        return 0;
+    fx_edge_settings s;
+    edge_settings(p, &s);
+    fx_pass_set set = fx_edge_passes(&s);
+    if (p->lighting == LIGHT_DIFFUSE_PASSES)
+        set |= FX_PASS_BIT(FX_PASS_DIFF_DIR) | FX_PASS_BIT(FX_PASS_DIFF_COL);
+    else
+        set |= FX_PASS_BIT(FX_PASS_NORMAL);
+    return set;
+}
+
+static int cel_halo(const void *params, int w, int h)
+{
+    (void)w;
+    (void)h;
+    fx_edge_settings s;
+    edge_settings(params, &s);
+    return fx_edge_halo(&s);
+}
+
+typedef struct cel_job {
+    const fx_effect_run *run;
+    const cel_params *p;
+    const float *diff_dir, *diff_col, *normal;
+    int dd_ch, dc_ch;
+    fx_vec3 to_light;
+    float values[RAMP_MAX];
+    int n;
+    const float *matte;
+} cel_job;
+
+static inline float finite_or(float v)
+{
+    v = v == v ? v : 0.0f;
+    return v > FLT_MAX ? FLT_MAX : v < -FLT_MAX ? -FLT_MAX : v;
+}
+
+/* The ramp q(t), t = lighting / white: band floor(t N) with smooth steps of width soft. */
+static inline float ramp_q(const cel_job *j, float t)
+{
+    const int n = j->n;
+    if (n <= 1)
+        return j->values[0];
+    float soft = j->p->band_softness;
+    float v = j->values[0];
+    for (int k = 1; k < n; k++) {
+        float edge = (float)k / (float)n;
+        float s = soft > 0.0f ? fx_smoothstep(edge - 0.5f * soft, edge + 0.5f * soft, t) : (t >= edge ? 1.0f : 0.0f);
+        v += s * (j->values[k] - j->values[k - 1]);
+    }
+    return v;
+}
+
+static void cel_rows(void *user, int begin, int end)
+{
+    const cel_job *j = user;
+    const fx_effect_run *run = j->run;
+    const cel_params *p = j->p;
+    const float inv_white = 1.0f / p->white;
+    for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++)
+        for (int x = run->roi.x0; x < run->roi.x1; x++) {
+            size_t i = (size_t)y * run->width + x;
+            const float *s = run->src + i * 4;
+            float *d = run->dst + i * 4;
+            float c[3] = { finite_or(s[0]), finite_or(s[1]), finite_or(s[2]) };
+            float o[3] = { c[0], c[1], c[2] };
+            if (p->lighting == LIGHT_DIFFUSE_PASSES) {
+                const float *dd = j->diff_dir + i * j->dd_ch, *dc = j->diff_col + i * j->dc_ch;
+                float l3[3] = { fmaxf(finite_or(dd[0]), 0.0f), fmaxf(finite_or(dd[1]), 0.0f), fmaxf(finite_or(dd[2]), 0.0f) };
+                float l = fx_luminance(l3[0], l3[1], l3[2]);
+                float l_c = l < 1e30f ? l : 1e30f;
+                float q = ramp_q(j, l_c * inv_white) * p->white;
+                for (int k = 0; k < 3; k++) {
+                    float tint = l > 1e-8f ? l3[k] / l : 1.0f; /* the light's colour */
+                    float col = finite_or(dc[k]);
+                    o[k] = c[k] + col * (q * tint - l3[k]);
+                }
+            } else {
+                const float *nn = j->normal + i * 3;
+                fx_vec3 n = fx_v3_normalize_or(fx_v3(finite_or(nn[0]), finite_or(nn[1]), finite_or(nn[2])), fx_v3(0, 0, 0));
+                if (fx_v3_dot(n, n) > 0.5f) {
+                    float l = fx_saturate(fx_v3_dot(n, j->to_light));
+                    float q = ramp_q(j, l * inv_white) * p->white;
+                    float ratio = (p->ambient + q) / (p->ambient + l + 1e-6f);
+                    for (int k = 0; k < 3; k++)
+                        o[k] = c[k] * ratio;
+                }
+            }
+            if (j->matte) {
+                float e = j->matte[i];
+                for (int k = 0; k < 3; k++)
+                    o[k] += e * (p->outline_color[k] - o[k]);
+            }
+            for (int k = 0; k < 3; k++)
+                d[k] = finite_or(c[k] + p->mix * (o[k] - c[k]));
+            float a = finite_or(s[3]);
+            d[3] = j->matte ? finite_or(a + p->mix * j->matte[i] * (p->outline_color[3] - a)) : a;
+        }
+}
+
+static fx_result cel_process(const fx_effect_run *run)
+{
+    const cel_params *p = run->params;
+    const fx_rect *roi = &run->roi;
+    if (roi->x1 <= roi->x0 || roi->y1 <= roi->y0)
+        return FX_OK;
+    if (!(p->mix > 0.0f)) {
+        for (int y = roi->y0; y < roi->y1; y++)
+            memcpy(run->dst + ((size_t)y * run->width + roi->x0) * 4, run->src + ((size_t)y * run->width + roi->x0) * 4,
+                   (size_t)(roi->x1 - roi->x0) * 4 * sizeof(float));
+        return FX_OK;
+    }
+    char where[96];
+    snprintf(where, sizeof where, "effect %d (cel_shading)", run->index);
+    cel_job j;
+    memset(&j, 0, sizeof j);
+    j.run = run;
+    j.p = p;
+    j.n = p->bands;
+    for (int k = 0; k < j.n; k++)
+        j.values[k] = p->ramp_mode == RAMP_CUSTOM ? p->ramp[k] : (j.n > 1 ? (float)k / (float)(j.n - 1) : 1.0f);
+    const fx_frame *f = run->frame;
+    if (p->lighting == LIGHT_DIFFUSE_PASSES) {
+        fx_pass *dd = fx_frame_find_pass(f, "DiffDir"), *dc = fx_frame_find_pass(f, "DiffCol");
+        if (!dd || !dc)
+            return fx_fail(run->ctx, FX_ERR_MISSING_PASS,
+                           "%s: lighting diffuse_passes needs the %s pass (Diffuse %s), which the frame does "
+                           "not have; enable it, or use lighting normal_light",
+                           where, !dd ? "DiffDir" : "DiffCol", !dd ? "Direct / Light" : "Color");
+        j.diff_dir = dd->data;
+        j.dd_ch = dd->channels;
+        j.diff_col = dc->data;
+        j.dc_ch = dc->channels;
+        if (j.dd_ch < 3 || j.dc_ch < 3)
+            return fx_fail(run->ctx, FX_ERR_BAD_FILE, "%s: DiffDir/DiffCol need 3 channels", where);
+    } else {
+        fx_pass *n = fx_frame_find_pass(f, "Normal");
+        if (!n || n->channels < 3)
+            return fx_fail(run->ctx, FX_ERR_MISSING_PASS, "%s: lighting normal_light needs the Normal pass", where);
+        j.normal = n->data;
+        fx_vec3 dir;
+        if (p->use_direction) {
+            dir = fx_v3(p->direction[0], p->direction[1], p->direction[2]);
+        } else {
+            fx_light L;
+            fx_result r = fx_frame_find_light(f, p->light, where, &L);
+            if (r)
+                return r;
+            dir = L.direction;
+        }
+        j.to_light = fx_v3_normalize_or(fx_v3_scale(dir, -1.0f), fx_v3(0, 0, 1));
+    }
+    fx_edge_settings es;
+    edge_settings(p, &es);
+    float *matte = NULL;
+    fx_result r = FX_OK;
+    if (es.use_depth || es.use_normal) {
+        fx_edge_sources src;
+        if ((r = fx_edge_sources_from_frame(f, run->src, &es, &src, where)))
+            return r;
+        matte = fx_mem_alloc((size_t)run->width * run->height * sizeof(float));
+        if (!matte)
+            return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the outlines", where);
+        r = fx_edge_matte(run->ctx, &src, &es, roi, matte, NULL, where);
+        j.matte = matte;
+    }
+    if (!r) {
+        int rows = roi->y1 - roi->y0;
+        fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), cel_rows, &j);
+    }
+    fx_mem_free(matte);
+    return r;
+}
+
+static fx_result cel_validate(const void *params, char *err, size_t err_size)
+{
+    const cel_params *p = params;
+    for (int i = 0; i < 4; i++)
+        if (!isfinite(p->outline_color[i])) {
+            snprintf(err, err_size, "outline_color[%d] is not finite", i);
+            return FX_ERR_BAD_PARAM;
+        }
+    if (p->lighting == LIGHT_NORMAL && p->use_direction &&
+        !(fabsf(p->direction[0]) + fabsf(p->direction[1]) + fabsf(p->direction[2]) > 1e-12f)) {
+        snprintf(err, err_size, "direction is zero");
+        return FX_ERR_BAD_PARAM;
+    }
+    return FX_OK;
+}
+
+const fx_effect_class fx_effect_cel_shading = {
+    .name = "cel_shading",
+    .doc = "Cel shading: a banded ramp over diffuse lighting (diffuse passes or N.L) with Sobel outlines from depth and normals",
+    .params_size = sizeof(cel_params),
+    .params = cel_param_defs,
+    .param_count = FX_COUNT_OF(cel_param_defs),
+    .presets = { NULL, NULL, NULL, NULL },
+    .passes = cel_passes,
+    .needs_camera = NULL,
+    .halo = cel_halo,
+    .validate = cel_validate,
+    .process = cel_process,
+};

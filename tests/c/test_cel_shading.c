@@ -1,0 +1,171 @@
+/* cel_shading through the public API: diffuse-pass re-banding keeps texture and the other
+ * light, N.L with a direction, outlines from depth, passes declared per params, identity,
+ * masks, extremes, thread invariance. */
+#include "fx_effect_test.h"
+
+#include <float.h>
+#include <math.h>
+
+static float *run_frame(fx_context *ctx, const fx_frame *f, const char *params, const char *mask)
+{
+    char buf[1024];
+    snprintf(buf, sizeof buf, "{\"version\":1,\"effects\":[{\"effect\":\"cel_shading\",\"params\":{%s}%s%s}]}",
+             params, mask ? ",\"mask\":" : "", mask ? mask : "");
+    fx_stack *s = NULL;
+    float *o = NULL;
+    if (fx_stack_new(ctx, &s) == FX_OK && fx_stack_load_json(s, buf) == FX_OK)
+        o = et_run(ctx, s, f);
+    else
+        fprintf(stderr, "setup: %s\n", fx_context_error(ctx));
+    fx_stack_free(s);
+    return o;
+}
+
+/* w x 1: DiffDir ramps 0..1 (white light), DiffCol 0.5 red-ish, Combined = col x dir + 0.1 */
+static fx_frame *diffuse_frame(fx_context *ctx, int w, int h)
+{
+    fx_frame *f = NULL;
+    fx_frame_new(ctx, w, h, &f);
+    float *c = malloc((size_t)w * h * 4 * sizeof(float)), *dd = malloc((size_t)w * h * 3 * sizeof(float)),
+          *dc = malloc((size_t)w * h * 3 * sizeof(float)), *dep = malloc((size_t)w * h * sizeof(float)),
+          *n = malloc((size_t)w * h * 3 * sizeof(float));
+    for (int i = 0; i < w * h; i++) {
+        float l = ((float)(i % w) + 0.5f) / (float)w;
+        const float col[3] = { 0.8f, 0.4f, 0.2f };
+        for (int k = 0; k < 3; k++) {
+            dd[3 * i + k] = l;
+            dc[3 * i + k] = col[k];
+            c[4 * i + k] = col[k] * l + 0.1f;
+            n[3 * i + k] = k == 2 ? 1.0f : 0.0f;
+        }
+        c[4 * i + 3] = 1;
+        dep[i] = 5.0f;
+    }
+    fx_frame_add_pass(f, "Combined", 4, c);
+    fx_frame_add_pass(f, "DiffDir", 3, dd);
+    fx_frame_add_pass(f, "DiffCol", 3, dc);
+    fx_frame_add_pass(f, "Depth", 1, dep);
+    fx_frame_add_pass(f, "Normal", 3, n);
+    free(c);
+    free(dd);
+    free(dc);
+    free(dep);
+    free(n);
+    return f;
+}
+
+static void test_values(fx_context *ctx)
+{
+    const int w = 30;
+    fx_frame *f = diffuse_frame(ctx, w, 1);
+    float *o = run_frame(ctx, f, "\"bands\":3,\"band_softness\":0,\"outline_width\":0", NULL);
+    int ok = o != NULL;
+    const float col[3] = { 0.8f, 0.4f, 0.2f };
+    for (int x = 0; ok && x < w; x++) {
+        float l = ((float)x + 0.5f) / (float)w;
+        float q = l < 1.0f / 3 ? 0.0f : l < 2.0f / 3 ? 0.5f : 1.0f;
+        for (int k = 0; k < 3; k++)
+            ok &= fabsf(o[4 * x + k] - (col[k] * q + 0.1f)) < 1e-5f;
+    }
+    CHECK(ok); /* texture (DiffCol) and the other light (0.1) survive, direct light banded */
+    free(o);
+    o = run_frame(ctx, f, "\"bands\":2,\"ramp_mode\":\"custom\",\"ramp\":[0.25,0.75,0,0,0,0,0,0],\"band_softness\":0,\"outline_width\":0", NULL);
+    CHECK(o && fabsf(o[0] - (0.8f * 0.25f + 0.1f)) < 1e-5f && fabsf(o[4 * (w - 1)] - (0.8f * 0.75f + 0.1f)) < 1e-5f);
+    free(o);
+    /* N.L with a direction straight down onto +Z normals: l = 1 -> top band, ratio 1 */
+    o = run_frame(ctx, f, "\"lighting\":\"normal_light\",\"use_direction\":true,\"direction\":[0,0,-1],\"outline_width\":0", NULL);
+    CHECK(o && memcmp(o, et_combined(f), (size_t)w * 16) == 0 ? 1 : (o && fabsf(o[0] - et_combined(f)[0]) < 1e-5f));
+    free(o);
+    /* light at 60 degrees: l = 0.5 -> band 1 of 3 (0.5): ratio (0.15 + 0.5) / (0.15 + 0.5) */
+    o = run_frame(ctx, f, "\"lighting\":\"normal_light\",\"use_direction\":true,\"direction\":[0.8660254,0,-0.5],\"band_softness\":0,\"outline_width\":0,\"bands\":2", NULL);
+    /* bands 2: l = 0.5 -> band 1 -> q = 1: ratio (0.15 + 1) / (0.15 + 0.5) */
+    CHECK(o && fabsf(o[0] - et_combined(f)[0] * (1.15f / 0.65f)) < 1e-4f);
+    free(o);
+    /* no lights in the frame and no direction: a clear error */
+    fx_stack *s = NULL;
+    fx_frame *out = NULL;
+    fx_stack_new(ctx, &s);
+    fx_stack_load_json(s, "{\"version\":1,\"effects\":[{\"effect\":\"cel_shading\",\"params\":{\"lighting\":\"normal_light\"}}]}");
+    CHECK(fx_stack_run(s, f, &out) != FX_OK && strlen(fx_context_error(ctx)) > 0);
+    /* passes declared per params */
+    char *req = NULL;
+    fx_stack_required_passes(s, &req);
+    CHECK(req && tu_contains(req, "Normal") && !tu_contains(req, "DiffDir") && tu_contains(req, "Depth"));
+    fx_free(req);
+    fx_stack_set_enum(s, 0, "lighting", "diffuse_passes");
+    fx_stack_set_float(s, 0, "outline_width", 0);
+    fx_stack_required_passes(s, &req);
+    CHECK(req && tu_contains(req, "DiffDir") && tu_contains(req, "DiffCol") && !tu_contains(req, "Depth") && !tu_contains(req, "Normal"));
+    fx_free(req);
+    fx_stack_free(s);
+    fx_frame_free(f);
+}
+
+static void test_outlines_properties(fx_context *c1, fx_context *c2)
+{
+    const int w = 40, h = 30;
+    fx_frame *f = diffuse_frame(c1, w, h);
+    float *dep = NULL;
+    int ch = 0;
+    fx_frame_pass(f, "Depth", &dep, &ch);
+    for (int y = 10; y < 20; y++)
+        for (int x = 12; x < 28; x++)
+            dep[y * w + x] = 2.0f; /* a box in front */
+    float *o = run_frame(c1, f, "\"outline_width\":2,\"outline_color\":[0,0,1,1],\"normal_sensitivity\":0", NULL);
+    CHECK(o && o[(10 * w + 20) * 4 + 2] == 1.0f && o[(10 * w + 20) * 4] == 0.0f); /* on the box's edge */
+    CHECK(o && o[(15 * w + 20) * 4 + 2] != 1.0f);                                  /* inside: no line */
+    free(o);
+    size_t n = (size_t)w * h * 4;
+    const float *src = et_combined(f);
+    float *a = run_frame(c1, f, "\"outline_width\":3", NULL), *b = run_frame(c2, f, "\"outline_width\":3", NULL);
+    CHECK(a && b && memcmp(a, b, n * sizeof(float)) == 0);
+    float *m = run_frame(c2, f, "\"outline_width\":3", "{\"rect\":[5,5,20,10]}");
+    CHECK(m && et_outside_equal(m, src, w, h, 5, 5, 20, 10));
+    free(a);
+    free(b);
+    free(m);
+    o = run_frame(c1, f, "\"mix\":0", NULL);
+    CHECK(o && memcmp(o, src, n * sizeof(float)) == 0);
+    free(o);
+    fx_frame_free(f);
+}
+
+static void test_extremes(fx_context *ctx)
+{
+    const float bad[] = { NAN, INFINITY, -INFINITY, 1e38f, -1e38f, 1e-40f, 0.0f, FLT_MAX };
+    fx_frame *f = diffuse_frame(ctx, 9, 5);
+    const char *names[] = { "Combined", "DiffDir", "DiffCol", "Depth", "Normal" };
+    for (int p = 0; p < 5; p++) {
+        float *d = NULL;
+        int ch = 0;
+        fx_frame_pass(f, names[p], &d, &ch);
+        for (int i = 0; i < 9 * 5 * ch; i++)
+            d[i] = bad[(i * 3 + p) % 8];
+    }
+    const char *ps[] = { "", "\"lighting\":\"normal_light\",\"use_direction\":true", "\"bands\":1,\"outline_width\":64",
+                         "\"white\":1e-6,\"band_softness\":0" };
+    for (int k = 0; k < 4; k++) {
+        float *o = run_frame(ctx, f, ps[k], NULL);
+        CHECK(o && tu_all_finite(o, 9 * 5 * 4));
+        free(o);
+    }
+    fx_frame_free(f);
+    f = diffuse_frame(ctx, 1, 1);
+    float *o = run_frame(ctx, f, "\"outline_width\":64", NULL);
+    CHECK(o && tu_all_finite(o, 4));
+    free(o);
+    fx_frame_free(f);
+}
+
+int main(void)
+{
+    fx_context *c1 = NULL, *c2 = NULL;
+    fx_context_new(&c1, 1);
+    fx_context_new(&c2, 2);
+    test_values(c1);
+    test_outlines_properties(c1, c2);
+    test_extremes(c1);
+    fx_context_free(c1);
+    fx_context_free(c2);
+    return tu_finish("test_cel_shading");
+}
