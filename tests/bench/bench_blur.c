@@ -2,7 +2,10 @@
  * sigma (median of N runs after a warm-up) as a ratio to a memcpy of the frame measured in
  * the same run, the error against `exact` at the same sigma, and OpenCV's GaussianBlur.
  *
- *   bench_blur [runs=7] [threads=2] [sigmas=2,8.5,16.7,50] [out.csv|-] [only=substring]
+ *   bench_blur [runs=7] [threads=2] [sigmas=2,8.5,16.7,50] [out.csv|-] [only=sub1,sub2,...]
+ *
+ * At each sigma the selected cases are timed round-robin (one call of each per round), so
+ * their ratios hold within the run on a shared machine.
  *
  * Errors: max and mean absolute error over all channels of a test image with values in
  * [0, 1] (smooth gradients + a per-pixel hash texture), and the max error of a centred
@@ -44,8 +47,14 @@ typedef struct algo {
     int passes;
 } algo;
 
-static double run_blur(fx_context *ctx, const float *src, float *dst, double sigma, const algo *a,
-                       int runs)
+typedef struct prepared {
+    const fx_effect_class *cls;
+    void *params;
+    fx_effect_run run;
+} prepared;
+
+static void prepare(prepared *p, fx_context *ctx, const float *src, float *dst, double sigma,
+                    const algo *a)
 {
     const fx_effect_class *cls = fx_effect_find("gaussian_blur");
     void *params = calloc(1, cls->params_size);
@@ -58,28 +67,43 @@ static double run_blur(fx_context *ctx, const float *src, float *dst, double sig
             *(int *)((char *)params + d->offset) = i;
     d = fx_effect_find_param(cls, "box_passes");
     *(int *)((char *)params + d->offset) = a->passes;
-    fx_effect_run run;
-    memset(&run, 0, sizeof run);
-    run.ctx = ctx;
-    run.src = src;
-    run.dst = dst;
-    run.width = W;
-    run.height = H;
-    run.roi = (fx_rect){ 0, 0, W, H };
-    run.params = params;
-    run.quality = FX_QUALITY_FINAL;
-    double t[64];
-    runs = runs > 64 ? 64 : runs;
-    if (cls->process(&run) != FX_OK) { /* warm-up */
-        fprintf(stderr, "%s failed: %s\n", a->label, fx_context_error(ctx));
+    p->cls = cls;
+    p->params = params;
+    memset(&p->run, 0, sizeof p->run);
+    p->run.ctx = ctx;
+    p->run.src = src;
+    p->run.dst = dst;
+    p->run.width = W;
+    p->run.height = H;
+    p->run.roi = (fx_rect){ 0, 0, W, H };
+    p->run.params = params;
+    p->run.quality = FX_QUALITY_FINAL;
+}
+
+static double run_once(prepared *p)
+{
+    double t0 = now_ms();
+    if (p->cls->process(&p->run) != FX_OK) {
+        fprintf(stderr, "gaussian_blur failed: %s\n", fx_context_error(p->run.ctx));
         exit(1);
     }
-    for (int i = 0; i < runs; i++) {
-        double t0 = now_ms();
-        cls->process(&run);
-        t[i] = now_ms() - t0;
-    }
-    free(params);
+    return now_ms() - t0;
+}
+
+/* Median of `runs` timed calls after a warm-up (runs 0: the warm-up only). */
+static double run_blur(fx_context *ctx, const float *src, float *dst, double sigma, const algo *a,
+                       int runs)
+{
+    prepared p;
+    prepare(&p, ctx, src, dst, sigma, a);
+    double t[64];
+    runs = runs > 64 ? 64 : runs;
+    run_once(&p);
+    for (int i = 0; i < runs; i++)
+        t[i] = run_once(&p);
+    free(p.params);
+    if (runs == 0)
+        return 0;
     qsort(t, runs, sizeof(double), cmp_d);
     return t[runs / 2];
 }
@@ -97,6 +121,17 @@ static double memcpy_ms(const float *src, float *dst)
     }
     qsort(t, runs, sizeof(double), cmp_d);
     return t[runs / 2];
+}
+
+/* only: comma-separated substrings of the case labels */
+static int matches(const char *label, const char *only)
+{
+    char buf[256];
+    snprintf(buf, sizeof buf, "%s", only);
+    for (char *tok = strtok(buf, ","); tok; tok = strtok(NULL, ","))
+        if (strstr(label, tok))
+            return 1;
+    return 0;
 }
 
 static void row(const char *what, double sigma, int threads, double ms, double floor_ms, double mean,
@@ -167,7 +202,7 @@ int main(int argc, char **argv)
     double floor_ms = memcpy_ms(src, dst);
     row("memcpy (the bandwidth floor)", 0, threads, floor_ms, floor_ms, -1, -1, -1);
     static const algo algos[] = {
-        { "box 3 (draft)", "box", 3 },   { "box 4", "box", 4 }, { "box 5", "box", 5 },
+        { "box 3 (draft)", "box", 3 },   { "box 4 (preview)", "box", 4 }, { "box 5", "box", 5 },
         { "box 6", "box", 6 },           { "recursive (final)", "recursive", 3 },
     };
     const algo exact = { "exact (reference)", "exact", 3 };
@@ -177,10 +212,30 @@ int main(int argc, char **argv)
         double tref = run_blur(ctx, src, ref, sg, &exact, sg > 20 ? 1 : 3);
         row(exact.label, sg, threads, tref, floor_ms, -1, -1, -1);
         double peak = impref[((size_t)(H / 2) * W + W / 2) * 4];
-        for (size_t k = 0; k < sizeof algos / sizeof algos[0]; k++) {
-            if (only && !strstr(algos[k].label, only))
+        /* the cases are timed round-robin (one call of each per round), so that the
+         * machine's load shifts hit them alike and their ratios hold within the run */
+        enum { NA = sizeof algos / sizeof algos[0] };
+        prepared pr[NA];
+        double tm[NA][64];
+        int sel[NA], runs = RUNS > 64 ? 64 : RUNS;
+        for (int k = 0; k < NA; k++) {
+            sel[k] = !only || matches(algos[k].label, only);
+            if (sel[k]) {
+                prepare(&pr[k], ctx, src, dst, sg, &algos[k]);
+                run_once(&pr[k]);
+            }
+        }
+        for (int i = 0; i < runs; i++)
+            for (int k = 0; k < NA; k++)
+                if (sel[k])
+                    tm[k][i] = run_once(&pr[k]);
+        for (int k = 0; k < NA; k++) {
+            if (!sel[k])
                 continue;
-            double ms = run_blur(ctx, src, dst, sg, &algos[k], RUNS);
+            qsort(tm[k], runs, sizeof(double), cmp_d);
+            double ms = tm[k][runs / 2];
+            run_once(&pr[k]); /* dst = this case's result */
+            free(pr[k].params);
             double s = 0, m = 0;
             for (size_t i = 0; i < n; i++) {
                 double d = fabs((double)dst[i] - ref[i]);
@@ -199,7 +254,7 @@ int main(int argc, char **argv)
 #ifdef LIBFX_BENCH_OPENCV
     bench_cv_set_threads(threads);
     const int ks[] = { 11, 51, 101 };
-    for (int k = 0; k < (only && !strstr("opencv", only) ? 0 : 3); k++) {
+    for (int k = 0; k < (only && !matches("opencv", only) ? 0 : 3); k++) {
         double t[64];
         int runs = RUNS > 64 ? 64 : RUNS;
         bench_cv_gaussian(src, dst, W, H, ks[k]);

@@ -32,6 +32,7 @@
 #define V_LANES_REC 32          /* floats per vertical strip (recursive, row-wise) */
 #define H_LANES 16              /* target floats per horizontal block (rows * channels) */
 #define PAD 4                   /* rows before/after the data in a lane buffer (recursion state) */
+#define BOX_MIN_RING 32         /* box: ring slots at least (see blur_plan.ring) */
 
 /* ---- kernels' parameters ------------------------------------------------------------- */
 
@@ -128,8 +129,9 @@ typedef struct blur_plan {
     double *suf;  /* suf[m] = sum taps[m..2R], 2R+2 entries */
     /* box */
     int passes, r;
-    double alpha, norm;
-    int resum; /* recompute the running sum from scratch every `resum` steps */
+    double alpha, norm, normP; /* normP = norm^passes: the stages run unnormalised */
+    int resum; /* recompute the running sums from scratch every `resum` steps */
+    int ring;  /* slots of the v4d kernels' rings: >= 2r+2, and not tiny (fewer wraps) */
     int ext;   /* rows of a lane buffer before and after the data (>= PAD) */
     /* recursive (Deriche 4th order: causal n[], anticausal m[], shared d[]) */
     double dn[4], dm[4], dd[4], gain_c, gain_a;
@@ -163,9 +165,12 @@ static fx_result plan_init(blur_plan *p, const fx_blur_spec *spec)
         p->passes = passes;
         fx_extended_box(sigma * sigma / passes, &p->r, &p->alpha);
         p->norm = 1.0 / (2.0 * p->r + 1.0 + 2.0 * p->alpha);
-        p->resum = 2 * p->r + 1 < 64 ? 64 : 2 * p->r + 1;
+        p->normP = 1.0;
+        for (int k = 0; k < passes; k++)
+            p->normP *= p->norm;
+        p->resum = 4 * (2 * p->r + 1) < 64 ? 64 : 4 * (2 * p->r + 1);
         p->halo = passes * (p->r + 1);
-        p->ext = p->halo > PAD ? p->halo : PAD;
+        p->ring = 2 * p->r + 2 < BOX_MIN_RING ? BOX_MIN_RING : 2 * p->r + 2;
         return FX_OK;
     }
     if (p->alg == FX_BLUR_RECURSIVE) {
@@ -246,50 +251,74 @@ static void exact_lanes(const blur_plan *p, const double *restrict in, double *r
     }
 }
 
-/* Sum of in[clamp(k)] for k in [lo, hi], per lane, into s. */
-static inline void window_sum(const double *restrict in, double *restrict s, int n, int L, int lo,
-                              int hi)
-{
-    int nl = lo < 0 ? (hi < 0 ? hi - lo + 1 : -lo) : 0;
-    int nr = hi > n - 1 ? (lo > n - 1 ? hi - lo + 1 : hi - (n - 1)) : 0;
-    int a = lo < 0 ? 0 : lo, b = hi > n - 1 ? n - 1 : hi;
-    const double *first = in, *last = in + (size_t)(n - 1) * L;
-    for (int l = 0; l < L; l++)
-        s[l] = (double)nl * first[l] + (double)nr * last[l];
-    for (int k = a; k <= b; k++) {
-        const double *restrict x = in + (size_t)k * L;
-        for (int l = 0; l < L; l++)
-            s[l] += x[l];
-    }
-}
-
-/* One extended box: out[i] = norm * (sum_{|k|<=r} in[i+k] + alpha (in[i-r-1] + in[i+r+1])).
- * Running sum in double; recomputed from scratch every `resum` steps so that a huge
- * value (1e38) leaving the window cannot leave its rounding residue behind for long. */
+/* Extended boxes, all passes fused in one sweep. Stage k (k = 0..passes-1) keeps the last
+ * M = 2r+2 samples of its input in a ring and the running sum s of the inner 2r+1; fed
+ * input position t it emits (unnormalised) position t - (r+1):
+ *     s += x[t-1] - x[t-2r-2];   u = s + alpha (x[t-2r-2] + x[t])
+ * (x[t-2r-2] is both the sample leaving the sum and the left end tap), and u feeds stage
+ * k+1. The last stage's output times normP = norm^passes is position t - passes (r+1).
+ * Replicate borders: the stages start in the steady state of the first sample (rings full
+ * of it: what an infinitely long run of it leaves), and past the end the last sample is
+ * fed, so the cascade sees the replicate extension (exact: every pass of the old padded
+ * cascade saw the same). Every `resum` steps each s is recomputed from its ring (fixed
+ * order: oldest first) instead of updated, so that a huge value (1e38) leaving the window
+ * cannot leave its rounding residue behind for long. Per lane the operations are the same
+ * in every version of the kernel (lanes here, v4d below), so they give the same bits.
+ * st holds passes * (2r+3) * L doubles. */
 FX_CLONES
 static void box_lanes(const blur_plan *p, const double *restrict in, double *restrict out, int n,
-                      int L, double *restrict s)
+                      int L, double *restrict st)
 {
-    const int r = p->r;
-    const double alpha = p->alpha, norm = p->norm;
-    for (int i = 0; i < n; i++) {
-        if (i % p->resum == 0) {
-            window_sum(in, s, n, L, i - r, i + r);
-        } else {
-            int kin = i + r > n - 1 ? n - 1 : i + r;
-            int kout = i - r - 1 < 0 ? 0 : i - r - 1;
-            const double *restrict xi = in + (size_t)kin * L;
-            const double *restrict xo = in + (size_t)kout * L;
-            for (int l = 0; l < L; l++)
-                s[l] += xi[l] - xo[l];
+    const int P = p->passes, r = p->r, M = 2 * r + 2, W = 2 * r + 1, lag = P * (r + 1);
+    const double a = p->alpha, g = p->normP;
+    double *restrict ring = st, *restrict S = st + (size_t)P * M * L;
+    for (int l = 0; l < L; l++) {
+        double c = in[l];
+        for (int k = 0; k < P; k++) {
+            double *rk = ring + (size_t)k * M * L;
+            for (int m = 0; m < M; m++)
+                rk[(size_t)m * L + l] = c;
+            double s = c;
+            for (int j = 1; j < W; j++)
+                s += c;
+            c = s + a * (c + c);
         }
-        int ka = i - r - 1 < 0 ? 0 : i - r - 1;
-        int kb = i + r + 1 > n - 1 ? n - 1 : i + r + 1;
-        const double *restrict ea = in + (size_t)(ka > n - 1 ? n - 1 : ka) * L;
-        const double *restrict eb = in + (size_t)(kb < 0 ? 0 : kb) * L;
-        double *restrict o = out + (size_t)i * L;
-        for (int l = 0; l < L; l++)
-            o[l] = (s[l] + alpha * (ea[l] + eb[l])) * norm;
+    }
+    int slot = 0, pslot = M - 1, rc = 0;
+    for (int t = 0; t < n + lag; t++) {
+        if (rc == 0) /* re-sum: inner window = every slot but the current one, oldest first */
+            for (int k = 0; k < P; k++) {
+                const double *rk = ring + (size_t)k * M * L;
+                double *sk = S + (size_t)k * L;
+                int m = slot + 1 == M ? 0 : slot + 1;
+                for (int l = 0; l < L; l++)
+                    sk[l] = rk[(size_t)m * L + l];
+                for (int j = 1; j < W; j++) {
+                    m = m + 1 == M ? 0 : m + 1;
+                    for (int l = 0; l < L; l++)
+                        sk[l] += rk[(size_t)m * L + l];
+                }
+            }
+        const double *xin = in + (size_t)(t < n ? t : n - 1) * L;
+        double *o = t >= lag ? out + (size_t)(t - lag) * L : NULL;
+        for (int l = 0; l < L; l++) {
+            double x = xin[l];
+            for (int k = 0; k < P; k++) {
+                double *rk = ring + (size_t)k * M * L;
+                double old = rk[(size_t)slot * L + l];
+                double s = S[(size_t)k * L + l];
+                if (rc != 0)
+                    s = s + (rk[(size_t)pslot * L + l] - old);
+                S[(size_t)k * L + l] = s;
+                rk[(size_t)slot * L + l] = x;
+                x = s + a * (old + x);
+            }
+            if (o)
+                o[l] = x * g;
+        }
+        pslot = slot;
+        slot = slot + 1 == M ? 0 : slot + 1;
+        rc = rc + 1 == p->resum ? 0 : rc + 1;
     }
 }
 
@@ -348,7 +377,7 @@ static void deriche_lanes(const blur_plan *p, double *x, double *y, int n, int L
 }
 
 /* Runs the plan on buffer a (rows 0..n-1 of L lanes, plan.ext rows each side); b is scratch of
- * the same shape; s and xplus hold L doubles. Returns the buffer holding the result. */
+ * the same shape; s holds lane_state_doubles(p, L). Returns the buffer holding the result. */
 static double *filter_lanes(const blur_plan *p, double *a, double *b, int n, int L, double *s)
 {
     switch (p->alg) {
@@ -359,28 +388,18 @@ static double *filter_lanes(const blur_plan *p, double *a, double *b, int n, int
         deriche_lanes(p, a, b, n, L, s);
         return b;
     case FX_BLUR_BOX:
-    default: {
-        /* Each pass must see the replicate extension of its own input as the cascade on
-         * the extended original would: run the passes over the line padded with
-         * passes * (r + 1) copies of each edge value (clamping beyond that is exact, the
-         * padding's far end stays constant). Clamping each pass at the line's own ends
-         * instead errs by up to 10% of the signal near the border. */
-        const int P = p->halo;
-        const ptrdiff_t Ls = L;
-        for (int k = 1; k <= P; k++) {
-            memcpy(a - k * Ls, a, (size_t)L * sizeof(double));
-            memcpy(a + (n - 1 + k) * Ls, a + (n - 1) * Ls, (size_t)L * sizeof(double));
-        }
-        double *ea = a - P * Ls, *eb = b - P * Ls;
-        for (int k = 0; k < p->passes; k++) {
-            box_lanes(p, ea, eb, n + 2 * P, L, s);
-            double *t = ea;
-            ea = eb;
-            eb = t;
-        }
-        return ea + P * Ls;
+    default:
+        box_lanes(p, a, b, n, L, s);
+        return b;
     }
-    }
+}
+
+/* Doubles of state filter_lanes needs for L lanes. */
+static size_t lane_state_doubles(const blur_plan *p, int L)
+{
+    if (p->alg == FX_BLUR_BOX)
+        return (size_t)p->passes * (2 * (size_t)p->r + 3) * (size_t)L;
+    return 4 * (size_t)L;
 }
 
 static inline float to_float_clamped(double v)
@@ -441,9 +460,10 @@ static size_t round_up64(size_t b)
 
 static inline __attribute__((always_inline)) v4d load4(const float *p)
 {
-    v4f f;
-    memcpy(&f, p, sizeof f);
-    return __builtin_convertvector(f, v4d);
+    /* element-wise: GCC 12 turns this into one vcvtps2pd ymm, [mem] in the AVX2 clone (a
+     * __builtin_convertvector of a v4f gives two halves and an insert) */
+    v4d r = { p[0], p[1], p[2], p[3] };
+    return r;
 }
 
 static inline __attribute__((always_inline)) void store4_clamped(float *p, v4d v)
@@ -591,6 +611,302 @@ static void deriche_rows4(const blur_plan *p, const float *const *in, float *con
     }
 }
 
+/* box_lanes on groups of 4 lanes straight from float rows, one group at a time over blocks
+ * of BOX_BLOCK positions (the running sums and the previous inputs stay in registers; the
+ * rows of a block stay in L1 while the groups go by). Group v of input position i is at
+ * in[v] + i * istep (k[v] floats, 4 but for a partial last group); output position o0 + j
+ * of group v goes to out[v] + j * ostep. Same operations per lane as box_lanes, so the
+ * same bits. out may alias in: position i is written after every read of it, and the
+ * last sample (fed past the end) is read once up front. Stage k's ring, slot m, group v
+ * is ring[k * RS + m * NV + v] (RS = (2r+2) * NV); S: passes * NV; last: NV. */
+typedef struct box_args {
+    const float *in[8];
+    size_t istep;
+    float *out[8];
+    ptrdiff_t ostep;
+    int k[8];
+    int groups, NV, n, o0, o1;
+    v4d *ring, *S, *last;
+} box_args;
+
+#define BOX_BLOCK 64
+
+/* The first k floats of p (k < 4: the rest 0), and the store of the first k. */
+static inline __attribute__((always_inline)) v4d loadn(const float *p, int k)
+{
+    if (k >= 4)
+        return load4(p);
+    float t[4] = { 0, 0, 0, 0 };
+    if (k > 0)
+        memcpy(t, p, (size_t)k * sizeof(float));
+    return load4(t);
+}
+
+static inline __attribute__((always_inline)) void storen_clamped(float *p, v4d v, int k)
+{
+    if (k >= 4) {
+        store4_clamped(p, v);
+    } else {
+        float t[4];
+        store4_clamped(t, v);
+        memcpy(p, t, (size_t)k * sizeof(float));
+    }
+}
+
+/* Positions t0..t1-1 of one group; LOAD: t < n (else the last sample is fed); STORE: the
+ * output position t - lag is >= o0. slot, rc: ring slot and re-sum counter at t0. The
+ * inner loop runs between ring wraps and re-sums, with no test but its own. */
+static inline __attribute__((always_inline)) void
+box_seg(const blur_plan *p, const int P, const int NV, const int LOAD, const int STORE,
+        const box_args *A, int v, int t0, int t1, int slot, int rc)
+{
+    const int M = p->ring, D2 = 2 * p->r + 2, W = 2 * p->r + 1, lag = P * (p->r + 1);
+    const int kv = A->k[v], resum = p->resum;
+    const double a = p->alpha, g = p->normP;
+    const ptrdiff_t RS = (ptrdiff_t)M * NV;
+    v4d *const ring = A->ring + v, *const rend = ring + RS;
+    const size_t istep = A->istep;
+    const ptrdiff_t ostep = A->ostep;
+    const float *in = A->in[v] + (LOAD ? (size_t)t0 * istep : 0);
+    float *out = A->out[v] + (STORE ? (ptrdiff_t)(t0 - lag - A->o0) * ostep : 0);
+    const v4d xl = A->last[v];
+    v4d S[6], pr[6];
+    /* rs: slot of position t (written), ro: of position t - (2r+2) (leaving) */
+    int os = slot - D2 < 0 ? slot - D2 + M : slot - D2;
+    v4d *rs = ring + (ptrdiff_t)slot * NV, *ro = ring + (ptrdiff_t)os * NV;
+    {
+        const v4d *rp = slot == 0 ? rend - NV : rs - NV;
+        for (int k = 0; k < P; k++) {
+            S[k] = A->S[k * NV + v];
+            pr[k] = rp[k * RS];
+        }
+    }
+    int t = t0;
+    while (t < t1) {
+        int len;
+        if (rc == 0) { /* re-sum positions t-2r-1 .. t-1, oldest first */
+            v4d x = LOAD ? loadn(in, kv) : xl;
+            for (int k = 0; k < P; k++) {
+                const v4d *rk = ring + k * RS;
+                int m = slot - W < 0 ? slot - W + M : slot - W;
+                v4d sum = rk[(ptrdiff_t)m * NV];
+                for (int j = 1; j < W; j++) {
+                    m = m + 1 == M ? 0 : m + 1;
+                    sum += rk[(ptrdiff_t)m * NV];
+                }
+                v4d old = ro[k * RS];
+                S[k] = sum;
+                rs[k * RS] = x;
+                pr[k] = x;
+                x = S[k] + a * (old + x);
+            }
+            if (STORE) {
+                storen_clamped(out, x * g, kv);
+                out += ostep;
+            }
+            if (LOAD)
+                in += istep;
+            rs += NV;
+            ro += NV;
+            len = 1;
+        } else {
+            len = t1 - t;
+            if (M - slot < len)
+                len = M - slot;
+            if (M - os < len)
+                len = M - os;
+            if (resum - rc < len)
+                len = resum - rc;
+            if (kv == 4) {
+                for (int i = 0; i < len; i++) {
+                    v4d x = LOAD ? load4(in) : xl;
+#pragma GCC unroll 6
+                    for (int k = 0; k < P; k++) {
+                        v4d old = ro[k * RS];
+                        S[k] = S[k] + (pr[k] - old);
+                        rs[k * RS] = x;
+                        pr[k] = x;
+                        x = S[k] + a * (old + x);
+                    }
+                    if (STORE) {
+                        store4_clamped(out, x * g);
+                        out += ostep;
+                    }
+                    if (LOAD)
+                        in += istep;
+                    rs += NV;
+                    ro += NV;
+                }
+            } else {
+                for (int i = 0; i < len; i++) {
+                    v4d x = LOAD ? loadn(in, kv) : xl;
+                    for (int k = 0; k < P; k++) {
+                        v4d old = ro[k * RS];
+                        S[k] = S[k] + (pr[k] - old);
+                        rs[k * RS] = x;
+                        pr[k] = x;
+                        x = S[k] + a * (old + x);
+                    }
+                    if (STORE) {
+                        storen_clamped(out, x * g, kv);
+                        out += ostep;
+                    }
+                    if (LOAD)
+                        in += istep;
+                    rs += NV;
+                    ro += NV;
+                }
+            }
+        }
+        t += len;
+        slot += len;
+        if (slot == M)
+            rs = ring, slot = 0;
+        os += len;
+        if (os == M)
+            ro = ring, os = 0;
+        rc += len;
+        if (rc == resum)
+            rc = 0;
+    }
+    for (int k = 0; k < P; k++)
+        A->S[k * NV + v] = S[k];
+}
+
+static inline __attribute__((always_inline)) void box_sweep(const blur_plan *p, const int P,
+                                                            const int NV, const box_args *A)
+{
+    const int M = p->ring, W = 2 * p->r + 1, lag = P * (p->r + 1);
+    const ptrdiff_t RS = (ptrdiff_t)M * NV;
+    const double a = p->alpha;
+    const int n = A->n, s0 = A->o0 + lag, T = A->o1 + lag;
+    for (int v = 0; v < A->groups; v++) {
+        v4d c = loadn(A->in[v], A->k[v]);
+        A->last[v] = loadn(A->in[v] + (size_t)(n - 1) * A->istep, A->k[v]);
+        for (int k = 0; k < P; k++) {
+            v4d *rk = A->ring + k * RS + v;
+            for (int m = 0; m < M; m++)
+                rk[(ptrdiff_t)m * NV] = c;
+            A->S[k * NV + v] = c - c;
+            v4d s = c;
+            for (int j = 1; j < W; j++)
+                s += c;
+            c = s + a * (c + c);
+        }
+    }
+    int slot = 0, rc = 0;
+    for (int tb = 0; tb < T; tb += BOX_BLOCK) {
+        const int te = T - tb < BOX_BLOCK ? T : tb + BOX_BLOCK;
+        if (A->istep > 64 && te < n) /* rows far apart: no prefetcher follows that stride */
+            for (int t = te; t < te + BOX_BLOCK && t < n; t++)
+                for (int v = 0; v < A->groups; v += 4)
+                    __builtin_prefetch(A->in[v] + (size_t)t * A->istep);
+        for (int v = 0; v < A->groups; v++) {
+            int t = tb, sl = slot, r = rc;
+            while (t < te) {
+                int tend = te;
+                if (t < n && n < tend)
+                    tend = n;
+                if (t < s0 && s0 < tend)
+                    tend = s0;
+                if (t < n) {
+                    if (t >= s0)
+                        box_seg(p, P, NV, 1, 1, A, v, t, tend, sl, r);
+                    else
+                        box_seg(p, P, NV, 1, 0, A, v, t, tend, sl, r);
+                } else {
+                    if (t >= s0)
+                        box_seg(p, P, NV, 0, 1, A, v, t, tend, sl, r);
+                    else
+                        box_seg(p, P, NV, 0, 0, A, v, t, tend, sl, r);
+                }
+                sl = (int)(((long long)sl + (tend - t)) % M);
+                r = (int)(((long long)r + (tend - t)) % p->resum);
+                t = tend;
+            }
+        }
+        slot = (int)(((long long)slot + (te - tb)) % M);
+        rc = (int)(((long long)rc + (te - tb)) % p->resum);
+    }
+}
+
+#define BOX_V_NV (V_LANES / 4)
+#define BOX_SWEEP(P)                                                                            \
+    FX_CLONES static void box_sweep##P##v(const blur_plan *p, const box_args *A)               \
+    {                                                                                           \
+        box_sweep(p, P, BOX_V_NV, A);                                                           \
+    }                                                                                           \
+    FX_CLONES static void box_sweep##P##h(const blur_plan *p, const box_args *A)               \
+    {                                                                                           \
+        box_sweep(p, P, H_ROWS, A);                                                             \
+    }
+BOX_SWEEP(2)
+BOX_SWEEP(3)
+BOX_SWEEP(4)
+BOX_SWEEP(5)
+BOX_SWEEP(6)
+
+static void box_run(const blur_plan *p, box_args *A, v4d *scratch)
+{
+    const size_t ring = (size_t)p->passes * (size_t)p->ring * (size_t)A->NV;
+    A->ring = scratch;
+    A->S = scratch + ring;
+    A->last = A->S + (size_t)p->passes * A->NV;
+    int h = A->NV == H_ROWS;
+    switch (p->passes) {
+    case 2: h ? box_sweep2h(p, A) : box_sweep2v(p, A); break;
+    case 3: h ? box_sweep3h(p, A) : box_sweep3v(p, A); break;
+    case 4: h ? box_sweep4h(p, A) : box_sweep4v(p, A); break;
+    case 5: h ? box_sweep5h(p, A) : box_sweep5v(p, A); break;
+    default: h ? box_sweep6h(p, A) : box_sweep6v(p, A); break;
+    }
+}
+
+/* Box, vertical: strip of L <= V_LANES floats (any channels), rows 0..n-1 of `in` (`stride`
+ * floats apart), output rows o0..o1-1 to out (row o0 at `out`, `ostride` apart). */
+static void box_vertical(const blur_plan *p, const float *in, size_t stride, int n, int o0, int o1,
+                         float *out, size_t ostride, int L, v4d *scratch)
+{
+    box_args A;
+    A.NV = BOX_V_NV;
+    A.groups = (L + 3) / 4;
+    for (int v = 0; v < A.groups; v++) {
+        A.in[v] = in + 4 * v;
+        A.out[v] = out + 4 * v;
+        A.k[v] = L - 4 * v < 4 ? L - 4 * v : 4;
+    }
+    A.istep = stride;
+    A.ostep = (ptrdiff_t)ostride;
+    A.n = n, A.o0 = o0, A.o1 = o1;
+    box_run(p, &A, scratch);
+}
+
+/* Box, horizontal, RGBA: H_ROWS rows at once (as deriche_rows4: in[r] row r at column sx0,
+ * out[r] row r at column sx0, NULL rows absent and last). */
+static void box_rows4(const blur_plan *p, const float *const *in, float *const *out, int n, int o0,
+                      int o1, v4d *scratch)
+{
+    box_args A;
+    A.NV = H_ROWS;
+    A.groups = 0;
+    for (int r = 0; r < H_ROWS && out[r]; r++) {
+        A.in[r] = in[r];
+        A.out[r] = out[r] + (size_t)o0 * 4;
+        A.k[r] = 4;
+        A.groups++;
+    }
+    A.istep = 4;
+    A.ostep = 4;
+    A.n = n, A.o0 = o0, A.o1 = o1;
+    box_run(p, &A, scratch);
+}
+
+/* v4d of scratch box_vertical (NV = BOX_V_NV) / box_rows4 (NV = H_ROWS) need. */
+static size_t box_scratch_v4d(const blur_plan *p, int NV)
+{
+    return ((size_t)p->passes * ((size_t)p->ring + 1) + 1) * (size_t)NV;
+}
+
 /* Vertical pass: strips of columns [c, c + L) (in floats) of rows sy0..sy1-1 -> vbuf rows
  * oy0..oy1-1. */
 static void vertical_range(void *user, int begin, int end, int worker)
@@ -606,6 +922,11 @@ static void vertical_range(void *user, int begin, int end, int worker)
     for (int strip = begin; strip < end; strip++) {
         int c0 = c_first + strip * Lmax;
         int L = c_end - c0 < Lmax ? c_end - c0 : Lmax;
+        if (j->fast_v && j->plan->alg == FX_BLUR_BOX) {
+            box_vertical(j->plan, j->src + (size_t)j->sy0 * row + c0, row, n, j->oy0 - j->sy0,
+                         j->oy1 - j->sy0, j->vorigin + c0, j->vstride, L, (v4d *)A);
+            continue;
+        }
         if (j->fast_v) {
             v4d *st = (v4d *)A, *cb = st + 5 * (size_t)(Lmax / 4);
             float *xs = (float *)(cb + (size_t)(j->oy1 - j->oy0) * (Lmax / 4));
@@ -656,7 +977,10 @@ static void horizontal_range(void *user, int begin, int end, int worker)
                 in[r] = j->vorigin + (size_t)(r0 + rr) * j->vstride + (size_t)j->sx0 * 4;
                 out[r] = r < nr ? j->dst + (size_t)(j->oy0 + r0 + r) * row + (size_t)j->sx0 * 4 : NULL;
             }
-            deriche_rows4(j->plan, in, out, n, j->ox0 - j->sx0, j->ox1 - j->sx0, (v4d *)A);
+            if (j->plan->alg == FX_BLUR_BOX)
+                box_rows4(j->plan, in, out, n, j->ox0 - j->sx0, j->ox1 - j->sx0, (v4d *)A);
+            else
+                deriche_rows4(j->plan, in, out, n, j->ox0 - j->sx0, j->ox1 - j->sx0, (v4d *)A);
             continue;
         }
         int L = nr * C;
@@ -749,7 +1073,7 @@ fx_result fx_blur_image(fx_context *ctx, const float *src, float *dst, int width
     j->sx1 = (int)((long long)r.x1 + H > width ? width : (long long)r.x1 + H);
     j->sy0 = (int)((long long)r.y0 - H < 0 ? 0 : (long long)r.y0 - H);
     j->sy1 = (int)((long long)r.y1 + H > height ? height : (long long)r.y1 + H);
-    j->fast_v = FX_BLUR_FAST && plan.alg == FX_BLUR_RECURSIVE;
+    j->fast_v = FX_BLUR_FAST && (plan.alg == FX_BLUR_RECURSIVE || plan.alg == FX_BLUR_BOX);
     j->fast_h = j->fast_v && channels == 4;
     j->strip_lanes = j->fast_v ? V_LANES_REC : V_LANES;
     j->block_rows = j->fast_h ? H_ROWS : (H_LANES / channels < 1 ? 1 : H_LANES / channels);
@@ -759,15 +1083,19 @@ fx_result fx_blur_image(fx_context *ctx, const float *src, float *dst, int width
     const size_t d = sizeof(double);
     size_t nv = (size_t)(j->sy1 - j->sy0), nh = (size_t)(j->sx1 - j->sx0), ext = (size_t)plan.ext;
     size_t sv, sh;
-    if (j->fast_v)
+    if (j->fast_v && plan.alg == FX_BLUR_BOX)
+        sv = box_scratch_v4d(&plan, BOX_V_NV) * sizeof(v4d);
+    else if (j->fast_v)
         sv = (5 + (size_t)(r.y1 - r.y0)) * j->strip_lanes * d + (nv + 7) * j->strip_lanes * sizeof(float);
     else
-        sv = (2 * (nv + 2 * ext) + 4) * (size_t)j->strip_lanes * d;
+        sv = (2 * (nv + 2 * ext) * (size_t)j->strip_lanes + lane_state_doubles(&plan, j->strip_lanes)) * d;
     size_t Lh = (size_t)j->block_rows * channels;
-    if (j->fast_h)
+    if (j->fast_h && plan.alg == FX_BLUR_BOX)
+        sh = box_scratch_v4d(&plan, H_ROWS) * sizeof(v4d);
+    else if (j->fast_h)
         sh = (size_t)(r.x1 - r.x0) * H_ROWS * sizeof(v4d);
     else
-        sh = (2 * (nh + 2 * ext) + 4) * Lh * d;
+        sh = (2 * (nh + 2 * ext) * Lh + lane_state_doubles(&plan, (int)Lh)) * d;
     j->scratch_bytes = round_up64(sv > sh ? sv : sh);
 
     /* The vertical result goes straight to dst when the computed columns are the written
@@ -831,10 +1159,11 @@ fx_result fx_blur_line(fx_context *ctx, const float *in, float *out, int n, int 
         return FX_OK;
     }
     double *A = lane_buffer(n, 1, plan.ext), *Bf = lane_buffer(n, 1, plan.ext);
-    double s[4];
-    if (!A || !Bf) {
+    double *s = fx_mem_alloc(lane_state_doubles(&plan, 1) * sizeof(double));
+    if (!A || !Bf || !s) {
         fx_mem_free(A);
         fx_mem_free(Bf);
+        fx_mem_free(s);
         plan_free(&plan);
         return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
     }
@@ -846,6 +1175,7 @@ fx_result fx_blur_line(fx_context *ctx, const float *in, float *out, int n, int 
         out[(size_t)i * stride] = to_float_clamped(res[i]);
     fx_mem_free(A);
     fx_mem_free(Bf);
+    fx_mem_free(s);
     plan_free(&plan);
     return FX_OK;
 }
