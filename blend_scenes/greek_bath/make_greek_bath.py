@@ -31,12 +31,28 @@ STATUE_XY = (-4.6, 0.2)
 SUN_AZIMUTH = -13.5   # degrees from +Y (negative: towards +X)
 SUN_ELEVATION = 10.0
 
+STATUE_ANCHOR = (STATUE_XY[0], STATUE_XY[1], 2.0)   # chest height: the censor grid's corner
+
+# The bath's stack: caustics on the water (by material name, world-anchored from the
+# Position pass, animated by the frame time), crepuscular rays from the `Sun` through
+# the colonnade (sky mask from Depth: bright walls cast none), then the censored statue
+# (cells anchored to a world point on it, so they stay put while the camera moves).
 RECIPE = {
     "version": 1,
     "quality": "final",
     "effects": [
+        {"effect": "voronoi_caustics", "enabled": True,
+         "params": {"mode": "physical", "points": 196, "tile_size": 3.0, "strength": 0.8,
+                    "line_width": 0.12, "speed": 2.0, "environment_strength": 0.25,
+                    "world_color": [0.55, 0.7, 0.95]},
+         "mask": {"material": "Water"}},
+        {"effect": "god_rays", "enabled": True,
+         "params": {"light": "Sun", "occlusion": "sky", "threshold": 0.9, "knee": 0.5,
+                    "max_source": 6.0, "decay": 0.975, "density": 0.95, "weight": 1.0,
+                    "exposure": 0.006}},
         {"effect": "pixelate", "enabled": True,
-         "params": {"mode": "cells", "cell_size": 12, "anchor": "mask"},
+         "params": {"mode": "cells", "cell_size": 12, "anchor": "world",
+                    "world_point_auto": False, "world_point": list(STATUE_ANCHOR)},
          "mask": {"object": "Statue"}},
     ],
 }

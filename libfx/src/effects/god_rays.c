@@ -102,7 +102,7 @@ static const fx_param_def god_rays_param_defs[] = {
     FX_P_INT(god_rays_params, seed, "seed", 0, -2147483647, 2147483647, 0, 100, "", "Jitter seed"),
     FX_P_FLOAT(god_rays_params, polar_resolution, "polar_resolution", 1.0, 0.05, 16.0, 0.25, 4.0, "",
                "polar: lines per pixel of arc at the farthest pixel"),
-    FX_P_INT(god_rays_params, polar_levels, "polar_levels", 3, 1, 32, 1, 8, "",
+    FX_P_INT(god_rays_params, polar_levels, "polar_levels", 2, 1, 32, 1, 8, "",
              "polar: decay rates per octave of distance (accuracy of the decay)"),
 };
 
@@ -394,8 +394,8 @@ const fx_effect_class fx_effect_god_rays = {
     .param_count = FX_COUNT_OF(god_rays_param_defs),
     .presets = {
         "{\"method\": \"polar\", \"polar_resolution\": 0.5, \"polar_levels\": 1}",
+        "{\"method\": \"polar\", \"polar_resolution\": 0.75, \"polar_levels\": 2}",
         "{\"method\": \"polar\", \"polar_resolution\": 1, \"polar_levels\": 2}",
-        "{\"method\": \"polar\", \"polar_resolution\": 2, \"polar_levels\": 3}",
         "{\"method\": \"naive\", \"samples\": 2000, \"jitter\": false}",
     },
     .passes = god_rays_passes,

@@ -230,7 +230,7 @@ static inline double oat(const double *o, int m, int ch)
 /* Kernel-weighted mean of occ over the path [b_lo, m] (bins), kernel exp(-lam (m - x)),
  * trapezoid rule over the whole bins and the fractional end. Fk: running sums
  * Fk[i] = sum_{i' <= i} o[i'] exp(-lam (i - i')). */
-static void path_mean(const double *Fk, const double *o, double lam, int m, double b_lo, double out[3])
+static void path_mean(const double *Fk, const double *o, double lam, double em1, int m, double b_lo, double out[3])
 {
     double m0f = ceil(b_lo);
     double f = m0f - b_lo;
@@ -241,8 +241,12 @@ static void path_mean(const double *Fk, const double *o, double lam, int m, doub
             out[ch] = o[3 * m + ch];
         return;
     }
-    double e1n = exp(-lam * (n - 1)), ef = exp(-lam * (n - 1 + f)), en = exp(-lam * n);
-    double t1 = lam < 1e-12 ? (double)n : expm1(-lam * n) / expm1(-lam);
+    /* two exponentials per call; the rest from them (em1 = expm1(-lam), per level) */
+    double e1n = exp(-lam * (n - 1));
+    double en = e1n * (1.0 + em1);
+    double ef = f > 0.0 ? e1n * exp(-lam * f) : e1n;
+    double ln_ = lam * n;
+    double t1 = lam < 1e-12 ? (double)n : (ln_ < 0.5 ? expm1(-ln_) : en - 1.0) / em1;
     double den = t1 - 0.5 - 0.5 * e1n + 0.5 * f * (e1n + ef);
     for (int ch = 0; ch < 3; ch++) {
         double t = Fk[3 * m + ch] - (m0 >= 1 ? en * Fk[3 * (m0 - 1) + ch] : 0.0);
@@ -287,7 +291,7 @@ static void polar_lines(void *user, int begin, int end, int worker)
                 }
             for (int m = 0; m < cnt; m++) {
                 double rho = ln->b0 + m, v[3];
-                path_mean(F, o, 0.0, m, m - d * rho, v);
+                path_mean(F, o, 0.0, 0.0, m, m - d * rho, v);
                 for (int ch = 0; ch < 3; ch++)
                     out[3 * m + ch] = to_float(rb->scale * v[ch]);
             }
@@ -329,7 +333,8 @@ static void polar_lines(void *user, int begin, int end, int worker)
             for (int q = 0; q < 4; q++) {
                 int kk = kb - 1 + q - k_lo;
                 kk = kk < 0 ? 0 : kk >= K ? K - 1 : kk;
-                path_mean(F + (size_t)kk * j->max_count * 3, o, exp((k_lo + kk) * j->hstep), m, m - d * rho, v[q]);
+                double lam = exp((k_lo + kk) * j->hstep);
+                path_mean(F + (size_t)kk * j->max_count * 3, o, lam, expm1(-lam), m, m - d * rho, v[q]);
             }
             for (int ch = 0; ch < 3; ch++) {
                 /* Catmull-Rom in log(rate), clamped to the two middle values */
