@@ -3,6 +3,8 @@
 #include "io/cryptomatte_meta.h"
 
 #include <errno.h>
+#include <limits.h>
+#include <stdarg.h>
 #include <stdio.h>
 #include <string.h>
 #include <sys/stat.h>
@@ -43,6 +45,59 @@ fx_result fx_exr_fail(fx_context *ctx, fx_exr_file *f, exr_result_t rv, const ch
      * before anything is allocated; OpenEXRCore 3.1.5 even says "out of memory" for a
      * chunk that does not decompress), so it is a bad file. */
     return fx_fail(ctx, FX_ERR_BAD_FILE, "'%s': %s: %s", f->path, what, detail);
+}
+
+void fx_exr_job_error_init(fx_exr_job_error *e)
+{
+    pthread_mutex_init(&e->lock, NULL);
+    e->first = INT_MAX;
+    e->code = FX_OK;
+    e->message[0] = '\0';
+}
+
+void fx_exr_job_error_destroy(fx_exr_job_error *e)
+{
+    pthread_mutex_destroy(&e->lock);
+}
+
+int fx_exr_job_should_run(fx_exr_job_error *e, int chunk)
+{
+    pthread_mutex_lock(&e->lock);
+    int run = chunk < e->first;
+    pthread_mutex_unlock(&e->lock);
+    return run;
+}
+
+static void job_failv(fx_exr_job_error *e, int chunk, fx_result code, const char *fmt, va_list ap)
+{
+    pthread_mutex_lock(&e->lock);
+    if (chunk < e->first) {
+        vsnprintf(e->message, sizeof e->message, fmt, ap);
+        e->code = code;
+        e->first = chunk;
+    }
+    pthread_mutex_unlock(&e->lock);
+}
+
+void fx_exr_job_fail(fx_exr_job_error *e, int chunk, fx_result code, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    job_failv(e, chunk, code, fmt, ap);
+    va_end(ap);
+}
+
+void fx_exr_job_fail_exr(fx_exr_job_error *e, int chunk, const char *path, exr_result_t rv, const char *what)
+{
+    const char *detail = last_error[0] ? last_error : exr_get_default_error_message(rv);
+    fx_exr_job_fail(e, chunk, FX_ERR_BAD_FILE, "'%s': %s: %s", path, what, detail);
+}
+
+fx_result fx_exr_job_result(const fx_context *ctx, fx_exr_job_error *e)
+{
+    if (e->first == INT_MAX)
+        return FX_OK;
+    return fx_fail(ctx, e->code, "%s", e->message);
 }
 
 const char *fx_exr_string_attr(const fx_exr_file *f, int part, const char *name)

@@ -53,6 +53,31 @@ void fx_exr_clear_error(void);
 /* "none", "rle", "zips", "zip", "piz", "pxr24", "b44", "b44a", "dwaa", "dwab". */
 const char *fx_exr_compression_name(exr_compression_t c);
 
+/* ---- parallel chunk loops (decoding and encoding chunks on the context's pool) ----
+ * Workers cannot record errors on the context (messages are per calling thread), so a
+ * loop collects its first error here and the calling thread reports it afterwards.
+ * "First" is the failed chunk of the lowest index, not the earliest in time: chunks
+ * are handed out in increasing order and every chunk below a failure still runs, so
+ * the message is the one the serial loop gives, whatever the thread count. */
+typedef struct fx_exr_job_error {
+    pthread_mutex_t lock;
+    int first;           /* lowest failed chunk; INT_MAX: none (under lock) */
+    fx_result code;
+    char message[1024];
+} fx_exr_job_error;
+
+void fx_exr_job_error_init(fx_exr_job_error *e);
+void fx_exr_job_error_destroy(fx_exr_job_error *e);
+/* Whether `chunk` should still run: no chunk below it has failed. */
+int fx_exr_job_should_run(fx_exr_job_error *e, int chunk);
+/* Records the failure of `chunk` (kept if it is the lowest so far). Any thread. */
+void fx_exr_job_fail(fx_exr_job_error *e, int chunk, fx_result code, const char *fmt, ...) FX_PRINTF(4, 5);
+/* The same with the calling thread's OpenEXR message, worded as fx_exr_fail does:
+ * "'<path>': <what>: <message>" (FX_ERR_BAD_FILE). */
+void fx_exr_job_fail_exr(fx_exr_job_error *e, int chunk, const char *path, exr_result_t rv, const char *what);
+/* After the loop, on the calling thread: FX_OK, or the kept error recorded on ctx. */
+fx_result fx_exr_job_result(const fx_context *ctx, fx_exr_job_error *e);
+
 /* A string attribute of a part, or NULL. */
 const char *fx_exr_string_attr(const fx_exr_file *f, int part, const char *name);
 

@@ -14,7 +14,10 @@
 #include "io/exr_channels.h"
 #include "io/exr_common.h"
 #include "io/exr_dwa_fallback.h"
+#include "core/parallel.h"
 
+#include <limits.h>
+#include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -67,140 +70,219 @@ static fx_result resolve_view(fx_context *ctx, const fx_exr_file *f, const char 
     return fx_fail(ctx, FX_ERR_INVALID_ARGUMENT, "'%s' has no view '%s' (views: %s)", f->path, want, list);
 }
 
-/* Decodes the planned channels of one scanline or tiled part with OpenEXRCore. */
+/* Decoding one scanline or tiled part: its chunks are independent, so they are decoded
+ * on the context's pool. OpenEXRCore allows it: a read context has parsed the whole
+ * header when exr_start_read returns and may then be used by several threads at once
+ * (openexr_context.h: the default file stream must give "thread-safe concurrent
+ * access", and it reads with pread), the chunk table is loaded once with an atomic
+ * swap (chunk.c), and an exr_decode_pipeline_t is per thread (openexr_decode.h). So
+ * each worker keeps its own pipeline and scratch planes; chunks cover disjoint pixels
+ * of the passes, and what a chunk decodes does not depend on the worker. */
+typedef struct decode_job {
+    reader *rd;
+    int p;
+    int tiled;
+    int32_t lines;
+    uint32_t tile_w, tile_h;
+    int nx, chunks;
+    int64_t cw, chh;               /* the largest chunk */
+    size_t scratch_floats;         /* per worker */
+    float *scratch;                /* workers * scratch_floats */
+    exr_decode_pipeline_t *dec;    /* per worker */
+    unsigned char *have_dec;       /* per worker */
+    atomic_int done;
+    int reported;                  /* chunks done at the last progress report (worker 0) */
+    fx_exr_job_error err;
+} decode_job;
+
+static void decode_chunk(decode_job *j, int k, int worker)
+{
+    reader *rd = j->rd;
+    fx_exr_file *f = rd->f;
+    const int p = j->p;
+    const fx_exr_part *pt = &f->parts[p];
+    exr_decode_pipeline_t *dec = &j->dec[worker];
+    float *scratch = j->scratch + (size_t)worker * j->scratch_floats;
+    char what[160];
+    exr_chunk_info_t ci;
+    exr_result_t rv;
+    int x0, y0;
+
+    fx_exr_clear_error(); /* this thread's OpenEXR message: never a stale one */
+    if (j->tiled) {
+        int tx = k % j->nx, ty = k / j->nx;
+        rv = exr_read_tile_chunk_info(f->exr, p, tx, ty, 0, 0, &ci);
+        /* Tile coordinates are counted from the data window's corner. */
+        x0 = pt->dw[0] + tx * (int)j->tile_w;
+        y0 = pt->dw[1] + ty * (int)j->tile_h;
+        snprintf(what, sizeof what, "part %d, tile (%d, %d)", p, tx, ty);
+    } else {
+        y0 = pt->dw[1] + k * j->lines;
+        x0 = pt->dw[0];
+        rv = exr_read_scanline_chunk_info(f->exr, p, y0, &ci);
+        snprintf(what, sizeof what, "part %d, scanlines from %d", p, y0);
+    }
+    if (rv != EXR_ERR_SUCCESS) {
+        fx_exr_job_fail_exr(&j->err, k, f->path, rv, what);
+        return;
+    }
+    rv = j->have_dec[worker] ? exr_decoding_update(f->exr, p, &ci, dec)
+                             : exr_decoding_initialize(f->exr, p, &ci, dec);
+    if (rv != EXR_ERR_SUCCESS) {
+        fx_exr_job_fail_exr(&j->err, k, f->path, rv, what);
+        return;
+    }
+    j->have_dec[worker] = 1;
+    /* Never trust the chunk's size: it must sit inside the part's window. */
+    if (ci.width <= 0 || ci.height <= 0 || ci.width > j->cw || ci.height > j->chh ||
+        x0 + (int64_t)ci.width - 1 > pt->dw[2] || y0 + (int64_t)ci.height - 1 > pt->dw[3]) {
+        fx_exr_job_fail(&j->err, k, FX_ERR_BAD_FILE, "'%s': %s: chunk of %dx%d outside the data window",
+                        f->path, what, ci.width, ci.height);
+        return;
+    }
+    /* Decode into planes of a scratch buffer, then scatter into the passes.
+     * Straight into the interleaved passes would be faster, but OpenEXRCore
+     * 3.1.5's interleaved fast paths (unpack_half_to_float_4chan_interleave...)
+     * assume the file's channel order is the memory order: a file stored as
+     * A,B,G,R came out with alpha in red (ColorCodedLevels.exr). */
+    int planes = 0;
+    size_t plane = (size_t)ci.width * (size_t)ci.height;
+    for (int c = 0; c < dec->channel_count; c++) {
+        exr_coding_channel_info_t *ch = &dec->channels[c];
+        const chan_dest *d = c < pt->channel_count ? &rd->dest[pt->first_chan + c] : NULL;
+        if (!d || !d->base) {
+            ch->decode_to_ptr = NULL; /* skipped: not decoded at all */
+            continue;
+        }
+        ch->decode_to_ptr = (uint8_t *)(scratch + (size_t)planes * plane);
+        ch->user_pixel_stride = (int32_t)sizeof(float);
+        ch->user_line_stride = ci.width * (int32_t)sizeof(float);
+        ch->user_data_type = EXR_PIXEL_FLOAT;
+        ch->user_bytes_per_element = sizeof(float);
+        planes++;
+    }
+    if (!planes)
+        return;
+    if ((rv = exr_decoding_choose_default_routines(f->exr, p, dec)) != EXR_ERR_SUCCESS ||
+        (rv = exr_decoding_run(f->exr, p, dec)) != EXR_ERR_SUCCESS) {
+        fx_exr_job_fail_exr(&j->err, k, f->path, rv, what);
+        return;
+    }
+    planes = 0;
+    for (int c = 0; c < dec->channel_count && c < pt->channel_count; c++) {
+        const chan_dest *d = &rd->dest[pt->first_chan + c];
+        if (!d->base)
+            continue;
+        const float *src = scratch + (size_t)planes++ * plane;
+        for (int y = 0; y < ci.height; y++) {
+            float *dst = d->base +
+                         ((size_t)(y0 + y - rd->dw[1]) * (size_t)rd->width + (size_t)(x0 - rd->dw[0])) *
+                             (size_t)d->stride +
+                         (size_t)d->slot;
+            const float *row = src + (size_t)y * (size_t)ci.width;
+            for (int x = 0; x < ci.width; x++)
+                dst[(size_t)x * (size_t)d->stride] = row[x];
+        }
+    }
+}
+
+static void decode_range(void *user, int begin, int end, int worker)
+{
+    decode_job *j = user;
+    for (int k = begin; k < end; k++) {
+        if (!fx_exr_job_should_run(&j->err, k))
+            continue;
+        decode_chunk(j, k, worker);
+        int done = atomic_fetch_add(&j->done, 1) + 1;
+        /* Progress (and cancellation) from the calling thread only: it is worker 0. */
+        if (worker == 0 && done - j->reported >= 16) {
+            j->reported = done;
+            if (fx_progress(j->rd->ctx, "read", (double)done / j->chunks) != FX_OK)
+                fx_exr_job_fail(&j->err, k + 1, FX_ERR_CANCELLED, "%s", fx_context_error(j->rd->ctx));
+        }
+    }
+}
+
 static fx_result decode_core_part(reader *rd, int p)
 {
     fx_exr_file *f = rd->f;
     const fx_exr_part *pt = &f->parts[p];
     exr_result_t rv;
-    int tiled = pt->storage == EXR_STORAGE_TILED;
-    int32_t lines = 1;
-    uint32_t tile_w = 0, tile_h = 0;
-    int nx = 1, ny = 0;
+    decode_job j;
+    memset(&j, 0, sizeof j);
+    j.rd = rd;
+    j.p = p;
+    j.tiled = pt->storage == EXR_STORAGE_TILED;
+    j.lines = 1;
+    j.nx = 1;
+    int ny = 0;
     int64_t pw = (int64_t)pt->dw[2] - pt->dw[0] + 1, ph = (int64_t)pt->dw[3] - pt->dw[1] + 1;
 
-    if (tiled) {
+    if (j.tiled) {
         int32_t tw = 0, th = 0;
         if ((rv = exr_get_tile_sizes(f->exr, p, 0, 0, &tw, &th)) != EXR_ERR_SUCCESS || tw <= 0 || th <= 0)
             return fx_exr_fail(rd->ctx, f, rv, "cannot read the tile size");
-        tile_w = (uint32_t)tw, tile_h = (uint32_t)th;
-        nx = (int)((pw + tw - 1) / tw);
+        j.tile_w = (uint32_t)tw, j.tile_h = (uint32_t)th;
+        j.nx = (int)((pw + tw - 1) / tw);
         ny = (int)((ph + th - 1) / th);
     } else {
-        if ((rv = exr_get_scanlines_per_chunk(f->exr, p, &lines)) != EXR_ERR_SUCCESS || lines <= 0)
+        if ((rv = exr_get_scanlines_per_chunk(f->exr, p, &j.lines)) != EXR_ERR_SUCCESS || j.lines <= 0)
             return fx_exr_fail(rd->ctx, f, rv, "cannot read the scanlines per chunk");
-        ny = (int)((ph + lines - 1) / lines);
+        ny = (int)((ph + j.lines - 1) / j.lines);
     }
+    if ((int64_t)j.nx * ny > INT_MAX)
+        return fx_fail(rd->ctx, FX_ERR_LIMIT, "'%s': part %d: too many chunks", f->path, p);
+    j.chunks = j.nx * ny;
 
-    /* Scratch for one chunk: a plane per decoded channel. */
+    /* Scratch for one chunk per worker: a plane per decoded channel. */
     int used = 0;
     for (int c = 0; c < pt->channel_count; c++)
         used += rd->dest[pt->first_chan + c].base != NULL;
-    int64_t cw = tiled ? (int64_t)tile_w : pw, chh = tiled ? (int64_t)tile_h : lines;
-    if (cw > pw)
-        cw = pw;
-    if (chh > ph)
-        chh = ph;
+    j.cw = j.tiled ? (int64_t)j.tile_w : pw, j.chh = j.tiled ? (int64_t)j.tile_h : j.lines;
+    if (j.cw > pw)
+        j.cw = pw;
+    if (j.chh > ph)
+        j.chh = ph;
+    int workers = fx_parallel_workers(rd->ctx);
+    if (workers > j.chunks)
+        workers = j.chunks > 0 ? j.chunks : 1;
     size_t scratch_bytes;
-    if (!fx_size_mul(&scratch_bytes, (size_t)cw * (size_t)chh, (size_t)used, sizeof(float)))
+    if (!fx_size_mul(&j.scratch_floats, (size_t)j.cw, (size_t)j.chh, (size_t)used) ||
+        !fx_size_mul(&scratch_bytes, j.scratch_floats, (size_t)workers, sizeof(float)))
         return fx_fail(rd->ctx, FX_ERR_LIMIT, "'%s': part %d: chunk size overflows", f->path, p);
     char what[1200];
     snprintf(what, sizeof what, "file '%s' part %d decoding", f->path, p);
     fx_result result = fx_check_budget(rd->ctx, scratch_bytes, what);
     if (result != FX_OK)
         return result;
-    float *scratch = fx_mem_alloc(scratch_bytes ? scratch_bytes : 1);
-    if (!scratch)
+    j.scratch = fx_mem_alloc(scratch_bytes ? scratch_bytes : 1);
+    j.dec = fx_mem_calloc((size_t)workers, sizeof *j.dec);
+    j.have_dec = fx_mem_calloc((size_t)workers, 1);
+    if (!j.scratch || !j.dec || !j.have_dec) {
+        fx_mem_free(j.scratch);
+        fx_mem_free(j.dec);
+        fx_mem_free(j.have_dec);
         return fx_fail(rd->ctx, FX_ERR_OUT_OF_MEMORY, "'%s': out of memory decoding part %d", f->path, p);
-
-    exr_decode_pipeline_t dec = EXR_DECODE_PIPELINE_INITIALIZER;
-    int have_decoder = 0;
-    for (int ty = 0; ty < ny && result == FX_OK; ty++) {
-        for (int tx = 0; tx < nx && result == FX_OK; tx++) {
-            exr_chunk_info_t ci;
-            int x0, y0;
-            if (tiled) {
-                rv = exr_read_tile_chunk_info(f->exr, p, tx, ty, 0, 0, &ci);
-                /* Tile coordinates are counted from the data window's corner. */
-                x0 = pt->dw[0] + tx * (int)tile_w;
-                y0 = pt->dw[1] + ty * (int)tile_h;
-                snprintf(what, sizeof what, "part %d, tile (%d, %d)", p, tx, ty);
-            } else {
-                y0 = pt->dw[1] + ty * lines;
-                x0 = pt->dw[0];
-                rv = exr_read_scanline_chunk_info(f->exr, p, y0, &ci);
-                snprintf(what, sizeof what, "part %d, scanlines from %d", p, y0);
-            }
-            if (rv != EXR_ERR_SUCCESS) {
-                result = fx_exr_fail(rd->ctx, f, rv, what);
-                break;
-            }
-            rv = have_decoder ? exr_decoding_update(f->exr, p, &ci, &dec)
-                              : exr_decoding_initialize(f->exr, p, &ci, &dec);
-            if (rv != EXR_ERR_SUCCESS) {
-                result = fx_exr_fail(rd->ctx, f, rv, what);
-                break;
-            }
-            have_decoder = 1;
-            /* Never trust the chunk's size: it must sit inside the part's window. */
-            if (ci.width <= 0 || ci.height <= 0 || ci.width > cw || ci.height > chh ||
-                x0 + (int64_t)ci.width - 1 > pt->dw[2] ||
-                y0 + (int64_t)ci.height - 1 > pt->dw[3]) {
-                result = fx_fail(rd->ctx, FX_ERR_BAD_FILE, "'%s': %s: chunk of %dx%d outside the data window",
-                                 f->path, what, ci.width, ci.height);
-                break;
-            }
-            /* Decode into planes of a scratch buffer, then scatter into the passes.
-             * Straight into the interleaved passes would be faster, but OpenEXRCore
-             * 3.1.5's interleaved fast paths (unpack_half_to_float_4chan_interleave...)
-             * assume the file's channel order is the memory order: a file stored as
-             * A,B,G,R came out with alpha in red (ColorCodedLevels.exr). */
-            int planes = 0;
-            size_t plane = (size_t)ci.width * (size_t)ci.height;
-            for (int c = 0; c < dec.channel_count; c++) {
-                exr_coding_channel_info_t *ch = &dec.channels[c];
-                const chan_dest *d = c < pt->channel_count ? &rd->dest[pt->first_chan + c] : NULL;
-                if (!d || !d->base) {
-                    ch->decode_to_ptr = NULL; /* skipped: not decoded at all */
-                    continue;
-                }
-                ch->decode_to_ptr = (uint8_t *)(scratch + (size_t)planes * plane);
-                ch->user_pixel_stride = (int32_t)sizeof(float);
-                ch->user_line_stride = ci.width * (int32_t)sizeof(float);
-                ch->user_data_type = EXR_PIXEL_FLOAT;
-                ch->user_bytes_per_element = sizeof(float);
-                planes++;
-            }
-            if (!planes)
-                continue;
-            if ((rv = exr_decoding_choose_default_routines(f->exr, p, &dec)) != EXR_ERR_SUCCESS ||
-                (rv = exr_decoding_run(f->exr, p, &dec)) != EXR_ERR_SUCCESS) {
-                result = fx_exr_fail(rd->ctx, f, rv, what);
-                break;
-            }
-            planes = 0;
-            for (int c = 0; c < dec.channel_count && c < pt->channel_count; c++) {
-                const chan_dest *d = &rd->dest[pt->first_chan + c];
-                if (!d->base)
-                    continue;
-                const float *src = scratch + (size_t)planes++ * plane;
-                for (int y = 0; y < ci.height; y++) {
-                    float *dst = d->base +
-                                 ((size_t)(y0 + y - rd->dw[1]) * (size_t)rd->width + (size_t)(x0 - rd->dw[0])) *
-                                     (size_t)d->stride +
-                                 (size_t)d->slot;
-                    const float *row = src + (size_t)y * (size_t)ci.width;
-                    for (int x = 0; x < ci.width; x++)
-                        dst[(size_t)x * (size_t)d->stride] = row[x];
-                }
-            }
-        }
-        if (result == FX_OK && (ty & 15) == 15)
-            result = fx_progress(rd->ctx, "read", (double)(ty + 1) / ny);
     }
-    if (have_decoder)
-        exr_decoding_destroy(f->exr, &dec);
-    fx_mem_free(scratch);
+    atomic_init(&j.done, 0);
+    fx_exr_job_error_init(&j.err);
+
+    /* One chunk per task (a chunk is thousands of pixels); tasks are taken in
+     * increasing order, which the error rule of fx_exr_job_error relies on. With
+     * fewer chunks than threads the scratch is sized for fewer workers: serial. */
+    if (workers < fx_parallel_workers(rd->ctx))
+        decode_range(&j, 0, j.chunks, 0);
+    else
+        fx_parallel_for_worker(rd->ctx, j.chunks, 1, decode_range, &j);
+    result = fx_exr_job_result(rd->ctx, &j.err);
+
+    for (int w = 0; w < workers; w++)
+        if (j.have_dec[w])
+            exr_decoding_destroy(f->exr, &j.dec[w]);
+    fx_exr_job_error_destroy(&j.err);
+    fx_mem_free(j.have_dec);
+    fx_mem_free(j.dec);
+    fx_mem_free(j.scratch);
     return result;
 }
 

@@ -1,4 +1,5 @@
-/* fx_frame_write_exr: a frame as one scanline part, ZIP compressed.
+/* fx_frame_write_exr: a frame as one scanline part, ZIP compressed (zlib level
+ * FX_EXR_DEFAULT_ZIP_LEVEL; other lossless codecs through fx_exr_write).
  *
  * Channel names: `<Pass>.<letter>` with the letters of passes.h ("Combined.R",
  * "Depth.Z", "Normal.X", "CryptoObject00.R"), passes libfx does not know get R, G, B, A
@@ -14,6 +15,8 @@
 #include "io/exr_camera.h"
 #include "io/exr_common.h"
 #include "io/atomic_file.h"
+#include "io/exr_write.h"
+#include "core/parallel.h"
 
 #include <errno.h>
 #include <fcntl.h>
@@ -125,6 +128,115 @@ static exr_result_t write_attributes(exr_context_t exr, int part, const fx_frame
     return fx_exr_write_cryptos(exr, part, f);
 }
 
+/* Encoding: chunks are packed and compressed on the context's pool, each worker with
+ * its own exr_encode_pipeline_t (openexr_encode.h: one per thread, many threads on one
+ * context), then written in increasing y on the calling thread with
+ * exr_write_scanline_chunk, which OpenEXRCore requires for INCREASING_Y parts and
+ * which fills the chunk table. A worker's pipeline stops short of writing: its
+ * write_fn copies the compressed chunk into a slot of the current batch and
+ * yield_until_ready_fn (which would insist on file order) is dropped. The bytes of a
+ * chunk do not depend on who compressed it, so the file is the same for any thread
+ * count. Batches of chunks bound the memory held for compressed data. */
+typedef struct chunk_slot {
+    uint8_t *data;
+    size_t size, cap;
+    int y;
+} chunk_slot;
+
+typedef struct encode_job {
+    const fx_frame *f;
+    exr_context_t exr;
+    int part;
+    const out_chan *chans;
+    int nchan;
+    const char *path;
+    int32_t lines;
+    int first;                     /* chunk index of slots[0] */
+    chunk_slot *slots;
+    exr_encode_pipeline_t *enc;    /* per worker */
+    unsigned char *have_enc;       /* per worker */
+    fx_exr_job_error err;
+} encode_job;
+
+static exr_result_t stash_chunk(exr_encode_pipeline_t *enc)
+{
+    chunk_slot *slot = enc->encoding_user_data;
+    size_t n = (size_t)enc->compressed_bytes;
+    if (n > slot->cap) {
+        uint8_t *grown = fx_mem_realloc(slot->data, n);
+        if (!grown)
+            return EXR_ERR_OUT_OF_MEMORY;
+        slot->data = grown;
+        slot->cap = n;
+    }
+    if (n)
+        memcpy(slot->data, enc->compressed_buffer, n);
+    slot->size = n;
+    slot->y = enc->chunk.start_y;
+    return EXR_ERR_SUCCESS;
+}
+
+static void encode_chunk(encode_job *j, int k, int worker)
+{
+    const fx_frame *f = j->f;
+    exr_encode_pipeline_t *enc = &j->enc[worker];
+    chunk_slot *slot = &j->slots[k - j->first];
+    int y = k * j->lines;
+    int fy = f->data_window[1] + y;
+    exr_chunk_info_t ci;
+    exr_result_t rv;
+
+    fx_exr_clear_error(); /* this thread's OpenEXR message: never a stale one */
+    if ((rv = exr_write_scanline_chunk_info(j->exr, j->part, fy, &ci)) == EXR_ERR_SUCCESS)
+        rv = j->have_enc[worker] ? exr_encoding_update(j->exr, j->part, &ci, enc)
+                                 : exr_encoding_initialize(j->exr, j->part, &ci, enc);
+    if (rv == EXR_ERR_SUCCESS) {
+        j->have_enc[worker] = 1;
+        for (int c = 0; c < enc->channel_count; c++) {
+            exr_coding_channel_info_t *ch = &enc->channels[c];
+            const out_chan *oc = NULL;
+            for (int i = 0; i < j->nchan && !oc; i++)
+                if (strcmp(j->chans[i].name, ch->channel_name) == 0)
+                    oc = &j->chans[i];
+            if (!oc) { /* cannot happen: we declared every channel */
+                rv = EXR_ERR_INVALID_ARGUMENT;
+                break;
+            }
+            size_t px = (size_t)y * (size_t)f->width;
+            ch->encode_from_ptr = (const uint8_t *)(oc->data + px * (size_t)oc->stride + (size_t)oc->slot);
+            ch->user_pixel_stride = oc->stride * (int32_t)sizeof(float);
+            ch->user_line_stride = f->width * oc->stride * (int32_t)sizeof(float);
+            ch->user_data_type = EXR_PIXEL_FLOAT;
+            ch->user_bytes_per_element = sizeof(float);
+        }
+    }
+    if (rv == EXR_ERR_SUCCESS)
+        rv = exr_encoding_choose_default_routines(j->exr, j->part, enc);
+    if (rv == EXR_ERR_SUCCESS) {
+        enc->yield_until_ready_fn = NULL;
+        enc->write_fn = stash_chunk;
+        enc->encoding_user_data = slot;
+        rv = exr_encoding_run(j->exr, j->part, enc);
+    }
+    if (rv != EXR_ERR_SUCCESS) {
+        const char *m = fx_exr_last_error();
+        fx_exr_job_fail(&j->err, k,
+                        rv == EXR_ERR_OUT_OF_MEMORY ? FX_ERR_OUT_OF_MEMORY
+                        : rv == EXR_ERR_WRITE_IO    ? FX_ERR_IO
+                                                    : FX_ERR_INTERNAL,
+                        "cannot write '%s': scanlines from %d: %s", j->path, fy,
+                        m[0] ? m : exr_get_default_error_message(rv));
+    }
+}
+
+static void encode_range(void *user, int begin, int end, int worker)
+{
+    encode_job *j = user;
+    for (int i = begin; i < end; i++)
+        if (fx_exr_job_should_run(&j->err, j->first + i))
+            encode_chunk(j, j->first + i, worker);
+}
+
 static fx_result encode_pixels(const fx_frame *f, exr_context_t exr, int part, const out_chan *chans, int nchan,
                                const char *path)
 {
@@ -133,54 +245,61 @@ static fx_result encode_pixels(const fx_frame *f, exr_context_t exr, int part, c
     if (rv != EXR_ERR_SUCCESS || lines <= 0)
         return fx_fail(f->ctx, FX_ERR_INTERNAL, "cannot write '%s': scanlines per chunk: %s", path,
                        exr_get_default_error_message(rv));
-    exr_encode_pipeline_t enc = EXR_ENCODE_PIPELINE_INITIALIZER;
-    int have = 0;
+    int chunks = (int)(((int64_t)f->height + lines - 1) / lines);
+    int workers = fx_parallel_workers(f->ctx);
+    /* A few chunks per worker and batch: enough to balance, little memory held. */
+    int batch = 8 * workers;
+    if (batch > chunks)
+        batch = chunks;
+
+    encode_job j;
+    memset(&j, 0, sizeof j);
+    j.f = f, j.exr = exr, j.part = part, j.chans = chans, j.nchan = nchan, j.path = path, j.lines = lines;
+    j.slots = fx_mem_calloc((size_t)batch, sizeof *j.slots);
+    j.enc = fx_mem_calloc((size_t)workers, sizeof *j.enc);
+    j.have_enc = fx_mem_calloc((size_t)workers, 1);
+    if (!j.slots || !j.enc || !j.have_enc) {
+        fx_mem_free(j.slots);
+        fx_mem_free(j.enc);
+        fx_mem_free(j.have_enc);
+        return fx_fail(f->ctx, FX_ERR_OUT_OF_MEMORY, "cannot write '%s': out of memory", path);
+    }
+    fx_exr_job_error_init(&j.err);
+
     fx_result r = FX_OK;
-    int chunk = 0;
-    for (int y = 0; y < f->height && r == FX_OK; y += lines, chunk++) {
-        exr_chunk_info_t ci;
-        int fy = f->data_window[1] + y;
-        if ((rv = exr_write_scanline_chunk_info(exr, part, fy, &ci)) == EXR_ERR_SUCCESS)
-            rv = have ? exr_encoding_update(exr, part, &ci, &enc) : exr_encoding_initialize(exr, part, &ci, &enc);
-        if (rv == EXR_ERR_SUCCESS) {
-            have = 1;
-            for (int c = 0; c < enc.channel_count; c++) {
-                exr_coding_channel_info_t *ch = &enc.channels[c];
-                const out_chan *oc = NULL;
-                for (int k = 0; k < nchan && !oc; k++)
-                    if (strcmp(chans[k].name, ch->channel_name) == 0)
-                        oc = &chans[k];
-                if (!oc) { /* cannot happen: we declared every channel */
-                    rv = EXR_ERR_INVALID_ARGUMENT;
-                    break;
-                }
-                size_t px = (size_t)y * (size_t)f->width;
-                ch->encode_from_ptr = (const uint8_t *)(oc->data + px * (size_t)oc->stride + (size_t)oc->slot);
-                ch->user_pixel_stride = oc->stride * (int32_t)sizeof(float);
-                ch->user_line_stride = f->width * oc->stride * (int32_t)sizeof(float);
-                ch->user_data_type = EXR_PIXEL_FLOAT;
-                ch->user_bytes_per_element = sizeof(float);
+    for (j.first = 0; j.first < chunks && r == FX_OK; j.first += batch) {
+        int n = chunks - j.first < batch ? chunks - j.first : batch;
+        fx_parallel_for_worker(f->ctx, n, 1, encode_range, &j);
+        if ((r = fx_exr_job_result(f->ctx, &j.err)) != FX_OK)
+            break;
+        for (int i = 0; i < n && r == FX_OK; i++) {
+            fx_exr_clear_error();
+            rv = exr_write_scanline_chunk(exr, part, j.slots[i].y, j.slots[i].data, j.slots[i].size);
+            if (rv != EXR_ERR_SUCCESS) {
+                const char *m = fx_exr_last_error();
+                r = fx_fail(f->ctx, rv == EXR_ERR_WRITE_IO ? FX_ERR_IO : FX_ERR_INTERNAL,
+                            "cannot write '%s': scanlines from %d: %s", path, j.slots[i].y,
+                            m[0] ? m : exr_get_default_error_message(rv));
             }
         }
-        if (rv == EXR_ERR_SUCCESS)
-            rv = exr_encoding_choose_default_routines(exr, part, &enc);
-        if (rv == EXR_ERR_SUCCESS)
-            rv = exr_encoding_run(exr, part, &enc);
-        if (rv != EXR_ERR_SUCCESS) {
-            const char *m = fx_exr_last_error();
-            r = fx_fail(f->ctx, rv == EXR_ERR_WRITE_IO ? FX_ERR_IO : FX_ERR_INTERNAL,
-                        "cannot write '%s': scanlines from %d: %s", path, fy,
-                        m[0] ? m : exr_get_default_error_message(rv));
-        }
-        if (r == FX_OK && (chunk & 15) == 15)
-            r = fx_progress(f->ctx, "write", (double)(y + lines) / f->height);
+        if (r == FX_OK && j.first + n < chunks)
+            r = fx_progress(f->ctx, "write", (double)(j.first + n) / chunks);
     }
-    if (have)
-        exr_encoding_destroy(exr, &enc);
+
+    for (int w = 0; w < workers; w++)
+        if (j.have_enc[w])
+            exr_encoding_destroy(exr, &j.enc[w]);
+    for (int i = 0; i < batch; i++)
+        fx_mem_free(j.slots[i].data);
+    fx_exr_job_error_destroy(&j.err);
+    fx_mem_free(j.slots);
+    fx_mem_free(j.enc);
+    fx_mem_free(j.have_enc);
     return r;
 }
 
-static fx_result write_to(const fx_frame *f, const char *tmp, const char *path, const fx_write_options *opts)
+static fx_result write_to(const fx_frame *f, const char *tmp, const char *path, const fx_write_options *opts,
+                          const fx_exr_write_params *params)
 {
     out_chan *chans = NULL;
     int nchan = 0;
@@ -215,7 +334,10 @@ static fx_result write_to(const fx_frame *f, const char *tmp, const char *path, 
             rv = exr_add_part(exr, "libfx", EXR_STORAGE_SCANLINE, &part);
         if (rv == EXR_ERR_SUCCESS)
             rv = exr_initialize_required_attr(exr, part, &disp, &dw, 1.0f, &swc, 1.0f,
-                                              EXR_LINEORDER_INCREASING_Y, EXR_COMPRESSION_ZIP);
+                                              EXR_LINEORDER_INCREASING_Y, params->compression);
+        if (rv == EXR_ERR_SUCCESS &&
+            (params->compression == EXR_COMPRESSION_ZIP || params->compression == EXR_COMPRESSION_ZIPS))
+            rv = exr_set_zip_compression_level(exr, part, params->zip_level);
         for (int k = 0; k < nchan && rv == EXR_ERR_SUCCESS; k++) {
             snprintf(failed, sizeof failed, "channel '%s'", chans[k].name);
             /* The hint for lossy codecs: colour is perceptually logarithmic, data linear. */
@@ -250,7 +372,14 @@ static fx_result write_to(const fx_frame *f, const char *tmp, const char *path, 
     return r;
 }
 
-fx_result fx_frame_write_exr(const fx_frame *f, const char *path, const fx_write_options *opts)
+fx_exr_write_params fx_exr_write_defaults(void)
+{
+    fx_exr_write_params p = {EXR_COMPRESSION_ZIP, FX_EXR_DEFAULT_ZIP_LEVEL};
+    return p;
+}
+
+fx_result fx_exr_write(const fx_frame *f, const char *path, const fx_write_options *opts,
+                       const fx_exr_write_params *params)
 {
     fx_context *ctx = f ? f->ctx : NULL;
     if (!f || !path || !path[0])
@@ -259,12 +388,34 @@ fx_result fx_frame_write_exr(const fx_frame *f, const char *path, const fx_write
         return fx_fail(ctx, FX_ERR_INVALID_ARGUMENT,
                        "fx_frame_write_exr: opts->size is %zu, expected %zu (set it to sizeof(fx_write_options))",
                        opts->size, sizeof(fx_write_options));
+    fx_exr_write_params p = params ? *params : fx_exr_write_defaults();
+    switch (p.compression) {
+    case EXR_COMPRESSION_NONE:
+    case EXR_COMPRESSION_RLE:
+    case EXR_COMPRESSION_ZIPS:
+    case EXR_COMPRESSION_ZIP:
+    case EXR_COMPRESSION_PIZ:
+        break;
+    default:
+        return fx_fail(ctx, FX_ERR_INVALID_ARGUMENT,
+                       "cannot write '%s': compression '%s' is not supported (none, rle, zips, zip, piz)", path,
+                       fx_exr_compression_name(p.compression));
+    }
+    if ((p.compression == EXR_COMPRESSION_ZIP || p.compression == EXR_COMPRESSION_ZIPS) &&
+        (p.zip_level < 1 || p.zip_level > 9))
+        return fx_fail(ctx, FX_ERR_INVALID_ARGUMENT, "cannot write '%s': ZIP level %d is not in 1..9", path,
+                       p.zip_level);
     fx_result r = fx_refuse_input(ctx, path, opts ? opts->input_path : NULL);
     if (r != FX_OK)
         return r;
     char *tmp = NULL;
     if ((r = fx_temp_create(ctx, path, &tmp)) != FX_OK)
         return r;
-    r = write_to(f, tmp, path, opts);
+    r = write_to(f, tmp, path, opts, &p);
     return fx_temp_commit(ctx, tmp, path, r);
+}
+
+fx_result fx_frame_write_exr(const fx_frame *f, const char *path, const fx_write_options *opts)
+{
+    return fx_exr_write(f, path, opts, NULL);
 }

@@ -1,0 +1,36 @@
+/* The EXR writer's internal entry: fx_frame_write_exr with the encoding choices the
+ * public options do not (yet) carry. */
+#ifndef LIBFX_IO_EXR_WRITE_H
+#define LIBFX_IO_EXR_WRITE_H
+
+#include "core/internal.h"
+
+#include <openexr.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* zlib level for ZIP/ZIPS output. Measured on Blender renders (docs/performance.md,
+ * "EXR I/O"): level 1 writes ~3x faster than zlib's default 6 for files a few percent
+ * larger; levels above 4 cost much more time for under 1% of size. */
+#define FX_EXR_DEFAULT_ZIP_LEVEL 1
+
+typedef struct fx_exr_write_params {
+    /* EXR_COMPRESSION_NONE, _RLE, _ZIPS, _ZIP or _PIZ (the lossless ones OpenEXRCore
+     * 3.1 encodes); anything else is FX_ERR_INVALID_ARGUMENT. */
+    exr_compression_t compression;
+    int zip_level; /* 1..9 for ZIP/ZIPS; ignored otherwise */
+} fx_exr_write_params;
+
+/* EXR_COMPRESSION_ZIP at FX_EXR_DEFAULT_ZIP_LEVEL. */
+fx_exr_write_params fx_exr_write_defaults(void);
+
+/* fx_frame_write_exr with explicit encoding; params NULL: the defaults. */
+fx_result fx_exr_write(const fx_frame *f, const char *path, const fx_write_options *opts,
+                       const fx_exr_write_params *params);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

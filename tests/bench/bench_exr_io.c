@@ -1,0 +1,189 @@
+/* bench_exr_io: EXR read and write times for 1 and 2 threads (and a ZIP level sweep).
+ *
+ *   bench_exr_io IN.exr [reps] [--levels]
+ *
+ * Per repetition and thread count (interleaved, so ratios come from one run on a noisy
+ * shared machine): read every pass, read Combined only (what `libfx run` decodes for a
+ * Combined-only stack is close to this), write every pass, write Combined only. Prints
+ * medians. --levels also writes every pass at ZIP levels 1..9 (2 threads) and prints
+ * time and size per level: the data behind FX_EXR_DEFAULT_ZIP_LEVEL (io/exr_write.h).
+ *
+ * Not built by CMake (tests/bench/CMakeLists.txt belongs to the benches' owner); build
+ * against a Release build tree:
+ *   cc -O2 -std=c11 -D_POSIX_C_SOURCE=200809L -Ilibfx/include -Ilibfx/src -I/usr/include/OpenEXR \
+ *      tests/bench/bench_exr_io.c build-iop/libfx/libfx.a -o build-iop/bench_exr_io \
+ *      -lOpenEXRCore-3_1 -lOpenEXR-3_1 -lImath-3_1 -lIlmThread-3_1 -lIex-3_1 -lcjson \
+ *      -lpng -lz -lstdc++ -lpthread -lm
+ */
+#include "libfx/fx.h"
+#ifndef BENCH_PUBLIC_ONLY /* -DBENCH_PUBLIC_ONLY: no --levels, for builds before io/exr_write.h */
+#include "io/exr_write.h"
+#endif
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <time.h>
+#include <unistd.h>
+
+#define MAX_REPS 64
+
+static double now(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return ts.tv_sec + ts.tv_nsec * 1e-9;
+}
+
+static int cmp_double(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return x < y ? -1 : x > y;
+}
+
+static double median(double *v, int n)
+{
+    qsort(v, (size_t)n, sizeof *v, cmp_double);
+    return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+static long file_size(const char *path)
+{
+    struct stat st;
+    return stat(path, &st) == 0 ? (long)st.st_size : -1;
+}
+
+static void die(fx_context *ctx, const char *what)
+{
+    fprintf(stderr, "bench_exr_io: %s: %s\n", what, fx_context_error(ctx));
+    exit(1);
+}
+
+/* One combined-only stack: a recipe with no effects needs only Combined. */
+static fx_stack *combined_stack(fx_context *ctx)
+{
+    fx_stack *s = NULL;
+    if (fx_stack_new(ctx, &s) != FX_OK ||
+        fx_stack_load_json(s, "{\"version\": 1, \"effects\": []}") != FX_OK)
+        die(ctx, "stack");
+    return s;
+}
+
+int main(int argc, char **argv)
+{
+    if (argc < 2) {
+        fprintf(stderr, "usage: bench_exr_io IN.exr [reps] [--levels]\n");
+        return 2;
+    }
+    const char *in = argv[1];
+    int reps = 7, levels = 0;
+    for (int i = 2; i < argc; i++) {
+        if (strcmp(argv[i], "--levels") == 0)
+            levels = 1;
+        else
+            reps = atoi(argv[i]);
+    }
+    if (reps < 1 || reps > MAX_REPS)
+        reps = 7;
+    char out[256];
+    snprintf(out, sizeof out, "/tmp/bench_exr_io_%ld.exr", (long)getpid());
+
+    static const int threads[2] = {1, 2};
+    fx_context *ctx[2];
+    fx_stack *stack[2];
+    for (int t = 0; t < 2; t++) {
+        if (fx_context_new(&ctx[t], threads[t]) != FX_OK)
+            return 1;
+        stack[t] = combined_stack(ctx[t]);
+    }
+    double rd_all[2][MAX_REPS], rd_comb[2][MAX_REPS], wr_all[2][MAX_REPS], wr_comb[2][MAX_REPS];
+    int w = 0, h = 0, passes = 0;
+    long size_all = 0, size_comb = 0;
+    for (int r = 0; r < reps; r++) {
+        for (int t = 0; t < 2; t++) {
+            fx_frame *f = NULL, *fc = NULL;
+            double t0 = now();
+            if (fx_frame_read_exr(ctx[t], in, NULL, &f) != FX_OK)
+                die(ctx[t], "read");
+            double t1 = now();
+            fx_read_options ro = {sizeof ro, NULL, NULL, stack[t]};
+            if (fx_frame_read_exr(ctx[t], in, &ro, &fc) != FX_OK)
+                die(ctx[t], "read Combined");
+            double t2 = now();
+            fx_write_options wo = {sizeof wo, 0, 0, NULL};
+            if (fx_frame_write_exr(f, out, &wo) != FX_OK)
+                die(ctx[t], "write");
+            double t3 = now();
+            size_all = file_size(out);
+            wo.only_combined = 1;
+            if (fx_frame_write_exr(f, out, &wo) != FX_OK)
+                die(ctx[t], "write Combined");
+            double t4 = now();
+            size_comb = file_size(out);
+            rd_all[t][r] = t1 - t0, rd_comb[t][r] = t2 - t1;
+            wr_all[t][r] = t3 - t2, wr_comb[t][r] = t4 - t3;
+            w = fx_frame_width(f), h = fx_frame_height(f);
+            passes = fx_frame_pass_count(f);
+            fx_frame_free(f);
+            fx_frame_free(fc);
+            fx_context_clear_warnings(ctx[t]);
+        }
+    }
+    printf("# %s: %dx%d, %d passes; median of %d runs (ms)\n", in, w, h, passes, reps);
+    printf("| operation | 1 thread | 2 threads | 1t / 2t |\n|---|---:|---:|---:|\n");
+    struct { const char *name; double (*v)[MAX_REPS]; } rows[] = {
+        {"read all passes", rd_all}, {"read Combined", rd_comb},
+        {"write all passes", wr_all}, {"write Combined", wr_comb}};
+    for (size_t i = 0; i < sizeof rows / sizeof rows[0]; i++) {
+        /* the ratio of the medians of per-run ratios: both from the same runs */
+        double ratio[MAX_REPS];
+        for (int r = 0; r < reps; r++)
+            ratio[r] = rows[i].v[0][r] / rows[i].v[1][r];
+        double m1 = median(rows[i].v[0], reps), m2 = median(rows[i].v[1], reps);
+        printf("| %s | %.1f | %.1f | %.2f |\n", rows[i].name, m1 * 1e3, m2 * 1e3, median(ratio, reps));
+    }
+    printf("output sizes: all passes %.2f MB, Combined %.2f MB (input %.2f MB)\n", size_all / 1e6,
+           size_comb / 1e6, file_size(in) / 1e6);
+
+#ifndef BENCH_PUBLIC_ONLY
+    if (levels) {
+        fx_frame *f = NULL;
+        if (fx_frame_read_exr(ctx[1], in, NULL, &f) != FX_OK)
+            die(ctx[1], "read");
+        printf("\n# ZIP level sweep, every pass, 2 threads, median of %d runs\n", reps);
+        printf("| level | write ms | MB | MB Combined only | write ms Combined only |\n|---:|---:|---:|---:|---:|\n");
+        for (int level = 1; level <= 9; level++) {
+            double tv[MAX_REPS], tc[MAX_REPS];
+            long sz = 0, szc = 0;
+            for (int r = 0; r < reps; r++) {
+                fx_exr_write_params p = fx_exr_write_defaults();
+                p.zip_level = level;
+                fx_write_options wo = {sizeof wo, 0, 0, NULL};
+                double t0 = now();
+                if (fx_exr_write(f, out, &wo, &p) != FX_OK)
+                    die(ctx[1], "write");
+                double t1 = now();
+                sz = file_size(out);
+                wo.only_combined = 1;
+                if (fx_exr_write(f, out, &wo, &p) != FX_OK)
+                    die(ctx[1], "write");
+                tc[r] = now() - t1;
+                szc = file_size(out);
+                tv[r] = t1 - t0;
+            }
+            printf("| %d | %.1f | %.2f | %.2f | %.1f |\n", level, median(tv, reps) * 1e3, sz / 1e6, szc / 1e6,
+                   median(tc, reps) * 1e3);
+        }
+        fx_frame_free(f);
+    }
+#else
+    (void)levels;
+#endif
+    unlink(out);
+    for (int t = 0; t < 2; t++) {
+        fx_stack_free(stack[t]);
+        fx_context_free(ctx[t]);
+    }
+    return 0;
+}
