@@ -20,8 +20,10 @@ int main(void)
     }
     char in[1200];
     snprintf(in, sizeof in, "%s/data/blender/render_multilayer.exr", data_dir);
+    /* 1 thread, then 2: parallel decoding/encoding allocates per worker and per chunk. */
+    for (int threads = 1; threads <= 2; threads++) {
     fx_context *ctx = NULL;
-    if (fx_context_new(&ctx, 1) != FX_OK)
+    if (fx_context_new(&ctx, threads) != FX_OK)
         return 1;
 
     int failures = 0, n;
@@ -46,7 +48,7 @@ int main(void)
     fx_frame *f = NULL;
     CHECK_OK(ctx, fx_frame_read_exr(ctx, in, NULL, &f));
     char out[600];
-    snprintf(out, sizeof out, "%s/oom.exr", tu_tmpdir("exr_oom"));
+    snprintf(out, sizeof out, "%s/oom%d.exr", tu_tmpdir("exr_oom"), threads);
     fx_write_options wo = {sizeof wo, 0, 0, NULL};
     for (n = 1; f && n < 2000; n++) {
         fx_mem_fail_after(n);
@@ -60,5 +62,6 @@ int main(void)
     CHECK(n < 2000 && access(out, F_OK) == 0);
     fx_frame_free(f);
     fx_context_free(ctx);
+    }
     return tu_finish("test_exr_oom");
 }
