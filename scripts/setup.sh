@@ -9,7 +9,7 @@ packages=(
   libopenexr-dev libcjson-dev libpng-dev    # the library's dependencies
   openimageio-tools python3-openimageio     # oiiotool/idiff and OIIO from Python, for tests and comparisons
   python3-numpy python3-pytest              # Python tests (run with /usr/bin/python3)
-  python3-matplotlib                        # plots in docs/ (benchmarks)
+  python3-matplotlib python3-pil            # plots and GIF flip-books in docs/
   blender                                   # Debian's Blender 3.4: the add-on, scenes and renders
   xvfb                                      # a display for the add-on's UI screenshot
   libopencv-imgproc-dev                     # OpenCV's GaussianBlur as the benchmark's peer

@@ -150,6 +150,7 @@ for path in %r:
         assert g.get('params', {}) == w.get('params', {}), (path, g, w)
         assert g.get('mask', {}) == w.get('mask', {}), (path, g, w)
 # passes: an object-index mask turns use_pass_object_index on; emptying the stack restores it
+scene.libfx.stack.clear(); scene_setup.sync(scene)   # the last recipe's passes (Depth for mirrors) go
 assert not vl.use_pass_object_index and not vl.use_pass_z
 name = native.effect_names()[0]
 recipe.from_recipe(scene, {'version': 1, 'effects': [{'effect': name, 'mask': {'object_index': 3}}]})
