@@ -20,7 +20,9 @@ What each kind becomes:
       reflected image (or cel quantisation) cannot be expressed as a BSDF.  They
       render as perfect mirrors here; compare them after applying the same
       colour operator to the reference's mirror region.
-Glossy bounces are raised so the facing pair shows several inter-reflections.
+Glossy bounces are raised so the facing pair shows several inter-reflections, and the
+indirect clamp is off (mirror paths are indirect light: clamped, they come out darker
+than the surfaces they reflect).
 """
 
 import os
@@ -126,6 +128,10 @@ def main():
     cy.glossy_bounces = 12
     cy.max_bounces = 16
     cy.blur_glossy = 0.0          # keep mirror paths exact
+    # Everything seen in a mirror is indirect light for Cycles: the scene's indirect
+    # clamp (0.5) would darken the reflected room 1.5-2.2x. Off, for the truth; render
+    # the input the same way to compare (tests/bench/bench_ssr_render.py does).
+    cy.sample_clamp_indirect = 0.0
     if opts["samples"]:
         cy.samples = opts["samples"]
     if opts["res"]:

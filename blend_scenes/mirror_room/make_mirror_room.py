@@ -58,7 +58,9 @@ def ssr(name, label, **params):
 
 
 # Every mirror kind as one ssr_mirror entry (docs/effects/ssr_mirror.md). The facing
-# pair traces a second bounce when a ray lands on another mirror (mirror_surfaces).
+# pair is one entry masked by both panels: a ray landing on the other panel is
+# reflected again there (bounces); it runs last, so rays landing on the other mirrors
+# take their finished reflections.
 # The bent panels are curved geometry: their Normal pass already carries the
 # curvature, so they need no `bend` (which curves flat panels).
 RECIPE = {
@@ -76,10 +78,10 @@ RECIPE = {
             edge_threshold=0.05),
         ssr("Mirror_BentOut", "convex (curved geometry)"),
         ssr("Mirror_BentIn", "concave (curved geometry)"),
-        ssr("Mirror_FacingA", "facing pair A (double reflections)", bounces=2,
-            mirror_surfaces=json.dumps({"material": ALL_MIRRORS})),
-        ssr("Mirror_FacingB", "facing pair B (double reflections)", bounces=2,
-            mirror_surfaces=json.dumps({"material": ALL_MIRRORS})),
+        # last, so rays landing on the other mirrors see their finished reflections;
+        # one entry for both panels, so the regress between them is traced (bounces)
+        {"effect": "ssr_mirror", "enabled": True, "label": "facing pair (multiple reflections)",
+         "params": {"bounces": 4}, "mask": {"material": ["Mirror_FacingA", "Mirror_FacingB"]}},
     ],
 }
 

@@ -16,6 +16,13 @@ Modes:
   eevee_ssr      the same true mirrors rendered by Eevee with screen-space
                  reflections on (Eevee's own SSR: the peer).
   eevee_nossr    Eevee, SSR off (the time baseline for Eevee's SSR cost).
+
+Light transport is made the same in every mode (--clamp-indirect, default 0 = off;
+Filter Glossy 0): the scene's own settings clamp indirect samples at 0.5, and in
+Cycles everything seen *in a mirror* is indirect light, so a clamped truth shows the
+reflected room 1.5-2.2x darker than the same surfaces seen directly (measured on the
+mirror room: walls lit by the ceiling lights lose the most). libfx reflects what the
+camera saw, so input and truth must share one unclamped estimator.
 """
 
 import json
@@ -33,7 +40,7 @@ SCENE_DIR = os.path.join(ROOT, "blend_scenes", "mirror_room")
 def parse(argv):
     args = argv[argv.index("--") + 1:] if "--" in argv else []
     o = {"prefix": os.path.abspath(args[0]), "mode": "backing", "res": (640, 360),
-         "samples": 16, "frame": 1}
+         "samples": 16, "frame": 1, "clamp": 0.0}
     i = 1
     while i < len(args):
         a = args[i]
@@ -45,6 +52,9 @@ def parse(argv):
             i += 3
         elif a == "--samples":
             o["samples"] = int(args[i + 1])
+            i += 2
+        elif a == "--clamp-indirect":
+            o["clamp"] = float(args[i + 1])
             i += 2
         elif a == "--frame":
             o["frame"] = int(args[i + 1])
@@ -79,6 +89,9 @@ def main():
         cy.glossy_bounces = 12
         cy.max_bounces = 16
         cy.blur_glossy = 0.0
+    # the same light transport for input and truth (see the module doc)
+    scene.cycles.sample_clamp_indirect = o["clamp"]
+    scene.cycles.blur_glossy = 0.0
     if o["mode"].startswith("eevee"):
         scene.render.engine = 'BLENDER_EEVEE'
         ee = scene.eevee

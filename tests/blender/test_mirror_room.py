@@ -19,7 +19,8 @@ def test_mirror_room_ssr(blender, library, tmp_path):
     assert proc.returncode == 0, out[-5000:]
     recipe = T.read_json(tmp_path / "mr_libfx_recipe.json")
     entries = [e for e in recipe["effects"] if e.get("enabled", True)]
-    assert len(entries) == 11 and all(e["effect"] == "ssr_mirror" for e in entries)
+    # ten entries: one per mirror kind, the facing pair as one entry over both panels
+    assert len(entries) == 10 and all(e["effect"] == "ssr_mirror" for e in entries)
     plain = T.Exr(tmp_path / "mr_libfx_passes.0001.exr")
     res = T.Exr(tmp_path / "mr_libfx.0001.exr")
     before = plain.get("Combined", "RGBA")
@@ -27,7 +28,11 @@ def test_mirror_room_ssr(blender, library, tmp_path):
     assert np.isfinite(after).all()
     assert np.array_equal(before[..., 3], after[..., 3]), "alpha changed"
 
-    masks = {e["mask"]["material"]: T.mask_support(plain, e["mask"]) for e in entries}
+    def key(e):
+        m = e["mask"]["material"]
+        return m if isinstance(m, str) else "+".join(m)
+    masks = {key(e): T.mask_support(plain, e["mask"]) for e in entries}
+    assert "Mirror_FacingA+Mirror_FacingB" in masks, sorted(masks)
     union = np.zeros(before.shape[:2], dtype=bool)
     for name, m in masks.items():
         assert m is not None and m.sum() > 50, (name, None if m is None else m.sum())

@@ -1,7 +1,9 @@
 /* ssr_mirror through the public API on synthetic frames made here: a floor mirror in
  * front of a patterned wall seen by a tilted camera. Geometry (the law of reflection to
  * a pixel), the mask (non-mirror pixels bit-identical), parameters (reflectivity,
- * Fresnel, glossiness, operators, bend, double reflections, fallback), stability
+ * Fresnel, glossiness, operators, bend, double reflections, fallback), multiple
+ * reflections in a facing pair (the wall seen via two and three reflections where the
+ * unfolded path puts it), stability
  * (grazing, towards the camera, near plane, full-screen mirror, all background, NaN
  * normals), thread invariance; and depth reconstruction against Blender's Position
  * pass on a real mirror-room render (tests/data/ssr). */
@@ -384,6 +386,161 @@ static void test_double(fx_context *ctx)
     fx_frame_free(f);
 }
 
+
+/* A facing pair: mirrors x = -PAIR_X (index 1, backing 0.1) and x = +PAIR_X (index 3,
+ * backing 0.2), the patterned wall y = wall_y behind them, the camera between them
+ * looking down +Y. One entry masks both panels. For every pixel of the left mirror the
+ * path is unfolded analytically (reflect at each crossing until the wall): the pixels
+ * whose path reflects k = 2 or 3 times must show the wall colour at the unfolded point
+ * (the object seen via two/three reflections, where geometry puts it). */
+#define PAIR_X 1.2
+static fx_frame *pair_frame(fx_context *ctx, const scene *s)
+{
+    int w = s->w, h = s->h;
+    size_t n = (size_t)w * h;
+    float *rgba = calloc(n * 4, sizeof(float)), *dep = calloc(n, sizeof(float));
+    float *nor = calloc(n * 3, sizeof(float)), *ima = calloc(n, sizeof(float));
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++) {
+            size_t i = (size_t)y * w + x;
+            double d[3];
+            pixel_dir(s, x + 0.5, y + 0.5, d);
+            double tw = d[1] > 1e-9 ? (s->wall_y - s->cam[1]) / d[1] : 1e30;
+            double tm = fabs(d[0]) > 1e-9 ? ((d[0] > 0 ? PAIR_X : -PAIR_X) - s->cam[0]) / d[0] : 1e30;
+            double t = tw < tm ? tw : tm;
+            double p[3] = { s->cam[0] + d[0] * t, s->cam[1] + d[1] * t, s->cam[2] + d[2] * t };
+            double px, py;
+            dep[i] = (float)project(s, p, &px, &py);
+            float *c = rgba + i * 4;
+            if (tw < tm) {
+                ima[i] = 2;
+                nor[i * 3 + 1] = -1;
+                wall_colour(p, c);
+            } else {
+                ima[i] = d[0] > 0 ? 3.0f : 1.0f;
+                nor[i * 3] = d[0] > 0 ? -1.0f : 1.0f;
+                c[0] = c[1] = c[2] = d[0] > 0 ? 0.2f : 0.1f, c[3] = 1;
+            }
+        }
+    fx_frame *f = et_frame(ctx, w, h, rgba);
+    if (f) {
+        fx_frame_add_pass(f, "Depth", 1, dep);
+        fx_frame_add_pass(f, "Normal", 3, nor);
+        fx_frame_add_pass(f, "IndexMA", 1, ima);
+        fx_frame_set_camera(f, &s->camera);
+    }
+    free(rgba), free(dep), free(nor), free(ima);
+    return f;
+}
+
+/* Unfolds the eye ray through (px, py) between the pair: the number of reflections
+ * before it meets the wall (-1: none, e.g. the pixel is not on the left mirror) and the
+ * wall point; *first_x, *first_y: where the first reflected ray meets the other mirror,
+ * projected (the first hit on screen). */
+static int pair_path(const scene *s, double px, double py, double wp[3], double *first_x, double *first_y)
+{
+    double d[3], p[3] = { s->cam[0], s->cam[1], s->cam[2] };
+    pixel_dir(s, px, py, d);
+    if (!(d[0] < -1e-6) || !(d[1] > 1e-6))
+        return -1;
+    int k = 0;
+    for (; k < 32; k++) {
+        double tw = (s->wall_y - p[1]) / d[1];
+        double tm = ((d[0] > 0 ? PAIR_X : -PAIR_X) - p[0]) / d[0];
+        if (tw < tm) {
+            if (k == 0)
+                return -1; /* the wall itself */
+            for (int a = 0; a < 3; a++)
+                wp[a] = p[a] + d[a] * tw;
+            return k;
+        }
+        for (int a = 0; a < 3; a++)
+            p[a] += d[a] * tm;
+        if (k == 1)
+            project(s, p, first_x, first_y);
+        d[0] = -d[0];
+    }
+    return -1;
+}
+
+static void test_multi_bounce(fx_context *ctx1, fx_context *ctx2)
+{
+    scene s;
+    scene_init(&s, 192, 108, 1.2, 0.0, 10.0);
+    fx_frame *f = pair_frame(ctx2, &s);
+    const char *m = "{\"material_index\": [1, 3]}";
+    float *b1 = run_params(ctx2, f, m, "{\"bounces\": 1}", 0);
+    float *b2 = run_params(ctx2, f, m, "{\"bounces\": 2}", 0);
+    float *b4 = run_params(ctx2, f, m, "{}", 0); /* default bounces */
+    float *b4_1 = run_params(ctx1, f, m, "{}", 0);
+    CHECK(b1 && b2 && b4 && b4_1);
+    const float *ima = pass_of(f, "IndexMA");
+    int n[4] = { 0 }, ok[4] = { 0 };
+    double err1[4] = { 0 }, err2[4] = { 0 }, err4[4] = { 0 }, shifted[4] = { 0 };
+    for (int y = 0; b1 && b2 && b4 && y < s.h; y++)
+        for (int x = 0; x < s.w; x++) {
+            size_t i = (size_t)y * s.w + x;
+            if (ima[i] != 1.0f)
+                continue;
+            double wp[3], fx_ = 0, fy_ = 0, ex, ey;
+            int k = pair_path(&s, x + 0.5, y + 0.5, wp, &fx_, &fy_);
+            if (k < 2 || k > 3)
+                continue;
+            project(&s, wp, &ex, &ey);
+            /* away from the border fade and from the mirrors' far corner, the path's
+             * first hit and the wall point on screen */
+            if (ex < 0.1 * s.w || ex > 0.9 * s.w || ey < 0.1 * s.h || ey > 0.9 * s.h || fx_ < 0.1 * s.w ||
+                fx_ > 0.9 * s.w || fy_ < 0.1 * s.h || fy_ > 0.9 * s.h)
+                continue;
+            /* stay a few pixels off the transitions between reflection counts */
+            double wq[3], g0, g1;
+            int near = 0;
+            for (int dx = -3; dx <= 3; dx += 6)
+                near |= pair_path(&s, x + 0.5 + dx, y + 0.5, wq, &g0, &g1) != k;
+            if (near)
+                continue;
+            float wc[4], sc[4];
+            wall_colour(wp, wc);
+            /* the colour one wall-pixel-footprint x 3 to the side: a wrong position shows */
+            double ws[3] = { wp[0] + 3 * 2 * tan(s.fov_deg * DEG / 2) * (wp[1] - s.cam[1]) / s.h, wp[1], wp[2] };
+            wall_colour(ws, sc);
+            double e1 = 0, e2 = 0, e4 = 0, es = 0;
+            for (int c = 0; c < 3; c++) {
+                e1 += fabs(b1[i * 4 + c] - wc[c]) / 3;
+                e2 += fabs(b2[i * 4 + c] - wc[c]) / 3;
+                e4 += fabs(b4[i * 4 + c] - wc[c]) / 3;
+                es += fabs(b4[i * 4 + c] - sc[c]) / 3;
+            }
+            n[k]++;
+            ok[k] += e4 < 0.06;
+            err1[k] += e1, err2[k] += e2, err4[k] += e4, shifted[k] += es;
+        }
+    for (int k = 2; k <= 3; k++) {
+        double c = n[k] ? n[k] : 1;
+        fprintf(stderr,
+                "multi-bounce, %d reflections: %d px, MAE bounces 1 %.3f, 2 %.3f, 4 %.3f (3 px off: %.3f), "
+                "%d within 0.06\n",
+                k, n[k], err1[k] / c, err2[k] / c, err4[k] / c, shifted[k] / c, ok[k]);
+        CHECK(n[k] > 100);
+        CHECK(err4[k] / c < 0.03);
+        CHECK(ok[k] >= n[k] * 9 / 10);
+        CHECK(err1[k] / c > 4 * err4[k] / c);          /* one bounce shows the other panel */
+        CHECK(shifted[k] / c > 2 * err4[k] / c);       /* the position, not just the palette */
+    }
+    /* two traced bounces: exact for k = 2; for k = 3 the finished one-bounce estimate,
+     * better than the backing (measured 0.16 vs 0.29: the estimate of a regress is rough) */
+    CHECK(err2[2] / (n[2] ? n[2] : 1) < 0.03);
+    CHECK(err2[3] / (n[3] ? n[3] : 1) < 0.75 * err1[3] / (n[3] ? n[3] : 1));
+    CHECK(b4 && b4_1 && !memcmp(b4, b4_1, (size_t)s.w * s.h * 4 * sizeof(float)));
+    for (size_t i = 0; b4 && i < (size_t)s.w * s.h * 4; i++)
+        if (!isfinite(b4[i])) {
+            CHECK(!"finite");
+            break;
+        }
+    free(b1), free(b2), free(b4), free(b4_1);
+    fx_frame_free(f);
+}
+
 static double now_s(void)
 {
     struct timespec t;
@@ -538,6 +695,7 @@ int main(void)
     test_geometry(ctx2);
     test_params(ctx1, ctx2);
     test_double(ctx2);
+    test_multi_bounce(ctx1, ctx2);
     test_stability(ctx2);
     test_errors(ctx1);
     test_position_from_depth(ctx1);

@@ -13,10 +13,15 @@
  *
  * One stack entry is one mirror kind: many mirrors are many entries, each with its own
  * mask and parameters (the add-on's UI, `libfx describe` and the docs keep working on
- * plain parameter tables). Double reflections: `mirror_surfaces` is a mask naming every
- * mirror of the scene; a ray whose hit lands on one of them is traced again from there
- * (`bounces` 2..3), and with bounces 1 it takes that pixel's current colour, which is
- * the other mirror's finished reflection when its entry ran earlier in the stack.
+ * plain parameter tables). Multiple reflections: a ray that lands on a pixel of this
+ * entry's own mask (the other panel of a facing pair, a concave mirror seeing itself)
+ * is reflected again there with the normal there and this entry's reflectivity and
+ * Fresnel, up to `bounces`; when the bounces run out (or a later bounce misses) it
+ * takes that pixel's *finished* one-bounce reflection, iterated three times on the
+ * first-bounce hits (cheap: no tracing), instead of the dark backing. A ray that lands
+ * on another mirror takes that pixel's current colour: the other mirror's finished
+ * reflection when its entry ran earlier in the stack (the seed's trick); or, for
+ * pixels of `mirror_surfaces`, is traced again with this entry's reflectivity.
  *
  * Cost follows the mirror: rays are traced only for masked pixels (or one per cell of
  * 1/resolution_scale pixels); the blurred copy for glossy mirrors covers only the
@@ -65,6 +70,8 @@ typedef struct ssr_params {
 } ssr_params;
 
 enum { OP_NONE = 0, OP_SEPIA, OP_GRAYSCALE, OP_CEL };
+/* Jacobi iterations of the finished one-bounce image (the estimate past the last bounce) */
+enum { FIN_ITERATIONS = 3 };
 enum { FALLBACK_TEXTURE = 0, FALLBACK_ENVIRONMENT };
 
 static const char *const op_items[] = { "none", "sepia", "grayscale", "cel" };
@@ -104,9 +111,10 @@ static const fx_param_def ssr_param_defs[] = {
     FX_P_STRING(ssr_params, mirror_surfaces, "mirror_surfaces", "", "",
                 "Mask JSON naming every mirror of the scene (as a stack mask: {\"material\": [...]}); "
                 "hits on these pixels bounce again (bounces > 1). Empty: no second bounce"),
-    FX_P_INT(ssr_params, bounces, "bounces", 1, 1, 3, 1, 3, "",
-             "Reflections per ray: 1 takes the colour where the ray lands (another mirror's finished "
-             "reflection if its entry ran earlier); 2-3 trace again from mirror_surfaces pixels"),
+    FX_P_INT(ssr_params, bounces, "bounces", 4, 1, 8, 1, 8, "",
+             "Reflections per ray: a ray landing on this entry's own mirror (or on mirror_surfaces) "
+             "is reflected again there, up to this many times; then, and on later misses, it takes "
+             "that pixel's finished one-bounce reflection. 1: the colour where the ray lands"),
     FX_P_INT(ssr_params, max_steps, "max_steps", 96, 1, 65536, 8, 1024, "", "Steps per ray at most"),
     FX_P_FLOAT(ssr_params, stride, "stride", 1.5, 0.5, 256.0, 0.5, 16.0, "pixels", "First step along the ray's 2-D line"),
     FX_P_FLOAT(ssr_params, growth, "growth", 1.04, 1.0, 2.0, 1.0, 1.3, "",
@@ -149,6 +157,32 @@ static inline int view_normal_at(const ssr_frame *F, int x, int y, fx_vec3 *n)
         return 0;
     *n = fx_v3_normalize_or(fx_world_dir_to_view(&F->view, nw), fx_v3(0, 0, 0));
     return n->x != 0.0f || n->y != 0.0f || n->z != 0.0f;
+}
+
+/* Tracer hits: a surface seen from behind (its normal along the ray) is not what a
+ * mirror shows; the march goes on past it. */
+static int front_facing(const void *user, int x, int y, fx_vec3 dir)
+{
+    fx_vec3 n;
+    return !view_normal_at(user, x, y, &n) || fx_v3_dot(n, dir) <= 0.25f;
+}
+
+/* Tracer: the planar depth of pixel (x, y)'s tangent plane at (px, py), within the
+ * pixel's neighbourhood (else its sample): exact for the flat mirrors and walls that a
+ * ray meets at grazing angles. */
+static double plane_depth(const void *user, int x, int y, double px, double py)
+{
+    const ssr_frame *F = user;
+    float d;
+    fx_vec3 c = view_pos_at(F, x, y, &d), n;
+    if (F->view.orthographic || !view_normal_at(F, x, y, &n))
+        return d;
+    fx_vec3 e = fx_view_position(&F->view, fx_view_pixel_to_ndc(&F->view, (float)px, (float)py), 1.0f);
+    double den = fx_v3_dot(e, n);
+    if (!(fabs(den) > 1e-4))
+        return d;
+    double t = fx_v3_dot(c, n) / den; /* e has planar depth 1 */
+    return isfinite(t) && t > 0.5 * d && t < 2.0 * d ? t : d;
 }
 
 static inline void sample_bilinear(const float *img, int w, int h, float px, float py, float out[3])
@@ -194,6 +228,9 @@ typedef struct ssr_job {
     int cx0, cy0, ncx, ncy;    /* cell grid over the roi */
     cell_hit *cells;
     const float *lookup;       /* image the reflection is sampled from (blurred for glossy) */
+    const float *fin;          /* finished one-bounce image of this mirror (lookup elsewhere), or NULL */
+    float *out;                /* where shade_rows writes: run->dst, or a fin buffer */
+    int last_bounce;           /* bounces left after the first: 0 while iterating fin */
     float opm[16];
     float *dbg_hit, *dbg_xy, *dbg_len;
 } ssr_job;
@@ -322,42 +359,107 @@ static cell_hit pixel_hit(const ssr_job *j, int x, int y)
     return r;
 }
 
-/* Second (and third) bounce from a hit that landed on another mirror's pixel. */
-static int bounce(const ssr_job *j, fx_vec3 from, int hx, int hy, int left, float rgb[3])
+static inline int own_at(const ssr_job *j, int x, int y)
+{
+    return j->run->mask && j->run->mask->coverage[(size_t)y * j->F->w + x] > 0.5f;
+}
+
+/* Weight of the reflection on a pixel of this mirror seen along `incident`. */
+static inline float mirror_weight(const ssr_params *p, fx_vec3 n, fx_vec3 incident)
+{
+    float wgt = p->reflectivity;
+    if (p->fresnel) {
+        float ndv = fx_saturate(-fx_v3_dot(n, incident));
+        wgt *= p->f0 + (1.0f - p->f0) * powf(1.0f - ndv, p->fresnel_power);
+    }
+    return wgt;
+}
+
+/* Where the ray o + t dir meets the surface of pixel (x, y) at (px, py): the exact
+ * intersection with the pixel's tangent plane when it projects within 1.5 px of the
+ * hit (a mirror seen at a grazing angle spans decimetres per pixel, and the next bounce
+ * starts here), else the pixel's centre position. */
+static fx_vec3 surface_point(const ssr_frame *F, int x, int y, float px, float py, fx_vec3 o, fx_vec3 dir,
+                             fx_vec3 centre)
+{
+    fx_vec3 n;
+    if (!view_normal_at(F, x, y, &n))
+        return centre;
+    float den = fx_v3_dot(n, dir);
+    if (!(fabsf(den) > 1e-6f))
+        return centre;
+    float t = fx_v3_dot(n, fx_v3_sub(centre, o)) / den;
+    if (!(t > 0.0f) || !isfinite(t))
+        return centre;
+    fx_vec3 q = fx_v3_add(o, fx_v3_scale(dir, t));
+    fx_vec2 pix = { -1e30f, -1e30f };
+    if (!(fx_view_project(&F->view, q, &pix) > 0.0f) || !(fabsf(pix.x - px) < 1.5f && fabsf(pix.y - py) < 1.5f))
+        return centre;
+    return q;
+}
+
+/* Colour the ray o + t dir brings back from (px, py), where it landed. Not a mirror
+ * there: the lookup. This entry's own mirror or a mirror_surfaces pixel: reflected
+ * again (up to `left` more bounces). The estimate where no further bounce is traced or
+ * it misses: the pixel's finished one-bounce reflection (own mirror, j->fin) or its
+ * current colour (another mirror, whose entry may have finished it). */
+static void ray_colour(const ssr_job *j, fx_vec3 ro, fx_vec3 rd, float px, float py, int left, float rgb[3])
 {
     const ssr_frame *F = j->F;
+    int hx = (int)fx_clampf(floorf(px), 0.0f, (float)(F->w - 1));
+    int hy = (int)fx_clampf(floorf(py), 0.0f, (float)(F->h - 1));
+    int own = own_at(j, hx, hy);
+    int other = !own && j->surfaces && j->surfaces->coverage[(size_t)hy * F->w + hx] > 0.5f;
+    sample_bilinear(own && j->fin ? j->fin : j->lookup, F->w, F->h, px, py, rgb);
+    if ((!own && !other) || left <= 0)
+        return;
     float d;
     fx_vec3 pos = view_pos_at(F, hx, hy, &d);
-    if (fx_ssr_is_background(d))
-        return 0;
-    fx_vec3 inc = fx_v3_normalize_or(fx_v3_sub(pos, from), fx_v3(0, 0, -1));
+    if (fx_ssr_is_background(d) || !isfinite(pos.x + pos.y + pos.z))
+        return;
+    pos = surface_point(F, hx, hy, px, py, ro, rd, pos);
+    fx_vec3 inc = fx_v3_normalize_or(rd, fx_v3(0, 0, -1));
     fx_vec3 n;
-    if (!view_normal_at(F, hx, hy, &n))
-        return 0;
-    if (fx_v3_dot(n, inc) > 0.0f)
-        n = fx_v3_scale(n, -1.0f);
+    if (own) {
+        if (!shading_normal(j, hx, hy, pos, inc, &n))
+            return;
+    } else {
+        if (!view_normal_at(F, hx, hy, &n))
+            return;
+        if (fx_v3_dot(n, inc) > 0.0f)
+            n = fx_v3_scale(n, -1.0f);
+    }
     fx_vec3 r = fx_v3_reflect(inc, n);
-    fx_vec3 o = fx_v3_add(pos, fx_v3_scale(n, j->p->bias * fx_ssr_pixel_footprint(&F->view, d)));
+    fx_vec3 o = fx_v3_add(pos, fx_v3_scale(n, j->p->bias * fx_ssr_pixel_footprint(&F->view, -pos.z)));
     fx_ssr_hit hit;
     if (!fx_ssr_trace(&F->scene, &j->st, o, r, &hit))
-        return 0;
+        return;
+    float fade = 1.0f;
+    if (j->p->edge_fade > 0.0f) {
+        float ex = fminf(hit.px, (float)F->w - hit.px) / (j->p->edge_fade * (float)F->w);
+        float ey = fminf(hit.py, (float)F->h - hit.py) / (j->p->edge_fade * (float)F->h);
+        fade = fx_smoothstep(0.0f, 1.0f, fminf(ex, ey));
+    }
     fx_vec3 hn;
     if (view_normal_at(F, hit.ix, hit.iy, &hn) && fx_v3_dot(hn, r) > 0.25f)
-        return 0;
-    if (left > 1 && j->surfaces && j->surfaces->coverage[(size_t)hit.iy * F->w + hit.ix] > 0.5f) {
-        fx_vec3 hp = view_pos_at(F, hit.ix, hit.iy, NULL);
-        float tex[3];
-        sample_bilinear(j->lookup, F->w, F->h, hit.px, hit.py, tex);
-        if (bounce(j, pos, hit.ix, hit.iy, left - 1, rgb)) {
-            float R = j->p->reflectivity;
-            for (int k = 0; k < 3; k++)
-                rgb[k] = tex[k] * (1.0f - R) + rgb[k] * R;
-            return 1;
-        }
-        (void)hp;
+        fade = 0.0f;
+    if (!(fade > 0.0f))
+        return;
+    float next[3], tex[3], est[3] = { rgb[0], rgb[1], rgb[2] };
+    ray_colour(j, o, r, hit.px, hit.py, left - 1, next);
+    float wgt;
+    if (own) {
+        /* this mirror again: its backing under its reflectivity x Fresnel at this angle */
+        sample_bilinear(j->run->src, F->w, F->h, px, py, tex);
+        wgt = mirror_weight(j->p, n, inc);
+    } else {
+        memcpy(tex, est, sizeof tex);
+        wgt = j->p->reflectivity;
     }
-    sample_bilinear(j->lookup, F->w, F->h, hit.px, hit.py, rgb);
-    return 1;
+    for (int k = 0; k < 3; k++) {
+        float v = tex[k] * (1.0f - wgt) + next[k] * wgt;
+        rgb[k] = est[k] + (v - est[k]) * fade;
+    }
 }
 
 static void apply_operator(const ssr_job *j, float px, float py, float rgb[3])
@@ -410,10 +512,13 @@ static void shade_rows(void *user, int begin, int end)
         for (int x = run->roi.x0; x < run->roi.x1; x++) {
             size_t i = (size_t)y * w + x;
             const float *s = run->src + i * 4;
-            float *o = run->dst + i * 4;
-            memcpy(o, s, 4 * sizeof(float));
+            float *o = j->out + i * 4;
+            if (j->out == run->dst)
+                memcpy(o, s, 4 * sizeof(float));
             if (!in_mask(m, w, x, y))
                 continue;
+            if (j->out != run->dst)
+                memcpy(o, s, 4 * sizeof(float));
             cell_hit h = pixel_hit(j, x, y);
             float d;
             fx_vec3 pos = view_pos_at(F, x, y, &d);
@@ -428,15 +533,9 @@ static void shade_rows(void *user, int begin, int end)
                 memcpy(fb, s, sizeof fb);
             float conf = h.state == 1 ? h.conf : 0.0f;
             if (conf > 0.0f) {
-                int hx = (int)fx_clampf(floorf(h.px), 0.0f, (float)(F->w - 1));
-                int hy = (int)fx_clampf(floorf(h.py), 0.0f, (float)(F->h - 1));
-                sample_bilinear(j->lookup, F->w, F->h, h.px, h.py, refl);
-                if (p->bounces > 1 && j->surfaces && j->surfaces->coverage[(size_t)hy * w + hx] > 0.5f) {
-                    float b[3];
-                    if (bounce(j, pos, hx, hy, p->bounces - 1, b))
-                        for (int k = 0; k < 3; k++)
-                            refl[k] = refl[k] * (1.0f - p->reflectivity) + b[k] * p->reflectivity;
-                }
+                fx_vec3 rd = fx_v3_reflect(inc, n);
+                fx_vec3 ro = fx_v3_add(pos, fx_v3_scale(n, p->bias * fx_ssr_pixel_footprint(&F->view, d)));
+                ray_colour(j, ro, rd, h.px, h.py, j->last_bounce, refl);
                 if (p->op != OP_NONE)
                     apply_operator(j, h.px, h.py, refl);
                 for (int k = 0; k < 3; k++)
@@ -444,16 +543,13 @@ static void shade_rows(void *user, int begin, int end)
             } else {
                 memcpy(refl, fb, sizeof refl);
             }
-            float wgt = p->reflectivity;
-            if (p->fresnel) {
-                float ndv = fx_saturate(-fx_v3_dot(n, inc));
-                float base = 1.0f - ndv;
-                wgt *= p->f0 + (1.0f - p->f0) * powf(base, p->fresnel_power);
-            }
+            float wgt = mirror_weight(p, n, inc);
             for (int k = 0; k < 3; k++) {
                 float v = s[k] * (1.0f - wgt) + refl[k] * wgt;
                 o[k] = isfinite(v) ? v : s[k];
             }
+            if (j->out != run->dst)
+                continue; /* iterating the finished one-bounce image: no debug layers */
             if (j->dbg_hit)
                 j->dbg_hit[i] = conf;
             if (j->dbg_xy) {
@@ -604,7 +700,7 @@ static fx_result ssr_process(const fx_effect_run *run)
     F.depth = dp->data;
     F.normal = np->data;
     F.nch = np->channels;
-    F.scene = (fx_ssr_scene){ &F.view, F.depth, F.w, F.h };
+    F.scene = (fx_ssr_scene){ &F.view, F.depth, F.w, F.h, front_facing, plane_depth, &F };
     /* the fx_ssr_scene points at F.view: F must not move from here on */
 
     ssr_job j;
@@ -619,7 +715,7 @@ static fx_result ssr_process(const fx_effect_run *run)
 
     fx_result r = FX_OK;
     fx_mask *surfaces = NULL;
-    float *blurred = NULL;
+    float *blurred = NULL, *fin[2] = { NULL, NULL };
     fx_mask_spec spec;
     int has_surfaces = 0;
     if (p->bounces > 1 && (r = parse_surfaces(run->ctx, p->mirror_surfaces, where, &spec, &has_surfaces)))
@@ -692,8 +788,35 @@ static fx_result ssr_process(const fx_effect_run *run)
     if (r)
         goto out;
     int rows = roi->y1 - roi->y0;
+    if (p->bounces > 1 && run->mask) {
+        /* the finished one-bounce image of this mirror, Jacobi-iterated on the first-bounce
+         * hits (a ray landing on this mirror sees its previous iterate): the estimate
+         * where the traced bounces run out. Two full-frame buffers (lookup elsewhere). */
+        size_t n4 = (size_t)F.w * F.h * 4;
+        if ((r = fx_check_budget(run->ctx, 2 * n4 * sizeof(float), "the mirror's multi-bounce estimate")))
+            goto out;
+        fin[0] = fx_mem_alloc(n4 * sizeof(float));
+        fin[1] = fx_mem_alloc(n4 * sizeof(float));
+        if (!fin[0] || !fin[1]) {
+            r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the multi-bounce estimate", where);
+            goto out;
+        }
+        memcpy(fin[0], j.lookup, n4 * sizeof(float));
+        memcpy(fin[1], j.lookup, n4 * sizeof(float));
+        j.last_bounce = 0;
+        j.fin = NULL;
+        for (int it = 0; it < FIN_ITERATIONS; it++) {
+            j.out = fin[it & 1];
+            fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), shade_rows, &j);
+            j.fin = j.out;
+        }
+    }
+    j.out = run->dst;
+    j.last_bounce = p->bounces - 1;
     fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), shade_rows, &j);
 out:
+    fx_mem_free(fin[0]);
+    fx_mem_free(fin[1]);
     fx_mem_free(j.cells);
     fx_mem_free(blurred);
     fx_mask_free(surfaces);

@@ -37,6 +37,21 @@ static double depth_at(const line_state *L, double s)
     return k > 0.0 ? -z / k : INFINITY;
 }
 
+/* Depth of the surface under the line at s (pixel ix, iy): its tangent plane there when
+ * the scene gives one, else the pixel's sample; +inf for background. */
+static double surface_at(const fx_ssr_scene *sc, const line_state *L, double s, int ix, int iy)
+{
+    double d = fx_ssr_depth_at(sc, ix, iy);
+    if (sc->surface_depth && isfinite(d)) {
+        double x, y;
+        pixel_at(L, s, &x, &y);
+        double p = sc->surface_depth(sc->user, ix, iy, x, y);
+        if (isfinite(p) && p > 0.0)
+            return p;
+    }
+    return d;
+}
+
 static int pixel_index(const line_state *L, double s, int *ix, int *iy)
 {
     double x, y;
@@ -169,14 +184,21 @@ int fx_ssr_trace(const fx_ssr_scene *s, const fx_ssr_settings *st, fx_vec3 origi
             break;
         double sd = fx_ssr_depth_at(s, ix, iy);
         double dmin = d_prev < d_cur ? d_prev : d_cur, dmax = d_prev < d_cur ? d_cur : d_prev;
-        if (isfinite(sd) && dmax >= sd && dmin <= sd + thick) {
+        int cand = isfinite(sd) && dmax >= sd && dmin <= sd + thick;
+        /* a grazing surface: the ray was in front of this pixel's plane at the last step
+         * and is behind it now (crossed it), though the depth samples jump past the slab */
+        if (!cand && isfinite(sd) && s->surface_depth && d_cur >= sd) {
+            double pp = surface_at(s, &L, s_prev, ix, iy), pc = surface_at(s, &L, s_cur, ix, iy);
+            cand = d_prev <= pp && d_cur >= pc;
+        }
+        if (cand) {
             double lo = s_prev, hi = s_cur;
             for (int r = 0; r < refine; r++) {
                 double mid = 0.5 * (lo + hi);
                 int mx, my;
                 if (!pixel_index(&L, mid, &mx, &my))
                     break;
-                double smid = fx_ssr_depth_at(s, mx, my);
+                double smid = surface_at(s, &L, mid, mx, my);
                 if (isfinite(smid) && depth_at(&L, mid) >= smid)
                     hi = mid;
                 else
@@ -185,8 +207,9 @@ int fx_ssr_trace(const fx_ssr_scene *s, const fx_ssr_settings *st, fx_vec3 origi
             int hx, hy;
             double slop = fabs(d_cur - d_prev) / (double)(1u << refine);
             if (pixel_index(&L, hi, &hx, &hy)) {
-                double sh = fx_ssr_depth_at(s, hx, hy), dh = depth_at(&L, hi);
-                if (isfinite(sh) && dh >= sh - slop && dh <= sh + thick + slop) {
+                double sh = surface_at(s, &L, hi, hx, hy), dh = depth_at(&L, hi);
+                if (isfinite(sh) && dh >= sh - slop && dh <= sh + thick + slop &&
+                    (!s->accept || s->accept(s->user, hx, hy, dir))) {
                     double x, y;
                     pixel_at(&L, hi, &x, &y);
                     double k = L.k0 + L.dk * hi;

@@ -27,6 +27,17 @@ typedef struct fx_ssr_scene {
     const fx_view *view;
     const float *depth;    /* planar depth, width * height */
     int width, height;
+    /* Optional: a candidate hit on pixel (x, y) for the unit view-space ray direction
+     * `dir` is kept only if this returns non-zero; otherwise the march goes on past it
+     * (e.g. surfaces seen from behind: a ray leaving a mirror seen at a grazing angle
+     * otherwise "hits" the far half of its own start pixel). NULL: every hit counts. */
+    int (*accept)(const void *user, int x, int y, fx_vec3 dir);
+    /* Optional: planar depth of pixel (x, y)'s surface at the continuous frame position
+     * (px, py) (its tangent plane), used by the refinement and the final thickness test
+     * instead of the pixel's one depth sample: a surface seen at a grazing angle spans
+     * decimetres of depth per pixel, more than any useful thickness. NULL: the sample. */
+    double (*surface_depth)(const void *user, int x, int y, double px, double py);
+    const void *user;
 } fx_ssr_scene;
 
 typedef struct fx_ssr_settings {
