@@ -1,6 +1,6 @@
 /* posterize: N colour levels per channel, or of the gray (mean or Rec.709 luminance): the
  * seed's banding, in sRGB-encoded or linear steps, with optional ordered dithering.
- * Memory-bound: one pass, quantiser tables from math/levels.h. docs/effects/posterize.md. */
+ * Memory-bound: one pass, SIMD threshold chain from math/levels.h (no encoding per pixel). docs/effects/posterize.md. */
 #include "core/effect.h"
 #include "core/parallel.h"
 #include "math/color.h"
@@ -50,46 +50,14 @@ typedef struct post_job {
     fx_levels q;
 } post_job;
 
-static inline float finite_or(float v)
-{
-    v = v == v ? v : 0.0f;
-    return v > FLT_MAX ? FLT_MAX : v < -FLT_MAX ? -FLT_MAX : v;
-}
-
 static void post_rows(void *user, int begin, int end)
 {
     const post_job *j = user;
     const fx_effect_run *run = j->run;
-    const fx_levels *q = &j->q;
-    const int mode = j->p->mode;
-    const float mix = j->p->mix;
-    const int x0 = run->roi.x0, x1 = run->roi.x1;
-    for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++) {
-        const float *restrict s = run->src + (size_t)y * run->width * 4;
-        float *restrict d = run->dst + (size_t)y * run->width * 4;
-        for (int x = x0; x < x1; x++) {
-            const float r = s[4 * x], g = s[4 * x + 1], b = s[4 * x + 2];
-            const float dd = fx_bayer8(x, y);
-            float o0, o1, o2;
-            if (mode == MODE_COLOR) {
-                o0 = fx_levels_apply(q, r, dd);
-                o1 = fx_levels_apply(q, g, dd);
-                o2 = fx_levels_apply(q, b, dd);
-            } else {
-                float gray = mode == MODE_LUMINANCE ? fx_luminance(r, g, b) : (r + g + b) * (1.0f / 3.0f);
-                o0 = o1 = o2 = fx_levels_apply(q, gray, dd);
-            }
-            if (mix < 1.0f) {
-                o0 = r + mix * (o0 - r);
-                o1 = g + mix * (o1 - g);
-                o2 = b + mix * (o2 - b);
-            }
-            d[4 * x] = finite_or(o0);
-            d[4 * x + 1] = finite_or(o1);
-            d[4 * x + 2] = finite_or(o2);
-            d[4 * x + 3] = finite_or(s[4 * x + 3]);
-        }
-    }
+    const int gray = j->p->mode == MODE_COLOR ? 0 : j->p->mode == MODE_LUMINANCE ? 1 : 2;
+    for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++)
+        fx_levels_rgba_row(&j->q, run->src + (size_t)y * run->width * 4, run->dst + (size_t)y * run->width * 4,
+                           run->roi.x0, run->roi.x1, y, gray, j->p->mix);
 }
 
 static fx_result posterize_process(const fx_effect_run *run)

@@ -182,7 +182,7 @@ static void sc_rows(void *user, int begin, int end)
             float gray = p->gray == GRAY_LUMINANCE ? fx_luminance(r, g, b)
                                                    : r * (1.0f / 3.0f) + g * (1.0f / 3.0f) + b * (1.0f / 3.0f);
             if (j->quantise)
-                gray = fx_levels_apply(&j->q, gray, fx_bayer8(x, y));
+                gray = fx_levels_apply(&j->q, gray, x, y);
             float k = 0.0f;
             if (p->keep != KEEP_NONE && (!cov || cov[x] > 0.0f))
                 k = keep_weight(j, r, g, b) * ks * (cov ? cov[x] : 1.0f);

@@ -1,14 +1,20 @@
 /* Quantising values to N levels (posterize, sin_city, the seed's banding), in linear or
  * sRGB-encoded steps, with optional ordered (8x8 Bayer) dithering.
  *
- * u = v / white. Band k = floor(e(u) * N + dither), clamped to [0, N-1], where e is the
- * identity (linear) or the sRGB encoding; the band's value is white * e^-1(k / (N-1)), so
- * black stays 0, white stays white, and a ramp over [0, white] takes exactly N values.
- * Values above white are kept as they are when keep_hdr (highlights survive for a following
- * bloom), else they take the top level; values <= 0 and NaN take level 0.
- * Without dither the sRGB case runs from tables (FX_LEVELS_LUT buckets over [0, 1], each
- * holding at most one band edge for N <= 256): k = first[i] + (u >= edge[i]), exact to
- * the band edges decode(k/N) and branch-free; with dither it encodes per value (powf). */
+ * u = v / white. Band k = floor(e(u) * N + delta), clamped to [0, N-1], where e is the
+ * identity (linear) or the sRGB encoding and delta = dither x the pixel's Bayer offset; the
+ * band's value is white * e^-1(k / (N-1)), so black stays 0, white stays white, and a ramp
+ * over [0, white] takes exactly N values. Values above white are kept as they are when
+ * keep_hdr (highlights survive for a following bloom), else they take the top level;
+ * values <= 0 (and below FLT_MIN) and NaN take level 0.
+ *
+ * No encoding per pixel: band k is the number of thresholds t_j <= u, with
+ * t_j = e^-1((j - delta) / N) computed once in double and rounded up to float, so
+ * `u >= t_j` is exactly `e(u) N + delta >= j` evaluated in exact arithmetic (no
+ * approximation error: the band edges are the formula's, for every Bayer phase). Without
+ * dither all 64 phases share one row of thresholds. N <= FX_LEVELS_VEC runs a branch-free
+ * compare/select chain over whole RGBA pixels in SIMD vectors (fx_levels_rgba_row); larger N
+ * a branch-free binary search. */
 #ifndef LIBFX_MATH_LEVELS_H
 #define LIBFX_MATH_LEVELS_H
 
@@ -16,17 +22,22 @@
 #include <stdint.h>
 
 #define FX_LEVELS_MAX 256
-#define FX_LEVELS_LUT 8192
+#define FX_LEVELS_VEC 16 /* N up to this: the SIMD chain (N - 1 <= 15 thresholds) */
 
 typedef struct fx_levels {
     int n;          /* levels, 2..FX_LEVELS_MAX */
     int srgb;       /* steps in sRGB-encoded values */
     int keep_hdr;
+    int phase_mask; /* 63 with dither, 0 without */
     float white, inv_white;
     float dither;   /* 0..1: amplitude of the ordered dither, in bands */
-    float value[FX_LEVELS_MAX];        /* linear output per band (times white) */
-    uint8_t first[FX_LEVELS_LUT];      /* sRGB: band at each bucket's start */
-    float edge[FX_LEVELS_LUT];         /* sRGB: the band edge inside the bucket, or 2 */
+    float value[FX_LEVELS_MAX];               /* linear output per band (times white) */
+    /* thresholds per Bayer phase ((y & 7) * 8 + (x & 7)), padded with +Inf to 256 */
+    float thr[64][FX_LEVELS_MAX];
+    /* the same, 4 copies each, for the SIMD chain (N <= FX_LEVELS_VEC) */
+    float thr4[64][FX_LEVELS_VEC][4] __attribute__((aligned(16)));
+    /* pixel pairs (x, x + 1) from phase of x: thr of x (4 copies) then of x + 1 (4 copies) */
+    float thr8[64][FX_LEVELS_VEC][8] __attribute__((aligned(32)));
 } fx_levels;
 
 /* n clamped to [2, FX_LEVELS_MAX]; white <= 0 or not finite reads as 1. */
@@ -43,28 +54,40 @@ static inline float fx_bayer8(int x, int y)
     return ((float)m[y & 7][x & 7] + 0.5f) * (1.0f / 64.0f) - 0.5f;
 }
 
-/* Quantises v; d is the pixel's dither offset (fx_bayer8), ignored when q->dither is 0. */
-float fx_levels_apply_slow(const fx_levels *q, float v, float d);
-
-static inline float fx_levels_apply(const fx_levels *q, float v, float d)
+/* Band of u (= v / white) at Bayer phase `phase` (already masked). */
+static inline int fx_levels_band(const fx_levels *q, float u, int phase)
 {
-    float u = v * q->inv_white;
-    if (!(u > 0.0f))
-        return q->value[0];
-    if (u >= 1.0f)
-        return q->keep_hdr ? (v < 3.4e38f ? v : 3.4e38f) : q->value[q->n - 1];
-    if (q->dither > 0.0f)
-        return fx_levels_apply_slow(q, v, d);
-    int k;
-    if (q->srgb) {
-        int i = (int)(u * (float)FX_LEVELS_LUT);
-        i = i < FX_LEVELS_LUT - 1 ? i : FX_LEVELS_LUT - 1;
-        k = q->first[i] + (u >= q->edge[i]);
-    } else {
-        k = (int)(u * (float)q->n);
+    const float *t = q->thr[phase];
+    int k = 0;
+    if (q->n <= FX_LEVELS_VEC) {
+        for (int j = 0; j < q->n - 1; j++)
+            k += u >= t[j];
+        return k;
     }
-    k = k < q->n - 1 ? k : q->n - 1;
-    return q->value[k];
+    /* branch-free binary search over 255 thresholds (+Inf padded): largest k with t[k-1] <= u */
+    for (int step = 128; step >= 1; step >>= 1)
+        k += (u >= t[k + step - 1]) ? step : 0;
+    return k;
 }
+
+/* Quantises v at pixel (x, y). */
+static inline float fx_levels_apply(const fx_levels *q, float v, int x, int y)
+{
+    const float u = v * q->inv_white;
+    if (q->keep_hdr && u >= 1.0f)
+        return v < 3.4e38f ? v : 3.4e38f;
+    return q->value[fx_levels_band(q, u, (((y & 7) << 3) | (x & 7)) & q->phase_mask)];
+}
+
+/* Quantises pixels x0..x1-1 of one RGBA row (src, dst point at the row's pixel 0) at image
+ * row y. gray: 0 each of R, G, B; 1 Rec.709 luminance; 2 the mean (R+G+B)/3, quantised and
+ * written to all three. mix < 1 blends from the source. Alpha passes (NaN -> 0, +-Inf ->
+ * +-FLT_MAX); the output is always finite. */
+void fx_levels_rgba_row(const fx_levels *q, const float *src, float *dst, int x0, int x1, int y,
+                        int gray, float mix);
+
+/* Reference (slow) quantiser: the formula with the sRGB encoding per value, in double. For
+ * tests: equal to fx_levels_apply except within 1e-12 (relative) of a band edge. */
+float fx_levels_apply_reference(const fx_levels *q, float v, int x, int y);
 
 #endif
