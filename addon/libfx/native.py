@@ -53,7 +53,8 @@ class fx_write_options(ctypes.Structure):
     _fields_ = [("size", ctypes.c_size_t),
                 ("half_color", c_int),
                 ("only_combined", c_int),
-                ("input_path", c_char_p)]
+                ("input_path", c_char_p),
+                ("compression", c_char_p)]   # NULL: the library's default (ZIP, fast)
 
 
 P = ctypes.POINTER

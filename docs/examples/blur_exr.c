@@ -32,7 +32,7 @@ int main(int argc, char **argv)
     if (!r)
         r = fx_stack_run(stack, in, &out);
     if (!r) {
-        fx_write_options wo = {sizeof wo, 0, 1, argv[1]}; /* float, Combined only, never over the input */
+        fx_write_options wo = {sizeof wo, 0, 1, argv[1], NULL}; /* float, Combined only, never over the input */
         r = fx_frame_write_exr(out, argv[2], &wo);
     }
     for (int i = 0; i < fx_context_warning_count(ctx); i++)

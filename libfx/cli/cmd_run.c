@@ -15,7 +15,7 @@
 #include <unistd.h>
 
 typedef struct run_opts {
-    const char *stack_path, *camera_path, *layer, *view, *quality, *png, *in, *out;
+    const char *stack_path, *camera_path, *layer, *view, *quality, *png, *in, *out, *compression;
     long threads;
     double fps;
     long frame; /* --frame, for a single file */
@@ -110,6 +110,8 @@ static int parse_options(int argc, char **argv, run_opts *o)
             VALUE(o->layer);
         } else if (is(opt, "--view", NULL)) {
             VALUE(o->view);
+        } else if (is(opt, "--compression", NULL)) {
+            VALUE(o->compression);
         } else if (is(opt, "-q", "--quality")) {
             VALUE(o->quality);
             if (fx_quality_from_name(o->quality) < 0)
@@ -389,6 +391,7 @@ static int run_frame(run_job *job, const run_item *it)
     wo.half_color = o->half;
     wo.only_combined = 0; /* the output holds Combined, debug passes and kept passes only */
     wo.input_path = it->in;
+    wo.compression = o->compression; /* NULL: the library's default (ZIP, fast level) */
     r = fx_frame_write_exr(out, it->out, &wo);
     cli_flush_warnings(ctx);
     if (r == FX_ERR_CANCELLED)

@@ -90,6 +90,7 @@ int cli_help_command(FILE *out, const char *cmd)
                 "  --keep-passes         read every pass and copy the input's passes to OUT\n"
                 "  --debug-outputs       add the effects' debug passes (masks, mattes...) to OUT\n"
                 "  --half                write colour passes as half floats (data stay float)\n"
+                "  --compression C       zip (default, fast level), zip:1..zip:9, zips, piz, rle, none\n"
                 "  -f, --force           overwrite existing outputs (never the input)\n"
                 "  --frame N             the scene frame of a single input (for animated effects)\n"
                 "  -v, --verbose         per-frame phase times and per-effect timings (stdout)\n"

@@ -111,7 +111,7 @@ int main(int argc, char **argv)
             if (fx_frame_read_exr(ctx[t], in, &ro, &fc) != FX_OK)
                 die(ctx[t], "read Combined");
             double t2 = now();
-            fx_write_options wo = {sizeof wo, 0, 0, NULL};
+            fx_write_options wo = {sizeof wo, 0, 0, NULL, NULL};
             if (fx_frame_write_exr(f, out, &wo) != FX_OK)
                 die(ctx[t], "write");
             double t3 = now();
@@ -159,7 +159,7 @@ int main(int argc, char **argv)
             for (int r = 0; r < reps; r++) {
                 fx_exr_write_params p = fx_exr_write_defaults();
                 p.zip_level = level;
-                fx_write_options wo = {sizeof wo, 0, 0, NULL};
+                fx_write_options wo = {sizeof wo, 0, 0, NULL, NULL};
                 double t0 = now();
                 if (fx_exr_write(f, out, &wo, &p) != FX_OK)
                     die(ctx[1], "write");

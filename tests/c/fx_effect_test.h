@@ -9,7 +9,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-static fx_frame *et_frame(fx_context *ctx, int w, int h, const float *rgba)
+static inline fx_frame *et_frame(fx_context *ctx, int w, int h, const float *rgba)
 {
     fx_frame *f = NULL;
     if (fx_frame_new(ctx, w, h, &f) != FX_OK)
@@ -21,7 +21,7 @@ static fx_frame *et_frame(fx_context *ctx, int w, int h, const float *rgba)
     return f;
 }
 
-static const float *et_combined(const fx_frame *f)
+static inline const float *et_combined(const fx_frame *f)
 {
     float *d = NULL;
     int c = 0;
@@ -31,7 +31,7 @@ static const float *et_combined(const fx_frame *f)
 }
 
 /* A stack holding one effect; the caller sets parameters on index 0. */
-static fx_stack *et_stack(fx_context *ctx, const char *effect)
+static inline fx_stack *et_stack(fx_context *ctx, const char *effect)
 {
     fx_stack *s = NULL;
     int idx = -1;
@@ -46,7 +46,7 @@ static fx_stack *et_stack(fx_context *ctx, const char *effect)
 }
 
 /* Runs s on in; returns a malloc'ed copy of the output Combined (NULL on failure). */
-static float *et_run(fx_context *ctx, fx_stack *s, const fx_frame *in)
+static inline float *et_run(fx_context *ctx, fx_stack *s, const fx_frame *in)
 {
     fx_frame *out = NULL;
     if (fx_stack_run(s, in, &out) != FX_OK) {
@@ -63,7 +63,7 @@ static float *et_run(fx_context *ctx, fx_stack *s, const fx_frame *in)
 }
 
 /* 1 if every pixel outside rect [x, y, w, h] is bit-identical in a and b. */
-static int et_outside_equal(const float *a, const float *b, int W, int H, int rx, int ry, int rw, int rh)
+static inline int et_outside_equal(const float *a, const float *b, int W, int H, int rx, int ry, int rw, int rh)
 {
     for (int y = 0; y < H; y++)
         for (int x = 0; x < W; x++) {

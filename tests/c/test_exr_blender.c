@@ -157,7 +157,7 @@ int main(void)
     /* a processed file can be read again: write the render route, read it back */
     char out[600];
     snprintf(out, sizeof out, "%s/again.exr", tu_tmpdir("exr_blender"));
-    fx_write_options wo = {sizeof wo, 1, 0, fixture("render_multilayer.exr")};
+    fx_write_options wo = {sizeof wo, 1, 0, fixture("render_multilayer.exr"), NULL};
     CHECK_OK(ctx, fx_frame_write_exr(r, out, &wo));
     fx_frame *again = NULL;
     CHECK_OK(ctx, fx_frame_read_exr(ctx, out, NULL, &again));

@@ -34,7 +34,7 @@ int main(void)
     CHECK_OK(ctx, fx_frame_add_pass(f, "Depth", 1, depth));
     int dw[4] = {10, -3, 10 + w - 1, -3 + h - 1}, disp[4] = {0, 0, 119, 49};
     CHECK_OK(ctx, fx_frame_set_windows(f, dw, disp));
-    fx_write_options wo = {sizeof wo, 0, 0, NULL};
+    fx_write_options wo = {sizeof wo, 0, 0, NULL, NULL};
     CHECK_OK(ctx, fx_frame_write_exr(f, src, &wo));
 
     const char *codecs[2] = {"dwaa", "dwab"};

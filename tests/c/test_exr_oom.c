@@ -49,7 +49,7 @@ int main(void)
     CHECK_OK(ctx, fx_frame_read_exr(ctx, in, NULL, &f));
     char out[600];
     snprintf(out, sizeof out, "%s/oom%d.exr", tu_tmpdir("exr_oom"), threads);
-    fx_write_options wo = {sizeof wo, 0, 0, NULL};
+    fx_write_options wo = {sizeof wo, 0, 0, NULL, NULL};
     for (n = 1; f && n < 2000; n++) {
         fx_mem_fail_after(n);
         fx_result r = fx_frame_write_exr(f, out, &wo);

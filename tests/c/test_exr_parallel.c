@@ -113,7 +113,7 @@ int main(void)
             fx_exr_write_params p = fx_exr_write_defaults();
             p.compression = codecs[k].c;
             p.zip_level = codecs[k].level;
-            fx_write_options wo = {sizeof wo, 0, 0, NULL};
+            fx_write_options wo = {sizeof wo, 0, 0, NULL, NULL};
             CHECK_OK(ctx[t], fx_exr_write(src[t], path, &wo, &p));
             bytes[t] = slurp(path, &len[t]);
             fx_frame *back = NULL;

@@ -3,6 +3,7 @@
 #include "testutil.h"
 
 #include <dirent.h>
+#include <stddef.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -132,7 +133,7 @@ static void test_round_trip(fx_context *ctx, const char *dir)
 
     char path[600];
     snprintf(path, sizeof path, "%s/round.exr", dir);
-    fx_write_options wo = {sizeof wo, 0, 0, NULL};
+    fx_write_options wo = {sizeof wo, 0, 0, NULL, NULL};
     CHECK_OK(ctx, fx_frame_write_exr(f, path, &wo));
     CHECK(!has_temp_file(dir));
 
@@ -171,7 +172,7 @@ static void test_round_trip(fx_context *ctx, const char *dir)
     /* half_color: Combined becomes half, data passes stay float (bit-exact) */
     char hpath[600];
     snprintf(hpath, sizeof hpath, "%s/half.exr", dir);
-    fx_write_options ho = {sizeof ho, 1, 0, NULL};
+    fx_write_options ho = {sizeof ho, 1, 0, NULL, NULL};
     CHECK_OK(ctx, fx_frame_write_exr(f, hpath, &ho));
     char *info = NULL;
     CHECK_OK(ctx, fx_exr_info_json(ctx, hpath, &info));
@@ -202,7 +203,7 @@ static void test_round_trip(fx_context *ctx, const char *dir)
     }
 
     /* only_combined */
-    fx_write_options oc = {sizeof oc, 0, 1, NULL};
+    fx_write_options oc = {sizeof oc, 0, 1, NULL, NULL};
     CHECK_OK(ctx, fx_frame_write_exr(f, hpath, &oc));
     g = NULL;
     CHECK_OK(ctx, fx_frame_read_exr(ctx, hpath, NULL, &g));
@@ -234,13 +235,13 @@ static void test_refusals(fx_context *ctx, const char *dir)
     char in[600], alias[600];
     snprintf(in, sizeof in, "%s/input.exr", dir);
     snprintf(alias, sizeof alias, "%s/./input.exr", dir);
-    fx_write_options wo = {sizeof wo, 0, 0, NULL};
+    fx_write_options wo = {sizeof wo, 0, 0, NULL, NULL};
     CHECK_OK(ctx, fx_frame_write_exr(f, in, &wo));
     size_t len0 = 0, len1 = 0;
     char *before = slurp(in, &len0);
 
     fx_frame *g = tu_pattern_frame(ctx, 8, 8, 2);
-    fx_write_options same = {sizeof same, 0, 0, in};
+    fx_write_options same = {sizeof same, 0, 0, in, NULL};
     CHECK_FAIL(ctx, fx_frame_write_exr(g, alias, &same), FX_ERR_INVALID_ARGUMENT,
                "refusing to overwrite the input file");
     char *after = slurp(in, &len1);
@@ -275,11 +276,36 @@ static void test_refusals(fx_context *ctx, const char *dir)
     CHECK_OK(ctx, fx_frame_add_pass(empty, "Depth", 1, NULL));
     char e[600];
     snprintf(e, sizeof e, "%s/empty.exr", dir);
-    fx_write_options oc = {sizeof oc, 0, 1, NULL};
+    fx_write_options oc = {sizeof oc, 0, 1, NULL, NULL};
     CHECK_FAIL(ctx, fx_frame_write_exr(empty, e, &oc), FX_ERR_MISSING_PASS, "Combined");
     CHECK(access(e, F_OK) != 0);
     CHECK(!has_temp_file(dir));
-    fx_write_options bad = {3, 0, 0, NULL};
+    /* compression by name; an unknown name is refused and leaves no file */
+    {
+        char cpath[600];
+        snprintf(cpath, sizeof cpath, "%s/piz.exr", dir);
+        fx_write_options po = {sizeof po, 0, 1, NULL, "piz"};
+        CHECK_OK(ctx, fx_frame_write_exr(f, cpath, &po));
+        fx_frame *pf = NULL;
+        CHECK_OK(ctx, fx_frame_read_exr(ctx, cpath, NULL, &pf));
+        float *pa = NULL, *pb = NULL;
+        fx_frame_pass(f, "Combined", &pa, NULL);
+        if (pf)
+            fx_frame_pass(pf, "Combined", &pb, NULL);
+        CHECK(pa && pb && memcmp(pa, pb, (size_t)fx_frame_width(f) * fx_frame_height(f) * 16) == 0);
+        fx_frame_free(pf);
+        snprintf(cpath, sizeof cpath, "%s/bad_codec.exr", dir);
+        fx_write_options bo = {sizeof bo, 0, 1, NULL, "dwaa"};
+        CHECK_FAIL(ctx, fx_frame_write_exr(f, cpath, &bo), FX_ERR_BAD_PARAM, "compression 'dwaa'");
+        CHECK(access(cpath, F_OK) != 0);
+        fx_write_options lo = {sizeof lo, 0, 1, NULL, "zip:12"};
+        CHECK_FAIL(ctx, fx_frame_write_exr(f, cpath, &lo), FX_ERR_BAD_PARAM, "zip:12");
+        /* a caller built against 0.1.0 (no compression field) still works */
+        fx_write_options old = {offsetof(fx_write_options, compression), 0, 1, NULL, (const char *)1};
+        snprintf(cpath, sizeof cpath, "%s/old_size.exr", dir);
+        CHECK_OK(ctx, fx_frame_write_exr(f, cpath, &old));
+    }
+    fx_write_options bad = {3, 0, 0, NULL, NULL};
     CHECK_FAIL(ctx, fx_frame_write_exr(g, e, &bad), FX_ERR_INVALID_ARGUMENT, "size");
     fx_frame_free(empty);
     fx_frame_free(f);

@@ -169,6 +169,26 @@ def test_identity_recipe_is_bit_identical(run, tmp_path):
     assert a.tobytes() == b.tobytes()
 
 
+@pytest.mark.parametrize("codec", ["zip", "zip:6", "zips", "piz", "rle", "none"])
+def test_compression_choices_are_lossless(run, tmp_path, codec):
+    src = make_frame(tmp_path / "in.exr")
+    recipe = write_recipe(tmp_path / "r.json", [])
+    out = tmp_path / "out.exr"
+    r = run("run", "--stack", recipe, "--compression", codec, src, "-o", out)
+    assert r.returncode == EXIT_OK, r.stderr
+    assert combined(read_exr(src)).tobytes() == combined(read_exr(out)).tobytes()
+
+
+def test_unknown_compression_names_the_choices(run, tmp_path):
+    src = make_frame(tmp_path / "in.exr")
+    recipe = write_recipe(tmp_path / "r.json", [])
+    out = tmp_path / "out.exr"
+    r = run("run", "--stack", recipe, "--compression", "dwaa", src, "-o", out)
+    assert r.returncode != EXIT_OK
+    assert "compression 'dwaa'" in r.stderr and "piz" in r.stderr
+    assert not out.exists()
+
+
 def test_output_has_only_combined_unless_keep_passes(run, tmp_path):
     src = make_frame(tmp_path / "in.exr")
     recipe = write_recipe(tmp_path / "r.json", [{"effect": "pixelate"}])

@@ -209,6 +209,10 @@ typedef struct fx_write_options {
     int half_color;         /* 1: colour passes as half; data passes always float */
     int only_combined;      /* 1: write Combined only; 0: every pass in the frame */
     const char *input_path; /* refuse to write over this file (the input) */
+    /* Appended after 0.1.0 (a smaller `size` is accepted and means the default):
+     * "zip" (default, zlib level 1: fast, a few % larger than level 6), "zip:1".."zip:9",
+     * "zips", "zips:N", "piz", "rle", "none"; NULL: the default. Lossless only. */
+    const char *compression;
 } fx_write_options;
 
 /* Writes a multilayer EXR atomically (temporary file in the same folder + rename),
@@ -279,6 +283,12 @@ FX_API fx_result fx_frame_set_aux_view(fx_frame *f, const char *name, const char
  * "light", "light": "Sun"}, {"name": "rain_map", "kind": "rain_map"}]}. A light name ""
  * ("light:") means the scene's first sun. Renderers make only these. */
 FX_API fx_result fx_stack_required_aux_views(const fx_stack *s, char **out_json);
+/* Built aux-view maps (a light view's filtered moments, the rain map) are kept per context
+ * and reused while the view's sidecar entry, file size and modification time and the
+ * effect's build parameters are the same, so frames 2..N of a batch neither re-read nor
+ * rebuild them. max_bytes bounds the cache (default 768 MiB, never above the context's
+ * memory limit); 0 turns it off. Results are bit-identical either way. */
+FX_API fx_result fx_context_set_aux_cache(fx_context *c, uint64_t max_bytes);
 
 #ifdef __cplusplus
 }

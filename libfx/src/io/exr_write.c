@@ -21,6 +21,7 @@
 #include <errno.h>
 #include <fcntl.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -384,11 +385,18 @@ fx_result fx_exr_write(const fx_frame *f, const char *path, const fx_write_optio
     fx_context *ctx = f ? f->ctx : NULL;
     if (!f || !path || !path[0])
         return fx_fail(ctx, FX_ERR_INVALID_ARGUMENT, "fx_frame_write_exr: frame and path must not be NULL");
-    if (opts && opts->size < sizeof(fx_write_options))
+    /* Older callers pass the struct without `compression`: accept that prefix. */
+    const size_t v1_size = offsetof(fx_write_options, compression);
+    if (opts && opts->size < v1_size)
         return fx_fail(ctx, FX_ERR_INVALID_ARGUMENT,
                        "fx_frame_write_exr: opts->size is %zu, expected %zu (set it to sizeof(fx_write_options))",
                        opts->size, sizeof(fx_write_options));
     fx_exr_write_params p = params ? *params : fx_exr_write_defaults();
+    if (!params && opts && opts->size >= sizeof(fx_write_options) && opts->compression) {
+        fx_result pr = fx_exr_parse_compression(ctx, opts->compression, &p);
+        if (pr != FX_OK)
+            return pr;
+    }
     switch (p.compression) {
     case EXR_COMPRESSION_NONE:
     case EXR_COMPRESSION_RLE:
@@ -413,6 +421,38 @@ fx_result fx_exr_write(const fx_frame *f, const char *path, const fx_write_optio
         return r;
     r = write_to(f, tmp, path, opts, &p);
     return fx_temp_commit(ctx, tmp, path, r);
+}
+
+fx_result fx_exr_parse_compression(const fx_context *ctx, const char *text, fx_exr_write_params *out)
+{
+    static const struct {
+        const char *name;
+        exr_compression_t c;
+    } codecs[] = {{"none", EXR_COMPRESSION_NONE}, {"rle", EXR_COMPRESSION_RLE}, {"zips", EXR_COMPRESSION_ZIPS},
+                  {"zip", EXR_COMPRESSION_ZIP}, {"piz", EXR_COMPRESSION_PIZ}};
+    fx_exr_write_params p = fx_exr_write_defaults();
+    const char *colon = strchr(text, ':');
+    size_t n = colon ? (size_t)(colon - text) : strlen(text);
+    int found = 0;
+    for (size_t i = 0; i < sizeof codecs / sizeof codecs[0]; i++)
+        if (strlen(codecs[i].name) == n && strncmp(text, codecs[i].name, n) == 0) {
+            p.compression = codecs[i].c;
+            found = 1;
+        }
+    int zip = p.compression == EXR_COMPRESSION_ZIP || p.compression == EXR_COMPRESSION_ZIPS;
+    if (found && colon) {
+        char *end = NULL;
+        long level = strtol(colon + 1, &end, 10);
+        if (!zip || end == colon + 1 || *end || level < 1 || level > 9)
+            found = 0;
+        else
+            p.zip_level = (int)level;
+    }
+    if (!found)
+        return fx_fail(ctx, FX_ERR_BAD_PARAM,
+                       "compression '%s' is not one of: zip, zip:1..zip:9, zips, zips:N, piz, rle, none", text);
+    *out = p;
+    return FX_OK;
 }
 
 fx_result fx_frame_write_exr(const fx_frame *f, const char *path, const fx_write_options *opts)
