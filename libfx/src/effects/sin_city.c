@@ -12,6 +12,7 @@
 
 #include <float.h>
 #include <math.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <string.h>
 
@@ -112,6 +113,7 @@ typedef struct sc_job {
     int quantise;
     float key[3];
     float hue_c, hue_half, hue_soft;
+    float inv_hue_soft, inv_sat_soft; /* reciprocals: no division per pixel for the ramps */
     fx_levels q;
 } sc_job;
 
@@ -122,7 +124,7 @@ static inline float finite_or(float v)
 }
 
 /* Weight in [0, 1] of keeping colour (r, g, b) (finite, may be negative). */
-static inline float keep_weight(const sc_job *j, float r, float g, float b)
+static inline __attribute__((always_inline)) float keep_weight(const sc_job *j, float r, float g, float b)
 {
     const sin_city_params *p = j->p;
     r = r > 0.0f ? r : 0.0f;
@@ -145,53 +147,218 @@ static inline float keep_weight(const sc_job *j, float r, float g, float b)
     }
     /* hue window: hexcone hue in degrees, circular distance to the centre */
     float d = mx - mn;
-    float sat = d / mx;
-    float gate = p->saturation_softness > 0.0f
-                     ? fx_saturate((sat - p->min_saturation) / p->saturation_softness + 0.5f)
-                     : (sat >= p->min_saturation ? 1.0f : 0.0f);
+    float gate;
+    if (p->saturation_softness > 0.0f) {
+        /* sat = d / mx, without the division: (sat - min) / soft + 0.5 */
+        gate = fx_saturate((d / mx - p->min_saturation) * j->inv_sat_soft + 0.5f);
+    } else {
+        gate = d >= p->min_saturation * mx ? 1.0f : 0.0f;
+    }
     if (!(gate > 0.0f) || !(d > 0.0f))
         return 0.0f;
+    const float s60 = 60.0f / d;
     float h;
     if (mx == r)
-        h = 60.0f * ((g - b) / d);
+        h = (g - b) * s60;
     else if (mx == g)
-        h = 60.0f * ((b - r) / d) + 120.0f;
+        h = (b - r) * s60 + 120.0f;
     else
-        h = 60.0f * ((r - g) / d) + 240.0f;
+        h = (r - g) * s60 + 240.0f;
+    /* h in [-60, 360], hue_c in [0, 360): |h - c| in [0, 420], one wrap at most */
     float dist = fabsf(h - j->hue_c);
-    dist = fmodf(dist, 360.0f);
+    dist = dist >= 360.0f ? dist - 360.0f : dist;
     dist = dist > 180.0f ? 360.0f - dist : dist;
-    float w = dist <= j->hue_half ? 1.0f
-              : j->hue_soft > 0.0f ? 1.0f - fx_smoothstep(j->hue_half, j->hue_half + j->hue_soft, dist)
-                                   : 0.0f;
-    return w * gate;
+    if (dist <= j->hue_half)
+        return gate;
+    if (!(j->hue_soft > 0.0f))
+        return 0.0f;
+    float t = fx_saturate((dist - j->hue_half) * j->inv_hue_soft);
+    return (1.0f - t * t * (3.0f - 2.0f * t)) * gate;
 }
 
-static void sc_rows(void *user, int begin, int end)
+/* The rows in chunks of 8 pixels, each step a loop over the 8 lanes with no branches
+ * (selects); keep_weight() above is the scalar statement of the same weights (and does the
+ * keep dot mode); test_sin_city checks the hue window's values at and around its edges. */
+#define SC_LANES 8 /* keep_lanes' vectors have 8 lanes */
+/* keep_lanes uses GCC vector types; the other lane loops are left to the vectoriser, whose
+ * -O2 "very cheap" cost model leaves them scalar: the dynamic model here, with an AVX2
+ * clone beside the baseline (no FMA in either: the same bits). Vectors live only inside
+ * always-inline helpers, so GCC's ABI note for 32-byte vectors does not apply. */
+#if defined(__GNUC__) && !defined(__clang__)
+#  pragma GCC diagnostic ignored "-Wpsabi"
+#endif
+#if defined(__GNUC__) && !defined(__clang__) && (defined(__x86_64__) || defined(__i386__)) && \
+    !defined(FX_NO_CLONES)
+#  define SC_VEC __attribute__((optimize("tree-vectorize", "vect-cost-model=dynamic"), target_clones("avx2", "default")))
+#else
+#  define SC_VEC
+#endif
+
+static inline __attribute__((always_inline)) float clampf_finite(float v) /* NaN -> 0, +-Inf -> +-FLT_MAX, branch-free */
+{
+    v = v == v ? v : 0.0f;
+    v = v < FLT_MAX ? v : FLT_MAX;
+    return v > -FLT_MAX ? v : -FLT_MAX;
+}
+
+static inline __attribute__((always_inline)) void keep_lanes(const sc_job *j, const float *R, const float *G, const float *B, float *K)
+{
+    const sin_city_params *p = j->p;
+    if (p->keep == KEEP_DOT) {
+        for (int i = 0; i < SC_LANES; i++)
+            K[i] = keep_weight(j, R[i], G[i], B[i]);
+        return;
+    }
+    /* GCC vector types: 8 lanes (one AVX register, two SSE ones in the baseline clone) */
+    typedef float v8f __attribute__((vector_size(32)));
+    typedef int32_t v8i __attribute__((vector_size(32)));
+#define SEL(m, a, b) ((v8f)(((v8i)(a) & (m)) | ((v8i)(b) & ~(m))))
+#define SPLAT(v) ((v8f){ (v), (v), (v), (v), (v), (v), (v), (v) })
+    const v8f zero = SPLAT(0.0f), one = SPLAT(1.0f);
+    const v8f ms = SPLAT(p->min_saturation), iss = SPLAT(j->inv_sat_soft);
+    const v8f hc = SPLAT(j->hue_c), hh = SPLAT(j->hue_half), ihs = SPLAT(j->inv_hue_soft);
+    const int soft_sat = p->saturation_softness > 0.0f, soft_hue = j->hue_soft > 0.0f;
+    v8f r, g, b;
+    memcpy(&r, R, sizeof r);
+    memcpy(&g, G, sizeof g);
+    memcpy(&b, B, sizeof b);
+    r = SEL(r > zero, r, zero);
+    g = SEL(g > zero, g, zero);
+    b = SEL(b > zero, b, zero);
+    v8f mx = SEL(r > g, r, g);
+    mx = SEL(mx > b, mx, b);
+    v8f mn = SEL(r < g, r, g);
+    mn = SEL(mn < b, mn, b);
+    const v8f d = mx - mn;
+    const v8i ok = (mx > SPLAT(1e-20f)) & (d > zero);
+    const v8f imx = one / SEL(ok, mx, one);
+    v8f gate;
+    if (soft_sat) {
+        gate = (d * imx - ms) * iss + SPLAT(0.5f);
+        gate = SEL(gate > zero, gate, zero);
+        gate = SEL(gate < one, gate, one);
+    } else {
+        gate = SEL(d >= ms * mx, one, zero);
+    }
+    const v8f s60 = SPLAT(60.0f) / SEL(ok, d, one);
+    v8f h = SEL(mx == g, (b - r) * s60 + SPLAT(120.0f), (r - g) * s60 + SPLAT(240.0f));
+    h = SEL(mx == r, (g - b) * s60, h);
+    v8f dist = h - hc;
+    dist = SEL(dist < zero, -dist, dist);
+    dist = SEL(dist >= SPLAT(360.0f), dist - SPLAT(360.0f), dist);
+    dist = SEL(dist > SPLAT(180.0f), SPLAT(360.0f) - dist, dist);
+    v8f ws = zero;
+    if (soft_hue) {
+        v8f t = (dist - hh) * ihs;
+        t = SEL(t > zero, t, zero);
+        t = SEL(t < one, t, one);
+        ws = one - t * t * (SPLAT(3.0f) - SPLAT(2.0f) * t);
+    }
+    const v8f w = SEL(dist <= hh, one, ws);
+    const v8f k = SEL(ok, w * gate, zero);
+    memcpy(K, &k, sizeof k);
+#undef SEL
+#undef SPLAT
+}
+
+SC_VEC static void sc_rows(void *user, int begin, int end)
 {
     const sc_job *j = user;
     const fx_effect_run *run = j->run;
     const sin_city_params *p = j->p;
     const float mix = p->mix, ks = p->keep_strength;
+    const int lum = p->gray == GRAY_LUMINANCE, keep = p->keep != KEEP_NONE;
+    const fx_levels *q = &j->q;
+    const int nt = j->quantise ? q->n - 1 : 0;
+    const int vec = nt < FX_LEVELS_VEC;
+    float T[FX_LEVELS_VEC][SC_LANES], V[FX_LEVELS_VEC];
+    for (int k = 0; k < FX_LEVELS_VEC; k++)
+        V[k] = j->quantise ? q->value[k] : 0.0f;
     for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++) {
         const float *s = run->src + (size_t)y * run->width * 4;
         float *d = run->dst + (size_t)y * run->width * 4;
         const float *cov = j->keep_cov ? j->keep_cov + (size_t)y * run->width : NULL;
-        for (int x = run->roi.x0; x < run->roi.x1; x++) {
-            const float r = finite_or(s[4 * x]), g = finite_or(s[4 * x + 1]), b = finite_or(s[4 * x + 2]);
-            float gray = p->gray == GRAY_LUMINANCE ? fx_luminance(r, g, b)
-                                                   : r * (1.0f / 3.0f) + g * (1.0f / 3.0f) + b * (1.0f / 3.0f);
-            if (j->quantise)
-                gray = fx_levels_apply(&j->q, gray, x, y);
-            float k = 0.0f;
-            if (p->keep != KEEP_NONE && (!cov || cov[x] > 0.0f))
-                k = keep_weight(j, r, g, b) * ks * (cov ? cov[x] : 1.0f);
-            const float k1 = 1.0f - k; /* k = 1 gives the colour exactly, k = 0 the gray */
-            float o[3] = { k * r + k1 * gray, k * g + k1 * gray, k * b + k1 * gray };
-            const float in[3] = { r, g, b };
-            for (int c = 0; c < 3; c++)
-                d[4 * x + c] = finite_or(mix < 1.0f ? in[c] + mix * (o[c] - in[c]) : o[c]);
-            d[4 * x + 3] = finite_or(s[4 * x + 3]);
+        /* chunks start at x0 + 8 m: lane i always has Bayer phase (x0 + i) & 7 in this row */
+        if (j->quantise && vec)
+            for (int t = 0; t < nt; t++)
+                for (int i = 0; i < SC_LANES; i++)
+                    T[t][i] = q->thr[(((y & 7) << 3) | ((run->roi.x0 + i) & 7)) & q->phase_mask][t];
+        for (int x = run->roi.x0; x < run->roi.x1; x += SC_LANES) {
+            const int n = run->roi.x1 - x < SC_LANES ? run->roi.x1 - x : SC_LANES;
+            float R[SC_LANES], G[SC_LANES], B[SC_LANES], A[SC_LANES], Y[SC_LANES], K[SC_LANES];
+            float tail[SC_LANES * 4], tcov[SC_LANES];
+            const float *sp = s + 4 * (size_t)x, *cp = cov ? cov + x : NULL;
+            if (n < SC_LANES) { /* the tail: a padded copy (zeros) */
+                memset(tail, 0, sizeof tail);
+                memset(tcov, 0, sizeof tcov);
+                memcpy(tail, sp, (size_t)n * 4 * sizeof(float));
+                if (cp)
+                    memcpy(tcov, cp, (size_t)n * sizeof(float));
+                sp = tail;
+                cp = cp ? tcov : NULL;
+            }
+            for (int i = 0; i < SC_LANES; i++) {
+                R[i] = clampf_finite(sp[4 * i]);
+                G[i] = clampf_finite(sp[4 * i + 1]);
+                B[i] = clampf_finite(sp[4 * i + 2]);
+                A[i] = clampf_finite(sp[4 * i + 3]);
+            }
+            for (int i = 0; i < SC_LANES; i++)
+                Y[i] = lum ? fx_luminance(R[i], G[i], B[i])
+                           : R[i] * (1.0f / 3.0f) + G[i] * (1.0f / 3.0f) + B[i] * (1.0f / 3.0f);
+            if (j->quantise) {
+                if (vec) {
+                    float O[SC_LANES], U[SC_LANES];
+                    for (int i = 0; i < SC_LANES; i++) {
+                        U[i] = Y[i] * q->inv_white;
+                        O[i] = 0.0f;
+                    }
+                    for (int t = 0; t < nt; t++)
+                        for (int i = 0; i < SC_LANES; i++)
+                            O[i] = U[i] >= T[t][i] ? V[t + 1] : O[i];
+                    for (int i = 0; i < SC_LANES; i++) /* HDR kept (keep_hdr is on here) */
+                        Y[i] = U[i] >= 1.0f ? (Y[i] < 3.4e38f ? Y[i] : 3.4e38f) : O[i];
+                } else {
+                    for (int i = 0; i < n; i++)
+                        Y[i] = fx_levels_apply(q, Y[i], x + i, y);
+                }
+            }
+            if (keep) {
+                keep_lanes(j, R, G, B, K);
+                for (int i = 0; i < SC_LANES; i++) {
+                    float c = cp ? cp[i] : 1.0f;
+                    K[i] = c > 0.0f ? K[i] * ks * c : 0.0f;
+                }
+            } else {
+                for (int i = 0; i < SC_LANES; i++)
+                    K[i] = 0.0f;
+            }
+            float P0[SC_LANES], P1[SC_LANES], P2[SC_LANES];
+            for (int i = 0; i < SC_LANES; i++) {
+                const float k = K[i], k1 = 1.0f - k; /* k = 1 gives the colour exactly, k = 0 the gray */
+                P0[i] = k * R[i] + k1 * Y[i];
+                P1[i] = k * G[i] + k1 * Y[i];
+                P2[i] = k * B[i] + k1 * Y[i];
+            }
+            if (mix < 1.0f)
+                for (int i = 0; i < SC_LANES; i++) {
+                    P0[i] = R[i] + mix * (P0[i] - R[i]);
+                    P1[i] = G[i] + mix * (P1[i] - G[i]);
+                    P2[i] = B[i] + mix * (P2[i] - B[i]);
+                }
+            for (int i = 0; i < SC_LANES; i++) {
+                P0[i] = clampf_finite(P0[i]);
+                P1[i] = clampf_finite(P1[i]);
+                P2[i] = clampf_finite(P2[i]);
+            }
+            /* direct stores (a staging buffer read back wider than written stalls store forwarding) */
+            float *dp = d + 4 * (size_t)x;
+            for (int i = 0; i < n; i++) {
+                dp[4 * i] = P0[i];
+                dp[4 * i + 1] = P1[i];
+                dp[4 * i + 2] = P2[i];
+                dp[4 * i + 3] = A[i];
+            }
         }
     }
 }
@@ -228,6 +395,8 @@ static fx_result sin_city_process(const fx_effect_run *run)
     j->hue_c = j->hue_c < 0.0f ? j->hue_c + 360.0f : j->hue_c;
     j->hue_half = 0.5f * p->hue_width;
     j->hue_soft = p->hue_softness;
+    j->inv_hue_soft = p->hue_softness > 0.0f ? 1.0f / p->hue_softness : 0.0f;
+    j->inv_sat_soft = p->saturation_softness > 0.0f ? 1.0f / p->saturation_softness : 0.0f;
     fx_mask *keep = NULL;
     fx_result r = FX_OK;
     if (p->keep != KEEP_NONE && (p->keep_object[0] || p->keep_material[0])) {
