@@ -4,6 +4,8 @@
  * pixels; finite output; clear errors without a rain map. */
 #include "fx_effect_test.h"
 
+#include "core/aux_view.h"
+
 #include <math.h>
 
 #define N 64
@@ -300,12 +302,55 @@ static void test_splashes_and_wet(fx_context *ctx)
     fx_frame_free(f);
 }
 
+/* The rain map goes through the context's cache (core/aux_view.h): a stack of wet_surfaces,
+ * rain_splashes and rain over frames 1..4 in one context builds the map once (plus the
+ * filtered copy for the soft edges) and gives the same bits as a context without cache. */
+static void test_cache(void)
+{
+    fx_context *cached = NULL, *plain = NULL;
+    fx_context_new(&cached, 2);
+    fx_context_new(&plain, 1);
+    CHECK_OK(plain, fx_context_set_aux_cache(plain, 0));
+    fx_camera mc;
+    const char *map = rain_map(cached, 1.0f, 3.0f, &mc, "cache");
+    const char *names[] = {"wet_surfaces", "rain_splashes", "rain"};
+    for (int fr = 1; fr <= 4; fr++) {
+        float *out[2] = {NULL, NULL};
+        fx_context *cs[2] = {cached, plain};
+        for (int k = 0; k < 2; k++) {
+            fx_frame *f = ground_frame(cs[k], map, &mc, fr);
+            fx_stack *s = NULL;
+            CHECK_OK(cs[k], fx_stack_new(cs[k], &s));
+            for (int e = 0; e < 3; e++) {
+                int idx;
+                CHECK_OK(cs[k], fx_stack_append(s, names[e], &idx));
+            }
+            CHECK_OK(cs[k], fx_stack_set_string(s, 2, "cover_material", ""));
+            CHECK_OK(cs[k], fx_stack_set_float(s, 0, "edge_softness", 2.0)); /* 3.2 texels: filtered */
+            out[k] = et_run(cs[k], s, f);
+            fx_stack_free(s);
+            fx_frame_free(f);
+        }
+        CHECK(out[0] && out[1] && memcmp(out[0], out[1], N * N * 4 * sizeof(float)) == 0);
+        free(out[0]);
+        free(out[1]);
+    }
+    long built, reused;
+    fx_aux_cache_stats(cached, &built, &reused);
+    CHECK(built == 2 && reused == 4 * 4 - 2); /* 4 acquires a frame (wet: 2), 2 builds */
+    fx_aux_cache_stats(plain, &built, &reused);
+    CHECK(built == 16 && reused == 0);
+    fx_context_free(cached);
+    fx_context_free(plain);
+}
+
 int main(void)
 {
     fx_context *ctx = NULL;
     fx_context_new(&ctx, 2);
     test_rain(ctx);
     test_splashes_and_wet(ctx);
+    test_cache();
     fx_context_free(ctx);
     return tu_finish("test_rain");
 }

@@ -365,6 +365,79 @@ static void test_sidecar_threads_errors(fx_context *ctx)
     fx_frame_free(g);
 }
 
+/* The per-context cache of built light maps (core/aux_view.h): frames 2..N reuse the map
+ * and give the same bits as an uncached context (1 and 2 threads, box and Gaussian); a
+ * replaced view file, other filter parameters or a too small limit build again. */
+static void test_cache(void)
+{
+    float h[N * N];
+    for (int i = 0; i < N * N; i++)
+        h[i] = ((i % N) > N / 4 && (i % N) < N / 2 && (i / N) > N / 4 && (i / N) < 3 * N / 4) ? 2.0f : 0.0f;
+    fx_context *cached = NULL, *plain = NULL, *one = NULL;
+    fx_context_new(&cached, 2);
+    fx_context_new(&plain, 2);
+    fx_context_new(&one, 1);
+    CHECK_OK(plain, fx_context_set_aux_cache(plain, 0));
+    CHECK_OK(one, fx_context_set_aux_cache(one, 0));
+    const char *path = write_light_view(cached, h, "cache");
+    fx_frame *fc = floor_frame(cached, path), *fp = floor_frame(plain, path), *f1 = floor_frame(one, path);
+    const char *filters[] = {"box_sat", "gaussian"};
+    for (int k = 0; k < 2; k++) {
+        float *ref = run_vsm(plain, fp, "vsm", filters[k], 9.0f, 0.3f, 0.01f);
+        float *ref1 = run_vsm(one, f1, "vsm", filters[k], 9.0f, 0.3f, 0.01f);
+        CHECK(ref && ref1 && memcmp(ref, ref1, N * N * 4 * sizeof(float)) == 0);
+        for (int frame = 0; frame < 3; frame++) {
+            float *o = run_vsm(cached, fc, "vsm", filters[k], 9.0f, 0.3f, 0.01f);
+            CHECK(o && ref && memcmp(o, ref, N * N * 4 * sizeof(float)) == 0);
+            free(o);
+        }
+        free(ref);
+        free(ref1);
+    }
+    long built, reused;
+    fx_aux_cache_stats(cached, &built, &reused);
+    CHECK(built == 2 && reused == 4); /* one map per filter, frames 2 and 3 reuse it */
+    fx_aux_cache_stats(plain, &built, &reused);
+    CHECK(built == 2 && reused == 0);
+    /* pcf reads the unfiltered depth: another entry, same bits as uncached */
+    float *p1 = run_vsm(cached, fc, "pcf", "box_sat", 5.0f, 0.3f, 0.01f);
+    float *p2 = run_vsm(plain, fp, "pcf", "box_sat", 5.0f, 0.3f, 0.01f);
+    CHECK(p1 && p2 && memcmp(p1, p2, N * N * 4 * sizeof(float)) == 0);
+    free(p1);
+    free(p2);
+    /* the view re-rendered to the same path: built again, and the new shadow shows */
+    float *before = run_vsm(cached, fc, "vsm", "box_sat", 9.0f, 0.3f, 0.01f);
+    for (int i = 0; i < N * N; i++)
+        h[i] = (i % N) > N / 2 ? 2.0f : 0.0f;
+    write_light_view(cached, h, "cache");
+    fx_aux_cache_stats(cached, &built, &reused);
+    long b0 = built;
+    float *after = run_vsm(cached, fc, "vsm", "box_sat", 9.0f, 0.3f, 0.01f);
+    float *after_ref = run_vsm(plain, fp, "vsm", "box_sat", 9.0f, 0.3f, 0.01f);
+    fx_aux_cache_stats(cached, &built, &reused);
+    CHECK(built == b0 + 1);
+    CHECK(before && after && memcmp(before, after, N * N * 4 * sizeof(float)) != 0);
+    CHECK(after && after_ref && memcmp(after, after_ref, N * N * 4 * sizeof(float)) == 0);
+    free(before);
+    free(after_ref);
+    /* a limit below one map: nothing is kept, every run builds, same bits */
+    CHECK_OK(cached, fx_context_set_aux_cache(cached, 1000));
+    for (int r = 0; r < 2; r++) {
+        float *o = run_vsm(cached, fc, "vsm", "box_sat", 9.0f, 0.3f, 0.01f);
+        CHECK(o && after && memcmp(o, after, N * N * 4 * sizeof(float)) == 0);
+        free(o);
+    }
+    fx_aux_cache_stats(cached, &built, &reused);
+    CHECK(built == b0 + 3);
+    free(after);
+    fx_frame_free(fc);
+    fx_frame_free(fp);
+    fx_frame_free(f1);
+    fx_context_free(cached); /* frees the entries (leak-checked under ASan) */
+    fx_context_free(plain);
+    fx_context_free(one);
+}
+
 int main(void)
 {
     fx_context *ctx = NULL;
@@ -375,6 +448,7 @@ int main(void)
     test_bleeding(ctx);
     test_sidecar_threads_errors(ctx);
     test_sat_precision(ctx);
+    test_cache();
     fx_context_free(ctx);
     return tu_finish("test_vsm_shadows");
 }

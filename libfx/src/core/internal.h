@@ -54,7 +54,11 @@ struct fx_context {
     char **warnings;
     int warning_count, warning_cap;
     fx_pool *pool;                 /* worker threads, created on first parallel loop */
+    struct fx_aux_cache *aux_cache;/* built aux-view maps reused across frames (core/aux_view.c) */
 };
+
+/* Frees the context's aux-view cache (core/aux_view.c). */
+void fx_aux_cache_free(fx_context *ctx);
 
 /* Records the calling thread's error on ctx and returns code. ctx may be NULL. */
 fx_result fx_fail(const fx_context *ctx, fx_result code, const char *fmt, ...) FX_PRINTF(3, 4);

@@ -220,7 +220,7 @@ static fx_result rain_process(const fx_effect_run *run)
         spec.material_count = 1;
         r = fx_mask_build(run->ctx, &spec, run->frame, where, &cover);
         if (r) {
-            fx_rain_map_free(&j.rm);
+            fx_rain_map_free(run->ctx, &j.rm);
             return r;
         }
         j.cover = cover;
@@ -231,13 +231,13 @@ static fx_result rain_process(const fx_effect_run *run)
     j.dbg = fx_effect_debug_pass(run, "streaks", 1, &r);
     if (!j.dbg && r) {
         fx_mask_free(cover);
-        fx_rain_map_free(&j.rm);
+        fx_rain_map_free(run->ctx, &j.rm);
         return r;
     }
     int rows = roi->y1 - roi->y0;
     fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), rain_rows, &j);
     fx_mask_free(cover);
-    fx_rain_map_free(&j.rm);
+    fx_rain_map_free(run->ctx, &j.rm);
     return FX_OK;
 }
 

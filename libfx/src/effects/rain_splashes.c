@@ -161,12 +161,12 @@ static fx_result splash_process(const fx_effect_run *run)
     j.t = frame / (fps > 0 ? fps : 24.0);
     j.dbg = fx_effect_debug_pass(run, "splashes", 1, &r);
     if (!j.dbg && r) {
-        fx_rain_map_free(&j.rm);
+        fx_rain_map_free(run->ctx, &j.rm);
         return r;
     }
     int rows = roi->y1 - roi->y0;
     fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), splash_rows, &j);
-    fx_rain_map_free(&j.rm);
+    fx_rain_map_free(run->ctx, &j.rm);
     return FX_OK;
 }
 

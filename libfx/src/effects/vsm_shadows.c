@@ -185,20 +185,25 @@ static fx_result vsm_process(const fx_effect_run *run)
         return fx_fail(run->ctx, FX_ERR_NO_CAMERA, "%s needs the camera and the Depth pass", where);
     char name[FX_STRING_PARAM_MAX + 8];
     snprintf(name, sizeof name, "light:%s", p->light);
-    fx_aux_view *av = NULL;
-    fx_result r = fx_aux_view_load(run->frame, name, where, &av);
+    /* the light view's map, built once per context and reused while the view is the same
+     * (core/aux_view.h); PCF and hard read only the normalised depth */
+    fx_aux_map map;
+    int filtered = p->method == METHOD_VSM;
+    fx_result r = fx_aux_map_acquire(run->frame, name, p->derivative_bias, filtered ? p->filter : -1,
+                                     filtered ? p->filter_size : 0.0f, where, &map);
     if (r)
         return r;
+    const fx_aux_view *av = map.av;
     j.av = av;
     if (p->apply == APPLY_SUN_DIFFUSE) {
         fx_light light;
         if ((r = fx_frame_find_light(run->frame, av->name + 6, where, &light))) {
-            fx_aux_view_free(av);
+            fx_aux_map_release(run->ctx, &map);
             return r;
         }
         fx_pass *dc = fx_frame_find_pass(run->frame, "DiffCol");
         if (!dc || dc->channels < 3) {
-            fx_aux_view_free(av);
+            fx_aux_map_release(run->ctx, &map);
             return fx_fail(run->ctx, FX_ERR_MISSING_PASS, "%s: apply sun_diffuse needs the DiffCol pass", where);
         }
         j.diffcol = dc->data;
@@ -208,30 +213,20 @@ static fx_result vsm_process(const fx_effect_run *run)
         if (light.type != FX_LIGHT_SUN)
             fx_warn(run->ctx, "%s: light '%s' is not a sun: sun_diffuse treats it as one", where, light.name);
     }
-    fx_shadow_map sm;
-    r = fx_shadow_map_build(run->ctx, av->depth, av->width, av->height, av->view.cam.clip_start,
-                            av->view.cam.clip_end, p->derivative_bias, &sm, where);
-    if (!r && p->method == METHOD_VSM)
-        r = fx_shadow_map_filter(run->ctx, &sm, (fx_shadow_filter)p->filter, p->filter_size, where);
-    if (r) {
-        fx_aux_view_free(av);
-        return r;
-    }
-    j.sm = &sm;
-    float ms = fx_shadow_map_norm_dist(&sm, p->min_std);
+    const fx_shadow_map *sm = map.sm;
+    j.sm = sm;
+    float ms = fx_shadow_map_norm_dist(sm, p->min_std);
     j.min_var = ms * ms > 1e-12f ? ms * ms : 1e-12f;
-    j.eps = fx_shadow_map_norm_dist(&sm, p->depth_bias);
+    j.eps = fx_shadow_map_norm_dist(sm, p->depth_bias);
     j.pcf_radius = (int)lrintf((p->filter_size - 1.0f) * 0.5f);
     j.vis_out = fx_effect_debug_pass(run, "visibility", 1, &r);
     if (!j.vis_out && r) {
-        fx_shadow_map_free(&sm);
-        fx_aux_view_free(av);
+        fx_aux_map_release(run->ctx, &map);
         return r;
     }
     int rows = roi->y1 - roi->y0;
     fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), vsm_rows, &j);
-    fx_shadow_map_free(&sm);
-    fx_aux_view_free(av);
+    fx_aux_map_release(run->ctx, &map);
     return FX_OK;
 }
 

@@ -130,15 +130,10 @@ static fx_result wet_process(const fx_effect_run *run)
     j.p = p;
     if (!fx_surface_src_init(&j.surf, run->frame) || !j.surf.normal)
         return fx_fail(run->ctx, FX_ERR_NO_CAMERA, "%s needs the camera and the Depth and Normal passes", where);
-    /* the texel size is known only once the map is read: load, then filter */
-    fx_result r = fx_rain_map_load(run->frame, 0.0f, where, &j.rm);
+    /* the rain map's moments box-filtered over `softness` metres (cached per context) */
+    fx_result r = fx_rain_map_load(run->frame, p->softness, where, &j.rm);
     if (r)
         return r;
-    float texels = j.rm.texel_metres > 0.0f ? p->softness / j.rm.texel_metres : 0.0f;
-    if (texels > 1.0f && (r = fx_shadow_map_filter(run->ctx, &j.rm.sm, FX_SHADOW_FILTER_BOX_SAT, texels, where))) {
-        fx_rain_map_free(&j.rm);
-        return r;
-    }
     fx_pass *gd = fx_frame_find_pass(run->frame, "GlossDir"), *gc = fx_frame_find_pass(run->frame, "GlossCol");
     if (gd && gc && gd->channels >= 3 && gc->channels >= 3 && gd->channels == gc->channels && gd->channels == 3) {
         j.gdir = gd->data;
@@ -146,12 +141,12 @@ static fx_result wet_process(const fx_effect_run *run)
     }
     j.dbg = fx_effect_debug_pass(run, "wetness", 1, &r);
     if (!j.dbg && r) {
-        fx_rain_map_free(&j.rm);
+        fx_rain_map_free(run->ctx, &j.rm);
         return r;
     }
     int rows = roi->y1 - roi->y0;
     fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), wet_rows, &j);
-    fx_rain_map_free(&j.rm);
+    fx_rain_map_free(run->ctx, &j.rm);
     return FX_OK;
 }
 

@@ -4,33 +4,41 @@
 #include <math.h>
 #include <string.h>
 
-fx_result fx_rain_map_load(const fx_frame *f, float soft_width_texels, const char *where, fx_rain_map *out)
+static float texel_size(const fx_aux_view *av)
+{
+    /* the projection's x scale maps [-1, 1] NDC over the width */
+    float sx = av->view.cam.projection[0];
+    return fabsf(sx) > 1e-20f ? 2.0f / fabsf(sx) / (float)av->width : 0.0f;
+}
+
+fx_result fx_rain_map_load(const fx_frame *f, float soft_width_metres, const char *where, fx_rain_map *out)
 {
     memset(out, 0, sizeof *out);
-    fx_result r = fx_aux_view_load(f, FX_AUX_RAIN_MAP, where, &out->av);
+    fx_result r = fx_aux_map_acquire(f, FX_AUX_RAIN_MAP, 0, -1, 0.0f, where, &out->map);
     if (r)
         return r;
-    const fx_aux_view *av = out->av;
-    r = fx_shadow_map_build(f->ctx, av->depth, av->width, av->height, av->view.cam.clip_start,
-                            av->view.cam.clip_end, 0, &out->sm, where);
-    if (!r && soft_width_texels > 1.0f)
-        r = fx_shadow_map_filter(f->ctx, &out->sm, FX_SHADOW_FILTER_BOX_SAT, soft_width_texels, where);
-    if (r) {
-        fx_rain_map_free(out);
-        return r;
+    float texel = texel_size(out->map.av);
+    float width = texel > 0.0f && soft_width_metres > 0.0f ? soft_width_metres / texel : 0.0f;
+    if (width > 1.0f) {
+        /* the texel size is known once the map is read: the filtered map is a second entry */
+        fx_aux_map filtered;
+        r = fx_aux_map_acquire(f, FX_AUX_RAIN_MAP, 0, FX_SHADOW_FILTER_BOX_SAT, width, where, &filtered);
+        fx_aux_map_release(f->ctx, &out->map);
+        if (r)
+            return r;
+        out->map = filtered;
     }
+    out->av = out->map.av;
+    out->sm = *out->map.sm;
     out->eps = fx_shadow_map_norm_dist(&out->sm, 0.05f);
-    /* texel size: the projection's x scale maps [-1, 1] NDC over the width */
-    float sx = av->view.cam.projection[0];
-    out->texel_metres = fabsf(sx) > 1e-20f ? 2.0f / fabsf(sx) / (float)av->width : 0.0f;
+    out->texel_metres = texel;
     return FX_OK;
 }
 
-void fx_rain_map_free(fx_rain_map *rm)
+void fx_rain_map_free(fx_context *ctx, fx_rain_map *rm)
 {
     if (!rm)
         return;
-    fx_shadow_map_free(&rm->sm);
-    fx_aux_view_free(rm->av);
-    rm->av = NULL;
+    fx_aux_map_release(ctx, &rm->map);
+    memset(rm, 0, sizeof *rm);
 }

@@ -10,16 +10,17 @@
 #include "math/shadow_map.h"
 
 typedef struct fx_rain_map {
-    fx_aux_view *av;
-    fx_shadow_map sm;
+    const fx_aux_view *av;
+    fx_shadow_map sm;   /* a shallow copy of the cached map's (borrowed arrays) */
+    fx_aux_map map;     /* what fx_rain_map_free releases */
     float eps;          /* normalised depth tolerance of the hard test */
     float texel_metres; /* world size of one texel (x) */
 } fx_rain_map;
 
-/* Loads the frame's rain map; soft_width_texels > 1 also filters its moments (box, SAT)
- * for fx_rain_map_soft. */
-fx_result fx_rain_map_load(const fx_frame *f, float soft_width_texels, const char *where, fx_rain_map *out);
-void fx_rain_map_free(fx_rain_map *rm);
+/* Loads the frame's rain map (through the context's cache, core/aux_view.h); soft_width
+ * metres > 0 also filters its moments (box, SAT) over that width for fx_rain_map_soft. */
+fx_result fx_rain_map_load(const fx_frame *f, float soft_width_metres, const char *where, fx_rain_map *out);
+void fx_rain_map_free(fx_context *ctx, fx_rain_map *rm);
 
 /* 1: exposed, 0: under cover (hard test at the nearest texel). */
 static inline float fx_rain_map_exposed(const fx_rain_map *rm, fx_vec3 p)
