@@ -201,6 +201,12 @@ typedef struct polar_job {
     size_t scratch_per_worker;
     fx_rect roi;
     float *rays;
+    /* shared tables, filled once per call (no transcendentals per bin): level g (rate
+     * lambda_{k_min + g}) has em1[g] = expm1(-lambda), e1[g] = exp(-lambda) and
+     * pw[g * pw_len + j] = exp(-lambda j), pq[g * pw_len + j] = -expm1(-lambda j);
+     * kap[rho] = the continuous level of the rate at rho bins (rho >= 1). */
+    int k_min, n_levels, pw_len, max_rho;
+    double *em1, *e1, *pw, *pq, *kap;
 } polar_job;
 
 /* [r_in, r_out] of the ray L + r (c, s), r >= 0, inside the slab [-0.5, w + 0.5] x [-0.5, h + 0.5]. */
@@ -227,33 +233,58 @@ static inline double oat(const double *o, int m, int ch)
     return m >= 0 ? o[3 * m + ch] : 0.0;
 }
 
-/* Kernel-weighted mean of occ over the path [b_lo, m] (bins), kernel exp(-lam (m - x)),
- * trapezoid rule over the whole bins and the fractional end. Fk: running sums
- * Fk[i] = sum_{i' <= i} o[i'] exp(-lam (i - i')). */
-static void path_mean(const double *Fk, const double *o, double lam, double em1, int m, double b_lo, double out[3])
+/* Kernel-weighted mean of occ over the path [m0 - f, m] (bins), kernel exp(-lam (m - x)),
+ * trapezoid rule over the whole bins and the fractional end (kernel linear across it).
+ * Fk: running sums Fk[i] = sum_{i' <= i} o[i'] exp(-lam (i - i')); pw/pq: the level's
+ * tables exp(-lam j) and -expm1(-lam j); em1 = expm1(-lam) (0: lam = 0). */
+static inline void path_mean(const double *Fk, const double *o, const double *pw, const double *pq, double em1,
+                             int m, int m0, double f, double out[3])
 {
-    double m0f = ceil(b_lo);
-    double f = m0f - b_lo;
-    int m0 = (int)m0f;
     int n = m - m0 + 1;
     if (n <= 1 && f < 1e-9) {
         for (int ch = 0; ch < 3; ch++)
             out[ch] = o[3 * m + ch];
         return;
     }
-    /* two exponentials per call; the rest from them (em1 = expm1(-lam), per level) */
-    double e1n = exp(-lam * (n - 1));
-    double en = e1n * (1.0 + em1);
-    double ef = f > 0.0 ? e1n * exp(-lam * f) : e1n;
-    double ln_ = lam * n;
-    double t1 = lam < 1e-12 ? (double)n : (ln_ < 0.5 ? expm1(-ln_) : en - 1.0) / em1;
+    double e1n = pw[n - 1];
+    double en = pw[n];
+    double ef = e1n * (1.0 + f * em1);
+    double t1 = em1 == 0.0 ? (double)n : -pq[n] / em1; /* (1 - e^-lam n) / (1 - e^-lam) */
     double den = t1 - 0.5 - 0.5 * e1n + 0.5 * f * (e1n + ef);
+    double inv = den > 1e-300 ? 1.0 / den : 0.0;
     for (int ch = 0; ch < 3; ch++) {
         double t = Fk[3 * m + ch] - (m0 >= 1 ? en * Fk[3 * (m0 - 1) + ch] : 0.0);
         double om0 = oat(o, m0, ch);
         double olo = f * oat(o, m0 - 1, ch) + (1.0 - f) * om0;
         double num = t - 0.5 * o[3 * m + ch] - 0.5 * om0 * e1n + 0.5 * f * (om0 * e1n + olo * ef);
-        out[ch] = den > 1e-300 ? num / den : o[3 * m + ch];
+        out[ch] = den > 1e-300 ? num * inv : o[3 * m + ch];
+    }
+}
+
+/* Bilinear samples of occ along the line, bins 0..cnt-1 at radius (b0 + m) hr. */
+static void gather_line(const polar_job *j, double c, double s, int b0, int cnt, double *o)
+{
+    const int w = j->w, h = j->h;
+    const float *occ = j->occ;
+    for (int m = 0; m < cnt; m++) {
+        double r = (b0 + m) * j->hr;
+        double fx = j->lx + r * c - 0.5, fy = j->ly + r * s - 0.5;
+        double x0f = floor(fx), y0f = floor(fy);
+        double *q = o + 3 * m;
+        q[0] = q[1] = q[2] = 0.0;
+        if (!(x0f >= -1.0 && x0f < (double)w && y0f >= -1.0 && y0f < (double)h))
+            continue;
+        int x0 = (int)x0f, y0 = (int)y0f;
+        double tx = fx - x0f, ty = fy - y0f;
+        if (x0 >= 0 && x0 + 1 < w && y0 >= 0 && y0 + 1 < h) {
+            /* interior: four taps, no bounds checks */
+            const float *p0 = occ + ((size_t)y0 * w + x0) * 3, *p1 = p0 + (size_t)w * 3;
+            double w00 = (1.0 - tx) * (1.0 - ty), w01 = tx * (1.0 - ty), w10 = (1.0 - tx) * ty, w11 = tx * ty;
+            for (int ch = 0; ch < 3; ch++)
+                q[ch] = w00 * p0[ch] + w01 * p0[3 + ch] + w10 * p1[ch] + w11 * p1[3 + ch];
+        } else {
+            sample_add(occ, w, h, fx + 0.5, fy + 0.5, 1.0, q);
+        }
     }
 }
 
@@ -263,23 +294,17 @@ static void polar_lines(void *user, int begin, int end, int worker)
     const fx_radial_blur *rb = j->rb;
     const double d = rb->density;
     const double mass = fx_radial_blur_mass(rb->decay);
+    const double k_out = rb->scale * mass;
     double *o = j->scratch + (size_t)worker * j->scratch_per_worker;
     double *F = o + (size_t)j->max_count * 3;
+    const size_t fstride = (size_t)j->max_count * 3;
     for (int a = begin; a < end; a++) {
         const polar_line *ln = &j->line[a];
         if (ln->count <= 0)
             continue;
         double th = j->theta_c + j->phi0 + a * j->dphi;
-        double c = cos(th), s = sin(th);
         const int cnt = ln->count;
-        for (int m = 0; m < cnt; m++) {
-            double acc[3] = {0, 0, 0};
-            double r = (ln->b0 + m) * j->hr;
-            sample_add(j->occ, j->w, j->h, j->lx + r * c, j->ly + r * s, 1.0, acc);
-            o[3 * m] = acc[0];
-            o[3 * m + 1] = acc[1];
-            o[3 * m + 2] = acc[2];
-        }
+        gather_line(j, cos(th), sin(th), ln->b0, cnt, o);
         float *out = j->res + ln->offset * 3;
         if (j->a <= 0.0) {
             /* decay 1: one rate, 0: prefix sums */
@@ -291,58 +316,107 @@ static void polar_lines(void *user, int begin, int end, int worker)
                 }
             for (int m = 0; m < cnt; m++) {
                 double rho = ln->b0 + m, v[3];
-                path_mean(F, o, 0.0, 0.0, m, m - d * rho, v);
+                double b_lo = m - d * rho, m0f = ceil(b_lo);
+                path_mean(F, o, j->pw, j->pq, 0.0, m, (int)m0f, m0f - b_lo, v);
                 for (int ch = 0; ch < 3; ch++)
                     out[3 * m + ch] = to_float(rb->scale * v[ch]);
             }
             continue;
         }
-        /* levels k_lo .. k_hi cover the rates of every bin (rho >= 1) with the cubic's
+        /* levels g_lo .. g_hi cover the rates of every bin (rho >= 1) with the cubic's
          * neighbours; level k runs only up to the last bin that uses it */
-        double rho_min = ln->b0 < 1 ? 1.0 : (double)ln->b0;
-        double rho_max = fmax((double)(ln->b0 + cnt - 1), rho_min);
-        int k_lo = (int)floor(level_of(j, rho_max)) - 1;
-        int k_hi = (int)floor(level_of(j, rho_min)) + 2;
-        int K = k_hi - k_lo + 1;
+        int rho_min = ln->b0 < 1 ? 1 : ln->b0;
+        int rho_max = ln->b0 + cnt - 1 > rho_min ? ln->b0 + cnt - 1 : rho_min;
+        int g_lo = (int)floor(j->kap[rho_max]) - 1 - j->k_min;
+        int g_hi = (int)floor(j->kap[rho_min]) + 2 - j->k_min;
+        if (g_lo < 0) g_lo = 0;
+        if (g_hi > j->n_levels - 1) g_hi = j->n_levels - 1;
+        int K = g_hi - g_lo + 1;
         if (K > j->max_levels)
             K = j->max_levels;
         for (int kk = 0; kk < K; kk++) {
-            int k = k_lo + kk;
-            double e1 = exp(-exp(k * j->hstep));
-            double last = j->a / (d * exp((k - 2) * j->hstep)) - ln->b0;
+            int g = g_lo + kk;
+            double e1 = j->e1[g];
+            double last = j->a / (d * exp((j->k_min + g - 2) * j->hstep)) - ln->b0;
             int e_k = last >= cnt - 2 ? cnt - 1 : last < 0 ? 0 : (int)floor(last) + 1;
-            double *Fk = F + (size_t)kk * j->max_count * 3;
-            double run[3] = {0, 0, 0};
-            for (int m = 0; m <= e_k; m++)
-                for (int ch = 0; ch < 3; ch++) {
-                    run[ch] = run[ch] * e1 + o[3 * m + ch];
-                    Fk[3 * m + ch] = run[ch];
-                }
+            double *Fk = F + (size_t)kk * fstride;
+            double r0 = 0, r1 = 0, r2 = 0;
+            for (int m = 0; m <= e_k; m++) {
+                r0 = r0 * e1 + o[3 * m];
+                r1 = r1 * e1 + o[3 * m + 1];
+                r2 = r2 * e1 + o[3 * m + 2];
+                Fk[3 * m] = r0;
+                Fk[3 * m + 1] = r1;
+                Fk[3 * m + 2] = r2;
+            }
         }
         for (int m = 0; m < cnt; m++) {
-            double rho = ln->b0 + m;
-            if (rho < 0.5) { /* at the light: a path of length 0 */
+            int rho = ln->b0 + m;
+            const double *om = o + 3 * m;
+            if (rho < 1) { /* at the light: a path of length 0 */
                 for (int ch = 0; ch < 3; ch++)
-                    out[3 * m + ch] = to_float(rb->scale * mass * o[3 * m + ch]);
+                    out[3 * m + ch] = to_float(k_out * om[ch]);
                 continue;
             }
-            double kappa = level_of(j, rho);
+            double kappa = j->kap[rho];
             int kb = (int)floor(kappa);
             double t = kappa - kb;
+            double b_lo = m - d * rho, m0f = ceil(b_lo);
+            int m0 = (int)m0f;
+            double f = m0f - b_lo;
+            int n = m - m0 + 1;
+            if (n <= 1 && f < 1e-9) {
+                for (int ch = 0; ch < 3; ch++)
+                    out[3 * m + ch] = to_float(k_out * om[ch]);
+                continue;
+            }
+            /* the level-independent parts of the trapezoid (path_mean, expanded):
+             * num = F[m] - en F[m0-1] - o[m]/2 + e1n A + ef B, with the path's start bins */
+            double A[3], B[3], C[3];
+            for (int ch = 0; ch < 3; ch++) {
+                double om0 = oat(o, m0, ch);
+                double olo = f * oat(o, m0 - 1, ch) + (1.0 - f) * om0;
+                A[ch] = 0.5 * (f - 1.0) * om0;
+                B[ch] = 0.5 * f * olo;
+                C[ch] = -0.5 * om[ch];
+            }
             double v[4][3];
             for (int q = 0; q < 4; q++) {
-                int kk = kb - 1 + q - k_lo;
+                int kk = kb - 1 + q - j->k_min - g_lo;
                 kk = kk < 0 ? 0 : kk >= K ? K - 1 : kk;
-                double lam = exp((k_lo + kk) * j->hstep);
-                path_mean(F + (size_t)kk * j->max_count * 3, o, lam, expm1(-lam), m, m - d * rho, v[q]);
+                int g = g_lo + kk;
+                const double *Fk = F + (size_t)kk * fstride;
+                const double *pw = j->pw + (size_t)g * j->pw_len;
+                double em1 = j->em1[g];
+                double e1n = pw[n - 1], en = pw[n];
+                double ef = e1n * (1.0 + f * em1);
+                double t1 = em1 == 0.0 ? (double)n : -j->pq[(size_t)g * j->pw_len + n] / em1;
+                double den = t1 - 0.5 - 0.5 * e1n + 0.5 * f * (e1n + ef);
+                if (!(den > 1e-300)) {
+                    for (int ch = 0; ch < 3; ch++)
+                        v[q][ch] = om[ch];
+                    continue;
+                }
+                double inv = 1.0 / den;
+                const double *Fm = Fk + 3 * m;
+                if (m0 >= 1) {
+                    const double *Fl = Fk + 3 * (m0 - 1);
+                    for (int ch = 0; ch < 3; ch++)
+                        v[q][ch] = (Fm[ch] - en * Fl[ch] + C[ch] + e1n * A[ch] + ef * B[ch]) * inv;
+                } else {
+                    for (int ch = 0; ch < 3; ch++)
+                        v[q][ch] = (Fm[ch] + C[ch] + e1n * A[ch] + ef * B[ch]) * inv;
+                }
             }
+            double w0 = 0.5 * t * (-1.0 + t * (2.0 - t)), w1 = 1.0 + t * t * (-2.5 + 1.5 * t);
+            double w2 = 0.5 * t * (1.0 + t * (4.0 - 3.0 * t)), w3 = 0.5 * t * t * (t - 1.0);
             for (int ch = 0; ch < 3; ch++) {
                 /* Catmull-Rom in log(rate), clamped to the two middle values */
-                double p0 = v[0][ch], p1 = v[1][ch], p2 = v[2][ch], p3 = v[3][ch];
-                double val = p1 + 0.5 * t * (p2 - p0 + t * (2 * p0 - 5 * p1 + 4 * p2 - p3 + t * (3 * (p1 - p2) + p3 - p0)));
-                double lo = fmin(p1, p2), hi = fmax(p1, p2);
+                double p1 = v[1][ch], p2 = v[2][ch];
+                double val = w0 * v[0][ch] + w1 * p1 + w2 * p2 + w3 * v[3][ch];
+                double lo = p1 < p2 ? p1 : p2, hi = p1 < p2 ? p2 : p1;
                 val = val < lo ? lo : val > hi ? hi : val;
-                out[3 * m + ch] = to_float(rb->scale * mass * val);
+                out[3 * m + ch] = to_float(k_out * val);
             }
         }
     }
@@ -475,9 +549,26 @@ fx_result fx_radial_blur_polar(fx_context *ctx, const float *occ, float *rays, i
     j.max_levels = max_levels;
     j.max_count = max_count;
     j.scratch_per_worker = (size_t)max_count * 3 * (1 + (size_t)max_levels);
+    /* level tables: every rate any bin can use (rho in 1 .. max_rho, the cubic's
+     * neighbours), powers exp(-lambda j) for path lengths j <= max_rho + 2 */
+    int max_rho = 1;
+    for (int a = 0; a < j.lines; a++)
+        if (j.line[a].count > 0 && j.line[a].b0 + j.line[a].count - 1 > max_rho)
+            max_rho = j.line[a].b0 + j.line[a].count - 1;
+    j.max_rho = max_rho;
+    j.pw_len = max_rho + 3;
+    int use_levels = j.a > 0.0 && rb->density > 0.0 && rb->decay > 0.0;
+    if (use_levels) {
+        j.k_min = (int)floor(level_of(&j, (double)max_rho)) - 2;
+        j.n_levels = (int)floor(level_of(&j, 1.0)) + 3 - j.k_min + 1;
+    } else {
+        j.k_min = 0;
+        j.n_levels = 1;
+    }
     int workers = fx_parallel_workers(ctx);
+    uint64_t table_doubles = (uint64_t)j.n_levels * (2 + 2 * (uint64_t)j.pw_len) + (uint64_t)max_rho + 1;
     uint64_t bytes = (uint64_t)total * 3 * sizeof(float) +
-                     (uint64_t)workers * j.scratch_per_worker * sizeof(double);
+                     (uint64_t)workers * j.scratch_per_worker * sizeof(double) + table_doubles * sizeof(double);
     fx_result r = fx_check_budget(ctx, bytes, where);
     if (r != FX_OK) {
         fx_mem_free(j.line);
@@ -485,12 +576,33 @@ fx_result fx_radial_blur_polar(fx_context *ctx, const float *occ, float *rays, i
     }
     j.res = fx_mem_alloc((total ? total : 1) * 3 * sizeof(float));
     j.scratch = fx_mem_alloc((size_t)workers * j.scratch_per_worker * sizeof(double));
-    if (!j.res || !j.scratch) {
+    double *tables = fx_mem_alloc((size_t)table_doubles * sizeof(double));
+    if (!j.res || !j.scratch || !tables) {
         fx_mem_free(j.res);
         fx_mem_free(j.scratch);
+        fx_mem_free(tables);
         fx_mem_free(j.line);
         return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the polar grid (%zu bins)", where, total);
     }
+    j.em1 = tables;
+    j.e1 = j.em1 + j.n_levels;
+    j.pw = j.e1 + j.n_levels;
+    j.pq = j.pw + (size_t)j.n_levels * j.pw_len;
+    j.kap = j.pq + (size_t)j.n_levels * j.pw_len;
+    for (int g = 0; g < j.n_levels; g++) {
+        double lam = use_levels ? exp((j.k_min + g) * j.hstep) : 0.0;
+        j.em1[g] = expm1(-lam);
+        j.e1[g] = exp(-lam);
+        double *pw = j.pw + (size_t)g * j.pw_len, *pq = j.pq + (size_t)g * j.pw_len;
+        for (int i = 0; i < j.pw_len; i++) {
+            double x = lam * i;
+            pw[i] = x > 745.0 ? 0.0 : exp(-x);
+            pq[i] = -expm1(-x);
+        }
+    }
+    j.kap[0] = 0.0;
+    for (int rho = 1; rho <= max_rho; rho++)
+        j.kap[rho] = use_levels ? level_of(&j, (double)rho) : 0.0;
     if (rb->decay <= 0.0 || rb->density <= 0.0) {
         /* decay 0: the kernel has no mass (the limit of the naive sum). density 0: every
          * sample is the pixel itself. Both are plain per-pixel products. */
@@ -508,6 +620,7 @@ fx_result fx_radial_blur_polar(fx_context *ctx, const float *occ, float *rays, i
     }
     fx_mem_free(j.res);
     fx_mem_free(j.scratch);
+    fx_mem_free(tables);
     fx_mem_free(j.line);
     return FX_OK;
 }
