@@ -190,7 +190,10 @@ fx_result fx_param_set_json(fx_context *ctx, const fx_param_def *d, void *params
             return fx_fail(ctx, FX_ERR_BAD_PARAM, "%s: parameter '%s' needs %d numbers%s", where,
                            in->name, in->count, is_matrix4 ? " (a 4x4 matrix) or 9 (3x3)" : "");
         for (int i = 0; i < n; i++) {
-            if (!isfinite(tmp[i]) || (in->min < in->max && (tmp[i] < in->min || tmp[i] > in->max)))
+            /* Compared with the bounds as floats: a bound such as 1e30 is not a float, and
+             * the value given as exactly that bound must not be refused. */
+            if (!isfinite(tmp[i]) ||
+                (in->min < in->max && (tmp[i] < (float)in->min || tmp[i] > (float)in->max)))
                 return fx_fail(ctx, FX_ERR_BAD_PARAM,
                                "%s: parameter '%s'[%d] = %g is out of range [%g, %g]", where, in->name,
                                i, tmp[i], in->min, in->max);
