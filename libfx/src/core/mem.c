@@ -1,13 +1,16 @@
 /* Every allocation of the library goes through these, so tests can make the Nth one
  * fail (allocation-failure injection) and check for clean errors without leaks. */
 #include "core/internal.h"
+#include "core/mem_failures.h"
 
+#include <cjson/cJSON.h>
 #include <stdatomic.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
 
 static atomic_long fail_countdown; /* 0: never fail */
+static atomic_ulong failed_count;  /* allocations that returned NULL, injected or real */
 
 void fx_mem_fail_after(long n)
 {
@@ -18,31 +21,61 @@ static int should_fail(void)
 {
     long n = atomic_load(&fail_countdown);
     while (n > 0) {
-        if (atomic_compare_exchange_weak(&fail_countdown, &n, n - 1))
+        if (atomic_compare_exchange_weak(&fail_countdown, &n, n - 1)) {
+            if (n == 1)
+                atomic_fetch_add(&failed_count, 1);
             return n == 1;
+        }
     }
     return 0;
+}
+
+static void *counted(void *p)
+{
+    if (!p)
+        atomic_fetch_add(&failed_count, 1);
+    return p;
+}
+
+unsigned long fx_mem_failure_count(void)
+{
+    return atomic_load(&failed_count);
 }
 
 void *fx_mem_alloc(size_t n)
 {
     if (should_fail())
         return NULL;
-    return malloc(n ? n : 1);
+    return counted(malloc(n ? n : 1));
 }
 
 void *fx_mem_calloc(size_t count, size_t size)
 {
     if (should_fail())
         return NULL;
-    return calloc(count ? count : 1, size ? size : 1);
+    return counted(calloc(count ? count : 1, size ? size : 1));
 }
 
 void *fx_mem_realloc(void *p, size_t n)
 {
     if (should_fail())
         return NULL;
-    return realloc(p, n ? n : 1);
+    return counted(realloc(p, n ? n : 1));
+}
+
+/* cJSON allocates through fx_mem too (recipes, sidecars, masks, presets), so failure
+ * injection covers the JSON parsers and callers can tell "out of memory" from "bad JSON"
+ * (fx_mem_failure_count). Installed when the library is loaded: cJSON's hooks are global
+ * and plain malloc/free underneath, so other cJSON users in the process are unaffected. */
+static void *cjson_alloc(size_t n)
+{
+    return fx_mem_alloc(n);
+}
+
+__attribute__((constructor)) static void fx_mem_hook_cjson(void)
+{
+    cJSON_Hooks hooks = {cjson_alloc, fx_mem_free};
+    cJSON_InitHooks(&hooks);
 }
 
 void fx_mem_free(void *p)
