@@ -1,5 +1,6 @@
 /* Camera sidecar JSON: the matrices Blender's EXRs lack, written by the add-on. */
 #include "core/internal.h"
+#include "core/mem_failures.h"
 #include "core/aux_view.h"
 
 #include <cjson/cJSON.h>
@@ -42,7 +43,10 @@ fx_result fx_camera_from_json(fx_context *ctx, const char *json, fx_camera *out)
 {
     if (!json || !out)
         return fx_fail(ctx, FX_ERR_INVALID_ARGUMENT, "fx_camera_from_json: NULL argument");
+    unsigned long failures = fx_mem_failure_count();
     cJSON *root = cJSON_Parse(json);
+    if (!root && fx_mem_failure_count() != failures)
+        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "camera: out of memory parsing the JSON");
     if (!root || !cJSON_IsObject(root)) {
         cJSON_Delete(root);
         return fx_fail(ctx, FX_ERR_BAD_RECIPE, "camera: not a JSON object");
@@ -130,7 +134,10 @@ fx_result fx_frame_apply_sidecar(fx_frame *f, const char *json)
     if (!f || !json)
         return fx_fail(f ? f->ctx : NULL, FX_ERR_INVALID_ARGUMENT, "fx_frame_apply_sidecar: NULL argument");
     fx_context *ctx = f->ctx;
+    unsigned long failures = fx_mem_failure_count();
     cJSON *root = cJSON_Parse(json);
+    if (!root && fx_mem_failure_count() != failures)
+        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "sidecar: out of memory parsing the JSON");
     if (!root || !cJSON_IsObject(root)) {
         cJSON_Delete(root);
         return fx_fail(ctx, FX_ERR_BAD_RECIPE, "sidecar: not a JSON object");

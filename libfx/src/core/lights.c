@@ -1,5 +1,6 @@
 /* Lights from the frame's "libfx:lights" metadata (checked when the sidecar was applied). */
 #include "core/lights.h"
+#include "core/mem_failures.h"
 
 #include <cjson/cJSON.h>
 #include <stdio.h>
@@ -39,7 +40,10 @@ fx_result fx_frame_find_light(const fx_frame *f, const char *name, const char *w
                        "%s needs the scene's lights, which the frame does not carry (give the scene "
                        "sidecar with --camera; the Blender add-on writes it)",
                        where);
+    unsigned long failures = fx_mem_failure_count();
     cJSON *lights = cJSON_Parse(text);
+    if (!lights && fx_mem_failure_count() != failures)
+        return fx_fail(f->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory reading the scene's lights", where);
     if (!cJSON_IsArray(lights)) {
         cJSON_Delete(lights);
         return fx_fail(f->ctx, FX_ERR_BAD_FILE, "%s: the frame's libfx:lights metadata is not a JSON list", where);

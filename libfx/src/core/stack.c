@@ -2,6 +2,7 @@
  * and out; and the run loop that chains effects over a frame's Combined pass. */
 #include "core/effect.h"
 #include "core/mask.h"
+#include "core/mem_failures.h"
 #include "core/parallel.h"
 #include "core/params.h"
 
@@ -128,7 +129,11 @@ static fx_result effective_params(const fx_stack *s, const fx_entry *e, int inde
     fx_params_set_defaults(c, out);
     const char *preset = c->presets[quality];
     if (preset) {
+        unsigned long failures = fx_mem_failure_count();
         cJSON *p = cJSON_Parse(preset);
+        if (!p && fx_mem_failure_count() != failures)
+            return fx_fail(s->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory reading the '%s' preset", where,
+                           fx_quality_name(quality));
         if (!p)
             return fx_fail(s->ctx, FX_ERR_INTERNAL, "%s: preset '%s' is not valid JSON", where,
                            fx_quality_name(quality));
@@ -222,7 +227,10 @@ fx_result fx_stack_load_json(fx_stack *s, const char *json)
 {
     if (!s || !json)
         return fx_fail(s ? s->ctx : NULL, FX_ERR_INVALID_ARGUMENT, "fx_stack_load_json: NULL argument");
+    unsigned long failures = fx_mem_failure_count();
     cJSON *root = cJSON_Parse(json);
+    if (!root && fx_mem_failure_count() != failures)
+        return fx_fail(s->ctx, FX_ERR_OUT_OF_MEMORY, "recipe: out of memory parsing the JSON");
     if (!root) {
         const char *at = cJSON_GetErrorPtr();
         int line = 1;
@@ -467,7 +475,10 @@ fx_result fx_stack_set_mask_json(fx_stack *s, int index, const char *mask_json)
     fx_mask_spec spec;
     memset(&spec, 0, sizeof spec);
     if (mask_json && mask_json[0]) {
+        unsigned long failures = fx_mem_failure_count();
         cJSON *j = cJSON_Parse(mask_json);
+        if (!j && fx_mem_failure_count() != failures)
+            return fx_fail(s->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory reading the mask", where);
         if (!j)
             return fx_fail(s->ctx, FX_ERR_BAD_RECIPE, "%s: the mask is not valid JSON", where);
         fx_result r = fx_mask_spec_parse(s->ctx, j, where, &spec);
