@@ -28,6 +28,7 @@
  * bounding box of the hits. Output is bit-identical for any thread count (per-pixel
  * work, serial double-precision reductions) and finite for any input. */
 #include "core/effect.h"
+#include "core/mem_failures.h"
 #include "core/parallel.h"
 #include "math/blur.h"
 #include "math/camera.h"
@@ -617,7 +618,10 @@ static fx_result parse_surfaces(fx_context *ctx, const char *json, const char *w
     memset(spec, 0, sizeof *spec);
     if (!json || !json[0])
         return FX_OK;
+    unsigned long failures = fx_mem_failure_count();
     cJSON *j = cJSON_Parse(json);
+    if (!j && fx_mem_failure_count() != failures)
+        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory reading mirror_surfaces", where);
     if (!j)
         return fx_fail(ctx, FX_ERR_BAD_PARAM, "%s: mirror_surfaces is not valid JSON (a mask object)", where);
     fx_result r = fx_mask_spec_parse(ctx, j, where, spec);
@@ -663,9 +667,14 @@ static fx_result ssr_validate(const void *params, char *err, size_t err_size)
             return FX_ERR_BAD_PARAM;
         }
     if (p->mirror_surfaces[0]) {
+        unsigned long failures = fx_mem_failure_count();
         cJSON *j = cJSON_Parse(p->mirror_surfaces);
         int ok = j && cJSON_IsObject(j);
         cJSON_Delete(j);
+        if (!j && fx_mem_failure_count() != failures) {
+            snprintf(err, err_size, "out of memory reading mirror_surfaces");
+            return FX_ERR_OUT_OF_MEMORY;
+        }
         if (!ok) {
             snprintf(err, err_size, "mirror_surfaces must be a mask JSON object, e.g. "
                                     "{\"material\": [\"Mirror_A\", \"Mirror_B\"]}");
