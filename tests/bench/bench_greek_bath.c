@@ -1,9 +1,11 @@
 /* bench_greek_bath: god_rays (naive vs polar: time and error against the reference) and
  * voronoi_caustics (grid vs brute force: time vs points) on a rendered bath frame.
  *
- *   bench_greek_bath passes.exr sidecar.json [runs] > out.csv
+ *   bench_greek_bath passes.exr sidecar.json [runs [max_naive_samples [skip_caustics]]] > out.csv
  *
  * passes.exr: the batch runner's <prefix>libfx_passes.####.exr; sidecar: its camera.json.
+ * max_naive_samples (default 400) caps the naive sweep (10..400); skip_caustics 1 leaves
+ * out the caustics rows. Polar rows: value "res/levels/downsample".
  * CSV rows: effect,method,param,value,ms_median,err_rms,err_max,err_p99 (errors of the added
  * rays against the reference preset, relative to the reference's peak rays value). Medians of
  * `runs` runs (default 5); the machine is shared: compare ratios within one run. */
@@ -101,6 +103,8 @@ int main(int argc, char **argv)
     int runs = argc > 3 ? atoi(argv[3]) : 5;
     if (runs < 1)
         runs = 1;
+    int max_naive = argc > 4 ? atoi(argv[4]) : 400;
+    int skip_caustics = argc > 5 ? atoi(argv[5]) : 0;
     if (fx_context_new(&ctx, 0) != FX_OK || fx_frame_read_exr(ctx, argv[1], NULL, &in) != FX_OK ||
         fx_frame_apply_sidecar_file(in, argv[2]) != FX_OK) {
         fprintf(stderr, "load: %s\n", fx_context_error(ctx));
@@ -125,7 +129,7 @@ int main(int argc, char **argv)
     printf("god_rays,reference,samples,2000,%.3f,0,0,0\n", tref);
     fflush(stdout);
     const int samples[] = {10, 25, 50, 100, 200, 400};
-    for (int i = 0; i < 6; i++)
+    for (int i = 0; i < 6 && samples[i] <= max_naive; i++)
         for (int jit = 0; jit < 2; jit++) {
             float *o = NULL;
             snprintf(json, sizeof json, "{\"version\": 1, \"effects\": [{\"effect\": \"god_rays\", \"params\": {" RAYS
@@ -137,15 +141,21 @@ int main(int argc, char **argv)
             fflush(stdout);
             free(o);
         }
-    const double res[] = {0.25, 0.5, 0.75, 1.0, 1.5, 2.0};
-    for (int i = 0; i < 6; i++) {
+    /* polar: resolution (lines and bins per pixel), levels per octave, downsample */
+    const struct { double res; int levels, down; } pol[] = {
+        {0.25, 2, 1}, {0.5, 2, 1}, {0.75, 2, 1}, {1.0, 2, 1}, {1.5, 3, 1}, {2.0, 3, 1},
+        {1.0, 2, 2}, {1.0, 2, 3}, {1.0, 2, 4}, {0.75, 2, 2}, {0.5, 1, 2}, {0.75, 1, 3}, {1.5, 2, 2}, {2.0, 3, 2},
+    };
+    for (int i = 0; i < (int)(sizeof pol / sizeof pol[0]); i++) {
         float *o = NULL;
         snprintf(json, sizeof json, "{\"version\": 1, \"effects\": [{\"effect\": \"god_rays\", \"params\": {" RAYS
-                 ", \"method\": \"polar\", \"polar_resolution\": %g, \"polar_levels\": %d}}]}", res[i], res[i] >= 1.5 ? 3 : 2);
+                 ", \"method\": \"polar\", \"polar_resolution\": %g, \"polar_levels\": %d, \"polar_downsample\": %d}}]}",
+                 pol[i].res, pol[i].levels, pol[i].down);
         double ms = run_recipe(json, runs, &o);
         double rms, mx, p99;
         errors(o, ref, src, &rms, &mx, &p99);
-        printf("god_rays,polar,resolution,%g,%.3f,%.5f,%.5f,%.5f\n", res[i], ms, rms, mx, p99);
+        printf("god_rays,polar,res/levels/downsample,%g/%d/%d,%.3f,%.5f,%.5f,%.5f\n", pol[i].res, pol[i].levels,
+               pol[i].down, ms, rms, mx, p99);
         fflush(stdout);
         free(o);
     }
@@ -164,7 +174,7 @@ int main(int argc, char **argv)
     free(ref);
     /* caustics: time vs points, grid and brute force, on the water */
     const int points[] = {49, 100, 196, 400, 1024, 2025, 5041};
-    for (int i = 0; i < 7; i++)
+    for (int i = 0; i < 7 && !skip_caustics; i++)
         for (int m = 0; m < 2; m++) {
             snprintf(json, sizeof json, "{\"version\": 1, \"effects\": [{\"effect\": \"voronoi_caustics\", \"params\": "
                      "{\"points\": %d, \"tile_size\": 3.0, \"method\": \"%s\"}, \"mask\": {\"material\": \"Water\"}}]}",

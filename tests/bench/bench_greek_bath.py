@@ -2,7 +2,8 @@
 """god_rays and voronoi_caustics on a rendered Greek-bath frame, beside Blender's Sun Beams
 compositor node on the same image, in one run; CSV + plots for docs/effects/god_rays.md.
 
-    /usr/bin/python3 tests/bench/bench_greek_bath.py --render 640x360 [--runs 3] [--out out/bench_bath]
+    /usr/bin/python3 tests/bench/bench_greek_bath.py --render 1920x1080 [--runs 5] [--out out/bench_bath]
+        [--max-naive 400] [--skip-caustics]
 
 --render renders frame 1 of blend_scenes/greek_bath with the add-on's batch runner (4
 samples) to get the passes and the scene sidecar; --exr/--sidecar use existing ones.
@@ -84,6 +85,8 @@ def main():
     ap.add_argument("--exr")
     ap.add_argument("--sidecar")
     ap.add_argument("--runs", type=int, default=3)
+    ap.add_argument("--max-naive", type=int, default=400, help="largest naive sample count in the sweep")
+    ap.add_argument("--skip-caustics", action="store_true", help="god_rays rows only")
     ap.add_argument("--csv", help="reuse this bench_greek_bath CSV instead of running the binary")
     ap.add_argument("--out", default=os.path.join(ROOT, "out", "bench_bath"))
     ap.add_argument("--plots", default=os.path.join(ROOT, "docs", "images"))
@@ -101,7 +104,8 @@ def main():
             f.write("".join(l for l in src if not l.startswith("sun_beams_blender")))
     else:
         with open(csv_path, "w") as f:
-            subprocess.run([find_bench(), a.exr, a.sidecar, str(a.runs)], check=True, stdout=f)
+            subprocess.run([find_bench(), a.exr, a.sidecar, str(a.runs), str(a.max_naive),
+                            "1" if a.skip_caustics else "0"], check=True, stdout=f)
 
     # Blender's Sun Beams node on the same image (Combined only), source at the sun.
     side = json.load(open(a.sidecar))
@@ -122,6 +126,14 @@ def main():
             f.write("sun_beams_blender,%s,ray_length,0.5,%.3f,,,\n" % (em, 1000 * (res[em] - res["identity"])))
         f.write("sun_beams_blender,empty_tree,,,%.3f,,,\n" % (1000 * res["identity"]))
     print(open(csv_path).read())
+    rows = list(csv.DictReader(open(csv_path)))
+    sb = {x["method"]: float(x["ms_median"]) for x in rows if x["effect"] == "sun_beams_blender"}
+    print("same run: Sun Beams (full frame, minus empty tree) %.1f ms, tiled %.1f ms" % (sb["FULL_FRAME"], sb["TILED"]))
+    for x in rows:
+        if x["effect"] == "god_rays" and x["method"] in ("preset", "reference", "identity"):
+            ms = float(x["ms_median"])
+            print("  god_rays %-9s %-10s %9.1f ms  Sun Beams / this = %6.1fx  (RMS err %s)" % (
+                x["method"], x["value"], ms, min(sb.values()) / ms, x["err_rms"] or "-"))
     plot(list(csv.DictReader(open(csv_path))), a.plots)
 
 
@@ -143,17 +155,26 @@ def plot(rows, outdir):
         for x in r:
             ax[1].annotate(x["value"], (float(x["ms_median"]), float(x["err_rms"])), fontsize=7)
     r = [x for x in rows if x["effect"] == "god_rays" and x["method"] == "polar"]
-    ax[1].plot([float(x["ms_median"]) for x in r], [float(x["err_rms"]) for x in r], "s-", label="polar")
+    for down, mk in (("1", "s-"), ("2", "D-"), ("3", "^-"), ("4", "v-")):
+        rd = [x for x in r if x["value"].split("/")[-1] == down]
+        if not rd:
+            continue
+        rd.sort(key=lambda x: float(x["ms_median"]))
+        ax[1].plot([float(x["ms_median"]) for x in rd], [float(x["err_rms"]) for x in rd], mk,
+                   label="polar, downsample %s" % down)
     for x in r:
-        ax[1].annotate("res %s" % x["value"], (float(x["ms_median"]), float(x["err_rms"])), fontsize=7)
-    for x in r:
-        ax[0].axhline(float(x["ms_median"]), color="C2", lw=0.6, ls=":")
+        ax[1].annotate(x["value"], (float(x["ms_median"]), float(x["err_rms"])), fontsize=6)
+    rp = [x for x in rows if x["effect"] == "god_rays" and x["method"] == "preset"]
+    ax[1].plot([float(x["ms_median"]) for x in rp], [float(x["err_rms"]) for x in rp], "k*", ms=10, label="presets")
+    for x in rp:
+        ax[0].axhline(float(x["ms_median"]), color="C2", lw=0.8, ls=":")
+        ax[0].annotate("polar %s" % x["value"], (10, float(x["ms_median"])), fontsize=7, color="C2")
     sb = [x for x in rows if x["effect"] == "sun_beams_blender" and x["method"] == "FULL_FRAME"]
     if sb:
         ax[0].axhline(float(sb[0]["ms_median"]), color="k", ls="--", label="Blender Sun Beams (full frame)")
     ax[0].set_xscale("log"); ax[0].set_yscale("log")
     ax[0].set_xlabel("samples (naive)"); ax[0].set_ylabel("ms (median)")
-    ax[0].set_title("god_rays time (dotted: polar resolutions)")
+    ax[0].set_title("god_rays time (dotted: polar presets)")
     ax[0].legend(fontsize=8)
     ax[1].set_xscale("log"); ax[1].set_yscale("log")
     ax[1].set_xlabel("ms (median)"); ax[1].set_ylabel("RMS error / peak rays (vs naive 2000)")

@@ -44,11 +44,12 @@ typedef struct rset {
     int jitter;
     double polar_res;
     int levels;
+    int down;
 } rset;
 
 static rset defaults(void)
 {
-    rset r = {"naive", 100, 0.97, 0.9, 1.0, 0.02, 0.5f, 0.3f, 0, 0, 0};
+    rset r = {"naive", 100, 0.97, 0.9, 1.0, 0.02, 0.5f, 0.3f, 0, 0, 0, 0};
     return r;
 }
 
@@ -73,6 +74,8 @@ static fx_stack *rays_stack(fx_context *ctx, rset r)
         e |= fx_stack_set_float(s, 0, "polar_resolution", r.polar_res);
     if (r.levels > 0)
         e |= fx_stack_set_int(s, 0, "polar_levels", r.levels);
+    if (r.down > 0)
+        e |= fx_stack_set_int(s, 0, "polar_downsample", r.down);
     if (e != FX_OK) {
         fprintf(stderr, "setup: %s\n", fx_context_error(ctx));
         fx_stack_free(s);
@@ -349,14 +352,21 @@ static void test_methods_converge(fx_context *ctx)
             r.polar_res = 1;
             r.levels = 2;
             float *coarse = run_rays(ctx, img, r);
-            CHECK(ref && fine && coarse);
+            r.down = 2;
+            float *down = run_rays(ctx, img, r);
+            r.down = 0;
+            CHECK(ref && fine && coarse && down);
             if (ref && fine && coarse) {
                 double peak, ef = max_rays_diff(fine, ref, img, &peak), ec = max_rays_diff(coarse, ref, img, &peak);
                 fprintf(stderr, "light %g,%g decay %g: polar fine %.4f coarse %.4f of peak %.3f\n", r.lx, r.ly, r.decay,
                         ef, ec, peak);
                 CHECK(ef < 0.06 * peak);
                 CHECK(ec < 0.25 * peak);
+                double ed = max_rays_diff(down, ref, img, &peak);
+                fprintf(stderr, "  polar downsample 2: %.4f of peak\n", ed);
+                CHECK(ed < 0.5 * peak); /* max error: shaft edges soften by ~2 px on 8 px stripes */
             }
+            free(down);
             free(ref);
             free(fine);
             free(coarse);
@@ -367,13 +377,14 @@ static void test_methods_converge(fx_context *ctx)
 static void test_threads(void)
 {
     float *img = spot_image(50, 10);
-    for (int m = 0; m < 2; m++) {
+    for (int m = 0; m < 3; m++) {
         float *outs[2] = {NULL, NULL};
         for (int t = 0; t < 2; t++) {
             fx_context *c = NULL;
             fx_context_new(&c, t + 1);
             rset r = defaults();
             r.method = m ? "polar" : "naive";
+            r.down = m == 2 ? 2 : 0;
             r.jitter = 1;
             outs[t] = run_rays(c, img, r);
             fx_context_free(c);
