@@ -2,8 +2,11 @@
  * impulses, scale-free depth, normals at AA edges, coverage-aware Cryptomatte IDs, index IDs,
  * identity, masks, extremes, thread invariance. */
 #include "fx_effect_test.h"
+#include "math/srgb_lut.h"
 
 #include <float.h>
+#include <stdint.h>
+#include <string.h>
 #include <math.h>
 
 /* Runs a one-effect stack from a recipe JSON on f; returns a copy of `pass` of the output
@@ -356,8 +359,47 @@ static void test_extremes(fx_context *ctx)
     fx_frame_free(f);
 }
 
+/* The sRGB table encoder (luminance edges) against the formula in double: over every 61st
+ * float in [2^-9, 2^20) the error is below FX_SRGB_LUT_MAX_ERR (absolute up to 1, relative
+ * above); exact below 2^-9 and at powers of two; monotone. */
+static void test_srgb_lut(void)
+{
+    const float *lut = fx_srgb_lut();
+    double max_abs = 0, max_rel = 0;
+    int mono = 1, exact = 1;
+    float prev = -1.0f;
+    uint32_t b0, b1;
+    float lo = 0.001953125f, hi = FX_SRGB_LUT_MAX;
+    memcpy(&b0, &lo, 4);
+    memcpy(&b1, &hi, 4);
+    for (uint32_t b = b0; b < b1; b += 61) {
+        float a;
+        memcpy(&a, &b, 4);
+        double want = a <= 0.0031308 ? 12.92 * a : 1.055 * pow(a, 1 / 2.4) - 0.055;
+        float got = fx_srgb_encode_lut(lut, a);
+        double e = fabs(got - want);
+        if (a <= 1.0f)
+            max_abs = e > max_abs ? e : max_abs;
+        else
+            max_rel = e / want > max_rel ? e / want : max_rel;
+        mono &= got >= prev;
+        prev = got;
+    }
+    for (int e = -9; e < 20; e++) {
+        float a = ldexpf(1.0f, e);
+        double want = a <= 0.0031308 ? 12.92 * a : 1.055 * pow(a, 1 / 2.4) - 0.055;
+        exact &= fx_srgb_encode_lut(lut, a) == (float)want;
+    }
+    for (float a = 0.0f; a < 0.00195f; a += 1.3e-5f)
+        exact &= fx_srgb_encode_lut(lut, a) == 12.92f * a;
+    printf("srgb lut: max abs error %.3g on [2^-9, 1], max relative %.3g above 1\n", max_abs, max_rel);
+    CHECK(max_abs < FX_SRGB_LUT_MAX_ERR && max_rel < FX_SRGB_LUT_MAX_ERR && mono && exact);
+    CHECK(fx_srgb_encode_lut(lut, 1.0f) == 1.0f && fx_srgb_encode_lut(lut, 0.0f) == 0.0f);
+}
+
 int main(void)
 {
+    test_srgb_lut();
     fx_context *c1 = NULL, *c2 = NULL;
     fx_context_new(&c1, 1);
     fx_context_new(&c2, 2);

@@ -94,41 +94,50 @@ static int edges_halo(const void *params, int width, int height)
     return fx_edge_halo(&s);
 }
 
-/* NaN -> 0, +-Inf and overflow -> +-FLT_MAX: the effect never emits non-finite values. */
-static inline float finite_or(float v)
-{
-    v = v == v ? v : 0.0f;
-    return v > FLT_MAX ? FLT_MAX : v < -FLT_MAX ? -FLT_MAX : v;
-}
-
 typedef struct draw_job {
     const fx_effect_run *run;
     const edges_params *p;
     const float *matte;
 } draw_job;
 
+typedef float v4f __attribute__((vector_size(16)));
+typedef int v4i __attribute__((vector_size(16)));
+
+static inline v4f sel4(v4i m, v4f a, v4f b)
+{
+    return (v4f)(((v4i)a & m) | ((v4i)b & ~m));
+}
+
+/* d = s + a (t - s) per pixel, one RGBA vector at a time; NaN -> 0, +-Inf -> +-FLT_MAX. */
 static void draw_rows(void *user, int begin, int end)
 {
     const draw_job *j = user;
     const fx_effect_run *run = j->run;
     const fx_rect *roi = &run->roi;
     const float op = j->p->opacity;
-    const float *lc = j->p->line_color;
+    const int matte_out = j->p->output == OUT_MATTE;
+    v4f lc;
+    memcpy(&lc, j->p->line_color, sizeof lc);
+    const v4f big = { FLT_MAX, FLT_MAX, FLT_MAX, FLT_MAX }, zero = { 0, 0, 0, 0 };
     for (int y = roi->y0 + begin; y < roi->y0 + end; y++) {
         const size_t row = (size_t)y * run->width;
         for (int x = roi->x0; x < roi->x1; x++) {
-            const float *s = run->src + (row + x) * 4;
-            float *d = run->dst + (row + x) * 4;
-            float e = j->matte[row + x];
-            if (j->p->output == OUT_MATTE) {
-                float t[4] = { e, e, e, 1.0f };
-                for (int k = 0; k < 4; k++)
-                    d[k] = finite_or(s[k] + op * (t[k] - s[k]));
+            v4f s, t;
+            memcpy(&s, run->src + (row + x) * 4, sizeof s);
+            const float e = j->matte[row + x];
+            float a;
+            if (matte_out) {
+                t = (v4f){ e, e, e, 1.0f };
+                a = op;
             } else {
-                float a = e * op;
-                for (int k = 0; k < 4; k++)
-                    d[k] = finite_or(s[k] + a * (lc[k] - s[k]));
+                t = lc;
+                a = e * op;
             }
+            v4f d = s + (v4f){ a, a, a, a } * (t - s);
+            d = sel4(d == d, d, zero);
+            d = sel4(d > big, big, d);
+            d = sel4(d < -big, -big, d);
+            memcpy(run->dst + (row + x) * 4, &d, sizeof d);
         }
     }
 }

@@ -3,6 +3,7 @@
 
 #include "core/parallel.h"
 #include "math/color.h"
+#include "math/srgb_lut.h"
 #include "math/vec.h"
 
 #include <float.h>
@@ -171,39 +172,14 @@ typedef struct edge_job {
     fx_rect strength_rect; /* where the thresholded strength is computed */
     fx_rect roi;
     float *lum, *ldepth;  /* fields (full-size planes, filled inside field_rect) */
+    float *unorm;         /* unit normals (3 per pixel; 0 0 0: background), inside field_rect */
+    const float *lut;     /* sRGB encoding table (math/srgb_lut.h) */
     float *plane;         /* thresholded strength (full-size), when dilating */
     float *matte;
     float *strengths;
     const int *disc;      /* dilation offsets (dx, dy) pairs */
     int disc_count;
 } edge_job;
-
-static void fields_rows(void *user, int begin, int end)
-{
-    const edge_job *j = user;
-    const fx_rect *fr = &j->field_rect;
-    for (int y = fr->y0 + begin; y < fr->y0 + end; y++) {
-        size_t row = (size_t)y * j->w;
-        if (j->lum) {
-            const float *p = j->src->rgba + row * 4;
-            for (int x = fr->x0; x < fr->x1; x++) {
-                float l = fx_luminance(p[4 * x], p[4 * x + 1], p[4 * x + 2]);
-                /* finite, clamped to the encoder's useful range (NaN -> 0) */
-                l = l > 0.0f ? (l < 1e6f ? l : 1e6f) : 0.0f;
-                j->lum[row + x] = fx_srgb_encode(l);
-            }
-        }
-        if (j->ldepth) {
-            const float *d = j->src->depth + row;
-            for (int x = fr->x0; x < fr->x1; x++) {
-                float v = d[x];
-                v = v > FX_EDGE_NEAR_DEPTH ? (v < FX_EDGE_FAR_DEPTH ? v : FX_EDGE_FAR_DEPTH)
-                                           : (v == v ? FX_EDGE_NEAR_DEPTH : FX_EDGE_FAR_DEPTH);
-                j->ldepth[row + x] = logf(v);
-            }
-        }
-    }
-}
 
 /* Unit normal of pixel i, or 0 for background. */
 static inline int unit_normal(const float *n, size_t i, float u[3])
@@ -219,24 +195,67 @@ static inline int unit_normal(const float *n, size_t i, float u[3])
     return 1;
 }
 
-static float normal_strength(const float *n, int w, int h, int x, int y)
+static void fields_rows(void *user, int begin, int end)
 {
-    float c[3], q[3];
-    int hc = unit_normal(n, (size_t)y * w + x, c);
-    const int nx[4] = { clampi(x - 1, 0, w - 1), clampi(x + 1, 0, w - 1), x, x };
-    const int ny[4] = { y, y, clampi(y - 1, 0, h - 1), clampi(y + 1, 0, h - 1) };
-    float min_dot = 1.0f;
-    int mixed = 0;
-    for (int k = 0; k < 4; k++) {
-        int hq = unit_normal(n, (size_t)ny[k] * w + nx[k], q);
-        if (hc != hq)
-            mixed = 1;
-        else if (hc) {
-            float d = c[0] * q[0] + c[1] * q[1] + c[2] * q[2];
-            if (d < min_dot)
-                min_dot = d;
+    const edge_job *j = user;
+    const fx_rect *fr = &j->field_rect;
+    for (int y = fr->y0 + begin; y < fr->y0 + end; y++) {
+        size_t row = (size_t)y * j->w;
+        if (j->lum) {
+            const float *p = j->src->rgba + row * 4;
+            for (int x = fr->x0; x < fr->x1; x++) {
+                float l = fx_luminance(p[4 * x], p[4 * x + 1], p[4 * x + 2]);
+                /* finite, clamped to the encoder's useful range (NaN -> 0) */
+                l = l > 0.0f ? (l < 1e6f ? l : 1e6f) : 0.0f;
+                j->lum[row + x] = fx_srgb_encode_lut(j->lut, l); /* no powf: math/srgb_lut.h */
+            }
+        }
+        if (j->ldepth) {
+            const float *d = j->src->depth + row;
+            for (int x = fr->x0; x < fr->x1; x++) {
+                float v = d[x];
+                v = v > FX_EDGE_NEAR_DEPTH ? (v < FX_EDGE_FAR_DEPTH ? v : FX_EDGE_FAR_DEPTH)
+                                           : (v == v ? FX_EDGE_NEAR_DEPTH : FX_EDGE_FAR_DEPTH);
+                j->ldepth[row + x] = logf(v);
+            }
+        }
+        if (j->unorm) {
+            const float *n = j->src->normal;
+            for (int x = fr->x0; x < fr->x1; x++) {
+                float u[3] = { 0.0f, 0.0f, 0.0f };
+                unit_normal(n, row + x, u);
+                memcpy(j->unorm + (row + x) * 3, u, sizeof u);
+            }
         }
     }
+}
+
+/* Smallest cosine between the pixel's unit normal and its 4 neighbours' (from the plane of
+ * unit normals), and whether surface and background meet there. */
+static inline float normal_min_dot(const float *un, int w, int h, int x, int y, int *mixed)
+{
+    const float *c = un + ((size_t)y * w + x) * 3;
+    const int hc = c[0] != 0.0f || c[1] != 0.0f || c[2] != 0.0f;
+    const size_t nb[4] = { (size_t)y * w + clampi(x - 1, 0, w - 1), (size_t)y * w + clampi(x + 1, 0, w - 1),
+                           (size_t)clampi(y - 1, 0, h - 1) * w + x, (size_t)clampi(y + 1, 0, h - 1) * w + x };
+    float min_dot = 1.0f;
+    int mx = 0;
+    for (int k = 0; k < 4; k++) {
+        const float *q = un + nb[k] * 3;
+        const int hq = q[0] != 0.0f || q[1] != 0.0f || q[2] != 0.0f;
+        if (hc != hq)
+            mx = 1;
+        else if (hc) {
+            float d = c[0] * q[0] + c[1] * q[1] + c[2] * q[2];
+            min_dot = d < min_dot ? d : min_dot;
+        }
+    }
+    *mixed = mx;
+    return min_dot;
+}
+
+static inline float normal_angle(float min_dot, int mixed)
+{
     float a = acosf(fx_clampf(min_dot, -1.0f, 1.0f)) * (float)(180.0 / 3.14159265358979323846);
     return mixed && a < 90.0f ? 90.0f : a;
 }
@@ -294,12 +313,94 @@ static float id_strength(const fx_edge_sources *src, int k, int w, int h, int x,
     return m;
 }
 
-static inline float ramp(float s, float t, float softness)
+/* clamp((s - t) / max(softness t, 1e-6), 0, 1), with the reciprocal taken once. */
+typedef struct ramp_k {
+    float t, inv;
+} ramp_k;
+
+static ramp_k ramp_of(float t, float softness)
 {
     float wdt = softness * t;
     wdt = wdt > 1e-6f ? wdt : 1e-6f;
-    float e = (s - t) / wdt;
+    return (ramp_k){ t, 1.0f / wdt };
+}
+
+static inline float ramp(ramp_k r, float s)
+{
+    float e = (s - r.t) * r.inv;
     return e > 0.0f ? (e < 1.0f ? e : 1.0f) : 0.0f;
+}
+
+/* The operator on row y of a field for x in [x0, x1) into out[x]: the interior without any
+ * clamping (the same expressions as fx_edge_response_at, so the same bits), the borders
+ * through fx_edge_response_at. */
+static void response_row(const float *f, int w, int h, int y, int x0, int x1, fx_edge_operator op, float *out)
+{
+    const int r = fx_edge_operator_radius(op);
+    const float *A = f + (size_t)clampi(y - r, 0, h - 1) * w, *B = f + (size_t)y * w;
+    const float *C = f + (size_t)clampi(y + r, 0, h - 1) * w;
+    int xa = x0 > r ? x0 : r, xb = x1 < w - r ? x1 : w - r;
+    if (xb < xa)
+        xa = xb = x1;
+    for (int x = x0; x < xa && x < x1; x++)
+        out[x] = fx_edge_response_at(f, 1, w, h, x, y, op);
+    switch (op) {
+    case FX_EDGE_LAPLACE4:
+        for (int x = xa; x < xb; x++) {
+            const float c = B[x];
+            float v = fabsf(((A[x] - c) + (C[x] - c)) + ((B[x - r] - c) + (B[x + r] - c)));
+            out[x] = v <= FLT_MAX ? v : FLT_MAX;
+        }
+        break;
+    case FX_EDGE_LAPLACE8:
+    case FX_EDGE_SPARSE7:
+        for (int x = xa; x < xb; x++) {
+            const float c = B[x];
+            const float n = A[x] - c, s = C[x] - c, we = B[x - r] - c, ea = B[x + r] - c;
+            const float nw = A[x - r] - c, ne = A[x + r] - c, sw = C[x - r] - c, se = C[x + r] - c;
+            float v = fabsf(((n + s) + (we + ea)) + ((nw + ne) + (sw + se))) * (1.0f / 3.0f);
+            out[x] = v <= FLT_MAX ? v : FLT_MAX;
+        }
+        break;
+    case FX_EDGE_SOBEL_X:
+        for (int x = xa; x < xb; x++) {
+            const float c = B[x];
+            const float we = B[x - r] - c, ea = B[x + r] - c;
+            const float nw = A[x - r] - c, ne = A[x + r] - c, sw = C[x - r] - c, se = C[x + r] - c;
+            float v = fabsf((ne - nw) + 2.0f * (ea - we) + (se - sw)) * 0.25f;
+            out[x] = v <= FLT_MAX ? v : FLT_MAX;
+        }
+        break;
+    case FX_EDGE_SOBEL_Y:
+        for (int x = xa; x < xb; x++) {
+            const float c = B[x];
+            const float n = A[x] - c, s = C[x] - c;
+            const float nw = A[x - r] - c, ne = A[x + r] - c, sw = C[x - r] - c, se = C[x + r] - c;
+            float v = fabsf((sw - nw) + 2.0f * (s - n) + (se - ne)) * 0.25f;
+            out[x] = v <= FLT_MAX ? v : FLT_MAX;
+        }
+        break;
+    case FX_EDGE_SOBEL:
+    default:
+        for (int x = xa; x < xb; x++) {
+            const float c = B[x];
+            const float n = A[x] - c, s = C[x] - c, we = B[x - r] - c, ea = B[x + r] - c;
+            const float nw = A[x - r] - c, ne = A[x + r] - c, sw = C[x - r] - c, se = C[x + r] - c;
+            double gx = (double)(ne - nw) + 2.0 * (ea - we) + (se - sw);
+            double gy = (double)(sw - nw) + 2.0 * (s - n) + (se - ne);
+            float v = (float)(sqrt(gx * gx + gy * gy) * 0.25);
+            out[x] = v <= FLT_MAX ? v : FLT_MAX;
+        }
+        break;
+    }
+    for (int x = xb > x0 ? xb : x0; x < x1; x++)
+        out[x] = fx_edge_response_at(f, 1, w, h, x, y, op);
+}
+
+/* max of two non-NaN values, inline (fmaxf is a libm call here) */
+static inline float maxf(float a, float b)
+{
+    return a > b ? a : b;
 }
 
 static void strength_rows(void *user, int begin, int end)
@@ -308,28 +409,62 @@ static void strength_rows(void *user, int begin, int end)
     const fx_edge_settings *s = j->s;
     const fx_rect *sr = &j->strength_rect;
     const int w = j->w, h = j->h;
+    const ramp_k rl = ramp_of(s->luminance_threshold, s->softness), rd = ramp_of(s->depth_threshold, s->softness);
+    const ramp_k rn = ramp_of(s->normal_threshold, s->softness), ri = ramp_of(s->id_threshold, s->softness);
+    /* normals turning by less than the threshold give 0 without an acos: cos(threshold)
+     * plus a margin so that rounding never hides a value ramp() would make positive */
+    const float cos_skip = cosf(fx_clampf(s->normal_threshold, 0.0f, 180.0f) * (float)(3.14159265358979323846 / 180.0)) + 1e-5f;
+    float *sl_row = NULL, *sd_row = NULL;
+    if (s->use_luminance)
+        sl_row = fx_mem_alloc((size_t)w * sizeof(float));
+    if (s->use_depth)
+        sd_row = fx_mem_alloc((size_t)w * sizeof(float));
     for (int y = sr->y0 + begin; y < sr->y0 + end; y++) {
         const int in_roi_y = y >= j->roi.y0 && y < j->roi.y1;
         float *out = j->plane ? j->plane + (size_t)y * w : j->matte + (size_t)y * w;
+        if (s->use_luminance) {
+            if (sl_row)
+                response_row(j->lum, w, h, y, sr->x0, sr->x1, s->op, sl_row);
+        }
+        if (s->use_depth) {
+            if (sd_row)
+                response_row(j->ldepth, w, h, y, sr->x0, sr->x1, s->op, sd_row);
+        }
+        if (sl_row && sd_row && !s->use_normal && !s->use_object && !s->use_material && !j->strengths) {
+            for (int x = sr->x0; x < sr->x1; x++) { /* the common cases: simple loops */
+                float a = ramp(rl, sl_row[x]), b = ramp(rd, sd_row[x]);
+                out[x] = a > b ? a : b;
+            }
+            continue;
+        }
+        if (sl_row && !s->use_depth && !s->use_normal && !s->use_object && !s->use_material && !j->strengths) {
+            for (int x = sr->x0; x < sr->x1; x++)
+                out[x] = ramp(rl, sl_row[x]);
+            continue;
+        }
         for (int x = sr->x0; x < sr->x1; x++) {
             float sl = 0, sd = 0, sn = 0, si = 0, e = 0;
             if (s->use_luminance) {
-                sl = fx_edge_response_at(j->lum, 1, w, h, x, y, s->op);
-                e = fmaxf(e, ramp(sl, s->luminance_threshold, s->softness));
+                sl = sl_row ? sl_row[x] : fx_edge_response_at(j->lum, 1, w, h, x, y, s->op);
+                e = maxf(e, ramp(rl, sl));
             }
             if (s->use_depth) {
-                sd = fx_edge_response_at(j->ldepth, 1, w, h, x, y, s->op);
-                e = fmaxf(e, ramp(sd, s->depth_threshold, s->softness));
+                sd = sd_row ? sd_row[x] : fx_edge_response_at(j->ldepth, 1, w, h, x, y, s->op);
+                e = maxf(e, ramp(rd, sd));
             }
             if (s->use_normal) {
-                sn = normal_strength(j->src->normal, w, h, x, y);
-                e = fmaxf(e, ramp(sn, s->normal_threshold, s->softness));
+                int mixed;
+                float md = normal_min_dot(j->unorm, w, h, x, y, &mixed);
+                if (mixed || md < cos_skip || j->strengths) {
+                    sn = normal_angle(md, mixed);
+                    e = maxf(e, ramp(rn, sn));
+                }
             }
             for (int k = 0; k < 2; k++)
                 if (k == 0 ? s->use_object : s->use_material) {
                     float d = id_strength(j->src, k, w, h, x, y);
-                    si = fmaxf(si, d);
-                    e = fmaxf(e, ramp(d, s->id_threshold, s->softness));
+                    si = maxf(si, d);
+                    e = maxf(e, ramp(ri, d));
                 }
             out[x] = e;
             if (j->strengths && in_roi_y && x >= j->roi.x0 && x < j->roi.x1) {
@@ -341,6 +476,8 @@ static void strength_rows(void *user, int begin, int end)
             }
         }
     }
+    fx_mem_free(sl_row);
+    fx_mem_free(sd_row);
 }
 
 static void dilate_rows(void *user, int begin, int end)
@@ -409,11 +546,15 @@ fx_result fx_edge_matte(fx_context *ctx, const fx_edge_sources *src, const fx_ed
                            k == 0 ? "object" : "material");
     if ((s->use_luminance && !(j.lum = fx_mem_alloc(n * sizeof(float)))) ||
         (s->use_depth && !(j.ldepth = fx_mem_alloc(n * sizeof(float)))) ||
+        (s->use_normal && !(j.unorm = fx_mem_alloc(n * 3 * sizeof(float)))) ||
         (reach > 0 && !(j.plane = fx_mem_alloc(n * sizeof(float))))) {
         r = fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the edge planes", where);
         goto out;
     }
-    if (j.lum || j.ldepth) {
+    if (j.lum)
+        j.lut = fx_srgb_lut();
+    /* field_rect (strength rect + the operator's radius >= 1) covers the normals' 4-neighbourhood too */
+    if (j.lum || j.ldepth || j.unorm) {
         int rows = j.field_rect.y1 - j.field_rect.y0;
         fx_parallel_for(ctx, rows, fx_grain_for(ctx, rows), fields_rows, &j);
     }
@@ -439,6 +580,7 @@ fx_result fx_edge_matte(fx_context *ctx, const fx_edge_sources *src, const fx_ed
 out:
     fx_mem_free(j.lum);
     fx_mem_free(j.ldepth);
+    fx_mem_free(j.unorm);
     fx_mem_free(j.plane);
     return r;
 }
