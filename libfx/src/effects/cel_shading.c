@@ -120,6 +120,8 @@ typedef struct cel_job {
     int dd_ch, dc_ch;
     fx_vec3 to_light;
     float values[RAMP_MAX];
+    float band_lo[RAMP_MAX]; /* band k's smoothstep starts here (edge k/n - softness/2) */
+    float band_inv;          /* 1 / softness (0: hard bands) */
     int n;
     const float *matte;
 } cel_job;
@@ -131,17 +133,23 @@ static inline float finite_or(float v)
 }
 
 /* The ramp q(t), t = lighting / white: band floor(t N) with smooth steps of width soft. */
+/* The ramp at t: values[0] plus each band step, smoothed over band_softness around the
+ * edges k/n (a smoothstep without a division: (t - lo) / softness, clamped). */
 static inline float ramp_q(const cel_job *j, float t)
 {
     const int n = j->n;
     if (n <= 1)
         return j->values[0];
-    float soft = j->p->band_softness;
     float v = j->values[0];
-    for (int k = 1; k < n; k++) {
-        float edge = (float)k / (float)n;
-        float s = soft > 0.0f ? fx_smoothstep(edge - 0.5f * soft, edge + 0.5f * soft, t) : (t >= edge ? 1.0f : 0.0f);
-        v += s * (j->values[k] - j->values[k - 1]);
+    if (j->band_inv > 0.0f) {
+        for (int k = 1; k < n; k++) {
+            float u = (t - j->band_lo[k]) * j->band_inv;
+            u = u > 0.0f ? (u < 1.0f ? u : 1.0f) : 0.0f;
+            v += u * u * (3.0f - 2.0f * u) * (j->values[k] - j->values[k - 1]);
+        }
+    } else {
+        for (int k = 1; k < n; k++)
+            v += (t >= (float)k / (float)n ? 1.0f : 0.0f) * (j->values[k] - j->values[k - 1]);
     }
     return v;
 }
@@ -161,12 +169,17 @@ static void cel_rows(void *user, int begin, int end)
             float o[3] = { c[0], c[1], c[2] };
             if (p->lighting == LIGHT_DIFFUSE_PASSES) {
                 const float *dd = j->diff_dir + i * j->dd_ch, *dc = j->diff_col + i * j->dc_ch;
-                float l3[3] = { fmaxf(finite_or(dd[0]), 0.0f), fmaxf(finite_or(dd[1]), 0.0f), fmaxf(finite_or(dd[2]), 0.0f) };
+                float l3[3];
+                for (int k = 0; k < 3; k++) {
+                    float v = finite_or(dd[k]);
+                    l3[k] = v > 0.0f ? v : 0.0f;
+                }
                 float l = fx_luminance(l3[0], l3[1], l3[2]);
                 float l_c = l < 1e30f ? l : 1e30f;
                 float q = ramp_q(j, l_c * inv_white) * p->white;
+                const float inv_l = l > 1e-8f ? 1.0f / l : 0.0f;
                 for (int k = 0; k < 3; k++) {
-                    float tint = l > 1e-8f ? l3[k] / l : 1.0f; /* the light's colour */
+                    float tint = l > 1e-8f ? l3[k] * inv_l : 1.0f; /* the light's colour */
                     float col = finite_or(dc[k]);
                     o[k] = c[k] + col * (q * tint - l3[k]);
                 }
@@ -212,6 +225,9 @@ static fx_result cel_process(const fx_effect_run *run)
     j.run = run;
     j.p = p;
     j.n = p->bands;
+    j.band_inv = p->band_softness > 0.0f ? 1.0f / p->band_softness : 0.0f;
+    for (int k = 0; k < RAMP_MAX; k++)
+        j.band_lo[k] = (float)k / (float)(j.n > 0 ? j.n : 1) - 0.5f * p->band_softness;
     for (int k = 0; k < j.n; k++)
         j.values[k] = p->ramp_mode == RAMP_CUSTOM ? p->ramp[k] : (j.n > 1 ? (float)k / (float)(j.n - 1) : 1.0f);
     const fx_frame *f = run->frame;
