@@ -17,6 +17,9 @@ cmake --build build-asan -j"$(nproc)" >/dev/null
 ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1 \
   ctest --test-dir build-asan --output-on-failure -j2 || status=1
 
+echo "== Fuzz target (EXR reader + recipe parser + one effect; libFuzzer + ASan, 60 s)"
+bash tests/fuzz/run_fuzz.sh 60 || status=1
+
 export LIBFX_CLI="$PWD/build/libfx/libfx" LIBFX_LIBRARY="$PWD/build/libfx/libfx.so"
 # Two runs: each folder has its own conftest.py.
 echo "== Python tests (CLI, interop)"
