@@ -112,8 +112,8 @@ def frusta_box(scene, frames, geo_lo, geo_hi):
         far = min(cam.data.clip_end, (cam.matrix_world.translation - (geo_lo + geo_hi) / 2).length + diag)
         pts += frustum_points(scene, cam, far)
     scene.frame_set(keep)
-    lo = Vector(map(max, geo_lo, Vector(map(min, *zip(*pts))))) if pts else geo_lo
-    hi = Vector(map(min, geo_hi, Vector(map(max, *zip(*pts))))) if pts else geo_hi
+    lo = Vector(map(max, geo_lo, Vector(map(min, zip(*pts))))) if pts else geo_lo
+    hi = Vector(map(min, geo_hi, Vector(map(max, zip(*pts))))) if pts else geo_hi
     if any(lo[i] >= hi[i] for i in range(3)):
         return geo_lo, geo_hi
     return lo, hi
@@ -164,8 +164,8 @@ def view_spec(scene, view, frames, objs):
         # receivers: the region the cameras see; casters: the whole geometry box
         rc = [inv @ p for p in box_corners(reg_lo, reg_hi)]
         gc = [inv @ p for p in box_corners(geo_lo, geo_hi)]
-        lo = Vector(map(min, *zip(*rc)))
-        hi = Vector(map(max, *zip(*rc)))
+        lo = Vector(map(min, zip(*rc)))
+        hi = Vector(map(max, zip(*rc)))
         zmax = max(p.z for p in gc) + 1.0            # nearest caster to the light (view looks down -Z)
         zmin = min(p.z for p in gc) - 1.0
         ext = Vector((hi.x - lo.x, hi.y - lo.y))
@@ -259,7 +259,17 @@ def _render(scene, spec, objs, path):
             bpy.ops.render.render(write_still=False, scene=aux.name)
         finally:
             BUSY["on"] = False
-        written = base + "0001.exr"
+        # the File Output node numbers the file with the frame of the scene the render was
+        # started from (frame 8 of a batch gives .0008.exr), not the aux scene's frame 1
+        written = None
+        for f in (scene.frame_current, 1):
+            if os.path.exists(base + "%04d.exr" % f):
+                written = base + "%04d.exr" % f
+                break
+        if written is None:
+            import glob
+            found = sorted(glob.glob(glob.escape(base) + "[0-9]*.exr"))
+            written = found[-1] if found else base + "0001.exr"
         if not os.path.exists(written):
             raise native.LibfxError("the aux view render of '%s' wrote no file (%s)" % (spec["name"], written))
         os.replace(written, path)

@@ -143,6 +143,28 @@ def _record(scene, frame, error=None, **kw):
     return rec
 
 
+_ctx_lock = threading.Lock()
+_CTX = {"ctx": None, "threads": None}
+
+
+def _context(threads):
+    """One libfx context kept across frames: its aux-view cache (core/aux_view.h) lets
+    frames 2..N reuse the light view's and rain map's built maps. Call with _ctx_lock."""
+    c = _CTX["ctx"]
+    if c is None or _CTX["threads"] != threads or c._L is not native.lib():
+        if _CTX["ctx"] is not None:
+            _CTX["ctx"].close()
+        _CTX["ctx"], _CTX["threads"] = native.Context(threads), threads
+    return _CTX["ctx"]
+
+
+def free_context():
+    with _ctx_lock:
+        if _CTX["ctx"] is not None:
+            _CTX["ctx"].close()
+        _CTX["ctx"] = _CTX["threads"] = None
+
+
 def process_frame(scene, frame, recipe_dict=None, passes_file=None, camera=None, fps=None):
     """Runs the scene's stack on the File Output EXR of a frame and writes the results.
     Returns the result record; raises nothing."""
@@ -167,7 +189,9 @@ def process_frame(scene, frame, recipe_dict=None, passes_file=None, camera=None,
             raise native.LibfxError("the passes file %s was not written (is the compositor on, "
                                     "and the node '%s' unmuted?)" % (passes_file, scene_setup.FO_NODE))
         t0 = time.perf_counter()
-        with native.Context(scene.libfx.threads) as ctx:
+        with _ctx_lock:   # one thread at a time per context (F12's render thread, batch's main)
+            ctx = _context(scene.libfx.threads)
+            ctx.warnings()   # drop what an earlier frame left
             stack = native.Stack(ctx, recipe_dict)
             fin = native.Frame.read(ctx, passes_file, stack)
             if camera is not None:
@@ -330,6 +354,7 @@ def register():
 
 def unregister():
     """Removes only our handlers, also those of an older copy of this module (reload)."""
+    free_context()
     for name, fn in HANDLERS:
         lst = getattr(bpy.app.handlers, name)
         for h in list(lst):
