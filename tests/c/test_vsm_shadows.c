@@ -365,6 +365,68 @@ static void test_sidecar_threads_errors(fx_context *ctx)
     fx_frame_free(g);
 }
 
+/* apply sun_diffuse: where fully shadowed, the removed light is DiffCol E N.L / pi times
+ * Burley's factor (principled) or 1 (lambert); N.L = N.V = 1 makes them equal. A sun
+ * tilted 60 degrees off the floor's normal, camera straight down (V = +z). */
+static void test_sun_diffuse(fx_context *ctx)
+{
+    float h[N * N];
+    for (int i = 0; i < N * N; i++)
+        h[i] = 3.0f; /* a roof over everything: all shadowed (the light view is straight down) */
+    const char *path = write_light_view(ctx, h, "roof");
+    const float dc = 0.5f, energy = 3.0f, rough = 0.7f;
+    const double tilt[2] = {0.0, 60.0};
+    for (int t = 0; t < 2; t++) {
+        double a = tilt[t] * 3.14159265358979 / 180.0;
+        /* the light travels along -to_light; to_light = (sin a, 0, cos a) */
+        float lx = (float)sin(a), lz = (float)cos(a);
+        float out[2] = {0, 0};
+        for (int model = 0; model < 2; model++) {
+            fx_frame *f = floor_frame(ctx, path);
+            float *nrm = malloc(N * N * 3 * sizeof(float)), *col = malloc(N * N * 3 * sizeof(float));
+            for (int i = 0; i < N * N; i++) {
+                nrm[3 * i] = nrm[3 * i + 1] = 0.0f;
+                nrm[3 * i + 2] = 1.0f;
+                col[3 * i] = col[3 * i + 1] = col[3 * i + 2] = dc;
+            }
+            fx_frame_add_pass(f, "Normal", 3, nrm);
+            fx_frame_add_pass(f, "DiffCol", 3, col);
+            free(nrm);
+            free(col);
+            char json[1024];
+            snprintf(json, sizeof json,
+                     "{\"world_to_camera\": [[1,0,0,0],[0,1,0,0],[0,0,1,-10],[0,0,0,1]], \"projection\": "
+                     "[[0.2,0,0,0],[0,0.2,0,0],[0,0,%.9g,%.9g],[0,0,0,1]], \"clip_start\": 0.1, \"clip_end\": 20, "
+                     "\"orthographic\": true, \"lights\": [{\"name\": \"Sun\", \"type\": \"SUN\", \"position\": "
+                     "[0,0,10], \"direction\": [%.9g, 0, %.9g], \"color\": [1,1,1], \"energy\": %g}]}",
+                     -2 / 19.9, -20.1 / 19.9, -lx, -lz, energy);
+            CHECK_OK(ctx, fx_frame_apply_sidecar(f, json));
+            fx_stack *s = et_stack(ctx, "vsm_shadows");
+            CHECK_OK(ctx, fx_stack_set_string(s, 0, "light", "Sun"));
+            CHECK_OK(ctx, fx_stack_set_enum(s, 0, "method", "hard"));
+            CHECK_OK(ctx, fx_stack_set_enum(s, 0, "diffuse", model ? "lambert" : "principled"));
+            CHECK_OK(ctx, fx_stack_set_float(s, 0, "roughness", rough));
+            CHECK_OK(ctx, fx_stack_set_float(s, 0, "normal_offset", 0.0));
+            float *o = et_run(ctx, s, f);
+            CHECK(o != NULL);
+            out[model] = o ? o[4 * (N / 2 * N + N / 2)] : 0.0f;
+            free(o);
+            fx_stack_free(s);
+            fx_frame_free(f);
+        }
+        double ndl = cos(a), lambert = dc * energy * ndl / 3.14159265358979;
+        /* Burley: V = +z, H = normalize(V + L), L.H = cos(a / 2) */
+        double ldh = cos(a / 2), f90 = 0.5 + 2 * rough * ldh * ldh;
+        double burley = (1 + (f90 - 1) * pow(1 - ndl, 5)) * (1 + (f90 - 1) * 0.0);
+        CHECK(fabs((1.0 - out[1]) - lambert) < 1e-5);
+        CHECK(fabs((1.0 - out[0]) - lambert * burley) < 1e-5);
+        if (t == 0)
+            CHECK(out[0] == out[1]);
+        printf("sun_diffuse tilt %.0f: removed lambert %.5f, principled %.5f (Burley %.4f)\n", tilt[t],
+                1.0 - out[1], 1.0 - out[0], burley);
+    }
+}
+
 /* The per-context cache of built light maps (core/aux_view.h): frames 2..N reuse the map
  * and give the same bits as an uncached context (1 and 2 threads, box and Gaussian); a
  * replaced view file, other filter parameters or a too small limit build again. */
@@ -448,6 +510,7 @@ int main(void)
     test_bleeding(ctx);
     test_sidecar_threads_errors(ctx);
     test_sat_precision(ctx);
+    test_sun_diffuse(ctx);
     test_cache();
     fx_context_free(ctx);
     return tu_finish("test_vsm_shadows");
