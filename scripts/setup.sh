@@ -13,7 +13,7 @@ packages=(
   blender                                   # Debian's Blender 3.4: the add-on, scenes and renders
   xvfb                                      # a display for the add-on's UI screenshot
   libopencv-imgproc-dev                     # OpenCV's GaussianBlur as the benchmark's peer
-  clang                                     # sanitizer builds and the fuzz target
+  clang libclang-rt-14-dev                  # the fuzz target (libFuzzer is in libclang-rt)
 )
 missing=()
 for p in "${packages[@]}"; do

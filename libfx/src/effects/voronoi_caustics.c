@@ -70,7 +70,7 @@ static const fx_param_def caustics_param_defs[] = {
                "World size of the repeating tile (scene units): cells are tile_size / sqrt(points)"),
     FX_P_ENUM(caustics_params, metric, "metric", METRIC_MINKOWSKI, metric_items,
               "minkowski: exponent d; chebyshev: the limit d -> infinity"),
-    FX_P_FLOAT(caustics_params, exponent, "exponent", 1.5, 0.0, 1e6, 0.5, 8.0, "",
+    FX_P_FLOAT(caustics_params, exponent, "exponent", 1.5, 0.01, 1e6, 0.5, 8.0, "",
                "Minkowski exponent d > 0 (the seed: 1.5; 2 Euclidean, 1 Manhattan; d < 1 is not a "
                "metric, still finite)"),
     FX_P_ENUM(caustics_params, mode, "mode", MODE_PHYSICAL, mode_items,
