@@ -148,6 +148,46 @@ static fx_frame *depth_frame(fx_context *ctx, int w, int h, float near, float fa
     return f;
 }
 
+/* depth_mode planar: a plane seen at a grazing angle (1/d affine in x and y, depth from 1 to
+ * ~130) gives 0 everywhere, where relative fires; a step 2 -> 4 gives d1/d0 - 1 = 1 on its
+ * far side and 1 - d0/d1 = 0.5 on the near side; scale-free. */
+static void test_depth_planar(fx_context *ctx)
+{
+    const int w = 12, h = 8;
+    fx_frame *f = tu_pattern_frame(ctx, w, h, 3);
+    float *d = malloc((size_t)w * h * sizeof(float));
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++)
+            d[y * w + x] = 1.0f / (1.0f - 0.0899f * (float)x - 0.0005f * (float)y); /* 1/d affine: d 1 .. ~130 */
+    fx_frame_add_pass(f, "Depth", 1, d);
+    const char *pp = "\"luminance\":false,\"depth\":true,\"depth_mode\":\"planar\"";
+    const char *pr = "\"luminance\":false,\"depth\":true,\"depth_mode\":\"relative\"";
+    float *sp = run_pass(ctx, f, recipe(pp, NULL), "fx0_edges_strengths");
+    float *sr = run_pass(ctx, f, recipe(pr, NULL), "fx0_edges_strengths");
+    float mp = 0, mr = 0;
+    for (int i = 0; sp && sr && i < w * h; i++) {
+        mp = sp[4 * i + 1] > mp ? sp[4 * i + 1] : mp;
+        mr = sr[4 * i + 1] > mr ? sr[4 * i + 1] : mr;
+    }
+    CHECK(sp && sr && mp < 1e-3f && mr > 0.5f);
+    free(sp);
+    free(sr);
+    fx_frame_free(f);
+    for (int k = 0; k < 2; k++) {
+        float sc = k ? 100.0f : 1.0f;
+        f = tu_pattern_frame(ctx, w, h, 3);
+        for (int i = 0; i < w * h; i++)
+            d[i] = (i % w < 6 ? 2.0f : 4.0f) * sc;
+        fx_frame_add_pass(f, "Depth", 1, d);
+        sp = run_pass(ctx, f, recipe(pp, NULL), "fx0_edges_strengths");
+        CHECK(sp && fabsf(sp[(3 * w + 6) * 4 + 1] - 1.0f) < 1e-5f && fabsf(sp[(3 * w + 5) * 4 + 1] - 0.5f) < 1e-5f &&
+              sp[(3 * w + 2) * 4 + 1] == 0.0f);
+        free(sp);
+        fx_frame_free(f);
+    }
+    free(d);
+}
+
 static void test_depth_normals(fx_context *ctx)
 {
     const char *p = "\"luminance\":false,\"depth\":true,\"operator\":\"sobel\"";
@@ -405,6 +445,7 @@ int main(void)
     fx_context_new(&c2, 2);
     test_kernels(c1);
     test_depth_normals(c1);
+    test_depth_planar(c1);
     test_ids(c1);
     test_properties(c1, c2);
     test_extremes(c1);

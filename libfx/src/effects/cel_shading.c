@@ -34,6 +34,7 @@ typedef struct cel_params {
     float outline_width;
     float outline_color[4];
     float depth_sensitivity, normal_sensitivity;
+    int depth_mode;
     float mix;
 } cel_params;
 
@@ -41,6 +42,7 @@ enum { LIGHT_DIFFUSE_PASSES = 0, LIGHT_NORMAL };
 enum { RAMP_BANDS = 0, RAMP_CUSTOM };
 
 static const char *const lighting_items[] = { "diffuse_passes", "normal_light" };
+static const char *const depth_mode_items[] = FX_EDGE_DEPTH_MODE_ITEMS;
 static const char *const ramp_items[] = { "bands", "custom" };
 static const float ramp_default[RAMP_MAX] = { 0.0f, 0.35f, 0.7f, 1.0f, 1.0f, 1.0f, 1.0f, 1.0f };
 static const float dir_default[3] = { 0.3f, 0.4f, -0.87f };
@@ -74,6 +76,9 @@ static const fx_param_def cel_param_defs[] = {
                "Outlines where depth jumps by more than 1/sensitivity (relative); 0: off"),
     FX_P_FLOAT(cel_params, normal_sensitivity, "normal_sensitivity", 0.5, 0.0, 1.0, 0.0, 1.0, "factor",
                "Outlines where normals turn by more than 90 x (1 - sensitivity) degrees; 0: off"),
+    FX_P_ENUM(cel_params, depth_mode, "depth_mode", 1, depth_mode_items,
+              "Depth outlines: planar (default): second differences of 1/depth, no lines along floors or "
+              "the sea's horizon; relative: Sobel of ln(depth) (math/edge_ops.h)"),
     FX_P_FLOAT(cel_params, mix, "mix", 1.0, 0.0, 1.0, 0.0, 1.0, "factor", "0: the identity; 1: the full effect"),
 };
 
@@ -87,6 +92,7 @@ static void edge_settings(const cel_params *p, fx_edge_settings *s)
     s->normal_threshold = 90.0f * (1.0f - p->normal_sensitivity);
     s->softness = 0.5f;
     s->line_width = p->outline_width;
+    s->depth_planar = p->depth_mode == 1;
 }
 
 static fx_pass_set cel_passes(const void *params)

@@ -16,6 +16,7 @@ typedef struct edges_params {
     int luminance, depth, normal, object_id, material_id, id_source;
     float luminance_threshold, depth_threshold, normal_threshold, id_threshold;
     float softness, line_width;
+    int depth_mode;
     float line_color[4];
     int output;
     float opacity;
@@ -25,6 +26,7 @@ enum { OUT_OVER = 0, OUT_MATTE };
 
 static const char *const op_items[] = FX_EDGE_OPERATOR_ITEMS;
 static const char *const id_items[] = { "cryptomatte", "index" };
+static const char *const depth_mode_items[] = FX_EDGE_DEPTH_MODE_ITEMS;
 static const char *const out_items[] = { "over", "matte" };
 static const float black4[4] = { 0, 0, 0, 1 };
 
@@ -38,6 +40,10 @@ static const fx_param_def edges_param_defs[] = {
     FX_P_BOOL(edges_params, depth, "depth", 0, "Edges of the Depth pass, as relative depth jumps"),
     FX_P_FLOAT(edges_params, depth_threshold, "depth_threshold", 0.05, 0.0, 1000.0, 0.0, 1.0, "",
                "Relative depth jump ln(d1/d0) that makes an edge (0.05: 5%; scale-free)"),
+    FX_P_ENUM(edges_params, depth_mode, "depth_mode", 0, depth_mode_items,
+              "relative: the operator on ln(depth) (fires along planes seen at grazing angles too); "
+              "planar: second differences of 1/depth, zero on any plane (no lines along floors or "
+              "the sea's horizon), silhouettes and creases only"),
     FX_P_BOOL(edges_params, normal, "normal", 0, "Edges where the Normal pass turns"),
     FX_P_FLOAT(edges_params, normal_threshold, "normal_threshold", 30.0, 0.0, 180.0, 0.0, 90.0, "",
                "Angle in degrees between neighbouring normals that makes an edge"),
@@ -76,6 +82,7 @@ static void settings_of(const edges_params *p, fx_edge_settings *s)
     s->id_threshold = p->id_threshold;
     s->softness = p->softness;
     s->line_width = p->line_width;
+    s->depth_planar = p->depth_mode == 1;
 }
 
 static fx_pass_set edges_passes(const void *params)

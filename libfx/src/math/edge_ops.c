@@ -216,7 +216,7 @@ static void fields_rows(void *user, int begin, int end)
                 float v = d[x];
                 v = v > FX_EDGE_NEAR_DEPTH ? (v < FX_EDGE_FAR_DEPTH ? v : FX_EDGE_FAR_DEPTH)
                                            : (v == v ? FX_EDGE_NEAR_DEPTH : FX_EDGE_FAR_DEPTH);
-                j->ldepth[row + x] = logf(v);
+                j->ldepth[row + x] = j->s->depth_planar ? 1.0f / v : logf(v);
             }
         }
         if (j->unorm) {
@@ -403,6 +403,26 @@ static inline float maxf(float a, float b)
     return a > b ? a : b;
 }
 
+/* Planar depth strength at (x, y) (field: 1/depth, finite and > 0): see edge_ops.h. */
+static inline float planar_at(const float *f, int w, int h, int x, int y)
+{
+    const float *B = f + (size_t)y * w;
+    const float c = B[x];
+    float sx = 0.0f, sy = 0.0f;
+    if (x > 0 && x + 1 < w)
+        sx = fabsf((B[x - 1] - c) + (B[x + 1] - c));
+    if (y > 0 && y + 1 < h)
+        sy = fabsf((B[x - w] - c) + (B[x + w] - c));
+    float v = (sx > sy ? sx : sy) / c; /* x depth */
+    return v <= FLT_MAX ? v : FLT_MAX;
+}
+
+static void planar_row(const float *f, int w, int h, int y, int x0, int x1, float *out)
+{
+    for (int x = x0; x < x1; x++)
+        out[x] = planar_at(f, w, h, x, y);
+}
+
 static void strength_rows(void *user, int begin, int end)
 {
     const edge_job *j = user;
@@ -427,7 +447,9 @@ static void strength_rows(void *user, int begin, int end)
                 response_row(j->lum, w, h, y, sr->x0, sr->x1, s->op, sl_row);
         }
         if (s->use_depth) {
-            if (sd_row)
+            if (sd_row && s->depth_planar)
+                planar_row(j->ldepth, w, h, y, sr->x0, sr->x1, sd_row);
+            else if (sd_row)
                 response_row(j->ldepth, w, h, y, sr->x0, sr->x1, s->op, sd_row);
         }
         if (sl_row && sd_row && !s->use_normal && !s->use_object && !s->use_material && !j->strengths) {
@@ -449,7 +471,12 @@ static void strength_rows(void *user, int begin, int end)
                 e = maxf(e, ramp(rl, sl));
             }
             if (s->use_depth) {
-                sd = sd_row ? sd_row[x] : fx_edge_response_at(j->ldepth, 1, w, h, x, y, s->op);
+                if (sd_row)
+                    sd = sd_row[x];
+                else if (s->depth_planar)
+                    sd = planar_at(j->ldepth, w, h, x, y);
+                else
+                    sd = fx_edge_response_at(j->ldepth, 1, w, h, x, y, s->op);
                 e = maxf(e, ramp(rd, sd));
             }
             if (s->use_normal) {

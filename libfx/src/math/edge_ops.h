@@ -6,7 +6,8 @@
  *  - luminance: the operator on sRGB-encoded Rec.709 luminance (perceptual: a threshold of
  *    0.1 is a 10% display step wherever it happens), unit-step normalised;
  *  - depth: the operator on ln(depth), unit-step normalised, so the strength is the
- *    relative depth jump (ln(d1/d0) ~ (d1-d0)/d0) and does not depend on scene units.
+ *    relative depth jump (ln(d1/d0) ~ (d1-d0)/d0) and does not depend on scene units; or,
+ *    depth_planar, second differences of 1/depth (zero on planes: see FX_EDGE_DEPTH_MODE_ITEMS).
  *    Depth >= FX_EDGE_FAR_DEPTH or non-finite is background (Cycles 1e10, Eevee 65504)
  *    and reads as FX_EDGE_FAR_DEPTH, so silhouettes against the sky are jumps too;
  *  - normal: the largest angle (degrees) between the pixel's normal and its 4 neighbours'
@@ -70,7 +71,17 @@ typedef struct fx_edge_settings {
     float id_threshold;        /* coverage difference, 0..1 */
     float softness;            /* ramp width as a fraction of each threshold */
     float line_width;          /* pixels; <= 2 draws the operator's own width */
+    int depth_planar;          /* depth: FX_EDGE_DEPTH_PLANAR instead of the operator on ln(depth) */
 } fx_edge_settings;
+
+/* Depth modes. RELATIVE: the operator on ln(depth) (a jump of ln(d1/d0)); it also fires along
+ * planes seen at grazing angles (a floor or the sea towards the horizon), whose depth grows
+ * fast from pixel to pixel. PLANAR: inverse depth is affine in screen space on any plane, so
+ * its second differences vanish there: strength = max over x and y of |1/d(-1) - 2/d + 1/d(+1)|
+ * x d (both neighbours inside the image; a border axis gives 0). Scale-free; a small jump
+ * reads eps as in RELATIVE, a step from d0 to d1 > d0 gives d1/d0 - 1 on its far side and
+ * 1 - d0/d1 on the near side; creases (a kink in 1/d) draw too, grazing planes never. */
+#define FX_EDGE_DEPTH_MODE_ITEMS { "relative", "planar" }
 
 /* The passes these settings read, beyond Combined. */
 fx_pass_set fx_edge_passes(const fx_edge_settings *s);
