@@ -253,12 +253,38 @@ static void test_images(fx_context *ctx1, fx_context *ctx2)
                 CHECK(outside_ok);
                 CHECK(err < (a == FX_BLUR_EXACT ? 1e-7 : 1e-5));
             }
-        /* in place */
-        fx_blur_spec s = spec(4.0, FX_BLUR_BOX, 3);
-        fx_blur_image(ctx1, src, a1, w, h, 4, &s, NULL, "t");
-        memcpy(a2, src, n * sizeof(float));
-        fx_blur_image(ctx1, a2, a2, w, h, 4, &s, NULL, "t");
-        CHECK(memcmp(a1, a2, n * sizeof(float)) == 0);
+        /* in place (src == dst): the fast row-wise kernels of box and recursive (RGBA,
+         * full width: the vertical result goes straight to dst) and their ROI path; 1-3
+         * channels take the lane kernels horizontally */
+        const fx_blur_algorithm ip_alg[] = { FX_BLUR_BOX, FX_BLUR_BOX, FX_BLUR_RECURSIVE,
+                                             FX_BLUR_RECURSIVE };
+        const double ip_sigma[] = { 4.0, 30.0, 4.0, 30.0 };
+        const fx_rect ip_roi[] = { { 0, 0, w, h }, { 0, 30, w, 77 }, { 40, 30, 111, 77 } };
+        for (int k = 0; k < 4; k++)
+            for (int ri = 0; ri < 3; ri++)
+                for (int c = 1; c <= 4; c += 3) {
+                    fx_blur_spec s = spec(ip_sigma[k], ip_alg[k], 3 + k % 2);
+                    size_t m = (size_t)w * h * c;
+                    memcpy(a1, src, m * sizeof(float));
+                    fx_blur_image(ctx2, src, a1, w, h, c, &s, &ip_roi[ri], "t");
+                    memcpy(a2, src, m * sizeof(float));
+                    CHECK_OK(ctx2, fx_blur_image(ctx2, a2, a2, w, h, c, &s, &ip_roi[ri], "t"));
+                    CHECK(memcmp(a1, a2, m * sizeof(float)) == 0);
+                }
+        /* the fast kernels give the lane kernels' bits: an RGBA row (horizontal, 4 rows at
+         * once) and a 1-channel column (vertical strip of one lane) against fx_blur_line */
+        for (int k = 0; k < 4; k++) {
+            fx_blur_spec s = spec(ip_sigma[k], ip_alg[k], 3 + k % 2);
+            float *line = malloc((size_t)w * 4 * sizeof(float));
+            fx_blur_image(ctx2, src, a1, w, 1, 4, &s, NULL, "t");
+            for (int c = 0; c < 4; c++)
+                fx_blur_line(ctx2, src + c, line + c, w, 4, &s, "t");
+            CHECK(memcmp(a1, line, (size_t)w * 4 * sizeof(float)) == 0);
+            fx_blur_image(ctx2, src, a1, 1, h, 1, &s, NULL, "t");
+            fx_blur_line(ctx2, src, line, h, 1, &s, "t");
+            CHECK(memcmp(a1, line, (size_t)h * sizeof(float)) == 0);
+            free(line);
+        }
         free(src), free(a1), free(a2), free(ro);
     }
 }

@@ -617,16 +617,38 @@ static void deriche_rows4(const blur_plan *p, const float *const *in, float *con
  * in[v] + i * istep (k[v] floats, 4 but for a partial last group); output position o0 + j
  * of group v goes to out[v] + j * ostep. Same operations per lane as box_lanes, so the
  * same bits. out may alias in: position i is written after every read of it, and the
- * last sample (fed past the end) is read once up front. Stage k's ring, slot m, group v
- * is ring[k * RS + m * NV + v] (RS = (2r+2) * NV); S: passes * NV; last: NV. */
+ * last sample (fed past the end) is read once up front. Group v's stage k ring, slot m,
+ * is ring[(v * passes + k) * M + m] (M = plan.ring; group-major: slot-major rings put a
+ * group's slots NV * 32 bytes apart, on a quarter of L1's sets for NV = 8, and thrashed
+ * them); S: passes * NV; last: NV. */
+#define BOX_V_NV (V_LANES / 4) /* groups of a vertical strip */
+#define BOX_MAX_NV (BOX_V_NV > H_ROWS ? BOX_V_NV : H_ROWS)
+
+/* n floats (n <= V_LANES; V_LANES the usual case, copied inline, no call) */
+static inline __attribute__((always_inline)) void copy_row(float *restrict d, const float *restrict s,
+                                                           int n)
+{
+    if (n == V_LANES) {
+        float t[V_LANES];
+        memcpy(t, s, sizeof t);
+        memcpy(d, t, sizeof t);
+    } else {
+        memcpy(d, s, (size_t)n * sizeof(float));
+    }
+}
+
 typedef struct box_args {
-    const float *in[8];
+    const float *in[BOX_MAX_NV]; /* position t of group v at in[v] + (t - ib) * istep */
     size_t istep;
-    float *out[8];
+    float *out[BOX_MAX_NV];      /* output of step t of group v at out[v] + (t - ob) * ostep */
     ptrdiff_t ostep;
-    int k[8];
+    int ib, ob;
+    int k[BOX_MAX_NV];
     int groups, NV, n, o0, o1;
     v4d *ring, *S, *last;
+    /* staged (vertical): rows go through xin / xout (BOX_BLOCK x L floats, contiguous) */
+    float *xin, *xout;
+    int L;
 } box_args;
 
 #define BOX_BLOCK 64
@@ -660,22 +682,22 @@ static inline __attribute__((always_inline)) void
 box_seg(const blur_plan *p, const int P, const int NV, const int LOAD, const int STORE,
         const box_args *A, int v, int t0, int t1, int slot, int rc)
 {
-    const int M = p->ring, D2 = 2 * p->r + 2, W = 2 * p->r + 1, lag = P * (p->r + 1);
+    const int M = p->ring, D2 = 2 * p->r + 2, W = 2 * p->r + 1;
     const int kv = A->k[v], resum = p->resum;
     const double a = p->alpha, g = p->normP;
-    const ptrdiff_t RS = (ptrdiff_t)M * NV;
-    v4d *const ring = A->ring + v, *const rend = ring + RS;
+    const ptrdiff_t RS = M, SL = 1; /* group-major rings: stage stride, slot stride */
+    v4d *const ring = A->ring + (ptrdiff_t)v * P * M, *const rend = ring + RS;
     const size_t istep = A->istep;
     const ptrdiff_t ostep = A->ostep;
-    const float *in = A->in[v] + (LOAD ? (size_t)t0 * istep : 0);
-    float *out = A->out[v] + (STORE ? (ptrdiff_t)(t0 - lag - A->o0) * ostep : 0);
+    const float *in = A->in[v] + (LOAD ? (size_t)(t0 - A->ib) * istep : 0);
+    float *out = A->out[v] + (STORE ? (ptrdiff_t)(t0 - A->ob) * ostep : 0);
     const v4d xl = A->last[v];
     v4d S[6], pr[6];
     /* rs: slot of position t (written), ro: of position t - (2r+2) (leaving) */
     int os = slot - D2 < 0 ? slot - D2 + M : slot - D2;
-    v4d *rs = ring + (ptrdiff_t)slot * NV, *ro = ring + (ptrdiff_t)os * NV;
+    v4d *rs = ring + (ptrdiff_t)slot * SL, *ro = ring + (ptrdiff_t)os * SL;
     {
-        const v4d *rp = slot == 0 ? rend - NV : rs - NV;
+        const v4d *rp = slot == 0 ? rend - SL : rs - SL;
         for (int k = 0; k < P; k++) {
             S[k] = A->S[k * NV + v];
             pr[k] = rp[k * RS];
@@ -689,11 +711,12 @@ box_seg(const blur_plan *p, const int P, const int NV, const int LOAD, const int
             for (int k = 0; k < P; k++) {
                 const v4d *rk = ring + k * RS;
                 int m = slot - W < 0 ? slot - W + M : slot - W;
-                v4d sum = rk[(ptrdiff_t)m * NV];
-                for (int j = 1; j < W; j++) {
-                    m = m + 1 == M ? 0 : m + 1;
-                    sum += rk[(ptrdiff_t)m * NV];
-                }
+                v4d sum = rk[(ptrdiff_t)m * SL];
+                int e1 = m + W < M ? m + W : M; /* slots m+1 .. e1-1, then 0 .. W-1-(e1-m) */
+                for (int q = m + 1; q < e1; q++)
+                    sum += rk[(ptrdiff_t)q * SL];
+                for (int q = 0, e2 = W - (e1 - m); q < e2; q++)
+                    sum += rk[(ptrdiff_t)q * SL];
                 v4d old = ro[k * RS];
                 S[k] = sum;
                 rs[k * RS] = x;
@@ -706,8 +729,8 @@ box_seg(const blur_plan *p, const int P, const int NV, const int LOAD, const int
             }
             if (LOAD)
                 in += istep;
-            rs += NV;
-            ro += NV;
+            rs += SL;
+            ro += SL;
             len = 1;
         } else {
             len = t1 - t;
@@ -734,8 +757,8 @@ box_seg(const blur_plan *p, const int P, const int NV, const int LOAD, const int
                     }
                     if (LOAD)
                         in += istep;
-                    rs += NV;
-                    ro += NV;
+                    rs += SL;
+                    ro += SL;
                 }
             } else {
                 for (int i = 0; i < len; i++) {
@@ -753,8 +776,8 @@ box_seg(const blur_plan *p, const int P, const int NV, const int LOAD, const int
                     }
                     if (LOAD)
                         in += istep;
-                    rs += NV;
-                    ro += NV;
+                    rs += SL;
+                    ro += SL;
                 }
             }
         }
@@ -773,20 +796,24 @@ box_seg(const blur_plan *p, const int P, const int NV, const int LOAD, const int
         A->S[k * NV + v] = S[k];
 }
 
+/* All positions of all groups. Staged (the vertical pass): each block of rows is first
+ * copied to xin (L floats a row, contiguous) and its outputs gathered in xout, then
+ * copied to the rows: walking the groups down 64 rows a page apart, straight from the
+ * image, costs a TLB miss per row and group. */
 static inline __attribute__((always_inline)) void box_sweep(const blur_plan *p, const int P,
-                                                            const int NV, const box_args *A)
+                                                            const int NV, const int STAGED,
+                                                            const box_args *A)
 {
     const int M = p->ring, W = 2 * p->r + 1, lag = P * (p->r + 1);
-    const ptrdiff_t RS = (ptrdiff_t)M * NV;
     const double a = p->alpha;
     const int n = A->n, s0 = A->o0 + lag, T = A->o1 + lag;
     for (int v = 0; v < A->groups; v++) {
         v4d c = loadn(A->in[v], A->k[v]);
         A->last[v] = loadn(A->in[v] + (size_t)(n - 1) * A->istep, A->k[v]);
         for (int k = 0; k < P; k++) {
-            v4d *rk = A->ring + k * RS + v;
+            v4d *rk = A->ring + ((ptrdiff_t)v * P + k) * M;
             for (int m = 0; m < M; m++)
-                rk[(ptrdiff_t)m * NV] = c;
+                rk[m] = c;
             A->S[k * NV + v] = c - c;
             v4d s = c;
             for (int j = 1; j < W; j++)
@@ -794,13 +821,37 @@ static inline __attribute__((always_inline)) void box_sweep(const blur_plan *p, 
             c = s + a * (c + c);
         }
     }
+    box_args B = *A;
+    B.ib = 0;
+    B.ob = lag + A->o0;
+    const size_t XL = (size_t)NV * 4; /* floats per staged row */
+    if (STAGED) {
+        for (int v = 0; v < A->groups; v++) {
+            B.in[v] = A->xin + 4 * v;
+            B.out[v] = A->xout + 4 * v;
+        }
+        B.istep = XL;
+        B.ostep = (ptrdiff_t)XL;
+    }
     int slot = 0, rc = 0;
     for (int tb = 0; tb < T; tb += BOX_BLOCK) {
         const int te = T - tb < BOX_BLOCK ? T : tb + BOX_BLOCK;
-        if (A->istep > 64 && te < n) /* rows far apart: no prefetcher follows that stride */
-            for (int t = te; t < te + BOX_BLOCK && t < n; t++)
-                for (int v = 0; v < A->groups; v += 4)
-                    __builtin_prefetch(A->in[v] + (size_t)t * A->istep);
+        if (STAGED) {
+            const size_t bytes = (size_t)A->L * sizeof(float);
+            for (int t = tb; t < te && t < n; t++) {
+                const float *row = A->in[0] + (size_t)t * A->istep;
+                if (t + BOX_BLOCK < n) /* rows a page apart: no prefetcher follows that */
+                    for (size_t c = 0; c < bytes; c += 64)
+                        __builtin_prefetch((const char *)row + (size_t)BOX_BLOCK * A->istep * sizeof(float) + c);
+                copy_row(A->xin + (size_t)(t - tb) * XL, row, A->L);
+            }
+            /* and the rows the next block writes, for writing */
+            for (int t = te > s0 ? te : s0; t < te + BOX_BLOCK && t < T; t++)
+                for (size_t c = 0; c < bytes; c += 64)
+                    __builtin_prefetch((const char *)(A->out[0] + (ptrdiff_t)(t - s0) * A->ostep) + c, 1);
+            B.ib = tb;
+            B.ob = tb;
+        }
         for (int v = 0; v < A->groups; v++) {
             int t = tb, sl = slot, r = rc;
             while (t < te) {
@@ -811,34 +862,36 @@ static inline __attribute__((always_inline)) void box_sweep(const blur_plan *p, 
                     tend = s0;
                 if (t < n) {
                     if (t >= s0)
-                        box_seg(p, P, NV, 1, 1, A, v, t, tend, sl, r);
+                        box_seg(p, P, NV, 1, 1, &B, v, t, tend, sl, r);
                     else
-                        box_seg(p, P, NV, 1, 0, A, v, t, tend, sl, r);
+                        box_seg(p, P, NV, 1, 0, &B, v, t, tend, sl, r);
                 } else {
                     if (t >= s0)
-                        box_seg(p, P, NV, 0, 1, A, v, t, tend, sl, r);
+                        box_seg(p, P, NV, 0, 1, &B, v, t, tend, sl, r);
                     else
-                        box_seg(p, P, NV, 0, 0, A, v, t, tend, sl, r);
+                        box_seg(p, P, NV, 0, 0, &B, v, t, tend, sl, r);
                 }
                 sl = (int)(((long long)sl + (tend - t)) % M);
                 r = (int)(((long long)r + (tend - t)) % p->resum);
                 t = tend;
             }
         }
+        if (STAGED)
+            for (int t = tb > s0 ? tb : s0; t < te; t++)
+                copy_row(A->out[0] + (ptrdiff_t)(t - s0) * A->ostep, A->xout + (size_t)(t - tb) * XL, A->L);
         slot = (int)(((long long)slot + (te - tb)) % M);
         rc = (int)(((long long)rc + (te - tb)) % p->resum);
     }
 }
 
-#define BOX_V_NV (V_LANES / 4)
 #define BOX_SWEEP(P)                                                                            \
     FX_CLONES static void box_sweep##P##v(const blur_plan *p, const box_args *A)               \
     {                                                                                           \
-        box_sweep(p, P, BOX_V_NV, A);                                                           \
+        box_sweep(p, P, BOX_V_NV, 1, A);                                                           \
     }                                                                                           \
     FX_CLONES static void box_sweep##P##h(const blur_plan *p, const box_args *A)               \
     {                                                                                           \
-        box_sweep(p, P, H_ROWS, A);                                                             \
+        box_sweep(p, P, H_ROWS, 0, A);                                                             \
     }
 BOX_SWEEP(2)
 BOX_SWEEP(3)
@@ -846,13 +899,14 @@ BOX_SWEEP(4)
 BOX_SWEEP(5)
 BOX_SWEEP(6)
 
-static void box_run(const blur_plan *p, box_args *A, v4d *scratch)
+static void box_run(const blur_plan *p, box_args *A, int h, v4d *scratch)
 {
     const size_t ring = (size_t)p->passes * (size_t)p->ring * (size_t)A->NV;
     A->ring = scratch;
     A->S = scratch + ring;
     A->last = A->S + (size_t)p->passes * A->NV;
-    int h = A->NV == H_ROWS;
+    A->xin = (float *)(A->last + A->NV);          /* BOX_BLOCK x 4 NV floats */
+    A->xout = A->xin + (size_t)BOX_BLOCK * 4 * A->NV; /* the same */
     switch (p->passes) {
     case 2: h ? box_sweep2h(p, A) : box_sweep2v(p, A); break;
     case 3: h ? box_sweep3h(p, A) : box_sweep3v(p, A); break;
@@ -878,7 +932,8 @@ static void box_vertical(const blur_plan *p, const float *in, size_t stride, int
     A.istep = stride;
     A.ostep = (ptrdiff_t)ostride;
     A.n = n, A.o0 = o0, A.o1 = o1;
-    box_run(p, &A, scratch);
+    A.L = L;
+    box_run(p, &A, 0, scratch);
 }
 
 /* Box, horizontal, RGBA: H_ROWS rows at once (as deriche_rows4: in[r] row r at column sx0,
@@ -898,13 +953,15 @@ static void box_rows4(const blur_plan *p, const float *const *in, float *const *
     A.istep = 4;
     A.ostep = 4;
     A.n = n, A.o0 = o0, A.o1 = o1;
-    box_run(p, &A, scratch);
+    A.L = 4 * A.groups;
+    box_run(p, &A, 1, scratch);
 }
 
 /* v4d of scratch box_vertical (NV = BOX_V_NV) / box_rows4 (NV = H_ROWS) need. */
 static size_t box_scratch_v4d(const blur_plan *p, int NV)
 {
-    return ((size_t)p->passes * ((size_t)p->ring + 1) + 1) * (size_t)NV;
+    /* rings, S, last, xin + xout (2 x BOX_BLOCK x 4 NV floats = BOX_BLOCK x NV v4d) */
+    return ((size_t)p->passes * ((size_t)p->ring + 1) + 1 + BOX_BLOCK) * (size_t)NV;
 }
 
 /* Vertical pass: strips of columns [c, c + L) (in floats) of rows sy0..sy1-1 -> vbuf rows
@@ -1075,7 +1132,7 @@ fx_result fx_blur_image(fx_context *ctx, const float *src, float *dst, int width
     j->sy1 = (int)((long long)r.y1 + H > height ? height : (long long)r.y1 + H);
     j->fast_v = FX_BLUR_FAST && (plan.alg == FX_BLUR_RECURSIVE || plan.alg == FX_BLUR_BOX);
     j->fast_h = j->fast_v && channels == 4;
-    j->strip_lanes = j->fast_v ? V_LANES_REC : V_LANES;
+    j->strip_lanes = j->fast_v && plan.alg == FX_BLUR_RECURSIVE ? V_LANES_REC : V_LANES;
     j->block_rows = j->fast_h ? H_ROWS : (H_LANES / channels < 1 ? 1 : H_LANES / channels);
 
     /* Scratch per worker, sized for both passes. */
