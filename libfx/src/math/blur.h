@@ -16,13 +16,14 @@
  *  - FX_BLUR_BOX: `passes` extended box filters (Gwosdek et al. 2011: integer box plus
  *    fractional end taps, so the variance matches sigma^2 exactly and the result is
  *    continuous in sigma, unlike integer-width box cascades that jump as sigma moves).
- *    Running sums in double. Cost independent of sigma.
+ *    All passes fused in one sweep (cascaded running sums in double, per-pass rings, periodic
+ *    re-sum). Cost independent of sigma.
  *
  * Layout: interleaved float pixels of 1..4 channels, rows top to bottom. The vertical
  * pass runs on strips of columns (the inner loop runs across a strip's lanes, so it
  * vectorises); the horizontal pass gathers blocks of rows into an x-major buffer and
- * runs the very same lane kernel. Recursive has direct row-wise kernels (vertical: any
- * channels; horizontal: 4 channels, 4 rows at once) giving the same bits. No transposes.
+ * runs the very same lane kernel. Recursive and box have direct row-wise kernels (vertical:
+ * any channels; horizontal: 4 channels, 4 rows at once) giving the same bits. No transposes.
  */
 #ifndef LIBFX_MATH_BLUR_H
 #define LIBFX_MATH_BLUR_H
