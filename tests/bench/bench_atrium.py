@@ -292,10 +292,22 @@ def reuse(out, report, md, gif):
     wall = time.perf_counter() - t0
     rendered = [l for l in log if "aux view" in l and "rendered" in l]
     reused = [l for l in log if "aux view" in l and "reused" in l]
-    report["reuse"] = {"frames": 8, "res": res, "aux_rendered": rendered, "aux_reused": len(reused), "wall_s": wall}
+    import re
+    per = {}
+    for l in log:
+        mt = re.match(r"libfx: frame (\d+): (.*) \(([\d.]+) ms in all\)", l)
+        if mt:
+            per[int(mt.group(1))] = {k: float(v) for k, v in re.findall(r"(\w+) ([\d.]+) ms", mt.group(2))}
+    report["reuse"] = {"frames": 8, "res": res, "aux_rendered": rendered, "aux_reused": len(reused), "wall_s": wall,
+                       "effect_ms_per_frame": per}
     md.append("### Aux views over a batch of 8 frames (%s)\n" % res)
     md.append(md_table(["aux views rendered", "reused", "batch wall (s)"],
                        [(len(rendered), len(reused), "%.0f" % wall)]))
+    if per:
+        names = list(per[min(per)].keys())
+        md.append("\nThe stack per frame in that batch (ms; frame 1 reads and builds the views' maps, frames "
+                  "2..8 take them from the context's cache):\n")
+        md.append(md_table(["frame"] + names, [(f, *("%.1f" % per[f].get(n, 0) for n in names)) for f in sorted(per)]))
     md.append("\n" + "\n".join("    " + l for l in rendered) + "\n")
     if gif:
         pngs = []
@@ -306,7 +318,9 @@ def reuse(out, report, md, gif):
                            check=True)
             pngs.append(str(p))
         g = ROOT / "docs" / "images" / "atrium_rain.gif"
-        subprocess.run(["convert", "-delay", "12", "-loop", "0", *pngs, str(g)], check=True)
+        from PIL import Image   # python3-pil (scripts/setup.sh)
+        ims = [Image.open(p).convert("RGB") for p in pngs]
+        ims[0].save(g, save_all=True, append_images=ims[1:], duration=120, loop=0)
 
 
 def main():
