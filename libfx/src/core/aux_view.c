@@ -1,6 +1,7 @@
 /* Auxiliary views (core/aux_view.h): the sidecar's "aux_views", fx_frame_set_aux_view,
  * fx_stack_required_aux_views and loading a view's depth for an effect. */
 #include "core/aux_view.h"
+#include "core/mem_failures.h"
 
 #include <cjson/cJSON.h>
 #include <sys/stat.h>
@@ -253,7 +254,12 @@ static char *entry_text(const fx_frame *f, const char *name, const char *where, 
 {
     fx_context *ctx = f->ctx;
     const char *text = fx_frame_meta(f, FX_AUX_META_KEY);
+    unsigned long failures = fx_mem_failure_count();
     cJSON *list = text ? cJSON_Parse(text) : NULL;
+    if (text && !list && fx_mem_failure_count() != failures) {
+        *res = fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory reading the frame's aux views", where);
+        return NULL;
+    }
     const cJSON *found = NULL, *v;
     size_t nlen = strlen(name);
     int prefix_only = nlen > 0 && name[nlen - 1] == ':';
@@ -268,6 +274,10 @@ static char *entry_text(const fx_frame *f, const char *name, const char *where, 
     if (out)
         snprintf(path, path_size, "%s", p->valuestring);
     cJSON_Delete(list);
+    if (!out && cJSON_IsString(p)) {
+        *res = fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory reading the frame's aux views", where);
+        return NULL;
+    }
     if (!out) {
         /* fx_aux_view_load words the error (missing view, malformed list) */
         fx_aux_view *av = NULL;
@@ -284,7 +294,10 @@ fx_result fx_aux_view_load(const fx_frame *f, const char *name, const char *wher
     *out = NULL;
     fx_context *ctx = f->ctx;
     const char *text = fx_frame_meta(f, FX_AUX_META_KEY);
+    unsigned long failures = fx_mem_failure_count();
     cJSON *list = text ? cJSON_Parse(text) : NULL;
+    if (text && !list && fx_mem_failure_count() != failures)
+        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory reading the frame's aux views", where);
     const cJSON *found = NULL, *v;
     size_t nlen = strlen(name);
     int prefix_only = nlen > 0 && name[nlen - 1] == ':';

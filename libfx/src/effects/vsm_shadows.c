@@ -130,8 +130,8 @@ static float visibility_at(const vsm_job *j, int x, int y, int *has_surface)
     float px, py, ld;
     if (!fx_aux_view_project(j->av, w, &px, &py, &ld))
         return 1.0f;
-    if (px < 0.0f || py < 0.0f || px > (float)j->sm->width || py > (float)j->sm->height)
-        return 1.0f; /* outside the light view: not shadowed by anything it saw */
+    if (!(px >= 0.0f && py >= 0.0f && px <= (float)j->sm->width && py <= (float)j->sm->height))
+        return 1.0f; /* outside the light view (or NaN): not shadowed by anything it saw */
     float t = fx_shadow_map_norm(j->sm, ld);
     switch (j->p->method) {
     case METHOD_HARD:

@@ -15,6 +15,7 @@
 #include "math/rain_map.h"
 #include "math/surface.h"
 
+#include <float.h>
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
@@ -92,6 +93,8 @@ static void wet_rows(void *user, int y0, int y1)
                     /* off the surface a little, so the surface itself does not cover it */
                     fx_vec3 q = fx_v3_add(w, fx_v3_scale(n, 0.05f));
                     wet = p->wetness * facing * fx_rain_map_soft(&j->rm, q);
+                    if (!(wet > 0.0f))
+                        wet = 0.0f; /* also NaN */
                 }
                 if (wet > 0.0f) {
                     fx_vec3 eye = fx_v3(j->surf.view.camera_to_world[3], j->surf.view.camera_to_world[7],
@@ -107,7 +110,9 @@ static void wet_rows(void *user, int y0, int y1)
                         float add = p->specular * fres * p->sky[c];
                         if (j->gdir && j->gcol)
                             add += p->gloss_boost * j->gdir[3 * i + c] * j->gcol[3 * i + c];
-                        o[c] = s[c] * (1.0f - p->darken * wet) + wet * add;
+                        float r = s[c] * (1.0f - p->darken * wet) + wet * add;
+                        /* hostile 1e38 glossy passes overflow the product: keep it finite */
+                        o[c] = r != r ? s[c] : fx_clampf(r, -FLT_MAX, FLT_MAX);
                     }
                 }
             }

@@ -28,7 +28,8 @@ static inline float fx_rain_map_exposed(const fx_rain_map *rm, fx_vec3 p)
     float px, py, d;
     if (!fx_aux_view_project(rm->av, p, &px, &py, &d))
         return 1.0f;
-    if (px < 0.0f || py < 0.0f || px >= (float)rm->sm.width || py >= (float)rm->sm.height)
+    if (!(px >= 0.0f && py >= 0.0f && px < (float)rm->sm.width && py < (float)rm->sm.height))
+        /* also NaN (a hostile Position/Depth): never index the map with it */
         return 1.0f;
     return fx_shadow_map_hard(&rm->sm, px, py, fx_shadow_map_norm(&rm->sm, d), rm->eps);
 }
@@ -40,7 +41,8 @@ static inline float fx_rain_map_soft(const fx_rain_map *rm, fx_vec3 p)
     float px, py, d;
     if (!fx_aux_view_project(rm->av, p, &px, &py, &d))
         return 1.0f;
-    if (px < 0.0f || py < 0.0f || px >= (float)rm->sm.width || py >= (float)rm->sm.height)
+    if (!(px >= 0.0f && py >= 0.0f && px < (float)rm->sm.width && py < (float)rm->sm.height))
+        /* also NaN (a hostile Position/Depth): never index the map with it */
         return 1.0f;
     float m1, m2;
     fx_shadow_map_moments(&rm->sm, px, py, &m1, &m2);
