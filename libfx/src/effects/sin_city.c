@@ -308,16 +308,28 @@ SC_VEC static void sc_rows(void *user, int begin, int end)
                            : R[i] * (1.0f / 3.0f) + G[i] * (1.0f / 3.0f) + B[i] * (1.0f / 3.0f);
             if (j->quantise) {
                 if (vec) {
-                    float O[SC_LANES], U[SC_LANES];
-                    for (int i = 0; i < SC_LANES; i++) {
-                        U[i] = Y[i] * q->inv_white;
-                        O[i] = 0.0f;
+                    /* GCC vector types: compares that may raise FE_INVALID are not if-converted
+                     * by the auto-vectoriser, and branches on real images mispredict */
+                    typedef float v8f __attribute__((vector_size(32)));
+                    typedef int32_t v8i __attribute__((vector_size(32)));
+                    const float iw = q->inv_white;
+                    v8f y8, t8, big = { 3.4e38f, 3.4e38f, 3.4e38f, 3.4e38f, 3.4e38f, 3.4e38f, 3.4e38f, 3.4e38f };
+                    memcpy(&y8, Y, sizeof y8);
+                    const v8f u = y8 * (v8f){ iw, iw, iw, iw, iw, iw, iw, iw };
+                    v8f o = { 0 };
+                    for (int t = 0; t < nt; t++) {
+                        const float vt = V[t + 1];
+                        const v8f v8 = { vt, vt, vt, vt, vt, vt, vt, vt };
+                        memcpy(&t8, T[t], sizeof t8);
+                        const v8i m = u >= t8;
+                        o = (v8f)(((v8i)v8 & m) | ((v8i)o & ~m));
                     }
-                    for (int t = 0; t < nt; t++)
-                        for (int i = 0; i < SC_LANES; i++)
-                            O[i] = U[i] >= T[t][i] ? V[t + 1] : O[i];
-                    for (int i = 0; i < SC_LANES; i++) /* HDR kept (keep_hdr is on here) */
-                        Y[i] = U[i] >= 1.0f ? (Y[i] < 3.4e38f ? Y[i] : 3.4e38f) : O[i];
+                    /* HDR kept (keep_hdr is on here), clamped to 3.4e38 */
+                    const v8i hb = y8 < big;
+                    const v8f yc = (v8f)(((v8i)y8 & hb) | ((v8i)big & ~hb));
+                    const v8i hm = u >= (v8f){ 1, 1, 1, 1, 1, 1, 1, 1 };
+                    o = (v8f)(((v8i)yc & hm) | ((v8i)o & ~hm));
+                    memcpy(Y, &o, sizeof o);
                 } else {
                     for (int i = 0; i < n; i++)
                         Y[i] = fx_levels_apply(q, Y[i], x + i, y);
