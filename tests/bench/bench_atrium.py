@@ -4,7 +4,7 @@ One command renders what is missing, measures, and writes OUT/tables.md, OUT/rep
 and the plots OUT/*.png:
 
     LIBFX_LIBRARY=build/libfx/libfx.so /usr/bin/python3 tests/bench/bench_atrium.py OUT_DIR \
-        [--res 480x270] [--spp 32] [--runs 5] [--only vsm,sun,hd,reuse] [--gif]
+        [--res 480x270] [--spp 32] [--runs 5] [--only vsm,sun,hd,reuse,sweep] [--gif]
 
 Renders are kept in OUT_DIR and reused by a re-run (delete them to re-render).
 
@@ -23,6 +23,8 @@ Renders are kept in OUT_DIR and reused by a re-run (delete them to re-render).
    fresh context (every view read and built) and of one context reused (frames 2..N:
    the aux-view cache), medians and same-run ratios; per effect.
 4. reuse: batch frames 1..8 (160x90): aux-view renders and reuses from the add-on's log.
+5. sweep: tests/bench/bench_atrium.sh on the build holding LIBFX_LIBRARY (1920x1080, light
+   maps 512..4096, uncached vs cached, SAT vs Gaussian).
 --gif also remakes the flip-book docs/images/atrium_rain.gif (frames 1..8, 320x180).
 """
 import argparse
@@ -323,13 +325,29 @@ def reuse(out, report, md, gif):
         ims[0].save(g, save_all=True, append_images=ims[1:], duration=120, loop=0)
 
 
+# ---------------------------------------------------------------- 5. the 1080p light-map sweep
+
+def sweep(out, runs, report, md):
+    """tests/bench/bench_atrium.sh against the build that holds LIBFX_LIBRARY: vsm_shadows at
+    1920x1080 per light-map size, uncached vs cached, and SAT vs Gaussian (2 threads)."""
+    build = pathlib.Path(LIB).resolve().parent.parent
+    p = subprocess.run(["sh", str(ROOT / "tests" / "bench" / "bench_atrium.sh"), str(build), "2", str(runs)],
+                       capture_output=True, text=True)
+    if p.returncode:
+        sys.exit(p.stdout[-2000:] + p.stderr[-2000:])
+    (out / "vsm_bench.csv").write_text(p.stdout)
+    report["sweep_csv"] = p.stdout
+    md.append("### vsm_shadows at 1920x1080 per light-map size (bench_atrium.sh, 2 threads; OUT/vsm_bench.csv)\n")
+    md.append("```\n" + p.stdout.strip() + "\n```")
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("out", nargs="?", default="/tmp/bench_atrium")
     ap.add_argument("--res", default="480x270")
     ap.add_argument("--spp", type=int, default=32)
     ap.add_argument("--runs", type=int, default=5)
-    ap.add_argument("--only", default="vsm,sun,hd,reuse")
+    ap.add_argument("--only", default="vsm,sun,hd,reuse,sweep")
     ap.add_argument("--gif", action="store_true")
     a = ap.parse_args()
     out = pathlib.Path(a.out)
@@ -346,6 +364,8 @@ def main():
         hd(out, a.runs, report, md)
     if "reuse" in only:
         reuse(out, report, md, a.gif)
+    if "sweep" in only:
+        sweep(out, a.runs, report, md)
     (out / "report.json").write_text(json.dumps(report, indent=1))
     (out / "tables.md").write_text("\n\n".join(md) + "\n")
     print("\n\n".join(md))
