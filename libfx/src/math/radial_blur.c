@@ -207,7 +207,20 @@ typedef struct polar_job {
      * kap[rho] = the continuous level of the rate at rho bins (rho >= 1). */
     int k_min, n_levels, pw_len, max_rho;
     double *em1, *e1, *pw, *pq, *kap;
+    /* per radius rho (bins) the output stage's constants, which depend on rho only (the
+     * path starts at bin ceil((1 - d) rho) of the line whatever its b0): rc[rho] */
+    struct rho_coef *rc;
 } polar_job;
+
+/* The four levels' trapezoid weights and Catmull-Rom weights of a radius. */
+typedef struct rho_coef {
+    int start;    /* absolute start bin of the path: ceil((1 - density) rho) */
+    int ident;    /* a path of one bin (or a degenerate kernel): the value is occ itself */
+    double f;     /* fractional bin before the start */
+    int g[4];     /* global level of q (clamped to the tables) */
+    double cr[4]; /* Catmull-Rom weights in log(rate) */
+    double inv[4], en[4], e1n[4], ef[4];
+} rho_coef;
 
 /* [r_in, r_out] of the ray L + r (c, s), r >= 0, inside the slab [-0.5, w + 0.5] x [-0.5, h + 0.5]. */
 static int clip_ray(double lx, double ly, double c, double s, int w, int h, double *r_in, double *r_out)
@@ -350,66 +363,39 @@ static void polar_lines(void *user, int begin, int end, int worker)
                 Fk[3 * m + 2] = r2;
             }
         }
+        static const double zero3[3] = {0.0, 0.0, 0.0};
         for (int m = 0; m < cnt; m++) {
             int rho = ln->b0 + m;
             const double *om = o + 3 * m;
-            if (rho < 1) { /* at the light: a path of length 0 */
-                for (int ch = 0; ch < 3; ch++)
-                    out[3 * m + ch] = to_float(k_out * om[ch]);
-                continue;
-            }
-            double kappa = j->kap[rho];
-            int kb = (int)floor(kappa);
-            double t = kappa - kb;
-            double b_lo = m - d * rho, m0f = ceil(b_lo);
-            int m0 = (int)m0f;
-            double f = m0f - b_lo;
-            int n = m - m0 + 1;
-            if (n <= 1 && f < 1e-9) {
+            const rho_coef *rc = rho >= 1 ? &j->rc[rho] : NULL;
+            if (!rc || rc->ident) { /* at the light, or a path of one bin */
                 for (int ch = 0; ch < 3; ch++)
                     out[3 * m + ch] = to_float(k_out * om[ch]);
                 continue;
             }
             /* the level-independent parts of the trapezoid (path_mean, expanded):
              * num = F[m] - en F[m0-1] - o[m]/2 + e1n A + ef B, with the path's start bins */
+            const int m0 = rc->start - ln->b0;
+            const double f = rc->f;
+            const double *o0 = m0 >= 0 ? o + 3 * m0 : zero3, *o1 = m0 >= 1 ? o + 3 * (m0 - 1) : zero3;
             double A[3], B[3], C[3];
             for (int ch = 0; ch < 3; ch++) {
-                double om0 = oat(o, m0, ch);
-                double olo = f * oat(o, m0 - 1, ch) + (1.0 - f) * om0;
-                A[ch] = 0.5 * (f - 1.0) * om0;
+                double olo = f * o1[ch] + (1.0 - f) * o0[ch];
+                A[ch] = 0.5 * (f - 1.0) * o0[ch];
                 B[ch] = 0.5 * f * olo;
                 C[ch] = -0.5 * om[ch];
             }
             double v[4][3];
             for (int q = 0; q < 4; q++) {
-                int kk = kb - 1 + q - j->k_min - g_lo;
+                int kk = rc->g[q] - g_lo;
                 kk = kk < 0 ? 0 : kk >= K ? K - 1 : kk;
-                int g = g_lo + kk;
                 const double *Fk = F + (size_t)kk * fstride;
-                const double *pw = j->pw + (size_t)g * j->pw_len;
-                double em1 = j->em1[g];
-                double e1n = pw[n - 1], en = pw[n];
-                double ef = e1n * (1.0 + f * em1);
-                double t1 = em1 == 0.0 ? (double)n : -j->pq[(size_t)g * j->pw_len + n] / em1;
-                double den = t1 - 0.5 - 0.5 * e1n + 0.5 * f * (e1n + ef);
-                if (!(den > 1e-300)) {
-                    for (int ch = 0; ch < 3; ch++)
-                        v[q][ch] = om[ch];
-                    continue;
-                }
-                double inv = 1.0 / den;
-                const double *Fm = Fk + 3 * m;
-                if (m0 >= 1) {
-                    const double *Fl = Fk + 3 * (m0 - 1);
-                    for (int ch = 0; ch < 3; ch++)
-                        v[q][ch] = (Fm[ch] - en * Fl[ch] + C[ch] + e1n * A[ch] + ef * B[ch]) * inv;
-                } else {
-                    for (int ch = 0; ch < 3; ch++)
-                        v[q][ch] = (Fm[ch] + C[ch] + e1n * A[ch] + ef * B[ch]) * inv;
-                }
+                const double *Fm = Fk + 3 * m, *Fl = m0 >= 1 ? Fk + 3 * (m0 - 1) : zero3;
+                const double en = rc->en[q], e1n = rc->e1n[q], ef = rc->ef[q], inv = rc->inv[q];
+                for (int ch = 0; ch < 3; ch++)
+                    v[q][ch] = (Fm[ch] - en * Fl[ch] + C[ch] + e1n * A[ch] + ef * B[ch]) * inv;
             }
-            double w0 = 0.5 * t * (-1.0 + t * (2.0 - t)), w1 = 1.0 + t * t * (-2.5 + 1.5 * t);
-            double w2 = 0.5 * t * (1.0 + t * (4.0 - 3.0 * t)), w3 = 0.5 * t * t * (t - 1.0);
+            const double w0 = rc->cr[0], w1 = rc->cr[1], w2 = rc->cr[2], w3 = rc->cr[3];
             for (int ch = 0; ch < 3; ch++) {
                 /* Catmull-Rom in log(rate), clamped to the two middle values */
                 double p1 = v[1][ch], p2 = v[2][ch];
@@ -440,40 +426,42 @@ static inline double atan2_fast(double y, double x)
     return y < 0.0 ? -r : r;
 }
 
-/* line a's value at rho bins (linear along the line, clamped to its ends); 0 off the lines */
-static inline void line_value3(const polar_job *j, int a, double rho, double v[3])
+/* A line as the back projection reads it: its bins (3 floats each) from radius b0 on,
+ * `last` + 1 >= 1 intervals; lines that miss the image read a zero line. */
+typedef struct back_line {
+    const float *bins;
+    double b0, last; /* double: a far light has b0 ~ 1e6 bins */
+} back_line;
+
+typedef struct back_job {
+    const polar_job *pj;
+    const back_line *bl; /* lines + 1 entries: the last repeats line 0 (full circle) or is zero */
+} back_job;
+
+/* b >= 0 here, so truncation is floor (no libm call, no SSE4.1 needed) */
+static inline const float *line_at(const back_line *l, double rho, float *t)
 {
-    v[0] = v[1] = v[2] = 0.0;
-    if (a < 0 || a >= j->lines)
-        return;
-    const polar_line *ln = &j->line[a];
-    if (ln->count <= 0)
-        return;
-    double b = rho - ln->b0;
-    const float *q;
-    if (b <= 0.0) {
-        q = j->res + ln->offset * 3;
-        v[0] = q[0], v[1] = q[1], v[2] = q[2];
-    } else if (b >= ln->count - 1) {
-        q = j->res + (ln->offset + ln->count - 1) * 3;
-        v[0] = q[0], v[1] = q[1], v[2] = q[2];
-    } else {
-        int i = (int)b;
-        double t = b - i;
-        q = j->res + (ln->offset + i) * 3;
-        for (int ch = 0; ch < 3; ch++)
-            v[ch] = q[ch] + t * ((double)q[3 + ch] - q[ch]);
-    }
+    double b = rho - l->b0;
+    b = b > 0.0 ? b : 0.0;
+    b = b < l->last + 1.0 ? b : l->last + 1.0;
+    int i = (int)b;
+    i = i < (int)l->last ? i : (int)l->last;
+    *t = (float)(b - i);
+    return l->bins + 3 * i;
 }
 
 static void polar_back(void *user, int begin, int end)
 {
-    const polar_job *j = user;
+    const back_job *bj = user;
+    const polar_job *j = bj->pj;
+    const back_line *bl = bj->bl;
     const double inv_hr = 1.0 / j->hr, inv_dphi = 1.0 / j->dphi;
+    const double amax = j->lines - 1;
     for (int yy = begin; yy < end; yy++) {
         int y = j->roi.y0 + yy;
         double vy = y + 0.5 - j->ly;
-        for (int x = j->roi.x0; x < j->roi.x1; x++) {
+        float *o = j->rays + ((size_t)y * j->w + j->roi.x0) * 3;
+        for (int x = j->roi.x0; x < j->roi.x1; x++, o += 3) {
             double vx = x + 0.5 - j->lx;
             double rho = sqrt(vx * vx + vy * vy) * inv_hr;
             double th = atan2_fast(vy, vx) - j->theta_c;
@@ -482,19 +470,20 @@ static void polar_back(void *user, int begin, int end)
                 else if (th <= -M_PI) th += 2 * M_PI;
             }
             double af = (th - j->phi0) * inv_dphi;
-            double a0f = floor(af);
-            double t = af - a0f;
-            int a0 = (int)a0f, a1 = a0 + 1;
-            if (j->full_circle) {
-                a0 = ((a0 % j->lines) + j->lines) % j->lines;
-                a1 = a0 + 1 == j->lines ? 0 : a0 + 1;
+            af = af > 0.0 ? af : 0.0;
+            af = af < amax + 1.0 ? af : amax + 1.0;
+            int a0 = (int)af;
+            a0 = a0 < (int)amax ? a0 : (int)amax;
+            float t = (float)(af - a0);
+            float t0, t1;
+            const float *q0 = line_at(&bl[a0], rho, &t0), *q1 = line_at(&bl[a0 + 1], rho, &t1);
+            for (int ch = 0; ch < 3; ch++) {
+                /* convex combinations of finite floats: finite after the clamp */
+                float v0 = (1.0f - t0) * q0[ch] + t0 * q0[3 + ch];
+                float v1 = (1.0f - t1) * q1[ch] + t1 * q1[3 + ch];
+                float v = (1.0f - t) * v0 + t * v1;
+                o[ch] = fminf(fmaxf(v, -FLT_MAX), FLT_MAX);
             }
-            double v0[3], v1[3];
-            line_value3(j, a0, rho, v0);
-            line_value3(j, a1, rho, v1);
-            float *o = j->rays + ((size_t)y * j->w + x) * 3;
-            for (int ch = 0; ch < 3; ch++)
-                o[ch] = to_float(v0[ch] + t * (v1[ch] - v0[ch]));
         }
     }
 }
@@ -597,7 +586,7 @@ static fx_result polar_full(fx_context *ctx, const float *occ, float *rays, int 
     }
     int workers = fx_parallel_workers(ctx);
     uint64_t table_doubles = (uint64_t)j.n_levels * (2 + 2 * (uint64_t)j.pw_len) + (uint64_t)max_rho + 1;
-    uint64_t bytes = (uint64_t)total * 3 * sizeof(float) +
+    uint64_t bytes = (uint64_t)total * 3 * sizeof(float) + ((uint64_t)max_rho + 1) * sizeof(rho_coef) +
                      (uint64_t)workers * j.scratch_per_worker * sizeof(double) + table_doubles * sizeof(double);
     fx_result r = fx_check_budget(ctx, bytes, where);
     if (r != FX_OK) {
@@ -607,7 +596,9 @@ static fx_result polar_full(fx_context *ctx, const float *occ, float *rays, int 
     j.res = fx_mem_alloc((total ? total : 1) * 3 * sizeof(float));
     j.scratch = fx_mem_alloc((size_t)workers * j.scratch_per_worker * sizeof(double));
     double *tables = fx_mem_alloc((size_t)table_doubles * sizeof(double));
-    if (!j.res || !j.scratch || !tables) {
+    j.rc = fx_mem_calloc((size_t)max_rho + 1, sizeof *j.rc);
+    if (!j.res || !j.scratch || !tables || !j.rc) {
+        fx_mem_free(j.rc);
         fx_mem_free(j.res);
         fx_mem_free(j.scratch);
         fx_mem_free(tables);
@@ -633,6 +624,47 @@ static fx_result polar_full(fx_context *ctx, const float *occ, float *rays, int 
     j.kap[0] = 0.0;
     for (int rho = 1; rho <= max_rho; rho++)
         j.kap[rho] = use_levels ? level_of(&j, (double)rho) : 0.0;
+    if (use_levels) {
+        for (int rho = 1; rho <= max_rho; rho++) {
+            rho_coef *rc = &j.rc[rho];
+            double b_lo = (1.0 - rb->density) * rho, sf = ceil(b_lo);
+            double f = sf - b_lo;
+            int n = rho - (int)sf + 1;
+            rc->start = (int)sf;
+            rc->f = f;
+            rc->ident = n <= 1 && f < 1e-9;
+            double kappa = j.kap[rho];
+            int kb = (int)floor(kappa);
+            double t = kappa - kb;
+            rc->cr[0] = 0.5 * t * (-1.0 + t * (2.0 - t));
+            rc->cr[1] = 1.0 + t * t * (-2.5 + 1.5 * t);
+            rc->cr[2] = 0.5 * t * (1.0 + t * (4.0 - 3.0 * t));
+            rc->cr[3] = 0.5 * t * t * (t - 1.0);
+            for (int q = 0; q < 4 && !rc->ident; q++) {
+                int g = kb - 1 + q - j.k_min;
+                g = g < 0 ? 0 : g > j.n_levels - 1 ? j.n_levels - 1 : g;
+                rc->g[q] = g;
+                if (n < 1 || n >= j.pw_len) { /* cannot happen (0 < n <= rho + 1): be safe */
+                    rc->ident = 1;
+                    break;
+                }
+                const double *pw = j.pw + (size_t)g * j.pw_len;
+                double em1 = j.em1[g];
+                double e1n = pw[n - 1], en = pw[n];
+                double ef = e1n * (1.0 + f * em1);
+                double t1 = em1 == 0.0 ? (double)n : -j.pq[(size_t)g * j.pw_len + n] / em1;
+                double den = t1 - 0.5 - 0.5 * e1n + 0.5 * f * (e1n + ef);
+                if (!(den > 1e-300)) {
+                    rc->ident = 1;
+                    break;
+                }
+                rc->inv[q] = 1.0 / den;
+                rc->en[q] = en;
+                rc->e1n[q] = e1n;
+                rc->ef[q] = ef;
+            }
+        }
+    }
     if (rb->decay <= 0.0 || rb->density <= 0.0) {
         /* decay 0: the kernel has no mass (the limit of the naive sum). density 0: every
          * sample is the pixel itself. Both are plain per-pixel products. */
@@ -645,12 +677,37 @@ static fx_result polar_full(fx_context *ctx, const float *occ, float *rays, int 
                 }
     } else {
         fx_parallel_for_worker(ctx, j.lines, 16, polar_lines, &j);
+        back_line *bl = fx_mem_alloc(((size_t)j.lines + 1) * sizeof *bl);
+        if (!bl) {
+            fx_mem_free(j.res);
+            fx_mem_free(j.scratch);
+            fx_mem_free(tables);
+            fx_mem_free(j.rc);
+            fx_mem_free(j.line);
+            return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for %d polar lines", where, j.lines);
+        }
+        static const float zero_line[6] = {0};
+        for (int a = 0; a <= j.lines; a++) {
+            const polar_line *ln = a < j.lines ? &j.line[a] : j.full_circle ? &j.line[0] : NULL;
+            if (ln && ln->count >= 2) {
+                bl[a].bins = j.res + ln->offset * 3;
+                bl[a].b0 = ln->b0;
+                bl[a].last = ln->count - 2;
+            } else {
+                bl[a].bins = zero_line;
+                bl[a].b0 = 0.0;
+                bl[a].last = 0.0;
+            }
+        }
+        back_job bj = {&j, bl};
         int rows = j.roi.y1 - j.roi.y0;
-        fx_parallel_for(ctx, rows, fx_grain_for(ctx, rows), polar_back, &j);
+        fx_parallel_for(ctx, rows, fx_grain_for(ctx, rows), polar_back, &bj);
+        fx_mem_free(bl);
     }
     fx_mem_free(j.res);
     fx_mem_free(j.scratch);
     fx_mem_free(tables);
+    fx_mem_free(j.rc);
     fx_mem_free(j.line);
     return FX_OK;
 }
