@@ -86,7 +86,13 @@ typedef struct splash_job {
 static float splash_at(const splash_job *j, fx_vec3 w)
 {
     const splash_params *p = j->p;
-    int ci = (int)floorf(w.x / p->spacing), cj = (int)floorf(w.y / p->spacing);
+    /* Cells are int: a point further than ~1e8 cells away (hostile positions such as
+     * 1e38) has no splash, rather than an overflowing cell index. */
+    float cx = floorf(w.x / p->spacing), cy = floorf(w.y / p->spacing);
+    double cyc_all = j->t / p->lifetime + 1.0;
+    if (!(fabsf(cx) < 1e8f) || !(fabsf(cy) < 1e8f) || !(fabs(cyc_all) < 1e9))
+        return 0.0f;
+    int ci = (int)cx, cj = (int)cy;
     float best = 0.0f;
     float ring_w = 0.2f * p->size;
     for (int dj = -1; dj <= 1; dj++)
