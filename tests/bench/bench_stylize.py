@@ -16,8 +16,9 @@
    and Streaks (bloom), RGB to BW + constant Color Ramp (posterize), and a cel chain
    (DiffDir -> RGB to BW -> constant ramp x DiffCol + DiffInd..., Sobel of Depth outlines).
 3. --peers also matches the bloom's radius to Fog Glow's: a single bright pixel through
-   Fog Glow (size --fog-size) and through bloom at several radii; the radius holding 90% of the
-   glow's added energy (r90) of each is printed, and the bloom whose r90 is closest is timed.
+   Fog Glow (size --fog-size, mix 1: the glare alone) and through bloom (intensity 1, add: the
+   glow is output - input) at several radii; the radius holding 90% of each glow's energy (r90)
+   is printed, and the bloom whose r90 is closest is timed beside Fog Glow.
 
 Writes out/bench/stylize.md (the tables) and prints them."""
 import argparse, ctypes, json, os, statistics, subprocess, sys, tempfile, time
@@ -204,7 +205,7 @@ def build(mode):
         L(out("Combined"), f.inputs[1]); L(f.outputs[0], comp.inputs[0])
     elif mode in ("fog_glow", "streaks"):
         g = tree.nodes.new("CompositorNodeGlare"); g.glare_type = mode.upper(); g.quality = "HIGH"
-        g.size = args["fog_size"]; g.threshold = 1.0; g.mix = 0.0
+        g.size = args["fog_size"]; g.threshold = 1.0; g.mix = args.get("mix", 0.0)
         L(out("Combined"), g.inputs[0]); L(g.outputs[0], comp.inputs[0])
     elif mode == "bw_ramp":
         bw = tree.nodes.new("CompositorNodeRGBToBW")
@@ -333,11 +334,11 @@ def main():
         spot_path = os.path.join(a.out, "spot.exr"); fog_path = os.path.join(a.out, "spot_fog_glow.exr")
         write_exr(spot_path, spot)
         blender({"src": spot_path, "w": w, "h": h, "threads": 2, "modes": [], "runs": 1, "fog_size": a.fog_size,
-                 "write": fog_path, "write_mode": "fog_glow"})
-        fog = read_rgb(fog_path) - spot[..., :3]
+                 "write": fog_path, "write_mode": "fog_glow", "mix": 1.0})
+        fog = read_rgb(fog_path)  # mix 1: the glare alone
         fog_r90 = r90(fog, cx, cy)
         best, match = None, ["", "| glow | r90 (px) |", "|---|---:|", "| Fog Glow size %d | %.1f |" % (a.fog_size, fog_r90)]
-        for rad in (32, 64, 128, 256, 512):
+        for rad in (4, 8, 16, 32, 64, 128, 256):
             g = bloom_on(spot, {"radius": rad, "threshold": 1.0, "intensity": 1.0})[..., :3] - spot[..., :3]
             rr = r90(g, cx, cy)
             match.append("| bloom radius %d | %.1f |" % (rad, rr))
