@@ -350,6 +350,18 @@ static void test_sidecar_threads_errors(fx_context *ctx)
     CHECK(req && strcmp(req, "{\"aux_views\":[]}") == 0);
     fx_free(req);
     fx_stack_free(s);
+    /* A named light, and the rain map asked for once by three rain effects. */
+    s = NULL;
+    fx_stack_new(ctx, &s);
+    CHECK_OK(ctx, fx_stack_load_json(s, "{\"version\": 1, \"effects\": ["
+                                        "{\"effect\": \"vsm_shadows\", \"params\": {\"light\": \"Key\"}},"
+                                        "{\"effect\": \"rain\"}, {\"effect\": \"wet_surfaces\"},"
+                                        "{\"effect\": \"rain_splashes\"}]}"));
+    CHECK_OK(ctx, fx_stack_required_aux_views(s, &req));
+    CHECK(req && strcmp(req, "{\"aux_views\":[{\"name\":\"light:Key\",\"kind\":\"light\",\"light\":\"Key\"},"
+                             "{\"name\":\"rain_map\",\"kind\":\"rain_map\"}]}") == 0);
+    fx_free(req);
+    fx_stack_free(s);
     fx_frame_free(none);
     /* NaN depth in the frame: finite output */
     float *d = NULL;

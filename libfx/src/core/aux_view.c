@@ -1,6 +1,7 @@
 /* Auxiliary views (core/aux_view.h): the sidecar's "aux_views", fx_frame_set_aux_view,
  * fx_stack_required_aux_views and loading a view's depth for an effect. */
 #include "core/aux_view.h"
+#include "core/effect.h"
 #include "core/mem_failures.h"
 
 #include <cjson/cJSON.h>
@@ -173,68 +174,17 @@ fx_result fx_frame_set_aux_view(fx_frame *f, const char *name, const char *exr_p
     return r;
 }
 
-/* ---- what a stack needs ---- */
+/* ---- what effects need ---- */
 
-/* The effects that read aux views, and which. Kept here (one small table) rather than in
- * the effect class, so the class contract stays as it is. */
-static void effect_views(const char *effect, const cJSON *params, cJSON *out)
+int fx_aux_needs_rain_map(const void *params, fx_aux_need *out, int max)
 {
-    char name[FX_NAME_MAX];
-    const char *kind = NULL, *light = NULL;
-    if (strcmp(effect, "vsm_shadows") == 0) {
-        const cJSON *l = cJSON_GetObjectItemCaseSensitive(params, "light");
-        light = cJSON_IsString(l) ? l->valuestring : "";
-        snprintf(name, sizeof name, "light:%s", light);
-        kind = "light";
-    } else if (strcmp(effect, "rain") == 0 || strcmp(effect, "wet_surfaces") == 0 ||
-               strcmp(effect, "rain_splashes") == 0) {
-        snprintf(name, sizeof name, "%s", FX_AUX_RAIN_MAP);
-        kind = "rain_map";
-    } else {
-        return;
-    }
-    const cJSON *e;
-    cJSON_ArrayForEach(e, out) {
-        const cJSON *n = cJSON_GetObjectItemCaseSensitive(e, "name");
-        if (cJSON_IsString(n) && strcmp(n->valuestring, name) == 0)
-            return;
-    }
-    cJSON *o = cJSON_CreateObject();
-    cJSON_AddStringToObject(o, "name", name);
-    cJSON_AddStringToObject(o, "kind", kind);
-    if (light)
-        cJSON_AddStringToObject(o, "light", light);
-    cJSON_AddItemToArray(out, o);
-}
-
-fx_result fx_stack_required_aux_views(const fx_stack *s, char **out_json)
-{
-    if (!s || !out_json)
-        return fx_fail(NULL, FX_ERR_INVALID_ARGUMENT, "fx_stack_required_aux_views: NULL argument");
-    *out_json = NULL;
-    char *text = NULL;
-    fx_result r = fx_stack_to_json(s, &text);
-    if (r)
-        return r;
-    cJSON *recipe = cJSON_Parse(text);
-    fx_free(text);
-    cJSON *o = cJSON_CreateObject();
-    cJSON *views = o ? cJSON_AddArrayToObject(o, "aux_views") : NULL;
-    const cJSON *effects = cJSON_GetObjectItemCaseSensitive(recipe, "effects");
-    const cJSON *e;
-    cJSON_ArrayForEach(e, effects) {
-        const cJSON *name = cJSON_GetObjectItemCaseSensitive(e, "effect");
-        const cJSON *en = cJSON_GetObjectItemCaseSensitive(e, "enabled");
-        if (views && cJSON_IsString(name) && !cJSON_IsFalse(en))
-            effect_views(name->valuestring, cJSON_GetObjectItemCaseSensitive(e, "params"), views);
-    }
-    char *str = views ? cJSON_PrintUnformatted(o) : NULL;
-    cJSON_Delete(o);
-    cJSON_Delete(recipe);
-    if (str)
-        *out_json = fx_json_strdup(str);
-    cJSON_free(str);
-    return *out_json ? FX_OK : fx_fail(NULL, FX_ERR_OUT_OF_MEMORY, "fx_stack_required_aux_views: out of memory");
+    (void)params;
+    if (max < 1)
+        return 0;
+    memset(out, 0, sizeof *out);
+    snprintf(out->name, sizeof out->name, "%s", FX_AUX_RAIN_MAP);
+    out->kind = "rain_map";
+    return 1;
 }
 
 /* ---- loading ---- */

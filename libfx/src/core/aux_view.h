@@ -22,6 +22,10 @@
 #define FX_AUX_META_KEY "libfx/aux_views"
 #define FX_AUX_RAIN_MAP "rain_map"
 
+/* The aux_views callback of every effect that reads the rain map. */
+struct fx_aux_need;
+int fx_aux_needs_rain_map(const void *params, struct fx_aux_need *out, int max);
+
 typedef struct fx_aux_view {
     char name[FX_NAME_MAX];
     char path[1024];

@@ -53,6 +53,14 @@ typedef struct fx_param_def {
 
 #define FX_COUNT_OF(a) ((int)(sizeof(a) / sizeof((a)[0])))
 
+/* An auxiliary view an effect reads (a light's depth view, the rain map): the add-on
+ * renders exactly the views the stack's effects ask for (fx_stack_required_aux_views). */
+typedef struct fx_aux_need {
+    char name[FX_NAME_MAX];     /* "light:Sun" ("light:" = the scene's first sun), "rain_map" */
+    const char *kind;           /* "light" or "rain_map" */
+    char light[FX_NAME_MAX];    /* for kind "light": the light's name, "" = the first sun */
+} fx_aux_need;
+
 /* Everything process() gets. */
 typedef struct fx_effect_run {
     fx_context *ctx;
@@ -85,6 +93,9 @@ typedef struct fx_effect_class {
     fx_pass_set (*passes)(const void *params);
     /* Non-zero if these params need camera matrices. NULL: never. */
     int (*needs_camera)(const void *params);
+    /* Auxiliary views these params read: fills up to `max` entries, returns how many.
+     * NULL: none. */
+    int (*aux_views)(const void *params, fx_aux_need *out, int max);
     /* Border pixels read around each output pixel (for tiling and ROI growth). NULL: 0. */
     int (*halo)(const void *params, int width, int height);
     /* Checks between parameters (each one's range is checked already). NULL: none.

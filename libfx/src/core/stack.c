@@ -576,6 +576,61 @@ fx_result fx_stack_required_passes(const fx_stack *s, char **out_json)
     return *out_json ? FX_OK : fx_fail(s->ctx, FX_ERR_OUT_OF_MEMORY, "out of memory");
 }
 
+/* The aux views the enabled effects read, from their effective parameters (so a preset
+ * or default counts as much as an explicit value); each view once. */
+fx_result fx_stack_required_aux_views(const fx_stack *s, char **out_json)
+{
+    if (!s || !out_json)
+        return fx_fail(s ? s->ctx : NULL, FX_ERR_INVALID_ARGUMENT, "fx_stack_required_aux_views: NULL argument");
+    *out_json = NULL;
+    cJSON *o = cJSON_CreateObject();
+    cJSON *views = o ? cJSON_AddArrayToObject(o, "aux_views") : NULL;
+    fx_result r = views ? FX_OK : fx_fail(s->ctx, FX_ERR_OUT_OF_MEMORY, "out of memory listing aux views");
+    for (int i = 0; !r && i < s->count; i++) {
+        const fx_entry *e = &s->entries[i];
+        if (!e->enabled || !e->cls->aux_views)
+            continue;
+        void *p = fx_mem_alloc(e->cls->params_size);
+        if (!p) {
+            r = fx_fail(s->ctx, FX_ERR_OUT_OF_MEMORY, "out of memory listing aux views");
+            break;
+        }
+        fx_aux_need need[4];
+        int n = (r = effective_params(s, e, i, entry_quality(s, e), p)) ? 0 : e->cls->aux_views(p, need, 4);
+        fx_mem_free(p);
+        for (int k = 0; k < n && !r; k++) {
+            int seen = 0;
+            const cJSON *v;
+            cJSON_ArrayForEach(v, views) {
+                const cJSON *name = cJSON_GetObjectItemCaseSensitive(v, "name");
+                seen |= cJSON_IsString(name) && strcmp(name->valuestring, need[k].name) == 0;
+            }
+            if (seen)
+                continue;
+            cJSON *item = cJSON_CreateObject();
+            if (!item || !cJSON_AddStringToObject(item, "name", need[k].name) ||
+                !cJSON_AddStringToObject(item, "kind", need[k].kind) ||
+                (strcmp(need[k].kind, "light") == 0 && !cJSON_AddStringToObject(item, "light", need[k].light))) {
+                cJSON_Delete(item);
+                r = fx_fail(s->ctx, FX_ERR_OUT_OF_MEMORY, "out of memory listing aux views");
+            } else {
+                cJSON_AddItemToArray(views, item);
+            }
+        }
+    }
+    char *str = r ? NULL : cJSON_PrintUnformatted(o);
+    cJSON_Delete(o);
+    if (!r && !str)
+        r = fx_fail(s->ctx, FX_ERR_OUT_OF_MEMORY, "out of memory listing aux views");
+    if (str) {
+        *out_json = fx_json_strdup(str);
+        cJSON_free(str);
+        if (!*out_json)
+            r = fx_fail(s->ctx, FX_ERR_OUT_OF_MEMORY, "out of memory listing aux views");
+    }
+    return r;
+}
+
 /* ---- running ---- */
 
 typedef struct composite_job {

@@ -12,6 +12,7 @@
  * bits, consecutive frames move the same streaks. Cover quads (material cover_material,
  * found through Cryptomatte, coverage normalised by cover_opacity) get the nearest layer's
  * pattern, unclipped, when the camera is under cover (rain map at the camera). Additive. */
+#include "core/aux_view.h"
 #include "core/effect.h"
 #include "core/parallel.h"
 #include "math/hash.h"
@@ -250,6 +251,7 @@ const fx_effect_class fx_effect_rain = {
     .presets = {NULL, NULL, NULL, NULL},
     .passes = rain_passes,
     .needs_camera = rain_needs_camera,
+    .aux_views = fx_aux_needs_rain_map, /* what is under cover */
     .halo = NULL,
     .validate = rain_validate,
     .process = rain_process,

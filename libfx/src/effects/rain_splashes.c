@@ -11,6 +11,7 @@
  * pass or Depth + camera): it is drawn in perspective by construction. Only pixels whose
  * surface faces up (normal Z >= up_threshold) and is exposed in the rain map get splashes.
  * Additive. */
+#include "core/aux_view.h"
 #include "core/effect.h"
 #include "core/parallel.h"
 #include "math/hash.h"
@@ -185,6 +186,7 @@ const fx_effect_class fx_effect_rain_splashes = {
     .presets = {NULL, NULL, NULL, NULL},
     .passes = splash_passes,
     .needs_camera = splash_needs_camera,
+    .aux_views = fx_aux_needs_rain_map, /* what is under cover */
     .halo = NULL,
     .validate = splash_validate,
     .process = splash_process,

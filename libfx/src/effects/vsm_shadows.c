@@ -262,6 +262,18 @@ static fx_result vsm_process(const fx_effect_run *run)
     return FX_OK;
 }
 
+/* The light's depth view, by the light's name ("" = the scene's first sun). */
+static int vsm_aux_views(const void *params, fx_aux_need *out, int max)
+{
+    const vsm_params *p = params;
+    if (max < 1)
+        return 0;
+    snprintf(out->name, sizeof out->name, "light:%.80s", p->light);
+    out->kind = "light";
+    snprintf(out->light, sizeof out->light, "%.80s", p->light);
+    return 1;
+}
+
 const fx_effect_class fx_effect_vsm_shadows = {
     .name = "vsm_shadows",
     .doc = "Shadows of a light from its depth view: variance shadow maps (SAT box or Gaussian), PCF or hard",
@@ -271,6 +283,7 @@ const fx_effect_class fx_effect_vsm_shadows = {
     .presets = {NULL, NULL, NULL, "{\"method\": \"pcf\"}"},
     .passes = vsm_passes,
     .needs_camera = vsm_needs_camera,
+    .aux_views = vsm_aux_views,
     .halo = NULL,
     .validate = NULL,
     .process = vsm_process,

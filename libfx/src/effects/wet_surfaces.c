@@ -10,6 +10,7 @@
  * facing is 1 for up-facing normals (N.z >= up_threshold), wall_wetness for walls,
  * smoothly between, 0 facing down. Output: src (1 - darken w) + w specular F(N.V) sky_color
  * + w gloss_boost GlossDir GlossCol, F Schlick's with F0 = 0.02 (water), N.V clamped. */
+#include "core/aux_view.h"
 #include "core/effect.h"
 #include "core/parallel.h"
 #include "math/rain_map.h"
@@ -164,6 +165,7 @@ const fx_effect_class fx_effect_wet_surfaces = {
     .presets = {NULL, NULL, NULL, NULL},
     .passes = wet_passes,
     .needs_camera = wet_needs_camera,
+    .aux_views = fx_aux_needs_rain_map, /* what is under cover */
     .halo = NULL,
     .validate = NULL,
     .process = wet_process,
