@@ -160,11 +160,72 @@ static inline float ramp_q(const cel_job *j, float t)
     return v;
 }
 
+/* GCC vector helpers: one RGBA pixel per v4f (SSE2 in the baseline build). */
+typedef float v4f __attribute__((vector_size(16)));
+typedef int v4i __attribute__((vector_size(16)));
+#define V4(v) ((v4f){ (v), (v), (v), (v) })
+
+static inline v4f sel4(v4i m, v4f a, v4f b)
+{
+    return (v4f)(((v4i)a & m) | ((v4i)b & ~m));
+}
+
+static inline v4f finite4(v4f v) /* NaN -> 0, +-Inf -> +-FLT_MAX */
+{
+    v = sel4(v == v, v, V4(0.0f));
+    v = sel4(v > V4(FLT_MAX), V4(FLT_MAX), v);
+    return sel4(v < V4(-FLT_MAX), V4(-FLT_MAX), v);
+}
+
+static inline v4f load3(const float *p, int ch) /* 3 channels (of ch >= 3), lane 3 = 0 */
+{
+    v4f v = { p[0], p[1], p[2], 0.0f };
+    (void)ch;
+    return v;
+}
+
+/* diffuse_passes: one vector per pixel (same formula as the scalar statement in the doc). */
+static void cel_rows_diffuse(const cel_job *j, int begin, int end)
+{
+    const fx_effect_run *run = j->run;
+    const cel_params *p = j->p;
+    const float inv_white = 1.0f / p->white, white = p->white, mix = p->mix;
+    v4f oc;
+    memcpy(&oc, p->outline_color, sizeof oc);
+    for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++)
+        for (int x = run->roi.x0; x < run->roi.x1; x++) {
+            const size_t i = (size_t)y * run->width + x;
+            v4f s;
+            memcpy(&s, run->src + i * 4, sizeof s);
+            const v4f c = finite4(s);
+            v4f l3 = finite4(load3(j->diff_dir + i * j->dd_ch, j->dd_ch));
+            l3 = sel4(l3 > V4(0.0f), l3, V4(0.0f));
+            const float l = fx_luminance(l3[0], l3[1], l3[2]);
+            const float l_c = l < 1e30f ? l : 1e30f;
+            const float q = ramp_q(j, l_c * inv_white) * white;
+            const v4f col = finite4(load3(j->diff_col + i * j->dc_ch, j->dc_ch));
+            const v4f tint = l > 1e-8f ? l3 * V4(1.0f / l) : V4(1.0f); /* the light's colour */
+            v4f o = c + col * (V4(q) * tint - l3); /* lane 3: c + 0 */
+            if (j->matte) {
+                const float e = j->matte[i];
+                o += V4(e) * (oc - o); /* lane 3: alpha toward the outline's alpha */
+            }
+            o = finite4(c + V4(mix) * (o - c));
+            if (!j->matte)
+                o[3] = c[3];
+            memcpy(run->dst + i * 4, &o, sizeof o);
+        }
+}
+
 static void cel_rows(void *user, int begin, int end)
 {
     const cel_job *j = user;
     const fx_effect_run *run = j->run;
     const cel_params *p = j->p;
+    if (p->lighting == LIGHT_DIFFUSE_PASSES) {
+        cel_rows_diffuse(j, begin, end);
+        return;
+    }
     const float inv_white = 1.0f / p->white;
     for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++)
         for (int x = run->roi.x0; x < run->roi.x1; x++) {
@@ -173,23 +234,7 @@ static void cel_rows(void *user, int begin, int end)
             float *d = run->dst + i * 4;
             float c[3] = { finite_or(s[0]), finite_or(s[1]), finite_or(s[2]) };
             float o[3] = { c[0], c[1], c[2] };
-            if (p->lighting == LIGHT_DIFFUSE_PASSES) {
-                const float *dd = j->diff_dir + i * j->dd_ch, *dc = j->diff_col + i * j->dc_ch;
-                float l3[3];
-                for (int k = 0; k < 3; k++) {
-                    float v = finite_or(dd[k]);
-                    l3[k] = v > 0.0f ? v : 0.0f;
-                }
-                float l = fx_luminance(l3[0], l3[1], l3[2]);
-                float l_c = l < 1e30f ? l : 1e30f;
-                float q = ramp_q(j, l_c * inv_white) * p->white;
-                const float inv_l = l > 1e-8f ? 1.0f / l : 0.0f;
-                for (int k = 0; k < 3; k++) {
-                    float tint = l > 1e-8f ? l3[k] * inv_l : 1.0f; /* the light's colour */
-                    float col = finite_or(dc[k]);
-                    o[k] = c[k] + col * (q * tint - l3[k]);
-                }
-            } else {
+            {
                 const float *nn = j->normal + i * 3;
                 fx_vec3 n = fx_v3_normalize_or(fx_v3(finite_or(nn[0]), finite_or(nn[1]), finite_or(nn[2])), fx_v3(0, 0, 0));
                 if (fx_v3_dot(n, n) > 0.5f) {
