@@ -77,6 +77,7 @@ void fx_context_free(fx_context *ctx)
         return;
     fx_pool_free(ctx->pool);
     fx_aux_cache_free(ctx);
+    fx_buffers_free(ctx);
     for (int i = 0; i < ctx->warning_count; i++)
         fx_mem_free(ctx->warnings[i]);
     fx_mem_free(ctx->warnings);

@@ -32,12 +32,18 @@ fx_result fx_frame_new(fx_context *ctx, int width, int height, fx_frame **out)
     return FX_OK;
 }
 
+/* Bytes of a pass's buffer: every pass holds width * height * channels floats. */
+static size_t pass_bytes(const fx_frame *f, int channels)
+{
+    return (size_t)f->width * (size_t)f->height * (size_t)channels * sizeof(float);
+}
+
 void fx_frame_free(fx_frame *f)
 {
     if (!f)
         return;
     for (int i = 0; i < f->pass_count; i++)
-        fx_mem_free(f->passes[i].data);
+        fx_buffer_put(f->ctx, f->passes[i].data, pass_bytes(f, f->passes[i].channels));
     fx_mem_free(f->passes);
     for (int i = 0; i < f->meta_count; i++) {
         fx_mem_free(f->meta[i].key);
@@ -110,7 +116,7 @@ fx_result fx_frame_adopt_pass(fx_frame *f, const char *name, int channels, float
     }
     fx_pass *p = fx_frame_find_pass(f, name);
     if (p) {
-        fx_mem_free(p->data);
+        fx_buffer_put(f->ctx, p->data, pass_bytes(f, p->channels));
     } else {
         if (f->pass_count == f->pass_cap) {
             int cap = f->pass_cap ? f->pass_cap * 2 : 8;
@@ -146,7 +152,7 @@ fx_result fx_frame_alloc_pass(fx_frame *f, const char *name, int channels, float
     fx_result r = fx_check_budget(f->ctx, bytes, what);
     if (r)
         return r;
-    float *data = fx_mem_alloc(bytes);
+    float *data = fx_buffer_get(f->ctx, bytes);
     if (!data)
         return fx_fail(f->ctx, FX_ERR_OUT_OF_MEMORY, "out of memory for pass '%s' (%.1f MiB)", name,
                        (double)bytes / (1 << 20));

@@ -55,6 +55,8 @@ struct fx_context {
     int warning_count, warning_cap;
     fx_pool *pool;                 /* worker threads, created on first parallel loop */
     struct fx_aux_cache *aux_cache;/* built aux-view maps reused across frames (core/aux_view.c) */
+    struct fx_buffer_slot *buffers; /* freed pixel buffers kept for reuse (core/buffers.c) */
+    int buffer_count;
 };
 
 /* Frees the context's aux-view cache (core/aux_view.c). */
@@ -68,6 +70,15 @@ void fx_warn(const fx_context *ctx, const char *fmt, ...) FX_PRINTF(2, 3);
 fx_result fx_progress(const fx_context *ctx, const char *stage, double fraction);
 /* Checks `bytes` against the context's budget; fails with FX_ERR_LIMIT naming `what`. */
 fx_result fx_check_budget(const fx_context *ctx, uint64_t bytes, const char *what);
+
+/* ---- pixel buffers ---- */
+/* Large pixel buffers come from, and go back to, a small per-context store: a batch of
+ * same-size frames then reuses memory that is already mapped instead of page-faulting
+ * a fresh buffer for every pass and effect (a 1080p RGBA float buffer is 8100 faults).
+ * Small buffers and a full store fall through to fx_mem. ctx may be NULL. */
+void *fx_buffer_get(fx_context *ctx, size_t bytes);
+void fx_buffer_put(fx_context *ctx, void *p, size_t bytes);
+void fx_buffers_free(fx_context *ctx);
 
 /* ---- frames ---- */
 #define FX_NAME_MAX 96
@@ -101,7 +112,7 @@ struct fx_frame {
 fx_pass *fx_frame_find_pass(const fx_frame *f, const char *name);
 /* Adds a pass and hands its (uninitialised) buffer back; replaces one of the same name. */
 fx_result fx_frame_alloc_pass(fx_frame *f, const char *name, int channels, float **out);
-/* Takes ownership of `data` (allocated with fx_mem_alloc). */
+/* Takes ownership of `data`: width*height*channels floats from fx_mem_alloc or fx_buffer_get. */
 fx_result fx_frame_adopt_pass(fx_frame *f, const char *name, int channels, float *data);
 /* New frame with f's size, windows, camera, time and metadata, no passes. */
 fx_result fx_frame_new_like(const fx_frame *f, fx_frame **out);

@@ -643,6 +643,18 @@ typedef struct composite_job {
     size_t *bad;   /* per row: non-finite values replaced */
 } composite_job;
 
+/* 1 if no value is NaN or Inf: the exponent bits all set. Written to vectorise. */
+static int span_all_finite(const float *p, size_t n)
+{
+    uint32_t bad = 0;
+    for (size_t i = 0; i < n; i++) {
+        uint32_t b;
+        memcpy(&b, p + i, sizeof b);
+        bad |= (uint32_t)((b & 0x7f800000u) == 0x7f800000u);
+    }
+    return bad == 0;
+}
+
 static void copy_span(const float *s, float *d, int x0, int x1)
 {
     if (x1 > x0)
@@ -674,14 +686,19 @@ static void composite_rows(void *user, int y0, int y1)
         }
         size_t bad = 0;
         const float *cov = j->mask ? j->mask->coverage + (size_t)y * j->width : NULL;
+        /* Most rows are all finite and unmasked: a branch-free check, nothing else. */
+        int row_finite = span_all_finite(d + (size_t)roi->x0 * 4, (size_t)(roi->x1 - roi->x0) * 4);
+        if (row_finite && !cov)
+            continue;
         for (int x = roi->x0; x < roi->x1; x++) {
             float *dp = d + (size_t)x * 4;
             const float *sp = s + (size_t)x * 4;
-            for (int c = 0; c < 4; c++)
-                if (!isfinite(dp[c])) {
-                    dp[c] = isnan(dp[c]) ? 0.0f : (dp[c] > 0 ? FLT_MAX : -FLT_MAX);
-                    bad++;
-                }
+            if (!row_finite)
+                for (int c = 0; c < 4; c++)
+                    if (!isfinite(dp[c])) {
+                        dp[c] = isnan(dp[c]) ? 0.0f : (dp[c] > 0 ? FLT_MAX : -FLT_MAX);
+                        bad++;
+                    }
             if (!cov)
                 continue;
             float m = cov[x];
@@ -828,7 +845,7 @@ fx_result fx_stack_run(fx_stack *s, const fx_frame *in, fx_frame **out)
         if (!r && src == cur && !spare) {
             size_t bytes = n * sizeof(float);
             if (!(r = fx_check_budget(ctx, bytes, "an effect's output"))) {
-                spare = fx_mem_alloc(bytes);
+                spare = fx_buffer_get(ctx, bytes);
                 if (!spare)
                     r = fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
             }
@@ -892,7 +909,7 @@ fx_result fx_stack_run(fx_stack *s, const fx_frame *in, fx_frame **out)
     }
     if (!r && ctx->progress)
         ctx->progress(ctx->progress_user, "done", 1.0); /* the work is finished: no cancel now */
-    fx_mem_free(spare);
+    fx_buffer_put(ctx, spare, n * sizeof(float));
     if (r) {
         fx_frame_free(o);
         return r;

@@ -93,38 +93,31 @@ static void row_double(const cm_job *j, const float *s, float *d, int n)
     }
 }
 
+/* One pixel is one 4-lane vector: out = c0*r + c1*g + c2*b + c3*a with the matrix's
+ * columns, summed in the same order as the scalar form (so the bits are the same). */
+typedef float cm_v4 __attribute__((vector_size(16)));
+
 static void cm_rows(void *user, int begin, int end)
 {
     const cm_job *j = user;
-    const float m00 = j->m[0], m01 = j->m[1], m02 = j->m[2], m03 = j->m[3];
-    const float m10 = j->m[4], m11 = j->m[5], m12 = j->m[6], m13 = j->m[7];
-    const float m20 = j->m[8], m21 = j->m[9], m22 = j->m[10], m23 = j->m[11];
-    const float m30 = j->m[12], m31 = j->m[13], m32 = j->m[14], m33 = j->m[15];
+    const float *m = j->m;
+    const cm_v4 c0 = {m[0], m[4], m[8], m[12]}, c1 = {m[1], m[5], m[9], m[13]};
+    const cm_v4 c2 = {m[2], m[6], m[10], m[14]}, c3 = {m[3], m[7], m[11], m[15]};
     const float mix = j->mix;
+    const int keep_alpha = j->keep_alpha;
     const int n = j->roi.x1 - j->roi.x0;
     for (int y = j->roi.y0 + begin; y < j->roi.y0 + end; y++) {
         const float *restrict s = j->src + ((size_t)y * j->width + j->roi.x0) * 4;
         float *restrict d = j->dst + ((size_t)y * j->width + j->roi.x0) * 4;
-        if (mix == 1.0f) {
-            for (int x = 0; x < n; x++) {
-                const float r = s[4 * x], g = s[4 * x + 1], b = s[4 * x + 2], a = s[4 * x + 3];
-                d[4 * x + 0] = m00 * r + m01 * g + m02 * b + m03 * a;
-                d[4 * x + 1] = m10 * r + m11 * g + m12 * b + m13 * a;
-                d[4 * x + 2] = m20 * r + m21 * g + m22 * b + m23 * a;
-                d[4 * x + 3] = j->keep_alpha ? a : m30 * r + m31 * g + m32 * b + m33 * a;
-            }
-        } else {
-            for (int x = 0; x < n; x++) {
-                const float r = s[4 * x], g = s[4 * x + 1], b = s[4 * x + 2], a = s[4 * x + 3];
-                const float tr = m00 * r + m01 * g + m02 * b + m03 * a;
-                const float tg = m10 * r + m11 * g + m12 * b + m13 * a;
-                const float tb = m20 * r + m21 * g + m22 * b + m23 * a;
-                const float ta = m30 * r + m31 * g + m32 * b + m33 * a;
-                d[4 * x + 0] = r + mix * (tr - r);
-                d[4 * x + 1] = g + mix * (tg - g);
-                d[4 * x + 2] = b + mix * (tb - b);
-                d[4 * x + 3] = j->keep_alpha ? a : a + mix * (ta - a);
-            }
+        for (int x = 0; x < n; x++) {
+            cm_v4 p;
+            memcpy(&p, s + 4 * x, sizeof p);
+            cm_v4 t = c0 * p[0] + c1 * p[1] + c2 * p[2] + c3 * p[3];
+            if (mix != 1.0f)
+                t = p + mix * (t - p);
+            if (keep_alpha)
+                t[3] = p[3];
+            memcpy(d + 4 * x, &t, sizeof t);
         }
         /* Overflow check: |v| <= FLT_MAX is false for +-Inf and NaN. Branch-free so it
          * vectorises; the row (in L1) is redone in double only when it fails. */

@@ -1,0 +1,74 @@
+/* The per-context store of freed pixel buffers (see fx_buffer_get in internal.h). */
+#include "core/internal.h"
+
+#include <string.h>
+
+#define BUFFER_MIN ((size_t)1 << 20) /* smaller ones are cheap to map: plain fx_mem */
+#define BUFFER_SLOTS 6               /* a few frames' passes plus an effect's spare */
+#define BUFFER_MAX_BYTES ((uint64_t)1 << 30)
+
+typedef struct fx_buffer_slot {
+    void *p;
+    size_t bytes;
+} fx_buffer_slot;
+
+void *fx_buffer_get(fx_context *ctx, size_t bytes)
+{
+    if (ctx && bytes >= BUFFER_MIN) {
+        void *p = NULL;
+        pthread_mutex_lock(&ctx->lock);
+        for (int i = 0; i < ctx->buffer_count; i++)
+            if (ctx->buffers[i].bytes == bytes) {
+                p = ctx->buffers[i].p;
+                ctx->buffers[i] = ctx->buffers[--ctx->buffer_count];
+                break;
+            }
+        pthread_mutex_unlock(&ctx->lock);
+        if (p)
+            return p;
+    }
+    return fx_mem_alloc(bytes);
+}
+
+void fx_buffer_put(fx_context *ctx, void *p, size_t bytes)
+{
+    if (!p)
+        return;
+    if (ctx && bytes >= BUFFER_MIN) {
+        pthread_mutex_lock(&ctx->lock);
+        if (!ctx->buffers)
+            ctx->buffers = fx_mem_calloc(BUFFER_SLOTS, sizeof *ctx->buffers);
+        uint64_t held = 0;
+        for (int i = 0; i < ctx->buffer_count; i++)
+            held += ctx->buffers[i].bytes;
+        uint64_t cap = ctx->max_bytes / 4 < BUFFER_MAX_BYTES ? ctx->max_bytes / 4 : BUFFER_MAX_BYTES;
+        int kept = 0;
+        if (ctx->buffers && held + bytes <= cap) {
+            if (ctx->buffer_count == BUFFER_SLOTS) {
+                /* full: the oldest goes */
+                fx_mem_free(ctx->buffers[0].p);
+                memmove(ctx->buffers, ctx->buffers + 1, (BUFFER_SLOTS - 1) * sizeof *ctx->buffers);
+                ctx->buffer_count--;
+            }
+            ctx->buffers[ctx->buffer_count].p = p;
+            ctx->buffers[ctx->buffer_count].bytes = bytes;
+            ctx->buffer_count++;
+            kept = 1;
+        }
+        pthread_mutex_unlock(&ctx->lock);
+        if (kept)
+            return;
+    }
+    fx_mem_free(p);
+}
+
+void fx_buffers_free(fx_context *ctx)
+{
+    if (!ctx)
+        return;
+    for (int i = 0; i < ctx->buffer_count; i++)
+        fx_mem_free(ctx->buffers[i].p);
+    fx_mem_free(ctx->buffers);
+    ctx->buffers = NULL;
+    ctx->buffer_count = 0;
+}
