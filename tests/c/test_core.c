@@ -62,6 +62,22 @@ static void *error_thread(void *p)
     return NULL;
 }
 
+/* A binding's garbage collector may free frames after their context: the context lives
+ * on until its last frame is freed (ASan/LSan check: no use after free, no leak). */
+static void test_frames_outlive_their_context(void)
+{
+    fx_context *ctx = NULL;
+    fx_context_new(&ctx, 2);
+    fx_frame *a = NULL, *b = NULL;
+    CHECK_OK(ctx, fx_frame_new(ctx, 1024, 512, &a)); /* 8 MiB passes: through the buffer store */
+    CHECK_OK(ctx, fx_frame_add_pass(a, "Combined", 4, NULL));
+    CHECK_OK(ctx, fx_frame_new(ctx, 1024, 512, &b));
+    CHECK_OK(ctx, fx_frame_add_pass(b, "Combined", 4, NULL));
+    fx_frame_free(a); /* its buffer goes to the store */
+    fx_context_free(ctx); /* closed, not yet freed: b lives */
+    fx_frame_free(b);     /* releases the context and the store */
+}
+
 static void test_errors_are_per_thread(void)
 {
     fx_context *ctx = NULL;
@@ -430,6 +446,7 @@ int main(void)
     test_sidecar();
     test_context_and_errors();
     test_errors_are_per_thread();
+    test_frames_outlive_their_context();
     test_recipes();
     test_cryptomatte_ids();
     test_masks();

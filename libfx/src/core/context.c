@@ -71,10 +71,8 @@ fx_result fx_context_new(fx_context **out, int threads)
     return FX_OK;
 }
 
-void fx_context_free(fx_context *ctx)
+static void context_destroy(fx_context *ctx)
 {
-    if (!ctx)
-        return;
     fx_pool_free(ctx->pool);
     fx_aux_cache_free(ctx);
     fx_buffers_free(ctx);
@@ -83,6 +81,38 @@ void fx_context_free(fx_context *ctx)
     fx_mem_free(ctx->warnings);
     pthread_mutex_destroy(&ctx->lock);
     fx_mem_free(ctx);
+}
+
+void fx_context_free(fx_context *ctx)
+{
+    if (!ctx)
+        return;
+    pthread_mutex_lock(&ctx->lock);
+    ctx->closed = 1;
+    int live = ctx->frames;
+    pthread_mutex_unlock(&ctx->lock);
+    if (live == 0)
+        context_destroy(ctx);
+}
+
+void fx_context_frame_born(fx_context *ctx)
+{
+    if (!ctx)
+        return;
+    pthread_mutex_lock(&ctx->lock);
+    ctx->frames++;
+    pthread_mutex_unlock(&ctx->lock);
+}
+
+void fx_context_frame_died(fx_context *ctx)
+{
+    if (!ctx)
+        return;
+    pthread_mutex_lock(&ctx->lock);
+    int destroy = --ctx->frames == 0 && ctx->closed;
+    pthread_mutex_unlock(&ctx->lock);
+    if (destroy)
+        context_destroy(ctx);
 }
 
 int fx_context_threads(const fx_context *ctx)

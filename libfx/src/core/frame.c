@@ -28,6 +28,7 @@ fx_result fx_frame_new(fx_context *ctx, int width, int height, fx_frame **out)
     memcpy(f->display_window, win, sizeof win);
     f->fps = 24.0;
     f->frame_number = 1.0;
+    fx_context_frame_born(ctx);
     *out = f;
     return FX_OK;
 }
@@ -50,7 +51,9 @@ void fx_frame_free(fx_frame *f)
         fx_mem_free(f->meta[i].value);
     }
     fx_mem_free(f->meta);
+    fx_context *ctx = f->ctx;
     fx_mem_free(f);
+    fx_context_frame_died(ctx); /* last: may release a context freed before its frames */
 }
 
 int fx_frame_width(const fx_frame *f)

@@ -57,6 +57,8 @@ struct fx_context {
     struct fx_aux_cache *aux_cache;/* built aux-view maps reused across frames (core/aux_view.c) */
     struct fx_buffer_slot *buffers; /* freed pixel buffers kept for reuse (core/buffers.c) */
     int buffer_count;
+    int frames;                     /* live frames: they return buffers here when freed */
+    int closed;                     /* fx_context_free was called; freed with the last frame */
 };
 
 /* Frees the context's aux-view cache (core/aux_view.c). */
@@ -79,6 +81,11 @@ fx_result fx_check_budget(const fx_context *ctx, uint64_t bytes, const char *wha
 void *fx_buffer_get(fx_context *ctx, size_t bytes);
 void fx_buffer_put(fx_context *ctx, void *p, size_t bytes);
 void fx_buffers_free(fx_context *ctx);
+/* Frames keep their context alive: fx_context_free while frames live only marks it
+ * closed, and the last fx_frame_free releases it (a binding's garbage collector may
+ * free frames after their context). */
+void fx_context_frame_born(fx_context *ctx);
+void fx_context_frame_died(fx_context *ctx);
 
 /* ---- frames ---- */
 #define FX_NAME_MAX 96
