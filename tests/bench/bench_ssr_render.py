@@ -2,12 +2,15 @@
 
     blender -b --factory-startup --python tests/bench/bench_ssr_render.py -- OUT_PREFIX \\
         [--mode backing|cycles_mirror|eevee_ssr|eevee_nossr] [--resolution W H] \\
-        [--samples N] [--frame N]
+        [--samples N] [--frame N] [--repeat N]
 
 Writes OUT_PREFIX.exr (32-bit multilayer render output with Combined, Depth, Normal,
 Position, IndexOB, IndexMA and CryptoMaterial), OUT_PREFIX.camera.json (the libfx
 scene sidecar: camera matrices as rows, clip range) and OUT_PREFIX.time.json (render
-wall time in seconds, as measured around bpy.ops.render.render).
+wall time in seconds, as measured around bpy.ops.render.render). With --repeat N the
+frame is rendered N times in this one Blender session and "seconds" is the median of
+renders 2..N (warm: Eevee's shader compilation and Cycles' kernel/BVH set-up are paid by
+the first); "all_seconds" lists every render.
 
 Modes:
   backing        the scene as built (mirrors are a dark backing): libfx's input.
@@ -40,7 +43,7 @@ SCENE_DIR = os.path.join(ROOT, "blend_scenes", "mirror_room")
 def parse(argv):
     args = argv[argv.index("--") + 1:] if "--" in argv else []
     o = {"prefix": os.path.abspath(args[0]), "mode": "backing", "res": (640, 360),
-         "samples": 16, "frame": 1, "clamp": 0.0}
+         "samples": 16, "frame": 1, "clamp": 0.0, "repeat": 1}
     i = 1
     while i < len(args):
         a = args[i]
@@ -55,6 +58,9 @@ def parse(argv):
             i += 2
         elif a == "--clamp-indirect":
             o["clamp"] = float(args[i + 1])
+            i += 2
+        elif a == "--repeat":
+            o["repeat"] = max(1, int(args[i + 1]))
             i += 2
         elif a == "--frame":
             o["frame"] = int(args[i + 1])
@@ -124,12 +130,18 @@ def main():
     scene.render.filepath = o["prefix"] + ".exr"
     with open(o["prefix"] + ".camera.json", "w") as f:
         json.dump(camera_dict(scene), f, indent=1)
-    t0 = time.perf_counter()
-    bpy.ops.render.render(write_still=True)
-    dt = time.perf_counter() - t0
+    times = []
+    for _ in range(o["repeat"]):
+        t0 = time.perf_counter()
+        bpy.ops.render.render(write_still=True)
+        times.append(time.perf_counter() - t0)
+    warm = sorted(times[1:]) if len(times) > 1 else times
+    dt = warm[len(warm) // 2]
     with open(o["prefix"] + ".time.json", "w") as f:
-        json.dump({"mode": o["mode"], "seconds": dt, "res": o["res"], "samples": o["samples"]}, f)
-    print("bench_ssr_render: %s %s %.2f s" % (o["mode"], o["prefix"], dt))
+        json.dump({"mode": o["mode"], "seconds": dt, "all_seconds": times, "res": o["res"],
+                   "samples": o["samples"]}, f)
+    print("bench_ssr_render: %s %s %.2f s (all: %s)" % (o["mode"], o["prefix"], dt,
+                                                      " ".join("%.2f" % t for t in times)))
 
 
 if __name__ == "__main__":
