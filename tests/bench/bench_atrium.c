@@ -13,18 +13,7 @@
 #include <string.h>
 #include <time.h>
 
-static double now_ms(void)
-{
-    struct timespec t;
-    clock_gettime(CLOCK_MONOTONIC, &t);
-    return t.tv_sec * 1e3 + t.tv_nsec / 1e6;
-}
-
-static int cmp(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return x < y ? -1 : x > y;
-}
+#include "bench_util.h"
 
 static fx_camera top(float half, float z)
 {
@@ -157,9 +146,9 @@ int main(int argc, char **argv)
                 tc[r] = run_once(sc, cached.f, cached.ctx);
                 ratio[r] = tc[r] / tp[r];
             }
-            qsort(tp, runs, sizeof tp[0], cmp);
-            qsort(tc, runs, sizeof tc[0], cmp);
-            qsort(ratio, runs, sizeof ratio[0], cmp);
+            qsort(tp, runs, sizeof tp[0], cmp_d);
+            qsort(tc, runs, sizeof tc[0], cmp_d);
+            qsort(ratio, runs, sizeof ratio[0], cmp_d);
             printf("%d,%s,%s,%g,%.1f,%.1f,%.3f\n", S, cfg[c].method, cfg[c].filter, cfg[c].size, tp[runs / 2],
                    tc[runs / 2], ratio[runs / 2]);
             fflush(stdout);
@@ -182,9 +171,9 @@ int main(int argc, char **argv)
                 }
                 ratio[r] = t[1][r] / t[0][r];
             }
-            qsort(t[0], runs, sizeof t[0][0], cmp);
-            qsort(t[1], runs, sizeof t[1][0], cmp);
-            qsort(ratio, runs, sizeof ratio[0], cmp);
+            qsort(t[0], runs, sizeof t[0][0], cmp_d);
+            qsort(t[1], runs, sizeof t[1][0], cmp_d);
+            qsort(ratio, runs, sizeof ratio[0], cmp_d);
             printf("%d,filter_only,box_sat_vs_gaussian,%g,%.1f,%.1f,%.3f\n", S, width, t[0][runs / 2],
                    t[1][runs / 2], ratio[runs / 2]);
             fflush(stdout);

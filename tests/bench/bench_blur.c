@@ -19,23 +19,12 @@
 #include <string.h>
 #include <time.h>
 
+#include "bench_util.h"
+
 #ifdef LIBFX_BENCH_OPENCV
 void bench_cv_set_threads(int n);
 void bench_cv_gaussian(const float *src, float *dst, int w, int h, int ksize);
 #endif
-
-static double now_ms(void)
-{
-    struct timespec t;
-    clock_gettime(CLOCK_MONOTONIC, &t);
-    return t.tv_sec * 1e3 + t.tv_nsec / 1e6;
-}
-
-static int cmp_d(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return x < y ? -1 : x > y;
-}
 
 static const int W = 1920, H = 1080;
 static int RUNS = 7;
@@ -78,6 +67,7 @@ static void prepare(prepared *p, fx_context *ctx, const float *src, float *dst, 
     p->run.roi = (fx_rect){ 0, 0, W, H };
     p->run.params = params;
     p->run.quality = FX_QUALITY_FINAL;
+    p->run.where = "bench_blur";
 }
 
 static double run_once(prepared *p)

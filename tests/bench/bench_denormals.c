@@ -12,18 +12,7 @@
 #include <string.h>
 #include <time.h>
 
-static double now_ms(void)
-{
-    struct timespec t;
-    clock_gettime(CLOCK_MONOTONIC, &t);
-    return t.tv_sec * 1e3 + t.tv_nsec * 1e-6;
-}
-
-static int cmp(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return x < y ? -1 : x > y;
-}
+#include "bench_util.h"
 
 static float value(uint32_t i, int denormal)
 {
@@ -104,7 +93,7 @@ int main(int argc, char **argv)
                         t[k * runs + r - 1] = dt;
                 }
             for (int k = 0; k < 2; k++) {
-                qsort(t + k * runs, runs, sizeof(double), cmp);
+                qsort(t + k * runs, runs, sizeof(double), cmp_d);
                 med[k] = t[k * runs + runs / 2];
             }
             free(t);

@@ -14,23 +14,12 @@
 #include <string.h>
 #include <time.h>
 
+#include "bench_util.h"
+
 #ifdef LIBFX_BENCH_OPENCV
 void bench_cv_set_threads(int n);
 void bench_cv_gaussian(const float *src, float *dst, int w, int h, int ksize);
 #endif
-
-static double now_ms(void)
-{
-    struct timespec t;
-    clock_gettime(CLOCK_MONOTONIC, &t);
-    return t.tv_sec * 1e3 + t.tv_nsec / 1e6;
-}
-
-static int cmp_d(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return x < y ? -1 : x > y;
-}
 
 static int W = 1920, H = 1080, RUNS = 7;
 static float *g_src, *g_dst, *g_ref;
@@ -81,6 +70,7 @@ static double time_effect(fx_context *ctx, const bench_case *bc, float *dst)
     run.roi = (fx_rect){ 0, 0, W, H };
     run.params = params;
     run.quality = FX_QUALITY_FINAL;
+    run.where = bc->label;
     double t[64];
     int runs = RUNS > 64 ? 64 : RUNS;
     cls->process(&run); /* warm-up: page faults, pool start */

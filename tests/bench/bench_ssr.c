@@ -15,18 +15,7 @@
 #include <string.h>
 #include <time.h>
 
-static double now_ms(void)
-{
-    struct timespec t;
-    clock_gettime(CLOCK_MONOTONIC, &t);
-    return t.tv_sec * 1e3 + t.tv_nsec * 1e-6;
-}
-
-static int cmp(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return x < y ? -1 : x > y;
-}
+#include "bench_util.h"
 
 static long mirror_pixels(const fx_frame *f, const float rect[4])
 {
@@ -94,7 +83,7 @@ int main(int argc, char **argv)
                     if (r > 0) /* the first run warms caches and the pool */
                         t[r - 1] = dt;
                 }
-                qsort(t, (size_t)runs, sizeof *t, cmp);
+                qsort(t, (size_t)runs, sizeof *t, cmp_d);
                 long px = mirror_pixels(f, masks[m].r);
                 double med = t[runs / 2];
                 printf("%d,%d,%s,%d,%s,%ld,%.3f,%.3f,%.1f\n", fx_frame_width(f), fx_frame_height(f), presets[p],

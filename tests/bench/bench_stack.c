@@ -9,18 +9,7 @@
 #include <string.h>
 #include <time.h>
 
-static double now_ms(void)
-{
-    struct timespec t;
-    clock_gettime(CLOCK_MONOTONIC, &t);
-    return t.tv_sec * 1e3 + t.tv_nsec / 1e6;
-}
-
-static int cmp(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return x < y ? -1 : x > y;
-}
+#include "bench_util.h"
 
 int main(int argc, char **argv)
 {
@@ -67,8 +56,8 @@ int main(int argc, char **argv)
             ts[r] = now_ms() - t0;
             fx_frame_free(o);
         }
-        qsort(tc, (size_t)runs, sizeof *tc, cmp);
-        qsort(ts, (size_t)runs, sizeof *ts, cmp);
+        qsort(tc, (size_t)runs, sizeof *tc, cmp_d);
+        qsort(ts, (size_t)runs, sizeof *ts, cmp_d);
         printf("| %s | %.2f | %.2f | %.2f |\n", recipes[k][0], tc[runs / 2], ts[runs / 2], ts[runs / 2] / tc[runs / 2]);
         fx_stack_free(s);
     }

@@ -77,6 +77,7 @@ typedef struct fx_effect_run {
     int quality;            /* fx_quality the preset came from */
     int index;              /* position in the stack, for messages */
     const char *effect_name;
+    const char *where;      /* "effect <index> (<name>)": the prefix of this effect's messages */
     fx_frame *debug;        /* add debug passes here ("<name>" is prefixed by the stack), or NULL */
 } fx_effect_run;
 

@@ -867,6 +867,7 @@ fx_result fx_stack_run(fx_stack *s, const fx_frame *in, fx_frame **out)
             run.quality = quality;
             run.index = i;
             run.effect_name = e->cls->name;
+            run.where = where;
             run.debug = s->debug ? o : NULL;
             r = e->cls->process(&run);
             if (!r) {

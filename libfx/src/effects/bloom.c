@@ -302,8 +302,7 @@ static fx_result bloom_process(const fx_effect_run *run)
                    (size_t)(roi->x1 - roi->x0) * 4 * sizeof(float));
         return FX_OK;
     }
-    char where[96];
-    snprintf(where, sizeof where, "effect %d (bloom)", run->index);
+    const char *where = run->where;
     bloom_job j;
     memset(&j, 0, sizeof j);
     j.run = run;

@@ -269,8 +269,7 @@ static fx_result cel_process(const fx_effect_run *run)
                    (size_t)(roi->x1 - roi->x0) * 4 * sizeof(float));
         return FX_OK;
     }
-    char where[96];
-    snprintf(where, sizeof where, "effect %d (cel_shading)", run->index);
+    const char *where = run->where;
     cel_job j;
     memset(&j, 0, sizeof j);
     j.run = run;

@@ -163,8 +163,7 @@ static fx_result edges_process(const fx_effect_run *run)
                    (size_t)(roi->x1 - roi->x0) * 4 * sizeof(float));
         return FX_OK;
     }
-    char where[96];
-    snprintf(where, sizeof where, "effect %d (edges)", run->index);
+    const char *where = run->where;
     fx_edge_settings s;
     settings_of(p, &s);
     fx_edge_sources src;

@@ -70,8 +70,7 @@ static int gaussian_blur_halo(const void *params, int width, int height)
 static fx_result gaussian_blur_process(const fx_effect_run *run)
 {
     const gaussian_blur_params *p = run->params;
-    char where[96];
-    snprintf(where, sizeof where, "effect %d (gaussian_blur)", run->index);
+    const char *where = run->where;
     const int w = run->width;
     const fx_rect *roi = &run->roi;
     fx_result r;

@@ -295,8 +295,7 @@ static fx_result god_rays_process(const fx_effect_run *run)
     const int w = run->width, h = run->height;
     if (run->roi.x1 <= run->roi.x0 || run->roi.y1 <= run->roi.y0)
         return FX_OK;
-    char where[96];
-    snprintf(where, sizeof where, "effect %d (god_rays)", run->index);
+    const char *where = run->where;
     if (identity_params(p)) {
         copy_roi(run);
         return FX_OK;

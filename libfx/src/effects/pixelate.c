@@ -300,8 +300,7 @@ static fx_result pixelate_process(const fx_effect_run *run)
     const fx_rect *roi = &run->roi;
     if (roi->x1 <= roi->x0 || roi->y1 <= roi->y0)
         return FX_OK;
-    char where[96];
-    snprintf(where, sizeof where, "effect %d (pixelate)", run->index);
+    const char *where = run->where;
     int ox = 0, oy = 0, have_origin = 0;
     if (p->anchor == ANCHOR_WORLD && p->mode != MODE_SLICES) {
         fx_result wr = world_origin(run, p, where, &ox, &oy, &have_origin);

@@ -75,7 +75,7 @@ static fx_result posterize_process(const fx_effect_run *run)
     }
     post_job *j = fx_mem_alloc(sizeof *j);
     if (!j)
-        return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "effect %d (posterize): out of memory", run->index);
+        return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", run->where);
     j->run = run;
     j->p = p;
     fx_levels_init(&j->q, p->levels, p->space == SPACE_SRGB, p->white, p->dither, p->keep_hdr);

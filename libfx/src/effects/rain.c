@@ -194,8 +194,7 @@ static fx_result rain_process(const fx_effect_run *run)
     const fx_rect *roi = &run->roi;
     if (roi->x1 <= roi->x0 || roi->y1 <= roi->y0)
         return FX_OK;
-    char where[96];
-    snprintf(where, sizeof where, "effect %d (rain)", run->index);
+    const char *where = run->where;
     rain_job j;
     memset(&j, 0, sizeof j);
     j.run = run;

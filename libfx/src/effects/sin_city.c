@@ -389,7 +389,7 @@ static fx_result sin_city_process(const fx_effect_run *run)
         return FX_OK;
     }
     char where[96];
-    snprintf(where, sizeof where, "effect %d (sin_city) keep mask", run->index);
+    snprintf(where, sizeof where, "%s keep mask", run->where);
     sc_job *j = fx_mem_alloc(sizeof *j);
     if (!j)
         return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);

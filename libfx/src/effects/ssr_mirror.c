@@ -690,8 +690,7 @@ static fx_result ssr_process(const fx_effect_run *run)
     const fx_rect *roi = &run->roi;
     if (roi->x1 <= roi->x0 || roi->y1 <= roi->y0)
         return FX_OK;
-    char where[96];
-    snprintf(where, sizeof where, "effect %d (ssr_mirror)", run->index);
+    const char *where = run->where;
     ssr_frame F;
     memset(&F, 0, sizeof F);
     F.w = run->width;

@@ -278,8 +278,7 @@ static void mean_rows(void *user, int begin, int end)
 static fx_result caustics_process(const fx_effect_run *run)
 {
     const caustics_params *p = run->params;
-    char where[96];
-    snprintf(where, sizeof where, "effect %d (voronoi_caustics)", run->index);
+    const char *where = run->where;
     if (run->roi.x1 <= run->roi.x0 || run->roi.y1 <= run->roi.y0)
         return FX_OK;
     caustics_job j;

@@ -207,8 +207,7 @@ static fx_result vsm_process(const fx_effect_run *run)
     const fx_rect *roi = &run->roi;
     if (roi->x1 <= roi->x0 || roi->y1 <= roi->y0)
         return FX_OK;
-    char where[96];
-    snprintf(where, sizeof where, "effect %d (vsm_shadows)", run->index);
+    const char *where = run->where;
     vsm_job j;
     memset(&j, 0, sizeof j);
     j.run = run;

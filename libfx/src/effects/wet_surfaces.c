@@ -128,8 +128,7 @@ static fx_result wet_process(const fx_effect_run *run)
     const fx_rect *roi = &run->roi;
     if (roi->x1 <= roi->x0 || roi->y1 <= roi->y0)
         return FX_OK;
-    char where[96];
-    snprintf(where, sizeof where, "effect %d (wet_surfaces)", run->index);
+    const char *where = run->where;
     wet_job j;
     memset(&j, 0, sizeof j);
     j.run = run;
