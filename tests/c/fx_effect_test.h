@@ -62,6 +62,34 @@ static inline float *et_run(fx_context *ctx, fx_stack *s, const fx_frame *in)
     return copy;
 }
 
+/* Runs one effect with the given params (the inside of a JSON object, e.g. "\"sigma\": 2")
+ * and optional mask JSON on frame f; returns a malloc'ed copy of the output Combined. */
+static inline float *et_run_effect(fx_context *ctx, const char *effect, const fx_frame *f, const char *params,
+                                   const char *mask)
+{
+    char buf[2048];
+    snprintf(buf, sizeof buf, "{\"version\":1,\"effects\":[{\"effect\":\"%s\",\"params\":{%s}%s%s}]}",
+             effect, params, mask ? ",\"mask\":" : "", mask ? mask : "");
+    fx_stack *s = NULL;
+    float *o = NULL;
+    if (f && fx_stack_new(ctx, &s) == FX_OK && fx_stack_load_json(s, buf) == FX_OK)
+        o = et_run(ctx, s, f);
+    else
+        fprintf(stderr, "setup: %s\n", fx_context_error(ctx));
+    fx_stack_free(s);
+    return o;
+}
+
+/* The same on a w x h frame with Combined = px. */
+static inline float *et_run_effect_px(fx_context *ctx, const char *effect, const float *px, int w, int h,
+                                      const char *params, const char *mask)
+{
+    fx_frame *f = et_frame(ctx, w, h, px);
+    float *o = et_run_effect(ctx, effect, f, params, mask);
+    fx_frame_free(f);
+    return o;
+}
+
 /* 1 if every pixel outside rect [x, y, w, h] is bit-identical in a and b. */
 static inline int et_outside_equal(const float *a, const float *b, int W, int H, int rx, int ry, int rw, int rh)
 {

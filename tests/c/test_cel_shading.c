@@ -8,17 +8,7 @@
 
 static float *run_frame(fx_context *ctx, const fx_frame *f, const char *params, const char *mask)
 {
-    char buf[1024];
-    snprintf(buf, sizeof buf, "{\"version\":1,\"effects\":[{\"effect\":\"cel_shading\",\"params\":{%s}%s%s}]}",
-             params, mask ? ",\"mask\":" : "", mask ? mask : "");
-    fx_stack *s = NULL;
-    float *o = NULL;
-    if (fx_stack_new(ctx, &s) == FX_OK && fx_stack_load_json(s, buf) == FX_OK)
-        o = et_run(ctx, s, f);
-    else
-        fprintf(stderr, "setup: %s\n", fx_context_error(ctx));
-    fx_stack_free(s);
-    return o;
+    return et_run_effect(ctx, "cel_shading", f, params, mask);
 }
 
 /* w x 1: DiffDir ramps 0..1 (white light), DiffCol 0.5 red-ish, Combined = col x dir + 0.1 */

@@ -10,19 +10,7 @@
 
 static float *run_recipe(fx_context *ctx, const float *px, int w, int h, const char *params, const char *mask)
 {
-    char buf[1024];
-    snprintf(buf, sizeof buf, "{\"version\":1,\"effects\":[{\"effect\":\"posterize\",\"params\":{%s}%s%s}]}",
-             params, mask ? ",\"mask\":" : "", mask ? mask : "");
-    fx_frame *f = et_frame(ctx, w, h, px);
-    fx_stack *s = NULL;
-    float *o = NULL;
-    if (f && fx_stack_new(ctx, &s) == FX_OK && fx_stack_load_json(s, buf) == FX_OK)
-        o = et_run(ctx, s, f);
-    else
-        fprintf(stderr, "setup: %s\n", fx_context_error(ctx));
-    fx_stack_free(s);
-    fx_frame_free(f);
-    return o;
+    return et_run_effect_px(ctx, "posterize", px, w, h, params, mask);
 }
 
 static float enc(double v) /* sRGB encode in double, for expectations */

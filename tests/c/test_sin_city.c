@@ -10,25 +10,12 @@ float fx_cryptomatte_id(const char *name); /* internal (core/mask.h) */
 
 static float *run_frame(fx_context *ctx, const fx_frame *f, const char *params, const char *mask)
 {
-    char buf[2048];
-    snprintf(buf, sizeof buf, "{\"version\":1,\"effects\":[{\"effect\":\"sin_city\",\"params\":{%s}%s%s}]}",
-             params, mask ? ",\"mask\":" : "", mask ? mask : "");
-    fx_stack *s = NULL;
-    float *o = NULL;
-    if (fx_stack_new(ctx, &s) == FX_OK && fx_stack_load_json(s, buf) == FX_OK)
-        o = et_run(ctx, s, f);
-    else
-        fprintf(stderr, "setup: %s\n", fx_context_error(ctx));
-    fx_stack_free(s);
-    return o;
+    return et_run_effect(ctx, "sin_city", f, params, mask);
 }
 
 static float *run_px(fx_context *ctx, const float *px, int w, int h, const char *params, const char *mask)
 {
-    fx_frame *f = et_frame(ctx, w, h, px);
-    float *o = run_frame(ctx, f, params, mask);
-    fx_frame_free(f);
-    return o;
+    return et_run_effect_px(ctx, "sin_city", px, w, h, params, mask);
 }
 
 static int is_gray(const float *o, float g)
