@@ -13,31 +13,6 @@
 
 /* ---- matrices in JSON (rows, as the camera sidecar) ---- */
 
-static int read_m4(const cJSON *v, float out[16])
-{
-    int n = 0;
-    const cJSON *row;
-    if (!cJSON_IsArray(v))
-        return 0;
-    cJSON_ArrayForEach(row, v) {
-        if (cJSON_IsArray(row)) {
-            if (cJSON_GetArraySize(row) != 4)
-                return 0;
-            const cJSON *x;
-            cJSON_ArrayForEach(x, row) {
-                if (!cJSON_IsNumber(x) || n >= 16 || !isfinite(x->valuedouble))
-                    return 0;
-                out[n++] = (float)x->valuedouble;
-            }
-        } else {
-            if (!cJSON_IsNumber(row) || n >= 16 || !isfinite(row->valuedouble))
-                return 0;
-            out[n++] = (float)row->valuedouble;
-        }
-    }
-    return n == 16;
-}
-
 static cJSON *m4_json(const float m[16])
 {
     cJSON *rows = cJSON_CreateArray();
@@ -52,32 +27,6 @@ static cJSON *m4_json(const float m[16])
 
 static const char *const view_keys[] = {"name", "path", "world_to_camera", "projection",
                                         "clip_start", "clip_end", "orthographic", "kind", "signature"};
-
-/* One view entry -> camera; 0 with a message in err when malformed. */
-static int view_camera(const cJSON *v, fx_camera *cam, char *err, size_t err_size)
-{
-    memset(cam, 0, sizeof *cam);
-    cam->size = sizeof *cam;
-    const cJSON *cs = cJSON_GetObjectItemCaseSensitive(v, "clip_start");
-    const cJSON *ce = cJSON_GetObjectItemCaseSensitive(v, "clip_end");
-    if (!read_m4(cJSON_GetObjectItemCaseSensitive(v, "world_to_camera"), cam->world_to_camera) ||
-        !read_m4(cJSON_GetObjectItemCaseSensitive(v, "projection"), cam->projection)) {
-        snprintf(err, err_size, "\"world_to_camera\" and \"projection\" must be 4x4 matrices (rows of finite numbers)");
-        return 0;
-    }
-    if (!cJSON_IsNumber(cs) || !cJSON_IsNumber(ce) || !(cs->valuedouble >= 0) ||
-        !(ce->valuedouble > cs->valuedouble) || !isfinite(ce->valuedouble)) {
-        snprintf(err, err_size, "needs 0 <= \"clip_start\" < \"clip_end\" (finite)");
-        return 0;
-    }
-    cam->clip_start = (float)cs->valuedouble;
-    cam->clip_end = (float)ce->valuedouble;
-    cam->orthographic = cam->projection[15] == 1.0f && cam->projection[14] == 0.0f;
-    const cJSON *o = cJSON_GetObjectItemCaseSensitive(v, "orthographic");
-    if (cJSON_IsBool(o))
-        cam->orthographic = cJSON_IsTrue(o);
-    return 1;
-}
 
 fx_result fx_aux_views_check(fx_context *ctx, const cJSON *list)
 {
@@ -107,7 +56,7 @@ fx_result fx_aux_views_check(fx_context *ctx, const cJSON *list)
         }
         fx_camera cam;
         char err[256];
-        if (!view_camera(v, &cam, err, sizeof err))
+        if (!fx_camera_parse(v, 1, &cam, err, sizeof err))
             return fx_fail(ctx, FX_ERR_BAD_RECIPE, "sidecar: aux_views[%d] ('%s'): %s", i, name->valuestring, err);
         i++;
     }
@@ -272,7 +221,7 @@ fx_result fx_aux_view_load(const fx_frame *f, const char *name, const char *wher
     }
     fx_camera cam;
     char err[256];
-    if (fx_aux_views_check(ctx, list) || !view_camera(found, &cam, err, sizeof err)) {
+    if (fx_aux_views_check(ctx, list) || !fx_camera_parse(found, 1, &cam, err, sizeof err)) {
         cJSON_Delete(list);
         return fx_fail(ctx, FX_ERR_BAD_FILE, "%s: the frame's aux view list is malformed", where);
     }

@@ -35,6 +35,40 @@ static int read_matrix(const cJSON *v, float out[16])
     return n == 16;
 }
 
+/* A camera object of the sidecar (or of an aux view): matrices as 4 rows of 4 (or 16
+ * numbers), the clip range, and "orthographic" (else inferred from the projection).
+ * Aux views may start at clip 0 (an orthographic depth view). 0 and a message in err
+ * when malformed. */
+int fx_camera_parse(const cJSON *obj, int zero_clip_start_ok, fx_camera *cam, char *err, size_t err_size)
+{
+    memset(cam, 0, sizeof *cam);
+    cam->size = sizeof *cam;
+    const cJSON *cs = cJSON_GetObjectItemCaseSensitive(obj, "clip_start");
+    const cJSON *ce = cJSON_GetObjectItemCaseSensitive(obj, "clip_end");
+    if (!read_matrix(cJSON_GetObjectItemCaseSensitive(obj, "world_to_camera"), cam->world_to_camera)) {
+        snprintf(err, err_size, "\"world_to_camera\" must be a 4x4 matrix (4 rows of 4 finite numbers)");
+        return 0;
+    }
+    if (!read_matrix(cJSON_GetObjectItemCaseSensitive(obj, "projection"), cam->projection)) {
+        snprintf(err, err_size, "\"projection\" must be a 4x4 matrix (4 rows of 4 finite numbers)");
+        return 0;
+    }
+    if (!cJSON_IsNumber(cs) || !cJSON_IsNumber(ce) ||
+        !(zero_clip_start_ok ? cs->valuedouble >= 0 : cs->valuedouble > 0) ||
+        !(ce->valuedouble > cs->valuedouble) || !isfinite(ce->valuedouble)) {
+        snprintf(err, err_size, "needs %s \"clip_start\" < \"clip_end\" (finite)", zero_clip_start_ok ? "0 <=" : "0 <");
+        return 0;
+    }
+    cam->clip_start = (float)cs->valuedouble;
+    cam->clip_end = (float)ce->valuedouble;
+    /* OpenGL projections: perspective has -1 in the last row's z, orthographic 1 in w. */
+    cam->orthographic = cam->projection[15] == 1.0f && cam->projection[14] == 0.0f;
+    const cJSON *o = cJSON_GetObjectItemCaseSensitive(obj, "orthographic");
+    if (cJSON_IsBool(o))
+        cam->orthographic = cJSON_IsTrue(o);
+    return 1;
+}
+
 static const char *const sidecar_keys[] = {"world_to_camera", "projection", "clip_start", "clip_end",
                                             "orthographic", "lights", "frame", "fps", "scene", "camera",
                                             "aux_views"};
@@ -52,30 +86,12 @@ fx_result fx_camera_from_json(fx_context *ctx, const char *json, fx_camera *out)
         return fx_fail(ctx, FX_ERR_BAD_RECIPE, "camera: not a JSON object");
     }
     fx_camera cam;
-    memset(&cam, 0, sizeof cam);
-    cam.size = sizeof cam;
+    char err[256];
     fx_result r = FX_OK;
-    const cJSON *w2c = cJSON_GetObjectItemCaseSensitive(root, "world_to_camera");
-    const cJSON *proj = cJSON_GetObjectItemCaseSensitive(root, "projection");
-    const cJSON *cs = cJSON_GetObjectItemCaseSensitive(root, "clip_start");
-    const cJSON *ce = cJSON_GetObjectItemCaseSensitive(root, "clip_end");
-    if (!read_matrix(w2c, cam.world_to_camera))
-        r = fx_fail(ctx, FX_ERR_BAD_RECIPE, "camera: \"world_to_camera\" must be a 4x4 matrix (4 rows of 4 finite numbers)");
-    else if (!read_matrix(proj, cam.projection))
-        r = fx_fail(ctx, FX_ERR_BAD_RECIPE, "camera: \"projection\" must be a 4x4 matrix (4 rows of 4 finite numbers)");
-    else if (!cJSON_IsNumber(cs) || !cJSON_IsNumber(ce) || !(cs->valuedouble > 0) ||
-             !(ce->valuedouble > cs->valuedouble) || !isfinite(ce->valuedouble))
-        r = fx_fail(ctx, FX_ERR_BAD_RECIPE, "camera: needs 0 < \"clip_start\" < \"clip_end\"");
-    if (!r) {
-        cam.clip_start = (float)cs->valuedouble;
-        cam.clip_end = (float)ce->valuedouble;
-        /* OpenGL projections: perspective has -1 in the last row's z, orthographic 1 in w. */
-        cam.orthographic = cam.projection[15] == 1.0f && cam.projection[14] == 0.0f;
-        const cJSON *ortho = cJSON_GetObjectItemCaseSensitive(root, "orthographic");
-        if (cJSON_IsBool(ortho))
-            cam.orthographic = cJSON_IsTrue(ortho);
+    if (!fx_camera_parse(root, 0, &cam, err, sizeof err))
+        r = fx_fail(ctx, FX_ERR_BAD_RECIPE, "camera: %s", err);
+    else
         *out = cam;
-    }
     cJSON_Delete(root);
     return r;
 }

@@ -128,6 +128,12 @@ fx_result fx_frame_new_like(const fx_frame *f, fx_frame **out);
  * Runs in parallel on ctx's pool. */
 size_t fx_sanitize_floats(fx_context *ctx, float *data, size_t count);
 
+/* ---- cameras in JSON ---- */
+struct cJSON;
+/* Parses a camera object (sidecar or aux view); 0 with a message in err when malformed.
+ * zero_clip_start_ok: aux depth views may start at clip 0. */
+int fx_camera_parse(const struct cJSON *obj, int zero_clip_start_ok, fx_camera *cam, char *err, size_t err_size);
+
 /* ---- text files ---- */
 /* Reads a whole text file (NUL-terminated, freed with fx_mem_free); `what` names it in
  * messages ("recipe", "sidecar"). Larger than max_bytes: FX_ERR_BAD_RECIPE. */
