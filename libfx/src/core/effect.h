@@ -118,6 +118,10 @@ const fx_param_def *fx_effect_find_param(const fx_effect_class *cls, const char 
  * (not an error) or on failure (then *result says why). */
 float *fx_effect_debug_pass(const fx_effect_run *run, const char *name, int channels, fx_result *result);
 
+/* Copies src to dst inside the ROI and returns FX_OK: what an effect does when its
+ * parameters make it the identity (zero strength), per the "early return" rule. */
+fx_result fx_effect_pass_through(const fx_effect_run *run);
+
 /* Parameter storage helpers (core/params.c). */
 void fx_params_set_defaults(const fx_effect_class *cls, void *params);
 

@@ -752,6 +752,17 @@ float *fx_effect_debug_pass(const fx_effect_run *run, const char *name, int chan
     return buf;
 }
 
+fx_result fx_effect_pass_through(const fx_effect_run *run)
+{
+    const fx_rect *roi = &run->roi;
+    if (roi->x1 <= roi->x0)
+        return FX_OK;
+    for (int y = roi->y0; y < roi->y1; y++)
+        memcpy(run->dst + ((size_t)y * run->width + roi->x0) * 4, run->src + ((size_t)y * run->width + roi->x0) * 4,
+               (size_t)(roi->x1 - roi->x0) * 4 * sizeof(float));
+    return FX_OK;
+}
+
 static fx_result check_passes(const fx_stack *s, const fx_frame *in, fx_pass_set set, const char *where)
 {
     for (int i = 0; i < FX_PASS_COUNT; i++) {

@@ -10,6 +10,7 @@
 #include "core/parallel.h"
 #include "math/blur.h"
 #include "math/color.h"
+#include "math/simd4.h"
 
 #include <float.h>
 #include <math.h>
@@ -19,9 +20,6 @@
 
 /* GCC vector extensions: one RGBA pixel per v4f (SSE2 in the baseline build), only inside
  * inline helpers and the row loops. */
-typedef float v4f __attribute__((vector_size(16)));
-typedef int32_t v4i __attribute__((vector_size(16)));
-#define V4(v) ((v4f){ (v), (v), (v), (v) })
 
 static inline v4f ld4(const float *p)
 {
@@ -33,18 +31,6 @@ static inline v4f ld4(const float *p)
 static inline void st4(float *p, v4f v)
 {
     memcpy(p, &v, sizeof v);
-}
-
-static inline v4f sel4(v4i m, v4f a, v4f b)
-{
-    return (v4f)(((v4i)a & m) | ((v4i)b & ~m));
-}
-
-static inline v4f finite4(v4f v) /* NaN -> 0, +-Inf -> +-FLT_MAX */
-{
-    v = sel4(v == v, v, V4(0.0f));
-    v = sel4(v > V4(FLT_MAX), V4(FLT_MAX), v);
-    return sel4(v < V4(-FLT_MAX), V4(-FLT_MAX), v);
 }
 
 typedef struct bloom_params {

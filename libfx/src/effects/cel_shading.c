@@ -12,6 +12,7 @@
 #include "math/color.h"
 #include "math/edge_ops.h"
 #include "math/vec.h"
+#include "math/simd4.h"
 
 #include <float.h>
 #include <math.h>
@@ -161,21 +162,6 @@ static inline float ramp_q(const cel_job *j, float t)
 }
 
 /* GCC vector helpers: one RGBA pixel per v4f (SSE2 in the baseline build). */
-typedef float v4f __attribute__((vector_size(16)));
-typedef int v4i __attribute__((vector_size(16)));
-#define V4(v) ((v4f){ (v), (v), (v), (v) })
-
-static inline v4f sel4(v4i m, v4f a, v4f b)
-{
-    return (v4f)(((v4i)a & m) | ((v4i)b & ~m));
-}
-
-static inline v4f finite4(v4f v) /* NaN -> 0, +-Inf -> +-FLT_MAX */
-{
-    v = sel4(v == v, v, V4(0.0f));
-    v = sel4(v > V4(FLT_MAX), V4(FLT_MAX), v);
-    return sel4(v < V4(-FLT_MAX), V4(-FLT_MAX), v);
-}
 
 static inline v4f load3(const float *p, int ch) /* 3 channels (of ch >= 3), lane 3 = 0 */
 {
@@ -263,12 +249,8 @@ static fx_result cel_process(const fx_effect_run *run)
     const fx_rect *roi = &run->roi;
     if (roi->x1 <= roi->x0 || roi->y1 <= roi->y0)
         return FX_OK;
-    if (!(p->mix > 0.0f)) {
-        for (int y = roi->y0; y < roi->y1; y++)
-            memcpy(run->dst + ((size_t)y * run->width + roi->x0) * 4, run->src + ((size_t)y * run->width + roi->x0) * 4,
-                   (size_t)(roi->x1 - roi->x0) * 4 * sizeof(float));
-        return FX_OK;
-    }
+    if (!(p->mix > 0.0f))
+        return fx_effect_pass_through(run); /* zero strength: the identity */
     const char *where = run->where;
     cel_job j;
     memset(&j, 0, sizeof j);

@@ -135,13 +135,8 @@ static fx_result color_matrix_process(const fx_effect_run *run)
     const fx_rect *roi = &run->roi;
     if (roi->x1 <= roi->x0 || roi->y1 <= roi->y0)
         return FX_OK;
-    if (p->mix <= 0.0f) {
-        for (int y = roi->y0; y < roi->y1; y++)
-            memcpy(run->dst + ((size_t)y * run->width + roi->x0) * 4,
-                   run->src + ((size_t)y * run->width + roi->x0) * 4,
-                   (size_t)(roi->x1 - roi->x0) * 4 * sizeof(float));
-        return FX_OK;
-    }
+    if (p->mix <= 0.0f)
+        return fx_effect_pass_through(run); /* zero strength: the identity */
     cm_job j;
     j.src = run->src;
     j.dst = run->dst;

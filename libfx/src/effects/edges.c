@@ -5,6 +5,7 @@
 #include "core/effect.h"
 #include "core/parallel.h"
 #include "math/edge_ops.h"
+#include "math/simd4.h"
 
 #include <float.h>
 #include <math.h>
@@ -107,13 +108,6 @@ typedef struct draw_job {
     const float *matte;
 } draw_job;
 
-typedef float v4f __attribute__((vector_size(16)));
-typedef int v4i __attribute__((vector_size(16)));
-
-static inline v4f sel4(v4i m, v4f a, v4f b)
-{
-    return (v4f)(((v4i)a & m) | ((v4i)b & ~m));
-}
 
 /* d = s + a (t - s) per pixel, one RGBA vector at a time; NaN -> 0, +-Inf -> +-FLT_MAX. */
 static void draw_rows(void *user, int begin, int end)
@@ -156,13 +150,8 @@ static fx_result edges_process(const fx_effect_run *run)
     if (roi->x1 <= roi->x0 || roi->y1 <= roi->y0)
         return FX_OK;
     if (!(p->opacity > 0.0f) ||
-        !(p->luminance || p->depth || p->normal || p->object_id || p->material_id)) {
-        for (int y = roi->y0; y < roi->y1; y++)
-            memcpy(run->dst + ((size_t)y * run->width + roi->x0) * 4,
-                   run->src + ((size_t)y * run->width + roi->x0) * 4,
-                   (size_t)(roi->x1 - roi->x0) * 4 * sizeof(float));
-        return FX_OK;
-    }
+        !(p->luminance || p->depth || p->normal || p->object_id || p->material_id))
+        return fx_effect_pass_through(run); /* zero strength: the identity */
     const char *where = run->where;
     fx_edge_settings s;
     settings_of(p, &s);

@@ -2,6 +2,7 @@
 #include "math/levels.h"
 
 #include "math/color.h"
+#include "math/simd4.h"
 
 #include <float.h>
 #include <string.h>
@@ -104,21 +105,6 @@ float fx_levels_apply_reference(const fx_levels *q, float v, int x, int y)
 #if defined(__GNUC__) && !defined(__clang__)
 #  pragma GCC diagnostic ignored "-Wpsabi"
 #endif
-typedef float v4f __attribute__((vector_size(16)));
-typedef int32_t v4i __attribute__((vector_size(16)));
-
-static inline v4f sel(v4i m, v4f a, v4f b) /* m ? a : b, lane-wise */
-{
-    return (v4f)(((v4i)a & m) | ((v4i)b & ~m));
-}
-
-static inline v4f finite4(v4f v) /* NaN -> 0, +-Inf -> +-FLT_MAX */
-{
-    const v4f big = { FLT_MAX, FLT_MAX, FLT_MAX, FLT_MAX }, nbig = -big, zero = { 0, 0, 0, 0 };
-    v = sel(v == v, v, zero);
-    v = sel(v > big, big, v);
-    return sel(v < nbig, nbig, v);
-}
 
 
 typedef float v8f __attribute__((vector_size(32)));
@@ -155,10 +141,10 @@ static inline void pixel4(const fx_levels *q, const float *sp, float *dp, int ph
         o[c] = q->value[fx_levels_band(q, u[c], ph)];
     const v4f top = { 3.4e38f, 3.4e38f, 3.4e38f, 3.4e38f };
     const v4i hdr = { -q->keep_hdr, -q->keep_hdr, -q->keep_hdr, -q->keep_hdr };
-    o = sel(hdr & (u >= (v4f){ 1, 1, 1, 1 }), sel(v < top, v, top), o);
+    o = sel4(hdr & (u >= (v4f){ 1, 1, 1, 1 }), sel4(v < top, v, top), o);
     if (mix < 1.0f)
         o = s + (v4f){ mix, mix, mix, mix } * (o - s);
-    o = sel((v4i){ 0, 0, 0, -1 }, s, o);
+    o = sel4((v4i){ 0, 0, 0, -1 }, s, o);
     o = finite4(o);
     memcpy(dp, &o, sizeof o);
 }

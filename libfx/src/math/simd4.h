@@ -1,0 +1,28 @@
+/* Four-lane float vectors (GCC/Clang vector extensions): one RGBA pixel per vector, or
+ * four values at once. Branch-free lane selects, so loops stay vectorised. */
+#ifndef LIBFX_MATH_SIMD4_H
+#define LIBFX_MATH_SIMD4_H
+
+#include <float.h>
+#include <stdint.h>
+
+typedef float v4f __attribute__((vector_size(16)));
+typedef int32_t v4i __attribute__((vector_size(16)));
+
+#define V4(v) ((v4f){ (v), (v), (v), (v) })
+
+/* m ? a : b, lane by lane (m from a vector comparison: all ones or zero) */
+static inline v4f sel4(v4i m, v4f a, v4f b)
+{
+    return (v4f)(((v4i)a & m) | ((v4i)b & ~m));
+}
+
+/* NaN -> 0, +-Inf -> +-FLT_MAX */
+static inline v4f finite4(v4f v)
+{
+    v = sel4(v == v, v, V4(0.0f));
+    v = sel4(v > V4(FLT_MAX), V4(FLT_MAX), v);
+    return sel4(v < V4(-FLT_MAX), V4(-FLT_MAX), v);
+}
+
+#endif
