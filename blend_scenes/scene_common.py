@@ -677,12 +677,19 @@ def print_index_table():
 
 
 def run_main(main):
-    """Run a builder; exit non-zero on failure (exceptions in -b --python
-    scripts otherwise still exit 0)."""
+    """Run a script's main() under `blender -b --python`; exit non-zero on failure
+    (exceptions there otherwise still exit 0): 2 for a usage error (SystemExit with a
+    message), 1 for anything else."""
     import sys
     import traceback
     try:
         main()
+    except SystemExit as e:
+        if e.code in (None, 0):
+            return
+        print(e)
+        sys.stdout.flush()
+        os._exit(2)
     except Exception:
         traceback.print_exc()
         sys.stdout.flush()

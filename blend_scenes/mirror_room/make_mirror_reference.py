@@ -30,6 +30,9 @@ import sys
 
 import bpy
 
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+import scene_common as sc  # noqa: E402
+
 HERE = os.path.dirname(os.path.abspath(__file__))
 BLEND = os.path.join(HERE, "mirror_room.blend")
 
@@ -156,14 +159,4 @@ def main():
 
 
 if __name__ == "__main__":
-    try:
-        main()
-    except SystemExit as e:
-        print(e)
-        sys.stdout.flush()
-        os._exit(2)
-    except Exception:
-        import traceback
-        traceback.print_exc()
-        sys.stdout.flush()
-        os._exit(1)
+    sc.run_main(main)

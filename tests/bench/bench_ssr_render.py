@@ -145,14 +145,6 @@ def main():
 
 
 if __name__ == "__main__":
-    try:
-        main()
-    except SystemExit as e:
-        print(e)
-        sys.stdout.flush()
-        os._exit(2)
-    except Exception:
-        import traceback
-        traceback.print_exc()
-        sys.stdout.flush()
-        os._exit(1)
+    sys.path.insert(0, os.path.dirname(SCENE_DIR))
+    import scene_common  # noqa: E402
+    scene_common.run_main(main)
