@@ -13,24 +13,6 @@
 #include <string.h>
 #include <unistd.h>
 
-static char *slurp(const char *path, size_t *len)
-{
-    FILE *fp = fopen(path, "rb");
-    if (!fp)
-        return NULL;
-    fseek(fp, 0, SEEK_END);
-    long n = ftell(fp);
-    fseek(fp, 0, SEEK_SET);
-    char *b = malloc((size_t)n + 1);
-    if (b && fread(b, 1, (size_t)n, fp) != (size_t)n) {
-        free(b);
-        b = NULL;
-    }
-    fclose(fp);
-    *len = (size_t)n;
-    return b;
-}
-
 /* Same passes, same channels, same bits. */
 static int frames_equal(const fx_frame *a, const fx_frame *b)
 {
@@ -115,7 +97,7 @@ int main(void)
             p.zip_level = codecs[k].level;
             fx_write_options wo = {sizeof wo, 0, 0, NULL, NULL};
             CHECK_OK(ctx[t], fx_exr_write(src[t], path, &wo, &p));
-            bytes[t] = slurp(path, &len[t]);
+            bytes[t] = tu_slurp(path, &len[t]);
             fx_frame *back = NULL;
             CHECK_OK(ctx[t], fx_frame_read_exr(ctx[t], path, NULL, &back));
             CHECK(back && frames_equal(src[t], back));
@@ -141,7 +123,7 @@ int main(void)
         CHECK_OK(ctx[1], fx_frame_write_exr(src[1], a, NULL));
         CHECK_OK(ctx[1], fx_exr_write(src[1], b, NULL, &p));
         size_t la = 0, lb = 0;
-        char *ba = slurp(a, &la), *bb = slurp(b, &lb);
+        char *ba = tu_slurp(a, &la), *bb = tu_slurp(b, &lb);
         CHECK(ba && bb && la == lb && memcmp(ba, bb, la) == 0);
         free(ba);
         free(bb);
@@ -168,7 +150,7 @@ int main(void)
         snprintf(bad, sizeof bad, "%s/bad.exr", dir);
         CHECK_OK(ctx[0], fx_frame_write_exr(src[0], good, NULL));
         size_t len = 0;
-        char *b = slurp(good, &len);
+        char *b = tu_slurp(good, &len);
         CHECK(b && len > 4096);
         if (b && len > 4096) {
             /* garbage over the compressed data of a few chunks past the middle */

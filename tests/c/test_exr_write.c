@@ -37,24 +37,6 @@ static int has_temp_file(const char *dir)
     return found;
 }
 
-static char *slurp(const char *path, size_t *len)
-{
-    FILE *fp = fopen(path, "rb");
-    if (!fp)
-        return NULL;
-    fseek(fp, 0, SEEK_END);
-    long n = ftell(fp);
-    fseek(fp, 0, SEEK_SET);
-    char *b = malloc((size_t)n + 1);
-    if (b && fread(b, 1, (size_t)n, fp) != (size_t)n) {
-        free(b);
-        b = NULL;
-    }
-    fclose(fp);
-    *len = (size_t)n;
-    return b;
-}
-
 /* A frame with awkward values and several kinds of passes. */
 static fx_frame *rich_frame(fx_context *ctx, int w, int h)
 {
@@ -238,13 +220,13 @@ static void test_refusals(fx_context *ctx, const char *dir)
     fx_write_options wo = {sizeof wo, 0, 0, NULL, NULL};
     CHECK_OK(ctx, fx_frame_write_exr(f, in, &wo));
     size_t len0 = 0, len1 = 0;
-    char *before = slurp(in, &len0);
+    char *before = tu_slurp(in, &len0);
 
     fx_frame *g = tu_pattern_frame(ctx, 8, 8, 2);
     fx_write_options same = {sizeof same, 0, 0, in, NULL};
     CHECK_FAIL(ctx, fx_frame_write_exr(g, alias, &same), FX_ERR_INVALID_ARGUMENT,
                "refusing to overwrite the input file");
-    char *after = slurp(in, &len1);
+    char *after = tu_slurp(in, &len1);
     CHECK(before && after && len0 == len1 && memcmp(before, after, len0) == 0);
     free(before), free(after);
 

@@ -28,25 +28,6 @@ static int accepted_error(fx_result r, const char *msg, const char *what)
     return 0;
 }
 
-static char *read_file(const char *path)
-{
-    FILE *f = fopen(path, "rb");
-    if (!f)
-        return NULL;
-    fseek(f, 0, SEEK_END);
-    long n = ftell(f);
-    fseek(f, 0, SEEK_SET);
-    char *s = malloc((size_t)n + 1);
-    if (s && fread(s, 1, (size_t)n, f) != (size_t)n) {
-        free(s);
-        s = NULL;
-    }
-    if (s)
-        s[n] = 0;
-    fclose(f);
-    return s;
-}
-
 /* The recipe parser: the stack keeps its previous content on every failure. */
 static void oom_recipe(fx_context *ctx, const char *name, const char *json)
 {
@@ -224,7 +205,7 @@ int main(void)
     for (int i = 0; data && i < FX_COUNT_OF(recipes); i++) {
         char path[1024];
         snprintf(path, sizeof path, "%s/../../blend_scenes/%s", data, recipes[i]);
-        char *json = read_file(path);
+        char *json = tu_slurp(path, NULL);
         if (json)
             oom_recipe(ctx, recipes[i], json);
         free(json);

@@ -77,3 +77,24 @@ const char *tu_tmpdir(const char *name)
     mkdir(path, 0700);
     return path;
 }
+
+char *tu_slurp(const char *path, size_t *len)
+{
+    FILE *fp = fopen(path, "rb");
+    if (!fp)
+        return NULL;
+    fseek(fp, 0, SEEK_END);
+    long n = ftell(fp);
+    fseek(fp, 0, SEEK_SET);
+    char *b = n >= 0 ? malloc((size_t)n + 1) : NULL;
+    if (b && fread(b, 1, (size_t)n, fp) != (size_t)n) {
+        free(b);
+        b = NULL;
+    }
+    fclose(fp);
+    if (b)
+        b[n] = '\0';
+    if (len)
+        *len = b ? (size_t)n : 0;
+    return b;
+}

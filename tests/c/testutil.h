@@ -51,6 +51,8 @@ fx_frame *tu_pattern_frame(fx_context *ctx, int w, int h, unsigned seed);
 /* Max |a-b| over n floats, and whether every value is finite. */
 double tu_max_abs_diff(const float *a, const float *b, size_t n);
 int tu_all_finite(const float *a, size_t n);
+/* A whole file, NUL-terminated, malloc'ed (len may be NULL); NULL if unreadable. */
+char *tu_slurp(const char *path, size_t *len);
 /* A fresh empty directory under /tmp for this test; returns its path (static storage). */
 const char *tu_tmpdir(const char *name);
 
