@@ -259,6 +259,22 @@ static int shading_normal(const ssr_job *j, int x, int y, fx_vec3 pos, fx_vec3 i
 }
 
 /* Traces the reflection of pixel (x, y) of this mirror; fills *h. */
+/* How much of a hit to keep: fades towards the screen border (edge_fade), and 0 for a
+ * surface seen from behind (its normal along the ray), which is not what a mirror shows. */
+static float hit_fade(const ssr_job *j, const ssr_frame *F, const fx_ssr_hit *hit, fx_vec3 r)
+{
+    float fade = 1.0f;
+    if (j->p->edge_fade > 0.0f) {
+        float ex = fminf(hit->px, (float)F->w - hit->px) / (j->p->edge_fade * (float)F->w);
+        float ey = fminf(hit->py, (float)F->h - hit->py) / (j->p->edge_fade * (float)F->h);
+        fade = fx_smoothstep(0.0f, 1.0f, fminf(ex, ey));
+    }
+    fx_vec3 hn;
+    if (view_normal_at(F, hit->ix, hit->iy, &hn) && fx_v3_dot(hn, r) > 0.25f)
+        fade = 0.0f;
+    return fade;
+}
+
 static void trace_pixel(const ssr_job *j, int x, int y, cell_hit *h)
 {
     const ssr_frame *F = j->F;
@@ -278,16 +294,7 @@ static void trace_pixel(const ssr_job *j, int x, int y, cell_hit *h)
     fx_ssr_hit hit;
     if (!fx_ssr_trace(&F->scene, &j->st, o, r, &hit))
         return;
-    float fade = 1.0f;
-    if (j->p->edge_fade > 0.0f) {
-        float ex = fminf(hit.px, (float)F->w - hit.px) / (j->p->edge_fade * (float)F->w);
-        float ey = fminf(hit.py, (float)F->h - hit.py) / (j->p->edge_fade * (float)F->h);
-        fade = fx_smoothstep(0.0f, 1.0f, fminf(ex, ey));
-    }
-    /* a surface seen from behind (its normal along the ray) is not what a mirror shows */
-    fx_vec3 hn;
-    if (view_normal_at(F, hit.ix, hit.iy, &hn) && fx_v3_dot(hn, r) > 0.25f)
-        fade = 0.0f;
+    float fade = hit_fade(j, F, &hit, r);
     h->px = hit.px;
     h->py = hit.py;
     h->conf = fade;
@@ -435,15 +442,7 @@ static void ray_colour(const ssr_job *j, fx_vec3 ro, fx_vec3 rd, float px, float
     fx_ssr_hit hit;
     if (!fx_ssr_trace(&F->scene, &j->st, o, r, &hit))
         return;
-    float fade = 1.0f;
-    if (j->p->edge_fade > 0.0f) {
-        float ex = fminf(hit.px, (float)F->w - hit.px) / (j->p->edge_fade * (float)F->w);
-        float ey = fminf(hit.py, (float)F->h - hit.py) / (j->p->edge_fade * (float)F->h);
-        fade = fx_smoothstep(0.0f, 1.0f, fminf(ex, ey));
-    }
-    fx_vec3 hn;
-    if (view_normal_at(F, hit.ix, hit.iy, &hn) && fx_v3_dot(hn, r) > 0.25f)
-        fade = 0.0f;
+    float fade = hit_fade(j, F, &hit, r);
     if (!(fade > 0.0f))
         return;
     float next[3], tex[3], est[3] = { rgb[0], rgb[1], rgb[2] };
