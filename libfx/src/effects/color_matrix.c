@@ -27,13 +27,15 @@ static const float identity16[16] = { 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 
 static const fx_param_def color_matrix_param_defs[] = {
     FX_P_ENUM(color_matrix_params, op, "operator", OP_GRAY_LUMINANCE, op_items,
               "grayscale_average: (R+G+B)/3; grayscale_luminance: Rec.709 weights "
-              "0.2126/0.7152/0.0722; sepia: the classic sepia matrix; custom: the matrix "
+              "0.2126/0.7152/0.0722; sepia: the classic sepia matrix (rows 0.393 0.769 0.189 / "
+              "0.349 0.686 0.168 / 0.272 0.534 0.131); custom: the matrix "
               "parameter. Named operators leave alpha untouched"),
     FX_P_FLOATS(color_matrix_params, matrix, "matrix", 16, identity16, -1000.0, 1000.0, "matrix4",
                 "Row-major 4x4 matrix acting on (R,G,B,A) for operator custom (a 3x3 is accepted "
                 "and embedded with alpha kept)"),
     FX_P_FLOAT(color_matrix_params, mix, "mix", 1.0, 0.0, 1.0, 0.0, 1.0, "factor",
-               "Blend between the original (0) and the transformed colour (1)"),
+               "Blend between the original (0: an exact copy) and the transformed colour (1): "
+               "out = p + mix (M p - p)"),
 };
 
 /* The effective matrix of the params (row-major, on RGBA); named operators come from

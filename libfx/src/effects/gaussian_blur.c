@@ -26,7 +26,9 @@ static const fx_param_def gaussian_blur_param_defs[] = {
                "(also for paper_5x5)"),
     FX_P_ENUM(gaussian_blur_params, kernel, "kernel", KERNEL_GAUSSIAN, kernel_items,
               "gaussian: separable Gaussian of the given sigma; paper_5x5: the fixed 5x5 kernel "
-              "1/273 [1 4 7 4 1; 4 16 26 16 4; 7 26 41 26 7; ...] applied as a true 2-D kernel"),
+              "1/273 [1 4 7 4 1; 4 16 26 16 4; 7 26 41 26 7; ...] applied as a true 2-D kernel "
+              "(not separable); it ignores sigma and algorithm, except that sigma below 0.2 "
+              "is still the identity"),
     FX_P_ENUM(gaussian_blur_params, algorithm, "algorithm", FX_BLUR_RECURSIVE, algorithm_items,
               "box: repeated extended box filters (fast, cost independent of sigma); recursive: "
               "Deriche 4th-order IIR (cost independent of sigma, max error 0.3% of the peak); "

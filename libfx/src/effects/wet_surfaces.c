@@ -35,11 +35,15 @@ typedef struct wet_params {
 static const float default_sky[3] = {0.55f, 0.62f, 0.72f};
 
 static const fx_param_def wet_param_defs[] = {
-    FX_P_FLOAT(wet_params, wetness, "wetness", 1.0, 0.0, 1.0, 0.0, 1.0, "factor", "Overall wetness (0: identity)"),
+    FX_P_FLOAT(wet_params, wetness, "wetness", 1.0, 0.0, 1.0, 0.0, 1.0, "factor",
+               "Overall wetness; a pixel's wetness is this x its exposure in the rain map x "
+               "its facing (up 1, walls wall_wetness, down 0); 0: identity"),
     FX_P_FLOAT(wet_params, darken, "darken", 0.35, 0.0, 1.0, 0.0, 0.8, "factor",
-               "How much wet albedo darkens the surface"),
+               "How much water darkens the surface: wet pixels are scaled by 1 - darken x "
+               "wetness (0: no darkening)"),
     FX_P_FLOAT(wet_params, specular, "specular", 0.8, 0.0, 10.0, 0.0, 2.0, "",
-               "Strength of the wet film's sky reflection"),
+               "Strength of the wet film's reflection of sky_color, times wetness and Schlick's "
+               "Fresnel (F0 0.02, water): strongest at grazing angles"),
     FX_P_FLOATS(wet_params, sky, "sky_color", 3, default_sky, 0.0, 1e4, "color", "Radiance the wet film reflects"),
     FX_P_FLOAT(wet_params, up_threshold, "up_threshold", 0.7, 0.0, 1.0, 0.3, 0.95, "",
                "Normals with a world Z at least this face up (fully wet)"),
