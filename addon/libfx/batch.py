@@ -6,7 +6,18 @@
 
 Blender exits 0 even when a handler raises (GUIDE §3); this runner exits 1 if
 any frame's stack failed (the message names the frame and the effect), 2 on a
-usage or setup error, 0 when every frame was written.
+usage or setup error, 0 when every frame was written.  The contract a render
+farm relies on (docs/farm.md; tests/blender/test_batch_contract.py):
+
+- frames in, one result per frame: ``--frames 1-3`` / ``1,3`` / ``2-3`` writes
+  <prefix>libfx.0001.exr ... and nothing for other frames; a bad range exits 2
+  before anything renders;
+- a frame's result exists only when that frame succeeded: its old results (and
+  temporary files an interrupted writer left) are removed before it renders and
+  after it fails; the library writes temp + rename, so no partial file appears;
+- ``--skip-existing`` skips a frame only when its results are complete (the
+  EXR reads back whole, the image loads), so a re-queued chunk renders only what
+  is missing or damaged.
 
 Per frame it writes, beside the output prefix:
   <prefix>####.<ext>               Blender's own render (as the scene is set up)
@@ -18,6 +29,7 @@ Per frame it writes, beside the output prefix:
 """
 
 import argparse
+import glob
 import os
 import sys
 
@@ -29,24 +41,37 @@ def _argv():
     return argv[argv.index("--") + 1:] if "--" in argv else []
 
 
-def parse_frames(text, scene):
-    if not text:
-        return list(range(scene.frame_start, scene.frame_end + 1, max(1, scene.frame_step)))
+def parse_frame_list(text):
+    """'1-3', '1,3,5-7', '2..4' (Blender's notation) -> frames in order, each once.
+    Raises ValueError naming the bad part. Needs no scene: checked before any set-up."""
+    def number(s, part):
+        try:
+            return int(s)
+        except ValueError:
+            raise ValueError("'%s' is not a frame or a range A-B (e.g. 1-8 or 1,3,5-7)" % part) from None
+
     frames = []
-    for part in text.split(","):
+    for part in text.replace("..", "-").split(","):
         part = part.strip()
         if not part:
             continue
-        if "-" in part[1:]:
+        if "-" in part[1:]:   # part[0] may be a minus sign
             a, b = part[1:].split("-", 1)
-            a = part[0] + a
-            lo, hi = int(a), int(b)
+            lo, hi = number(part[0] + a, part), number(b, part)
             if hi < lo:
-                raise ValueError("frame range %s runs backwards" % part)
+                raise ValueError("range '%s' runs backwards" % part)
             frames.extend(range(lo, hi + 1))
         else:
-            frames.append(int(part))
-    return frames
+            frames.append(number(part, part))
+    if not frames:
+        raise ValueError("'%s' names no frame" % text)
+    return list(dict.fromkeys(frames))
+
+
+def parse_frames(text, scene):
+    if not text:
+        return list(range(scene.frame_start, scene.frame_end + 1, max(1, scene.frame_step)))
+    return parse_frame_list(text)
 
 
 def parse_args(argv):
@@ -87,8 +112,75 @@ def die(msg, code=2):
     os._exit(code)
 
 
+def say(msg):
+    print("libfx batch: " + msg)
+    sys.stdout.flush()
+
+
+# ---------------------------------------------------------------- one result per frame
+
+def result_files(fx, scene, frame, with_image):
+    """(the files whose completeness means 'frame done': the EXR, and the image in
+    the scene's format when it is not EXR; all of the frame's result paths)."""
+    paths = fx.scene_setup.result_paths(scene, frame)
+    return [paths["exr"]] + ([paths["image"]] if with_image else []), paths
+
+
+def unfinished(fx, ctx, files):
+    """None when every file is complete, else why not. A result is complete when
+    the EXR reads back whole (every chunk: a truncated file fails) and the image
+    loads; files of an older, interrupted run are not counted as finished."""
+    for p in files:
+        if not os.path.isfile(p):
+            return "%s is missing" % p
+    try:
+        fx.native.Frame.read(ctx, files[0]).close()
+    except fx.native.LibfxError as e:
+        return "%s is damaged or incomplete: %s" % (files[0], e)
+    for p in files[1:]:
+        img = bpy.data.images.load(p, check_existing=False)
+        try:
+            if tuple(img.size) == (0, 0):
+                return "%s is damaged or incomplete (Blender cannot load it)" % p
+        finally:
+            bpy.data.images.remove(img)
+    return None
+
+
+def discard(paths):
+    """Removes a frame's results and the temporary files an interrupted writer left
+    (the library writes '<dir>/.<name>.tmp-<pid>-<n>' and renames it when complete;
+    the sidecar goes through '<name>.tmp')."""
+    for key in ("exr", "image", "camera"):
+        p = paths[key]
+        d, name = os.path.split(p)
+        for q in [p, p + ".tmp"] + glob.glob(os.path.join(d, "." + glob.escape(name) + ".tmp-*")):
+            try:
+                os.remove(q)
+            except FileNotFoundError:
+                pass
+
+
 def main():
     args = parse_args(_argv())
+    # Usage errors first: a farm's wrong command must fail before anything renders.
+    frames = None
+    if args.frames is not None:
+        try:
+            frames = parse_frame_list(args.frames)
+        except ValueError as e:
+            die("--frames %s: %s" % (args.frames, e))
+    size = None
+    if args.resolution:
+        try:
+            size = tuple(int(v) for v in args.resolution.lower().split("x"))
+            if len(size) != 2 or min(size) < 1:
+                raise ValueError
+        except ValueError:
+            die("--resolution wants WxH, got %r" % args.resolution)
+    if args.samples is not None and args.samples < 1:
+        die("--samples wants a positive number, got %d" % args.samples)
+
     fx = enable_addon()
     scene = bpy.context.scene
     if fx.props.catalog() is None or not fx.props.catalog().ok:
@@ -96,12 +188,8 @@ def main():
     r = scene.render
     if args.output:
         r.filepath = args.output
-    if args.resolution:
-        try:
-            w, h = (int(v) for v in args.resolution.lower().split("x"))
-        except ValueError:
-            die("--resolution wants WxH, got %r" % args.resolution)
-        r.resolution_x, r.resolution_y, r.resolution_percentage = w, h, 100
+    if size:
+        r.resolution_x, r.resolution_y, r.resolution_percentage = size[0], size[1], 100
     if args.samples:
         if r.engine == "CYCLES":
             scene.cycles.samples = args.samples
@@ -128,25 +216,31 @@ def main():
         die("the stack cannot run: %s" % st["error"], 1)
     for w in st.get("warnings", []):
         print("libfx batch: warning: " + w, file=sys.stderr)
-    try:
-        frames = parse_frames(args.frames, scene)
-    except ValueError as e:
-        die("--frames: %s" % e)
+    if frames is None:
+        frames = parse_frames(None, scene)
+    with_image = fx.scene_setup.writes_image(scene)
 
-    print("libfx batch: scene '%s', frames %s, %dx%d, passes %s" % (
+    say("scene '%s', frames %s, %dx%d, passes %s" % (
         scene.name, args.frames or "%d-%d" % (scene.frame_start, scene.frame_end),
         r.resolution_x, r.resolution_y, ", ".join(st.get("passes", []))))
-    sys.stdout.flush()
     failures = []
+    skipped = 0
+    check_ctx = fx.native.Context(1) if args.skip_existing else None
     # The aux views cover the camera over the scene's whole range (and the frames asked
     # for), so every frame and every later run can reuse them.
     span = sorted(set(frames) | set(range(scene.frame_start, scene.frame_end + 1)))
     for frame in frames:
-        paths = fx.scene_setup.result_paths(scene, frame)
-        wanted = [paths["exr"]] + ([paths["image"]] if fx.scene_setup.writes_image(scene) else [])
-        if args.skip_existing and all(os.path.exists(p) for p in wanted):
-            print("libfx batch: frame %d: exists, skipped" % frame)
-            continue
+        files, paths = result_files(fx, scene, frame, with_image)
+        if args.skip_existing:
+            why = unfinished(fx, check_ctx, files)
+            if why is None:
+                say("frame %d: exists, skipped" % frame)
+                skipped += 1
+                continue
+            if os.path.exists(files[0]) or any(os.path.exists(p) for p in files[1:]):
+                say("frame %d: %s: rendering it again" % (frame, why))
+        # From here until it succeeds the frame has no result: never an older one.
+        discard(paths)
         fx.render.RESULTS.pop((scene.name, frame), None)
         # Auxiliary views (light view, rain map) only when the stack needs them; reused
         # while light and geometry do not move.
@@ -161,21 +255,31 @@ def main():
         # A one-frame animation: Blender numbers the file (a still would not) and
         # frame_change_post gives this frame's camera.
         scene.frame_start = scene.frame_end = frame
-        bpy.ops.render.render(animation=True)
+        try:
+            bpy.ops.render.render(animation=True)
+        except RuntimeError as e:
+            failures.append("frame %d: Blender's render failed: %s" % (frame, str(e).strip()))
+            discard(paths)
+            continue
         rec = fx.render.RESULTS.get((scene.name, frame))
+        failed = None
         if rec is None:
-            failures.append("frame %d: the stack did not run (no render_post)" % frame)
+            failed = "frame %d: the stack did not run (no render_post)" % frame
         elif not rec["ok"]:
-            failures.append("frame %d: %s" % (frame, rec["error"]))
+            failed = "frame %d: %s" % (frame, rec["error"])
         else:
-            missing = [p for p in wanted if not os.path.exists(p)]
+            missing = [p for p in files if not os.path.exists(p)]
             if missing:
-                failures.append("frame %d: not written: %s" % (frame, ", ".join(missing)))
+                failed = "frame %d: not written: %s" % (frame, ", ".join(missing))
+        if failed:
+            failures.append(failed)
+            discard(paths)
         sys.stdout.flush()
+    if check_ctx is not None:
+        check_ctx.close()
     if failures:
         die("%d of %d frame(s) failed:\n  %s" % (len(failures), len(frames), "\n  ".join(failures)), 1)
-    print("libfx batch: %d frame(s) done" % len(frames))
-    sys.stdout.flush()
+    say("%d frame(s) done: %d rendered, %d skipped" % (len(frames), len(frames) - skipped, skipped))
 
 
 if __name__ == "__main__":
