@@ -21,18 +21,6 @@
 /* GCC vector extensions: one RGBA pixel per v4f (SSE2 in the baseline build), only inside
  * inline helpers and the row loops. */
 
-static inline v4f ld4(const float *p)
-{
-    v4f v;
-    memcpy(&v, p, sizeof v);
-    return v;
-}
-
-static inline void st4(float *p, v4f v)
-{
-    memcpy(p, &v, sizeof v);
-}
-
 typedef struct bloom_params {
     int mode;
     float threshold, knee, clamp_value;

@@ -17,6 +17,8 @@
 #include "core/parallel.h"
 #include "math/camera.h"
 #include "math/radial_blur.h"
+#include "math/simd4.h"
+#include "math/vec.h"
 
 #include <float.h>
 #include <math.h>
@@ -221,19 +223,18 @@ static void occ_rows(void *user, int begin, int end)
     const occ_job *j = user;
     const god_rays_params *p = j->p;
     const int w = j->run->width;
+    const int soft = p->knee > 0.0f, sky_test = p->occlusion == OCC_SKY;
     for (int y = begin; y < end; y++)
         for (int x = 0; x < w; x++) {
             size_t i = (size_t)y * w + x;
-            const float *c = j->run->src + i * 4;
-            float *o = j->occ + i * 3;
-            float r = fmaxf(c[0], 0.0f), g = fmaxf(c[1], 0.0f), b = fmaxf(c[2], 0.0f);
-            if (!(r <= FLT_MAX)) r = 0.0f;
-            if (!(g <= FLT_MAX)) g = 0.0f;
-            if (!(b <= FLT_MAX)) b = 0.0f;
-            float lum = 0.2126f * r + 0.7152f * g + 0.0722f * b;
-            float m = p->knee > 0.0f ? fx_smoothstep(p->threshold, p->threshold + p->knee, lum)
-                                     : (lum > p->threshold ? 1.0f : 0.0f);
-            if (p->occlusion == OCC_SKY) {
+            /* emitting colour: negative, NaN and +Inf channels count as 0 */
+            v4f c = ld4(j->run->src + i * 4);
+            c = sel4(c > V4(0.0f), c, V4(0.0f));
+            c = sel4(c <= V4(FLT_MAX), c, V4(0.0f));
+            float lum = 0.2126f * c[0] + 0.7152f * c[1] + 0.0722f * c[2];
+            float m = soft ? fx_smoothstep(p->threshold, p->threshold + p->knee, lum)
+                           : (lum > p->threshold ? 1.0f : 0.0f);
+            if (sky_test) {
                 float sky = j->depth && j->depth[i] > p->sky_distance ? 1.0f : 0.0f;
                 if (j->material)
                     sky = fmaxf(sky, j->material->coverage[i]);
@@ -246,9 +247,7 @@ static void occ_rows(void *user, int begin, int end)
             float k = m;
             if (lum > p->max_source && lum > 0.0f)
                 k *= p->max_source / lum;
-            o[0] = r * k;
-            o[1] = g * k;
-            o[2] = b * k;
+            st4(j->occ + i * 4, c * (v4f){k, k, k, 0.0f});
         }
 }
 
@@ -264,20 +263,15 @@ static void comp_rows(void *user, int begin, int end)
     const comp_job *j = user;
     const fx_effect_run *run = j->run;
     const int w = run->width;
+    const v4f fade = V4((float)j->fade);
     for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++)
         for (int x = run->roi.x0; x < run->roi.x1; x++) {
             size_t i = (size_t)y * w + x;
-            const float *s = run->src + i * 4;
-            const float *ry = j->rays + i * 3;
-            float *d = run->dst + i * 4;
-            for (int ch = 0; ch < 3; ch++) {
-                double add = ry[ch] * j->fade;
-                if (j->screen)
-                    add *= 1.0 - fx_saturate(s[ch]);
-                double v = s[ch] + add;
-                d[ch] = v > FLT_MAX ? FLT_MAX : v < -FLT_MAX ? -FLT_MAX : (float)v;
-            }
-            d[3] = s[3];
+            const v4f s = ld4(run->src + i * 4);
+            v4f add = ld4(j->rays + i * 4) * fade; /* alpha lane: rays hold 0 there */
+            if (j->screen)
+                add *= V4(1.0f) - min4(max4(s, V4(0.0f)), V4(1.0f));
+            st4(run->dst + i * 4, finite4(s + add));
         }
 }
 
@@ -287,6 +281,13 @@ static void copy_roi(const fx_effect_run *run)
         memcpy(run->dst + ((size_t)y * run->width + run->roi.x0) * 4,
                run->src + ((size_t)y * run->width + run->roi.x0) * 4,
                (size_t)(run->roi.x1 - run->roi.x0) * 4 * sizeof(float));
+}
+
+/* RGB of n four-lane pixels into a 3-channel pass */
+static void copy_rgb(float *dst, const float *src4, size_t n)
+{
+    for (size_t i = 0; i < n; i++)
+        memcpy(dst + i * 3, src4 + i * 4, 3 * sizeof(float));
 }
 
 static fx_result god_rays_process(const fx_effect_run *run)
@@ -336,16 +337,22 @@ static fx_result god_rays_process(const fx_effect_run *run)
             oj.material = material;
         }
     }
-    size_t n3 = 0;
-    if (!fx_size_mul(&n3, (size_t)w, (size_t)h, 3)) {
+    /* occlusion and rays: RGB + a zero lane per pixel (four-lane vectors) */
+    size_t n4 = 0;
+    if (!fx_size_mul(&n4, (size_t)w, (size_t)h, 4)) {
         fx_mask_free(material);
         return fx_fail(run->ctx, FX_ERR_LIMIT, "%s: frame too large", where);
     }
-    float *occ = fx_mem_alloc(n3 * sizeof(float));
-    float *rays = fx_mem_calloc(n3, sizeof(float));
+    /* frame-sized: from the context's buffer store (no page faults frame after frame);
+     * occ is written whole, rays inside the ROI (the debug pass wants it whole) */
+    const size_t bytes = n4 * sizeof(float);
+    float *occ = fx_buffer_get(run->ctx, bytes);
+    float *rays = fx_buffer_get(run->ctx, bytes);
+    if (occ && rays && run->debug)
+        memset(rays, 0, bytes);
     if (!occ || !rays) {
-        fx_mem_free(occ);
-        fx_mem_free(rays);
+        fx_buffer_put(run->ctx, occ, bytes);
+        fx_buffer_put(run->ctx, rays, bytes);
         fx_mask_free(material);
         return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the occlusion map", where);
     }
@@ -379,14 +386,14 @@ static fx_result god_rays_process(const fx_effect_run *run)
         if (run->debug) {
             float *dbg = fx_effect_debug_pass(run, "occlusion", 3, &r);
             if (dbg)
-                memcpy(dbg, occ, n3 * sizeof(float));
+                copy_rgb(dbg, occ, (size_t)w * h);
             float *dr = r == FX_OK ? fx_effect_debug_pass(run, "rays", 3, &r) : NULL;
             if (dr)
-                memcpy(dr, rays, n3 * sizeof(float));
+                copy_rgb(dr, rays, (size_t)w * h);
         }
     }
-    fx_mem_free(occ);
-    fx_mem_free(rays);
+    fx_buffer_put(run->ctx, occ, bytes);
+    fx_buffer_put(run->ctx, rays, bytes);
     return r;
 }
 

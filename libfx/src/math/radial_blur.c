@@ -4,8 +4,10 @@
 
 #include "core/parallel.h"
 #include "math/hash.h"
+#include "math/simd4.h"
 
 #include <float.h>
+#include <limits.h>
 #include <math.h>
 #include <stdatomic.h>
 #include <string.h>
@@ -60,7 +62,7 @@ static inline void sample_add(const float *occ, int w, int h, double x, double y
             if (xi < 0 || xi >= w)
                 continue;
             double ww = (dx ? tx : 1.0 - tx) * wy;
-            const float *q = occ + ((size_t)yi * w + xi) * 3;
+            const float *q = occ + ((size_t)yi * w + xi) * 4;
             acc[0] += ww * q[0];
             acc[1] += ww * q[1];
             acc[2] += ww * q[2];
@@ -137,11 +139,12 @@ static void naive_rows(void *user, int begin, int end)
                     wt *= j->step_decay;
                 }
             }
-            float *o = j->rays + ((size_t)y * j->w + x) * 3;
+            float *o = j->rays + ((size_t)y * j->w + x) * 4;
             double k = rb->scale * inv_n;
             o[0] = to_float(acc[0] * k);
             o[1] = to_float(acc[1] * k);
             o[2] = to_float(acc[2] * k);
+            o[3] = 0.0f;
         }
     }
 }
@@ -176,13 +179,39 @@ fx_result fx_radial_blur_naive(fx_context *ctx, const float *occ, float *rays, i
 /* ---- polar (epipolar lines through the light) ----
  * Everything along a line is in bin units: bin m of a line lies at radius (b0 + m) * hr
  * from the light (hr = 1 / resolution px); a pixel at rho bins has a path of d * rho
- * bins and the decay rate a / (d * rho) per bin. */
+ * bins and the decay rate a / (d * rho) per bin. Bins, running sums and results are
+ * four-lane floats (RGB + a zero lane): one vector operation per bin and level. */
 
 typedef struct polar_line {
     int b0;        /* radius of bin 0, in bins */
     int count;     /* bins b0 .. b0 + count - 1; 0: the line misses the image */
-    size_t offset; /* into the results (3 floats per bin) */
+    int out0;      /* results for bins out0 .. b0 + count - 1 (the line's bands, below) */
+    int out_count;
+    size_t offset; /* into the results (4 floats per bin) */
 } polar_line;
+
+/* Bands: the pixels at radius rho in band k (rho >= band_lo[k], band_lo[k] = far / 2^(k+1),
+ * the last band reaching the light) interpolate between every 2^k-th line, so the lines'
+ * spacing stays between 1/2 and 1 of the spacing at the farthest pixel everywhere, instead
+ * of shrinking towards the light. A line a serves the bands k <= trailing zeros of a: it
+ * gathers and runs its sums from the light (the paths need them) but evaluates its
+ * results only from its innermost band outwards. */
+#define POLAR_MAX_BANDS 24
+
+/* A radius's output constants (they depend on rho only: the path starts at bin
+ * ceil((1 - d) rho) of the line whatever its b0), pre-broadcast so the per-bin loop
+ * multiplies from memory. For level q of the four around the radius's rate, the
+ * trapezoid mean is v_q = ci F[m] - cl F[m0 - 1] + cc o[m] + ca o[m0] + cb olo, with
+ * olo = o[m0] + f (o[m0 - 1] - o[m0]); the value is the Catmull-Rom mix of v_0..v_3
+ * (weights cr) clamped to [v_1, v_2]. */
+typedef struct rho_coef {
+    v4f ci[4], cl[4], cc[4], ca[4], cb[4];
+    v4f cr[4];
+    v4f f;        /* fractional bin before the start */
+    int start;    /* absolute start bin of the path: ceil((1 - density) rho) */
+    int ident;    /* a path of one bin (or a degenerate kernel): the value is occ itself */
+    int g[4];     /* level of q (clamped to the tables) */
+} rho_coef;
 
 typedef struct polar_job {
     const float *occ;
@@ -193,34 +222,25 @@ typedef struct polar_job {
     double phi0, dphi, theta_c; /* line a has angle theta_c + phi0 + a * dphi */
     int lines, full_circle;
     polar_line *line;
+    int bands;                  /* 1 .. POLAR_MAX_BANDS; lines is a multiple of 2^(bands - 1) */
+    double band_lo[POLAR_MAX_BANDS];
     float *res;
     double a;                   /* -100 ln(decay) (0: decay 1) */
     double hstep;               /* ln 2 / levels */
     int max_levels, max_count;
-    double *scratch;            /* per worker: max_count * 3 (occ) + max_levels * max_count * 3 (F) */
+    v4f *scratch;               /* per worker: max_count (occ) + max_count * max_levels (F) */
     size_t scratch_per_worker;
     fx_rect roi;
     float *rays;
-    /* shared tables, filled once per call (no transcendentals per bin): level g (rate
-     * lambda_{k_min + g}) has em1[g] = expm1(-lambda), e1[g] = exp(-lambda) and
-     * pw[g * pw_len + j] = exp(-lambda j), pq[g * pw_len + j] = -expm1(-lambda j);
-     * kap[rho] = the continuous level of the rate at rho bins (rho >= 1). */
-    int k_min, n_levels, pw_len, max_rho;
-    double *em1, *e1, *pw, *pq, *kap;
-    /* per radius rho (bins) the output stage's constants, which depend on rho only (the
-     * path starts at bin ceil((1 - d) rho) of the line whatever its b0): rc[rho] */
-    struct rho_coef *rc;
+    /* tables filled once per call (no transcendental per bin). Level g has the rate
+     * lambda_{k_min + g} = exp((k_min + g) hstep) per bin: e1[g] = exp(-lambda), and
+     * last[g] = the largest radius (bins) whose interpolation reads the level. Radii
+     * rho_lo .. max_rho (those of the lines' bins, rho >= 1): kap[rho - rho_lo] = the
+     * continuous level of the rate a / (d rho), rc[rho - rho_lo] its output constants. */
+    int k_min, n_levels, rho_lo, max_rho;
+    double *e1, *last, *kap;
+    rho_coef *rc;
 } polar_job;
-
-/* The four levels' trapezoid weights and Catmull-Rom weights of a radius. */
-typedef struct rho_coef {
-    int start;    /* absolute start bin of the path: ceil((1 - density) rho) */
-    int ident;    /* a path of one bin (or a degenerate kernel): the value is occ itself */
-    double f;     /* fractional bin before the start */
-    int g[4];     /* global level of q (clamped to the tables) */
-    double cr[4]; /* Catmull-Rom weights in log(rate) */
-    double inv[4], en[4], e1n[4], ef[4];
-} rho_coef;
 
 /* [r_in, r_out] of the ray L + r (c, s), r >= 0, inside the slab [-0.5, w + 0.5] x [-0.5, h + 0.5]. */
 static int clip_ray(double lx, double ly, double c, double s, int w, int h, double *r_in, double *r_out)
@@ -241,62 +261,33 @@ static inline double level_of(const polar_job *j, double rho)
     return log(j->a / (j->rb->density * rho)) / j->hstep;
 }
 
-static inline double oat(const double *o, int m, int ch)
-{
-    return m >= 0 ? o[3 * m + ch] : 0.0;
-}
-
-/* Kernel-weighted mean of occ over the path [m0 - f, m] (bins), kernel exp(-lam (m - x)),
- * trapezoid rule over the whole bins and the fractional end (kernel linear across it).
- * Fk: running sums Fk[i] = sum_{i' <= i} o[i'] exp(-lam (i - i')); pw/pq: the level's
- * tables exp(-lam j) and -expm1(-lam j); em1 = expm1(-lam) (0: lam = 0). */
-static inline void path_mean(const double *Fk, const double *o, const double *pw, const double *pq, double em1,
-                             int m, int m0, double f, double out[3])
-{
-    int n = m - m0 + 1;
-    if (n <= 1 && f < 1e-9) {
-        for (int ch = 0; ch < 3; ch++)
-            out[ch] = o[3 * m + ch];
-        return;
-    }
-    double e1n = pw[n - 1];
-    double en = pw[n];
-    double ef = e1n * (1.0 + f * em1);
-    double t1 = em1 == 0.0 ? (double)n : -pq[n] / em1; /* (1 - e^-lam n) / (1 - e^-lam) */
-    double den = t1 - 0.5 - 0.5 * e1n + 0.5 * f * (e1n + ef);
-    double inv = den > 1e-300 ? 1.0 / den : 0.0;
-    for (int ch = 0; ch < 3; ch++) {
-        double t = Fk[3 * m + ch] - (m0 >= 1 ? en * Fk[3 * (m0 - 1) + ch] : 0.0);
-        double om0 = oat(o, m0, ch);
-        double olo = f * oat(o, m0 - 1, ch) + (1.0 - f) * om0;
-        double num = t - 0.5 * o[3 * m + ch] - 0.5 * om0 * e1n + 0.5 * f * (om0 * e1n + olo * ef);
-        out[ch] = den > 1e-300 ? num * inv : o[3 * m + ch];
-    }
-}
-
 /* Bilinear samples of occ along the line, bins 0..cnt-1 at radius (b0 + m) hr. */
-static void gather_line(const polar_job *j, double c, double s, int b0, int cnt, double *o)
+static void gather_line(const polar_job *j, double c, double s, int b0, int cnt, v4f *o)
 {
     const int w = j->w, h = j->h;
     const float *occ = j->occ;
+    const double x0 = j->lx - 0.5, y0 = j->ly - 0.5;
     for (int m = 0; m < cnt; m++) {
         double r = (b0 + m) * j->hr;
-        double fx = j->lx + r * c - 0.5, fy = j->ly + r * s - 0.5;
-        double x0f = floor(fx), y0f = floor(fy);
-        double *q = o + 3 * m;
-        q[0] = q[1] = q[2] = 0.0;
-        if (!(x0f >= -1.0 && x0f < (double)w && y0f >= -1.0 && y0f < (double)h))
+        double fx = x0 + r * c, fy = y0 + r * s;
+        if (!(fx >= -1.0 && fx < (double)w && fy >= -1.0 && fy < (double)h)) {
+            o[m] = V4(0.0f);
             continue;
-        int x0 = (int)x0f, y0 = (int)y0f;
-        double tx = fx - x0f, ty = fy - y0f;
-        if (x0 >= 0 && x0 + 1 < w && y0 >= 0 && y0 + 1 < h) {
+        }
+        /* fx, fy >= -1: truncation of the shifted value is floor (no libm call) */
+        int xi = (int)(fx + 1.0) - 1, yi = (int)(fy + 1.0) - 1;
+        if (xi >= 0 && xi + 1 < w && yi >= 0 && yi + 1 < h) {
             /* interior: four taps, no bounds checks */
-            const float *p0 = occ + ((size_t)y0 * w + x0) * 3, *p1 = p0 + (size_t)w * 3;
-            double w00 = (1.0 - tx) * (1.0 - ty), w01 = tx * (1.0 - ty), w10 = (1.0 - tx) * ty, w11 = tx * ty;
-            for (int ch = 0; ch < 3; ch++)
-                q[ch] = w00 * p0[ch] + w01 * p0[3 + ch] + w10 * p1[ch] + w11 * p1[3 + ch];
+            v4f tx = V4((float)(fx - xi)), ty = V4((float)(fy - yi));
+            const float *p0 = occ + ((size_t)yi * w + xi) * 4, *p1 = p0 + (size_t)w * 4;
+            v4f a = ld4(p0), b = ld4(p1);
+            a += tx * (ld4(p0 + 4) - a);
+            b += tx * (ld4(p1 + 4) - b);
+            o[m] = a + ty * (b - a);
         } else {
-            sample_add(occ, w, h, fx + 0.5, fy + 0.5, 1.0, q);
+            double acc[3] = {0.0, 0.0, 0.0};
+            sample_add(occ, w, h, fx + 0.5, fy + 0.5, 1.0, acc);
+            o[m] = (v4f){(float)acc[0], (float)acc[1], (float)acc[2], 0.0f};
         }
     }
 }
@@ -305,12 +296,10 @@ static void polar_lines(void *user, int begin, int end, int worker)
 {
     polar_job *j = user;
     const fx_radial_blur *rb = j->rb;
-    const double d = rb->density;
-    const double mass = fx_radial_blur_mass(rb->decay);
-    const double k_out = rb->scale * mass;
-    double *o = j->scratch + (size_t)worker * j->scratch_per_worker;
-    double *F = o + (size_t)j->max_count * 3;
-    const size_t fstride = (size_t)j->max_count * 3;
+    const v4f k_out = V4((float)(rb->scale * fx_radial_blur_mass(rb->decay)));
+    const v4f zero = V4(0.0f);
+    v4f *o = j->scratch + (size_t)worker * j->scratch_per_worker;
+    v4f *F = o + j->max_count; /* F[m * K + k]: the levels of a bin side by side */
     for (int a = begin; a < end; a++) {
         const polar_line *ln = &j->line[a];
         if (ln->count <= 0)
@@ -318,92 +307,53 @@ static void polar_lines(void *user, int begin, int end, int worker)
         double th = j->theta_c + j->phi0 + a * j->dphi;
         const int cnt = ln->count;
         gather_line(j, cos(th), sin(th), ln->b0, cnt, o);
-        float *out = j->res + ln->offset * 3;
-        if (j->a <= 0.0) {
-            /* decay 1: one rate, 0: prefix sums */
-            double run[3] = {0, 0, 0};
-            for (int m = 0; m < cnt; m++)
-                for (int ch = 0; ch < 3; ch++) {
-                    run[ch] += o[3 * m + ch];
-                    F[3 * m + ch] = run[ch];
-                }
-            for (int m = 0; m < cnt; m++) {
-                double rho = ln->b0 + m, v[3];
-                double b_lo = m - d * rho, m0f = ceil(b_lo);
-                path_mean(F, o, j->pw, j->pq, 0.0, m, (int)m0f, m0f - b_lo, v);
-                for (int ch = 0; ch < 3; ch++)
-                    out[3 * m + ch] = to_float(rb->scale * v[ch]);
-            }
-            continue;
-        }
-        /* levels g_lo .. g_hi cover the rates of every bin (rho >= 1) with the cubic's
-         * neighbours; level k runs only up to the last bin that uses it */
-        int rho_min = ln->b0 < 1 ? 1 : ln->b0;
+        const int m_out = ln->out0 - ln->b0;
+        float *out = j->res + ln->offset * 4; /* bin m's result at out + 4 (m - m_out) */
+        /* levels g_lo .. g_hi cover the rates of every result bin (rho >= 1) with the
+         * cubic's neighbours; level k runs only up to the last bin that reads it (decay 1:
+         * one level of rate 0, prefix sums over the whole line) */
+        int rho_min = ln->out0 < j->rho_lo ? j->rho_lo : ln->out0;
         int rho_max = ln->b0 + cnt - 1 > rho_min ? ln->b0 + cnt - 1 : rho_min;
-        int g_lo = (int)floor(j->kap[rho_max]) - 1 - j->k_min;
-        int g_hi = (int)floor(j->kap[rho_min]) + 2 - j->k_min;
+        int g_lo = (int)floor(j->kap[rho_max - j->rho_lo]) - 1 - j->k_min;
+        int g_hi = (int)floor(j->kap[rho_min - j->rho_lo]) + 2 - j->k_min;
         if (g_lo < 0) g_lo = 0;
         if (g_hi > j->n_levels - 1) g_hi = j->n_levels - 1;
         int K = g_hi - g_lo + 1;
         if (K > j->max_levels)
             K = j->max_levels;
         for (int kk = 0; kk < K; kk++) {
-            int g = g_lo + kk;
-            double e1 = j->e1[g];
-            double last = j->a / (d * exp((j->k_min + g - 2) * j->hstep)) - ln->b0;
-            int e_k = last >= cnt - 2 ? cnt - 1 : last < 0 ? 0 : (int)floor(last) + 1;
-            double *Fk = F + (size_t)kk * fstride;
-            double r0 = 0, r1 = 0, r2 = 0;
+            const v4f e1 = V4((float)j->e1[g_lo + kk]);
+            double last = j->last[g_lo + kk] - ln->b0;
+            int e_k = last >= cnt - 2 ? cnt - 1 : last < 0 ? 0 : (int)last + 1;
+            v4f run = zero;
+            v4f *Fk = F + kk;
             for (int m = 0; m <= e_k; m++) {
-                r0 = r0 * e1 + o[3 * m];
-                r1 = r1 * e1 + o[3 * m + 1];
-                r2 = r2 * e1 + o[3 * m + 2];
-                Fk[3 * m] = r0;
-                Fk[3 * m + 1] = r1;
-                Fk[3 * m + 2] = r2;
+                run = run * e1 + o[m];
+                Fk[(size_t)m * K] = run;
             }
         }
-        static const double zero3[3] = {0.0, 0.0, 0.0};
-        for (int m = 0; m < cnt; m++) {
-            int rho = ln->b0 + m;
-            const double *om = o + 3 * m;
-            const rho_coef *rc = rho >= 1 ? &j->rc[rho] : NULL;
+        for (int m = m_out; m < cnt; m++) {
+            const int rho = ln->b0 + m;
+            const v4f om = o[m];
+            const rho_coef *rc = rho >= j->rho_lo ? &j->rc[rho - j->rho_lo] : NULL;
             if (!rc || rc->ident) { /* at the light, or a path of one bin */
-                for (int ch = 0; ch < 3; ch++)
-                    out[3 * m + ch] = to_float(k_out * om[ch]);
+                st4(out + 4 * (m - m_out), finite4(k_out * om));
                 continue;
             }
-            /* the level-independent parts of the trapezoid (path_mean, expanded):
-             * num = F[m] - en F[m0-1] - o[m]/2 + e1n A + ef B, with the path's start bins */
             const int m0 = rc->start - ln->b0;
-            const double f = rc->f;
-            const double *o0 = m0 >= 0 ? o + 3 * m0 : zero3, *o1 = m0 >= 1 ? o + 3 * (m0 - 1) : zero3;
-            double A[3], B[3], C[3];
-            for (int ch = 0; ch < 3; ch++) {
-                double olo = f * o1[ch] + (1.0 - f) * o0[ch];
-                A[ch] = 0.5 * (f - 1.0) * o0[ch];
-                B[ch] = 0.5 * f * olo;
-                C[ch] = -0.5 * om[ch];
-            }
-            double v[4][3];
+            const v4f o0 = m0 >= 0 ? o[m0] : zero, o1 = m0 >= 1 ? o[m0 - 1] : zero;
+            const v4f olo = o0 + rc->f * (o1 - o0);
+            const v4f *Fm = F + (size_t)m * K, *Fl = m0 >= 1 ? F + (size_t)(m0 - 1) * K : NULL;
+            v4f v[4];
             for (int q = 0; q < 4; q++) {
                 int kk = rc->g[q] - g_lo;
                 kk = kk < 0 ? 0 : kk >= K ? K - 1 : kk;
-                const double *Fk = F + (size_t)kk * fstride;
-                const double *Fm = Fk + 3 * m, *Fl = m0 >= 1 ? Fk + 3 * (m0 - 1) : zero3;
-                const double en = rc->en[q], e1n = rc->e1n[q], ef = rc->ef[q], inv = rc->inv[q];
-                for (int ch = 0; ch < 3; ch++)
-                    v[q][ch] = (Fm[ch] - en * Fl[ch] + C[ch] + e1n * A[ch] + ef * B[ch]) * inv;
+                v4f t = rc->ci[q] * Fm[kk] + rc->cc[q] * om + rc->ca[q] * o0 + rc->cb[q] * olo;
+                v[q] = Fl ? t - rc->cl[q] * Fl[kk] : t;
             }
-            const double w0 = rc->cr[0], w1 = rc->cr[1], w2 = rc->cr[2], w3 = rc->cr[3];
-            for (int ch = 0; ch < 3; ch++) {
-                /* Catmull-Rom in log(rate), clamped to the two middle values */
-                double p1 = v[1][ch], p2 = v[2][ch];
-                double val = w0 * v[0][ch] + w1 * p1 + w2 * p2 + w3 * v[3][ch];
-                double lo = p1 < p2 ? p1 : p2, hi = p1 < p2 ? p2 : p1;
-                val = val < lo ? lo : val > hi ? hi : val;
-                out[3 * m + ch] = to_float(k_out * val);
-            }
+            v4f val = rc->cr[0] * v[0] + rc->cr[1] * v[1] + rc->cr[2] * v[2] + rc->cr[3] * v[3];
+            val = min4(max4(val, min4(v[1], v[2])), max4(v[1], v[2]));
+            st4(out + 4 * (m - m_out), finite4(k_out * val));
         }
     }
 }
@@ -426,7 +376,7 @@ static inline double atan2_fast(double y, double x)
     return y < 0.0 ? -r : r;
 }
 
-/* A line as the back projection reads it: its bins (3 floats each) from radius b0 on,
+/* A line as the back projection reads it: its bins (4 floats each) from radius b0 on,
  * `last` + 1 >= 1 intervals; lines that miss the image read a zero line. */
 typedef struct back_line {
     const float *bins;
@@ -435,19 +385,22 @@ typedef struct back_line {
 
 typedef struct back_job {
     const polar_job *pj;
-    const back_line *bl; /* lines + 1 entries: the last repeats line 0 (full circle) or is zero */
+    const back_line *bl; /* lines + 2^(bands-1) + 1 entries: past the last line the circle
+                            wraps (full circle) or zero lines */
 } back_job;
 
-/* b >= 0 here, so truncation is floor (no libm call, no SSE4.1 needed) */
-static inline const float *line_at(const back_line *l, double rho, float *t)
+/* The line's value at radius rho (bins), linear between bins. b >= 0 here, so
+ * truncation is floor (no libm call, no SSE4.1 needed). */
+static inline v4f line_at(const back_line *l, double rho)
 {
     double b = rho - l->b0;
     b = b > 0.0 ? b : 0.0;
     b = b < l->last + 1.0 ? b : l->last + 1.0;
     int i = (int)b;
     i = i < (int)l->last ? i : (int)l->last;
-    *t = (float)(b - i);
-    return l->bins + 3 * i;
+    const float *q = l->bins + 4 * i;
+    v4f a = ld4(q);
+    return a + V4((float)(b - i)) * (ld4(q + 4) - a);
 }
 
 static void polar_back(void *user, int begin, int end)
@@ -457,11 +410,15 @@ static void polar_back(void *user, int begin, int end)
     const back_line *bl = bj->bl;
     const double inv_hr = 1.0 / j->hr, inv_dphi = 1.0 / j->dphi;
     const double amax = j->lines - 1;
+    const int top = j->bands - 1;
+    double inv_step[POLAR_MAX_BANDS];
+    for (int k = 0; k < j->bands; k++)
+        inv_step[k] = 1.0 / (double)(1 << k);
     for (int yy = begin; yy < end; yy++) {
         int y = j->roi.y0 + yy;
         double vy = y + 0.5 - j->ly;
-        float *o = j->rays + ((size_t)y * j->w + j->roi.x0) * 3;
-        for (int x = j->roi.x0; x < j->roi.x1; x++, o += 3) {
+        float *o = j->rays + ((size_t)y * j->w + j->roi.x0) * 4;
+        for (int x = j->roi.x0; x < j->roi.x1; x++, o += 4) {
             double vx = x + 0.5 - j->lx;
             double rho = sqrt(vx * vx + vy * vy) * inv_hr;
             double th = atan2_fast(vy, vx) - j->theta_c;
@@ -472,18 +429,14 @@ static void polar_back(void *user, int begin, int end)
             double af = (th - j->phi0) * inv_dphi;
             af = af > 0.0 ? af : 0.0;
             af = af < amax + 1.0 ? af : amax + 1.0;
-            int a0 = (int)af;
-            a0 = a0 < (int)amax ? a0 : (int)amax;
-            float t = (float)(af - a0);
-            float t0, t1;
-            const float *q0 = line_at(&bl[a0], rho, &t0), *q1 = line_at(&bl[a0 + 1], rho, &t1);
-            for (int ch = 0; ch < 3; ch++) {
-                /* convex combinations of finite floats: finite after the clamp */
-                float v0 = (1.0f - t0) * q0[ch] + t0 * q0[3 + ch];
-                float v1 = (1.0f - t1) * q1[ch] + t1 * q1[3 + ch];
-                float v = (1.0f - t) * v0 + t * v1;
-                o[ch] = fminf(fmaxf(v, -FLT_MAX), FLT_MAX);
-            }
+            /* the pixel's band: between every 2^k-th line */
+            int k = 0;
+            while (k < top && rho < j->band_lo[k])
+                k++;
+            int a0 = ((int)af >> k) << k;
+            v4f v0 = line_at(&bl[a0], rho), v1 = line_at(&bl[a0 + (1 << k)], rho);
+            /* a convex combination of finite floats: finite after the clamp */
+            st4(o, finite4(v0 + V4((float)((af - a0) * inv_step[k])) * (v1 - v0)));
         }
     }
 }
@@ -537,6 +490,29 @@ static fx_result polar_full(fx_context *ctx, const float *occ, float *rays, int 
         j.lines = (int)n;
         j.phi0 = lo - 2.0 * j.dphi;
     }
+    /* bands (see polar_line): as many as leave >= 16 lines (full circle; 4 in a sector) in
+     * the innermost one and reach the nearest pixel; the line count rounded up to a
+     * multiple of the coarsest step */
+    double r_near = 0.0;
+    if (!inside) {
+        double ex = j.lx < X0 ? X0 - j.lx : j.lx > W ? j.lx - W : 0.0;
+        double ey = j.ly < Y0 ? Y0 - j.ly : j.ly > H ? j.ly - H : 0.0;
+        r_near = hypot(ex, ey);
+    }
+    int top = 0;
+    while (top + 1 < POLAR_MAX_BANDS && (j.lines >> (top + 1)) >= (j.full_circle ? 16 : 4) &&
+           r_far / (double)(1 << (top + 1)) > r_near)
+        top++;
+    j.bands = top + 1;
+    const int step_max = 1 << top;
+    if (j.full_circle) {
+        j.lines = (j.lines + step_max - 1) / step_max * step_max;
+        j.dphi = 2 * M_PI / j.lines;
+    } else {
+        j.lines = (j.lines - 1 + step_max - 1) / step_max * step_max + 1;
+    }
+    for (int k = 0; k < j.bands; k++)
+        j.band_lo[k] = k == top ? 0.0 : r_far / j.hr / (double)(2 << k);
     j.line = fx_mem_calloc((size_t)j.lines, sizeof *j.line);
     if (!j.line)
         return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for %d polar lines", where, j.lines);
@@ -552,117 +528,120 @@ static fx_result polar_full(fx_context *ctx, const float *occ, float *rays, int 
         double b0 = floor(r_in / j.hr);
         ln->b0 = (int)b0;
         ln->count = (int)(floor(r_out / j.hr) - b0) + 2; /* one bin past the end for interpolation */
-        total += (size_t)ln->count;
+        /* results from the line's innermost band on (one bin below it for interpolation) */
+        int band = a == 0 ? top : __builtin_ctz((unsigned)a);
+        band = band < top ? band : top;
+        double lo = floor(j.band_lo[band]) - 1.0;
+        ln->out0 = lo > ln->b0 ? (int)lo : ln->b0;
+        if (ln->out0 > ln->b0 + ln->count - 2)
+            ln->out0 = ln->b0 + ln->count - 2;
+        ln->out_count = ln->b0 + ln->count - ln->out0;
+        total += (size_t)ln->out_count;
         if (ln->count > max_count)
             max_count = ln->count;
     }
     j.a = rb->decay >= 1.0 ? 0.0 : rb->decay <= 0.0 ? 0.0 : -(double)FX_RAYS_REFERENCE_SAMPLES * log(rb->decay);
     int levels = rb->levels < 1 ? 1 : rb->levels;
     j.hstep = log(2.0) / levels;
-    /* levels per line: from the rate at the line's far end to the rate at r = 1 */
-    int max_levels = 1;
-    if (j.a > 0.0 && rb->density > 0.0) {
-        double span = log(fmax(r_far / j.hr + 2.0, 2.0)) / j.hstep;
-        max_levels = (int)ceil(span) + 6;
-    }
-    j.max_levels = max_levels;
-    j.max_count = max_count;
-    j.scratch_per_worker = (size_t)max_count * 3 * (1 + (size_t)max_levels);
-    /* level tables: every rate any bin can use (rho in 1 .. max_rho, the cubic's
-     * neighbours), powers exp(-lambda j) for path lengths j <= max_rho + 2 */
-    int max_rho = 1;
+    /* the radii of the lines' bins: rho_lo .. max_rho (rho >= 1; the light's own bin is
+     * the identity). A far light has them all far out: the tables span only these. */
+    int rho_lo = INT_MAX, max_rho = 1;
     for (int a = 0; a < j.lines; a++)
-        if (j.line[a].count > 0 && j.line[a].b0 + j.line[a].count - 1 > max_rho)
-            max_rho = j.line[a].b0 + j.line[a].count - 1;
+        if (j.line[a].count > 0) {
+            int lo = j.line[a].out0 < 1 ? 1 : j.line[a].out0, hi = j.line[a].b0 + j.line[a].count - 1;
+            rho_lo = lo < rho_lo ? lo : rho_lo;
+            max_rho = hi > max_rho ? hi : max_rho;
+        }
+    if (rho_lo > max_rho)
+        rho_lo = max_rho;
+    j.rho_lo = rho_lo;
     j.max_rho = max_rho;
-    j.pw_len = max_rho + 3;
+    const int n_rho = max_rho - rho_lo + 1;
     int use_levels = j.a > 0.0 && rb->density > 0.0 && rb->decay > 0.0;
     if (use_levels) {
         j.k_min = (int)floor(level_of(&j, (double)max_rho)) - 2;
-        j.n_levels = (int)floor(level_of(&j, 1.0)) + 3 - j.k_min + 1;
+        j.n_levels = (int)floor(level_of(&j, (double)rho_lo)) + 3 - j.k_min + 1;
     } else {
         j.k_min = 0;
         j.n_levels = 1;
     }
+    /* levels one line reads: from the rate at its far end to the rate at its near end */
+    j.max_levels = j.n_levels;
+    j.max_count = max_count;
+    j.scratch_per_worker = (size_t)max_count * (1 + (size_t)j.max_levels);
     int workers = fx_parallel_workers(ctx);
-    uint64_t table_doubles = (uint64_t)j.n_levels * (2 + 2 * (uint64_t)j.pw_len) + (uint64_t)max_rho + 1;
-    uint64_t bytes = (uint64_t)total * 3 * sizeof(float) + ((uint64_t)max_rho + 1) * sizeof(rho_coef) +
-                     (uint64_t)workers * j.scratch_per_worker * sizeof(double) + table_doubles * sizeof(double);
+    uint64_t table_doubles = 2 * (uint64_t)j.n_levels + (uint64_t)n_rho;
+    uint64_t bytes = (uint64_t)total * 4 * sizeof(float) + (uint64_t)n_rho * sizeof(rho_coef) +
+                     (uint64_t)workers * j.scratch_per_worker * sizeof(v4f) + table_doubles * sizeof(double);
     fx_result r = fx_check_budget(ctx, bytes, where);
     if (r != FX_OK) {
         fx_mem_free(j.line);
         return r;
     }
-    j.res = fx_mem_alloc((total ? total : 1) * 3 * sizeof(float));
-    j.scratch = fx_mem_alloc((size_t)workers * j.scratch_per_worker * sizeof(double));
+    const size_t res_bytes = (total ? total : 1) * 4 * sizeof(float);
+    j.res = fx_buffer_get(ctx, res_bytes); /* the same size frame after frame: reused */
+    j.scratch = fx_mem_alloc((size_t)workers * j.scratch_per_worker * sizeof(v4f));
     double *tables = fx_mem_alloc((size_t)table_doubles * sizeof(double));
-    j.rc = fx_mem_calloc((size_t)max_rho + 1, sizeof *j.rc);
+    j.rc = fx_mem_calloc((size_t)n_rho, sizeof *j.rc);
     if (!j.res || !j.scratch || !tables || !j.rc) {
         fx_mem_free(j.rc);
-        fx_mem_free(j.res);
+        fx_buffer_put(ctx, j.res, res_bytes);
         fx_mem_free(j.scratch);
         fx_mem_free(tables);
         fx_mem_free(j.line);
         return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the polar grid (%zu bins)", where, total);
     }
-    j.em1 = tables;
-    j.e1 = j.em1 + j.n_levels;
-    j.pw = j.e1 + j.n_levels;
-    j.pq = j.pw + (size_t)j.n_levels * j.pw_len;
-    j.kap = j.pq + (size_t)j.n_levels * j.pw_len;
+    j.e1 = tables;
+    j.last = j.e1 + j.n_levels;
+    j.kap = j.last + j.n_levels;
     for (int g = 0; g < j.n_levels; g++) {
         double lam = use_levels ? exp((j.k_min + g) * j.hstep) : 0.0;
-        j.em1[g] = expm1(-lam);
         j.e1[g] = exp(-lam);
-        double *pw = j.pw + (size_t)g * j.pw_len, *pq = j.pq + (size_t)g * j.pw_len;
-        for (int i = 0; i < j.pw_len; i++) {
-            double x = lam * i;
-            pw[i] = x > 745.0 ? 0.0 : exp(-x);
-            pq[i] = -expm1(-x);
-        }
+        /* level g is read by radii whose level is >= g - 2: rho <= a / (d lambda_{g-2}) */
+        j.last[g] = use_levels ? j.a / (rb->density * exp((j.k_min + g - 2) * j.hstep)) : 1e300;
     }
-    j.kap[0] = 0.0;
-    for (int rho = 1; rho <= max_rho; rho++)
-        j.kap[rho] = use_levels ? level_of(&j, (double)rho) : 0.0;
-    if (use_levels) {
-        for (int rho = 1; rho <= max_rho; rho++) {
-            rho_coef *rc = &j.rc[rho];
-            double b_lo = (1.0 - rb->density) * rho, sf = ceil(b_lo);
-            double f = sf - b_lo;
-            int n = rho - (int)sf + 1;
-            rc->start = (int)sf;
-            rc->f = f;
-            rc->ident = n <= 1 && f < 1e-9;
-            double kappa = j.kap[rho];
-            int kb = (int)floor(kappa);
-            double t = kappa - kb;
-            rc->cr[0] = 0.5 * t * (-1.0 + t * (2.0 - t));
-            rc->cr[1] = 1.0 + t * t * (-2.5 + 1.5 * t);
-            rc->cr[2] = 0.5 * t * (1.0 + t * (4.0 - 3.0 * t));
-            rc->cr[3] = 0.5 * t * t * (t - 1.0);
-            for (int q = 0; q < 4 && !rc->ident; q++) {
-                int g = kb - 1 + q - j.k_min;
-                g = g < 0 ? 0 : g > j.n_levels - 1 ? j.n_levels - 1 : g;
-                rc->g[q] = g;
-                if (n < 1 || n >= j.pw_len) { /* cannot happen (0 < n <= rho + 1): be safe */
-                    rc->ident = 1;
-                    break;
-                }
-                const double *pw = j.pw + (size_t)g * j.pw_len;
-                double em1 = j.em1[g];
-                double e1n = pw[n - 1], en = pw[n];
-                double ef = e1n * (1.0 + f * em1);
-                double t1 = em1 == 0.0 ? (double)n : -j.pq[(size_t)g * j.pw_len + n] / em1;
-                double den = t1 - 0.5 - 0.5 * e1n + 0.5 * f * (e1n + ef);
-                if (!(den > 1e-300)) {
-                    rc->ident = 1;
-                    break;
-                }
-                rc->inv[q] = 1.0 / den;
-                rc->en[q] = en;
-                rc->e1n[q] = e1n;
-                rc->ef[q] = ef;
+    for (int i = 0; i < n_rho; i++)
+        j.kap[i] = use_levels ? level_of(&j, (double)(rho_lo + i)) : 0.0;
+    /* decay 1 (no levels): kap = 0 gives the Catmull-Rom weights (0, 1, 0, 0) on the one
+     * level of rate 0, i.e. prefix sums */
+    for (int i = 0; i < n_rho; i++) {
+        const int rho = rho_lo + i;
+        rho_coef *rc = &j.rc[i];
+        double b_lo = (1.0 - rb->density) * rho, sf = ceil(b_lo);
+        double f = sf - b_lo;
+        int n = rho - (int)sf + 1; /* whole bins of the path, 1 .. rho + 1 */
+        rc->start = (int)sf;
+        rc->f = V4((float)f);
+        rc->ident = n <= 1 && f < 1e-9;
+        double kappa = j.kap[i];
+        int kb = (int)floor(kappa);
+        double t = kappa - kb;
+        rc->cr[0] = V4((float)(0.5 * t * (-1.0 + t * (2.0 - t))));
+        rc->cr[1] = V4((float)(1.0 + t * t * (-2.5 + 1.5 * t)));
+        rc->cr[2] = V4((float)(0.5 * t * (1.0 + t * (4.0 - 3.0 * t))));
+        rc->cr[3] = V4((float)(0.5 * t * t * (t - 1.0)));
+        for (int q = 0; q < 4 && !rc->ident; q++) {
+            int g = kb - 1 + q - j.k_min;
+            g = g < 0 ? 0 : g > j.n_levels - 1 ? j.n_levels - 1 : g;
+            rc->g[q] = g;
+            /* the path [start - f, rho] under the kernel exp(-lambda (rho - x)), trapezoid
+             * rule over whole bins and the fractional end (kernel linear across it) */
+            double lam = use_levels ? exp((j.k_min + g) * j.hstep) : 0.0;
+            double em1 = expm1(-lam);
+            double e1n = exp(-lam * (n - 1)), en = exp(-lam * n);
+            double ef = e1n * (1.0 + f * em1);
+            double t1 = em1 == 0.0 ? (double)n : expm1(-lam * n) / em1; /* sum_{i<n} e^-lam i */
+            double den = t1 - 0.5 - 0.5 * e1n + 0.5 * f * (e1n + ef);
+            if (!(den > 1e-300)) {
+                rc->ident = 1;
+                break;
             }
+            double inv = 1.0 / den;
+            rc->ci[q] = V4((float)inv);
+            rc->cl[q] = V4((float)(inv * en));
+            rc->cc[q] = V4((float)(-0.5 * inv));
+            rc->ca[q] = V4((float)(inv * 0.5 * (f - 1.0) * e1n));
+            rc->cb[q] = V4((float)(inv * 0.5 * f * ef));
         }
     }
     if (rb->decay <= 0.0 || rb->density <= 0.0) {
@@ -671,28 +650,30 @@ static fx_result polar_full(fx_context *ctx, const float *occ, float *rays, int 
         double k = rb->decay <= 0.0 ? 0.0 : rb->scale * fx_radial_blur_mass(rb->decay);
         for (int y = j.roi.y0; y < j.roi.y1; y++)
             for (int x = j.roi.x0; x < j.roi.x1; x++)
-                for (int ch = 0; ch < 3; ch++) {
-                    size_t i = ((size_t)y * width + x) * 3 + ch;
-                    rays[i] = to_float(k * occ[i]);
+                for (int ch = 0; ch < 4; ch++) {
+                    size_t i = ((size_t)y * width + x) * 4 + ch;
+                    rays[i] = ch < 3 ? to_float(k * occ[i]) : 0.0f;
                 }
     } else {
         fx_parallel_for_worker(ctx, j.lines, 16, polar_lines, &j);
-        back_line *bl = fx_mem_alloc(((size_t)j.lines + 1) * sizeof *bl);
+        const int n_bl = j.lines + (1 << (j.bands - 1)) + 1;
+        back_line *bl = fx_mem_alloc((size_t)n_bl * sizeof *bl);
         if (!bl) {
-            fx_mem_free(j.res);
+            fx_buffer_put(ctx, j.res, res_bytes);
             fx_mem_free(j.scratch);
             fx_mem_free(tables);
             fx_mem_free(j.rc);
             fx_mem_free(j.line);
             return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for %d polar lines", where, j.lines);
         }
-        static const float zero_line[6] = {0};
-        for (int a = 0; a <= j.lines; a++) {
-            const polar_line *ln = a < j.lines ? &j.line[a] : j.full_circle ? &j.line[0] : NULL;
+        static const float zero_line[8] = {0};
+        for (int a = 0; a < n_bl; a++) {
+            /* past the last line: the circle wraps (lines is a multiple of every step) */
+            const polar_line *ln = a < j.lines ? &j.line[a] : j.full_circle ? &j.line[a - j.lines] : NULL;
             if (ln && ln->count >= 2) {
-                bl[a].bins = j.res + ln->offset * 3;
-                bl[a].b0 = ln->b0;
-                bl[a].last = ln->count - 2;
+                bl[a].bins = j.res + ln->offset * 4;
+                bl[a].b0 = ln->out0;
+                bl[a].last = ln->out_count - 2;
             } else {
                 bl[a].bins = zero_line;
                 bl[a].b0 = 0.0;
@@ -704,7 +685,7 @@ static fx_result polar_full(fx_context *ctx, const float *occ, float *rays, int 
         fx_parallel_for(ctx, rows, fx_grain_for(ctx, rows), polar_back, &bj);
         fx_mem_free(bl);
     }
-    fx_mem_free(j.res);
+    fx_buffer_put(ctx, j.res, res_bytes);
     fx_mem_free(j.scratch);
     fx_mem_free(tables);
     fx_mem_free(j.rc);
@@ -731,18 +712,19 @@ static void down_rows(void *user, int begin, int end)
             int x0 = X * f, x1 = x0 + f > j->w ? j->w : x0 + f;
             double acc[3] = {0, 0, 0};
             for (int y = y0; y < y1; y++) {
-                const float *q = j->occ + ((size_t)y * j->w + x0) * 3;
-                for (int x = x0; x < x1; x++, q += 3) {
+                const float *q = j->occ + ((size_t)y * j->w + x0) * 4;
+                for (int x = x0; x < x1; x++, q += 4) {
                     acc[0] += q[0];
                     acc[1] += q[1];
                     acc[2] += q[2];
                 }
             }
             double inv = 1.0 / ((double)(y1 - y0) * (x1 - x0));
-            float *o = j->lo + ((size_t)Y * j->lw + X) * 3;
+            float *o = j->lo + ((size_t)Y * j->lw + X) * 4;
             o[0] = (float)(acc[0] * inv);
             o[1] = (float)(acc[1] * inv);
             o[2] = (float)(acc[2] * inv);
+            o[3] = 0.0f;
         }
     }
 }
@@ -764,18 +746,19 @@ static void up_rows(void *user, int begin, int end)
         v = v < 0.0 ? 0.0 : v > j->lh - 1 ? j->lh - 1 : v;
         int Y0 = (int)v, Y1 = Y0 + 1 < j->lh ? Y0 + 1 : Y0;
         float ty = (float)(v - Y0);
-        const float *r0 = j->lo + (size_t)Y0 * j->lw * 3, *r1 = j->lo + (size_t)Y1 * j->lw * 3;
+        const float *r0 = j->lo + (size_t)Y0 * j->lw * 4, *r1 = j->lo + (size_t)Y1 * j->lw * 4;
         for (int x = j->roi.x0; x < j->roi.x1; x++) {
             double u = (x + 0.5) * inv_f - 0.5;
             u = u < 0.0 ? 0.0 : u > j->lw - 1 ? j->lw - 1 : u;
             int X0 = (int)u, X1 = X0 + 1 < j->lw ? X0 + 1 : X0;
             float tx = (float)(u - X0);
-            float *o = j->rays + ((size_t)y * j->w + x) * 3;
+            float *o = j->rays + ((size_t)y * j->w + x) * 4;
             for (int ch = 0; ch < 3; ch++) {
-                float a = r0[3 * X0 + ch] + tx * (r0[3 * X1 + ch] - r0[3 * X0 + ch]);
-                float b = r1[3 * X0 + ch] + tx * (r1[3 * X1 + ch] - r1[3 * X0 + ch]);
+                float a = r0[4 * X0 + ch] + tx * (r0[4 * X1 + ch] - r0[4 * X0 + ch]);
+                float b = r1[4 * X0 + ch] + tx * (r1[4 * X1 + ch] - r1[4 * X0 + ch]);
                 o[ch] = a + ty * (b - a);
             }
+            o[3] = 0.0f;
         }
     }
 }
@@ -790,15 +773,17 @@ fx_result fx_radial_blur_polar(fx_context *ctx, const float *occ, float *rays, i
     if (f <= 1 || width < 4 * f || height < 4 * f || rb->decay <= 0.0 || rb->density <= 0.0)
         return polar_full(ctx, occ, rays, width, height, rb, roi, where);
     int lw = (width + f - 1) / f, lh = (height + f - 1) / f;
-    size_t n = (size_t)lw * lh * 3;
+    size_t n = (size_t)lw * lh * 4;
     fx_result res = fx_check_budget(ctx, (uint64_t)n * 2 * sizeof(float), where);
     if (res != FX_OK)
         return res;
-    float *lo = fx_mem_alloc(n * sizeof(float));
-    float *lrays = fx_mem_calloc(n, sizeof(float));
+    float *lo = fx_buffer_get(ctx, n * sizeof(float));
+    float *lrays = fx_buffer_get(ctx, n * sizeof(float));
+    if (lrays)
+        memset(lrays, 0, n * sizeof(float));
     if (!lo || !lrays) {
-        fx_mem_free(lo);
-        fx_mem_free(lrays);
+        fx_buffer_put(ctx, lo, n * sizeof(float));
+        fx_buffer_put(ctx, lrays, n * sizeof(float));
         return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the reduced occlusion map", where);
     }
     down_job dj = {occ, lo, width, height, lw, f};
@@ -815,7 +800,7 @@ fx_result fx_radial_blur_polar(fx_context *ctx, const float *occ, float *rays, i
         int rows = r.y1 - r.y0;
         fx_parallel_for(ctx, rows, fx_grain_for(ctx, rows), up_rows, &uj);
     }
-    fx_mem_free(lo);
-    fx_mem_free(lrays);
+    fx_buffer_put(ctx, lo, n * sizeof(float));
+    fx_buffer_put(ctx, lrays, n * sizeof(float));
     return res;
 }

@@ -5,7 +5,7 @@
  *
  *     rays(p) = scale * integral_0^1 occ(p - t * density * (p - L)) * decay^(100 t) dt
  *
- * where occ is the 3-channel occlusion map (zero outside the image) and scale =
+ * where occ is the occlusion map (RGB, zero outside the image) and scale =
  * 100 * weight * exposure. `decay` is the per-sample decay at the seed's 100 samples:
  *  - naive (GPU Gems): N samples q_i = p - (i + j) * density * (p - L) / N, i = 0..N-1,
  *    j a per-pixel jitter in [0, 1) (0 without jitter), each weighted
@@ -21,8 +21,11 @@
  *    interpolated in log(rate) (cubic, clamped); decay 1 needs one rate (prefix sums).
  *    The result is resampled back to the pixels. Exact in the limit of fine lines and
  *    many levels; cost O(levels) per bin, independent of the sample count. No
- *    transcendental function per bin: exp(-lambda_k j) and the level of each radius
- *    come from tables built once per call. With downsample f > 1 it runs on the
+ *    transcendental function per bin: the level of each radius and its weights come
+ *    from tables built once per call; bins and sums are four-lane floats. Lines are
+ *    spaced for the farthest pixel, so near the light they crowd: in octave bands of
+ *    radius the back projection reads only every 2^k-th line, and a line evaluates its
+ *    results only in the bands that read it (it still runs its sums from the light). With downsample f > 1 it runs on the
  *    occlusion map box-averaged f x f and the rays are interpolated back (the rays are
  *    smooth along the lines; shaft edges blur by about f pixels): ~f^2 less work.
  * Both are deterministic and bit-identical for any thread count. */
@@ -66,8 +69,9 @@ void fx_radial_blur_bound_light(double *lx, double *ly, int width, int height);
 /* integral_0^1 decay^(100 t) dt: the kernel's mass (1 for decay 1, 0 for decay 0). */
 double fx_radial_blur_mass(double decay);
 
-/* rays (3 channels, width x height) over roi (NULL: all) from occ (3 channels). Outside
- * roi, rays is untouched. Finite for finite occ. */
+/* rays over roi (NULL: all) from occ, both width x height pixels of 4 floats (RGB and a
+ * lane that occ holds at 0 and rays gets 0: four-lane vectors). Outside roi, rays is
+ * untouched. Finite for finite occ. */
 fx_result fx_radial_blur_naive(fx_context *ctx, const float *occ, float *rays, int width, int height,
                                const fx_radial_blur *rb, const fx_rect *roi, const char *where);
 fx_result fx_radial_blur_polar(fx_context *ctx, const float *occ, float *rays, int width, int height,
