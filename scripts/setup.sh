@@ -14,6 +14,7 @@ packages=(
   xvfb                                      # a display for the add-on's UI screenshot
   libopencv-imgproc-dev                     # OpenCV's GaussianBlur as the benchmark's peer
   clang libclang-rt-14-dev                  # the fuzz target (libFuzzer is in libclang-rt)
+  nodejs                                    # runs the Flamenco job type (farm/flamenco) in its test
 )
 missing=()
 for p in "${packages[@]}"; do

@@ -236,10 +236,17 @@ def save_image(scene, exr_path, image_path):
     """The result in the scene's output format, through Blender's colour management.
     Main thread only."""
     img = bpy.data.images.load(exr_path, check_existing=False)
+    # atomic like libfx's own EXR writer: a temp file beside the target, then a rename,
+    # so a killed render never leaves a partial image under the final name
+    folder, name = os.path.split(image_path)
+    tmp = os.path.join(folder, ".%s.tmp-%d%s" % (name, os.getpid(), os.path.splitext(name)[1]))
     try:
-        img.save_render(image_path, scene=scene)
+        img.save_render(tmp, scene=scene)
+        os.replace(tmp, image_path)
     finally:
         bpy.data.images.remove(img)
+        if os.path.exists(tmp):
+            os.unlink(tmp)
 
 
 @persistent
