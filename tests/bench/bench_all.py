@@ -1,0 +1,907 @@
+#!/usr/bin/python3
+"""bench_all: the trade, measured (issue 8). One command times every effect of `libfx list`
+at every quality preset and along its main knob, measures its error against its own
+`reference` preset and (mirrors, shadows) against Cycles, runs the peers in the same run,
+and writes a CSV, a Markdown report and plots.
+
+    /usr/bin/python3 tests/bench/bench_all.py [--quick] [--runs N] [--out out/bench_all] [--docs]
+        [--build build-benchall] [--spp 4] [--docs-root .] [--skip peers,cycles]
+
+Stages (progress and ETA on stderr):
+ 1. build    cmake --build BUILD (bench_presets, the CLI, the library); configures BUILD with
+             -DLIBFX_BUILD_BENCH=ON when it has no cache.
+ 2. render   the three scenes (greek_bath, atrium, mirror_room) at 1280x720 and 1920x1080,
+             frame 1, SPP samples, through the add-on's batch runner with a recipe that is the
+             union of every recipe benchmarked on that scene (so the passes file holds every
+             pass they need; the runner also renders the aux views and writes the sidecar).
+             Cached in OUT/renders (a stamp holds the recipe, size and samples).
+ 3. effects  tests/bench/bench_presets (C) per scene, size and effect: the four presets at 2 and
+             1 threads with the copy floor; at the largest size also the knob sweeps of KNOBS
+             (2 threads) and the scaling rows (0.25..4 MP, mask area 25..100 %, 2 threads).
+ 4. peers    run_peers() of tests/bench/bench_peers_all.py on the greek_bath passes file at the
+             largest size (Blender compositor nodes, oiiotool, EXR read+write, copy floor).
+ 5. cycles   ssr_mirror against Cycles' true mirrors (bench_ssr_render.py renders,
+             bench_ssr_accuracy.py measures) and vsm_shadows against Cycles' ray-traced sun
+             shadows (bench_atrium.py --only vsm), at reduced size; their results as `cycles`
+             rows.
+ 6. report   OUT/bench_all.csv, OUT/bench_all.md, OUT/images/perf_*.png. With --docs also
+             docs/bench/bench_all.csv, docs/images/perf_*.png, the generated section of
+             docs/performance.md (between <!-- bench_all begin --> and <!-- bench_all end -->)
+             and scripts/gen_effect_docs.py (docs/effects/*.md from the CSV).
+
+--quick: 1280x720 only, 2 runs, 2 threads, coarse sweeps, no Cycles stage (development).
+CSV: kind,scene,effect,setting,width,height,threads,runs,ms_median,mae,max_err,psnr_db,
+mask_px,note (bench_presets.c says how each column is measured).
+"""
+import argparse
+import csv
+import datetime
+import hashlib
+import json
+import os
+import pathlib
+import platform
+import re
+import shutil
+import subprocess
+import sys
+import time
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+HERE = ROOT / "tests" / "bench"
+SCHEMA = ["kind", "scene", "effect", "setting", "width", "height", "threads", "runs", "ms_median",
+          "mae", "max_err", "psnr_db", "mask_px", "note"]
+SCENES = ("greek_bath", "atrium", "mirror_room")
+SIZES_FULL = ((1280, 720), (1920, 1080))
+SIZES_QUICK = ((1280, 720),)
+FRAME = 1
+
+# Effects benchmarked beyond the scenes' own recipes, on the bath frame.
+BATH_EXTRAS = [
+    {"effect": "gaussian_blur", "params": {"sigma": 16.7}},          # = Blender's Blur size 50
+    {"effect": "color_matrix", "params": {"operator": "sepia"}},
+    {"effect": "bloom", "params": {"radius": 128}},
+    {"effect": "edges", "params": {"depth": True, "normal": True, "line_width": 3}},
+    {"effect": "posterize", "params": {"levels": 4}},
+]
+# scene -> [(recipe file or list of entries, effects of it to benchmark (None: all))]
+SCENE_RECIPES = {
+    "greek_bath": [("blend_scenes/greek_bath/recipe.json", None),
+                   ("blend_scenes/greek_bath/recipe_cel.json", None),
+                   (BATH_EXTRAS, None)],
+    "atrium": [("blend_scenes/atrium/recipe.json", None),
+               ("blend_scenes/atrium/recipe_sin_city.json", ["sin_city"])],  # bloom: on the bath
+    "mirror_room": [("blend_scenes/mirror_room/recipe.json", None)],
+}
+
+# The knob sweeps: (kind, param, full values, quick values or None, "@p=v;..." fixed params).
+# kind "knob": a cost/quality knob, error against the reference preset of the recipe's params;
+# "look": a knob that changes the picture, each value at final against the reference preset at
+# the same value. Main knobs from `libfx describe EFFECT` (the params the presets set, or
+# the one that sets the effect's size/reach).
+KNOBS = {
+    "bloom": [("knob", "level_sigma", "0.8,1,1.25,1.5,2", "0.8,2", ""),
+              ("look", "radius", "32,64,128,256", "256", "")],
+    "cel_shading": [("look", "outline_width", "0,1,2,4", "0,4", "")],
+    "color_matrix": [("look", "operator", "grayscale_luminance,sepia,custom", "custom", "")],
+    "edges": [("look", "line_width", "1,2,4,8", "8", "")],
+    "gaussian_blur": [("look", "sigma", "2,8.5,16.7,50", "2,50", ""),
+                      ("knob", "box_passes", "2,3,4,5,6", None, "algorithm=box")],
+    "god_rays": [("knob", "polar_resolution", "0.25,0.5,1,2", "0.25,1", ""),
+                 ("knob", "samples", "25,100,400", None, "method=naive")],
+    "pixelate": [("look", "cell_size", "4,12,32", "4", "")],
+    "posterize": [("look", "levels", "2,4,8,16", "16", "")],
+    "rain": [("look", "density", "0.1,0.35,1", "1", "")],
+    "rain_splashes": [("look", "spacing", "0.25,0.35,1", "0.25", "")],  # size 0.12 <= spacing / 2
+    "sin_city": [("look", "levels", "0,4,8", "0", "")],
+    "ssr_mirror": [("knob", "max_steps", "16,32,64,128,256", "16,64", ""),
+                   ("knob", "resolution_scale", "0.25,0.5,1", "0.5", ""),
+                   ("knob", "refine", "0,2,6", None, "")],
+    "voronoi_caustics": [("look", "points", "49,196,1024,4096", "4096", ""),
+                         ("knob", "method", "grid,brute", None, "")],
+    "vsm_shadows": [("look", "filter_size", "1,5,15,33", "15", ""),
+                    ("knob", "method", "hard,vsm,pcf", "hard", "")],
+    "wet_surfaces": [("look", "edge_softness", "0.1,0.4,1.6", None, "")],
+}
+SCALING_RES = "0.25,0.5,1,2,4"
+SCALING_MASK = "25,50,75,100"
+
+T0 = time.time()
+FAILURES = []
+
+
+def log(msg):
+    print("bench_all: %s" % msg, file=sys.stderr, flush=True)
+
+
+class Progress:
+    """Stage i/N with an ETA from per-stage cost estimates, scaled by the pace measured on the
+    stages done so far (cached renders, which take no time, are left out of the pace)."""
+
+    def __init__(self, stages):
+        self.stages = stages  # [(label, estimated seconds)]
+        self.i = 0
+        self.t_start = time.time()
+        self.paced = []  # (estimate, actual) of finished stages that did work
+        self.durations = {}
+
+    def start(self, label):
+        self.i += 1
+        self.label = label
+        self.t_stage = time.time()
+        est_left = sum(e for _, e in self.stages[self.i - 1:])
+        est_done = sum(e for e, _ in self.paced)
+        pace = sum(t for _, t in self.paced) / est_done if est_done > 30 else 1.0
+        log("[stage %d/%d] %s (elapsed %s, ETA %s)" % (self.i, len(self.stages), label,
+                                                    fmt_s(time.time() - self.t_start), fmt_s(est_left * pace)))
+
+    def end(self):
+        dt = time.time() - self.t_stage
+        est = self.stages[self.i - 1][1]
+        if dt > 0.2 * est:
+            self.paced.append((est, dt))
+        group = self.label.split(":")[0]
+        self.durations[group] = self.durations.get(group, 0.0) + dt
+        return dt
+
+
+def fmt_s(s):
+    s = int(round(s))
+    return "%dm%02ds" % (s // 60, s % 60) if s >= 60 else "%ds" % s
+
+
+def run(cmd, env=None, check=True, capture=True, cwd=None):
+    p = subprocess.run([str(c) for c in cmd], env=env, cwd=cwd, text=True,
+                       stdout=subprocess.PIPE if capture else None,
+                       stderr=subprocess.PIPE if capture else None)
+    if check and p.returncode:
+        tail = ((p.stdout or "")[-3000:] + (p.stderr or "")[-3000:]) if capture else ""
+        raise SystemExit("bench_all: failed (%d): %s\n%s" % (p.returncode, " ".join(map(str, cmd)), tail))
+    return p
+
+
+# ---------------------------------------------------------------- machine
+
+def machine():
+    model = "unknown CPU"
+    try:
+        for line in open("/proc/cpuinfo"):
+            if line.startswith("model name"):
+                model = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    mem = ""
+    try:
+        for line in open("/proc/meminfo"):
+            if line.startswith("MemTotal"):
+                mem = "%.0f GiB" % (int(line.split()[1]) / 1024 / 1024)
+    except OSError:
+        pass
+    return {"cpu": model, "cores": os.cpu_count(), "memory": mem, "os": platform.platform()}
+
+
+def source_state():
+    """The commit measured, and the uncommitted files of the library it was built with."""
+    try:
+        sha = run(["git", "-C", ROOT, "rev-parse", "--short", "HEAD"]).stdout.strip()
+        dirty = [l[3:] for l in run(["git", "-C", ROOT, "status", "--porcelain", "--", "libfx", "CMakeLists.txt",
+                                     "cmake"]).stdout.splitlines() if l.strip()]
+    except SystemExit:
+        return "unknown (not a git checkout)"
+    return "git %s%s" % (sha, "" if not dirty else " + uncommitted changes in %s" % ", ".join(dirty))
+
+
+def loadavg():
+    try:
+        return " ".join(open("/proc/loadavg").read().split()[:3])
+    except OSError:
+        return "?"
+
+
+# ---------------------------------------------------------------- recipes and renders
+
+def load_entries(src):
+    if isinstance(src, list):
+        return [dict(e) for e in src]
+    return json.load(open(ROOT / src))["effects"]
+
+
+def scene_plan(scene):
+    """(union recipe for the render, bench recipe, [effects to bench in order])."""
+    entries, effects = [], []
+    for src, only in SCENE_RECIPES[scene]:
+        es = [e for e in load_entries(src) if e.get("enabled", True)]
+        for e in es:
+            if only is None or e["effect"] in only:
+                entries.append(e)
+                if e["effect"] not in effects:
+                    effects.append(e["effect"])
+        # the render needs the passes of every entry of the recipe, benched or not
+    render = {"version": 1, "quality": "final", "effects": entries}
+    return render, {"version": 1, "quality": "final", "effects": entries}, effects
+
+
+def render_scene(scene, w, h, spp, out, env):
+    d = out / "renders" / ("%s_%dx%d" % (scene, w, h))
+    d.mkdir(parents=True, exist_ok=True)
+    render, bench, effects = scene_plan(scene)
+    rpath, bpath = d / "render_recipe.json", d / "bench_recipe.json"
+    rtext = json.dumps(render, indent=1)
+    stamp = {"recipe": hashlib.sha1(rtext.encode()).hexdigest(), "size": [w, h], "spp": spp, "frame": FRAME}
+    passes, side = d / ("r_libfx_passes.%04d.exr" % FRAME), d / ("r_libfx.%04d.camera.json" % FRAME)
+    bpath.write_text(json.dumps(bench, indent=1))
+    sp = d / "stamp.json"
+    if passes.exists() and side.exists() and sp.exists() and json.loads(sp.read_text()) == stamp:
+        log("%s %dx%d: cached render" % (scene, w, h))
+        return passes, side, bpath, effects, None
+    rpath.write_text(rtext)
+    t0 = time.time()
+    run(["blender", "-b", ROOT / "blend_scenes" / scene / ("%s.blend" % scene), "--python",
+         ROOT / "addon" / "libfx" / "batch.py", "--", "--frames", str(FRAME), "--output", str(d / "r_"),
+         "--resolution", "%dx%d" % (w, h), "--samples", str(spp), "--recipe", rpath], env=env)
+    dt = time.time() - t0
+    sp.write_text(json.dumps(stamp))
+    log("%s %dx%d: rendered in %.0f s" % (scene, w, h, dt))
+    return passes, side, bpath, effects, dt
+
+
+# ---------------------------------------------------------------- effects
+
+def read_rows(path):
+    with open(path, newline="") as f:
+        return [dict(r) for r in csv.DictReader(f)]
+
+
+def bench_effect(bench_bin, scene, effect, passes, side, recipe, args, sweeps, tmp):
+    """bench_presets for one effect; sweeps: the knob sweeps and the scaling rows too."""
+    cmd = [bench_bin, "--passes", passes, "--sidecar", side, "--recipe", recipe, "--scene", scene,
+           "--effects", effect, "--threads", args.threads, "--runs", str(args.runs),
+           "--budget-ms", str(args.budget_ms), "--ref-max-ms", str(args.ref_max_ms), "-o", tmp]
+    if sweeps:
+        for kind, param, full, quick, fixed in KNOBS.get(effect, []):
+            vals = quick if args.quick else full
+            if not vals:
+                continue
+            cmd += ["--look-knob" if kind == "look" else "--knob",
+                    "%s.%s=%s%s" % (effect, param, vals, ("@" + fixed) if fixed else "")]
+        cmd += ["--knobs-first-threads-only", "--scaling-res", args.scaling_res, "--scaling-mask",
+                args.scaling_mask, "--scaling-threads", str(max(int(t) for t in args.threads.split(",")))]
+    p = subprocess.Popen([str(c) for c in cmd], stderr=subprocess.PIPE, text=True)
+    for line in p.stderr:
+        if args.verbose or not line.startswith("bench_presets: ["):
+            sys.stderr.write("  " + line)
+    if p.wait():
+        log("ERROR: bench_presets failed for %s on %s (its rows are missing; message above)" % (effect, scene))
+        FAILURES.append("%s on %s" % (effect, scene))
+        return []
+    return read_rows(tmp)
+
+
+def describe(cli, effect):
+    return json.loads(run([cli, "describe", effect]).stdout)
+
+
+# ---------------------------------------------------------------- peers
+
+def peers_stage(passes, side, w, h, runs, out, env):
+    sys.path.insert(0, str(HERE))
+    try:
+        os.environ.update({k: v for k, v in env.items() if k.startswith("LIBFX")})
+        from bench_peers_all import run_peers
+    except Exception as e:  # the peers module is written by another engineer
+        log("peers skipped: tests/bench/bench_peers_all.py not importable (%s: %s)" % (type(e).__name__, e))
+        return [], "not importable: %s" % e
+    try:
+        rows = run_peers(str(passes), str(side), w, h, runs, str(out / "peers"))
+    except BaseException as e:  # keep the run's other results
+        log("peers failed: %s: %s" % (type(e).__name__, e))
+        return [], "failed: %s" % e
+    return [{k: ("" if r.get(k) is None else str(r.get(k))) for k in SCHEMA} for r in rows], None
+
+
+# ---------------------------------------------------------------- cycles
+
+def cycles_ssr(out, env, res, runs, cli):
+    d = out / "cycles" / "ssr"
+    d.mkdir(parents=True, exist_ok=True)
+    w, h = (int(v) for v in res.split("x"))
+    for mode, name in (("backing", "back"), ("cycles_mirror", "ref")):
+        if not (d / ("%s%d.exr" % (name, w))).exists():
+            t0 = time.time()
+            run(["blender", "-b", "--factory-startup", "--python", HERE / "bench_ssr_render.py", "--",
+                 d / ("%s%d" % (name, w)), "--mode", mode, "--resolution", w, h, "--samples", 16], env=env)
+            log("mirror_room %s %s rendered in %.0f s" % (mode, res, time.time() - t0))
+    p = run(["/usr/bin/python3", HERE / "bench_ssr_accuracy.py", "--cli", cli, "--dir", d, "--res", res,
+             "--out", d / "out", "--runs", runs], env=env)
+    (d / "accuracy.log").write_text(p.stdout + p.stderr)
+    m = re.search(r"region: (\d+) px", p.stdout)
+    region = m.group(1) if m else ""
+    rows = []
+    note = ("vs Cycles true mirrors (bench_ssr_accuracy.py); the whole mirror_room stack; RGB clamped to "
+            "[0 1]; PSNR peak 1; region: physical mirrors where the reference preset hit on screen; ms: "
+            "libfx run -v effects time")
+    with open(d / "out" / "ssr_accuracy.csv") as f:
+        lines = f.read().split("\n\n")[0].strip().splitlines()[1:]
+    for line in lines:
+        method, mae, psnr, ms = line.rsplit(",", 3)
+        setting = {"no reflection (input)": "input (no reflection)"}.get(method, method)
+        setting = re.sub(r"^libfx (\w+)$", r"quality=\1", setting)
+        rows.append(dict(kind="cycles", scene="mirror_room", effect="ssr_mirror", setting=setting, width=w,
+                         height=h, threads=2 if setting.startswith("quality") else "",
+                         runs=runs if setting.startswith("quality") else "", ms_median=ms if float(ms) > 0 else "",
+                         mae=mae, max_err="", psnr_db=psnr, mask_px=region, note=note))
+    with open(d / "out" / "ssr_curve.csv") as f:
+        for r in csv.DictReader(f):
+            k, v = r["variant"].split()
+            param = {"steps": "max_steps", "refine": "refine", "scale": "resolution_scale"}[k]
+            rows.append(dict(kind="cycles", scene="mirror_room", effect="ssr_mirror", setting="%s=%s" % (param, v),
+                             width=w, height=h, threads=2, runs=runs, ms_median=r["ms"], mae=r["mae"], max_err="",
+                             psnr_db=r["psnr_db"], mask_px=region,
+                             note=note + "; knob sweep (the other knobs at max_steps 64 stride 2 growth 1.05 "
+                                         "refine 4 scale 1)"))
+    return rows
+
+
+def cycles_vsm(out, env, res, spp, runs):
+    d = out / "cycles" / "vsm"
+    d.mkdir(parents=True, exist_ok=True)
+    p = run(["/usr/bin/python3", HERE / "bench_atrium.py", d, "--only", "vsm", "--res", res, "--spp", spp,
+             "--runs", runs], env=env)
+    (d / "atrium.log").write_text(p.stdout + p.stderr)
+    rep = json.load(open(d / "report.json"))
+    w, h = (int(v) for v in res.split("x"))
+    rows = []
+    for key, what in (("vsm_vs_cycles", "full render (world; bounces)"),
+                      ("vsm_direct", "the Sun's direct diffuse light alone")):
+        if key not in rep:
+            continue
+        r = rep[key]
+        shadow_px = int(round(r["shadow_pixel_fraction"] * w * h))
+        for method, size, bleed, mae_frame, mae_shadow, ms in r["rows"]:
+            if size == "":
+                setting = method
+            else:
+                m = "vsm" if method.startswith("vsm") else method
+                setting = "method=%s filter_size=%s" % (m, size)
+                if method == "vsm_gauss":
+                    setting += " filter=gaussian"
+                if m == "vsm":
+                    setting += " bleed_reduction=%s" % bleed
+            rows.append(dict(kind="cycles", scene="atrium", effect="vsm_shadows", setting=setting, width=w,
+                             height=h, threads=os.cpu_count() if ms != "" else "", runs=1 if ms != "" else "",
+                             ms_median=ms,
+                             mae="%.6g" % mae_shadow, max_err="", psnr_db="", mask_px=shadow_px,
+                             note="vs Cycles ray-traced Sun shadows (bench_atrium.py; frame %d; %s); MAE over the "
+                                  "pixels the Sun's shadow changes (mask_px); MAE over the frame %.5f; one run"
+                                  % (r["frame"], what, mae_frame)))
+    return rows
+
+
+# ---------------------------------------------------------------- report
+
+def fnum(v, kind="err"):
+    if v is None or v == "":
+        return ""
+    try:
+        x = float(v)
+    except ValueError:
+        return str(v)
+    if x != x:
+        return ""
+    if kind == "ms":
+        return "%.0f" % x if x >= 100 else "%.1f" % x if x >= 10 else "%.2f" % x
+    if kind == "db":
+        return "∞" if x == float("inf") else "%.1f" % x
+    if kind == "x":
+        return "%.1fx" % x
+    if x == 0:
+        return "0"
+    return "%.2g" % x if 0.01 <= abs(x) < 1000 else ("%.1e" % x).replace("e-0", "e-")
+
+
+def md_table(head, rows, align=None):
+    align = align or ["---"] * len(head)
+    out = ["| " + " | ".join(head) + " |", "|" + "|".join(align) + "|"]
+    out += ["| " + " | ".join(str(c).replace("|", "/") for c in r) + " |" for r in rows]
+    return out
+
+
+def size_of(r):
+    return "%sx%s" % (r["width"], r["height"])
+
+
+def common_note_parts(rows):
+    parts = [set((r["note"] or "").split("; ")) - {""} for r in rows]
+    return set.intersection(*parts) if parts else set()
+
+
+def effect_tables(rows, effects, halos):
+    """One table per effect: a row per (scene, setting, size), a column pair per thread count."""
+    md = []
+    floors = {(r["scene"], r["effect"], r["width"], r["height"], r["threads"]): float(r["ms_median"])
+              for r in rows if r["kind"] == "floor" and r["ms_median"]}
+    for eff in effects:
+        er = [r for r in rows if r["effect"] == eff and r["kind"] in ("effect", "reference")]
+        if not er:
+            continue
+        local = halos.get(eff, 99) <= 1
+        threads = sorted({r["threads"] for r in er}, key=lambda t: -int(t or 0))
+        common = common_note_parts(er)
+        md.append("#### %s\n" % eff)
+        if common:
+            md.append("Every row: %s.\n" % "; ".join(sorted(common)))
+        groups = {}
+        for r in er:
+            groups.setdefault((r["scene"], r["setting"], r["width"], r["height"]), []).append(r)
+        body = []
+        for (scene, setting, w, h), rs in groups.items():
+            by_t = {r["threads"]: r for r in rs}
+            cells = [scene, "`%s`%s" % (setting, " (reference)" if rs[0]["kind"] == "reference" else ""), "%sx%s" % (w, h)]
+            for t in threads:
+                r = by_t.get(t)
+                cells.append(fnum(r["ms_median"], "ms") if r else "")
+            for t in threads:
+                r = by_t.get(t)
+                fl = floors.get((scene, eff, w, h, t))
+                cells.append(fnum(float(r["ms_median"]) / fl, "x") if (local and r and fl and r["ms_median"]) else "")
+            cells.append("/".join(by_t[t]["runs"] if t in by_t else "-" for t in threads))
+            first = rs[0]
+            notes = []
+            for r in rs:
+                for part in (r["note"] or "").split("; "):
+                    if part and part not in common and part not in notes:
+                        notes.append(part)
+            cells += [fnum(first["mae"]), fnum(first["max_err"]), fnum(first["psnr_db"], "db"), first["mask_px"],
+                      "; ".join(notes)]
+            body.append(cells)
+        tl = ["%s thr" % t for t in threads]
+        md += md_table(["scene", "setting", "size"] + ["ms, " + t for t in tl] + ["x floor, " + t for t in tl] +
+                       ["runs (%s)" % "/".join(tl), "MAE", "max err", "PSNR dB", "mask px", "note"], body,
+                       ["---"] * 3 + ["---:"] * (2 * len(threads) + 5) + ["---"])
+        md.append("")
+    return md
+
+
+def libfx_ms(rows, effect, w, h, threads="2"):
+    """libfx's `final` time of an effect at a size (any scene; the bath first)."""
+    c = [r for r in rows if r["kind"] == "effect" and r["effect"] == effect and r["setting"] == "quality=final"
+         and r["width"] == str(w) and r["height"] == str(h) and r["threads"] == threads and r["ms_median"]]
+    c.sort(key=lambda r: r["scene"] != "greek_bath")
+    return (float(c[0]["ms_median"]), c[0]["scene"]) if c else (None, None)
+
+
+def peers_table(rows, peer_rows):
+    body = []
+    for r in peer_rows:
+        lib, _ = libfx_ms(rows, r["effect"], r["width"], r["height"]) if r["kind"] == "peer" else (None, None)
+        ratio = ""
+        if lib and r["ms_median"]:
+            try:
+                ratio = fnum(float(r["ms_median"]) / lib, "x")
+            except ValueError:
+                pass
+        body.append([r["kind"], r["effect"], r["setting"], size_of(r), r["threads"], r["runs"],
+                     fnum(r["ms_median"], "ms"), fnum(lib, "ms") if lib else "", ratio, fnum(r["mae"]),
+                     fnum(r["psnr_db"], "db"), r["note"]])
+    return md_table(["kind", "effect", "peer", "size", "threads", "runs", "ms", "libfx final ms (2 threads)",
+                     "peer / libfx", "MAE", "PSNR dB", "note"], body,
+                    ["---", "---", "---", "---", "---:", "---:", "---:", "---:", "---:", "---:", "---:", "---"])
+
+
+def scaling_tables(rows):
+    md = []
+    sr = [r for r in rows if r["kind"] == "scaling_res"]
+    if sr:
+        mps = sorted({r["setting"] for r in sr}, key=lambda s: float(s.split("=")[1]))
+        body = []
+        for (scene, eff) in dict.fromkeys((r["scene"], r["effect"]) for r in sr):
+            by = {r["setting"]: r for r in sr if r["scene"] == scene and r["effect"] == eff}
+            cells = [fnum(by[m]["ms_median"], "ms") if m in by else "" for m in mps]
+            lo, hi = by.get(mps[0]), by.get(mps[-1])
+            growth = ""
+            if lo and hi and float(lo["ms_median"]) > 0:
+                px = (int(hi["width"]) * int(hi["height"])) / (int(lo["width"]) * int(lo["height"]))
+                growth = "%.1fx for %.0fx pixels" % (float(hi["ms_median"]) / float(lo["ms_median"]), px)
+            body.append([eff, scene] + cells + [growth])
+        th = sr[0]["threads"]
+        md.append("#### Time vs resolution (ms, `final`, %s threads; frames resampled from the rendered one)\n" % th)
+        md += md_table(["effect", "scene"] + ["%s MP" % m.split("=")[1] for m in mps] + ["growth"], body,
+                       ["---", "---"] + ["---:"] * len(mps) + ["---"])
+        md.append("")
+    sm = [r for r in rows if r["kind"] == "scaling_mask"]
+    if sm:
+        pcts = sorted({r["setting"] for r in sm}, key=lambda s: float(s.split("=")[1].rstrip("%")))
+        body = []
+        for (scene, eff) in dict.fromkeys((r["scene"], r["effect"]) for r in sm):
+            by = {r["setting"]: r for r in sm if r["scene"] == scene and r["effect"] == eff}
+            cells = ["%s (%s px)" % (fnum(by[p]["ms_median"], "ms"), by[p]["mask_px"]) if p in by else ""
+                     for p in pcts]
+            full = by.get(pcts[-1])
+            ns = ""
+            if full and full["mask_px"] and int(full["mask_px"]) > 0:
+                ns = "%.0f" % (float(full["ms_median"]) * 1e6 / int(full["mask_px"]))
+            body.append([eff, scene, size_of(full) if full else ""] + cells + [ns])
+        th = sm[0]["threads"]
+        md.append("#### Time vs mask area (ms, `final`, %s threads; the effect's masks cut by a rectangle keeping "
+                  "that share of the masked pixels; whole-frame effects: that share of the frame)\n" % th)
+        md += md_table(["effect", "scene", "size"] + [p.split("=")[1] for p in pcts] + ["ns per mask px (100 %)"],
+                       body, ["---", "---", "---"] + ["---:"] * len(pcts) + ["---:"])
+        md.append("")
+    return md
+
+
+def plots(rows, effects, img_dir, peer_rows):
+    try:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        log("matplotlib missing: no plots")
+        return []
+    img_dir.mkdir(parents=True, exist_ok=True)
+    made = []
+    for eff in effects:
+        er = [r for r in rows if r["effect"] == eff and r["kind"] in ("effect", "reference") and r["ms_median"]]
+        if not er:
+            continue
+        big = max(er, key=lambda r: int(r["width"]) * int(r["height"]))
+        scene, W, H = big["scene"], big["width"], big["height"]
+        er = [r for r in er if r["scene"] == scene and r["width"] == W and r["height"] == H]
+        fig, ax = plt.subplots(figsize=(7, 4.4), dpi=100)
+        errs = [float(r["mae"]) for r in er if r["mae"] not in ("", None) and float(r["mae"]) > 0]
+        colours = {}
+        palette = ["C0", "C1", "C2", "C3", "C4", "C5", "C6"]
+
+        def family(r):
+            return "quality preset" if r["setting"].startswith("quality=") else r["setting"].split("=")[0]
+
+        fams = list(dict.fromkeys(family(r) for r in er if r["kind"] == "effect"))
+        for i, f in enumerate(fams):
+            colours[f] = palette[i % len(palette)]
+        threads = sorted({r["threads"] for r in er})
+        if errs:
+            zero_x = min(errs) / 4
+            for f in fams:
+                for t in threads:
+                    pts = [r for r in er if r["kind"] == "effect" and family(r) == f and r["threads"] == t]
+                    xs = [float(r["mae"]) if r["mae"] not in ("",) else float("nan") for r in pts]
+                    xs = [zero_x if x == 0 else x for x in xs]
+                    ys = [float(r["ms_median"]) for r in pts]
+                    ax.plot(xs, ys, "o" + ("-" if t == threads[-1] else "--"), color=colours[f], ms=5,
+                            label="%s, %s thread%s" % (f, t, "" if t == "1" else "s"))
+                    for x, y, r in zip(xs, ys, pts):
+                        ax.annotate(r["setting"].split("=", 1)[1], (x, y), fontsize=6.5, xytext=(3, 3),
+                                    textcoords="offset points")
+            ax.set_xscale("log")
+            ax.set_xlabel("MAE vs the reference preset (inside the mask; 0 drawn at the left)")
+        else:
+            labels = list(dict.fromkeys(r["setting"] for r in er))
+            for t in threads:
+                pts = [r for r in er if r["threads"] == t]
+                ax.plot([labels.index(r["setting"]) for r in pts], [float(r["ms_median"]) for r in pts],
+                        "o" + ("-" if t == threads[-1] else "--"), label="%s thread%s" % (t, "" if t == "1" else "s"))
+            ax.set_xticks(range(len(labels)))
+            ax.set_xticklabels(labels, rotation=30, ha="right", fontsize=7)
+            ax.set_xlabel("setting (no quality presets: every preset gives the same picture)")
+        for t in threads:
+            ref = [r for r in er if r["kind"] == "reference" and r["threads"] == t]
+            if ref and errs:
+                ax.axhline(float(ref[0]["ms_median"]), color="k", ls=":", lw=0.9)
+                ax.annotate("reference, %s thr" % t, (ax.get_xlim()[0], float(ref[0]["ms_median"])), fontsize=7,
+                            xytext=(2, 2), textcoords="offset points")
+        for r in peer_rows:  # peers timed at the plot's size
+            if r["effect"] == eff and r["kind"] == "peer" and r["ms_median"] and r["width"] == W and r["height"] == H:
+                y = float(r["ms_median"])
+                ax.axhline(y, color="r", lw=0.8, alpha=0.7)
+                ax.annotate(r["setting"][:48], (ax.get_xlim()[0], y), fontsize=6.5, color="r", xytext=(2, -8),
+                            textcoords="offset points")
+        ax.set_yscale("log")
+        ax.set_ylabel("ms (median)")
+        ax.set_title("%s on %s at %sx%s: time vs error" % (eff, scene, W, H), fontsize=10)
+        ax.legend(fontsize=7, loc="best")
+        fig.tight_layout()
+        p = img_dir / ("perf_%s.png" % eff)
+        fig.savefig(p)
+        plt.close(fig)
+        made.append(p)
+    for kind, fname, xlabel in (("scaling_res", "perf_scaling_res.png", "megapixels"),
+                                ("scaling_mask", "perf_scaling_mask.png", "masked pixels (millions)")):
+        sr = [r for r in rows if r["kind"] == kind and r["ms_median"]]
+        if not sr:
+            continue
+        fig, ax = plt.subplots(figsize=(7.5, 4.6), dpi=100)
+        for i, (scene, eff) in enumerate(dict.fromkeys((r["scene"], r["effect"]) for r in sr)):
+            pts = [r for r in sr if r["scene"] == scene and r["effect"] == eff]
+            if kind == "scaling_res":
+                xs = [int(r["width"]) * int(r["height"]) / 1e6 for r in pts]
+            else:
+                xs = [int(r["mask_px"]) / 1e6 for r in pts]
+            pts = [p for _, p in sorted(zip(xs, pts), key=lambda z: z[0])]
+            xs = sorted(xs)
+            ax.plot(xs, [float(r["ms_median"]) for r in pts], ("o-", "s-", "^-", "v-")[i // 10 % 4],
+                    color="C%d" % (i % 10), ms=4, label=eff)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel("ms (median, final, %s threads)" % sr[0]["threads"])
+        ax.set_title("time vs %s" % ("resolution" if kind == "scaling_res" else "mask area"), fontsize=10)
+        ax.legend(fontsize=6.5, ncol=2)
+        ax.grid(True, which="both", alpha=0.2)
+        fig.tight_layout()
+        p = img_dir / fname
+        fig.savefig(p)
+        plt.close(fig)
+        made.append(p)
+    return made
+
+
+def write_csv(path, rows):
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=SCHEMA, extrasaction="ignore", lineterminator="\n")
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: r.get(k, "") for k in SCHEMA})
+
+
+def report_md(a, info, rows, peer_rows, peer_note, effects, halos, images, img_prefix, durations, command):
+    md = ["<!-- generated by tests/bench/bench_all.py: do not edit by hand; rerun the command -->", "",
+          "## bench_all: every effect, preset and knob, measured in one run (issue 8)", "",
+          "Command: `%s`" % command, "",
+          "- Machine: %s, %s cores, %s RAM; %s" % (info["cpu"], info["cores"], info["memory"], info["os"]),
+          "- Date: %s (UTC); run took %s" % (info["date"], fmt_s(info["seconds"])),
+          "- Source: %s" % info["source"],
+          "- Load average (1/5/15 min): %s at the start, %s at the end" % (info["load_start"], info["load_end"]),
+          "- Renders: %s, %d samples, frame %d, through the add-on's batch runner" % (
+              ", ".join("%dx%d" % s for s in info["sizes"]), info["spp"], FRAME),
+          "- Stage durations: %s" % ", ".join("%s %s" % (k, fmt_s(v)) for k, v in durations.items()),
+          "- Failures: %s" % (", ".join(FAILURES) or "none"),
+          "- Mode: %s; runs per setting: %d (fewer, 3 at least, where one run exceeds %.0f ms / runs; one where "
+          "it exceeds %.0f ms: `runs` column); threads: %s; sizes: %s (the knob sweeps and scaling rows at the "
+          "largest, %s threads)" % ("--quick" if a.quick else "full", a.runs, a.budget_ms, a.budget_ms, a.threads,
+                                   ", ".join("%dx%d" % s for s in info["sizes"]), a.threads.split(",")[0]),
+          "", "How each number is made (tests/bench/bench_presets.c):", "",
+          "- **ms**: median wall time of `fx_stack_run` on a one-effect stack (the recipe's entries of that "
+          "effect with their params and masks) after one warm-up run; the input is the scene's passes EXR "
+          "and sidecar (aux views read and built in every run: no aux cache). 1 and 2 threads are separate "
+          "contexts; the outputs of both are hashed and a difference would be flagged in `note`.",
+          "- **error** (MAE, max, PSNR): Combined RGB against the same stack at the `reference` preset, over "
+          "the pixels the masks select (coverage > 0; all pixels without a mask); PSNR = 10 log10(peak^2 / "
+          "MSE), peak = the reference's largest RGB value there (scene-linear; HDR peaks make PSNR high); "
+          "∞: bit-identical. Quality knobs (`--knob`): the other params as the recipe's, at `final`, against "
+          "the reference preset of the recipe. Look knobs (sigma, radius, filter size...): each value at "
+          "`final` against the reference preset at the same value; effects without quality presets have "
+          "none (every preset is the same computation).",
+          "- **x floor**: ms over a parallel copy of the same frame's RGBA floats (read + write) on the same "
+          "thread pool, taken just before and after that effect in the same process (kind `floor`); shown "
+          "for per-pixel and 3x3 effects (halo <= 1).",
+          "- **cycles** rows: the effect against what Cycles renders for real, at reduced size "
+          "(bench_ssr_accuracy.py, bench_atrium.py); their notes say the region and metric.",
+          "- **scaling**: `final` at the frame resampled to 0.25..4 MP (Combined and light passes bilinear, "
+          "depth/normals/positions/IDs/Cryptomatte nearest), and with the masks cut by a rectangle keeping "
+          "25..100 % of their pixels.", "",
+          "This VM is shared: compare ratios within this run, not absolute times across runs. CSV: "
+          "[docs/bench/bench_all.csv](bench/bench_all.csv) (schema: `%s`)." % ",".join(SCHEMA), ""]
+    md.append("### Per effect\n")
+    md += effect_tables(rows, effects, halos)
+    md.append("### Peers (same run)\n")
+    if peer_rows:
+        md.append("Peer / libfx: the peer's time over libfx's `final` time for that effect at the same size with 2 "
+                  "threads, from this run (on the greek_bath frame where the effect is measured there).\n")
+        md += peers_table(rows, peer_rows)
+    else:
+        md.append("No peer rows in this run (%s)." % (peer_note or "skipped"))
+    md.append("")
+    cyc = [r for r in rows if r["kind"] == "cycles"]
+    md.append("### Against Cycles\n")
+    if cyc:
+        body = [[r["effect"], r["scene"], r["setting"], size_of(r), r["threads"], fnum(r["ms_median"], "ms"),
+                 fnum(r["mae"]), fnum(r["psnr_db"], "db"), r["mask_px"], r["note"]] for r in cyc]
+        common = common_note_parts([r for r in cyc if r["effect"] == "ssr_mirror"]) | \
+            common_note_parts([r for r in cyc if r["effect"] == "vsm_shadows"])
+        for b in body:
+            b[-1] = "; ".join(p for p in b[-1].split("; ") if p not in common)
+        for eff in ("ssr_mirror", "vsm_shadows"):
+            c = common_note_parts([r for r in cyc if r["effect"] == eff])
+            if c:
+                md.append("%s rows: %s.\n" % (eff, "; ".join(sorted(c))))
+        md += md_table(["effect", "scene", "setting", "size", "threads", "ms", "MAE", "PSNR dB", "px", "note"], body,
+                       ["---", "---", "---", "---", "---:", "---:", "---:", "---:", "---:", "---"])
+    else:
+        md.append("Not run (%s)." % ("--quick" if a.quick else "skipped"))
+    md.append("")
+    md.append("### Scaling: cost follows what the scene requires\n")
+    md += scaling_tables(rows)
+    md.append("### Plots\n")
+    for p in images:
+        md.append("![%s](%s%s)" % (p.stem, img_prefix, p.name))
+    md.append("")
+    return "\n".join(md)
+
+
+BEGIN, END = "<!-- bench_all begin -->", "<!-- bench_all end -->"
+
+
+def update_performance_md(path, section):
+    text = path.read_text()
+    block = BEGIN + "\n" + section.rstrip() + "\n" + END
+    if BEGIN in text and END in text:
+        a, b = text.index(BEGIN), text.index(END) + len(END)
+        text = text[:a] + block + text[b:]
+    else:
+        # right after the summary table at the top (its last '|' line), before the next section
+        lines = text.split("\n")
+        i = next((k for k, l in enumerate(lines) if l.startswith("|")), None)
+        if i is None:
+            raise SystemExit("bench_all: no summary table in %s" % path)
+        while i < len(lines) and lines[i].startswith("|"):
+            i += 1
+        lines[i:i] = ["", block]
+        text = "\n".join(lines)
+    tmp = path.with_suffix(".md.tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+# ---------------------------------------------------------------- main
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--quick", action="store_true", help="1280x720, 2 runs, 2 threads, coarse sweeps, no Cycles")
+    ap.add_argument("--runs", type=int, help="runs per setting (default 5; --quick 2)")
+    ap.add_argument("--out", default=str(ROOT / "out" / "bench_all"))
+    ap.add_argument("--docs", action="store_true", help="also write docs/ (CSV, plots, performance.md section)")
+    ap.add_argument("--docs-root", default=str(ROOT), help="tree whose docs/ --docs writes (default: this one)")
+    ap.add_argument("--build", default=os.environ.get("LIBFX_BUILD", str(ROOT / "build-benchall")))
+    ap.add_argument("--spp", type=int, default=4, help="render samples (default 4)")
+    ap.add_argument("--budget-ms", type=float, default=None,
+                    help="time budget per setting: fewer runs where one run is longer than BUDGET / runs "
+                         "(3 at least while one run fits the budget; default 2000; quick 3000)")
+    ap.add_argument("--cycles-ssr-res", default="640x360", help=argparse.SUPPRESS)
+    ap.add_argument("--cycles-vsm-res", default="480x270", help=argparse.SUPPRESS)
+    ap.add_argument("--skip", default="", help="comma list of stages to skip: peers, cycles")
+    ap.add_argument("--only-effects", default="", help="comma list: bench only these effects (development)")
+    ap.add_argument("--verbose", "-v", action="store_true", help="every bench_presets line on stderr")
+    a = ap.parse_args()
+    a.runs = a.runs or (2 if a.quick else 5)
+    a.budget_ms = a.budget_ms or (3000 if a.quick else 2000)
+    a.threads = "2" if a.quick else "2,1"  # the fastest first: errors and the slow reference come from it
+    a.ref_max_ms = 15000
+    a.scaling_res = "0.25,1" if a.quick else SCALING_RES
+    a.scaling_mask = "50,100" if a.quick else SCALING_MASK
+    sizes = SIZES_QUICK if a.quick else SIZES_FULL
+    skip = set(filter(None, a.skip.split(",")))
+    if a.quick:
+        skip.add("cycles")
+    only = set(filter(None, a.only_effects.split(",")))
+    out = pathlib.Path(a.out).resolve()
+    out.mkdir(parents=True, exist_ok=True)
+    build = pathlib.Path(a.build).resolve()
+    command = "/usr/bin/python3 tests/bench/bench_all.py" + "".join(" " + x for x in sys.argv[1:])
+    info = machine()
+    info["load_start"] = loadavg()
+    info["source"] = source_state()
+    info["date"] = datetime.datetime.utcnow().strftime("%Y-%m-%d %H:%M")
+    info["sizes"], info["spp"] = sizes, a.spp
+    log("%s; %s cores; load %s" % (info["cpu"], info["cores"], info["load_start"]))
+
+    # the plan, with rough cost estimates (s) for the ETA (measured on the 2-core VM)
+    plan = {sc: scene_plan(sc)[2] for sc in SCENES}
+    if only:
+        plan = {sc: [e for e in effs if e in only] for sc, effs in plan.items()}
+    # seconds per effect at 1280x720 in a --quick run (2-core VM); the full run's 720p pass
+    # (presets only, 2 thread counts, 5 runs) costs ~1.5x that, its 1080p pass (with the
+    # sweeps and scaling rows) ~4x
+    quick_s = {"god_rays": 52, "ssr_mirror": 27, "vsm_shadows": 15, "rain": 9, "voronoi_caustics": 7,
+               "gaussian_blur": 5}
+    stages = [("build", 20)]
+    stages += [("render: %s %dx%d" % (sc, w, h), (40 if sc == "greek_bath" else 80) * w * h / 0.92e6 *
+                (0.5 + a.spp / 16)) for sc in SCENES for (w, h) in sizes]
+    for (w, h) in sizes:
+        for sc in SCENES:
+            for e in plan[sc]:
+                f = 1.0 if a.quick else 4.0 if (w, h) == sizes[-1] else 1.5
+                stages.append(("effects: %s %s %dx%d" % (sc, e, w, h), quick_s.get(e, 3) * f))
+    if "peers" not in skip:
+        stages.append(("peers", 240 if a.quick else 480))
+    if "cycles" not in skip:
+        stages += [("cycles: ssr_mirror", 240), ("cycles: vsm_shadows", 180)]
+    stages.append(("report", 15))
+    prog = Progress(stages)
+
+    prog.start("build")
+    if not (build / "CMakeCache.txt").exists():
+        run(["cmake", "-S", ROOT, "-B", build, "-DCMAKE_BUILD_TYPE=Release", "-DLIBFX_BUILD_BENCH=ON"])
+    run(["cmake", "--build", build, "-j2", "--target", "bench_presets", "libfx_cli", "fx"])
+    bench_bin, cli, lib = build / "tests" / "bench" / "bench_presets", build / "libfx" / "libfx", \
+        build / "libfx" / "libfx.so"
+    for p in (bench_bin, cli, lib):
+        if not p.exists():
+            raise SystemExit("bench_all: %s not built (configure %s with -DLIBFX_BUILD_BENCH=ON)" % (p, build))
+    env = dict(os.environ, LIBFX_LIBRARY=str(lib), LIBFX_CLI=str(cli), LIBFX_BENCH_DIR=str(build / "tests" / "bench"))
+    prog.end()
+
+    renders = {}
+    for sc in SCENES:
+        for (w, h) in sizes:
+            prog.start("render: %s %dx%d" % (sc, w, h))
+            renders[(sc, w, h)] = render_scene(sc, w, h, a.spp, out, env)
+            prog.end()
+
+    rows = []
+    tmp = out / "bench_presets.tmp.csv"
+    for (w, h) in sizes:
+        for sc in SCENES:
+            passes, side, recipe, _, _ = renders[(sc, w, h)]
+            for e in plan[sc]:
+                prog.start("effects: %s %s %dx%d" % (sc, e, w, h))
+                rows += bench_effect(bench_bin, sc, e, passes, side, recipe, a, (w, h) == sizes[-1], tmp)
+                dt = prog.end()
+                log("  %s on %s %dx%d: %d rows in %.0f s" % (e, sc, w, h, len(rows), dt))
+                write_csv(out / "bench_all.partial.csv", rows)
+    tmp.unlink(missing_ok=True)
+
+    peer_rows, peer_note = [], None
+    if "peers" not in skip:
+        prog.start("peers")
+        w, h = sizes[-1]
+        passes, side = renders[("greek_bath", w, h)][:2]
+        peer_rows, peer_note = peers_stage(passes, side, w, h, min(a.runs, 3), out, env)
+        rows += peer_rows
+        prog.end()
+
+    if "cycles" not in skip:
+        prog.start("cycles: ssr_mirror")
+        try:
+            rows += cycles_ssr(out, env, a.cycles_ssr_res, 2, cli)
+        except SystemExit as e:
+            log("cycles ssr_mirror failed: %s" % str(e)[:2000])
+        prog.end()
+        prog.start("cycles: vsm_shadows")
+        try:
+            rows += cycles_vsm(out, env, a.cycles_vsm_res, 16, 1)
+        except SystemExit as e:
+            log("cycles vsm_shadows failed: %s" % str(e)[:2000])
+        prog.end()
+
+    prog.start("report")
+    effects = [l.split("\t")[0] for l in run([cli, "list"]).stdout.splitlines() if l.strip()]
+    halos = {e: describe(cli, e).get("halo", 99) for e in effects}
+    missing = [e for e in effects if not any(r["effect"] == e and r["kind"] == "effect" for r in rows)]
+    if missing and not only:
+        log("WARNING: no rows for %s" % ", ".join(missing))
+    info["load_end"] = loadavg()
+    info["seconds"] = time.time() - T0
+    write_csv(out / "bench_all.csv", rows)
+    (out / "bench_all.partial.csv").unlink(missing_ok=True)
+    images = plots(rows, effects, out / "images", peer_rows)
+    durations = dict(prog.durations)
+    md = report_md(a, info, rows, peer_rows, peer_note, effects, halos, images, "images/", durations, command)
+    (out / "bench_all.md").write_text(md)
+    if a.docs:
+        droot = pathlib.Path(a.docs_root).resolve()
+        write_csv(droot / "docs" / "bench" / "bench_all.csv", rows)
+        dimg = droot / "docs" / "images"
+        dimg.mkdir(parents=True, exist_ok=True)
+        for p in images:
+            shutil.copyfile(p, dimg / p.name)
+        section = report_md(a, info, rows, peer_rows, peer_note, effects, halos, images, "images/", durations,
+                            command)
+        update_performance_md(droot / "docs" / "performance.md", section)
+        gen = droot / "scripts" / "gen_effect_docs.py"
+        if gen.exists():
+            p = run(["/usr/bin/python3", gen, "--cli", cli, "--docs", droot / "docs" / "effects", "--bench-csv",
+                     droot / "docs" / "bench" / "bench_all.csv"], check=False)
+            log("gen_effect_docs.py: exit %d\n%s" % (p.returncode, (p.stdout + p.stderr)[-1500:]))
+    prog.end()
+    durations = dict(prog.durations)
+    log("done in %s: %s" % (fmt_s(time.time() - T0), ", ".join("%s %s" % (k, fmt_s(v)) for k, v in durations.items())))
+    log("wrote %s, %s%s" % (out / "bench_all.csv", out / "bench_all.md", " and docs/" if a.docs else ""))
+    if FAILURES:
+        log("FAILED: %s" % ", ".join(FAILURES))
+        sys.exit(1)
+
+
+if __name__ == "__main__":
+    main()
