@@ -667,8 +667,9 @@ def report_md(a, info, rows, peer_rows, peer_note, effects, halos, images, img_p
           "and sidecar (aux views read and built in every run: no aux cache). 1 and 2 threads are separate "
           "contexts; the outputs of both are hashed and a difference would be flagged in `note`.",
           "- **error** (MAE, max, PSNR): Combined RGB against the same stack at the `reference` preset, over "
-          "the pixels the masks select (coverage > 0; all pixels without a mask); PSNR = 10 log10(peak^2 / "
-          "MSE), peak = the reference's largest RGB value there (scene-linear; HDR peaks make PSNR high); "
+          "the pixels the masks select (coverage > 0; all pixels without a mask); MAE and max on the "
+          "scene-linear values, PSNR = 10 log10(1 / MSE) on values clipped to [0, 1] (display-referred, "
+          "as the peers' and the Cycles rows'); "
           "∞: bit-identical. Quality knobs (`--knob`): the other params as the recipe's, at `final`, against "
           "the reference preset of the recipe. Look knobs (sigma, radius, filter size...): each value at "
           "`final` against the reference preset at the same value; effects without quality presets have "

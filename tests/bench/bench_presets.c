@@ -15,8 +15,9 @@
  *    (fewer, but 3 at least, when one run takes longer than budget-ms / runs; a warm-up
  *    longer than budget-ms is the only run). Errors of Combined RGB against the reference preset's
  *    output, over the pixels the masks select (coverage > 0; every pixel without a mask):
- *    MAE, max |d|, PSNR = 10 log10(peak^2 / MSE) with peak = the reference's largest RGB
- *    value in the mask. --knob: a quality knob (the other params as the recipe's; error
+ *    MAE and max |d| on the scene-linear values; PSNR = 10 log10(1 / MSE) on values clipped
+ *    to [0, 1] (display-referred, as the peers' and the Cycles rows': with HDR suns a peak of
+ *    the reference's maximum gives meaningless 130 dB figures). --knob: a quality knob (the other params as the recipe's; error
  *    against the reference preset of the recipe's params). --look-knob: a knob that
  *    changes the picture (sigma, radius, filter size): each value at `final`, against the
  *    reference preset at the same value (no error for effects without presets: identical).
@@ -350,7 +351,7 @@ static double time_recipe(fx_context *ctx, const char *json, const fx_frame *f, 
 static void errors(const float *a, const float *ref, const float *mask, size_t npx, double *mae, double *maxe,
                    double *psnr)
 {
-    double s = 0, s2 = 0, m = 0, peak = 0;
+    double s = 0, s2 = 0, m = 0;
     size_t cnt = 0;
     for (size_t i = 0; i < npx; i++) {
         if (mask && !(mask[i] > 0.0f))
@@ -358,11 +359,10 @@ static void errors(const float *a, const float *ref, const float *mask, size_t n
         for (int c = 0; c < 3; c++) {
             double r = ref[i * 4 + c], d = fabs((double)a[i * 4 + c] - r);
             s += d;
-            s2 += d * d;
             if (d > m)
                 m = d;
-            if (r > peak)
-                peak = r;
+            double ac = fmin(fmax(a[i * 4 + c], 0.0), 1.0), rc = fmin(fmax(r, 0.0), 1.0);
+            s2 += (ac - rc) * (ac - rc);
         }
         cnt += 3;
     }
@@ -370,12 +370,10 @@ static void errors(const float *a, const float *ref, const float *mask, size_t n
         *mae = *maxe = *psnr = NAN;
         return;
     }
-    if (peak <= 0)
-        peak = 1;
     *mae = s / cnt;
     *maxe = m;
     double mse = s2 / cnt;
-    *psnr = mse > 0 ? 10 * log10(peak * peak / mse) : INFINITY; /* identical */
+    *psnr = mse > 0 ? 10 * log10(1.0 / mse) : INFINITY; /* identical (after the clip) */
 }
 
 typedef struct setting {

@@ -404,10 +404,11 @@ const fx_effect_class fx_effect_god_rays = {
     .params = god_rays_param_defs,
     .param_count = FX_COUNT_OF(god_rays_param_defs),
     .presets = {
-        /* measured (docs/effects/god_rays.md): at 1080p resolution 0.5 has the scene-relative
-         * line density of 1.5 at 640x360; draft reduces the map 2x2 */
-        "{\"method\": \"polar\", \"polar_resolution\": 0.5, \"polar_levels\": 1, \"polar_downsample\": 2}",
-        "{\"method\": \"polar\", \"polar_resolution\": 0.35, \"polar_levels\": 2, \"polar_downsample\": 1}",
+        /* chosen from the time/error sweep (docs/effects/god_rays.md): at 1080p resolution
+         * 0.5 has the scene-relative line density of 1.5 at 640x360; at equal time a reduced
+         * map with finer lines errs less than coarser lines at full size */
+        "{\"method\": \"polar\", \"polar_resolution\": 1, \"polar_levels\": 2, \"polar_downsample\": 4}",
+        "{\"method\": \"polar\", \"polar_resolution\": 0.75, \"polar_levels\": 2, \"polar_downsample\": 2}",
         "{\"method\": \"polar\", \"polar_resolution\": 0.5, \"polar_levels\": 2, \"polar_downsample\": 1}",
         "{\"method\": \"naive\", \"samples\": 2000, \"jitter\": false}",
     },
