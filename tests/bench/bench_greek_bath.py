@@ -65,8 +65,11 @@ def find_bench():
     env = os.environ.get("LIBFX_BENCH")
     if env:
         return env
-    for p in sorted(glob.glob(os.path.join(ROOT, "build*", "tests", "bench", "bench_greek_bath"))):
-        return p
+    # build/ (scripts/setup.sh's) first: other build dirs may hold older binaries
+    for p in [os.path.join(ROOT, "build", "tests", "bench", "bench_greek_bath")] + \
+            sorted(glob.glob(os.path.join(ROOT, "build*", "tests", "bench", "bench_greek_bath"))):
+        if os.path.exists(p):
+            return p
     sys.exit("bench_greek_bath not built (cmake -DLIBFX_BUILD_BENCH=ON)")
 
 
