@@ -1,5 +1,3 @@
-// SPDX-License-Identifier: GPL-3.0-or-later
-//
 // Flamenco 3 job type: render a frame range in chunks through libfx's batch runner
 // (addon/libfx/batch.py), so every frame gets Blender's render *and* the scene's libfx
 // effect stack. Put this file in the `scripts/` folder next to the flamenco-manager
