@@ -96,23 +96,25 @@ def test_generated_pages_are_current(cli):
 def test_check_catches_a_stale_page_and_regenerating_fixes_it(cli, tmp_path):
     docs = tmp_path / "effects"
     shutil.copytree(PAGES, docs)
-    no_csv = tmp_path / "absent.csv"
+    # the committed pages were generated from the committed CSV (or none): the same state here
+    committed_csv = REPO / "docs" / "bench" / "bench_all.csv"
+    csv_state = committed_csv if committed_csv.exists() else tmp_path / "absent.csv"
     page = docs / "gaussian_blur.md"
     text = page.read_text()
     # what a library change without regeneration looks like: the table disagrees
     page.write_text(text.replace("| `sigma` | float, pixels | 5 |",
                                  "| `sigma` | float, pixels | 4 |"))
-    r = gen(cli, "--check", "--docs", docs, "--bench-csv", no_csv)
+    r = gen(cli, "--check", "--docs", docs, "--bench-csv", csv_state)
     assert r.returncode == 1 and "gaussian_blur.md" in r.stderr, r.stdout + r.stderr
     (docs / "posterize.md").unlink()
-    r = gen(cli, "--check", "--docs", docs, "--bench-csv", no_csv)
+    r = gen(cli, "--check", "--docs", docs, "--bench-csv", csv_state)
     assert r.returncode == 1 and "posterize.md: missing" in r.stderr, r.stderr
     assert not (docs / "posterize.md").exists(), "--check must not write"
-    r = gen(cli, "--docs", docs, "--bench-csv", no_csv)
+    r = gen(cli, "--docs", docs, "--bench-csv", csv_state)
     assert r.returncode == 0, r.stderr
     assert page.read_text() == text, "regenerating must restore the committed page"
     assert "generated:params begin" in (docs / "posterize.md").read_text()
-    assert gen(cli, "--check", "--docs", docs, "--bench-csv", no_csv).returncode == 0
+    assert gen(cli, "--check", "--docs", docs, "--bench-csv", csv_state).returncode == 0
 
 
 def write_bench_csv(path, effect):
