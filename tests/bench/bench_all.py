@@ -15,9 +15,9 @@ Stages (progress and ETA on stderr):
              union of every recipe benchmarked on that scene (so the passes file holds every
              pass they need; the runner also renders the aux views and writes the sidecar).
              Cached in OUT/renders (a stamp holds the recipe, size and samples).
- 3. effects  tests/bench/bench_presets (C) per scene, size and effect: the four presets at 2 and
-             1 threads with the copy floor; at the largest size also the knob sweeps of KNOBS
-             (2 threads) and the scaling rows (0.25..4 MP, mask area 25..100 %, 2 threads).
+ 3. effects  tests/bench/bench_presets (C) per scene, size and effect: the four presets and the
+             knob sweeps of KNOBS at 2 and 1 threads with the copy floor; at the largest size
+             also the scaling rows (0.25..4 MP, mask area 25..100 %, 2 threads).
  4. peers    run_peers() of tests/bench/bench_peers_all.py on the greek_bath passes file at the
              largest size (Blender compositor nodes, oiiotool, EXR read+write, copy floor).
  5. cycles   ssr_mirror against Cycles' true mirrors (bench_ssr_render.py renders,
@@ -253,19 +253,22 @@ def read_rows(path):
         return [dict(r) for r in csv.DictReader(f)]
 
 
-def bench_effect(bench_bin, scene, effect, passes, side, recipe, args, sweeps, tmp):
-    """bench_presets for one effect; sweeps: the knob sweeps and the scaling rows too."""
+def bench_effect(bench_bin, scene, effect, passes, side, recipe, args, scaling, tmp):
+    """bench_presets for one effect: the presets and the knob sweeps (every size and thread
+    count; --quick: the first thread count only); scaling: the scaling rows too."""
     cmd = [bench_bin, "--passes", passes, "--sidecar", side, "--recipe", recipe, "--scene", scene,
            "--effects", effect, "--threads", args.threads, "--runs", str(args.runs),
            "--budget-ms", str(args.budget_ms), "--ref-max-ms", str(args.ref_max_ms), "-o", tmp]
-    if sweeps:
-        for kind, param, full, quick, fixed in KNOBS.get(effect, []):
-            vals = quick if args.quick else full
-            if not vals:
-                continue
-            cmd += ["--look-knob" if kind == "look" else "--knob",
-                    "%s.%s=%s%s" % (effect, param, vals, ("@" + fixed) if fixed else "")]
-        cmd += ["--knobs-first-threads-only", "--scaling-res", args.scaling_res, "--scaling-mask",
+    for kind, param, full, quick, fixed in KNOBS.get(effect, []):
+        vals = quick if args.quick else full
+        if not vals:
+            continue
+        cmd += ["--look-knob" if kind == "look" else "--knob",
+                "%s.%s=%s%s" % (effect, param, vals, ("@" + fixed) if fixed else "")]
+    if args.quick:
+        cmd += ["--knobs-first-threads-only"]
+    if scaling:
+        cmd += ["--scaling-res", args.scaling_res, "--scaling-mask",
                 args.scaling_mask, "--scaling-threads", str(max(int(t) for t in args.threads.split(",")))]
     p = subprocess.Popen([str(c) for c in cmd], stderr=subprocess.PIPE, text=True)
     for line in p.stderr:
@@ -658,9 +661,12 @@ def report_md(a, info, rows, peer_rows, peer_note, effects, halos, images, img_p
           "- Stage durations: %s" % ", ".join("%s %s" % (k, fmt_s(v)) for k, v in durations.items()),
           "- Failures: %s" % (", ".join(FAILURES) or "none"),
           "- Mode: %s; runs per setting: %d (fewer, 3 at least, where one run exceeds %.0f ms / runs; one where "
-          "it exceeds %.0f ms: `runs` column); threads: %s; sizes: %s (the knob sweeps and scaling rows at the "
-          "largest, %s threads)" % ("--quick" if a.quick else "full", a.runs, a.budget_ms, a.budget_ms, a.threads,
-                                   ", ".join("%dx%d" % s for s in info["sizes"]), a.threads.split(",")[0]),
+          "it exceeds %.0f ms: `runs` column); threads: %s; sizes: %s (presets and knob sweeps at every size%s; "
+          "the scaling rows at the largest, %s threads)" % (
+              "--quick" if a.quick else "full", a.runs, a.budget_ms, a.budget_ms, a.threads,
+              ", ".join("%dx%d" % s for s in info["sizes"]),
+              " and the first thread count only" if a.quick else " and thread count",
+              max(int(t) for t in a.threads.split(","))),
           "", "How each number is made (tests/bench/bench_presets.c):", "",
           "- **ms**: median wall time of `fx_stack_run` on a one-effect stack (the recipe's entries of that "
           "effect with their params and masks) after one warm-up run; the input is the scene's passes EXR "
