@@ -227,8 +227,8 @@ typedef struct polar_job {
     float *res;
     double a;                   /* -100 ln(decay) (0: decay 1) */
     double hstep;               /* ln 2 / levels */
-    int max_levels, max_count;
-    v4f *scratch;               /* per worker: max_count (occ) + max_count * max_levels (F) */
+    int max_count;
+    v4f *scratch;               /* per worker: max_count (occ) + max_count * n_levels (F) */
     size_t scratch_per_worker;
     fx_rect roi;
     float *rays;
@@ -318,9 +318,7 @@ static void polar_lines(void *user, int begin, int end, int worker)
         int g_hi = (int)floor(j->kap[rho_min - j->rho_lo]) + 2 - j->k_min;
         if (g_lo < 0) g_lo = 0;
         if (g_hi > j->n_levels - 1) g_hi = j->n_levels - 1;
-        int K = g_hi - g_lo + 1;
-        if (K > j->max_levels)
-            K = j->max_levels;
+        const int K = g_hi - g_lo + 1; /* <= n_levels */
         for (int kk = 0; kk < K; kk++) {
             const v4f e1 = V4((float)j->e1[g_lo + kk]);
             double last = j->last[g_lo + kk] - ln->b0;
@@ -565,10 +563,9 @@ static fx_result polar_full(fx_context *ctx, const float *occ, float *rays, int 
         j.k_min = 0;
         j.n_levels = 1;
     }
-    /* levels one line reads: from the rate at its far end to the rate at its near end */
-    j.max_levels = j.n_levels;
+    /* a line reads at most every level (its bins' rates with the cubic's neighbours) */
     j.max_count = max_count;
-    j.scratch_per_worker = (size_t)max_count * (1 + (size_t)j.max_levels);
+    j.scratch_per_worker = (size_t)max_count * (1 + (size_t)j.n_levels);
     int workers = fx_parallel_workers(ctx);
     uint64_t table_doubles = 2 * (uint64_t)j.n_levels + (uint64_t)n_rho;
     uint64_t bytes = (uint64_t)total * 4 * sizeof(float) + (uint64_t)n_rho * sizeof(rho_coef) +
