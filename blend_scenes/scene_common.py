@@ -25,6 +25,21 @@ import bmesh
 import bpy
 from mathutils import Euler, Matrix, Vector
 
+
+def _load_compat():
+    """The add-on's module of Blender version differences (addon/libfx/compat.py),
+    loaded by path: the builders share it without registering the add-on."""
+    import importlib.util
+    path = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                        "addon", "libfx", "compat.py")
+    spec = importlib.util.spec_from_file_location("libfx_compat", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+compat = _load_compat()
+
 RECIPE_TEXT_NAME = "libfx_recipe.json"
 
 # Settings every libfx test scene shares (see blend_scenes/README.md).
@@ -80,13 +95,22 @@ def render_settings(scene, samples=SAMPLES):
     scene.view_settings.look = 'None'
     scene.view_settings.exposure = 0.0
     scene.view_settings.gamma = 1.0
-    scene.render.image_settings.file_format = 'OPEN_EXR_MULTILAYER'
-    scene.render.image_settings.color_depth = '32'
-    scene.render.image_settings.exr_codec = 'ZIP'
+    compat.set_file_format(scene.render.image_settings, 'OPEN_EXR_MULTILAYER', '32', 'ZIP')
+
+
+def output_path(path):
+    """Where a builder writes ``path``: beside the script, or into $LIBFX_SCENES_OUT
+    (same file name) to build a scene elsewhere without touching the committed one."""
+    out = os.environ.get("LIBFX_SCENES_OUT")
+    if out:
+        os.makedirs(out, exist_ok=True)
+        return os.path.join(out, os.path.basename(path))
+    return path
 
 
 def save_blend(path):
     """Save compressed, relative paths, no UI-dependent state."""
+    path = output_path(path)
     bpy.context.scene.frame_set(FRAME_RANGE[0])
     bpy.ops.wm.save_as_mainfile(filepath=os.path.abspath(path), compress=True,
                                 relative_remap=True)
@@ -99,7 +123,7 @@ def write_recipe(scene_dir, recipe):
     Text datablock ``libfx_recipe.json`` inside the .blend (the add-on imports
     it on load when its stack is empty)."""
     text = json.dumps(recipe, indent=2, ensure_ascii=True) + "\n"
-    with open(os.path.join(scene_dir, "recipe.json"), "w", encoding="utf-8",
+    with open(output_path(os.path.join(scene_dir, "recipe.json")), "w", encoding="utf-8",
               newline="\n") as f:
         f.write(text)
     block = bpy.data.texts.get(RECIPE_TEXT_NAME) or bpy.data.texts.new(RECIPE_TEXT_NAME)
@@ -260,7 +284,7 @@ def add_area_light(name, location, target, size=(2.0, 2.0), power=200.0,
     data.size, data.size_y = size
     data.energy = power
     data.color = color
-    data.cycles.cast_shadow = shadow
+    compat.light_cast_shadow(data, shadow)
     obj = bpy.data.objects.new(name, data)
     bpy.context.scene.collection.objects.link(obj)
     obj.visible_camera = False
@@ -326,7 +350,7 @@ def animate_camera(cam, keys, interpolation='BEZIER'):
         prev = e.copy()
         cam.keyframe_insert("location", frame=frame)
         cam.keyframe_insert("rotation_euler", frame=frame)
-    for fc in cam.animation_data.action.fcurves:
+    for fc in compat.animation_fcurves(cam):
         for kp in fc.keyframe_points:
             kp.interpolation = interpolation
             kp.easing = 'EASE_IN_OUT'
@@ -355,9 +379,9 @@ def principled_material(name, color, pass_index, roughness=0.5, metallic=0.0,
     bsdf.inputs["Base Color"].default_value = (*color, 1.0)
     bsdf.inputs["Roughness"].default_value = roughness
     bsdf.inputs["Metallic"].default_value = metallic
-    bsdf.inputs["Specular"].default_value = specular
+    compat.principled_input(bsdf, "Specular").default_value = specular
     for k, v in extra.items():
-        bsdf.inputs[k.replace("_", " ")].default_value = v
+        compat.principled_input(bsdf, k.replace("_", " ")).default_value = v
     mat.diffuse_color = (*color, 1.0)  # viewport / solid mode colour
     if texture is not None:
         texture(nt, bsdf, color, bump)
@@ -617,12 +641,11 @@ def mesh_object(name, build, material=None, pass_index=0, smooth=False,
     me = bpy.data.meshes.new(name)
     bm.to_mesh(me)
     bm.free()
-    if smooth:
+    if smooth and auto_smooth_deg is not None:
+        compat.mesh_smooth_by_angle(me, math.radians(auto_smooth_deg))
+    elif smooth:
         for p in me.polygons:
             p.use_smooth = True
-        if auto_smooth_deg is not None:
-            me.use_auto_smooth = True
-            me.auto_smooth_angle = math.radians(auto_smooth_deg)
     obj = bpy.data.objects.new(name, me)
     (collection or bpy.context.scene.collection).objects.link(obj)
     if material is not None:

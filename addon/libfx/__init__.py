@@ -21,13 +21,13 @@ bl_info = {
 # dependency order so that no class of an old copy survives.
 if "native" in locals():
     import importlib
-    for _m in ("native", "catalog", "props", "recipe", "scene_setup", "aux_views", "render", "ui"):
+    for _m in ("compat", "native", "catalog", "props", "recipe", "scene_setup", "aux_views", "render", "ui"):
         if _m in locals():
             importlib.reload(locals()[_m])
 
 import bpy  # noqa: E402
 
-from . import native, catalog, props, recipe, scene_setup, aux_views, render, ui  # noqa: E402,F401
+from . import compat, native, catalog, props, recipe, scene_setup, aux_views, render, ui  # noqa: E402,F401
 
 _registered = []
 
@@ -35,6 +35,17 @@ _registered = []
 def register():
     if _registered:
         unregister()
+    problem = compat.version_problem()
+    if problem:
+        # Only a panel that says so: the rest of the add-on speaks an API this Blender
+        # may not have.
+        print("libfx: " + problem)
+        ui.UNSUPPORTED[:] = [problem]
+        for cls in ui.unsupported_classes:
+            bpy.utils.register_class(cls)
+            _registered.append(cls)
+        return
+    ui.UNSUPPORTED.clear()
     cat = catalog.Catalog.load()
     if not cat.ok:
         print("libfx: " + cat.error)
@@ -46,6 +57,12 @@ def register():
 
 
 def unregister():
+    if ui.UNSUPPORTED:
+        for cls in reversed(_registered):
+            bpy.utils.unregister_class(cls)
+        _registered.clear()
+        ui.UNSUPPORTED.clear()
+        return
     render.unregister()
     for cls in reversed(_registered):
         try:

@@ -30,7 +30,7 @@ import time
 import bpy
 from mathutils import Matrix, Vector
 
-from . import native, scene_setup
+from . import compat, native, scene_setup
 
 AUX_SCENE = "libfx aux view"
 BUSY = {"on": False}   # the render handlers ignore renders made here
@@ -210,6 +210,7 @@ def _render(scene, spec, objs, path):
     aux = bpy.data.scenes.new(AUX_SCENE)
     cam_data = bpy.data.cameras.new(AUX_SCENE)
     cam = bpy.data.objects.new(AUX_SCENE, cam_data)
+    made = None
     try:
         for ob in objs:
             aux.collection.objects.link(ob)
@@ -237,23 +238,14 @@ def _render(scene, spec, objs, path):
         aux.frame_start = aux.frame_end = aux.frame_current = 1
         vl = aux.view_layers[0]
         vl.use_pass_z = True
-        aux.use_nodes = True
-        nt = aux.node_tree
-        for n in list(nt.nodes):
-            nt.nodes.remove(n)
-        rl = nt.nodes.new("CompositorNodeRLayers")
+        nt, made = compat.ensure_compositor_tree(aux, AUX_SCENE)
+        rl = next(n for n in nt.nodes if n.bl_idname == "CompositorNodeRLayers")
         rl.scene = aux
-        comp = nt.nodes.new("CompositorNodeComposite")
-        nt.links.new(rl.outputs["Image"], comp.inputs["Image"])
         fo = nt.nodes.new("CompositorNodeOutputFile")
-        fo.format.file_format = "OPEN_EXR_MULTILAYER"
-        fo.format.color_depth = "32"
-        fo.format.exr_codec = "ZIP"
+        compat.file_output_format(fo, "OPEN_EXR_MULTILAYER", "32", "ZIP")
         base = path[:-len(".exr")] + ".tmp."
-        fo.base_path = base
-        fo.layer_slots.clear()
-        fo.layer_slots.new("Depth")
-        nt.links.new(rl.outputs["Depth"], fo.inputs["Depth"])
+        compat.file_output_set_prefix(fo, base)
+        compat.file_output_link(nt, fo, [("Depth", compat.render_layer_output(rl, "Depth"))])
         BUSY["on"] = True
         try:
             bpy.ops.render.render(write_still=False, scene=aux.name)
@@ -274,6 +266,7 @@ def _render(scene, spec, objs, path):
             raise native.LibfxError("the aux view render of '%s' wrote no file (%s)" % (spec["name"], written))
         os.replace(written, path)
     finally:
+        compat.release_compositor_tree(aux, made)
         bpy.data.scenes.remove(aux)
         bpy.data.objects.remove(cam)
         bpy.data.cameras.remove(cam_data)

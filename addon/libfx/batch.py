@@ -90,10 +90,14 @@ def parse_args(argv):
 
 
 def enable_addon():
-    """The add-on module: the installed one if enabled, else this source tree's."""
-    mod = sys.modules.get("libfx")
-    if mod is not None and getattr(bpy.types.Scene, "libfx", None) is not None:
-        return mod
+    """The add-on module: the one Blender has enabled (the legacy add-on 'libfx' or
+    the extension 'bl_ext.<repository>.libfx'), else this source tree's, registered."""
+    if getattr(bpy.types.Scene, "libfx", None) is not None:
+        for name in sorted(sys.modules):
+            mod = sys.modules[name]
+            if (name == "libfx" or (name.startswith("bl_ext.") and name.endswith(".libfx"))) \
+                    and hasattr(mod, "render"):
+                return mod
     here = os.path.dirname(os.path.abspath(__file__))
     parent = os.path.dirname(here)
     if parent not in sys.path:
@@ -182,19 +186,22 @@ def main():
         die("--samples wants a positive number, got %d" % args.samples)
 
     fx = enable_addon()
+    problem = fx.compat.version_problem()
+    if problem:
+        die(problem)
     scene = bpy.context.scene
     if fx.props.catalog() is None or not fx.props.catalog().ok:
         die(fx.native.load_error() or "libfx library unavailable")
+    loaded = fx.scene_setup.status(scene).get("error")
+    if loaded and not args.recipe:
+        die("scene '%s': %s" % (scene.name, loaded))
     r = scene.render
     if args.output:
         r.filepath = args.output
     if size:
         r.resolution_x, r.resolution_y, r.resolution_percentage = size[0], size[1], 100
     if args.samples:
-        if r.engine == "CYCLES":
-            scene.cycles.samples = args.samples
-        elif hasattr(scene, "eevee"):
-            scene.eevee.taa_render_samples = args.samples
+        fx.compat.set_render_samples(scene, args.samples)
     if args.recipe:
         try:
             with open(args.recipe, encoding="utf-8") as f:
@@ -210,6 +217,9 @@ def main():
     if not fx.scene_setup.has_stack(scene):
         die("scene '%s' has no enabled libfx effect (no stack, no %s text, no --recipe)"
             % (scene.name, fx.recipe.TEXT_NAME))
+    problem = fx.scene_setup.scene_problem(scene)
+    if problem:
+        die(problem)
     fx.scene_setup.sync(scene)
     st = fx.scene_setup.status(scene)
     if st.get("error"):

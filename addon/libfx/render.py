@@ -110,6 +110,10 @@ def on_render_init(scene, *args):
     if native.load() is None:
         _record(scene, scene.frame_current, error=native.load_error())
         return
+    problem = scene_setup.scene_problem(scene)
+    if problem:
+        _record(scene, scene.frame_current, error=problem)
+        return
     req = scene_setup.sync(scene)
     st = scene_setup.status(scene)
     if req is None:

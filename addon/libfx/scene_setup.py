@@ -15,7 +15,7 @@ import re
 
 import bpy
 
-from . import native, props
+from . import compat, native, props
 
 RL_NODE = "libfx Render Layers"
 FO_NODE = "libfx passes"
@@ -101,6 +101,27 @@ def _setting_holder(view_layer, setting):
     return None
 
 
+def scene_problem(scene, create_folder=True):
+    """Why the scene cannot be rendered for libfx (a message naming what to set), or None."""
+    if not any(vl.use for vl in scene.view_layers):
+        return ("scene '%s' has no view layer enabled for rendering (View Layer Properties > "
+                "Use for Rendering)" % scene.name)
+    if scene.camera is None:
+        return "scene '%s' has no active camera (Scene Properties > Camera)" % scene.name
+    if not scene.render.filepath.strip():
+        return ("scene '%s' has no output path (Output Properties > Output): libfx writes the "
+                "passes and its results beside it" % scene.name)
+    folder = os.path.dirname(output_prefix(scene)) or "."
+    if create_folder:
+        try:
+            os.makedirs(folder, exist_ok=True)
+        except OSError as e:
+            return "scene '%s': cannot create the output folder %s: %s" % (scene.name, folder, e.strerror or e)
+    if os.path.isdir(folder) and not os.access(folder, os.W_OK):
+        return "scene '%s': the output folder %s is not writable" % (scene.name, folder)
+    return None
+
+
 def has_stack(scene):
     s = getattr(scene, "libfx", None)
     return bool(s) and any(it.enabled for it in s.stack)
@@ -166,6 +187,9 @@ def sync(scene):
     _save_owned(scene, owned)
     _restore_settings(scene, keep={(vl.name, s) for s in keep})
     warnings += engine_warnings(scene, req.get("passes", []))
+    problem = scene_problem(scene, create_folder=False)
+    if problem:
+        warnings.append(problem)
     _set_status(scene, error=None, warnings=warnings, passes=req.get("passes", []),
                 camera=bool(req.get("camera", False)))
     return req
@@ -174,12 +198,14 @@ def sync(scene):
 def engine_warnings(scene, passes):
     out = []
     engine = scene.render.engine
-    if engine != "CYCLES":
-        idx = [p for p in passes if p in ("IndexOB", "IndexMA")]
-        if idx:
-            out.append("%s renders no %s pass: mask by object/material name instead "
-                       "(Cryptomatte works in every engine)" % (engine.replace("BLENDER_", "").title(),
-                                                                 "/".join(idx)))
+    idx = [p for p in passes if p in ("IndexOB", "IndexMA") and not compat.engine_renders_pass(engine, p)]
+    if idx:
+        out.append("%s renders no %s pass: mask by object/material name instead "
+                   "(Cryptomatte works in every engine)" % (compat.engine_label(engine), "/".join(idx)))
+    other = [p for p in passes if p not in idx and not compat.engine_renders_pass(engine, p)]
+    if other:
+        out.append("%s renders no %s pass: render with Cycles or Eevee" % (compat.engine_label(engine),
+                                                                          "/".join(other)))
     if not scene.render.use_compositing:
         out.append("Post Processing > Compositing is off: libfx cannot get the passes")
     return out
@@ -212,31 +238,27 @@ def _restore_settings(scene, keep):
 # ---------------------------------------------------------------- nodes
 
 def _sockets_for(rl, pass_name):
-    """Render Layers outputs carrying a canonical pass: Combined is 'Image';
-    Cryptomatte types are their ranks (CryptoObject00, 01, ...)."""
-    if pass_name == "Combined":
-        names = ["Image"]
-    elif pass_name.startswith("Crypto") and not pass_name[-2:].isdigit():
+    """Render Layers outputs carrying a canonical pass, as (EXR layer name, socket):
+    Combined is 'Image'; Cryptomatte types are their ranks (CryptoObject00, 01...)."""
+    if pass_name.startswith("Crypto") and not pass_name[-2:].isdigit():
         names = [s.name for s in rl.outputs if re.fullmatch(re.escape(pass_name) + r"\d\d", s.name)]
     else:
         names = [pass_name]
     out = []
     for n in names:
-        sock = rl.outputs.get(n)
+        sock = compat.render_layer_output(rl, n)
         if sock is not None and sock.enabled:
-            slot = "Combined" if n == "Image" else n
-            out.append((slot, sock))
+            out.append((n, sock))
     return out
 
 
 def ensure_nodes(scene, passes):
     """Adds/updates the libfx Render Layers + File Output nodes. Returns (missing passes)."""
     owned = _owned(scene)
-    if not scene.use_nodes:
-        scene.use_nodes = True
-        owned["use_nodes"] = True
+    nt, made = compat.ensure_compositor_tree(scene, "libfx compositor")
+    if made:
+        owned["compositor"] = made
         _save_owned(scene, owned)
-    nt = scene.node_tree
     vl = render_view_layer(scene)
     rl = nt.nodes.get(RL_NODE)
     if rl is None or rl.bl_idname != "CompositorNodeRLayers":
@@ -244,6 +266,7 @@ def ensure_nodes(scene, passes):
         rl.name = RL_NODE
         rl.location = (-300, -500)
     rl.label = "libfx"
+    rl.scene = scene
     rl.layer = vl.name
     rl.mute = False
     fo = nt.nodes.get(FO_NODE)
@@ -253,11 +276,8 @@ def ensure_nodes(scene, passes):
         fo.location = (0, -500)
     fo.label = "libfx passes (written by the libfx add-on)"
     fo.mute = False
-    fmt = fo.format
-    fmt.file_format = "OPEN_EXR_MULTILAYER"
-    fmt.color_depth = "32"
-    fmt.exr_codec = "ZIP"
-    fo.base_path = passes_base(scene)
+    compat.file_output_format(fo, "OPEN_EXR_MULTILAYER", "32", "ZIP")
+    compat.file_output_set_prefix(fo, passes_base(scene))
     wanted = []
     missing = []
     for p in ["Combined"] + [p for p in passes if p != "Combined"]:
@@ -265,28 +285,22 @@ def ensure_nodes(scene, passes):
         if not socks:
             missing.append(p)
         wanted.extend(socks)
-    current = [s.name for s in fo.layer_slots]
-    if current != [w[0] for w in wanted]:
-        fo.layer_slots.clear()
-        for slot, _ in wanted:
-            fo.layer_slots.new(slot)
-    for slot, sock in wanted:
-        inp = fo.inputs.get(slot)
-        if not inp.is_linked or inp.links[0].from_socket != sock:
-            nt.links.new(sock, inp)
+    compat.file_output_link(nt, fo, wanted)
     return missing
 
 
 def remove_nodes(scene):
-    nt = scene.node_tree if scene.use_nodes or scene.node_tree else None
+    nt = compat.compositor_tree(scene)
     if nt is not None:
         for name in (FO_NODE, RL_NODE):
             n = nt.nodes.get(name)
             if n is not None:
                 nt.nodes.remove(n)
     owned = _owned(scene)
-    if owned.pop("use_nodes", False):
-        scene.use_nodes = False
+    made = owned.pop("compositor", None)
+    if owned.pop("use_nodes", False):   # how scenes saved by an earlier add-on say it
+        made = made or "use_nodes"
+    compat.release_compositor_tree(scene, made)
     _save_owned(scene, owned)
 
 

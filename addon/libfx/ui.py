@@ -499,6 +499,26 @@ class LIBFX_PT_compositor(bpy.types.Panel):
         draw_stack(self.layout, context)
 
 
+#: The message of a Blender this add-on does not support (then only this panel registers).
+UNSUPPORTED = []
+
+
+class LIBFX_PT_unsupported(bpy.types.Panel):
+    bl_idname = "LIBFX_PT_unsupported"
+    bl_label = "libfx Effects"
+    bl_space_type = "PROPERTIES"
+    bl_region_type = "WINDOW"
+    bl_context = "output"
+
+    def draw(self, context):
+        box = self.layout.box()
+        box.alert = True
+        for i, line in enumerate(_wrap(" ".join(UNSUPPORTED), _chars(context))):
+            box.label(text=line, icon="ERROR" if i == 0 else "BLANK1")
+
+
+unsupported_classes = (LIBFX_PT_unsupported,)
+
 classes = (
     LIBFX_OT_stack_add, LIBFX_OT_stack_remove, LIBFX_OT_stack_duplicate, LIBFX_OT_stack_move,
     LIBFX_OT_param_reset, LIBFX_OT_mask_name_add, LIBFX_OT_mask_name_remove,

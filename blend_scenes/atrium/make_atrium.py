@@ -124,9 +124,7 @@ def materials():
         texture=lambda nt, b, c, k: sc.tex_noise(nt, b, c, k, scale=0.6, contrast=0.5),
         Subsurface=0.0)
     sc.mix_with_transparent(leaves, alpha_socket_fn=leaf_alpha)
-    leaves.blend_method = 'CLIP'
-    leaves.shadow_method = 'CLIP'
-    leaves.alpha_threshold = 0.5
+    sc.compat.material_alpha_clip(leaves, 0.5)
     leaves.use_backface_culling = False
     m["Leaves"] = leaves
     # Only a tinted Transparent BSDF (no reflective closure): a reflective part
@@ -135,9 +133,7 @@ def materials():
     # 1 - transparency ~ RAIN_COVER_OPACITY over what lies behind them.
     rain = sc.transparent_material("Rain_Cover", 20, opacity=RAIN_COVER_OPACITY,
                                    tint=(0.97, 0.98, 1.0))
-    rain.blend_method = 'BLEND'
-    rain.shadow_method = 'NONE'
-    rain.show_transparent_back = False
+    sc.compat.material_alpha_blend(rain, casts_shadow=False)
     m["Rain_Cover"] = rain
     return m
 
@@ -328,7 +324,7 @@ def main():
     sun = sc.add_sun("Sun", sun_dir, strength=4.5, color=(1.0, 0.93, 0.8), angle_deg=1.5)
     # libfx's vsm_shadows adds the Sun's shadows (apply "sun_diffuse"): Cycles must not.
     # tests/bench/bench_atrium.py renders the ray-traced truth with this switched on.
-    sun.data.cycles.cast_shadow = False
+    sc.compat.light_cast_shadow(sun.data, False)
 
     sc.mesh_object("Courtyard_Floor", build_courtyard_floor, m["Courtyard_Stone"], 1)
     sc.mesh_object("Arcade_Floor", build_arcade_floor, m["Arcade_Stone"], 2)

@@ -87,7 +87,7 @@ def _backing(nt):
     b = nt.nodes.new("ShaderNodeBsdfPrincipled")
     b.inputs["Base Color"].default_value = BACKING
     b.inputs["Roughness"].default_value = 0.3
-    b.inputs["Specular"].default_value = 0.0
+    sc.compat.principled_input(b, "Specular").default_value = 0.0
     return b
 
 

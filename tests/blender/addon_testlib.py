@@ -9,6 +9,7 @@ the CLI, the `libfx` tool ($LIBFX_CLI, else beside the library).  Renders are ti
 """
 import json
 import os
+import re
 import pathlib
 import shutil
 import struct
@@ -83,6 +84,27 @@ def run_blender(args, env=None, timeout=240, blend=None, python=None, python_exp
     return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, env=e)
 
 
+_TB_FILE = re.compile(r'^\s*File "([^"]+)"', re.M)
+#: Where Blender keeps its own scripts and Python: a traceback only through these is
+#: Blender's (5.2's bundled extensions add-on fails to import 'cattrs' at every start).
+_BLENDER_OWN = ("/usr/share/blender/", "/usr/lib/python3")
+
+
+def tracebacks(text):
+    """The Python tracebacks in Blender's output that pass through libfx's or the
+    tests' code (a frame outside Blender's own scripts); Blender's start-up noise
+    from its bundled add-ons is left out."""
+    out = []
+    for block in re.split(r"(?=Traceback \(most recent call last\):)", text)[1:]:
+        lines = block.splitlines()
+        end = next((i for i, l in enumerate(lines[1:], 1) if l and not l.startswith(" ")), len(lines) - 1)
+        block = "\n".join(lines[:end + 1])
+        files = _TB_FILE.findall(block)
+        if not files or any(not f.startswith(_BLENDER_OWN) for f in files):
+            out.append(block)
+    return out
+
+
 def addon_env(library):
     return {"LIBFX_LIBRARY": str(library), "PYTHONDONTWRITEBYTECODE": "1"}
 
@@ -112,11 +134,19 @@ class Exr:
         spec = inp.spec()
         self.spec = spec
         self.width, self.height = spec.width, spec.height
-        data = inp.read_image(0, 0, 0, spec.nchannels, "float")
-        inp.close()
-        self.names = list(spec.channelnames)
-        self.channels = {n: np.array(data[:, :, i], dtype=np.float32) for i, n in enumerate(self.names)}
         self.attrs = {a.name: a.value for a in spec.extra_attribs}
+        self.names = []
+        self.channels = {}
+        # Blender 5.x writes multilayer EXRs as one part per layer: read every part.
+        part = 0
+        while inp.seek_subimage(part, 0):
+            ps = inp.spec()
+            data = inp.read_image(part, 0, 0, ps.nchannels, "float")
+            for i, n in enumerate(ps.channelnames):
+                self.names.append(n)
+                self.channels[n] = np.array(data[:, :, i], dtype=np.float32)
+            part += 1
+        inp.close()
 
     def passes(self):
         """Pass names: 'Layer.Pass.C' -> 'Pass' (parsed from the right, GUIDE §3)."""
@@ -134,10 +164,14 @@ class Exr:
         out = []
         for c in chans:
             found = None
-            for n in self.names:
-                parts = n.split(".")
-                if len(parts) >= 2 and parts[-1] == c and parts[-2] in aliases:
-                    found = n
+            # 4.3+ File Output nodes name Cryptomatte channels .r/.g/.b/.a
+            for same in (str.__eq__, lambda a, b: a.lower() == b.lower()):
+                for n in self.names:
+                    parts = n.split(".")
+                    if len(parts) >= 2 and same(parts[-1], c) and parts[-2] in aliases:
+                        found = n
+                        break
+                if found:
                     break
             assert found is not None, "no channel %s.%s in %s" % (pass_name, c, self.names)
             out.append(self.channels[found])

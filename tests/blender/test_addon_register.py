@@ -10,7 +10,7 @@ def _check(proc):
     out = proc.stdout + proc.stderr
     assert proc.returncode == 0, out[-4000:]
     assert OK in proc.stdout, out[-4000:]
-    assert "Traceback" not in out, out[-4000:]
+    assert not T.tracebacks(out), out[-4000:]
     return out
 
 
@@ -165,7 +165,7 @@ assert vl.use_pass_object_index
 scene.libfx.stack.clear(); scene_setup.sync(scene)
 assert not vl.use_pass_object_index and vl.use_pass_z
 # Eevee cannot render index passes: the add-on says what to use instead
-scene.render.engine = 'BLENDER_EEVEE'
+scene.render.engine = libfx.compat.eevee_engine()
 recipe.from_recipe(scene, {'version': 1, 'effects': [{'effect': name, 'mask': {'object_index': 3}}]})
 w = scene_setup.status(scene)['warnings']
 assert any('Cryptomatte' in x for x in w), w
