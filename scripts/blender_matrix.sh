@@ -33,8 +33,17 @@ dump_bits() {  # target, cli path, runner...
     && bits_dirs+=("$logs/bits/$target")
 }
 
+# Roots that are missing are made in the background (mostly download and unpack)
+# while the host's Blender is tested.
+declare -A root_job
+for t in "${targets[@]}"; do
+  [ "$t" = host ] && continue
+  bash scripts/blender_roots.sh "$t" >"$logs/root-$t.log" 2>&1 &
+  root_job[$t]=$!
+done
+
 # The inputs of the cross-build check, rendered once by the host's Blender.
-[ -x build/libfx/libfx ] || bash scripts/setup.sh >"$logs/setup.log" 2>&1
+bash scripts/setup.sh >"$logs/setup.log" 2>&1
 if ! bash tests/matrix/make_bits_inputs.sh "$logs/bits_inputs"; then
   summary+=("same bits: FAILED to render the inputs"); status=1
 fi
@@ -47,11 +56,13 @@ for t in "${targets[@]}"; do
   if [ "$t" = host ]; then
     run=()
     build=build
-    [ -x build/libfx/libfx ] || bash scripts/setup.sh >>"$log" 2>&1
+    bash scripts/setup.sh >>"$log" 2>&1   # builds what changed (the add-on zip too)
   else
-    if ! bash scripts/blender_roots.sh "$t" 2>&1 | tee -a "$log"; then
-      summary+=("$t: FAILED to make the root (see $log)"); status=1; continue
+    if ! wait "${root_job[$t]}"; then
+      cat "$logs/root-$t.log" >>"$log"
+      summary+=("$t: FAILED to make the root (see $logs/root-$t.log)"); status=1; continue
     fi
+    cat "$logs/root-$t.log" | tee -a "$log"
     run=(bash scripts/in_root.sh "$t")
     build=build-$t
     echo "-- building libfx in the $t root" | tee -a "$log"

@@ -15,6 +15,7 @@ packages=(
   libopencv-imgproc-dev                     # OpenCV's GaussianBlur as the benchmark's peer
   clang libclang-rt-14-dev                  # the fuzz target (libFuzzer is in libclang-rt)
   nodejs                                    # runs the Flamenco job type (farm/flamenco) in its test
+  mmdebstrap                                # makes the Debian 13 / unstable roots holding Blender 4.3 / 5.x
 )
 missing=()
 for p in "${packages[@]}"; do

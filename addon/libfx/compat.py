@@ -104,10 +104,15 @@ def _pass_through_group(tree, scene):
 
 
 def release_compositor_tree(scene, how):
-    """Undoes ``ensure_compositor_tree``'s change (how as it returned)."""
-    if how == "use_nodes" and not has_compositing_node_group():
-        scene.use_nodes = False
-    elif how == "node_group" and has_compositing_node_group():
+    """Undoes ``ensure_compositor_tree``'s change (how as it returned). A scene whose
+    Use Nodes a 3.4-4.5 add-on turned on reaches 5.x with that tree made into a group:
+    the group goes, as Use Nodes would have gone off."""
+    if not how:
+        return
+    if not has_compositing_node_group():
+        if how == "use_nodes":
+            scene.use_nodes = False
+    else:
         tree = scene.compositing_node_group
         if tree is not None:
             scene.compositing_node_group = None

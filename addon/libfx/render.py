@@ -236,10 +236,21 @@ def _write_json(path, obj):
     os.replace(tmp, path)
 
 
+SAVE_IMAGE = ".libfx save"   # hidden: the one image datablock save_image reuses
+
+
 def save_image(scene, exr_path, image_path):
     """The result in the scene's output format, through Blender's colour management.
-    Main thread only."""
-    img = bpy.data.images.load(exr_path, check_existing=False)
+    Main thread only. One datablock is reloaded for every frame and removed when the
+    render completes: 5.2 crashes on the next frame of `-a` when an image is removed
+    inside render_post."""
+    img = bpy.data.images.get(SAVE_IMAGE)
+    if img is None:
+        img = bpy.data.images.load(exr_path, check_existing=False)
+        img.name = SAVE_IMAGE
+    else:
+        img.filepath = exr_path
+        img.reload()
     # atomic like libfx's own EXR writer: a temp file beside the target, then a rename,
     # so a killed render never leaves a partial image under the final name
     folder, name = os.path.split(image_path)
@@ -248,9 +259,24 @@ def save_image(scene, exr_path, image_path):
         img.save_render(tmp, scene=scene)
         os.replace(tmp, image_path)
     finally:
-        bpy.data.images.remove(img)
         if os.path.exists(tmp):
             os.unlink(tmp)
+
+
+def _remove_save_image():
+    img = bpy.data.images.get(SAVE_IMAGE)
+    if img is not None:
+        bpy.data.images.remove(img)
+
+
+@persistent
+def on_render_done(*args):
+    """render_complete / render_cancel: the save datablock goes (in the UI on the main
+    thread, after the queued saves)."""
+    if bpy.app.background:
+        _remove_save_image()
+    else:
+        _to_ui(_remove_save_image)
 
 
 @persistent
@@ -354,6 +380,8 @@ def _ui_show_result(exr_path):
 HANDLERS = (("frame_change_post", on_frame_change_post),
             ("render_init", on_render_init),
             ("render_post", on_render_post),
+            ("render_complete", on_render_done),
+            ("render_cancel", on_render_done),
             ("load_post", on_load_post))
 
 

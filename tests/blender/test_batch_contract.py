@@ -70,15 +70,17 @@ def pixels(path):
 
 def same_result(a, b):
     """Two results of the same frame: every channel bit-identical, every header attribute
-    equal but Blender's 'Date' stamp (copied from the passes file, so it differs between
-    runs more than a second apart). Returns whether the bytes are identical too."""
+    equal but Blender's per-run stamps copied from the passes file: 'Date' (differs
+    between runs more than a second apart) and 'RenderTime' (4.3+ write the real time).
+    Returns whether the bytes are identical too."""
     ea, ca = pixels(a)
     eb, cb = pixels(b)
     assert sorted(ca) == sorted(cb)
     for n in ca:
         assert np.array_equal(ca[n], cb[n]), "channel %s differs in %d values" % (n, (ca[n] != cb[n]).sum())
-    attrs_a = {k: v for k, v in ea.attrs.items() if k != "Date"}
-    attrs_b = {k: v for k, v in eb.attrs.items() if k != "Date"}
+    stamps = ("Date", "RenderTime")
+    attrs_a = {k: v for k, v in ea.attrs.items() if k not in stamps}
+    attrs_b = {k: v for k, v in eb.attrs.items() if k not in stamps}
     assert attrs_a == attrs_b
     return a.read_bytes() == b.read_bytes()
 
