@@ -216,8 +216,9 @@ RENDER_LAYER_RENAMED = {
 
 
 def render_layer_output(rl, pass_name):
-    """The Render Layers output of a pass by its short (EXR) name, or None; the
-    render's combined image is 'Image' in every release."""
+    """The Render Layers output of a pass by its short (EXR) name, or None (4.3+
+    also when the engine does not render it; 3.4 has it, disabled); the render's
+    combined image is 'Image' in every release."""
     name = "Image" if pass_name == "Combined" else pass_name
     sock = rl.outputs.get(name)
     if sock is None and name in RENDER_LAYER_RENAMED:
@@ -266,14 +267,26 @@ def engine_label(engine):
             "BLENDER_WORKBENCH": "Workbench"}.get(engine, engine)
 
 
+def eevee_is_next():
+    """Eevee Next (4.2+, still the Eevee of 5.x): ray tracing settings, Position and
+    Vector passes; the Eevee before it (3.4-4.1) had screen-space reflections."""
+    return "use_raytracing" in bpy.types.SceneEEVEE.bl_rna.properties
+
+
 def engine_renders_pass(engine, pass_name):
-    """Whether the engine writes this canonical pass at all (index passes:
-    Cycles only; every engine writes Cryptomatte, Depth, Normal)."""
-    if pass_name in ("IndexOB", "IndexMA"):
-        return engine == "CYCLES"
+    """Whether the engine writes this pass (its EXR name) at all. Index passes:
+    Cycles only; Position and Vector: Cycles and Eevee Next; Workbench: Depth only.
+    Cryptomatte, Depth, Normal and the light passes: Cycles and every Eevee."""
+    if engine == "CYCLES":
+        return True
     if engine == "BLENDER_WORKBENCH":
         return pass_name in ("Combined", "Depth")
-    return True
+    if is_eevee(engine):
+        if pass_name in ("IndexOB", "IndexMA"):
+            return False
+        if pass_name in ("Position", "Vector"):
+            return eevee_is_next()
+    return True   # another engine: the render's missing-socket warning tells
 
 
 def set_render_samples(scene, samples):

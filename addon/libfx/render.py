@@ -239,18 +239,25 @@ def _write_json(path, obj):
 SAVE_IMAGE = ".libfx save"   # hidden: the one image datablock save_image reuses
 
 
+def _image_showing(name, path):
+    """The image datablock `name`, loaded from `path` the first time, then pointed at
+    `path` and reloaded."""
+    img = bpy.data.images.get(name)
+    if img is None:
+        img = bpy.data.images.load(path, check_existing=False)
+        img.name = name
+    else:
+        img.filepath = path
+        img.reload()
+    return img
+
+
 def save_image(scene, exr_path, image_path):
     """The result in the scene's output format, through Blender's colour management.
     Main thread only. One datablock is reloaded for every frame and removed when the
     render completes: 5.2 crashes on the next frame of `-a` when an image is removed
     inside render_post."""
-    img = bpy.data.images.get(SAVE_IMAGE)
-    if img is None:
-        img = bpy.data.images.load(exr_path, check_existing=False)
-        img.name = SAVE_IMAGE
-    else:
-        img.filepath = exr_path
-        img.reload()
+    img = _image_showing(SAVE_IMAGE, exr_path)
     # atomic like libfx's own EXR writer: a temp file beside the target, then a rename,
     # so a killed render never leaves a partial image under the final name
     folder, name = os.path.split(image_path)
@@ -359,13 +366,7 @@ def _ui_save_image(scene_name, exr, image):
 
 
 def _ui_show_result(exr_path):
-    img = bpy.data.images.get(RESULT_IMAGE)
-    if img is None:
-        img = bpy.data.images.load(exr_path, check_existing=False)
-        img.name = RESULT_IMAGE
-    else:
-        img.filepath = exr_path
-        img.reload()
+    img = _image_showing(RESULT_IMAGE, exr_path)
     wm = bpy.context.window_manager
     for win in wm.windows:
         for area in win.screen.areas:

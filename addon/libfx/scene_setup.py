@@ -15,7 +15,7 @@ import re
 
 import bpy
 
-from . import compat, native, props
+from . import compat, native
 
 RL_NODE = "libfx Render Layers"
 FO_NODE = "libfx passes"

@@ -76,6 +76,27 @@ compat.material_alpha_blend(m)
 me = bpy.data.meshes.new('x'); bm = bmesh.new(); bmesh.ops.create_cube(bm, size=1.0); bm.to_mesh(me)
 compat.mesh_smooth_by_angle(me, 0.5)
 assert all(p.use_smooth for p in me.polygons)
+# which engine renders which pass: compat's table against Blender's own sockets
+vl = s.view_layers[0]
+for setting in ('use_pass_z', 'use_pass_normal', 'use_pass_position', 'use_pass_vector',
+                'use_pass_object_index', 'use_pass_material_index', 'use_pass_diffuse_direct',
+                'use_pass_diffuse_color', 'use_pass_cryptomatte_object'):
+    setattr(vl, setting, True)
+probe, probe_how = compat.ensure_compositor_tree(s, 'engines')
+prl = next(n for n in probe.nodes if n.bl_idname == 'CompositorNodeRLayers')
+for engine in ('CYCLES', compat.eevee_engine(), 'BLENDER_WORKBENCH'):
+    s.render.engine = engine
+    for p in ('Depth', 'Normal', 'Position', 'Vector', 'IndexOB', 'IndexMA', 'DiffDir', 'DiffCol',
+              'CryptoObject00'):
+        sock = compat.render_layer_output(prl, p)   # 4.3+: None when the engine lacks it
+        rendered = sock is not None and sock.enabled
+        assert rendered == compat.engine_renders_pass(engine, p), (engine, p)
+s.render.engine = 'CYCLES'
+compat.release_compositor_tree(s, probe_how)
+for setting in ('use_pass_z', 'use_pass_normal', 'use_pass_position', 'use_pass_vector',
+                'use_pass_object_index', 'use_pass_material_index', 'use_pass_diffuse_direct',
+                'use_pass_diffuse_color', 'use_pass_cryptomatte_object'):
+    setattr(vl, setting, False)
 # the compositor tree: made, holds Render Layers feeding the final image, released
 assert compat.compositor_tree(s) is None or not getattr(s, 'use_nodes', True)
 tree, how = compat.ensure_compositor_tree(s, 'probe')
@@ -267,7 +288,7 @@ def test_installs_the_way_this_blender_installs(blender, library, tmp_path):
 
 def test_animation_render_dash_a_and_apply_to_last_render(blender, library, cli, tmp_path):
     """`blender -b file -a` over three frames with the add-on enabled gives three
-    results; then, in a new session, "Apply to Last Render" re-runs a changed stack on
+    results, `-f 2` one; then, in a new session, "Apply to Last Render" re-runs a changed stack on
     frame 2's passes and writes what `libfx run` writes."""
     r1 = {"version": 1, "effects": [{"effect": "gaussian_blur", "params": {"sigma": 1.5},
                                      "mask": {"object": "Cube"}}]}
@@ -290,6 +311,10 @@ def test_animation_render_dash_a_and_apply_to_last_render(blender, library, cli,
     for f in (1, 2, 3):
         assert (tmp_path / ("anim_libfx.%04d.exr" % f)).is_file(), f
         assert (tmp_path / ("anim_libfx_passes.%04d.exr" % f)).is_file(), f
+    # -f: one frame the same way
+    _ok(T.run_blender(["-o", str(tmp_path / "still_"), "-f", "2"], env=T.addon_env(library),
+                      blend=tmp_path / "anim.blend", python_expr=T.PRELUDE), "blender -b -f 2")
+    assert sorted(p.name for p in tmp_path.glob("still_libfx.*.exr")) == ["still_libfx.0002.exr"]
     p1 = T.Exr(tmp_path / "anim_libfx_passes.0001.exr").get("Combined", "RGB")
     p3 = T.Exr(tmp_path / "anim_libfx_passes.0003.exr").get("Combined", "RGB")
     assert np.abs(p1 - p3).max() > 1e-3   # three frames, not one frame three times
