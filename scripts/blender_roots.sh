@@ -18,6 +18,7 @@ PACKAGES=blender,cmake,build-essential,pkg-config,libopenexr-dev,libcjson-dev,li
 PACKAGES+=,python3-numpy,python3-pytest,python3-openimageio,openimageio-tools
 PACKAGES+=,xvfb,xauth,libgl1-mesa-dri,ca-certificates
 PACKAGES+=,nodejs   # the farm test runs the Flamenco job type
+PACKAGES+=,imagemagick   # UI screenshots from the X display (4.3+ read back black under Xvfb)
 # The package mirror here is a dated snapshot: its Release files are "expired".
 APT_OPT='Acquire::Check-Valid-Until "false";'
 MARKER=.libfx-root-complete

@@ -336,6 +336,10 @@ def _to_ui(fn):
 
 
 def _drain_ui():
+    # While the render job runs Blender refuses writes to data-blocks (an image's
+    # name, a reload): try again when it has finished.
+    if bpy.app.is_job_running("RENDER"):
+        return 0.1
     with _lock:
         todo = list(_ui_queue)
         _ui_queue.clear()

@@ -10,6 +10,8 @@ for "libfx Result" to appear in the Image Editor, then saves a screenshot of the
 window and quits (exit code 1 if the F12 path did not produce the result).
 """
 import os
+import shutil
+import subprocess
 import sys
 
 import bpy
@@ -60,12 +62,19 @@ def setup():
 
 
 def scroll_properties():
+    """Scrolls the Properties editor down to the libfx panel; False while Blender
+    still refuses (4.3 does for a moment after a render)."""
     win = bpy.context.window_manager.windows[0]
-    for a in areas("PROPERTIES"):
-        region = [r for r in a.regions if r.type == "WINDOW"][0]
-        with bpy.context.temp_override(window=win, area=a, region=region):
-            for _ in range(25):
-                bpy.ops.view2d.scroll_down(deltay=60)
+    try:
+        for a in areas("PROPERTIES"):
+            region = [r for r in a.regions if r.type == "WINDOW"][0]
+            with bpy.context.temp_override(window=win, area=a, region=region):
+                for _ in range(25):
+                    bpy.ops.view2d.scroll_down(deltay=60)
+    except RuntimeError as e:
+        log("scroll later:", e)
+        return False
+    return True
 
 
 def tick():
@@ -88,14 +97,22 @@ def tick():
             if done or state["t"] > 120:
                 state["ok"] = done
                 log("F12 result image:", done)
-                scroll_properties()
+                state["phase"] = "scroll"
+            return 1.0
+        if state["phase"] == "scroll":
+            if scroll_properties() or state["t"] > 150:
                 state["phase"] = "shot"
             return 1.0
         if state["phase"] == "shot":
             os.makedirs(os.path.dirname(OUT), exist_ok=True)
             win = bpy.context.window_manager.windows[0]
-            with bpy.context.temp_override(window=win, area=win.screen.areas[0]):
-                bpy.ops.screen.screenshot(filepath=OUT)
+            if shutil.which("import") and os.environ.get("DISPLAY"):
+                # 4.3+ on Mesa's software GL under Xvfb read their window back black:
+                # the X display's own picture (ImageMagick) works for every release.
+                subprocess.run(["import", "-window", "root", OUT], check=True, timeout=60)
+            else:
+                with bpy.context.temp_override(window=win, area=win.screen.areas[0]):
+                    bpy.ops.screen.screenshot(filepath=OUT)
             log("saved", OUT)
             rec = libfx.render.RESULTS.get((bpy.context.scene.name, bpy.context.scene.frame_current))
             log("result record:", rec and {k: rec[k] for k in ("ok", "error")})
