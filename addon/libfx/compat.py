@@ -19,15 +19,21 @@ The differences, and the releases that made them:
   (5.0+: "Object Index", "Diffuse Direct").
 - image formats: multilayer EXR is a ``file_format`` (3.4-4.5) or a
   ``media_type`` (5.0+).
-- node settings that became input sockets (5.0+): ``node_setting``.
+- node settings that became input sockets (5.0+): none that the add-on sets
+  (the File Output node's format is still a property).
 - engine identifiers: Eevee is ``BLENDER_EEVEE`` (3.4-4.1, 5.0+) and
   ``BLENDER_EEVEE_NEXT`` (4.2-4.5); Eevee Next renders no index passes.
 - Principled BSDF sockets renamed in 4.0 ("Specular" -> "Specular IOR Level"...).
 - material blend and shadow modes (4.2: ``surface_render_method``,
-  ``use_transparent_shadow``; the old enums went away later).
+  ``use_transparent_shadow``; 5.0 dropped ``shadow_method``).
+- light shadows (``cycles.cast_shadow`` gone in 5.0) and animation F-curves
+  (slotted actions: ``action.fcurves`` gone in 5.0), for the scene builders.
 - mesh auto smooth (``use_auto_smooth`` until 4.0; ``set_sharp_from_angle`` 4.1+).
-- extensions (4.2+): the add-on's module is ``bl_ext.<repo>.libfx``.
+- extensions (4.2+): the add-on's module is ``bl_ext.<repo>.libfx`` (batch.py
+  looks for either name before it can import this module).
 """
+
+import os
 
 import bpy
 
@@ -92,9 +98,7 @@ def ensure_compositor_tree(scene, name):
 def _pass_through_group(tree, scene):
     """A new 5.x compositor group: Render Layers -> Group Output, so that the
     render the scene writes is the one it wrote before the group existed."""
-    if not any(s.in_out == "OUTPUT" for s in tree.interface.items_tree
-               if getattr(s, "item_type", "SOCKET") == "SOCKET"):
-        tree.interface.new_socket("Image", in_out="OUTPUT", socket_type="NodeSocketColor")
+    tree.interface.new_socket("Image", in_out="OUTPUT", socket_type="NodeSocketColor")
     rl = tree.nodes.new("CompositorNodeRLayers")
     rl.scene = scene
     rl.location = (-300, 0)
@@ -132,7 +136,6 @@ def file_output_set_prefix(node, prefix):
     animation and still renders alike (5.0+ numbers a still's file only when the
     name holds '#')."""
     if has_file_output_items(node):
-        import os
         directory, name = os.path.split(prefix)
         node.directory = directory + os.sep if directory else ""
         node.file_name = name + "####"
@@ -142,7 +145,6 @@ def file_output_set_prefix(node, prefix):
 
 def file_output_prefix(node):
     if has_file_output_items(node):
-        import os
         return os.path.join(node.directory, node.file_name.rstrip("#"))
     return node.base_path
 
@@ -224,23 +226,6 @@ def render_layer_output(rl, pass_name):
     if sock is None and name in RENDER_LAYER_RENAMED:
         sock = rl.outputs.get(RENDER_LAYER_RENAMED[name])
     return sock
-
-
-# ---------------------------------------------------------------- node settings
-
-def node_setting(node, name, value=None):
-    """Reads (value None) or sets a node setting: a property (3.4-4.5) or an
-    input socket of that name (5.0+, e.g. Glare's "Type")."""
-    sock = node.inputs.get(name.replace("_", " ").title()) if hasattr(node, "inputs") else None
-    if sock is None and hasattr(node, "inputs"):
-        sock = node.inputs.get(name)
-    if sock is not None and not hasattr(node, name):
-        if value is not None:
-            sock.default_value = value
-        return sock.default_value
-    if value is not None:
-        setattr(node, name, value)
-    return getattr(node, name)
 
 
 # ---------------------------------------------------------------- engines
@@ -382,12 +367,3 @@ def mesh_smooth_by_angle(mesh, angle):
     else:                                            # 3.4-4.0: auto smooth
         mesh.use_auto_smooth = True
         mesh.auto_smooth_angle = angle
-
-
-# ---------------------------------------------------------------- add-on module
-
-def addon_module_names():
-    """The module names this add-on may be registered under: the legacy add-on
-    ('libfx') and the extension ('bl_ext.<repository>.libfx', 4.2+)."""
-    import sys
-    return [n for n in sys.modules if n == "libfx" or (n.startswith("bl_ext.") and n.endswith(".libfx"))]
