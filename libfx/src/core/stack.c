@@ -782,6 +782,18 @@ static fx_result check_passes(const fx_stack *s, const fx_frame *in, fx_pass_set
     return FX_OK;
 }
 
+typedef struct copy_job {
+    float *dst;
+    const float *src;
+    size_t row; /* floats per row */
+} copy_job;
+
+static void copy_rows(void *user, int y0, int y1)
+{
+    const copy_job *j = user;
+    memcpy(j->dst + (size_t)y0 * j->row, j->src + (size_t)y0 * j->row, (size_t)(y1 - y0) * j->row * sizeof(float));
+}
+
 fx_result fx_stack_run(fx_stack *s, const fx_frame *in, fx_frame **out)
 {
     if (!s || !in || !out)
@@ -912,7 +924,10 @@ fx_result fx_stack_run(fx_stack *s, const fx_frame *in, fx_frame **out)
     }
     if (!r) {
         if (src == combined->data) {
-            memcpy(cur, src, n * sizeof(float));
+            /* no effect ran: the output is the input, copied by the pool so the first
+             * frame's page faults on the fresh buffer are shared out too */
+            copy_job job = {cur, src, (size_t)w * 4};
+            fx_parallel_for(ctx, h, fx_grain_for(ctx, h), copy_rows, &job);
         } else if (src == spare) {
             /* The result is in the spare buffer: make it the output's Combined. */
             r = fx_frame_adopt_pass(o, "Combined", 4, spare);
