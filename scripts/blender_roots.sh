@@ -67,12 +67,15 @@ make_root() {
   rm -rf "$root" "$root.partial"
   echo "roots: $suite: making $root (a few minutes, about 2 GB)"
   local t0=$SECONDS
-  mmdebstrap --variant=apt --aptopt="$APT_OPT" --include="$PACKAGES" \
-    "$suite" "$root.partial" >"$ROOTS/$suite.log" 2>&1 || {
-      echo "roots: $suite: mmdebstrap failed; the end of $ROOTS/$suite.log:" >&2
-      tail -20 "$ROOTS/$suite.log" >&2
-      return 1
-    }
+  local try
+  for try in 1 2; do   # a second try for a mirror's passing hiccup
+    rm -rf "$root.partial"
+    mmdebstrap --variant=apt --aptopt="$APT_OPT" --include="$PACKAGES" \
+      "$suite" "$root.partial" >"$ROOTS/$suite.log" 2>&1 && break
+    echo "roots: $suite: mmdebstrap failed (try $try); the end of $ROOTS/$suite.log:" >&2
+    tail -20 "$ROOTS/$suite.log" >&2
+    [ "$try" = 2 ] && return 1
+  done
   # Later apt-get runs inside the root need the same option.
   echo "$APT_OPT" >"$root.partial/etc/apt/apt.conf.d/99libfx-snapshot"
   local version
