@@ -26,7 +26,6 @@ void *fx_buffer_get(fx_context *ctx, size_t bytes)
         pthread_mutex_unlock(&ctx->lock);
         if (p)
             return p;
-        return fx_mem_alloc_large(bytes);
     }
     return fx_mem_alloc(bytes);
 }

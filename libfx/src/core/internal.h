@@ -21,10 +21,9 @@ extern "C" {
 #endif
 
 /* ---- memory: every allocation goes through here (failure injection in tests) ---- */
+/* Blocks of 2 MiB and more come huge-page aligned and advised (fewer first-touch faults). */
 void *fx_mem_alloc(size_t n);
 void *fx_mem_calloc(size_t count, size_t size);
-/* For frame-sized buffers: huge-page aligned and advised (fewer first-touch page faults). */
-void *fx_mem_alloc_large(size_t n);
 void *fx_mem_realloc(void *p, size_t n);
 void fx_mem_free(void *p);
 char *fx_mem_strdup(const char *s);

@@ -44,24 +44,15 @@ unsigned long fx_mem_failure_count(void)
     return atomic_load(&failed_count);
 }
 
-void *fx_mem_alloc(size_t n)
-{
-    if (should_fail())
-        return NULL;
-    return counted(malloc(n ? n : 1));
-}
-
 /* Frame-sized buffers: 2 MiB aligned and marked for transparent huge pages, so the first
  * touch of a 1080p pass costs about 16 page faults instead of 8100 (these machines run
- * THP in madvise mode: plain malloc gets 4 KiB pages). Freed with fx_mem_free. */
+ * THP in madvise mode: plain malloc gets 4 KiB pages). */
 #define HUGE_PAGE ((size_t)2 << 20)
 
-void *fx_mem_alloc_large(size_t n)
+static void *alloc_huge(size_t n)
 {
-    if (n < HUGE_PAGE)
-        return fx_mem_alloc(n);
-    if (should_fail())
-        return NULL;
+    if (n > SIZE_MAX - HUGE_PAGE)
+        return counted(NULL);
     size_t rounded = (n + HUGE_PAGE - 1) & ~(HUGE_PAGE - 1);
     void *p = NULL;
     if (posix_memalign(&p, HUGE_PAGE, rounded) != 0)
@@ -70,6 +61,15 @@ void *fx_mem_alloc_large(size_t n)
     (void)madvise(p, rounded, MADV_HUGEPAGE); /* a hint: without THP the pages stay small */
 #endif
     return p;
+}
+
+void *fx_mem_alloc(size_t n)
+{
+    if (should_fail())
+        return NULL;
+    if (n >= HUGE_PAGE)
+        return alloc_huge(n);
+    return counted(malloc(n ? n : 1));
 }
 
 void *fx_mem_calloc(size_t count, size_t size)
