@@ -42,6 +42,56 @@ static void test_brute_equals_grid(void)
     CHECK(total == 6 * 8 * 400);
 }
 
+/* The per-frame point table: exact == the on-the-fly searches above, bit for bit; fast:
+ * grid == brute bit for bit, and within float rounding of the exact distances. */
+static void test_table(void)
+{
+    const int grids[] = {1, 2, 3, 5, 9, 10, 14, 40, 200};
+    const double ps[] = {0.1, 1.0, 1.5, 2.0, 3.0, INFINITY};
+    int exact_bad = 0, fast_bad = 0, near_bad = 0, fast_used = 0;
+    for (int gi = 0; gi < 9; gi++)
+        for (int pi = 0; pi < 6; pi++) {
+            fx_voronoi v = {grids[gi], 7u + (uint32_t)gi, 0.75 * pi, 1.7, ps[pi]};
+            fx_voronoi_table te, tf;
+            CHECK(fx_voronoi_table_init(&te, &v, 0) == 0);
+            CHECK(fx_voronoi_table_init(&tf, &v, 1) == 0);
+            CHECK(te.kind == 0);
+            fast_used += tf.kind != 0;
+            int queries = grids[gi] >= 100 ? 40 : 600; /* brute force is O(G^2) */
+            for (int q = 0; q < queries; q++) {
+                double x = (fx_rand4(q, gi, pi, 3) - 0.3) * 3.0 * grids[gi];
+                double y = (fx_rand4(q, gi, pi, 4) - 0.3) * 3.0 * grids[gi];
+                if (q == 0) { x = 0.0; y = 0.0; }
+                if (q == 1) { x = -1e-12; y = grids[gi]; }
+                if (q == 2) { x = 1e9 + 0.25; y = -3e8; }
+                fx_voronoi_hit a, b, c, d;
+                fx_voronoi_grid(&v, x, y, &a);
+                fx_voronoi_table_grid(&te, x, y, &b);
+                fx_voronoi_table_brute(&te, x, y, &c);
+                exact_bad += memcmp(&a, &b, sizeof a) != 0 || memcmp(&a, &c, sizeof a) != 0;
+                fx_voronoi_table_grid(&tf, x, y, &b);
+                fx_voronoi_table_brute(&tf, x, y, &d);
+                fast_bad += b.i1 != d.i1 || b.i2 != d.i2 || memcmp(&b.f1, &d.f1, sizeof(double)) ||
+                            memcmp(&b.f2, &d.f2, sizeof(double)) || !isfinite(b.f1) || !isfinite(b.f2);
+                /* float: a few ulps of the tile coordinates (< G): 1e-6 (G + 1) cells */
+                double tol = 1e-6 * (grids[gi] + 1);
+                if (q != 2 && (fabs(b.f1 - a.f1) > tol || fabs(b.f2 - a.f2) > tol))
+                    if (near_bad++ < 5)
+                        fprintf(stderr, "G %d p %g (%g, %g): exact %d/%d %.9g/%.9g fast %d/%d %.9g/%.9g\n", grids[gi],
+                                ps[pi], x, y, a.i1, a.i2, a.f1, a.f2, b.i1, b.i2, b.f1, b.f2);
+            }
+            fx_voronoi_table_free(&te);
+            fx_voronoi_table_free(&tf);
+        }
+    if (exact_bad || fast_bad || near_bad)
+        fprintf(stderr, "table: exact mismatches %d, fast grid != brute %d, fast far from exact %d\n", exact_bad,
+                fast_bad, near_bad);
+    CHECK(exact_bad == 0);
+    CHECK(fast_bad == 0);
+    CHECK(near_bad == 0);
+    CHECK(fast_used == 4 * 4); /* G >= 10 and p in {1, 1.5, 2, inf} */
+}
+
 static void test_minkowski(void)
 {
     CHECK(fx_minkowski2(3, 4, 2.0) == 5.0);
@@ -342,15 +392,167 @@ static void test_extremes_and_mask(fx_context *ctx)
     fx_frame_free(f);
 }
 
+/* A w x h frame of a plane seen from above (positions from a continuous camera-like map),
+ * Normal +Z, Combined 0.5 grey; nan_every > 0 puts NaN/Inf positions on every n-th pixel. */
+static fx_frame *small_frame(fx_context *ctx, int w, int h, int nan_every)
+{
+    float *rgba = malloc((size_t)w * h * 4 * sizeof(float)), *pos = malloc((size_t)w * h * 3 * sizeof(float));
+    float *nrm = malloc((size_t)w * h * 3 * sizeof(float));
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++) {
+            size_t i = (size_t)y * w + x;
+            double u = (x + 0.5) / 7.0, v = (y + 0.5) / 7.0;
+            pos[i * 3] = (float)(u + 0.05 * u * v); /* mildly non-linear, as perspective is */
+            pos[i * 3 + 1] = (float)(v - 0.03 * u * u);
+            pos[i * 3 + 2] = 0.0f;
+            if (nan_every > 0 && i % (size_t)nan_every == 3)
+                pos[i * 3 + (i & 1)] = (i & 2) ? NAN : INFINITY;
+            nrm[i * 3] = nrm[i * 3 + 1] = 0.0f;
+            nrm[i * 3 + 2] = 1.0f;
+            rgba[i * 4] = rgba[i * 4 + 1] = rgba[i * 4 + 2] = 0.5f;
+            rgba[i * 4 + 3] = 1.0f;
+        }
+    fx_frame *f = et_frame(ctx, w, h, rgba);
+    cam c = {{0.3, -0.2, 4.0}, 0.0, 1.2}; /* any camera: the environment term needs one */
+    char json[2048];
+    camera_sidecar(&c, json, sizeof json);
+    if (f && (fx_frame_add_pass(f, "Position", 3, pos) != FX_OK || fx_frame_add_pass(f, "Normal", 3, nrm) != FX_OK ||
+              fx_frame_apply_sidecar(f, json) != FX_OK)) {
+        fx_frame_free(f);
+        f = NULL;
+    }
+    free(rgba);
+    free(pos);
+    free(nrm);
+    return f;
+}
+
+static int all_finite_bounded(const float *o, size_t n)
+{
+    for (size_t k = 0; o && k < n; k++)
+        if (!isfinite(o[k]) || o[k] < 0.0f || o[k] >= 100.0f)
+            return 0;
+    return o != NULL;
+}
+
+/* The reduced-resolution lattice (downsample > 1): tiny and odd sizes, each quality, masks
+ * smaller than a lattice step, NaN/Inf positions; thread count; close to every-pixel. */
+static void test_lattice(fx_context *ctx)
+{
+    fx_context *c1 = NULL;
+    CHECK(fx_context_new(&c1, 1) == FX_OK);
+    const int sizes[][2] = {{1, 1}, {1, 9}, {9, 1}, {2, 2}, {7, 5}, {13, 11}, {64, 37}};
+    const char *settings[] = {
+        "\"quality\": \"draft\"", "\"quality\": \"preview\"", "\"quality\": \"final\"",
+        "\"downsample\": 3", "\"downsample\": 16", "\"downsample\": 5, \"mode\": \"seed\"",
+        "\"downsample\": 4, \"lattice_shading\": true, \"exponent\": 0.5",
+        "\"downsample\": 2, \"method\": \"brute\"", "\"downsample\": 2, \"distance\": \"exact\""};
+    const int ns = (int)(sizeof settings / sizeof settings[0]);
+    int bad_finite = 0, bad_threads = 0, bad_pass = 0;
+    for (int si = 0; si < 7; si++)
+        for (int nan = 0; nan <= 1; nan++) {
+            int w = sizes[si][0], h = sizes[si][1];
+            fx_frame *f = small_frame(ctx, w, h, nan ? 5 : 0), *f1 = small_frame(c1, w, h, nan ? 5 : 0);
+            CHECK(f && f1);
+            if (!f || !f1) {
+                fx_frame_free(f);
+                fx_frame_free(f1);
+                continue;
+            }
+            for (int k = 0; k < ns; k++) {
+                char params[512];
+                /* "quality" is a recipe field; the others are params */
+                int is_q = strncmp(settings[k], "\"quality\"", 9) == 0;
+                snprintf(params, sizeof params,
+                         "{\"version\": 1, %s%s\"effects\": [{\"effect\": \"voronoi_caustics\", \"params\": "
+                         "{\"points\": 100, \"tile_size\": 2, \"line_width\": 0.2, \"environment_strength\": 0.3%s%s}}]}",
+                         is_q ? settings[k] : "", is_q ? ", " : "", is_q ? "" : ", ", is_q ? "" : settings[k]);
+                fx_stack *s = NULL, *s1 = NULL;
+                float *o = NULL, *o1 = NULL;
+                if (fx_stack_new(ctx, &s) == FX_OK && fx_stack_load_json(s, params) == FX_OK)
+                    o = et_run(ctx, s, f);
+                else
+                    fprintf(stderr, "lattice recipe %s: %s\n", params, fx_context_error(ctx));
+                if (fx_stack_new(c1, &s1) == FX_OK && fx_stack_load_json(s1, params) == FX_OK)
+                    o1 = et_run(c1, s1, f1);
+                fx_stack_free(s);
+                fx_stack_free(s1);
+                size_t n = (size_t)w * h * 4;
+                if (!all_finite_bounded(o, n)) {
+                    if (bad_finite++ < 3)
+                        fprintf(stderr, "lattice %dx%d nan %d %s: not finite/bounded\n", w, h, nan, settings[k]);
+                }
+                if (!o || !o1 || memcmp(o, o1, n * sizeof(float)))
+                    bad_threads++;
+                /* pixels without a position pass through untouched */
+                const float *in = et_combined(f);
+                for (size_t i = 3; nan && o && i < (size_t)w * h; i += 5)
+                    bad_pass += memcmp(o + i * 4, in + i * 4, 4 * sizeof(float)) != 0;
+                free(o);
+                free(o1);
+            }
+            fx_frame_free(f);
+            fx_frame_free(f1);
+        }
+    CHECK(bad_finite == 0);
+    CHECK(bad_threads == 0);
+    CHECK(bad_pass == 0);
+
+    /* a mask smaller than a lattice step (1 x 1, 2 x 2 at odd places): the lattice shrinks
+     * to the ROI (its first and last pixels are nodes), so these pixels are lattice nodes:
+     * exactly the every-pixel result */
+    fx_frame *f = small_frame(ctx, 64, 37, 0);
+    const char *rects[] = {"{\"rect\": [5, 7, 1, 1]}", "{\"rect\": [63, 36, 1, 1]}", "{\"rect\": [30, 11, 2, 2]}"};
+    const int rx[] = {5, 63, 30}, ry[] = {7, 36, 11}, rw[] = {1, 1, 2}, rh[] = {1, 1, 2};
+    for (int r = 0; f && r < 3; r++) {
+        float *full = et_run_effect(ctx, "voronoi_caustics", f,
+                                    "\"points\": 100, \"tile_size\": 2, \"downsample\": 1, \"distance\": \"fast\"", rects[r]);
+        float *lat = et_run_effect(ctx, "voronoi_caustics", f,
+                                   "\"points\": 100, \"tile_size\": 2, \"downsample\": 8, \"distance\": \"fast\"", rects[r]);
+        const float *in = et_combined(f);
+        CHECK(full && lat && memcmp(full, lat, (size_t)64 * 37 * 4 * sizeof(float)) == 0);
+        CHECK(lat && et_outside_equal(lat, in, 64, 37, rx[r], ry[r], rw[r], rh[r]));
+        CHECK(lat && tu_max_abs_diff(lat, in, (size_t)64 * 37 * 4) > 0.0);
+        free(full);
+        free(lat);
+    }
+    fx_frame_free(f);
+
+    /* on a smooth surface the lattice stays close to every pixel (final: mean error small) */
+    cam A = {{0.3, -0.2, 4.0}, 0.0, 1.2};
+    fx_frame *pf = plane_frame(ctx, &A);
+    float *ref = run_caustics(ctx, pf, "position", "\"downsample\": 1, \"distance\": \"exact\"");
+    const char *qs[] = {"\"downsample\": 2", "\"downsample\": 2, \"refine\": false",
+                        "\"downsample\": 4, \"refine\": false, \"lattice_shading\": true"};
+    double mae[3] = {0, 0, 0};
+    for (int q = 0; pf && ref && q < 3; q++) {
+        float *o = run_caustics(ctx, pf, "position", qs[q]);
+        CHECK(o != NULL);
+        for (size_t k = 0; o && k < (size_t)W * H * 4; k++)
+            mae[q] += fabs(o[k] - ref[k]);
+        mae[q] /= (double)W * H * 3;
+        free(o);
+    }
+    fprintf(stderr, "lattice MAE vs every pixel: final %.5f, no refine %.5f, lattice shading x4 %.5f\n", mae[0],
+            mae[1], mae[2]);
+    /* cells of ~7 px here: refinement matters, lattice shading at 4 blurs (draft) */
+    CHECK(mae[0] < 0.004 && mae[0] < mae[1] && mae[1] < mae[2] && mae[1] < 0.06 && mae[2] < 0.15);
+    free(ref);
+    fx_frame_free(pf);
+    fx_context_free(c1);
+}
+
 int main(void)
 {
     fx_context *ctx = NULL;
     if (fx_context_new(&ctx, 2) != FX_OK)
         return 1;
     test_brute_equals_grid();
+    test_table();
     test_minkowski();
     test_world_anchoring(ctx);
     test_extremes_and_mask(ctx);
+    test_lattice(ctx);
     fx_context_free(ctx);
     return tu_finish("test_voronoi_caustics");
 }

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # One build's outputs for the cross-build check: every recipe of the three scenes on
-# that scene's passes, and every effect alone with its defaults on each scene's passes
+# that scene's passes, and every effect alone with its defaults at each quality preset
+# (draft, final, reference) on each scene's passes
 # (an effect that cannot run on a scene writes its error instead of an EXR: the error
 # must then be the same in every build too).
 #   bash tests/matrix/bits_dump.sh CLI INPUTS OUTDIR
@@ -10,9 +11,9 @@ cli=${1:?usage: bits_dump.sh CLI INPUTS OUTDIR} inputs=${2:?} out=${3:?}
 [ -f "$inputs/complete" ] || { echo "bits_dump: no inputs in $inputs" >&2; exit 2; }
 mkdir -p "$out/recipes"
 "$cli" --version >"$out/version.txt" 2>&1 || true
-run() {  # name, recipe, scene
-  local name=$1 recipe=$2 scene=$3
-  if ! "$cli" run --quiet -j 2 --stack "$recipe" --camera "$inputs/$scene/libfx.0001.camera.json" \
+run() {  # name, recipe, scene, [quality]
+  local name=$1 recipe=$2 scene=$3 quality=${4:+-q $4}
+  if ! "$cli" run --quiet -j 2 $quality --stack "$recipe" --camera "$inputs/$scene/libfx.0001.camera.json" \
       "$inputs/$scene/libfx_passes.0001.exr" -o "$out/$name.exr" 2>"$out/$name.err"; then
     rm -f "$out/$name.exr"
   else
@@ -25,7 +26,12 @@ for scene in greek_bath atrium mirror_room; do
   done
   for effect in $("$cli" list | awk '{print $1}'); do
     printf '{"version": 1, "effects": [{"effect": "%s"}]}\n' "$effect" >"$out/recipes/$effect.json"
-    run "$scene.$effect" "$out/recipes/$effect.json" "$scene"
+    for q in draft final reference; do   # every preset's code path
+      run "$scene.$effect.$q" "$out/recipes/$effect.json" "$scene" "$q"
+    done
   done
+  printf '{"version": 1, "effects": [{"effect": "voronoi_caustics", "params": {"mode": "seed"}}]}\n' \
+    >"$out/recipes/caustics_seed.json"
+  run "$scene.caustics_seed" "$out/recipes/caustics_seed.json" "$scene"
 done
 ls "$out"/*.exr | wc -l | xargs echo "bits_dump: outputs:"

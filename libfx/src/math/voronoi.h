@@ -47,6 +47,40 @@ void fx_voronoi_grid(const fx_voronoi *v, double x, double y, fx_voronoi_hit *ou
 /* Rounded square root of a point count: the grid size G (>= 1). */
 int fx_voronoi_grid_for_points(int points);
 
+/* A frame's points, computed once (they depend only on time): the per-query searches
+ * below then cost no sin/hash per candidate. Two distance kinds:
+ *  - exact (fast = 0, or p not in {1, 1.5, 2, inf}): double, fx_minkowski2, the same
+ *    candidates, order and bits as fx_voronoi_brute/grid above (tested);
+ *  - fast (fast = 1 and p in {1, 1.5, 2, inf}): float, no pow: each candidate is ordered by
+ *    the key sum |d_i|^p (|x| sqrt|x| for p = 1.5, x^2 for 2, max for inf), which is
+ *    monotone in the distance, and only F1 and F2 are turned into distances (key^(1/p)).
+ *    Candidates are the points' periodic images stored at x - G, x, x + G, so brute force
+ *    and the ring search compute a candidate's key from the same floats: same bits. Float
+ *    tile coordinates (< G) err by a few ulps: 2e-5 cells at 40 000 points (tested within
+ *    1e-6 (G + 1) of exact). The
+ *    ring search stops on the tight bound (ring - 1) + 0.05 + (query's distance to its
+ *    cell's nearest side): a point stays at least 0.06 inside its cell. For G < 10 (rings
+ *    could reach a non-nearest image) the fast kind uses brute force (<= 81 points). */
+typedef struct fx_voronoi_table {
+    int grid;
+    double p;
+    int kind;          /* 0 exact; 1: p = 1, 2: p = 1.5, 3: p = 2, 4: inf */
+    double *x, *y;     /* G*G point positions (fx_voronoi_point's doubles) */
+    float *fx, *fy;    /* fast: 3 per point (x - G, x, x + G), index point * 3 + s + 1 */
+} fx_voronoi_table;
+
+/* Fills t (allocates; 0 on success, -1 out of memory). fast: use the fast kind when p allows. */
+int fx_voronoi_table_init(fx_voronoi_table *t, const fx_voronoi *v, int fast);
+void fx_voronoi_table_free(fx_voronoi_table *t);
+void fx_voronoi_table_brute(const fx_voronoi_table *t, double x, double y, fx_voronoi_hit *out);
+void fx_voronoi_table_grid(const fx_voronoi_table *t, double x, double y, fx_voronoi_hit *out);
+/* The nearest two among n >= 2 distinct candidate points only (each at its image nearest
+ * the query), computed as brute force computes them: equal to it when the true nearest
+ * two are among the candidates. For interpolating between searches (the candidates of
+ * nearby queries). */
+void fx_voronoi_table_among(const fx_voronoi_table *t, double x, double y, const int *cand, int n,
+                            fx_voronoi_hit *out);
+
 /* Smooth value noise in [0, 1] (bilinear over hashed lattice values, smoothstep weights). */
 double fx_value_noise2(double x, double y, uint32_t seed);
 
