@@ -1,7 +1,7 @@
 """The same recipe on the same EXR gives the same output bits from every libfx build.
 
 Run by scripts/blender_matrix.sh after each system (Debian 12, 13, unstable: gcc
-12/14/15, OpenEXR 3.1.5/3.1.13/3.4) built libfx and ran tests/matrix/bits_dump.sh:
+12.2/14.2/16.2, OpenEXR 3.1.5/3.2.12/3.4.16) built libfx and ran tests/matrix/bits_dump.sh:
 
     LIBFX_BITS_DIRS="out/matrix/bits/host out/matrix/bits/trixie" \\
         /usr/bin/python3 -m pytest tests/matrix
