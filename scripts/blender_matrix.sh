@@ -33,8 +33,10 @@ dump_bits() {  # target, cli path, runner...
     && bits_dirs+=("$logs/bits/$target")
 }
 
-# Roots that are missing are made in the background (mostly download and unpack)
-# while the host's Blender is tested.
+# The host's packages first (mmdebstrap among them: two root jobs must not both
+# apt-get install it at once), then the roots that are missing are made in the
+# background (mostly download and unpack) while the host's Blender is tested.
+bash scripts/setup.sh >"$logs/setup.log" 2>&1
 declare -A root_job
 for t in "${targets[@]}"; do
   [ "$t" = host ] && continue
@@ -43,7 +45,6 @@ for t in "${targets[@]}"; do
 done
 
 # The inputs of the cross-build check, rendered once by the host's Blender.
-bash scripts/setup.sh >"$logs/setup.log" 2>&1
 if ! bash tests/matrix/make_bits_inputs.sh "$logs/bits_inputs"; then
   summary+=("same bits: FAILED to render the inputs"); status=1
 fi
@@ -76,7 +77,7 @@ for t in "${targets[@]}"; do
   echo "-- $version; gcc / OpenEXR: $compiler" | tee -a "$log"
   dump_bits "$t" "$build/libfx/libfx" "${run[@]}"
   "${run[@]}" env LIBFX_LIBRARY="$here/$build/libfx/libfx.so" LIBFX_CLI="$here/$build/libfx/libfx" \
-      PYTHONDONTWRITEBYTECODE=1 LIBFX_MATRIX_TARGET="$t" \
+      PYTHONDONTWRITEBYTECODE=1 \
       /usr/bin/python3 -m pytest -q -p no:cacheprovider ${PYTEST_ARGS:-} tests/blender >>"$log" 2>&1
   rc=$?
   result=$(grep -E '^(=+ )?[0-9]+ (passed|failed)|(passed|failed|error).* in [0-9.]+s' "$log" | tail -1)
