@@ -55,17 +55,29 @@ static inline int before(double d, int k, double f, int i)
     return d < f || (d == f && k < i);
 }
 
-static inline void consider(const fx_voronoi *v, double qx, double qy, int k, fx_voronoi_hit *h)
+/* Where the exact searches read a point: computed now (fx_voronoi_brute/grid) or from a
+ * frame's table (the same doubles, fx_voronoi_table_init). */
+typedef struct point_source {
+    const fx_voronoi *v; /* NULL: read x, y */
+    const double *x, *y;
+    int grid;
+    double p;
+} point_source;
+
+static inline void consider(const point_source *s, double qx, double qy, int k, fx_voronoi_hit *h)
 {
     if (k == h->i1 || k == h->i2)
         return;
     double px, py;
-    fx_voronoi_point(v, k, &px, &py);
-    double G = v->grid;
+    if (s->v)
+        fx_voronoi_point(s->v, k, &px, &py);
+    else
+        px = s->x[k], py = s->y[k];
+    double G = s->grid;
     double dx = qx - px, dy = qy - py;
     dx -= G * floor(dx / G + 0.5);
     dy -= G * floor(dy / G + 0.5);
-    double d = fx_minkowski2(dx, dy, v->p);
+    double d = fx_minkowski2(dx, dy, s->p);
     if (before(d, k, h->f1, h->i1)) {
         h->f2 = h->f1;
         h->i2 = h->i1;
@@ -77,28 +89,28 @@ static inline void consider(const fx_voronoi *v, double qx, double qy, int k, fx
     }
 }
 
-static void finish(const fx_voronoi *v, fx_voronoi_hit *h)
+static void finish(int G, fx_voronoi_hit *h)
 {
-    if (v->grid == 1) {
+    if (G == 1) {
         h->i2 = h->i1;
         h->f2 = h->f1 + 1.0;
     }
 }
 
-void fx_voronoi_brute(const fx_voronoi *v, double x, double y, fx_voronoi_hit *out)
+static void exact_brute(const point_source *s, double x, double y, fx_voronoi_hit *out)
 {
-    const int G = v->grid;
+    const int G = s->grid;
     double qx = wrap_tile(x, G), qy = wrap_tile(y, G);
     fx_voronoi_hit h = {-1, -1, INFINITY, INFINITY};
     for (int k = 0; k < G * G; k++)
-        consider(v, qx, qy, k, &h);
-    finish(v, &h);
+        consider(s, qx, qy, k, &h);
+    finish(G, &h);
     *out = h;
 }
 
-void fx_voronoi_grid(const fx_voronoi *v, double x, double y, fx_voronoi_hit *out)
+static void exact_grid(const point_source *s, double x, double y, fx_voronoi_hit *out)
 {
-    const int G = v->grid;
+    const int G = s->grid;
     double qx = wrap_tile(x, G), qy = wrap_tile(y, G);
     int cx = (int)floor(qx), cy = (int)floor(qy);
     if (cx >= G) cx = G - 1;
@@ -112,14 +124,26 @@ void fx_voronoi_grid(const fx_voronoi *v, double x, double y, fx_voronoi_hit *ou
             int edge_row = dy == -ring || dy == ring;
             for (int dx = -ring; dx <= ring; dx += edge_row ? 1 : 2 * ring) {
                 int gx = ((cx + dx) % G + G) % G, gy = ((cy + dy) % G + G) % G;
-                consider(v, qx, qy, gy * G + gx, &h);
+                consider(s, qx, qy, gy * G + gx, &h);
                 if (ring == 0)
                     break;
             }
         }
     }
-    finish(v, &h);
+    finish(G, &h);
     *out = h;
+}
+
+void fx_voronoi_brute(const fx_voronoi *v, double x, double y, fx_voronoi_hit *out)
+{
+    point_source s = {v, NULL, NULL, v->grid, v->p};
+    exact_brute(&s, x, y, out);
+}
+
+void fx_voronoi_grid(const fx_voronoi *v, double x, double y, fx_voronoi_hit *out)
+{
+    point_source s = {v, NULL, NULL, v->grid, v->p};
+    exact_grid(&s, x, y, out);
 }
 
 /* ---- per-frame point table ---- */
@@ -162,27 +186,6 @@ void fx_voronoi_table_free(fx_voronoi_table *t)
     fx_mem_free(t->fy);
     t->x = t->y = NULL;
     t->fx = t->fy = NULL;
-}
-
-/* exact: consider() with the point read from the table (the same doubles) */
-static inline void consider_exact(const fx_voronoi_table *t, double qx, double qy, int k, fx_voronoi_hit *h)
-{
-    if (k == h->i1 || k == h->i2)
-        return;
-    double G = t->grid;
-    double dx = qx - t->x[k], dy = qy - t->y[k];
-    dx -= G * floor(dx / G + 0.5);
-    dy -= G * floor(dy / G + 0.5);
-    double d = fx_minkowski2(dx, dy, t->p);
-    if (before(d, k, h->f1, h->i1)) {
-        h->f2 = h->f1;
-        h->i2 = h->i1;
-        h->f1 = d;
-        h->i1 = k;
-    } else if (before(d, k, h->f2, h->i2)) {
-        h->f2 = d;
-        h->i2 = k;
-    }
 }
 
 /* fast: ordering key, monotone in the distance (correctly rounded sqrt, products and sums
@@ -292,15 +295,8 @@ void fx_voronoi_table_brute(const fx_voronoi_table *t, double x, double y, fx_vo
         fast_brute(t, qx, qy, out);
         return;
     }
-    double qx = wrap_tile(x, G), qy = wrap_tile(y, G);
-    fx_voronoi_hit h = {-1, -1, INFINITY, INFINITY};
-    for (int k = 0; k < G * G; k++)
-        consider_exact(t, qx, qy, k, &h);
-    if (G == 1) {
-        h.i2 = h.i1;
-        h.f2 = h.f1 + 1.0;
-    }
-    *out = h;
+    point_source s = {NULL, t->x, t->y, G, t->p};
+    exact_brute(&s, x, y, out);
 }
 
 void fx_voronoi_table_among(const fx_voronoi_table *t, double x, double y, const int *cand, int n,
@@ -321,14 +317,12 @@ void fx_voronoi_table_among(const fx_voronoi_table *t, double x, double y, const
         fast_out(t, &h, out);
         return;
     }
+    point_source s = {NULL, t->x, t->y, G, t->p};
     double qx = wrap_tile(x, G), qy = wrap_tile(y, G);
     fx_voronoi_hit h = {-1, -1, INFINITY, INFINITY};
     for (int c = 0; c < n; c++)
-        consider_exact(t, qx, qy, cand[c], &h);
-    if (G == 1) {
-        h.i2 = h.i1;
-        h.f2 = h.f1 + 1.0;
-    }
+        consider(&s, qx, qy, cand[c], &h);
+    finish(G, &h);
     *out = h;
 }
 
@@ -375,30 +369,8 @@ void fx_voronoi_table_grid(const fx_voronoi_table *t, double x, double y, fx_vor
         fast_out(t, &h, out);
         return;
     }
-    double qx = wrap_tile(x, G), qy = wrap_tile(y, G);
-    int cx = (int)floor(qx), cy = (int)floor(qy);
-    if (cx >= G) cx = G - 1;
-    if (cy >= G) cy = G - 1;
-    fx_voronoi_hit h = {-1, -1, INFINITY, INFINITY};
-    int max_ring = G / 2 + 1;
-    for (int ring = 0; ring <= max_ring; ring++) {
-        if (ring >= 1 && (double)(ring - 1) > h.f2)
-            break;
-        for (int dy = -ring; dy <= ring; dy++) {
-            int edge_row = dy == -ring || dy == ring;
-            for (int dx = -ring; dx <= ring; dx += edge_row ? 1 : 2 * ring) {
-                int gx = ((cx + dx) % G + G) % G, gy = ((cy + dy) % G + G) % G;
-                consider_exact(t, qx, qy, gy * G + gx, &h);
-                if (ring == 0)
-                    break;
-            }
-        }
-    }
-    if (G == 1) {
-        h.i2 = h.i1;
-        h.f2 = h.f1 + 1.0;
-    }
-    *out = h;
+    point_source s = {NULL, t->x, t->y, G, t->p};
+    exact_grid(&s, x, y, out);
 }
 
 double fx_value_noise2(double x, double y, uint32_t seed)
