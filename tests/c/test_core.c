@@ -372,6 +372,80 @@ static void worker_range(void *user, int b, int e, int worker)
         j->count[i]++;
 }
 
+/* Unchanged pixels are shared between frames of one context, never aliased for
+ * writing: a writer gets its own copy, and freeing either frame leaves the other whole. */
+static void test_shared_pixels(void)
+{
+    fx_context *ctx = NULL, *other = NULL;
+    fx_context_new(&ctx, 2);
+    fx_context_new(&other, 1);
+    const size_t n = 29 * 17 * 4;
+    fx_frame *in = tu_pattern_frame(ctx, 29, 17, 5);
+    const float *in_px = NULL, *out_px = NULL;
+    CHECK_OK(ctx, fx_frame_pass_read(in, "Combined", &in_px, NULL));
+    float *keep = malloc(n * sizeof(float));
+    memcpy(keep, in_px, n * sizeof(float));
+
+    fx_stack *s = NULL;
+    fx_stack_new(ctx, &s);
+    CHECK_OK(ctx, fx_stack_load_json(s, "{\"version\": 1, \"effects\": []}"));
+    fx_frame *out = NULL;
+    CHECK_OK(ctx, fx_stack_run(s, in, &out));
+    CHECK_OK(ctx, fx_frame_pass_read(out, "Combined", &out_px, NULL));
+    CHECK(out_px == in_px); /* an empty stack allocates nothing */
+    CHECK(strcmp(fx_frame_pass_name(out, 0), "Combined") == 0);
+
+    /* Writing to the output copies first: the input keeps its pixels. */
+    float *w = NULL;
+    CHECK_OK(ctx, fx_frame_pass(out, "Combined", &w, NULL));
+    CHECK(w != in_px);
+    CHECK(memcmp(w, keep, n * sizeof(float)) == 0);
+    w[0] = -7.0f;
+    CHECK(memcmp(in_px, keep, n * sizeof(float)) == 0);
+    fx_frame_free(out);
+
+    /* The output outlives its input (ASan checks the buffer's lifetime). */
+    CHECK_OK(ctx, fx_stack_run(s, in, &out));
+    fx_frame *copy = NULL;
+    fx_frame_new(ctx, 29, 17, &copy);
+    CHECK_OK(ctx, fx_frame_copy_passes(copy, in));
+    fx_frame_free(in);
+    CHECK_OK(ctx, fx_frame_pass_read(out, "Combined", &out_px, NULL));
+    CHECK(memcmp(out_px, keep, n * sizeof(float)) == 0);
+    const float *copy_px = NULL;
+    CHECK_OK(ctx, fx_frame_pass_read(copy, "Combined", &copy_px, NULL));
+    CHECK(copy_px == out_px); /* three holders once, two now */
+    fx_frame_free(out);
+    CHECK(memcmp(copy_px, keep, n * sizeof(float)) == 0);
+
+    /* A pass handed out writable is never shared again: writes through that pointer
+     * after a run must not reach the run's output. */
+    CHECK_OK(ctx, fx_frame_pass(copy, "Combined", &w, NULL));
+    CHECK(w == copy_px); /* the last holder writes in place */
+    CHECK_OK(ctx, fx_stack_run(s, copy, &out));
+    CHECK_OK(ctx, fx_frame_pass_read(out, "Combined", &out_px, NULL));
+    CHECK(out_px != w);
+    w[1] = 1234.0f;
+    CHECK(out_px[1] == keep[1]);
+    fx_frame_free(out);
+
+    /* Frames of another context get a copy (each context has its own buffer store). */
+    fx_frame *far = NULL;
+    fx_frame_new(other, 29, 17, &far);
+    CHECK_OK(other, fx_frame_copy_passes(far, copy));
+    const float *far_px = NULL;
+    CHECK_OK(other, fx_frame_pass_read(far, "Combined", &far_px, NULL));
+    CHECK(far_px != w && far_px[1] == 1234.0f);
+    fx_frame_free(far);
+
+    CHECK_FAIL(ctx, fx_frame_pass_read(copy, "Depth", &out_px, NULL), FX_ERR_MISSING_PASS, "Depth");
+    fx_frame_free(copy);
+    fx_stack_free(s);
+    free(keep);
+    fx_context_free(other);
+    fx_context_free(ctx);
+}
+
 static void test_parallel_for(void)
 {
     /* Same results whatever the thread count; nested loops do not deadlock. */
@@ -451,6 +525,7 @@ int main(void)
     test_cryptomatte_ids();
     test_masks();
     test_stack_masking();
+    test_shared_pixels();
     test_parallel_for();
     return tu_finish("test_core");
 }

@@ -166,8 +166,14 @@ FX_API fx_result fx_frame_set_windows(fx_frame *f, const int data_window[4], con
 FX_API void fx_frame_windows(const fx_frame *f, int data_window[4], int display_window[4]);
 /* Adds (or replaces) a pass; data is copied (NULL: zeros). channels 1..4. */
 FX_API fx_result fx_frame_add_pass(fx_frame *f, const char *name, int channels, const float *data);
-/* Borrowed pointer to a pass's pixels, writable; FX_ERR_MISSING_PASS if absent. */
+/* Borrowed pointer to a pass's pixels, writable; FX_ERR_MISSING_PASS if absent.
+ * Frames of one context share unchanged pixels (an empty stack's output holds its
+ * input's Combined; fx_frame_copy_passes shares): a pass asked for here gets its own
+ * copy first if another frame holds it, and is never shared from then on. */
 FX_API fx_result fx_frame_pass(const fx_frame *f, const char *name, float **data, int *channels);
+/* Read-only pointer to a pass's pixels, never copied; valid until f is freed or the
+ * pass replaced. Prefer it to fx_frame_pass for reading. */
+FX_API fx_result fx_frame_pass_read(const fx_frame *f, const char *name, const float **data, int *channels);
 FX_API int fx_frame_pass_count(const fx_frame *f);
 FX_API const char *fx_frame_pass_name(const fx_frame *f, int index);
 FX_API int fx_frame_pass_channels(const fx_frame *f, int index);
@@ -264,7 +270,8 @@ FX_API void fx_stack_set_debug_outputs(fx_stack *s, int enabled);
 FX_API fx_result fx_stack_run(fx_stack *s, const fx_frame *in, fx_frame **out);
 /* Per-effect wall time of the last run: [{"index": 0, "effect": "pixelate", "ms": 1.2}, ...] */
 FX_API fx_result fx_stack_timings_json(const fx_stack *s, char **out_json);
-/* Copies every pass of src that dst does not have (to keep input passes in an output). */
+/* Gives dst every pass of src that dst does not have (to keep input passes in an
+ * output): shared, not copied, when both frames have one context. */
 FX_API fx_result fx_frame_copy_passes(fx_frame *dst, const fx_frame *src);
 
 /* ---- Auxiliary views (issue 7: shadows and rain) --------------------------

@@ -4,8 +4,15 @@
 
 #include <float.h>
 #include <math.h>
+#include <stdatomic.h>
 #include <stdio.h>
 #include <string.h>
+
+struct fx_pixels {
+    atomic_int holders; /* passes pointing here, in any frames of one context */
+    float *data;
+    size_t bytes;
+};
 
 fx_result fx_frame_new(fx_context *ctx, int width, int height, fx_frame **out)
 {
@@ -39,12 +46,24 @@ static size_t pass_bytes(const fx_frame *f, int channels)
     return (size_t)f->width * (size_t)f->height * (size_t)channels * sizeof(float);
 }
 
+/* Drops p's hold on its pixels; the last holder returns the buffer to the store. */
+static void pass_release(fx_frame *f, fx_pass *p)
+{
+    fx_pixels *px = p->pixels;
+    if (px && atomic_fetch_sub(&px->holders, 1) == 1) {
+        fx_buffer_put(f->ctx, px->data, px->bytes);
+        fx_mem_free(px);
+    }
+    p->pixels = NULL;
+    p->data = NULL;
+}
+
 void fx_frame_free(fx_frame *f)
 {
     if (!f)
         return;
     for (int i = 0; i < f->pass_count; i++)
-        fx_buffer_put(f->ctx, f->passes[i].data, pass_bytes(f, f->passes[i].channels));
+        pass_release(f, &f->passes[i]);
     fx_mem_free(f->passes);
     for (int i = 0; i < f->meta_count; i++) {
         fx_mem_free(f->meta[i].key);
@@ -104,29 +123,20 @@ fx_pass *fx_frame_find_pass(const fx_frame *f, const char *name)
     return NULL;
 }
 
-fx_result fx_frame_adopt_pass(fx_frame *f, const char *name, int channels, float *data)
+/* The pass named `name`, its old pixels released, or a new empty one; NULL when the
+ * list cannot grow (the error is set). */
+static fx_pass *pass_slot(fx_frame *f, const char *name)
 {
-    if (!f || !name || !data || channels < 1 || channels > 4 || !name[0]) {
-        fx_mem_free(data);
-        return fx_fail(f ? f->ctx : NULL, FX_ERR_INVALID_ARGUMENT,
-                       "pass '%s': needs a name and 1 to 4 channels (got %d)", name ? name : "(null)",
-                       channels);
-    }
-    if (strlen(name) >= FX_NAME_MAX) {
-        fx_mem_free(data);
-        return fx_fail(f->ctx, FX_ERR_INVALID_ARGUMENT, "pass name '%.40s...' is longer than %d bytes",
-                       name, FX_NAME_MAX - 1);
-    }
     fx_pass *p = fx_frame_find_pass(f, name);
     if (p) {
-        fx_buffer_put(f->ctx, p->data, pass_bytes(f, p->channels));
+        pass_release(f, p);
     } else {
         if (f->pass_count == f->pass_cap) {
             int cap = f->pass_cap ? f->pass_cap * 2 : 8;
             fx_pass *np = fx_mem_realloc(f->passes, (size_t)cap * sizeof *np);
             if (!np) {
-                fx_mem_free(data);
-                return fx_fail(f->ctx, FX_ERR_OUT_OF_MEMORY, "out of memory adding pass '%s'", name);
+                fx_fail(f->ctx, FX_ERR_OUT_OF_MEMORY, "out of memory adding pass '%s'", name);
+                return NULL;
             }
             f->passes = np;
             f->pass_cap = cap;
@@ -135,9 +145,71 @@ fx_result fx_frame_adopt_pass(fx_frame *f, const char *name, int channels, float
         memset(p, 0, sizeof *p);
         strcpy(p->name, name);
     }
-    p->channels = channels;
     p->from_half = 0;
+    p->handed_out = 0;
+    return p;
+}
+
+static fx_result check_pass_name(const fx_frame *f, const char *name, int channels)
+{
+    if (!f || !name || channels < 1 || channels > 4 || !name[0])
+        return fx_fail(f ? f->ctx : NULL, FX_ERR_INVALID_ARGUMENT,
+                       "pass '%s': needs a name and 1 to 4 channels (got %d)", name ? name : "(null)",
+                       channels);
+    if (strlen(name) >= FX_NAME_MAX)
+        return fx_fail(f->ctx, FX_ERR_INVALID_ARGUMENT, "pass name '%.40s...' is longer than %d bytes",
+                       name, FX_NAME_MAX - 1);
+    return FX_OK;
+}
+
+fx_result fx_frame_adopt_pass(fx_frame *f, const char *name, int channels, float *data)
+{
+    fx_result r = data ? check_pass_name(f, name, channels)
+                       : fx_fail(f ? f->ctx : NULL, FX_ERR_INVALID_ARGUMENT, "pass '%s': no pixels",
+                                 name ? name : "(null)");
+    fx_pixels *px = r ? NULL : fx_mem_alloc(sizeof *px);
+    if (!r && !px)
+        r = fx_fail(f->ctx, FX_ERR_OUT_OF_MEMORY, "out of memory adding pass '%s'", name);
+    fx_pass *p = r ? NULL : pass_slot(f, name);
+    if (!p) {
+        fx_mem_free(px);
+        fx_mem_free(data);
+        return r ? r : FX_ERR_OUT_OF_MEMORY;
+    }
+    atomic_init(&px->holders, 1);
+    px->data = data;
+    px->bytes = pass_bytes(f, channels);
+    p->channels = channels;
     p->data = data;
+    p->pixels = px;
+    return FX_OK;
+}
+
+fx_result fx_frame_share_pass(fx_frame *dst, const char *name, const fx_frame *src, const fx_pass *sp)
+{
+    if (!dst || !src || !sp || dst->width != src->width || dst->height != src->height)
+        return fx_fail(dst ? dst->ctx : NULL, FX_ERR_INVALID_ARGUMENT, "fx_frame_share_pass: frames differ in size");
+    if (dst->ctx != src->ctx || sp->handed_out || !sp->pixels) {
+        fx_result r = fx_frame_add_pass(dst, name, sp->channels, sp->data);
+        if (!r)
+            fx_frame_find_pass(dst, name)->from_half = sp->from_half;
+        return r;
+    }
+    fx_result r = check_pass_name(dst, name, sp->channels);
+    if (r)
+        return r;
+    fx_pixels *px = sp->pixels;
+    atomic_fetch_add(&px->holders, 1); /* before pass_slot: dst may hold this very buffer */
+    fx_pass *p = pass_slot(dst, name);
+    if (!p) {
+        fx_pass tmp = {.pixels = px};
+        pass_release(dst, &tmp);
+        return FX_ERR_OUT_OF_MEMORY;
+    }
+    p->channels = sp->channels;
+    p->from_half = sp->from_half;
+    p->data = px->data;
+    p->pixels = px;
     return FX_OK;
 }
 
@@ -189,6 +261,39 @@ fx_result fx_frame_pass(const fx_frame *f, const char *name, float **data, int *
     if (!f || !name)
         return FX_ERR_INVALID_ARGUMENT;
     fx_pass *p = fx_frame_find_pass(f, name);
+    if (!p)
+        return fx_fail(f->ctx, FX_ERR_MISSING_PASS, "the frame has no pass '%s'", name);
+    if (data) {
+        if (p->pixels && atomic_load(&p->pixels->holders) > 1) {
+            /* another frame holds these pixels: the caller may write, so it gets a copy */
+            size_t bytes = pass_bytes(f, p->channels);
+            float *own = fx_buffer_get(f->ctx, bytes);
+            fx_pixels *px = own ? fx_mem_alloc(sizeof *px) : NULL;
+            if (!px) {
+                fx_buffer_put(f->ctx, own, bytes);
+                return fx_fail(f->ctx, FX_ERR_OUT_OF_MEMORY, "out of memory for a copy of pass '%s'", name);
+            }
+            memcpy(own, p->data, bytes);
+            atomic_init(&px->holders, 1);
+            px->data = own;
+            px->bytes = bytes;
+            pass_release((fx_frame *)f, p); /* asking for write access makes the caller f's owner */
+            p->data = own;
+            p->pixels = px;
+        }
+        p->handed_out = 1;
+        *data = p->data;
+    }
+    if (channels)
+        *channels = p->channels;
+    return FX_OK;
+}
+
+fx_result fx_frame_pass_read(const fx_frame *f, const char *name, const float **data, int *channels)
+{
+    if (!f || !name)
+        return FX_ERR_INVALID_ARGUMENT;
+    const fx_pass *p = fx_frame_find_pass(f, name);
     if (!p)
         return fx_fail(f->ctx, FX_ERR_MISSING_PASS, "the frame has no pass '%s'", name);
     if (data)
@@ -359,10 +464,9 @@ fx_result fx_frame_copy_passes(fx_frame *dst, const fx_frame *src)
         const fx_pass *p = &src->passes[i];
         if (fx_frame_find_pass(dst, p->name))
             continue;
-        fx_result r = fx_frame_add_pass(dst, p->name, p->channels, p->data);
+        fx_result r = fx_frame_share_pass(dst, p->name, src, p);
         if (r)
             return r;
-        fx_frame_find_pass(dst, p->name)->from_half = p->from_half;
     }
     return FX_OK;
 }

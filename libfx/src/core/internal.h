@@ -91,11 +91,18 @@ void fx_context_frame_died(fx_context *ctx);
 /* ---- frames ---- */
 #define FX_NAME_MAX 96
 
+/* A pass's pixel buffer, counted: frames of one context share it instead of copying
+ * (an empty stack's output, fx_frame_copy_passes). It goes back to the buffer store with
+ * its last holder; a holder that hands out a writable pointer gets its own copy first. */
+typedef struct fx_pixels fx_pixels;
+
 typedef struct fx_pass {
     char name[FX_NAME_MAX];  /* canonical name: "Combined", "Depth", "CryptoObject00", ... */
     int channels;            /* 1..4, interleaved */
     int from_half;           /* decoded from half floats (written back as half if asked) */
-    float *data;             /* width * height * channels */
+    int handed_out;          /* fx_frame_pass gave a writable pointer: never shared again */
+    float *data;             /* width * height * channels; read-only while shared */
+    fx_pixels *pixels;       /* the counted buffer data points into */
 } fx_pass;
 
 typedef struct fx_meta {
@@ -122,6 +129,9 @@ fx_pass *fx_frame_find_pass(const fx_frame *f, const char *name);
 fx_result fx_frame_alloc_pass(fx_frame *f, const char *name, int channels, float **out);
 /* Takes ownership of `data`: width*height*channels floats from fx_mem_alloc or fx_buffer_get. */
 fx_result fx_frame_adopt_pass(fx_frame *f, const char *name, int channels, float *data);
+/* Gives dst a pass named `name` holding src_pass's pixels: shared when both frames have
+ * one context and the pass was never handed out writable, else copied. Same sizes only. */
+fx_result fx_frame_share_pass(fx_frame *dst, const char *name, const fx_frame *src, const fx_pass *src_pass);
 /* New frame with f's size, windows, camera, time and metadata, no passes. */
 fx_result fx_frame_new_like(const fx_frame *f, fx_frame **out);
 

@@ -782,16 +782,16 @@ static fx_result check_passes(const fx_stack *s, const fx_frame *in, fx_pass_set
     return FX_OK;
 }
 
-typedef struct copy_job {
-    float *dst;
-    const float *src;
-    size_t row; /* floats per row */
-} copy_job;
-
-static void copy_rows(void *user, int y0, int y1)
+/* Combined leads the output's passes (debug passes were added before it). */
+static void combined_first(fx_frame *o)
 {
-    const copy_job *j = user;
-    memcpy(j->dst + (size_t)y0 * j->row, j->src + (size_t)y0 * j->row, (size_t)(y1 - y0) * j->row * sizeof(float));
+    for (int i = 1; i < o->pass_count; i++)
+        if (strcmp(o->passes[i].name, "Combined") == 0) {
+            fx_pass c = o->passes[i];
+            memmove(o->passes + 1, o->passes, (size_t)i * sizeof *o->passes);
+            o->passes[0] = c;
+            return;
+        }
 }
 
 fx_result fx_stack_run(fx_stack *s, const fx_frame *in, fx_frame **out)
@@ -810,16 +810,14 @@ fx_result fx_stack_run(fx_stack *s, const fx_frame *in, fx_frame **out)
     const size_t n = (size_t)w * h * 4;
     fx_frame *o = NULL;
     fx_result r = fx_frame_new_like(in, &o);
-    float *cur = NULL, *spare = NULL;
-    if (!r)
-        r = fx_frame_alloc_pass(o, "Combined", 4, &cur);
-    if (r) {
-        fx_frame_free(o);
+    if (r)
         return r;
-    }
-    /* Effects ping-pong between the output's Combined and one spare buffer. Each buffer
-     * keeps the rect where it may differ from the current image, so an effect limited to
-     * a small mask copies only what is stale, not the frame. */
+    /* Effects ping-pong between two buffers, taken when the first effect that changes
+     * pixels needs them: a stack that changes nothing allocates nothing and its output
+     * shares the input's Combined. Each buffer keeps the rect where it may differ from
+     * the current image, so an effect limited to a small mask copies only what is
+     * stale, not the frame. */
+    float *cur = NULL, *spare = NULL;
     const float *src = combined->data;
     const fx_rect full = {0, 0, w, h};
     fx_rect stale_cur = full, stale_spare = full;
@@ -864,17 +862,16 @@ fx_result fx_stack_run(fx_stack *s, const fx_frame *in, fx_frame **out)
             done++;
             continue;
         }
-        float *dst = NULL;
-        if (!r && src == cur && !spare) {
+        float **dst_buf = src == cur ? &spare : &cur;
+        if (!r && !*dst_buf) {
             size_t bytes = n * sizeof(float);
             if (!(r = fx_check_budget(ctx, bytes, "an effect's output"))) {
-                spare = fx_buffer_get(ctx, bytes);
-                if (!spare)
+                *dst_buf = fx_buffer_get(ctx, bytes);
+                if (!*dst_buf)
                     r = fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
             }
         }
-        if (!r)
-            dst = src == cur ? spare : cur;
+        float *dst = r ? NULL : *dst_buf;
         if (!r) {
             fx_effect_run run;
             memset(&run, 0, sizeof run);
@@ -924,18 +921,19 @@ fx_result fx_stack_run(fx_stack *s, const fx_frame *in, fx_frame **out)
     }
     if (!r) {
         if (src == combined->data) {
-            /* no effect ran: the output is the input, copied by the pool so the first
-             * frame's page faults on the fresh buffer are shared out too */
-            copy_job job = {cur, src, (size_t)w * 4};
-            fx_parallel_for(ctx, h, fx_grain_for(ctx, h), copy_rows, &job);
-        } else if (src == spare) {
-            /* The result is in the spare buffer: make it the output's Combined. */
-            r = fx_frame_adopt_pass(o, "Combined", 4, spare);
-            spare = NULL;
+            /* no effect changed a pixel: the output holds the input's Combined */
+            r = fx_frame_share_pass(o, "Combined", in, combined);
+        } else {
+            float **result = src == cur ? &cur : &spare;
+            r = fx_frame_adopt_pass(o, "Combined", 4, *result);
+            *result = NULL;
         }
+        if (!r)
+            combined_first(o);
     }
     if (!r && ctx->progress)
         ctx->progress(ctx->progress_user, "done", 1.0); /* the work is finished: no cancel now */
+    fx_buffer_put(ctx, cur, n * sizeof(float));
     fx_buffer_put(ctx, spare, n * sizeof(float));
     if (r) {
         fx_frame_free(o);

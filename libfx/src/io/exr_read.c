@@ -527,10 +527,13 @@ static fx_result read_frame(fx_context *ctx, fx_exr_file *f, const fx_read_optio
     }
 
     for (int i = 0; i < np && r == FX_OK; i++) {
-        float *data = NULL;
-        int nc = 0;
-        if ((r = fx_frame_pass(rd.frame, plan[i].name, &data, &nc)) != FX_OK)
+        fx_pass *pass = fx_frame_find_pass(rd.frame, plan[i].name);
+        if (!pass) {
+            r = fx_fail(ctx, FX_ERR_INTERNAL, "'%s': pass %s was planned but not made", f->path, plan[i].name);
             break;
+        }
+        float *data = pass->data; /* our own new pass: written in place, still shareable */
+        int nc = pass->channels;
         size_t count = (size_t)rd.width * (size_t)rd.height;
         for (int s = 0; s < nc; s++)
             if (plan[i].copy_from[s] >= 0)
