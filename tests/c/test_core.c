@@ -446,6 +446,55 @@ static void test_shared_pixels(void)
     fx_context_free(ctx);
 }
 
+/* Effects that keep their output finite themselves (the stack then skips its scan) must
+ * do so for a Combined built through the API, which the reader never sanitised: NaN and
+ * +-Inf in a third of the pixels, through the effect and through its identity path. */
+static void test_own_finite_effects(void)
+{
+    fx_context *ctx = NULL;
+    fx_context_new(&ctx, 2);
+    const int w = 23, h = 11;
+    fx_frame *f = tu_pattern_frame(ctx, w, h, 9);
+    float *px = NULL;
+    CHECK_OK(ctx, fx_frame_pass(f, "Combined", &px, NULL));
+    const float odd[3] = {NAN, INFINITY, -INFINITY};
+    for (int i = 0; i < w * h * 4; i += 3)
+        px[i] = odd[(i / 3) % 3];
+    int flagged = 0;
+    for (int c = 0; c < fx_effect_class_count; c++) {
+        const fx_effect_class *cls = fx_effect_classes[c];
+        if (!(cls->flags & FX_EFFECT_OWN_FINITE))
+            continue;
+        flagged++;
+        const char *variants[2] = {"{}", "{\"mix\": 0}"};
+        for (int v = 0; v < 2; v++) {
+            if (v == 1 && !fx_effect_find_param(cls, "mix"))
+                continue;
+            char json[256];
+            snprintf(json, sizeof json, "{\"version\": 1, \"effects\": [{\"effect\": \"%s\", \"params\": %s}]}",
+                     cls->name, variants[v]);
+            fx_stack *s = NULL;
+            fx_stack_new(ctx, &s);
+            CHECK_OK(ctx, fx_stack_load_json(s, json));
+            fx_context_clear_warnings(ctx);
+            fx_frame *out = NULL;
+            CHECK_OK(ctx, fx_stack_run(s, f, &out));
+            const float *o = NULL;
+            CHECK_OK(ctx, fx_frame_pass_read(out, "Combined", &o, NULL));
+            if (!tu_all_finite(o, (size_t)w * h * 4))
+                fprintf(stderr, "  %s %s: non-finite output\n", cls->name, variants[v]);
+            CHECK(tu_all_finite(o, (size_t)w * h * 4));
+            if (v == 1) /* the identity copies the NaN: replaced, and reported */
+                CHECK(fx_context_warning_count(ctx) > 0);
+            fx_frame_free(out);
+            fx_stack_free(s);
+        }
+    }
+    CHECK(flagged >= 2);
+    fx_frame_free(f);
+    fx_context_free(ctx);
+}
+
 static void test_parallel_for(void)
 {
     /* Same results whatever the thread count; nested loops do not deadlock. */
@@ -526,6 +575,7 @@ int main(void)
     test_masks();
     test_stack_masking();
     test_shared_pixels();
+    test_own_finite_effects();
     test_parallel_for();
     return tu_finish("test_core");
 }

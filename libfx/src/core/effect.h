@@ -13,6 +13,7 @@
 #include "core/mask.h"
 #include "core/passes.h"
 
+#include <stdatomic.h>
 #include <stddef.h>
 
 #ifdef __cplusplus
@@ -79,7 +80,14 @@ typedef struct fx_effect_run {
     const char *effect_name;
     const char *where;      /* "effect <index> (<name>)": the prefix of this effect's messages */
     fx_frame *debug;        /* add debug passes here ("<name>" is prefixed by the stack), or NULL */
+    atomic_size_t *nonfinite; /* FX_EFFECT_OWN_FINITE: fx_effect_finish_row counts here */
 } fx_effect_run;
+
+/* Class flags. */
+/* process() passes every output row it writes through fx_effect_finish_row while the row
+ * is in cache, so the stack need not read the whole output again to find NaN/Inf
+ * (for a per-pixel effect that re-read is a third of its memory traffic). */
+#define FX_EFFECT_OWN_FINITE 1u
 
 typedef struct fx_effect_class {
     const char *name;            /* recipe name: "gaussian_blur" */
@@ -90,6 +98,7 @@ typedef struct fx_effect_class {
     /* Quality presets as JSON objects of parameter values ("{\"steps\": 16}"), or NULL
      * for effects without a speed/accuracy trade. Index: fx_quality. */
     const char *presets[4];
+    unsigned flags;              /* FX_EFFECT_* */
     /* Passes needed beyond Combined for these params (and the mask's, added by the stack). */
     fx_pass_set (*passes)(const void *params);
     /* Non-zero if these params need camera matrices. NULL: never. */
@@ -117,6 +126,10 @@ const fx_param_def *fx_effect_find_param(const fx_effect_class *cls, const char 
  * buffer (width*height*channels floats, zeroed); NULL when debug outputs are off
  * (not an error) or on failure (then *result says why). */
 float *fx_effect_debug_pass(const fx_effect_run *run, const char *name, int channels, fx_result *result);
+
+/* Replaces NaN (0) and +-Inf (+-FLT_MAX) in n floats of an output row, as the stack
+ * does for every effect, and counts them for the stack's warning. */
+void fx_effect_finish_row(const fx_effect_run *run, float *row, size_t n);
 
 /* Copies src to dst inside the ROI and returns FX_OK: what an effect does when its
  * parameters make it the identity (zero strength), per the "early return" rule. */

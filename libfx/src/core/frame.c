@@ -475,6 +475,25 @@ fx_result fx_frame_copy_passes(fx_frame *dst, const fx_frame *src)
 
 #define SANITIZE_CHUNK 65536
 
+size_t fx_span_make_finite(float *data, size_t count)
+{
+    uint32_t any = 0;
+    for (size_t i = 0; i < count; i++) {
+        uint32_t b;
+        memcpy(&b, data + i, sizeof b);
+        any |= (uint32_t)((b & 0x7f800000u) == 0x7f800000u); /* exponent all ones: NaN or Inf */
+    }
+    if (!any)
+        return 0;
+    size_t replaced = 0;
+    for (size_t i = 0; i < count; i++)
+        if (!isfinite(data[i])) {
+            data[i] = isnan(data[i]) ? 0.0f : (data[i] > 0 ? FLT_MAX : -FLT_MAX);
+            replaced++;
+        }
+    return replaced;
+}
+
 typedef struct sanitize_job {
     float *data;
     size_t count;
@@ -488,15 +507,7 @@ static void sanitize_range(void *user, int begin, int end)
         size_t lo = (size_t)c * SANITIZE_CHUNK, hi = lo + SANITIZE_CHUNK;
         if (hi > j->count)
             hi = j->count;
-        size_t n = 0;
-        for (size_t i = lo; i < hi; i++) {
-            float v = j->data[i];
-            if (!isfinite(v)) {
-                j->data[i] = isnan(v) ? 0.0f : (v > 0 ? FLT_MAX : -FLT_MAX);
-                n++;
-            }
-        }
-        j->replaced[c] = n;
+        j->replaced[c] = fx_span_make_finite(j->data + lo, hi - lo);
     }
 }
 

@@ -138,6 +138,9 @@ fx_result fx_frame_new_like(const fx_frame *f, fx_frame **out);
 /* Replaces NaN with 0 and +-Inf with +-FLT_MAX in place; returns how many were replaced.
  * Runs in parallel on ctx's pool. */
 size_t fx_sanitize_floats(fx_context *ctx, float *data, size_t count);
+/* The same for one span on the calling thread; a branch-free scan first, so an all-finite
+ * span (the usual case) costs one read. */
+size_t fx_span_make_finite(float *data, size_t count);
 
 /* ---- cameras in JSON ---- */
 struct cJSON;

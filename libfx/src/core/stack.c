@@ -640,20 +640,9 @@ typedef struct composite_job {
     fx_rect roi;
     fx_rect stale; /* where dst may differ from src before this effect (outside the ROI) */
     int width;
-    size_t *bad;   /* per row: non-finite values replaced */
+    int own_finite; /* the effect made dst finite already (FX_EFFECT_OWN_FINITE) */
+    size_t *bad;    /* per row: non-finite values replaced */
 } composite_job;
-
-/* 1 if no value is NaN or Inf: the exponent bits all set. Written to vectorise. */
-static int span_all_finite(const float *p, size_t n)
-{
-    uint32_t bad = 0;
-    for (size_t i = 0; i < n; i++) {
-        uint32_t b;
-        memcpy(&b, p + i, sizeof b);
-        bad |= (uint32_t)((b & 0x7f800000u) == 0x7f800000u);
-    }
-    return bad == 0;
-}
 
 static void copy_span(const float *s, float *d, int x0, int x1)
 {
@@ -686,21 +675,17 @@ static void composite_rows(void *user, int y0, int y1)
         }
         size_t bad = 0;
         const float *cov = j->mask ? j->mask->coverage + (size_t)y * j->width : NULL;
-        /* Most rows are all finite and unmasked: a branch-free check, nothing else. */
-        int row_finite = span_all_finite(d + (size_t)roi->x0 * 4, (size_t)(roi->x1 - roi->x0) * 4);
-        if (row_finite && !cov)
+        /* Most rows are all finite and unmasked: a branch-free check, nothing else (and
+         * not even that for an effect that made its rows finite itself). */
+        if (!j->own_finite)
+            bad = fx_span_make_finite(d + (size_t)roi->x0 * 4, (size_t)(roi->x1 - roi->x0) * 4);
+        if (!cov) {
+            j->bad[y] = bad;
             continue;
+        }
         for (int x = roi->x0; x < roi->x1; x++) {
             float *dp = d + (size_t)x * 4;
             const float *sp = s + (size_t)x * 4;
-            if (!row_finite)
-                for (int c = 0; c < 4; c++)
-                    if (!isfinite(dp[c])) {
-                        dp[c] = isnan(dp[c]) ? 0.0f : (dp[c] > 0 ? FLT_MAX : -FLT_MAX);
-                        bad++;
-                    }
-            if (!cov)
-                continue;
             float m = cov[x];
             if (m <= 0.0f) {
                 memcpy(dp, sp, 4 * sizeof(float));
@@ -752,14 +737,24 @@ float *fx_effect_debug_pass(const fx_effect_run *run, const char *name, int chan
     return buf;
 }
 
+void fx_effect_finish_row(const fx_effect_run *run, float *row, size_t n)
+{
+    size_t bad = fx_span_make_finite(row, n);
+    if (bad && run->nonfinite)
+        atomic_fetch_add(run->nonfinite, bad);
+}
+
 fx_result fx_effect_pass_through(const fx_effect_run *run)
 {
     const fx_rect *roi = &run->roi;
     if (roi->x1 <= roi->x0)
         return FX_OK;
-    for (int y = roi->y0; y < roi->y1; y++)
-        memcpy(run->dst + ((size_t)y * run->width + roi->x0) * 4, run->src + ((size_t)y * run->width + roi->x0) * 4,
-               (size_t)(roi->x1 - roi->x0) * 4 * sizeof(float));
+    const size_t n = (size_t)(roi->x1 - roi->x0) * 4;
+    for (int y = roi->y0; y < roi->y1; y++) {
+        float *d = run->dst + ((size_t)y * run->width + roi->x0) * 4;
+        memcpy(d, run->src + ((size_t)y * run->width + roi->x0) * 4, n * sizeof(float));
+        fx_effect_finish_row(run, d, n); /* for effects that keep their output finite themselves */
+    }
     return FX_OK;
 }
 
@@ -889,6 +884,9 @@ fx_result fx_stack_run(fx_stack *s, const fx_frame *in, fx_frame **out)
             run.effect_name = e->cls->name;
             run.where = where;
             run.debug = s->debug ? o : NULL;
+            atomic_size_t own_bad;
+            atomic_init(&own_bad, 0);
+            run.nonfinite = &own_bad;
             r = e->cls->process(&run);
             if (!r) {
                 size_t *bad = fx_mem_calloc((size_t)(h ? h : 1), sizeof *bad);
@@ -896,7 +894,8 @@ fx_result fx_stack_run(fx_stack *s, const fx_frame *in, fx_frame **out)
                     r = fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
                 } else {
                     fx_rect *stale_dst = dst == cur ? &stale_cur : &stale_spare;
-                    composite_job job = {src, dst, mask, run.roi, *stale_dst, w, bad};
+                    composite_job job = {src, dst, mask, run.roi, *stale_dst, w,
+                                         (e->cls->flags & FX_EFFECT_OWN_FINITE) != 0, bad};
                     fx_parallel_for(ctx, h, fx_grain_for(ctx, h), composite_rows, &job);
                     /* dst now is the image; the buffer src came from (if ours) lags by the ROI */
                     *stale_dst = (fx_rect){0, 0, 0, 0};
@@ -904,7 +903,7 @@ fx_result fx_stack_run(fx_stack *s, const fx_frame *in, fx_frame **out)
                         fx_rect *stale_src = src == cur ? &stale_cur : &stale_spare;
                         *stale_src = rect_union(*stale_src, run.roi);
                     }
-                    size_t total = 0;
+                    size_t total = atomic_load(&own_bad);
                     for (int y = 0; y < h; y++)
                         total += bad[y];
                     fx_mem_free(bad);

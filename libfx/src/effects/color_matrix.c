@@ -60,6 +60,7 @@ static void matrix_of(const color_matrix_params *p, float m[16])
 }
 
 typedef struct cm_job {
+    const fx_effect_run *run;
     const float *src;
     float *dst;
     int width;
@@ -126,8 +127,10 @@ static void cm_rows(void *user, int begin, int end)
         int bad = 0;
         for (int i = 0; i < 4 * n; i++)
             bad |= !(fabsf(d[i]) <= FLT_MAX);
-        if (bad)
+        if (bad) {
             row_double(j, s, d, n);
+            fx_effect_finish_row(j->run, d, (size_t)n * 4); /* NaN inputs stay NaN in double */
+        }
     }
 }
 
@@ -140,6 +143,7 @@ static fx_result color_matrix_process(const fx_effect_run *run)
     if (p->mix <= 0.0f)
         return fx_effect_pass_through(run); /* zero strength: the identity */
     cm_job j;
+    j.run = run;
     j.src = run->src;
     j.dst = run->dst;
     j.width = run->width;
@@ -170,6 +174,7 @@ const fx_effect_class fx_effect_color_matrix = {
     .params = color_matrix_param_defs,
     .param_count = FX_COUNT_OF(color_matrix_param_defs),
     .presets = { NULL, NULL, NULL, NULL },
+    .flags = FX_EFFECT_OWN_FINITE,
     .passes = NULL,
     .needs_camera = NULL,
     .halo = NULL,
