@@ -9,7 +9,10 @@ SIDECAR its <prefix>libfx.0001.camera.json (camera and lights; '' or '-': no Sun
 rows). Prints a Markdown table and writes DIR/peers_all.csv (and .md). This module is the one
 place for Blender/oiiotool peer timing; bench_peers.py and bench_stylize.py call into it.
 
-Rows (CSV schema SCHEMA; one dict per row from run_peers):
+Rows (CSV schema SCHEMA; one dict per row from run_peers). Blender 5.x rows come from the
+Debian unstable root (scripts/blender_roots.sh) when it exists: blender5_peers.
+
+Rows:
   peer   Blender 3.4's compositor nodes on the same EXR (Image node -> node(s) -> Composite, no
          Render Layers node): the median of `runs` render() calls minus the median of an
          identity tree's (Image -> Composite), in one Blender process, execution modes TILED
@@ -285,9 +288,24 @@ s.render.threads = A["threads"]
 s.render.image_settings.file_format = "OPEN_EXR"
 s.render.image_settings.color_depth = "32"
 s.render.image_settings.exr_codec = "ZIP"
-s.use_nodes = True
-tree = s.node_tree
+# Blender 5 keeps the compositor in a node group with a Group Output, node settings in
+# input sockets, no execution modes; 3.4 has scene.node_tree, a Composite node, attributes.
+NEW = bpy.app.version >= (5, 0, 0)
+if NEW:
+    tree = bpy.data.node_groups.new("peers", "CompositorNodeTree")
+    tree.interface.new_socket("Image", in_out="OUTPUT", socket_type="NodeSocketColor")
+    s.compositing_node_group = tree
+    s.render.compositor_device = "CPU"
+else:
+    s.use_nodes = True
+    tree = s.node_tree
 images = {}
+
+def setting(node, socket, new_value, attr=None, old_value=None):
+    if NEW:
+        node.inputs[socket].default_value = new_value
+    else:
+        setattr(node, attr, old_value)
 
 def ramp_constant(node, positions, values):
     cr = node.color_ramp
@@ -305,11 +323,13 @@ def build(mode, src):
         images[src] = bpy.data.images.load(src)
     tree.nodes.clear()
     img = tree.nodes.new("CompositorNodeImage"); img.image = images[src]
-    comp = tree.nodes.new("CompositorNodeComposite")
+    comp = tree.nodes.new("NodeGroupOutput" if NEW else "CompositorNodeComposite")
     out = lambda name: img.outputs[name] if name in img.outputs and img.outputs[name].enabled else img.outputs[0]
     N, L = tree.nodes.new, tree.links.new
     if mode == "identity":
         L(out("Combined"), comp.inputs[0])
+    elif NEW:
+        build_new(mode, out, comp, N, L)
     elif mode == "blur":
         n = N("CompositorNodeBlur"); n.filter_type = "GAUSS"; n.size_x = n.size_y = A["blur_size"]
         L(out("Combined"), n.inputs[0]); L(n.outputs[0], comp.inputs[0])
@@ -374,6 +394,39 @@ def build(mode, src):
     else:
         raise SystemExit("unknown mode " + mode)
 
+def build_new(mode, out, comp, N, L):
+    # Blender 5's nodes for the modes it has (sockets for settings)
+    if mode in ("blur", "fast_blur"):
+        n = N("CompositorNodeBlur")
+        n.inputs["Type"].default_value = "Fast Gaussian" if mode == "fast_blur" else "Gaussian"
+        n.inputs["Size"].default_value = (A["blur_size"], A["blur_size"])
+        L(out("Combined"), n.inputs["Image"]); L(n.outputs[0], comp.inputs[0])
+    elif mode == "pixelate":
+        # Blender 5's Pixelate node has a Size (cell) input: no scale chain
+        px = N("CompositorNodePixelate"); px.inputs["Size"].default_value = A["cell"]
+        L(out("Combined"), px.inputs[0]); L(px.outputs[0], comp.inputs[0])
+    elif mode in ("sobel", "laplace"):
+        f = N("CompositorNodeFilter"); f.inputs["Type"].default_value = mode.capitalize()
+        L(out("Combined"), f.inputs["Image"]); L(f.outputs[0], comp.inputs[0])
+    elif mode in ("bloom", "fog_glow", "spot_bloom", "spot_fog_glow"):
+        g = N("CompositorNodeGlare")
+        g.inputs["Type"].default_value = "Fog Glow" if "fog_glow" in mode else "Bloom"
+        g.inputs["Quality"].default_value = "High"
+        g.inputs["Threshold"].default_value = 1.0
+        # spot_*: the glare alone (for the radius match); else image + glare
+        L(out("Combined"), g.inputs["Image"]); L(g.outputs["Glare" if mode.startswith("spot") else "Image"], comp.inputs[0])
+    elif mode == "sun_beams":
+        g = N("CompositorNodeGlare"); g.inputs["Type"].default_value = "Sun Beams"
+        g.inputs["Sun Position"].default_value = tuple(A["sun"])
+        g.inputs["Size"].default_value = A["ray_length"]
+        g.inputs["Threshold"].default_value = 0.0
+        L(out("Combined"), g.inputs["Image"]); L(g.outputs["Image"], comp.inputs[0])
+    elif mode == "bw":
+        bw = N("CompositorNodeRGBToBW")
+        L(out("Combined"), bw.inputs[0]); L(bw.outputs[0], comp.inputs[0])
+    else:
+        raise SystemExit("no Blender 5 tree for mode " + mode)
+
 def median_render(runs):
     bpy.ops.render.render()   # warm-up: image load, caches
     t = []
@@ -386,29 +439,33 @@ for mode in A["modes"]:
     res[mode] = {}
     build(mode, A["src"])
     for em in A["exec_modes"]:
-        tree.execution_mode = em
+        if not NEW:
+            tree.execution_mode = em
         res[mode][em] = median_render(A["runs"])
         if A.get("write") and mode != "identity":
             s.render.filepath = "%s/blender_%s_%s.exr" % (A["write"], mode, em)
             bpy.ops.render.render(write_still=True)
 for mode, src, path in A.get("extra_writes", []):
     build(mode, src)
-    tree.execution_mode = "FULL_FRAME"
+    if not NEW:
+        tree.execution_mode = "FULL_FRAME"
     s.render.filepath = path
     bpy.ops.render.render(write_still=True)
 print("RESULT " + json.dumps(res))
 """
 
 
-def blender_run(args):
-    """Runs BLENDER_SCRIPT with args (dict); returns {mode: {exec_mode: median ms of render()}}."""
-    with tempfile.TemporaryDirectory() as d:
+def blender_run(args, blender=None, tmp_dir=None):
+    """Runs BLENDER_SCRIPT with args (dict); returns {mode: {exec_mode: median ms of render()}}.
+    blender: the command (default [$BLENDER]); tmp_dir: where the script goes (inside the
+    tree for a Blender in a Debian root, which sees only the tree and shared/)."""
+    with tempfile.TemporaryDirectory(dir=tmp_dir) as d:
         script, aj = os.path.join(d, "peers.py"), os.path.join(d, "args.json")
         with open(script, "w") as f:
             f.write(BLENDER_SCRIPT)
         with open(aj, "w") as f:
             json.dump(args, f)
-        r = subprocess.run([BLENDER, "-b", "--factory-startup", "--python", script, "--", aj],
+        r = subprocess.run((blender or [BLENDER]) + ["-b", "--factory-startup", "--python", script, "--", aj],
                            capture_output=True, text=True)
     for line in r.stdout.splitlines():
         if line.startswith("RESULT "):
@@ -676,6 +733,85 @@ def blender_peers(ctx, modes, log):
     return rows
 
 
+# Blender 5.x (the compositor artists have today) from the Debian unstable root that
+# scripts/blender_roots.sh makes; the modes it has nodes for.
+BLENDER5_MODES = ["blur", "fast_blur", "pixelate", "sobel", "bloom", "fog_glow", "sun_beams", "bw"]
+
+
+def blender5_command():
+    """The command running Blender 5 in its root, or None when the root is missing."""
+    root = os.environ.get("LIBFX_ROOTS", "/var/cache/libfx-roots") + "/unstable"
+    if not os.path.exists(os.path.join(root, "usr/bin/blender")):
+        return None
+    return ["bash", os.path.join(ROOT, "scripts", "in_root.sh"), "unstable", "env", "HOME=/tmp", "blender"]
+
+
+def blender5_peers(ctx, log):
+    """Blender 5's compositor (CPU) on the same EXR: the node(s) alone, render() minus the
+    identity tree's, warm median; libfx's time beside it is its first frame in a fresh process
+    (`libfx run -v`, median of runs), so the ratio includes libfx's first-frame cost."""
+    cmd = blender5_command()
+    if not cmd:
+        print("no Blender 5 root (scripts/blender_roots.sh): no Blender 5 rows", file=sys.stderr)
+        return []
+    sc, w, h, runs, lib = ctx["scene"], ctx["w"], ctx["h"], ctx["runs"], ctx["lib"]
+    modes = [m for m in BLENDER5_MODES if m != "sun_beams" or "sun" in ctx]
+    spot_path = os.path.join(ctx["out"], "spot.exr")
+    write_rgba_exr(spot_path, spot_image(w, h))
+    spots = {m: os.path.join(ctx["out"], "blender5_%s.exr" % m) for m in ("spot_bloom", "spot_fog_glow")}
+    out5 = os.path.join(ctx["out"], "b5")
+    os.makedirs(out5, exist_ok=True)
+    t0 = time.perf_counter()
+    res = blender_run(blender_args(ctx["exr"], w, h, ["identity"] + modes, runs, exec_modes=("CPU",), write=out5,
+                                   sun=ctx.get("sun", (0.5, 0.5)),
+                                   extra_writes=[(m, spot_path, p) for m, p in spots.items()]),
+                      blender=cmd, tmp_dir=ctx["out"])
+    print("blender 5: %.0f s" % (time.perf_counter() - t0), file=sys.stderr, flush=True)
+    matched = {m: match_bloom_radius(lib, spot_path, spots["spot_" + m], w, h) for m in ("bloom", "fog_glow")}
+    sigma = BLENDER_BLUR_SIZE / 3.0
+    spec = {
+        "blur": ("gaussian_blur", "Blur Gaussian size=%d" % BLENDER_BLUR_SIZE, {"sigma": round(sigma, 3)},
+                 "sigma = size/3 as in Blender 3.4"),
+        "fast_blur": ("gaussian_blur", "Blur Fast Gaussian size=%d" % BLENDER_BLUR_SIZE, {"sigma": round(sigma, 3)},
+                      "sigma = size/3; the error column says how close the recursive filter is"),
+        "pixelate": ("pixelate", "Pixelate size=%d" % PIXEL_CELL, {"mode": "cells", "cell_size": PIXEL_CELL},
+                     "one node with a Size input in Blender 5"),
+        "sobel": ("edges", "Filter Sobel", None, "Blender outputs the gradient magnitude, libfx thresholded lines "
+                  "of the luminance (operator=sobel): timed only"),
+        "sun_beams": ("god_rays", "Glare Sun Beams size=%g threshold=0" % SUN_RAY_LENGTH, None,
+                      "source = the sidecar's sun; smears every pixel, god_rays only sky and bright pixels: "
+                      "timed only"),
+        "bw": ("color_matrix", "RGB to BW", {"operator": "grayscale_luminance"}, "Rec.709 luma on both sides"),
+    }
+    for m in ("bloom", "fog_glow"):
+        rad, brr, r90_b, _ = matched[m]
+        spec[m] = ("bloom", "Glare %s High threshold=1 size=0.5" % ("Bloom" if m == "bloom" else "Fog Glow"),
+                   {"radius": rad, "threshold": 1.0, "knee": 0.0, "intensity": 1.0, "composite": "add"},
+                   "radius matched on one bright pixel: Blender's glare holds 90%% of its light within %.0f px, "
+                   "bloom radius %d within %.0f px; energy not matched" % (r90_b, rad, brr))
+    idn = res["identity"]["CPU"]
+    rows = []
+    for m in modes:
+        effect, setting, params, note = spec[m]
+        p = params if params is not None else {"sobel": {"operator": "sobel"}, "sun_beams": {}}[m]
+        out_ref, lms = lib.run(effect, p, tag="b5_" + m)
+        err = None
+        if params is not None:
+            try:
+                err = errors(os.path.join(out5, "blender_%s_CPU.exr" % m), out_ref)
+            except RuntimeError as e:
+                print("no error figure for %s: %s" % (m, e), file=sys.stderr)
+        bms = max(res[m]["CPU"] - idn, 0.0)
+        rows.append(row(kind="peer", scene=sc, effect=effect, setting="blender 5 %s [CPU]" % setting, width=w,
+                        height=h, threads=2, runs=runs, ms_median="%.1f" % bms,
+                        note="%s; node(s) alone: render() %.1f ms minus identity tree %.1f ms; libfx %s %s: "
+                             "%.1f ms first frame (fresh process, same run): %.1fx faster"
+                             % (note, res[m]["CPU"], idn, effect, params_text(p), lms, bms / lms if lms else 0),
+                        **fmt_err(err)))
+        log(rows[-1])
+    return rows
+
+
 def oiio_peers(ctx, log):
     """oiiotool's operations, timed as the ImageBufAlgo calls oiiotool makes for them, in memory
     through OpenImageIO's Python binding (2 threads): on a loaded machine the op's time is lost
@@ -825,6 +961,7 @@ def run_peers(exr_path, sidecar_path, width, height, runs, out_dir, blender_mode
             ctx["sun"] = project_sun(json.load(f))
     rows = floor_rows(ctx["scene"], width, height, runs, log)
     rows += blender_peers(ctx, modes, log)
+    rows += blender5_peers(ctx, log)
     rows += oiio_peers(ctx, log)
     rows += bench_blur_rows(ctx["scene"], runs, log)
     rows += io_rows(ctx, log)
