@@ -5,7 +5,7 @@ at every quality preset and along its main knob, measures its error against its 
 and writes a CSV, a Markdown report and plots.
 
     /usr/bin/python3 tests/bench/bench_all.py [--quick] [--runs N] [--out out/bench_all] [--docs]
-        [--build build-benchall] [--spp 4] [--docs-root .] [--skip peers,cycles]
+        [--build build-benchall] [--spp 4] [--docs-root .] [--skip first,peers,cycles]
 
 Stages (progress and ETA on stderr):
  1. build    cmake --build BUILD (bench_presets, the CLI, the library); configures BUILD with
@@ -43,6 +43,7 @@ import pathlib
 import platform
 import re
 import shutil
+import statistics
 import subprocess
 import sys
 import time
@@ -247,6 +248,54 @@ def render_scene(scene, w, h, spp, out, env):
 
 
 # ---------------------------------------------------------------- effects
+
+FIRST_FRAME_SEQ = 4  # frames per process: the first, then warm ones
+
+
+def first_frame_rows(cli, scene, passes, side, recipe_path, effects, w, h, runs, tmp):
+    """What a one-frame run meets: `libfx run -v` (2 threads, `final`) over FIRST_FRAME_SEQ links
+    to the scene's passes, in `runs` fresh processes per effect; the effect's time on frame 1
+    (median over processes) against the median of the later frames. Also the empty stack
+    (effect "(empty stack)"), with the whole one-frame process's wall time."""
+    entries = json.loads(pathlib.Path(recipe_path).read_text())["effects"]
+    tmp.mkdir(parents=True, exist_ok=True)
+    for i in range(1, FIRST_FRAME_SEQ + 1):
+        link = tmp / ("in.%04d.exr" % i)
+        link.unlink(missing_ok=True)
+        link.symlink_to(pathlib.Path(passes).resolve())
+    rows = []
+    for eff in [None] + list(effects):
+        es = [e for e in entries if e["effect"] == eff and e.get("enabled", True)] if eff else []
+        rp = tmp / "recipe.json"
+        rp.write_text(json.dumps({"version": 1, "quality": "final", "effects": es}))
+        first, warm, one = [], [], []
+        for _ in range(runs):
+            for o in tmp.glob("out.*.exr"):
+                o.unlink()
+            out = run([cli, "run", "-v", "-j", "2", "--compression", "none", "--camera", side, "--stack", rp,
+                       tmp / "in.####.exr", "-o", tmp / "out.####.exr"]).stdout
+            per_frame = [sum(t["ms"] for t in json.loads(l[len("timings:"):]))
+                         for l in out.splitlines() if l.startswith("timings:")]
+            if len(per_frame) != FIRST_FRAME_SEQ:
+                raise SystemExit("bench_all: libfx run -v printed %d timings for %d frames" %
+                                 (len(per_frame), FIRST_FRAME_SEQ))
+            first.append(per_frame[0])
+            warm += per_frame[1:]
+            if eff is None:  # the whole process on one frame: read, empty stack, write
+                t0 = time.perf_counter()
+                run([cli, "run", "-j", "2", "--quiet", "--force", "--compression", "none", "--camera", side,
+                     "--stack", rp, tmp / "in.0001.exr", "-o", tmp / "one.exr"])
+                one.append((time.perf_counter() - t0) * 1e3)
+        f, wm = statistics.median(first), statistics.median(warm)
+        note = "warm %.1f ms (frames 2-%d, median); first / warm %.2fx" % (wm, FIRST_FRAME_SEQ, f / wm if wm > 0 else 0)
+        if one:
+            note += "; one-frame `libfx run` (read, stack, uncompressed write) %.0f ms" % statistics.median(one)
+        rows.append(dict(kind="first_frame", scene=scene, effect=eff or "(empty stack)", setting="quality=final",
+                         width=w, height=h, threads=2, runs=runs, ms_median="%.3f" % f, mae="", max_err="",
+                         psnr_db="", mask_px="", note=note))
+        log("  first frame %s: %.1f ms, warm %.1f ms" % (eff or "(empty stack)", f, wm))
+    return rows
+
 
 def read_rows(path):
     with open(path, newline="") as f:
@@ -474,6 +523,19 @@ def libfx_ms(rows, effect, w, h, threads="2"):
     return (float(c[0]["ms_median"]), c[0]["scene"]) if c else (None, None)
 
 
+def first_frame_table(rows):
+    ff = [r for r in rows if r["kind"] == "first_frame"]
+    body = []
+    for r in ff:
+        warm = r["note"].split(" ms")[0].replace("warm ", "")
+        ratio = r["note"].split("first / warm ")[1].split(";")[0] if "first / warm" in r["note"] else ""
+        rest = r["note"].split("; ", 2)[2] if r["note"].count("; ") >= 2 else ""
+        body.append([r["effect"], r["scene"], size_of(r), fnum(r["ms_median"], "ms"), fnum(warm, "ms"), ratio,
+                     r["runs"], rest])
+    return md_table(["effect", "scene", "size", "first frame ms", "warm ms", "first / warm", "processes", "note"],
+                    body, ["---", "---", "---", "---:", "---:", "---:", "---:", "---"])
+
+
 def peers_table(rows, peer_rows):
     body = []
     for r in peer_rows:
@@ -692,6 +754,13 @@ def report_md(a, info, rows, peer_rows, peer_note, effects, halos, images, img_p
           "[docs/bench/bench_all.csv](bench/bench_all.csv) (schema: `%s`)." % ",".join(SCHEMA), ""]
     md.append("### Per effect\n")
     md += effect_tables(rows, effects, halos)
+    if any(r["kind"] == "first_frame" for r in rows):
+        md.append("### The first frame of a process\n")
+        md.append("Each effect alone (the scene's entries, `final`, 2 threads) through `libfx run -v` over %d links "
+                  "to the scene's passes file, in fresh processes: the effect's time on frame 1 (median over the "
+                  "processes) and on the later frames (warm).\n" % FIRST_FRAME_SEQ)
+        md += first_frame_table(rows)
+        md.append("")
     md.append("### Peers (same run)\n")
     if peer_rows:
         md.append("Peer / libfx: the peer's time over libfx's `final` time for that effect at the same size with 2 "
@@ -767,7 +836,7 @@ def main():
                          "(3 at least while one run fits the budget; default 2000; quick 3000)")
     ap.add_argument("--cycles-ssr-res", default="640x360", help=argparse.SUPPRESS)
     ap.add_argument("--cycles-vsm-res", default="480x270", help=argparse.SUPPRESS)
-    ap.add_argument("--skip", default="", help="comma list of stages to skip: peers, cycles")
+    ap.add_argument("--skip", default="", help="comma list of stages to skip: first, peers, cycles")
     ap.add_argument("--only-effects", default="", help="comma list: bench only these effects (development)")
     ap.add_argument("--verbose", "-v", action="store_true", help="every bench_presets line on stderr")
     a = ap.parse_args()
@@ -810,6 +879,8 @@ def main():
             for e in plan[sc]:
                 f = 1.0 if a.quick else 4.0 if (w, h) == sizes[-1] else 1.5
                 stages.append(("effects: %s %s %dx%d" % (sc, e, w, h), quick_s.get(e, 3) * f))
+    if "first" not in skip:
+        stages += [("first frame: %s" % sc, 12 * (1 + len(plan[sc]))) for sc in SCENES]
     if "peers" not in skip:
         stages.append(("peers", 240 if a.quick else 480))
     if "cycles" not in skip:
@@ -848,6 +919,15 @@ def main():
                 log("  %s on %s %dx%d: %d rows in %.0f s" % (e, sc, w, h, len(rows), dt))
                 write_csv(out / "bench_all.partial.csv", rows)
     tmp.unlink(missing_ok=True)
+
+    if "first" not in skip:
+        w, h = sizes[-1]
+        for sc in SCENES:
+            prog.start("first frame: %s" % sc)
+            passes, side, recipe = renders[(sc, w, h)][:3]
+            rows += first_frame_rows(cli, sc, passes, side, recipe, plan[sc], w, h, 3, out / "first_frame" / sc)
+            prog.end()
+        write_csv(out / "bench_all.partial.csv", rows)
 
     peer_rows, peer_note = [], None
     if "peers" not in skip:
