@@ -495,6 +495,112 @@ static void test_own_finite_effects(void)
     fx_context_free(ctx);
 }
 
+/* Runs `json` on a copy of f that the stack may consume; compares with fx_stack_run on f
+ * and with the effects run one stack at a time (in-place effects must give the same bits). */
+static void check_consume(fx_context *ctx, const fx_frame *f, const char *json, const char *const *singles,
+                          int all_in_place)
+{
+    const int w = fx_frame_width(f), h = fx_frame_height(f);
+    const size_t n = (size_t)w * h * 4;
+    fx_stack *s = NULL;
+    fx_stack_new(ctx, &s);
+    CHECK_OK(ctx, fx_stack_load_json(s, json));
+    fx_frame *ref = NULL, *got = NULL, *copy = NULL;
+    CHECK_OK(ctx, fx_stack_run(s, f, &ref));
+    fx_frame_new(ctx, w, h, &copy);
+    const float *fp = NULL;
+    fx_frame_pass_read(f, "Combined", &fp, NULL);
+    CHECK_OK(ctx, fx_frame_add_pass(copy, "Combined", 4, fp)); /* its own pixels: consumable */
+    const float *given = NULL;
+    fx_frame_pass_read(copy, "Combined", &given, NULL);
+    CHECK_OK(ctx, fx_stack_run_consume(s, copy, &got));
+    const float *a = NULL, *b = NULL;
+    CHECK_OK(ctx, fx_frame_pass_read(ref, "Combined", &a, NULL));
+    CHECK_OK(ctx, fx_frame_pass_read(got, "Combined", &b, NULL));
+    CHECK(memcmp(a, b, n * sizeof(float)) == 0);
+    if (all_in_place)
+        CHECK(b == given); /* written over the consumed input: no second buffer */
+    /* one effect at a time */
+    fx_frame *step = NULL;
+    fx_frame_new(ctx, w, h, &step);
+    CHECK_OK(ctx, fx_frame_add_pass(step, "Combined", 4, fp));
+    for (int i = 0; singles[i]; i++) {
+        fx_stack *one = NULL;
+        fx_stack_new(ctx, &one);
+        CHECK_OK(ctx, fx_stack_load_json(one, singles[i]));
+        fx_frame *next = NULL;
+        CHECK_OK(ctx, fx_stack_run(one, step, &next));
+        fx_frame_free(step);
+        step = next;
+        fx_stack_free(one);
+    }
+    const float *c = NULL;
+    CHECK_OK(ctx, fx_frame_pass_read(step, "Combined", &c, NULL));
+    if (memcmp(a, c, n * sizeof(float)) != 0)
+        fprintf(stderr, "  %s: differs from its effects run one by one\n", json);
+    CHECK(memcmp(a, c, n * sizeof(float)) == 0);
+    fx_frame_free(step);
+    fx_frame_free(ref);
+    fx_frame_free(got);
+    fx_stack_free(s);
+}
+
+/* In-place effects and consumed inputs: same bits as the plain run; a consumed frame's
+ * Combined that another frame also holds is never written. */
+static void test_in_place(void)
+{
+    fx_context *ctx = NULL;
+    fx_context_new(&ctx, 2);
+    fx_frame *f = tu_pattern_frame(ctx, 41, 19, 4);
+#define E(x) "{\"effect\": " x "}"
+#define R(x) "{\"version\": 1, \"effects\": [" x "]}"
+    const char *cm = E("\"color_matrix\", \"params\": {\"operator\": \"sepia\"}");
+    const char *po = E("\"posterize\", \"params\": {\"levels\": 3}");
+    const char *bl = E("\"gaussian_blur\", \"params\": {\"sigma\": 1.5}");
+    const char *pm = E("\"posterize\", \"params\": {\"levels\": 5}, \"mask\": {\"rect\": [3, 2, 20, 9]}");
+    char json[1024], s1[256], s2[256], s3[256];
+    snprintf(s1, sizeof s1, R("%s"), cm);
+    snprintf(s2, sizeof s2, R("%s"), po);
+    snprintf(json, sizeof json, R("%s, %s"), cm, po);
+    check_consume(ctx, f, json, (const char *const[]){s1, s2, NULL}, 1);
+    snprintf(s1, sizeof s1, R("%s"), bl);
+    snprintf(s3, sizeof s3, R("%s"), pm);
+    snprintf(s2, sizeof s2, R("%s"), cm);
+    snprintf(json, sizeof json, R("%s, %s, %s, %s"), bl, cm, pm, cm);
+    check_consume(ctx, f, json, (const char *const[]){s1, s2, s3, s2, NULL}, 0);
+    snprintf(json, sizeof json, R("%s, %s"), pm, cm);
+    check_consume(ctx, f, json, (const char *const[]){s3, s2, NULL}, 0);
+
+    /* A consumed frame whose Combined another frame holds: that frame keeps its pixels. */
+    fx_frame *keeper = NULL, *given = NULL, *out = NULL;
+    fx_frame_new(ctx, 41, 19, &keeper);
+    fx_frame_new(ctx, 41, 19, &given);
+    CHECK_OK(ctx, fx_frame_copy_passes(keeper, f));
+    CHECK_OK(ctx, fx_frame_copy_passes(given, f)); /* three holders of f's Combined */
+    const float *fp = NULL, *kp = NULL;
+    fx_frame_pass_read(f, "Combined", &fp, NULL);
+    float *before = malloc(41 * 19 * 16);
+    memcpy(before, fp, 41 * 19 * 16);
+    fx_stack *s = NULL;
+    fx_stack_new(ctx, &s);
+    snprintf(json, sizeof json, R("%s"), cm);
+    CHECK_OK(ctx, fx_stack_load_json(s, json));
+    CHECK_OK(ctx, fx_stack_run_consume(s, given, &out));
+    fx_frame_pass_read(keeper, "Combined", &kp, NULL);
+    CHECK(memcmp(kp, before, 41 * 19 * 16) == 0);
+    CHECK(memcmp(fp, before, 41 * 19 * 16) == 0);
+    fx_frame_free(out);
+    CHECK_FAIL(ctx, fx_stack_run_consume(s, NULL, &out), FX_ERR_INVALID_ARGUMENT, "NULL");
+    CHECK(out == NULL);
+#undef E
+#undef R
+    free(before);
+    fx_stack_free(s);
+    fx_frame_free(keeper);
+    fx_frame_free(f);
+    fx_context_free(ctx);
+}
+
 static void test_parallel_for(void)
 {
     /* Same results whatever the thread count; nested loops do not deadlock. */
@@ -576,6 +682,7 @@ int main(void)
     test_stack_masking();
     test_shared_pixels();
     test_own_finite_effects();
+    test_in_place();
     test_parallel_for();
     return tu_finish("test_core");
 }

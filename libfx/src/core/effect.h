@@ -88,6 +88,10 @@ typedef struct fx_effect_run {
  * is in cache, so the stack need not read the whole output again to find NaN/Inf
  * (for a per-pixel effect that re-read is a third of its memory traffic). */
 #define FX_EFFECT_OWN_FINITE 1u
+/* process() may get dst == src (no mask then): it reads each pixel before writing that
+ * pixel and nothing else. The stack then writes over a buffer it owns instead of filling
+ * a second one: a third less memory traffic, and no fresh pages on a consumed input. */
+#define FX_EFFECT_IN_PLACE 2u
 
 typedef struct fx_effect_class {
     const char *name;            /* recipe name: "gaussian_blur" */

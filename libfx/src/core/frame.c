@@ -185,6 +185,11 @@ fx_result fx_frame_adopt_pass(fx_frame *f, const char *name, int channels, float
     return FX_OK;
 }
 
+int fx_frame_pixels_holders(const fx_pass *p)
+{
+    return p && p->pixels ? atomic_load(&p->pixels->holders) : 0;
+}
+
 fx_result fx_frame_share_pass(fx_frame *dst, const char *name, const fx_frame *src, const fx_pass *sp)
 {
     if (!dst || !src || !sp || dst->width != src->width || dst->height != src->height)

@@ -132,6 +132,8 @@ fx_result fx_frame_adopt_pass(fx_frame *f, const char *name, int channels, float
 /* Gives dst a pass named `name` holding src_pass's pixels: shared when both frames have
  * one context and the pass was never handed out writable, else copied. Same sizes only. */
 fx_result fx_frame_share_pass(fx_frame *dst, const char *name, const fx_frame *src, const fx_pass *src_pass);
+/* How many passes (in any frames) hold p's pixels. */
+int fx_frame_pixels_holders(const fx_pass *p);
 /* New frame with f's size, windows, camera, time and metadata, no passes. */
 fx_result fx_frame_new_like(const fx_frame *f, fx_frame **out);
 

@@ -646,7 +646,7 @@ typedef struct composite_job {
 
 static void copy_span(const float *s, float *d, int x0, int x1)
 {
-    if (x1 > x0)
+    if (x1 > x0 && s != d)
         memcpy(d + (size_t)x0 * 4, s + (size_t)x0 * 4, (size_t)(x1 - x0) * 4 * sizeof(float));
 }
 
@@ -789,7 +789,145 @@ static void combined_first(fx_frame *o)
         }
 }
 
-fx_result fx_stack_run(fx_stack *s, const fx_frame *in, fx_frame **out)
+/* The image's buffers during a run. Effects ping-pong between `cur` and `spare`, taken
+ * when the first effect that changes pixels needs them: a stack that changes nothing
+ * allocates nothing and its output shares the input's Combined. `owned` is the input's
+ * Combined when the caller gave the frame up (fx_stack_run_consume): in-place effects may
+ * write into it. Each of cur/spare keeps the rect where it may differ from the current
+ * image, so an effect limited to a small mask copies only what is stale, not the frame. */
+typedef struct run_buffers {
+    const float *image; /* the current image: the input's Combined, cur, spare or owned */
+    float *cur, *spare, *owned;
+    fx_rect stale_cur, stale_spare;
+    size_t bytes;
+} run_buffers;
+
+/* Where the effect writes: the current image itself for an in-place effect on a buffer
+ * the run may write (no mask: blending needs the old pixels), else the other buffer. */
+static fx_result pick_dst(fx_context *ctx, run_buffers *b, const fx_effect_class *cls, const fx_mask *mask,
+                          const char *where, float **dst)
+{
+    float *writable = b->image == b->cur ? b->cur : b->image == b->spare ? b->spare
+                      : b->image == b->owned ? b->owned : NULL;
+    if (writable && !mask && (cls->flags & FX_EFFECT_IN_PLACE)) {
+        *dst = writable;
+        return FX_OK;
+    }
+    float **buf = b->image == b->cur ? &b->spare : &b->cur;
+    if (!*buf) {
+        fx_result r = fx_check_budget(ctx, b->bytes, "an effect's output");
+        if (r)
+            return r;
+        if (!(*buf = fx_buffer_get(ctx, b->bytes)))
+            return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
+    }
+    *dst = *buf;
+    return FX_OK;
+}
+
+/* After an effect wrote dst over roi: dst is the image; every other buffer of ours lags
+ * by the roi (dst itself is whole: the composite copied its stale part). */
+static void image_moved(run_buffers *b, float *dst, fx_rect roi)
+{
+    if (dst == b->cur)
+        b->stale_cur = (fx_rect){0, 0, 0, 0};
+    else
+        b->stale_cur = rect_union(b->stale_cur, roi);
+    if (dst == b->spare)
+        b->stale_spare = (fx_rect){0, 0, 0, 0};
+    else
+        b->stale_spare = rect_union(b->stale_spare, roi);
+    b->image = dst;
+}
+
+/* Runs one enabled effect on the current image. */
+static fx_result run_entry(fx_stack *s, fx_entry *e, int i, const fx_frame *in, fx_frame *o, run_buffers *b,
+                           const char *where)
+{
+    fx_context *ctx = s->ctx;
+    const int w = in->width, h = in->height;
+    int quality = entry_quality(s, e);
+    void *params = fx_mem_alloc(e->cls->params_size);
+    if (!params)
+        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
+    fx_mask *mask = NULL;
+    fx_result r = effective_params(s, e, i, quality, params);
+    if (!r)
+        r = check_passes(s, in, e->cls->passes ? e->cls->passes(params) : 0, where);
+    if (!r && e->cls->needs_camera && e->cls->needs_camera(params) && !in->has_camera)
+        r = fx_fail(ctx, FX_ERR_NO_CAMERA,
+                    "%s needs the camera matrices: the file has no worldToCamera/worldToNDC "
+                    "attributes (give a camera sidecar with --camera)",
+                    where);
+    if (!r)
+        r = fx_mask_build(ctx, &e->mask, in, where, &mask);
+    if (!r && mask && mask->bounds.x1 <= mask->bounds.x0)
+        goto out; /* nothing selected: the effect is skipped and the image passes through */
+    float *dst = NULL;
+    if (!r)
+        r = pick_dst(ctx, b, e->cls, mask, where, &dst);
+    if (r)
+        goto out;
+    fx_effect_run run;
+    memset(&run, 0, sizeof run);
+    run.ctx = ctx;
+    run.frame = in;
+    run.src = b->image;
+    run.dst = dst;
+    run.width = w;
+    run.height = h;
+    run.roi = mask ? mask->bounds : (fx_rect){0, 0, w, h};
+    run.mask = mask;
+    run.params = params;
+    run.quality = quality;
+    run.index = i;
+    run.effect_name = e->cls->name;
+    run.where = where;
+    run.debug = s->debug ? o : NULL;
+    atomic_size_t own_bad;
+    atomic_init(&own_bad, 0);
+    run.nonfinite = &own_bad;
+    if ((r = e->cls->process(&run)))
+        goto out;
+    size_t *bad = fx_mem_calloc((size_t)(h ? h : 1), sizeof *bad);
+    if (!bad) {
+        r = fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
+        goto out;
+    }
+    fx_rect stale = dst == b->cur ? b->stale_cur : dst == b->spare ? b->stale_spare : (fx_rect){0, 0, 0, 0};
+    composite_job job = {b->image, dst, mask, run.roi, stale, w, (e->cls->flags & FX_EFFECT_OWN_FINITE) != 0, bad};
+    fx_parallel_for(ctx, h, fx_grain_for(ctx, h), composite_rows, &job);
+    image_moved(b, dst, run.roi);
+    size_t total = atomic_load(&own_bad);
+    for (int y = 0; y < h; y++)
+        total += bad[y];
+    fx_mem_free(bad);
+    if (total)
+        fx_warn(ctx, "%s produced %zu non-finite values; they were replaced", where, total);
+out:
+    fx_mask_free(mask);
+    fx_mem_free(params);
+    return r;
+}
+
+/* The output's Combined: the input's pixels when nothing changed them (shared), else the
+ * buffer holding the image. */
+static fx_result take_result(fx_frame *o, const fx_frame *in, const fx_pass *combined, run_buffers *b)
+{
+    fx_result r;
+    if (b->image == combined->data) {
+        r = fx_frame_share_pass(o, "Combined", in, combined);
+    } else {
+        float **result = b->image == b->cur ? &b->cur : &b->spare;
+        r = fx_frame_adopt_pass(o, "Combined", 4, *result);
+        *result = NULL;
+    }
+    if (!r)
+        combined_first(o);
+    return r;
+}
+
+static fx_result stack_run(fx_stack *s, const fx_frame *in, int consume, fx_frame **out)
 {
     if (!s || !in || !out)
         return fx_fail(s ? s->ctx : NULL, FX_ERR_INVALID_ARGUMENT, "fx_stack_run: NULL argument");
@@ -802,20 +940,16 @@ fx_result fx_stack_run(fx_stack *s, const fx_frame *in, fx_frame **out)
                        src ? "'" : "", src ? src : "the frame", src ? "'" : "");
     }
     const int w = in->width, h = in->height;
-    const size_t n = (size_t)w * h * 4;
     fx_frame *o = NULL;
     fx_result r = fx_frame_new_like(in, &o);
     if (r)
         return r;
-    /* Effects ping-pong between two buffers, taken when the first effect that changes
-     * pixels needs them: a stack that changes nothing allocates nothing and its output
-     * shares the input's Combined. Each buffer keeps the rect where it may differ from
-     * the current image, so an effect limited to a small mask copies only what is
-     * stale, not the frame. */
-    float *cur = NULL, *spare = NULL;
-    const float *src = combined->data;
     const fx_rect full = {0, 0, w, h};
-    fx_rect stale_cur = full, stale_spare = full;
+    run_buffers b = {combined->data, NULL, NULL, NULL, full, full, (size_t)w * h * 4 * sizeof(float)};
+    /* the input's Combined is ours to write when the caller gave the frame up and no other
+     * frame holds those pixels */
+    if (consume && in->ctx == ctx && combined->pixels && fx_frame_pixels_holders(combined) == 1)
+        b.owned = combined->data;
     int enabled = 0;
     for (int i = 0; i < s->count; i++)
         enabled += s->entries[i].enabled;
@@ -832,114 +966,39 @@ fx_result fx_stack_run(fx_stack *s, const fx_frame *in, fx_frame **out)
         snprintf(stage, sizeof stage, "%s (%d of %d)", where, done + 1, enabled);
         if ((r = fx_progress(ctx, stage, (double)done / (enabled ? enabled : 1))))
             break;
-        int quality = entry_quality(s, e);
-        void *params = fx_mem_alloc(e->cls->params_size);
-        if (!params) {
-            r = fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
-            break;
-        }
-        fx_mask *mask = NULL;
-        r = effective_params(s, e, i, quality, params);
-        if (!r)
-            r = check_passes(s, in, e->cls->passes ? e->cls->passes(params) : 0, where);
-        if (!r && e->cls->needs_camera && e->cls->needs_camera(params) && !in->has_camera)
-            r = fx_fail(ctx, FX_ERR_NO_CAMERA,
-                        "%s needs the camera matrices: the file has no worldToCamera/worldToNDC "
-                        "attributes (give a camera sidecar with --camera)",
-                        where);
-        if (!r)
-            r = fx_mask_build(ctx, &e->mask, in, where, &mask);
-        if (!r && mask && mask->bounds.x1 <= mask->bounds.x0) {
-            /* Nothing selected: the effect is skipped and the image passes through. */
-            fx_mask_free(mask);
-            fx_mem_free(params);
-            e->last_ms = now_ms() - t0;
-            done++;
-            continue;
-        }
-        float **dst_buf = src == cur ? &spare : &cur;
-        if (!r && !*dst_buf) {
-            size_t bytes = n * sizeof(float);
-            if (!(r = fx_check_budget(ctx, bytes, "an effect's output"))) {
-                *dst_buf = fx_buffer_get(ctx, bytes);
-                if (!*dst_buf)
-                    r = fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
-            }
-        }
-        float *dst = r ? NULL : *dst_buf;
-        if (!r) {
-            fx_effect_run run;
-            memset(&run, 0, sizeof run);
-            run.ctx = ctx;
-            run.frame = in;
-            run.src = src;
-            run.dst = dst;
-            run.width = w;
-            run.height = h;
-            run.roi = mask ? mask->bounds : (fx_rect){0, 0, w, h};
-            run.mask = mask;
-            run.params = params;
-            run.quality = quality;
-            run.index = i;
-            run.effect_name = e->cls->name;
-            run.where = where;
-            run.debug = s->debug ? o : NULL;
-            atomic_size_t own_bad;
-            atomic_init(&own_bad, 0);
-            run.nonfinite = &own_bad;
-            r = e->cls->process(&run);
-            if (!r) {
-                size_t *bad = fx_mem_calloc((size_t)(h ? h : 1), sizeof *bad);
-                if (!bad) {
-                    r = fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
-                } else {
-                    fx_rect *stale_dst = dst == cur ? &stale_cur : &stale_spare;
-                    composite_job job = {src, dst, mask, run.roi, *stale_dst, w,
-                                         (e->cls->flags & FX_EFFECT_OWN_FINITE) != 0, bad};
-                    fx_parallel_for(ctx, h, fx_grain_for(ctx, h), composite_rows, &job);
-                    /* dst now is the image; the buffer src came from (if ours) lags by the ROI */
-                    *stale_dst = (fx_rect){0, 0, 0, 0};
-                    if (src == cur || src == spare) {
-                        fx_rect *stale_src = src == cur ? &stale_cur : &stale_spare;
-                        *stale_src = rect_union(*stale_src, run.roi);
-                    }
-                    size_t total = atomic_load(&own_bad);
-                    for (int y = 0; y < h; y++)
-                        total += bad[y];
-                    fx_mem_free(bad);
-                    if (total)
-                        fx_warn(ctx, "%s produced %zu non-finite values; they were replaced", where, total);
-                    src = dst;
-                }
-            }
-        }
-        fx_mask_free(mask);
-        fx_mem_free(params);
+        r = run_entry(s, e, i, in, o, &b, where);
         e->last_ms = now_ms() - t0;
         done++;
     }
-    if (!r) {
-        if (src == combined->data) {
-            /* no effect changed a pixel: the output holds the input's Combined */
-            r = fx_frame_share_pass(o, "Combined", in, combined);
-        } else {
-            float **result = src == cur ? &cur : &spare;
-            r = fx_frame_adopt_pass(o, "Combined", 4, *result);
-            *result = NULL;
-        }
-        if (!r)
-            combined_first(o);
-    }
+    if (!r)
+        r = take_result(o, in, combined, &b);
     if (!r && ctx->progress)
         ctx->progress(ctx->progress_user, "done", 1.0); /* the work is finished: no cancel now */
-    fx_buffer_put(ctx, cur, n * sizeof(float));
-    fx_buffer_put(ctx, spare, n * sizeof(float));
+    fx_buffer_put(ctx, b.cur, b.bytes);
+    fx_buffer_put(ctx, b.spare, b.bytes);
     if (r) {
         fx_frame_free(o);
         return r;
     }
     *out = o;
     return FX_OK;
+}
+
+fx_result fx_stack_run(fx_stack *s, const fx_frame *in, fx_frame **out)
+{
+    return stack_run(s, in, 0, out);
+}
+
+fx_result fx_stack_run_consume(fx_stack *s, fx_frame *in, fx_frame **out)
+{
+    if (!in) {
+        if (out)
+            *out = NULL;
+        return fx_fail(s ? s->ctx : NULL, FX_ERR_INVALID_ARGUMENT, "fx_stack_run_consume: NULL frame");
+    }
+    fx_result r = stack_run(s, in, 1, out);
+    fx_frame_free(in); /* the output may hold its Combined: shared pixels outlive the frame */
+    return r;
 }
 
 fx_result fx_stack_timings_json(const fx_stack *s, char **out_json)

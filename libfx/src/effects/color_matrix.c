@@ -77,29 +77,30 @@ static inline float clamp_finite(double v)
     return (float)v;
 }
 
-/* The slow path for a row where float overflowed: double arithmetic, clamped. */
-static void row_double(const cm_job *j, const float *s, float *d, int n)
-{
-    const float *m = j->m;
-    for (int x = 0; x < n; x++) {
-        const float *p = s + (size_t)x * 4;
-        float *o = d + (size_t)x * 4;
-        for (int r = 0; r < 4; r++) {
-            double v = (double)m[r * 4 + 0] * p[0] + (double)m[r * 4 + 1] * p[1] +
-                       (double)m[r * 4 + 2] * p[2] + (double)m[r * 4 + 3] * p[3];
-            if (j->mix != 1.0f)
-                v = p[r] + (double)j->mix * (v - p[r]);
-            o[r] = clamp_finite(v);
-        }
-        if (j->keep_alpha)
-            o[3] = p[3];
-    }
-}
-
 /* One pixel is one 4-lane vector: out = c0*r + c1*g + c2*b + c3*a with the matrix's
  * columns, summed in the same order as the scalar form (so the bits are the same). */
 typedef float cm_v4 __attribute__((vector_size(16)));
 
+/* The slow path for a pixel where float overflowed: double arithmetic, clamped (a NaN
+ * input stays NaN: the row's finish replaces it). */
+static cm_v4 pixel_double(const cm_job *j, cm_v4 p)
+{
+    const float *m = j->m;
+    cm_v4 o;
+    for (int r = 0; r < 4; r++) {
+        double v = (double)m[r * 4 + 0] * p[0] + (double)m[r * 4 + 1] * p[1] + (double)m[r * 4 + 2] * p[2] +
+                   (double)m[r * 4 + 3] * p[3];
+        if (j->mix != 1.0f)
+            v = p[r] + (double)j->mix * (v - p[r]);
+        o[r] = clamp_finite(v);
+    }
+    if (j->keep_alpha)
+        o[3] = p[3];
+    return o;
+}
+
+/* src and dst may be the same buffer (FX_EFFECT_IN_PLACE): each pixel is read, then
+ * written, and the overflow path works from the pixel it read. */
 static void cm_rows(void *user, int begin, int end)
 {
     const cm_job *j = user;
@@ -110,8 +111,9 @@ static void cm_rows(void *user, int begin, int end)
     const int keep_alpha = j->keep_alpha;
     const int n = j->roi.x1 - j->roi.x0;
     for (int y = j->roi.y0 + begin; y < j->roi.y0 + end; y++) {
-        const float *restrict s = j->src + ((size_t)y * j->width + j->roi.x0) * 4;
-        float *restrict d = j->dst + ((size_t)y * j->width + j->roi.x0) * 4;
+        const float *s = j->src + ((size_t)y * j->width + j->roi.x0) * 4;
+        float *d = j->dst + ((size_t)y * j->width + j->roi.x0) * 4;
+        int slow = 0;
         for (int x = 0; x < n; x++) {
             cm_v4 p;
             memcpy(&p, s + 4 * x, sizeof p);
@@ -120,17 +122,17 @@ static void cm_rows(void *user, int begin, int end)
                 t = p + mix * (t - p);
             if (keep_alpha)
                 t[3] = p[3];
+            /* |v| <= FLT_MAX is false for +-Inf and NaN */
+            int ok = (fabsf(t[0]) <= FLT_MAX) & (fabsf(t[1]) <= FLT_MAX) & (fabsf(t[2]) <= FLT_MAX) &
+                     (fabsf(t[3]) <= FLT_MAX);
+            if (__builtin_expect(!ok, 0)) {
+                t = pixel_double(j, p);
+                slow = 1;
+            }
             memcpy(d + 4 * x, &t, sizeof t);
         }
-        /* Overflow check: |v| <= FLT_MAX is false for +-Inf and NaN. Branch-free so it
-         * vectorises; the row (in L1) is redone in double only when it fails. */
-        int bad = 0;
-        for (int i = 0; i < 4 * n; i++)
-            bad |= !(fabsf(d[i]) <= FLT_MAX);
-        if (bad) {
-            row_double(j, s, d, n);
-            fx_effect_finish_row(j->run, d, (size_t)n * 4); /* NaN inputs stay NaN in double */
-        }
+        if (slow)
+            fx_effect_finish_row(j->run, d, (size_t)n * 4);
     }
 }
 
@@ -174,7 +176,7 @@ const fx_effect_class fx_effect_color_matrix = {
     .params = color_matrix_param_defs,
     .param_count = FX_COUNT_OF(color_matrix_param_defs),
     .presets = { NULL, NULL, NULL, NULL },
-    .flags = FX_EFFECT_OWN_FINITE,
+    .flags = FX_EFFECT_OWN_FINITE | FX_EFFECT_IN_PLACE,
     .passes = NULL,
     .needs_camera = NULL,
     .halo = NULL,
