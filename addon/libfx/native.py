@@ -102,6 +102,7 @@ _SIGNATURES = {
     "fx_stack_required_passes": (c_int, [c_void_p, _PSTR]),
     "fx_stack_required_aux_views": (c_int, [c_void_p, _PSTR]),
     "fx_stack_run": (c_int, [c_void_p, c_void_p, _PP]),
+    "fx_stack_run_consume": (c_int, [c_void_p, c_void_p, c_int, _PP]),
     "fx_stack_timings_json": (c_int, [c_void_p, _PSTR]),
 }
 
@@ -358,6 +359,15 @@ class Stack:
     def run(self, frame):
         out = c_void_p()
         self._ctx.check(self._L.fx_stack_run(self._ptr, frame.ptr, ctypes.byref(out)), "fx_stack_run")
+        return Frame(self._ctx, out)
+
+    def run_consume(self, frame, keep_passes=False):
+        """run() for a frame not needed again: the library may write the result over its
+        pixels (no second frame-sized buffer) and frees it; ``frame`` is closed either way."""
+        out = c_void_p()
+        ptr, frame._ptr = frame._ptr, None   # the library frees it, success or not
+        self._ctx.check(self._L.fx_stack_run_consume(self._ptr, ptr, 1 if keep_passes else 0,
+                                                     ctypes.byref(out)), "fx_stack_run_consume")
         return Frame(self._ctx, out)
 
     def timings(self):

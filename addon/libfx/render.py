@@ -201,8 +201,7 @@ def process_frame(scene, frame, recipe_dict=None, passes_file=None, camera=None,
             if camera is not None:
                 fin.apply_sidecar(camera)
             fin.set_time(frame, fps)
-            fout = stack.run(fin)
-            fout.copy_passes_from(fin)
+            fout = stack.run_consume(fin, keep_passes=True)   # the passes go along, not copied
             os.makedirs(os.path.dirname(paths["exr"]) or ".", exist_ok=True)
             fout.write_exr(paths["exr"], input_path=passes_file)
             timings = stack.timings()

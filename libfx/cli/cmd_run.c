@@ -368,21 +368,13 @@ static int run_frame(run_job *job, const run_item *it)
         goto interrupted;
 
     cli_progress_phase(&job->progress, 1, "effects");
-    if (o->keep_passes) {
-        r = fx_stack_run(job->stack, in, &out);
-    } else {
-        /* the input is not needed again: the stack may write over its Combined */
-        r = fx_stack_run_consume(job->stack, in, &out);
-        in = NULL;
-    }
+    /* the input is not needed again: the stack may write over its Combined */
+    r = fx_stack_run_consume(job->stack, in, o->keep_passes, &out);
+    in = NULL;
     cli_flush_warnings(ctx);
     if (r == FX_ERR_CANCELLED)
         goto interrupted;
     if (r != FX_OK) {
-        rc = cli_fail(ctx, r, CLI_PHASE_PROCESS, it->in);
-        goto done;
-    }
-    if (o->keep_passes && (r = fx_frame_copy_passes(out, in)) != FX_OK) {
         rc = cli_fail(ctx, r, CLI_PHASE_PROCESS, it->in);
         goto done;
     }

@@ -513,7 +513,7 @@ static void check_consume(fx_context *ctx, const fx_frame *f, const char *json, 
     CHECK_OK(ctx, fx_frame_add_pass(copy, "Combined", 4, fp)); /* its own pixels: consumable */
     const float *given = NULL;
     fx_frame_pass_read(copy, "Combined", &given, NULL);
-    CHECK_OK(ctx, fx_stack_run_consume(s, copy, &got));
+    CHECK_OK(ctx, fx_stack_run_consume(s, copy, 0, &got));
     const float *a = NULL, *b = NULL;
     CHECK_OK(ctx, fx_frame_pass_read(ref, "Combined", &a, NULL));
     CHECK_OK(ctx, fx_frame_pass_read(got, "Combined", &b, NULL));
@@ -570,6 +570,20 @@ static void test_in_place(void)
     check_consume(ctx, f, json, (const char *const[]){s1, s2, s3, s2, NULL}, 0);
     snprintf(json, sizeof json, R("%s, %s"), pm, cm);
     check_consume(ctx, f, json, (const char *const[]){s3, s2, NULL}, 0);
+    /* the blur writes over its input with every algorithm (not when it keeps alpha) */
+    static const char *const blurs[] = {
+        E("\"gaussian_blur\", \"params\": {\"sigma\": 3.5, \"algorithm\": \"box\"}"),
+        E("\"gaussian_blur\", \"params\": {\"sigma\": 2.5, \"algorithm\": \"recursive\"}"),
+        E("\"gaussian_blur\", \"params\": {\"sigma\": 1.7, \"algorithm\": \"exact\"}"),
+        E("\"gaussian_blur\", \"params\": {\"sigma\": 0.1}"),
+        E("\"gaussian_blur\", \"params\": {\"sigma\": 2.5, \"alpha\": false}"),
+        E("\"gaussian_blur\", \"params\": {\"kernel\": \"paper_5x5\"}"),
+    };
+    for (int i = 0; i < FX_COUNT_OF(blurs); i++) {
+        snprintf(s1, sizeof s1, R("%s"), blurs[i]);
+        snprintf(json, sizeof json, R("%s, %s"), blurs[i], cm);
+        check_consume(ctx, f, json, (const char *const[]){s1, s2, NULL}, i < 4);
+    }
 
     /* A consumed frame whose Combined another frame holds: that frame keeps its pixels. */
     fx_frame *keeper = NULL, *given = NULL, *out = NULL;
@@ -585,12 +599,13 @@ static void test_in_place(void)
     fx_stack_new(ctx, &s);
     snprintf(json, sizeof json, R("%s"), cm);
     CHECK_OK(ctx, fx_stack_load_json(s, json));
-    CHECK_OK(ctx, fx_stack_run_consume(s, given, &out));
+    CHECK_OK(ctx, fx_stack_run_consume(s, given, 1, &out));
+    CHECK(fx_frame_pass_count(out) == fx_frame_pass_count(f)); /* keep_passes: every pass handed over */
     fx_frame_pass_read(keeper, "Combined", &kp, NULL);
     CHECK(memcmp(kp, before, 41 * 19 * 16) == 0);
     CHECK(memcmp(fp, before, 41 * 19 * 16) == 0);
     fx_frame_free(out);
-    CHECK_FAIL(ctx, fx_stack_run_consume(s, NULL, &out), FX_ERR_INVALID_ARGUMENT, "NULL");
+    CHECK_FAIL(ctx, fx_stack_run_consume(s, NULL, 0, &out), FX_ERR_INVALID_ARGUMENT, "NULL");
     CHECK(out == NULL);
 #undef E
 #undef R

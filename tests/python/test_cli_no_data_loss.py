@@ -148,11 +148,12 @@ def test_sigint_mid_run(cli, work):
 
 def test_out_of_memory(cli, work):
     tmp, _, _, out = work
-    src = write_exr(tmp / "big.exr", {"Combined": (sample_pixels(2048, 2048), "RGBA")})
+    src = write_exr(tmp / "big.exr", {"Combined": (sample_pixels(2560, 2560), "RGBA")})
     rec = write_recipe(tmp / "mem.json", [{"effect": "gaussian_blur", "params": {"sigma": 20}},
                                           {"effect": "bloom"}])
     before = snapshot(tmp)
-    limit = 200 << 20  # reads the 64 MiB frame, then runs out in the effects
+    # reads the 100 MiB frame (the blur then works over it in place), then runs out in bloom
+    limit = 200 << 20
 
     def cap():
         resource.setrlimit(resource.RLIMIT_AS, (limit, limit))

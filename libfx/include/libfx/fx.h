@@ -269,9 +269,11 @@ FX_API void fx_stack_set_debug_outputs(fx_stack *s, int enabled);
  * fx_frame_copy_passes). */
 FX_API fx_result fx_stack_run(fx_stack *s, const fx_frame *in, fx_frame **out);
 /* fx_stack_run for a caller done with `in` (a one-frame command, a render handler): the
- * stack may write the result over in's Combined, so per-pixel effects need no second
- * frame-sized buffer (on a fresh process, no fresh pages). `in` is freed in any case. */
-FX_API fx_result fx_stack_run_consume(fx_stack *s, fx_frame *in, fx_frame **out);
+ * stack may write the result over in's Combined, so effects that can work in place (per-
+ * pixel ones, the blur) need no second frame-sized buffer (in a fresh process, no fresh
+ * pages). keep_passes: the output also holds in's other passes (handed over, not copied).
+ * `in` is freed in any case. */
+FX_API fx_result fx_stack_run_consume(fx_stack *s, fx_frame *in, int keep_passes, fx_frame **out);
 /* Per-effect wall time of the last run: [{"index": 0, "effect": "pixelate", "ms": 1.2}, ...] */
 FX_API fx_result fx_stack_timings_json(const fx_stack *s, char **out_json);
 /* Gives dst every pass of src that dst does not have (to keep input passes in an

@@ -110,6 +110,9 @@ typedef struct fx_effect_class {
     /* Auxiliary views these params read: fills up to `max` entries, returns how many.
      * NULL: none. */
     int (*aux_views)(const void *params, fx_aux_need *out, int max);
+    /* Non-zero if these params let process() run with dst == src (see FX_EFFECT_IN_PLACE,
+     * for effects where it depends on the params). NULL: the flag decides. */
+    int (*in_place)(const void *params);
     /* Border pixels read around each output pixel (for tiling and ROI growth). NULL: 0. */
     int (*halo)(const void *params, int width, int height);
     /* Checks between parameters (each one's range is checked already). NULL: none.

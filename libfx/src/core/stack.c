@@ -804,12 +804,13 @@ typedef struct run_buffers {
 
 /* Where the effect writes: the current image itself for an in-place effect on a buffer
  * the run may write (no mask: blending needs the old pixels), else the other buffer. */
-static fx_result pick_dst(fx_context *ctx, run_buffers *b, const fx_effect_class *cls, const fx_mask *mask,
-                          const char *where, float **dst)
+static fx_result pick_dst(fx_context *ctx, run_buffers *b, const fx_effect_class *cls, const void *params,
+                          const fx_mask *mask, const char *where, float **dst)
 {
     float *writable = b->image == b->cur ? b->cur : b->image == b->spare ? b->spare
                       : b->image == b->owned ? b->owned : NULL;
-    if (writable && !mask && (cls->flags & FX_EFFECT_IN_PLACE)) {
+    int in_place = (cls->flags & FX_EFFECT_IN_PLACE) || (cls->in_place && cls->in_place(params));
+    if (writable && !mask && in_place) {
         *dst = writable;
         return FX_OK;
     }
@@ -865,7 +866,7 @@ static fx_result run_entry(fx_stack *s, fx_entry *e, int i, const fx_frame *in, 
         goto out; /* nothing selected: the effect is skipped and the image passes through */
     float *dst = NULL;
     if (!r)
-        r = pick_dst(ctx, b, e->cls, mask, where, &dst);
+        r = pick_dst(ctx, b, e->cls, params, mask, where, &dst);
     if (r)
         goto out;
     fx_effect_run run;
@@ -989,7 +990,7 @@ fx_result fx_stack_run(fx_stack *s, const fx_frame *in, fx_frame **out)
     return stack_run(s, in, 0, out);
 }
 
-fx_result fx_stack_run_consume(fx_stack *s, fx_frame *in, fx_frame **out)
+fx_result fx_stack_run_consume(fx_stack *s, fx_frame *in, int keep_passes, fx_frame **out)
 {
     if (!in) {
         if (out)
@@ -997,7 +998,11 @@ fx_result fx_stack_run_consume(fx_stack *s, fx_frame *in, fx_frame **out)
         return fx_fail(s ? s->ctx : NULL, FX_ERR_INVALID_ARGUMENT, "fx_stack_run_consume: NULL frame");
     }
     fx_result r = stack_run(s, in, 1, out);
-    fx_frame_free(in); /* the output may hold its Combined: shared pixels outlive the frame */
+    if (!r && keep_passes && (r = fx_frame_copy_passes(*out, in)) != FX_OK) {
+        fx_frame_free(*out);
+        *out = NULL;
+    }
+    fx_frame_free(in); /* the output may hold its pixels: shared pixels outlive the frame */
     return r;
 }
 

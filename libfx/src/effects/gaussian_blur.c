@@ -77,6 +77,8 @@ static fx_result gaussian_blur_process(const fx_effect_run *run)
     const fx_rect *roi = &run->roi;
     fx_result r;
     if (p->sigma < FX_BLUR_MIN_SIGMA) {
+        if (run->dst == run->src)
+            return FX_OK;
         for (int y = roi->y0; y < roi->y1; y++)
             memcpy(run->dst + ((size_t)y * w + roi->x0) * 4, run->src + ((size_t)y * w + roi->x0) * 4,
                    (size_t)(roi->x1 - roi->x0) * 4 * sizeof(float));
@@ -97,6 +99,14 @@ static fx_result gaussian_blur_process(const fx_effect_run *run)
     return FX_OK;
 }
 
+/* fx_blur_image may write over its input (each pixel after its last read); keeping the
+ * input's alpha needs it intact, and the 5x5 convolution reads neighbours it wrote. */
+static int gaussian_blur_in_place(const void *params)
+{
+    const gaussian_blur_params *p = params;
+    return p->alpha && p->kernel == KERNEL_GAUSSIAN;
+}
+
 const fx_effect_class fx_effect_gaussian_blur = {
     .name = "gaussian_blur",
     .doc = "Gaussian blur (box, recursive or exact algorithm; or the paper's 5x5 kernel)",
@@ -111,6 +121,7 @@ const fx_effect_class fx_effect_gaussian_blur = {
     },
     .passes = NULL,
     .needs_camera = NULL,
+    .in_place = gaussian_blur_in_place,
     .halo = gaussian_blur_halo,
     .validate = NULL,
     .process = gaussian_blur_process,
