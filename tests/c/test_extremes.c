@@ -105,10 +105,10 @@ static fx_result run_case(fx_context *ctx, fx_stack *s, const fx_frame *f, const
         int bad = 0;
         CHECK(out != NULL && fx_frame_width(out) == fx_frame_width(f) && fx_frame_height(out) == fx_frame_height(f));
         for (int p = 0; out && p < fx_frame_pass_count(out); p++) {
-            float *d = NULL;
+            const float *d = NULL;
             int ch = 0;
             const char *pn = fx_frame_pass_name(out, p);
-            fx_frame_pass(out, pn, &d, &ch);
+            fx_frame_pass_read(out, pn, &d, &ch);
             size_t n = (size_t)fx_frame_width(out) * fx_frame_height(out) * ch;
             for (size_t i = 0; i < n; i++)
                 if (!isfinite(d[i])) {
@@ -479,6 +479,53 @@ int main(void)
                 }
                 fx_frame_free(f);
             }
+
+    /* 2b. every preset, where the reduced-resolution paths live (cells, proxies, pyramid
+     * levels), on odd and tiny frames, whole and under a one-pixel mask (smaller than any
+     * reduced pixel): it runs, stays finite, and leaves every pixel outside the mask as it was */
+    static const int odd[][2] = {{1, 1}, {1, 9}, {9, 1}, {3, 5}, {17, 13}, {37, 23}};
+    for (int z = 0; z < FX_COUNT_OF(odd); z++) {
+        const int w = odd[z][0], h = odd[z][1];
+        fx_frame *f = make_frame(ctx, w, h, HOSTILE_EXR, SIDECAR_LIGHTS_FRONT);
+        CHECK(f != NULL);
+        const float *in_px = NULL;
+        if (f)
+            fx_frame_pass_read(f, "Combined", &in_px, NULL);
+        const int mx = (w / 2) | 1, my = (h / 2) | 1; /* odd: off any 2x2 or 4x4 cell's corner */
+        for (int e = 0; f && e < fx_effect_count(); e++) {
+            const char *effect = fx_effect_name(e);
+            for (int q = FX_QUALITY_DRAFT; q <= FX_QUALITY_REFERENCE; q++)
+                for (int masked = 0; masked < 2; masked++) {
+                    const int x0 = mx < w ? mx : w - 1, y0 = my < h ? my : h - 1;
+                    snprintf(current_case, sizeof current_case, "%s (%s) on hostile %dx%d%s", effect,
+                             fx_quality_name(q), w, h, masked ? ", one-pixel mask" : "");
+                    fx_stack *s = stack_for(ctx, effect, q);
+                    if (!s)
+                        continue;
+                    char mask[96];
+                    snprintf(mask, sizeof mask, "{\"rect\": [%d, %d, 1, 1]}", x0, y0);
+                    if (masked)
+                        CHECK_OK(ctx, fx_stack_set_mask_json(s, 0, mask));
+                    fx_frame *out = NULL;
+                    if (run_case(ctx, s, f, effect, 1) == FX_OK && masked && fx_stack_run(s, f, &out) == FX_OK) {
+                        const float *o = NULL;
+                        fx_frame_pass_read(out, "Combined", &o, NULL);
+                        int outside_kept = 1;
+                        for (int y = 0; y < h; y++)
+                            for (int x = 0; x < w; x++)
+                                if ((x != x0 || y != y0) &&
+                                    memcmp(o + ((size_t)y * w + x) * 4, in_px + ((size_t)y * w + x) * 4, 16) != 0)
+                                    outside_kept = 0;
+                        if (!outside_kept)
+                            fprintf(stderr, "WROTE OUTSIDE ITS MASK: %s\n", current_case);
+                        CHECK(outside_kept);
+                    }
+                    fx_frame_free(out);
+                    fx_stack_free(s);
+                }
+        }
+        fx_frame_free(f);
+    }
 
     /* 3. degenerate cameras, for the effects that use one */
     for (int e = 0; e < fx_effect_count() && hostile; e++) {

@@ -20,6 +20,7 @@
 #include "math/shadow_map.h"
 #include "math/surface.h"
 
+#include <float.h>
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
@@ -194,6 +195,10 @@ static void vsm_rows(void *user, int y0, int y1)
                 float rad[3] = {j->sun_rad.x, j->sun_rad.y, j->sun_rad.z};
                 for (int c = 0; c < 3; c++) {
                     float r = s[c] - k * ndl * dc[c] * rad[c];
+                    if (!(fabsf(r) <= FLT_MAX)) { /* a huge DiffCol overflowed: again in double */
+                        double t = (double)s[c] - (double)k * ndl * dc[c] * rad[c];
+                        r = (float)(t > FLT_MAX ? FLT_MAX : t < -FLT_MAX ? -FLT_MAX : t);
+                    }
                     o[c] = s[c] >= 0.0f && r < 0.0f ? 0.0f : r;
                 }
             }
