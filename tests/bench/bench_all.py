@@ -297,6 +297,23 @@ def first_frame_rows(cli, scene, passes, side, recipe_path, effects, w, h, runs,
     return rows
 
 
+def fresh_pages_row(bench_dir, scene, w, h, runs=5):
+    """The floor under a first frame: filling one fresh w x h RGBA float buffer in a new
+    process (bench_fresh_pages), against filling it again."""
+    first, again = [], []
+    for _ in range(runs):
+        a, b = run([bench_dir / "bench_fresh_pages", w, h]).stdout.split()
+        first.append(float(a))
+        again.append(float(b))
+    f, g = statistics.median(first), statistics.median(again)
+    log("  fresh pages %dx%d: %.1f ms, again %.1f ms" % (w, h, f, g))
+    return dict(kind="first_frame", scene=scene, effect="(fresh frame buffer)", setting="memset", width=w, height=h,
+                threads=1, runs=runs, ms_median="%.3f" % f, mae="", max_err="", psnr_db="", mask_px="",
+                note="warm %.1f ms (the same buffer filled again); first / warm %.2fx; one RGBA float buffer "
+                     "from fx_mem_alloc (huge-page advised) filled in a fresh process: what an effect that "
+                     "needs a second frame-sized buffer pays on the first frame" % (g, f / g if g > 0 else 0))
+
+
 def read_rows(path):
     with open(path, newline="") as f:
         return [dict(r) for r in csv.DictReader(f)]
@@ -891,7 +908,7 @@ def main():
     prog.start("build")
     if not (build / "CMakeCache.txt").exists():
         run(["cmake", "-S", ROOT, "-B", build, "-DCMAKE_BUILD_TYPE=Release", "-DLIBFX_BUILD_BENCH=ON"])
-    run(["cmake", "--build", build, "-j2", "--target", "bench_presets", "libfx_cli", "fx"])
+    run(["cmake", "--build", build, "-j2", "--target", "bench_presets", "bench_fresh_pages", "libfx_cli", "fx"])
     bench_bin, cli, lib = build / "tests" / "bench" / "bench_presets", build / "libfx" / "libfx", \
         build / "libfx" / "libfx.so"
     for p in (bench_bin, cli, lib):
@@ -925,6 +942,8 @@ def main():
         for sc in SCENES:
             prog.start("first frame: %s" % sc)
             passes, side, recipe = renders[(sc, w, h)][:3]
+            if sc == SCENES[0]:
+                rows.append(fresh_pages_row(build / "tests" / "bench", sc, w, h))
             rows += first_frame_rows(cli, sc, passes, side, recipe, plan[sc], w, h, 3, out / "first_frame" / sc)
             prog.end()
         write_csv(out / "bench_all.partial.csv", rows)
