@@ -38,6 +38,7 @@ typedef struct vsm_params {
     float strength;
     int diffuse;
     float roughness;
+    int map_level;
 } vsm_params;
 
 enum { METHOD_VSM = 0, METHOD_PCF, METHOD_HARD };
@@ -86,6 +87,10 @@ static const fx_param_def vsm_param_defs[] = {
     FX_P_FLOAT(vsm_params, roughness, "roughness", 0.5, 0.0, 1.0, 0.0, 1.0, "",
                "The scene's typical Principled roughness for the principled diffuse (Blender writes no "
                "roughness pass)"),
+    FX_P_INT(vsm_params, map_level, "map_level", 0, 0, FX_SHADOW_MAX_LEVEL, 0, 3, "",
+             "vsm: the light map's moments averaged over blocks of 2^level x 2^level texels before the "
+             "filter (a mip of the moments: cheaper filter and lookups, penumbrae at least 2^level texels "
+             "wide); 0: full resolution"),
 };
 
 static fx_pass_set vsm_passes(const void *params)
@@ -220,8 +225,15 @@ static fx_result vsm_process(const fx_effect_run *run)
      * (core/aux_view.h); PCF and hard read only the normalised depth */
     fx_aux_map map;
     int filtered = p->method == METHOD_VSM;
-    fx_result r = fx_aux_map_acquire(run->frame, name, p->derivative_bias, filtered ? p->filter : -1,
-                                     filtered ? p->filter_size : 0.0f, where, &map);
+    /* a reduced map needs the filter call even with no filter (width <= 1 skips it): 1.5
+     * texels rounds to no box */
+    int level = filtered ? p->map_level : 0;
+    float width = filtered ? p->filter_size : 0.0f;
+    if (level > 0 && !(width > 1.0f))
+        width = 1.5f;
+    fx_result r = fx_aux_map_acquire(run->frame, name, p->derivative_bias,
+                                     filtered ? FX_SHADOW_FILTER_WITH_LEVEL(p->filter, level) : -1, width, where,
+                                     &map);
     if (r)
         return r;
     const fx_aux_view *av = map.av;
@@ -279,7 +291,7 @@ const fx_effect_class fx_effect_vsm_shadows = {
     .params_size = sizeof(vsm_params),
     .params = vsm_param_defs,
     .param_count = FX_COUNT_OF(vsm_param_defs),
-    .presets = {NULL, NULL, NULL, "{\"method\": \"pcf\"}"},
+    .presets = {"{\"map_level\": 2}", "{\"map_level\": 1}", "{\"map_level\": 0}", "{\"method\": \"pcf\"}"},
     .passes = vsm_passes,
     .needs_camera = vsm_needs_camera,
     .aux_views = vsm_aux_views,

@@ -2,7 +2,6 @@
 #include "math/shadow_map.h"
 #include "core/parallel.h"
 #include "math/blur.h"
-#include "math/sat.h"
 
 #include <math.h>
 #include <string.h>
@@ -72,8 +71,9 @@ fx_result fx_shadow_map_build(fx_context *ctx, const float *raw_depth, int width
         fx_shadow_map_free(out);
         return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for a %d x %d shadow map", where, width, height);
     }
-    out->width = width;
-    out->height = height;
+    out->width = out->mwidth = width;
+    out->height = out->mheight = height;
+    out->level = 0;
     out->znear = znear;
     out->zfar = zfar;
     build_job j = {raw_depth, out, derivative_bias};
@@ -82,17 +82,163 @@ fx_result fx_shadow_map_build(fx_context *ctx, const float *raw_depth, int width
     return FX_OK;
 }
 
+/* ---- the moments' reduction (mip) ---- */
+
+typedef struct reduce_job {
+    const float *src; /* w x h x 2 */
+    float *dst;       /* mw x mh x 2 */
+    int w, h, mw, step;
+} reduce_job;
+
+/* Each reduced texel is the mean of its block's texels (clipped at the far borders), summed
+ * in double in a fixed order. */
+static void reduce_rows(void *user, int y0, int y1)
+{
+    reduce_job *j = user;
+    for (int my = y0; my < y1; my++) {
+        int by0 = my * j->step, by1 = by0 + j->step < j->h ? by0 + j->step : j->h;
+        for (int mx = 0; mx < j->mw; mx++) {
+            int bx0 = mx * j->step, bx1 = bx0 + j->step < j->w ? bx0 + j->step : j->w;
+            double a = 0.0, b = 0.0;
+            for (int y = by0; y < by1; y++) {
+                const float *row = j->src + ((size_t)y * j->w) * 2;
+                for (int x = bx0; x < bx1; x++) {
+                    a += row[2 * x];
+                    b += row[2 * x + 1];
+                }
+            }
+            double n = (double)(by1 - by0) * (double)(bx1 - bx0);
+            float *o = j->dst + ((size_t)my * j->mw + mx) * 2;
+            o[0] = (float)(a / n);
+            o[1] = (float)(b / n);
+        }
+    }
+}
+
+static fx_result reduce_moments(fx_context *ctx, fx_shadow_map *sm, int level, const char *where)
+{
+    int step = 1 << level;
+    int mw = (sm->width + step - 1) / step, mh = (sm->height + step - 1) / step;
+    float *m = fx_mem_alloc((size_t)mw * mh * 2 * sizeof(float));
+    if (!m)
+        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for a %d x %d shadow map level", where, mw, mh);
+    reduce_job j = {sm->moments, m, sm->width, sm->height, mw, step};
+    fx_parallel_for(ctx, mh, fx_grain_for(ctx, mh), reduce_rows, &j);
+    fx_mem_free(sm->moments);
+    sm->moments = m;
+    sm->mwidth = mw;
+    sm->mheight = mh;
+    sm->level = level;
+    return FX_OK;
+}
+
+/* ---- the box: separable running sums in double ----
+ * Each output is the mean of the texels of its (2r+1)^2 box inside the map (as the SAT box
+ * it replaces: no replicated border). Per line a running sum in double: O(1) per texel
+ * whatever the radius, each line by the same code whatever thread runs it (bit-identical
+ * for any thread count), and no (w+1)(h+1)x2 table of doubles. Values are normalised
+ * depths in [-1, 1] and their squares: the running sums keep ~1e-15 relative precision. */
+
+typedef struct box_job {
+    const float *src;
+    float *dst;
+    int w, h, r;
+} box_job;
+
+static void box_h_rows(void *user, int y0, int y1)
+{
+    box_job *j = user;
+    const int w = j->w, r = j->r;
+    for (int y = y0; y < y1; y++) {
+        const float *s = j->src + (size_t)y * w * 2;
+        float *d = j->dst + (size_t)y * w * 2;
+        double a = 0.0, b = 0.0;
+        int lo = 0, hi = 0; /* the window [lo, hi) */
+        for (int x = 0; x < w; x++) {
+            int want_hi = x + r + 1 < w ? x + r + 1 : w, want_lo = x - r > 0 ? x - r : 0;
+            for (; hi < want_hi; hi++) {
+                a += s[2 * hi];
+                b += s[2 * hi + 1];
+            }
+            for (; lo < want_lo; lo++) {
+                a -= s[2 * lo];
+                b -= s[2 * lo + 1];
+            }
+            double n = (double)(hi - lo);
+            d[2 * x] = (float)(a / n);
+            d[2 * x + 1] = (float)(b / n);
+        }
+    }
+}
+
+#define BOX_COLS 64 /* columns per job of the vertical pass (running sums side by side) */
+
+static void box_v_cols(void *user, int c0, int c1)
+{
+    box_job *j = user;
+    const int w = j->w, h = j->h, r = j->r;
+    double a[BOX_COLS * 2];
+    for (int cb = c0; cb < c1; cb++) {
+        int x0 = cb * BOX_COLS, x1 = x0 + BOX_COLS < w ? x0 + BOX_COLS : w, n = x1 - x0;
+        memset(a, 0, sizeof a);
+        int lo = 0, hi = 0;
+        for (int y = 0; y < h; y++) {
+            int want_hi = y + r + 1 < h ? y + r + 1 : h, want_lo = y - r > 0 ? y - r : 0;
+            for (; hi < want_hi; hi++) {
+                const float *s = j->src + ((size_t)hi * w + x0) * 2;
+                for (int k = 0; k < 2 * n; k++)
+                    a[k] += s[k];
+            }
+            for (; lo < want_lo; lo++) {
+                const float *s = j->src + ((size_t)lo * w + x0) * 2;
+                for (int k = 0; k < 2 * n; k++)
+                    a[k] -= s[k];
+            }
+            double inv = 1.0 / (double)(hi - lo);
+            float *d = j->dst + ((size_t)y * w + x0) * 2;
+            for (int k = 0; k < 2 * n; k++)
+                d[k] = (float)(a[k] * inv);
+        }
+    }
+}
+
+static fx_result box_filter(fx_context *ctx, float *m, int w, int h, int radius, const char *where)
+{
+    if (radius <= 0)
+        return FX_OK;
+    size_t bytes = (size_t)w * h * 2 * sizeof(float);
+    float *tmp = fx_buffer_get(ctx, bytes);
+    if (!tmp)
+        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory filtering a %d x %d shadow map", where, w, h);
+    box_job j = {m, tmp, w, h, radius};
+    fx_parallel_for(ctx, h, fx_grain_for(ctx, h), box_h_rows, &j);
+    box_job v = {tmp, m, w, h, radius};
+    int blocks = (w + BOX_COLS - 1) / BOX_COLS;
+    fx_parallel_for(ctx, blocks, 1, box_v_cols, &v);
+    fx_buffer_put(ctx, tmp, bytes);
+    return FX_OK;
+}
+
 fx_result fx_shadow_map_filter(fx_context *ctx, fx_shadow_map *sm, fx_shadow_filter filter, float width,
                                const char *where)
 {
+    int level = FX_SHADOW_FILTER_LEVEL((int)filter), kind = FX_SHADOW_FILTER_KIND((int)filter);
+    if (level > FX_SHADOW_MAX_LEVEL)
+        level = FX_SHADOW_MAX_LEVEL;
+    if (level > 0 && sm->level == 0) {
+        fx_result r = reduce_moments(ctx, sm, level, where);
+        if (r)
+            return r;
+        width /= (float)(1 << level);
+    }
     if (!(width > 1.0f))
         return FX_OK;
-    if (filter == FX_SHADOW_FILTER_BOX_SAT) {
+    if (kind == FX_SHADOW_FILTER_BOX_SAT) {
         int radius = (int)lrintf((width - 1.0f) * 0.5f);
-        return fx_sat_box_filter(ctx, sm->moments, sm->moments, sm->width, sm->height, 2, radius, where);
+        return box_filter(ctx, sm->moments, sm->mwidth, sm->mheight, radius, where);
     }
     fx_blur_spec spec = {width / sqrt(12.0), FX_BLUR_RECURSIVE, 3};
-    return fx_blur_image(ctx, sm->moments, sm->moments, sm->width, sm->height, 2, &spec, NULL, where);
+    return fx_blur_image(ctx, sm->moments, sm->moments, sm->mwidth, sm->mheight, 2, &spec, NULL, where);
 }
 
 void fx_shadow_map_free(fx_shadow_map *sm)
