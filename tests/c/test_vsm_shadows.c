@@ -532,9 +532,22 @@ static void test_box_and_levels(fx_context *ctx)
         for (int ri = 0; ri < 5; ri++) {
             fx_shadow_map sm;
             CHECK_OK(ctx, fx_shadow_map_build(ctx, raw, w, h, 1.0f, 10.0f, 1, &sm, "test"));
+            CHECK(sm.moments == NULL); /* made by the filter call */
+            fx_shadow_map unf;
+            CHECK_OK(ctx, fx_shadow_map_build(ctx, raw, w, h, 1.0f, 10.0f, 1, &unf, "test"));
+            CHECK_OK(ctx, fx_shadow_map_filter(ctx, &unf, FX_SHADOW_FILTER_BOX_SAT, 1.0f, "test"));
+            CHECK(unf.moments != NULL);
             float *want = malloc((size_t)w * h * 2 * sizeof(float));
-            CHECK_OK(ctx, fx_sat_box_filter(ctx, sm.moments, want, w, h, 2, radii[ri], "test"));
+            CHECK_OK(ctx, fx_sat_box_filter(ctx, unf.moments, want, w, h, 2, radii[ri], "test"));
+            fx_shadow_map_free(&unf);
+            /* fused (moments made row by row inside the box) and on an existing array */
             CHECK_OK(ctx, fx_shadow_map_filter(ctx, &sm, FX_SHADOW_FILTER_BOX_SAT, 2.0f * radii[ri] + 1.0f, "test"));
+            fx_shadow_map two;
+            CHECK_OK(ctx, fx_shadow_map_build(ctx, raw, w, h, 1.0f, 10.0f, 1, &two, "test"));
+            CHECK_OK(ctx, fx_shadow_map_filter(ctx, &two, FX_SHADOW_FILTER_BOX_SAT, 1.0f, "test"));
+            CHECK_OK(ctx, fx_shadow_map_filter(ctx, &two, FX_SHADOW_FILTER_BOX_SAT, 2.0f * radii[ri] + 1.0f, "test"));
+            CHECK(memcmp(two.moments, sm.moments, (size_t)w * h * 2 * sizeof(float)) == 0);
+            fx_shadow_map_free(&two);
             double worst = 0;
             for (int i = 0; i < w * h * 2; i++)
                 worst = fmax(worst, isfinite(sm.moments[i]) ? fabs(sm.moments[i] - want[i]) : 1e9);
@@ -547,6 +560,7 @@ static void test_box_and_levels(fx_context *ctx)
         for (int level = 1; level <= 3; level++) {
             fx_shadow_map full, red;
             CHECK_OK(ctx, fx_shadow_map_build(ctx, raw, w, h, 1.0f, 10.0f, 1, &full, "test"));
+            CHECK_OK(ctx, fx_shadow_map_filter(ctx, &full, FX_SHADOW_FILTER_BOX_SAT, 1.0f, "test"));
             CHECK_OK(ctx, fx_shadow_map_build(ctx, raw, w, h, 1.0f, 10.0f, 1, &red, "test"));
             CHECK_OK(ctx, fx_shadow_map_filter(ctx, &red, FX_SHADOW_FILTER_WITH_LEVEL(FX_SHADOW_FILTER_BOX_SAT, level),
                                                1.5f, "test"));

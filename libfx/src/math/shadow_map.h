@@ -33,9 +33,10 @@ typedef struct fx_shadow_map {
     int width, height;
     float znear, zfar;
     float *depth;    /* normalised depth, width * height */
-    float *moments;  /* filtered (E[z], E[z^2]), mwidth * mheight * 2 */
+    float *moments;  /* filtered (E[z], E[z^2]), mwidth * mheight * 2; NULL until filtered */
     int mwidth, mheight; /* the moments' grid: ceil(width / 2^level) x ceil(height / 2^level) */
     int level;       /* the moments' reduction level (0: full resolution) */
+    int derivative_bias;
 } fx_shadow_map;
 
 /* Normalised depth of a raw planar depth. */
@@ -53,11 +54,14 @@ static inline float fx_shadow_map_norm_dist(const fx_shadow_map *sm, float metre
     return range > 1e-20f ? 2.0f * metres / range : 0.0f;
 }
 
-/* Builds depth and moments (unfiltered) from raw planar depth. */
+/* Builds the normalised depth from raw planar depth. The moments are made by
+ * fx_shadow_map_filter (any width, even <= 1), at the level it asks for: without that call
+ * moments is NULL (PCF and the hard test read only the depth). */
 fx_result fx_shadow_map_build(fx_context *ctx, const float *raw_depth, int width, int height, float znear,
                               float zfar, int derivative_bias, fx_shadow_map *out, const char *where);
 /* Filters the moments with a box (width rounded to an odd number of texels) or a Gaussian
- * of the same variance. width <= 1: unfiltered. `filter` may carry a reduction level
+ * of the same variance (first making the moments when there are none). width <= 1:
+ * unfiltered. `filter` may carry a reduction level
  * (FX_SHADOW_FILTER_WITH_LEVEL): the moments are first reduced, then filtered with
  * width / 2^level texels of the reduced grid (unfiltered when that is <= 1; the bilinear
  * lookup of blocks of 2^level texels is then the filter). */
