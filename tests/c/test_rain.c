@@ -344,6 +344,99 @@ static void test_cache(void)
     fx_context_free(plain);
 }
 
+
+/* rain's layers knob: fewer layers add a subset of the streaks (never more light than
+ * three), the near layer alone is the same at every count where only it can show (wall at
+ * 3 m), bit-identical on 1 and 2 threads; 1x1, 1xN and odd frames with NaN / Inf depth
+ * stay finite for rain, rain_splashes and wet_surfaces. */
+static void test_rain_layers_extremes(fx_context *ctx)
+{
+    fx_camera mc;
+    const char *open = rain_map(ctx, -100.0f, 0.0f, &mc, "open_layers");
+    fx_frame *f = street_frame(ctx, 1e10f, open, &mc, 10);
+    const char *base = "\"cover_material\": \"\", \"density\": 1.0, \"streak_length\": 8.0, \"streak_width\": 2.0";
+    float *o[3];
+    for (int l = 1; l <= 3; l++) {
+        char params[256];
+        snprintf(params, sizeof params, "%s, \"layers\": %d", base, l);
+        o[l - 1] = et_run_effect(ctx, "rain", f, params, NULL);
+        CHECK(o[l - 1] && tu_all_finite(o[l - 1], N * N * 4));
+    }
+    const float *src = et_combined(f);
+    int more = 0, changed[3] = {0, 0, 0};
+    for (int i = 0; o[0] && o[1] && o[2] && i < N * N; i++)
+        for (int c = 0; c < 3; c++) {
+            more += o[0][4 * i + c] > o[1][4 * i + c] || o[1][4 * i + c] > o[2][4 * i + c];
+            for (int l = 0; l < 3; l++)
+                changed[l] += o[l][4 * i + c] != src[4 * i + c];
+        }
+    CHECK(more == 0);
+    CHECK(changed[0] > 0 && changed[0] < changed[1] && changed[1] < changed[2]);
+    fx_context *c1 = NULL;
+    fx_context_new(&c1, 1);
+    fx_frame *f1 = street_frame(c1, 1e10f, open, &mc, 10);
+    char params[256];
+    snprintf(params, sizeof params, "%s, \"layers\": 2", base);
+    float *o1 = et_run_effect(c1, "rain", f1, params, NULL);
+    CHECK(o1 && o[1] && memcmp(o1, o[1], N * N * 4 * sizeof(float)) == 0);
+    free(o1);
+    fx_frame_free(f1);
+    fx_context_free(c1);
+    for (int l = 0; l < 3; l++)
+        free(o[l]);
+    fx_frame_free(f);
+    /* a wall at 3 m: only the near layer can show on the left half; layers 1 and 3 agree there */
+    f = street_frame(ctx, 3.0f, open, &mc, 10);
+    snprintf(params, sizeof params, "%s, \"layers\": 1", base);
+    float *a = et_run_effect(ctx, "rain", f, params, NULL);
+    snprintf(params, sizeof params, "%s, \"layers\": 3", base);
+    float *b = et_run_effect(ctx, "rain", f, params, NULL);
+    int differ = 0;
+    for (int y = 0; a && b && y < N; y++)
+        for (int x = 0; x < N / 2; x++)
+            differ += memcmp(a + 4 * (y * N + x), b + 4 * (y * N + x), 16) != 0;
+    CHECK(a && b && differ == 0);
+    free(a);
+    free(b);
+    fx_frame_free(f);
+    /* tiny and odd frames with hostile depth and normals */
+    int sizes[][2] = {{1, 1}, {1, 7}, {7, 1}, {5, 3}};
+    for (size_t k = 0; k < sizeof sizes / sizeof sizes[0]; k++) {
+        int w = sizes[k][0], h = sizes[k][1];
+        float *rgba = malloc((size_t)w * h * 4 * sizeof(float)), *d = malloc((size_t)w * h * sizeof(float));
+        float *nrm = malloc((size_t)w * h * 3 * sizeof(float));
+        for (int i = 0; i < w * h * 4; i++)
+            rgba[i] = 0.5f;
+        for (int i = 0; i < w * h; i++) {
+            d[i] = i % 3 == 1 ? NAN : i % 3 == 2 ? INFINITY : 4.0f;
+            nrm[3 * i] = 0.0f;
+            nrm[3 * i + 1] = i % 2 ? NAN : 0.0f;
+            nrm[3 * i + 2] = 1.0f;
+        }
+        fx_frame *g = et_frame(ctx, w, h, rgba);
+        fx_frame_add_pass(g, "Depth", 1, d);
+        fx_frame_add_pass(g, "Normal", 3, nrm);
+        float w2c[16] = {1, 0, 0, 0, 0, 0, 1, -1, 0, -1, 0, -10, 0, 0, 0, 1};
+        fx_camera cam;
+        ortho(&cam, w2c, 5.0f, 0.1f, 100.0f);
+        fx_frame_set_camera(g, &cam);
+        CHECK_OK(ctx, fx_frame_set_aux_view(g, "rain_map", open, &mc));
+        const char *runs[][2] = {{"rain", "\"cover_material\": \"\", \"layers\": 1"},
+                                 {"rain", "\"cover_material\": \"\", \"layers\": 3"},
+                                 {"rain_splashes", ""},
+                                 {"wet_surfaces", ""}};
+        for (int r = 0; r < 4; r++) {
+            float *out = et_run_effect(ctx, runs[r][0], g, runs[r][1], NULL);
+            CHECK(out && tu_all_finite(out, (size_t)w * h * 4));
+            free(out);
+        }
+        fx_frame_free(g);
+        free(rgba);
+        free(d);
+        free(nrm);
+    }
+}
+
 int main(void)
 {
     fx_context *ctx = NULL;
@@ -351,6 +444,7 @@ int main(void)
     test_rain(ctx);
     test_splashes_and_wet(ctx);
     test_cache();
+    test_rain_layers_extremes(ctx);
     fx_context_free(ctx);
     return tu_finish("test_rain");
 }

@@ -512,6 +512,167 @@ static void test_cache(void)
     fx_context_free(one);
 }
 
+
+/* The box filter (separable running sums in double) gives the SAT's box means on odd
+ * sizes, 1x1, 1xN and radii beyond the map; the moments' reduction levels are the block
+ * means of the moments (partial blocks at the far borders) with finite lookups. */
+static void test_box_and_levels(fx_context *ctx)
+{
+    int sizes[][2] = {{37, 23}, {1, 1}, {1, 9}, {9, 1}, {5, 3}};
+    uint32_t st = 99;
+    for (size_t k = 0; k < sizeof sizes / sizeof sizes[0]; k++) {
+        int w = sizes[k][0], h = sizes[k][1];
+        float *raw = malloc((size_t)w * h * sizeof(float));
+        for (int i = 0; i < w * h; i++) {
+            st = st * 1664525u + 1013904223u;
+            raw[i] = 3.0f + 4.0f * (float)(st >> 8) / 16777216.0f;
+        }
+        raw[0] = NAN; /* a hostile texel: normalised to 1 (nothing occludes) */
+        int radii[] = {0, 1, 2, 5, 40};
+        for (int ri = 0; ri < 5; ri++) {
+            fx_shadow_map sm;
+            CHECK_OK(ctx, fx_shadow_map_build(ctx, raw, w, h, 1.0f, 10.0f, 1, &sm, "test"));
+            CHECK(sm.moments == NULL); /* made by the filter call */
+            fx_shadow_map unf;
+            CHECK_OK(ctx, fx_shadow_map_build(ctx, raw, w, h, 1.0f, 10.0f, 1, &unf, "test"));
+            CHECK_OK(ctx, fx_shadow_map_filter(ctx, &unf, FX_SHADOW_FILTER_BOX_SAT, 1.0f, "test"));
+            CHECK(unf.moments != NULL);
+            float *want = malloc((size_t)w * h * 2 * sizeof(float));
+            CHECK_OK(ctx, fx_sat_box_filter(ctx, unf.moments, want, w, h, 2, radii[ri], "test"));
+            fx_shadow_map_free(&unf);
+            /* fused (moments made row by row inside the box) and on an existing array */
+            CHECK_OK(ctx, fx_shadow_map_filter(ctx, &sm, FX_SHADOW_FILTER_BOX_SAT, 2.0f * radii[ri] + 1.0f, "test"));
+            fx_shadow_map two;
+            CHECK_OK(ctx, fx_shadow_map_build(ctx, raw, w, h, 1.0f, 10.0f, 1, &two, "test"));
+            CHECK_OK(ctx, fx_shadow_map_filter(ctx, &two, FX_SHADOW_FILTER_BOX_SAT, 1.0f, "test"));
+            CHECK_OK(ctx, fx_shadow_map_filter(ctx, &two, FX_SHADOW_FILTER_BOX_SAT, 2.0f * radii[ri] + 1.0f, "test"));
+            CHECK(memcmp(two.moments, sm.moments, (size_t)w * h * 2 * sizeof(float)) == 0);
+            fx_shadow_map_free(&two);
+            double worst = 0;
+            for (int i = 0; i < w * h * 2; i++)
+                worst = fmax(worst, isfinite(sm.moments[i]) ? fabs(sm.moments[i] - want[i]) : 1e9);
+            if (worst > 1e-6)
+                fprintf(stderr, "box %dx%d r %d: max |running sums - SAT| = %.2e\n", w, h, radii[ri], worst);
+            CHECK(worst < 1e-6);
+            free(want);
+            fx_shadow_map_free(&sm);
+        }
+        for (int level = 1; level <= 3; level++) {
+            fx_shadow_map full, red;
+            CHECK_OK(ctx, fx_shadow_map_build(ctx, raw, w, h, 1.0f, 10.0f, 1, &full, "test"));
+            CHECK_OK(ctx, fx_shadow_map_filter(ctx, &full, FX_SHADOW_FILTER_BOX_SAT, 1.0f, "test"));
+            CHECK_OK(ctx, fx_shadow_map_build(ctx, raw, w, h, 1.0f, 10.0f, 1, &red, "test"));
+            CHECK_OK(ctx, fx_shadow_map_filter(ctx, &red, FX_SHADOW_FILTER_WITH_LEVEL(FX_SHADOW_FILTER_BOX_SAT, level),
+                                               1.5f, "test"));
+            int step = 1 << level, mw = (w + step - 1) / step, mh = (h + step - 1) / step;
+            CHECK(red.mwidth == mw && red.mheight == mh && red.level == level);
+            double worst = 0;
+            for (int my = 0; my < mh; my++)
+                for (int mx = 0; mx < mw; mx++) {
+                    double a = 0, b = 0;
+                    int n = 0;
+                    for (int y = my * step; y < my * step + step && y < h; y++)
+                        for (int x = mx * step; x < mx * step + step && x < w; x++) {
+                            a += full.moments[2 * (y * w + x)];
+                            b += full.moments[2 * (y * w + x) + 1];
+                            n++;
+                        }
+                    worst = fmax(worst, fabs(red.moments[2 * (my * mw + mx)] - a / n));
+                    worst = fmax(worst, fabs(red.moments[2 * (my * mw + mx) + 1] - b / n));
+                }
+            CHECK(worst < 1e-6);
+            /* lookups anywhere on (and off) the full map's coordinates: finite */
+            float coords[] = {-5.0f, 0.0f, 0.5f, (float)w * 0.5f, (float)w, (float)w + 7.0f};
+            for (int a = 0; a < 6; a++)
+                for (int b = 0; b < 6; b++) {
+                    float m1, m2;
+                    fx_shadow_map_moments(&red, coords[a], coords[b] * (float)h / (float)w, &m1, &m2);
+                    CHECK(isfinite(m1) && isfinite(m2));
+                }
+            fx_shadow_map_free(&full);
+            fx_shadow_map_free(&red);
+        }
+        free(raw);
+    }
+}
+
+/* map_level through the effect: the square occluder's shadow stays (centre dark, far
+ * corners lit), every level within a few texels of the full map's picture, the same bits
+ * on 1 and 2 threads; odd and 1x1 frames with NaN depth stay finite. */
+static void test_map_level_effect(fx_context *ctx)
+{
+    float h[N * N];
+    for (int y = 0; y < N; y++)
+        for (int x = 0; x < N; x++) {
+            float wx = -L + (x + 0.5f) * 2 * L / N, wy = L - (y + 0.5f) * 2 * L / N;
+            h[y * N + x] = fabsf(wx) < 1.5f && fabsf(wy) < 1.5f ? 2.0f : 0.0f;
+        }
+    const char *path = write_light_view(ctx, h, "square_levels");
+    fx_frame *f = floor_frame(ctx, path);
+    fx_context *c1 = NULL;
+    fx_context_new(&c1, 1);
+    fx_frame *f1 = floor_frame(c1, path);
+    float *ref = NULL;
+    for (int level = 0; level <= 4; level++) {
+        char params[160];
+        snprintf(params, sizeof params, "\"apply\": \"combined\", \"filter_size\": 5, \"map_level\": %d", level);
+        float *o = et_run_effect(ctx, "vsm_shadows", f, params, NULL);
+        float *o1 = et_run_effect(c1, "vsm_shadows", f1, params, NULL);
+        CHECK(o && o1 && memcmp(o, o1, N * N * 4 * sizeof(float)) == 0);
+        CHECK(o && tu_all_finite(o, N * N * 4));
+        if (o && level <= 2) {
+            CHECK(o[4 * (N / 2 * N + N / 2)] < 0.05f);
+            CHECK(o[0] > 0.95f && o[4 * (N * N - 1)] > 0.95f);
+        }
+        if (level == 0)
+            ref = o;
+        else if (o && ref) {
+            double mae = 0;
+            for (int i = 0; i < N * N; i++)
+                mae += fabs(o[4 * i] - ref[4 * i]);
+            mae /= N * N;
+            fprintf(stderr, "map_level %d: mean |visibility - level 0| = %.4f\n", level, mae);
+            CHECK(mae < 0.02 * (1 << level));
+        }
+        if (o != ref)
+            free(o);
+        free(o1);
+    }
+    free(ref);
+    fx_frame_free(f1);
+    fx_context_free(c1);
+    fx_frame_free(f);
+    /* odd and 1x1 frames, NaN / Inf / negative depth, through the same light view */
+    int sizes[][2] = {{1, 1}, {7, 5}, {1, 13}, {13, 1}};
+    for (size_t k = 0; k < sizeof sizes / sizeof sizes[0]; k++) {
+        int w = sizes[k][0], hh = sizes[k][1];
+        float *rgba = malloc((size_t)w * hh * 4 * sizeof(float)), *d = malloc((size_t)w * hh * sizeof(float));
+        for (int i = 0; i < w * hh * 4; i++)
+            rgba[i] = 1.0f;
+        for (int i = 0; i < w * hh; i++)
+            d[i] = i % 4 == 1 ? NAN : i % 4 == 2 ? INFINITY : i % 4 == 3 ? -1.0f : CAM_Z;
+        fx_frame *g = et_frame(ctx, w, hh, rgba);
+        fx_frame_add_pass(g, "Depth", 1, d);
+        fx_camera cam = top_camera();
+        fx_frame_set_camera(g, &cam);
+        CHECK_OK(ctx, fx_frame_set_aux_view(g, "light:Sun", path, &cam));
+        for (int level = 0; level <= 4; level += 2) {
+            char params[160];
+            snprintf(params, sizeof params, "\"apply\": \"combined\", \"filter_size\": 5, \"map_level\": %d", level);
+            float *o = et_run_effect(ctx, "vsm_shadows", g, params, NULL);
+            CHECK(o && tu_all_finite(o, (size_t)w * hh * 4));
+            free(o);
+        }
+        float *o = et_run_effect(ctx, "vsm_shadows", g, "\"apply\": \"combined\", \"map_level\": 3, \"filter_size\": 1",
+                                 NULL);
+        CHECK(o && tu_all_finite(o, (size_t)w * hh * 4));
+        free(o);
+        fx_frame_free(g);
+        free(rgba);
+        free(d);
+    }
+}
+
 int main(void)
 {
     fx_context *ctx = NULL;
@@ -524,6 +685,8 @@ int main(void)
     test_sat_precision(ctx);
     test_sun_diffuse(ctx);
     test_cache();
+    test_box_and_levels(ctx);
+    test_map_level_effect(ctx);
     fx_context_free(ctx);
     return tu_finish("test_vsm_shadows");
 }

@@ -36,6 +36,7 @@ typedef struct rain_params {
     float cover_opacity;
     float cover_brightness;
     int seed;
+    int layers;
 } rain_params;
 
 static const float default_color[3] = {0.8f, 0.85f, 0.9f};
@@ -67,6 +68,9 @@ static const fx_param_def rain_param_defs[] = {
     FX_P_FLOAT(rain_params, cover_brightness, "cover_brightness", 0.6, 0.0, 10.0, 0.0, 2.0, "",
                "Brightness of the rain drawn on cover quads, relative to brightness"),
     FX_P_INT(rain_params, seed, "seed", 7, -2147483647, 2147483647, 0, 100, "", "Pattern seed"),
+    FX_P_INT(rain_params, layers, "layers", 3, 1, 3, 1, 3, "",
+             "How many of the near/mid/far layers are drawn, nearest first (the cost is about one "
+             "layer's per layer; fewer layers: less distant rain)"),
 };
 
 static fx_pass_set rain_passes(const void *params)
@@ -106,8 +110,42 @@ typedef struct rain_job {
     float *dbg;
 } rain_job;
 
+/* The streaks of the cells a pixel can see, per layer: the cells (ci + di, cj + dj) for
+ * di in [-reach, reach], dj in {-1, 0}, with the streak each holds (x0 < 0 marks none).
+ * Consecutive pixels of a row mostly fall in the same cells (a cell is 14 x 60 pattern
+ * pixels, 1.5 to 9 frame pixels per pattern pixel), so the hashes are computed once per
+ * cell change: the same values as per pixel, bit for bit. */
+typedef struct cell_cache {
+    int ci, cj, valid;
+    int n;
+    float x0[6], y0[6], len[6];
+    int has[6];
+} cell_cache;
+
+static void cells_fill(const rain_job *j, cell_cache *cc, int ci, int cj, int layer, int reach)
+{
+    const rain_params *p = j->p;
+    float cw = 14.0f, ch = 1.5f * p->length;
+    cc->ci = ci;
+    cc->cj = cj;
+    cc->valid = 1;
+    cc->n = 0;
+    for (int di = -reach; di <= reach; di++)
+        for (int dj = -1; dj <= 0; dj++) {
+            int cy = cj + dj, cx = ci + di, k = cc->n++;
+            uint32_t h = fx_hash4(cx, cy, layer, p->seed);
+            cc->has[k] = fx_hash_to_unit(h) < p->density;
+            if (!cc->has[k])
+                continue;
+            uint32_t h1 = fx_hash_u32(h), h2 = fx_hash_u32(h1), h3 = fx_hash_u32(h2);
+            cc->x0[k] = ((float)cx + 0.15f + 0.7f * fx_hash_to_unit(h1)) * cw;
+            cc->y0[k] = ((float)cy + fx_hash_to_unit(h2)) * ch;
+            cc->len[k] = p->length * (0.7f + 0.6f * fx_hash_to_unit(h3));
+        }
+}
+
 /* Streak intensity in [0, 1] of layer `layer` at frame pixel (x, y) (continuous). */
-static float streak(const rain_job *j, float x, float y, int layer, float scale)
+static float streak(const rain_job *j, float x, float y, int layer, float scale, cell_cache *cc)
 {
     const rain_params *p = j->p;
     float k = j->res * scale;
@@ -119,22 +157,17 @@ static float streak(const rain_job *j, float x, float y, int layer, float scale)
     float best = 0.0f;
     float wmin = 1.0f / k, we = p->width > wmin ? p->width : wmin;
     int reach = we > 0.15f * cw ? 1 : 0; /* wide streaks reach into the next columns */
-    for (int di = -reach; di <= reach; di++)
-    for (int dj = -1; dj <= 0; dj++) {
-        int cy = cj + dj, cx = ci + di;
-        uint32_t h = fx_hash4(cx, cy, layer, p->seed);
-        if (fx_hash_to_unit(h) >= p->density)
+    if (!cc->valid || cc->ci != ci || cc->cj != cj)
+        cells_fill(j, cc, ci, cj, layer, reach);
+    for (int c = 0; c < cc->n; c++) {
+        if (!cc->has[c])
             continue;
-        uint32_t h1 = fx_hash_u32(h), h2 = fx_hash_u32(h1), h3 = fx_hash_u32(h2);
-        float x0 = ((float)cx + 0.15f + 0.7f * fx_hash_to_unit(h1)) * cw;
-        float y0 = ((float)cy + fx_hash_to_unit(h2)) * ch;
-        float len = p->length * (0.7f + 0.6f * fx_hash_to_unit(h3));
-        float a = (v - y0) / len;
+        float a = (v - cc->y0[c]) / cc->len[c];
         if (a <= 0.0f || a >= 1.0f)
             continue;
         /* a streak narrower than a pixel is drawn a pixel wide and dimmer (its coverage),
          * so it does not alias into speckle at small sizes */
-        float across = 1.0f - fabsf(u - x0) / we;
+        float across = 1.0f - fabsf(u - cc->x0[c]) / we;
         if (across <= 0.0f)
             continue;
         float i = across * (p->width / we) * 4.0f * a * (1.0f - a);
@@ -149,7 +182,10 @@ static void rain_rows(void *user, int y0, int y1)
     const fx_effect_run *run = j->run;
     const rain_params *p = j->p;
     const fx_rect *roi = &run->roi;
-    for (int y = roi->y0 + y0; y < roi->y0 + y1; y++)
+    for (int y = roi->y0 + y0; y < roi->y0 + y1; y++) {
+        cell_cache cc[4];
+        for (int l = 0; l < 4; l++)
+            cc[l].valid = 0;
         for (int x = roi->x0; x < roi->x1; x++) {
             size_t i = (size_t)y * run->width + x;
             const float *s = run->src + 4 * i;
@@ -159,16 +195,16 @@ static void rain_rows(void *user, int y0, int y1)
                 d = 0.0f;
             if (!isfinite(d))
                 d = 3.0e38f;
-            fx_vec2 ndc = fx_view_pixel_to_ndc(&j->surf.view, (float)x + 0.5f, (float)y + 0.5f);
             float sum = 0.0f;
-            for (int l = 0; l < 3; l++) {
+            for (int l = 0; l < p->layers; l++) {
                 float dl = p->distances[l];
                 if (!(d > dl))
                     continue; /* the scene is nearer than the layer */
                 float scale = p->distances[0] / dl;
-                float st = streak(j, (float)x + 0.5f, (float)y + 0.5f, l, scale);
+                float st = streak(j, (float)x + 0.5f, (float)y + 0.5f, l, scale, &cc[l]);
                 if (st <= 0.0f)
                     continue;
+                fx_vec2 ndc = fx_view_pixel_to_ndc(&j->surf.view, (float)x + 0.5f, (float)y + 0.5f);
                 fx_vec3 w = fx_view_to_world(&j->surf.view, fx_view_position(&j->surf.view, ndc, dl));
                 if (fx_rain_map_exposed(&j->rm, w) <= 0.0f)
                     continue; /* under cover */
@@ -177,7 +213,7 @@ static void rain_rows(void *user, int y0, int y1)
             if (j->cover && j->camera_covered) {
                 float c = fx_saturate(j->cover->coverage[i] / p->cover_opacity);
                 if (c > 0.0f)
-                    sum += c * p->cover_brightness * streak(j, (float)x + 0.5f, (float)y + 0.5f, 3, 1.0f);
+                    sum += c * p->cover_brightness * streak(j, (float)x + 0.5f, (float)y + 0.5f, 3, 1.0f, &cc[3]);
             }
             if (j->dbg)
                 j->dbg[i] = sum;
@@ -186,6 +222,7 @@ static void rain_rows(void *user, int y0, int y1)
                 o[c] = s[c] + a * p->color[c];
             o[3] = s[3];
         }
+    }
 }
 
 static fx_result rain_process(const fx_effect_run *run)
@@ -212,7 +249,11 @@ static fx_result rain_process(const fx_effect_run *run)
     j.cs = cosf(a);
     j.sn = sinf(a);
     fx_mask *cover = NULL;
-    if (p->cover_material[0]) {
+    fx_vec3 cam = fx_v3(j.surf.view.camera_to_world[3], j.surf.view.camera_to_world[7],
+                        j.surf.view.camera_to_world[11]);
+    /* the cover quads get rain only when the camera stands under cover: otherwise their
+     * mask (a Cryptomatte match over the frame) is not built */
+    if (p->cover_material[0] && fx_rain_map_exposed(&j.rm, cam) <= 0.0f) {
         fx_mask_spec spec;
         memset(&spec, 0, sizeof spec);
         char *names[1] = {(char *)p->cover_material};
@@ -224,9 +265,7 @@ static fx_result rain_process(const fx_effect_run *run)
             return r;
         }
         j.cover = cover;
-        fx_vec3 cam = fx_v3(j.surf.view.camera_to_world[3], j.surf.view.camera_to_world[7],
-                            j.surf.view.camera_to_world[11]);
-        j.camera_covered = fx_rain_map_exposed(&j.rm, cam) <= 0.0f;
+        j.camera_covered = 1;
     }
     j.dbg = fx_effect_debug_pass(run, "streaks", 1, &r);
     if (!j.dbg && r) {
@@ -247,7 +286,7 @@ const fx_effect_class fx_effect_rain = {
     .params_size = sizeof(rain_params),
     .params = rain_param_defs,
     .param_count = FX_COUNT_OF(rain_param_defs),
-    .presets = {NULL, NULL, NULL, NULL},
+    .presets = {"{\"layers\": 1}", "{\"layers\": 2}", "{\"layers\": 3}", "{\"layers\": 3}"},
     .passes = rain_passes,
     .needs_camera = rain_needs_camera,
     .aux_views = fx_aux_needs_rain_map, /* what is under cover */

@@ -83,19 +83,22 @@ typedef struct splash_job {
     float *dbg;
 } splash_job;
 
-/* Splash intensity at world point w (on an up-facing surface). */
-static float splash_at(const splash_job *j, fx_vec3 w)
+/* The splashes of the 3 x 3 cells around cell (ci, cj): centre, radius now and fade
+ * factor (fade^1.5), or none. Pixels of a row mostly stay in one cell (a cell is spacing
+ * metres, tens of pixels on the ground), so this is computed once per cell change: the
+ * same values as per pixel, bit for bit. */
+typedef struct splash_cells {
+    int ci, cj, valid, n;
+    float sx[9], sy[9], r[9], fade[9], sqf[9], amp[9];
+} splash_cells;
+
+static void cells_fill(const splash_job *j, splash_cells *sc, int ci, int cj)
 {
     const splash_params *p = j->p;
-    /* Cells are int: a point further than ~1e8 cells away (hostile positions such as
-     * 1e38) has no splash, rather than an overflowing cell index. */
-    float cx = floorf(w.x / p->spacing), cy = floorf(w.y / p->spacing);
-    double cyc_all = j->t / p->lifetime + 1.0;
-    if (!(fabsf(cx) < 1e8f) || !(fabsf(cy) < 1e8f) || !(fabs(cyc_all) < 1e9))
-        return 0.0f;
-    int ci = (int)cx, cj = (int)cy;
-    float best = 0.0f;
-    float ring_w = 0.2f * p->size;
+    sc->ci = ci;
+    sc->cj = cj;
+    sc->valid = 1;
+    sc->n = 0;
     for (int dj = -1; dj <= 1; dj++)
         for (int di = -1; di <= 1; di++) {
             int i = ci + di, k = cj + dj;
@@ -108,16 +111,46 @@ static float splash_at(const splash_job *j, fx_vec3 w)
             if (fx_hash_to_unit(h) >= p->rate)
                 continue;
             uint32_t h1 = fx_hash_u32(h), h2 = fx_hash_u32(h1);
-            float sx = ((float)i + 0.1f + 0.8f * fx_hash_to_unit(h1)) * p->spacing;
-            float sy = ((float)k + 0.1f + 0.8f * fx_hash_to_unit(h2)) * p->spacing;
-            float dx = w.x - sx, dy = w.y - sy;
-            float dist = sqrtf(dx * dx + dy * dy);
-            float r = p->size * sqrtf(age);
-            float e = (dist - r) / ring_w;
+            int m = sc->n++;
+            sc->sx[m] = ((float)i + 0.1f + 0.8f * fx_hash_to_unit(h1)) * p->spacing;
+            sc->sy[m] = ((float)k + 0.1f + 0.8f * fx_hash_to_unit(h2)) * p->spacing;
+            sc->r[m] = p->size * sqrtf(age);
             float fade = 1.0f - age;
-            float v = expf(-e * e) * fade * sqrtf(fade);
-            best = v > best ? v : best;
+            sc->fade[m] = fade;
+            sc->sqf[m] = sqrtf(fade);
+            sc->amp[m] = fade * sc->sqf[m]; /* >= expf(.) * fade * sqrt(fade): rounding is monotone */
         }
+}
+
+/* Splash intensity at world point w (on an up-facing surface): the brightest ring of the
+ * 3 x 3 cells around w's. */
+static float splash_at(const splash_job *j, fx_vec3 w, splash_cells *sc)
+{
+    const splash_params *p = j->p;
+    /* Cells are int: a point further than ~1e8 cells away (hostile positions such as
+     * 1e38) has no splash, rather than an overflowing cell index. */
+    float cx = floorf(w.x / p->spacing), cy = floorf(w.y / p->spacing);
+    double cyc_all = j->t / p->lifetime + 1.0;
+    if (!(fabsf(cx) < 1e8f) || !(fabsf(cy) < 1e8f) || !(fabs(cyc_all) < 1e9))
+        return 0.0f;
+    int ci = (int)cx, cj = (int)cy;
+    if (!sc->valid || sc->ci != ci || sc->cj != cj)
+        cells_fill(j, sc, ci, cj);
+    float best = 0.0f;
+    float ring_w = 0.2f * p->size;
+    for (int m = 0; m < sc->n; m++) {
+        /* exp(-e^2) <= 1: a ring whose fade cannot beat the best so far is skipped, and
+         * one with e^2 > 110 gives exactly 0 in float: the maximum is the same bits */
+        if (!(sc->amp[m] > best))
+            continue;
+        float dx = w.x - sc->sx[m], dy = w.y - sc->sy[m];
+        float dist = sqrtf(dx * dx + dy * dy);
+        float e = (dist - sc->r[m]) / ring_w;
+        if (!(e * e <= 110.0f))
+            continue;
+        float v = expf(-e * e) * sc->fade[m] * sc->sqf[m];
+        best = v > best ? v : best;
+    }
     return best;
 }
 
@@ -127,7 +160,9 @@ static void splash_rows(void *user, int y0, int y1)
     const fx_effect_run *run = j->run;
     const splash_params *p = j->p;
     const fx_rect *roi = &run->roi;
-    for (int y = roi->y0 + y0; y < roi->y0 + y1; y++)
+    for (int y = roi->y0 + y0; y < roi->y0 + y1; y++) {
+        splash_cells sc;
+        memset(&sc, 0, sizeof sc);
         for (int x = roi->x0; x < roi->x1; x++) {
             size_t i = (size_t)y * run->width + x;
             const float *s = run->src + 4 * i;
@@ -136,14 +171,19 @@ static void splash_rows(void *user, int y0, int y1)
             fx_vec3 w, n;
             float d, v = 0.0f;
             if (fx_surface_world(&j->surf, x, y, &w, &d) && fx_surface_normal(&j->surf, x, y, &n) &&
-                n.z >= p->up_threshold && fx_rain_map_exposed(&j->rm, fx_v3_add(w, fx_v3_scale(n, 0.05f))) > 0.0f) {
-                v = splash_at(j, w);
-                for (int c = 0; c < 3; c++)
-                    o[c] = s[c] + v * p->brightness * p->color[c];
+                n.z >= p->up_threshold) {
+                v = splash_at(j, w, &sc);
+                /* the rain map only where there is a splash to hide */
+                if (v > 0.0f && !(fx_rain_map_exposed(&j->rm, fx_v3_add(w, fx_v3_scale(n, 0.05f))) > 0.0f))
+                    v = 0.0f;
+                if (v > 0.0f)
+                    for (int c = 0; c < 3; c++)
+                        o[c] = s[c] + v * p->brightness * p->color[c];
             }
             if (j->dbg)
                 j->dbg[i] = v;
         }
+    }
 }
 
 static fx_result splash_process(const fx_effect_run *run)

@@ -1,8 +1,9 @@
 /* vsm_shadows: shadows of a light from its auxiliary depth view (core/aux_view.h), as
- * variance shadow maps (Donnelly & Lauritzen 2006) filtered by a box through a
- * summed-area table or by a separable Gaussian, with the min-variance clamp, the
- * max-depth test with epsilon, light-bleeding reduction by remapping p_max and the
- * derivative bias on the second moment; PCF and the hard test as references.
+ * variance shadow maps (Donnelly & Lauritzen 2006) filtered by a box (separable running
+ * sums) or by a separable Gaussian, optionally on a mip of the moments (map_level), with
+ * the min-variance clamp, the max-depth test with epsilon, light-bleeding reduction by
+ * remapping p_max and the derivative bias on the second moment; PCF and the hard test as
+ * references.
  * docs/effects/vsm_shadows.md.
  *
  * Each pixel's surface (math/surface.h) is moved along its normal by normal_offset (when
@@ -39,6 +40,7 @@ typedef struct vsm_params {
     float strength;
     int diffuse;
     float roughness;
+    int map_level;
 } vsm_params;
 
 enum { METHOD_VSM = 0, METHOD_PCF, METHOD_HARD };
@@ -58,8 +60,9 @@ static const fx_param_def vsm_param_defs[] = {
               "filtering over the same box (cost grows with its area; the accuracy reference); hard: one "
               "depth test"),
     FX_P_ENUM(vsm_params, filter, "filter", 0, filter_items,
-              "How the moments are filtered: box_sat: a box through a summed-area table (centred, "
-              "double); gaussian: separable recursive Gaussian of the box's variance"),
+              "How the moments are filtered: box_sat: a box, as separable running sums in double (the "
+              "means of a summed-area table without its table); gaussian: separable recursive Gaussian "
+              "of the box's variance"),
     FX_P_FLOAT(vsm_params, filter_size, "filter_size", 5.0, 1.0, 1025.0, 1.0, 65.0, "pixels",
                "Filter width in light-map texels (box: rounded to odd); sets the penumbra width"),
     FX_P_FLOAT(vsm_params, min_std, "min_std", 0.01, 0.0, 10.0, 0.0, 0.1, "",
@@ -87,6 +90,10 @@ static const fx_param_def vsm_param_defs[] = {
     FX_P_FLOAT(vsm_params, roughness, "roughness", 0.5, 0.0, 1.0, 0.0, 1.0, "",
                "The scene's typical Principled roughness for the principled diffuse (Blender writes no "
                "roughness pass)"),
+    FX_P_INT(vsm_params, map_level, "map_level", 0, 0, FX_SHADOW_MAX_LEVEL, 0, 3, "",
+             "vsm: the light map's moments averaged over blocks of 2^level x 2^level texels before the "
+             "filter (a mip of the moments: cheaper filter and lookups, penumbrae at least 2^level texels "
+             "wide); 0: full resolution"),
 };
 
 static fx_pass_set vsm_passes(const void *params)
@@ -225,8 +232,15 @@ static fx_result vsm_process(const fx_effect_run *run)
      * (core/aux_view.h); PCF and hard read only the normalised depth */
     fx_aux_map map;
     int filtered = p->method == METHOD_VSM;
-    fx_result r = fx_aux_map_acquire(run->frame, name, p->derivative_bias, filtered ? p->filter : -1,
-                                     filtered ? p->filter_size : 0.0f, where, &map);
+    /* the moments are made by the filter call, which width <= 1 skips: 1.5 texels rounds
+     * to no box */
+    int level = filtered ? p->map_level : 0;
+    float width = filtered ? p->filter_size : 0.0f;
+    if (filtered && !(width > 1.0f))
+        width = 1.5f;
+    fx_result r = fx_aux_map_acquire(run->frame, name, p->derivative_bias,
+                                     filtered ? FX_SHADOW_FILTER_WITH_LEVEL(p->filter, level) : -1, width, where,
+                                     &map);
     if (r)
         return r;
     const fx_aux_view *av = map.av;
@@ -280,11 +294,11 @@ static int vsm_aux_views(const void *params, fx_aux_need *out, int max)
 
 const fx_effect_class fx_effect_vsm_shadows = {
     .name = "vsm_shadows",
-    .doc = "Shadows of a light from its depth view: variance shadow maps (SAT box or Gaussian), PCF or hard",
+    .doc = "Shadows of a light from its depth view: variance shadow maps (box or Gaussian), PCF or hard",
     .params_size = sizeof(vsm_params),
     .params = vsm_param_defs,
     .param_count = FX_COUNT_OF(vsm_param_defs),
-    .presets = {NULL, NULL, NULL, "{\"method\": \"pcf\"}"},
+    .presets = {"{\"map_level\": 2}", "{\"map_level\": 1}", "{\"map_level\": 0}", "{\"method\": \"pcf\"}"},
     .passes = vsm_passes,
     .needs_camera = vsm_needs_camera,
     .aux_views = vsm_aux_views,

@@ -44,6 +44,8 @@ static inline float fx_rain_map_soft(const fx_rain_map *rm, fx_vec3 p)
     if (!(px >= 0.0f && py >= 0.0f && px < (float)rm->sm.width && py < (float)rm->sm.height))
         /* also NaN (a hostile Position/Depth): never index the map with it */
         return 1.0f;
+    if (!rm->sm.moments) /* an unfiltered map (soft width under a texel): the hard test */
+        return fx_shadow_map_hard(&rm->sm, px, py, fx_shadow_map_norm(&rm->sm, d), rm->eps);
     float m1, m2;
     fx_shadow_map_moments(&rm->sm, px, py, &m1, &m2);
     float ms = fx_shadow_map_norm_dist(&rm->sm, 0.02f);

@@ -2,7 +2,6 @@
 #include "math/shadow_map.h"
 #include "core/parallel.h"
 #include "math/blur.h"
-#include "math/sat.h"
 
 #include <math.h>
 #include <string.h>
@@ -36,22 +35,29 @@ static float min_diff(const float *z, size_t i, int pos, int n, size_t step)
     return fabsf(f) < fabsf(b) ? f : b;
 }
 
+/* The moments (z, z^2 + derivative bias) of texel (x, y). */
+static inline void texel_moments(const fx_shadow_map *sm, int x, int y, float *m1, float *m2)
+{
+    const float *z = sm->depth;
+    size_t i = (size_t)y * sm->width + x;
+    float a = z[i], b = a * a;
+    if (sm->derivative_bias) {
+        float dx = min_diff(z, i, x, sm->width, 1);
+        float dy = min_diff(z, i, y, sm->height, (size_t)sm->width);
+        b += 0.25f * (dx * dx + dy * dy);
+    }
+    *m1 = a;
+    *m2 = b;
+}
+
 static void moment_rows(void *user, int y0, int y1)
 {
     build_job *j = user;
     fx_shadow_map *sm = j->sm;
-    const float *z = sm->depth;
     for (int y = y0; y < y1; y++)
         for (int x = 0; x < sm->width; x++) {
             size_t i = (size_t)y * sm->width + x;
-            float m1 = z[i], m2 = m1 * m1;
-            if (j->bias) {
-                float dx = min_diff(z, i, x, sm->width, 1);
-                float dy = min_diff(z, i, y, sm->height, (size_t)sm->width);
-                m2 += 0.25f * (dx * dx + dy * dy);
-            }
-            sm->moments[2 * i] = m1;
-            sm->moments[2 * i + 1] = m2;
+            texel_moments(sm, x, y, &sm->moments[2 * i], &sm->moments[2 * i + 1]);
         }
 }
 
@@ -67,32 +73,239 @@ fx_result fx_shadow_map_build(fx_context *ctx, const float *raw_depth, int width
     if (r)
         return r;
     out->depth = fx_mem_alloc(n * sizeof(float));
-    out->moments = fx_mem_alloc(n * 2 * sizeof(float));
-    if (!out->depth || !out->moments) {
+    if (!out->depth) {
         fx_shadow_map_free(out);
         return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for a %d x %d shadow map", where, width, height);
     }
-    out->width = width;
-    out->height = height;
+    out->width = out->mwidth = width;
+    out->height = out->mheight = height;
+    out->level = 0;
+    out->derivative_bias = derivative_bias != 0;
     out->znear = znear;
     out->zfar = zfar;
     build_job j = {raw_depth, out, derivative_bias};
     fx_parallel_for(ctx, height, fx_grain_for(ctx, height), norm_rows, &j);
-    fx_parallel_for(ctx, height, fx_grain_for(ctx, height), moment_rows, &j);
+    return FX_OK;
+}
+
+/* ---- the moments' reduction (mip) ---- */
+
+typedef struct reduce_job {
+    const fx_shadow_map *sm;
+    float *dst; /* mw x mh x 2 */
+    int mw, step;
+} reduce_job;
+
+/* Each reduced texel is the mean of its block's texels' moments (clipped at the far
+ * borders), summed in double in a fixed order, computed from the depth on the fly. */
+static void reduce_rows(void *user, int y0, int y1)
+{
+    reduce_job *j = user;
+    const fx_shadow_map *sm = j->sm;
+    for (int my = y0; my < y1; my++) {
+        int by0 = my * j->step, by1 = by0 + j->step < sm->height ? by0 + j->step : sm->height;
+        for (int mx = 0; mx < j->mw; mx++) {
+            int bx0 = mx * j->step, bx1 = bx0 + j->step < sm->width ? bx0 + j->step : sm->width;
+            double a = 0.0, b = 0.0;
+            for (int y = by0; y < by1; y++)
+                for (int x = bx0; x < bx1; x++) {
+                    float m1, m2;
+                    texel_moments(sm, x, y, &m1, &m2);
+                    a += m1;
+                    b += m2;
+                }
+            double n = (double)(by1 - by0) * (double)(bx1 - bx0);
+            float *o = j->dst + ((size_t)my * j->mw + mx) * 2;
+            o[0] = (float)(a / n);
+            o[1] = (float)(b / n);
+        }
+    }
+}
+
+/* The moments at level `level` (0: every texel) into sm->moments. */
+static fx_result make_moments(fx_context *ctx, fx_shadow_map *sm, int level, const char *where)
+{
+    int step = 1 << level;
+    int mw = (sm->width + step - 1) / step, mh = (sm->height + step - 1) / step;
+    float *m = fx_mem_alloc((size_t)mw * mh * 2 * sizeof(float));
+    if (!m)
+        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for a %d x %d shadow map's moments", where, mw,
+                       mh);
+    fx_mem_free(sm->moments);
+    sm->moments = m;
+    sm->mwidth = mw;
+    sm->mheight = mh;
+    sm->level = level;
+    if (level == 0) {
+        build_job j = {NULL, sm, sm->derivative_bias};
+        fx_parallel_for(ctx, mh, fx_grain_for(ctx, mh), moment_rows, &j);
+    } else {
+        reduce_job j = {sm, m, mw, step};
+        fx_parallel_for(ctx, mh, fx_grain_for(ctx, mh), reduce_rows, &j);
+    }
+    return FX_OK;
+}
+
+/* ---- the box: separable running sums in double ----
+ * Each output is the mean of the texels of its (2r+1)^2 box inside the map (as the SAT box
+ * it replaces: no replicated border). Per line a running sum in double: O(1) per texel
+ * whatever the radius, each line by the same code whatever thread runs it (bit-identical
+ * for any thread count), and no (w+1)(h+1)x2 table of doubles. Values are normalised
+ * depths in [-1, 1] and their squares: the running sums keep ~1e-15 relative precision. */
+
+typedef struct box_job {
+    const float *src;        /* w x h x 2 moments, or NULL: the full-resolution moments of sm */
+    const fx_shadow_map *sm; /* (src NULL) computed row by row from its depth ... */
+    float *rows;             /* ... into one row of w x 2 floats per worker */
+    float *dst;
+    int w, h, r;
+} box_job;
+
+static void box_h_range(box_job *j, int y0, int y1, float *row)
+{
+    const int w = j->w, r = j->r;
+    for (int y = y0; y < y1; y++) {
+        const float *s = j->src ? j->src + (size_t)y * w * 2 : row;
+        if (!j->src)
+            for (int x = 0; x < w; x++)
+                texel_moments(j->sm, x, y, &row[2 * x], &row[2 * x + 1]);
+        float *d = j->dst + (size_t)y * w * 2;
+        double a = 0.0, b = 0.0, inv = 1.0;
+        int lo = 0, hi = 0, n = 0; /* the window [lo, hi), its size and 1 / size */
+        for (int x = 0; x < w; x++) {
+            int want_hi = x + r + 1 < w ? x + r + 1 : w, want_lo = x - r > 0 ? x - r : 0;
+            for (; hi < want_hi; hi++) {
+                a += s[2 * hi];
+                b += s[2 * hi + 1];
+            }
+            for (; lo < want_lo; lo++) {
+                a -= s[2 * lo];
+                b -= s[2 * lo + 1];
+            }
+            if (hi - lo != n) { /* only near the ends of the line */
+                n = hi - lo;
+                inv = 1.0 / (double)n;
+            }
+            d[2 * x] = (float)(a * inv);
+            d[2 * x + 1] = (float)(b * inv);
+        }
+    }
+}
+
+static void box_h_rows(void *user, int y0, int y1)
+{
+    box_h_range(user, y0, y1, NULL);
+}
+
+static void box_h_rows_fused(void *user, int y0, int y1, int worker)
+{
+    box_job *j = user;
+    box_h_range(j, y0, y1, j->rows + (size_t)worker * j->w * 2);
+}
+
+#define BOX_COLS 64 /* columns per job of the vertical pass (running sums side by side) */
+
+static void box_v_cols(void *user, int c0, int c1)
+{
+    box_job *j = user;
+    const int w = j->w, h = j->h, r = j->r;
+    double a[BOX_COLS * 2];
+    for (int cb = c0; cb < c1; cb++) {
+        int x0 = cb * BOX_COLS, x1 = x0 + BOX_COLS < w ? x0 + BOX_COLS : w, n = x1 - x0;
+        memset(a, 0, sizeof a);
+        int lo = 0, hi = 0;
+        for (int y = 0; y < h; y++) {
+            int want_hi = y + r + 1 < h ? y + r + 1 : h, want_lo = y - r > 0 ? y - r : 0;
+            for (; hi < want_hi; hi++) {
+                const float *s = j->src + ((size_t)hi * w + x0) * 2;
+                for (int k = 0; k < 2 * n; k++)
+                    a[k] += s[k];
+            }
+            for (; lo < want_lo; lo++) {
+                const float *s = j->src + ((size_t)lo * w + x0) * 2;
+                for (int k = 0; k < 2 * n; k++)
+                    a[k] -= s[k];
+            }
+            double inv = 1.0 / (double)(hi - lo);
+            float *d = j->dst + ((size_t)y * w + x0) * 2;
+            for (int k = 0; k < 2 * n; k++)
+                d[k] = (float)(a[k] * inv);
+        }
+    }
+}
+
+/* The box over the full-resolution moments computed on the fly (fused: no moments array
+ * written and read back before the filter); the result lands in sm->moments. */
+static fx_result box_from_depth(fx_context *ctx, fx_shadow_map *sm, int radius, const char *where)
+{
+    int w = sm->width, h = sm->height, workers = fx_parallel_workers(ctx);
+    workers = workers > 0 ? workers : 1;
+    size_t bytes = (size_t)w * h * 2 * sizeof(float);
+    float *m = fx_mem_alloc(bytes), *tmp = fx_buffer_get(ctx, bytes);
+    float *rows = fx_mem_alloc((size_t)workers * w * 2 * sizeof(float));
+    if (!m || !tmp || !rows) {
+        fx_mem_free(m);
+        fx_mem_free(rows);
+        if (tmp)
+            fx_buffer_put(ctx, tmp, bytes);
+        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory filtering a %d x %d shadow map", where, w, h);
+    }
+    box_job j = {NULL, sm, rows, tmp, w, h, radius};
+    fx_parallel_for_worker(ctx, h, fx_grain_for(ctx, h), box_h_rows_fused, &j);
+    fx_mem_free(rows);
+    box_job v = {tmp, NULL, NULL, m, w, h, radius};
+    int blocks = (w + BOX_COLS - 1) / BOX_COLS;
+    fx_parallel_for(ctx, blocks, 1, box_v_cols, &v);
+    fx_buffer_put(ctx, tmp, bytes);
+    fx_mem_free(sm->moments);
+    sm->moments = m;
+    sm->mwidth = w;
+    sm->mheight = h;
+    sm->level = 0;
+    return FX_OK;
+}
+
+static fx_result box_filter(fx_context *ctx, float *m, int w, int h, int radius, const char *where)
+{
+    if (radius <= 0)
+        return FX_OK;
+    size_t bytes = (size_t)w * h * 2 * sizeof(float);
+    float *tmp = fx_buffer_get(ctx, bytes);
+    if (!tmp)
+        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory filtering a %d x %d shadow map", where, w, h);
+    box_job j = {m, NULL, NULL, tmp, w, h, radius};
+    fx_parallel_for(ctx, h, fx_grain_for(ctx, h), box_h_rows, &j);
+    box_job v = {tmp, NULL, NULL, m, w, h, radius};
+    int blocks = (w + BOX_COLS - 1) / BOX_COLS;
+    fx_parallel_for(ctx, blocks, 1, box_v_cols, &v);
+    fx_buffer_put(ctx, tmp, bytes);
     return FX_OK;
 }
 
 fx_result fx_shadow_map_filter(fx_context *ctx, fx_shadow_map *sm, fx_shadow_filter filter, float width,
                                const char *where)
 {
+    int level = FX_SHADOW_FILTER_LEVEL((int)filter), kind = FX_SHADOW_FILTER_KIND((int)filter);
+    if (level > FX_SHADOW_MAX_LEVEL)
+        level = FX_SHADOW_MAX_LEVEL;
+    if (sm->moments)
+        level = sm->level; /* already made (filtered again: on the grid it has) */
+    else if (level == 0 && kind == FX_SHADOW_FILTER_BOX_SAT && width > 1.0f && lrintf((width - 1.0f) * 0.5f) > 0)
+        return box_from_depth(ctx, sm, (int)lrintf((width - 1.0f) * 0.5f), where);
+    else {
+        fx_result r = make_moments(ctx, sm, level, where);
+        if (r)
+            return r;
+    }
+    width /= (float)(1 << level);
     if (!(width > 1.0f))
         return FX_OK;
-    if (filter == FX_SHADOW_FILTER_BOX_SAT) {
+    if (kind == FX_SHADOW_FILTER_BOX_SAT) {
         int radius = (int)lrintf((width - 1.0f) * 0.5f);
-        return fx_sat_box_filter(ctx, sm->moments, sm->moments, sm->width, sm->height, 2, radius, where);
+        return box_filter(ctx, sm->moments, sm->mwidth, sm->mheight, radius, where);
     }
     fx_blur_spec spec = {width / sqrt(12.0), FX_BLUR_RECURSIVE, 3};
-    return fx_blur_image(ctx, sm->moments, sm->moments, sm->width, sm->height, 2, &spec, NULL, where);
+    return fx_blur_image(ctx, sm->moments, sm->moments, sm->mwidth, sm->mheight, 2, &spec, NULL, where);
 }
 
 void fx_shadow_map_free(fx_shadow_map *sm)

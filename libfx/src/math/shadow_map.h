@@ -15,15 +15,28 @@
 #include "math/vec.h"
 
 typedef enum fx_shadow_filter {
-    FX_SHADOW_FILTER_BOX_SAT = 0,  /* box of (2r+1)^2 texels through a summed-area table */
+    FX_SHADOW_FILTER_BOX_SAT = 0,  /* box of (2r+1)^2 texels: separable running sums in double (the
+                                      name is historical: it was a summed-area table, same means) */
     FX_SHADOW_FILTER_GAUSSIAN = 1  /* separable recursive Gaussian (math/blur), sigma = width / sqrt(12) */
 } fx_shadow_filter;
+
+/* A filter value may carry a reduction level of the moments (bits 4..7): the moments are
+ * averaged over 2^level x 2^level texel blocks (a mip of the moments, which are linear, so
+ * the mean and variance of each block are exact) before the filter, whose width stays in
+ * full-resolution texels. The aux-map cache (core/aux_view.h) keys on the whole value. */
+#define FX_SHADOW_FILTER_KIND(f) ((f) & 15)
+#define FX_SHADOW_FILTER_LEVEL(f) (((f) >> 4) & 15)
+#define FX_SHADOW_FILTER_WITH_LEVEL(kind, level) ((kind) | ((level) << 4))
+#define FX_SHADOW_MAX_LEVEL 4
 
 typedef struct fx_shadow_map {
     int width, height;
     float znear, zfar;
     float *depth;    /* normalised depth, width * height */
-    float *moments;  /* filtered (E[z], E[z^2]), width * height * 2 */
+    float *moments;  /* filtered (E[z], E[z^2]), mwidth * mheight * 2; NULL until filtered */
+    int mwidth, mheight; /* the moments' grid: ceil(width / 2^level) x ceil(height / 2^level) */
+    int level;       /* the moments' reduction level (0: full resolution) */
+    int derivative_bias;
 } fx_shadow_map;
 
 /* Normalised depth of a raw planar depth. */
@@ -41,29 +54,42 @@ static inline float fx_shadow_map_norm_dist(const fx_shadow_map *sm, float metre
     return range > 1e-20f ? 2.0f * metres / range : 0.0f;
 }
 
-/* Builds depth and moments (unfiltered) from raw planar depth. */
+/* Builds the normalised depth from raw planar depth. The moments are made by
+ * fx_shadow_map_filter (any width, even <= 1), at the level it asks for: without that call
+ * moments is NULL (PCF and the hard test read only the depth). */
 fx_result fx_shadow_map_build(fx_context *ctx, const float *raw_depth, int width, int height, float znear,
                               float zfar, int derivative_bias, fx_shadow_map *out, const char *where);
 /* Filters the moments with a box (width rounded to an odd number of texels) or a Gaussian
- * of the same variance. width <= 1: unfiltered. */
+ * of the same variance (first making the moments when there are none). width <= 1:
+ * unfiltered. `filter` may carry a reduction level
+ * (FX_SHADOW_FILTER_WITH_LEVEL): the moments are first reduced, then filtered with
+ * width / 2^level texels of the reduced grid (unfiltered when that is <= 1; the bilinear
+ * lookup of blocks of 2^level texels is then the filter). */
 fx_result fx_shadow_map_filter(fx_context *ctx, fx_shadow_map *sm, fx_shadow_filter filter, float width,
                                const char *where);
 void fx_shadow_map_free(fx_shadow_map *sm);
 
-/* Bilinear lookup of the filtered moments at continuous texel coordinates (texel x's
- * centre at x + 0.5), clamped to the map. */
+/* Bilinear lookup of the filtered moments at continuous texel coordinates of the full
+ * map (texel x's centre at x + 0.5), clamped to the map; on a reduced grid (level > 0)
+ * the coordinates are scaled by 2^-level. */
 static inline void fx_shadow_map_moments(const fx_shadow_map *sm, float px, float py, float *m1, float *m2)
 {
+    if (sm->level > 0) {
+        float s = 1.0f / (float)(1 << sm->level);
+        px *= s;
+        py *= s;
+    }
+    const int w = sm->mwidth, h = sm->mheight;
     float fx = px - 0.5f, fy = py - 0.5f;
-    fx = fx_clampf(fx, 0.0f, (float)(sm->width - 1));
-    fy = fx_clampf(fy, 0.0f, (float)(sm->height - 1));
+    fx = fx_clampf(fx, 0.0f, (float)(w - 1));
+    fy = fx_clampf(fy, 0.0f, (float)(h - 1));
     int x0 = (int)fx, y0 = (int)fy;
-    int x1 = x0 + 1 < sm->width ? x0 + 1 : x0, y1 = y0 + 1 < sm->height ? y0 + 1 : y0;
+    int x1 = x0 + 1 < w ? x0 + 1 : x0, y1 = y0 + 1 < h ? y0 + 1 : y0;
     float tx = fx - (float)x0, ty = fy - (float)y0;
-    const float *a = sm->moments + ((size_t)y0 * sm->width + x0) * 2;
-    const float *b = sm->moments + ((size_t)y0 * sm->width + x1) * 2;
-    const float *c = sm->moments + ((size_t)y1 * sm->width + x0) * 2;
-    const float *d = sm->moments + ((size_t)y1 * sm->width + x1) * 2;
+    const float *a = sm->moments + ((size_t)y0 * w + x0) * 2;
+    const float *b = sm->moments + ((size_t)y0 * w + x1) * 2;
+    const float *c = sm->moments + ((size_t)y1 * w + x0) * 2;
+    const float *d = sm->moments + ((size_t)y1 * w + x1) * 2;
     float top0 = a[0] + (b[0] - a[0]) * tx, bot0 = c[0] + (d[0] - c[0]) * tx;
     float top1 = a[1] + (b[1] - a[1]) * tx, bot1 = c[1] + (d[1] - c[1]) * tx;
     *m1 = top0 + (bot0 - top0) * ty;
