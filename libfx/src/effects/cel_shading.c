@@ -130,7 +130,6 @@ typedef struct cel_job {
     float band_lo[RAMP_MAX]; /* band k's smoothstep starts here (edge k/n - softness/2) */
     float band_inv;          /* 1 / softness (0: hard bands) */
     int n;
-    const float *matte;
 } cel_job;
 
 static inline float finite_or(float v)
@@ -170,15 +169,16 @@ static inline v4f load3(const float *p, int ch) /* 3 channels (of ch >= 3), lane
     return v;
 }
 
-/* diffuse_passes: one vector per pixel (same formula as the scalar statement in the doc). */
-static void cel_rows_diffuse(const cel_job *j, int begin, int end)
+/* diffuse_passes: one vector per pixel (same formula as the scalar statement in the doc);
+ * matte: the row's outline matte (indexed by x), or NULL. */
+static void cel_row_diffuse(const cel_job *j, int y, const float *matte)
 {
     const fx_effect_run *run = j->run;
     const cel_params *p = j->p;
     const float inv_white = 1.0f / p->white, white = p->white, mix = p->mix;
     v4f oc;
     memcpy(&oc, p->outline_color, sizeof oc);
-    for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++)
+    {
         for (int x = run->roi.x0; x < run->roi.x1; x++) {
             const size_t i = (size_t)y * run->width + x;
             v4f s;
@@ -192,28 +192,30 @@ static void cel_rows_diffuse(const cel_job *j, int begin, int end)
             const v4f col = finite4(load3(j->diff_col + i * j->dc_ch, j->dc_ch));
             const v4f tint = l > 1e-8f ? l3 * V4(1.0f / l) : V4(1.0f); /* the light's colour */
             v4f o = c + col * (V4(q) * tint - l3); /* lane 3: c + 0 */
-            if (j->matte) {
-                const float e = j->matte[i];
+            if (matte) {
+                const float e = matte[x];
                 o += V4(e) * (oc - o); /* lane 3: alpha toward the outline's alpha */
             }
             o = finite4(c + V4(mix) * (o - c));
-            if (!j->matte)
+            if (!matte)
                 o[3] = c[3];
             memcpy(run->dst + i * 4, &o, sizeof o);
         }
+    }
 }
 
-static void cel_rows(void *user, int begin, int end)
+/* One row of the result; matte: the row's outline matte (indexed by x), or NULL. */
+static void cel_row(void *user, int y, const float *matte)
 {
     const cel_job *j = user;
     const fx_effect_run *run = j->run;
     const cel_params *p = j->p;
     if (p->lighting == LIGHT_DIFFUSE_PASSES) {
-        cel_rows_diffuse(j, begin, end);
+        cel_row_diffuse(j, y, matte);
         return;
     }
     const float inv_white = 1.0f / p->white;
-    for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++)
+    {
         for (int x = run->roi.x0; x < run->roi.x1; x++) {
             size_t i = (size_t)y * run->width + x;
             const float *s = run->src + i * 4;
@@ -231,16 +233,24 @@ static void cel_rows(void *user, int begin, int end)
                         o[k] = c[k] * ratio;
                 }
             }
-            if (j->matte) {
-                float e = j->matte[i];
+            if (matte) {
+                float e = matte[x];
                 for (int k = 0; k < 3; k++)
                     o[k] += e * (p->outline_color[k] - o[k]);
             }
             for (int k = 0; k < 3; k++)
                 d[k] = finite_or(c[k] + p->mix * (o[k] - c[k]));
             float a = finite_or(s[3]);
-            d[3] = j->matte ? finite_or(a + p->mix * j->matte[i] * (p->outline_color[3] - a)) : a;
+            d[3] = matte ? finite_or(a + p->mix * matte[x] * (p->outline_color[3] - a)) : a;
         }
+    }
+}
+
+static void cel_rows(void *user, int begin, int end)
+{
+    const cel_job *j = user;
+    for (int y = j->run->roi.y0 + begin; y < j->run->roi.y0 + end; y++)
+        cel_row(user, y, NULL);
 }
 
 static fx_result cel_process(const fx_effect_run *run)
@@ -295,24 +305,17 @@ static fx_result cel_process(const fx_effect_run *run)
     }
     fx_edge_settings es;
     edge_settings(p, &es);
-    float *matte = NULL;
-    fx_result r = FX_OK;
     if (es.use_depth || es.use_normal) {
+        /* the outline matte streams row by row into the shading: no frame-size plane */
         fx_edge_sources src;
-        if ((r = fx_edge_sources_from_frame(f, run->src, &es, &src, where)))
+        fx_result r = fx_edge_sources_from_frame(f, run->src, &es, &src, where);
+        if (r)
             return r;
-        matte = fx_mem_alloc((size_t)run->width * run->height * sizeof(float));
-        if (!matte)
-            return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the outlines", where);
-        r = fx_edge_matte(run->ctx, &src, &es, roi, matte, NULL, where);
-        j.matte = matte;
+        return fx_edge_matte_rows(run->ctx, &src, &es, roi, NULL, cel_row, &j, where);
     }
-    if (!r) {
-        int rows = roi->y1 - roi->y0;
-        fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), cel_rows, &j);
-    }
-    fx_mem_free(matte);
-    return r;
+    int rows = roi->y1 - roi->y0;
+    fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), cel_rows, &j);
+    return FX_OK;
 }
 
 static fx_result cel_validate(const void *params, char *err, size_t err_size)
