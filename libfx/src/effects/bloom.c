@@ -243,6 +243,17 @@ static void composite_rows(void *user, int begin, int end)
         const float *rb = j->nlev > 0 ? c->px + (size_t)yb * c->w * 4 : NULL;
         const float *srow = run->src + (size_t)y * run->width * 4;
         float *drow = run->dst + (size_t)y * run->width * 4;
+        if (j->nlev > 0 && p->composite == COMP_ADD) {
+            /* the common case in its own loop: no per-pixel tests of the settings */
+            const int *ta = j->tx[0], *tb = j->tx[1];
+            const v4f sc = { scale, scale, scale, 0.0f }; /* alpha passes */
+            for (int x = run->roi.x0; x < run->roi.x1; x++) {
+                const v4f s = finite4(ld4(srow + 4 * (size_t)x));
+                const v4f g = up4(c, ta, tb, x, ra, rb) * sc;
+                st4(drow + 4 * (size_t)x, finite4(s + g));
+            }
+            continue;
+        }
         for (int x = run->roi.x0; x < run->roi.x1; x++) {
             const v4f s = finite4(ld4(srow + 4 * (size_t)x));
             v4f g = j->nlev > 0 ? up4(c, j->tx[0], j->tx[1], x, ra, rb) : bright4(j, srow + 4 * (size_t)x);
