@@ -15,6 +15,7 @@
 #include "math/simd4.h"
 
 #include <float.h>
+#include <stdint.h>
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
@@ -171,37 +172,144 @@ static inline v4f load3(const float *p, int ch) /* 3 channels (of ch >= 3), lane
 
 /* diffuse_passes: one vector per pixel (same formula as the scalar statement in the doc);
  * matte: the row's outline matte (indexed by x), or NULL. */
-static void cel_row_diffuse(const cel_job *j, int y, const float *matte)
+/* 8 pixels in lanes (GCC vector types; an AVX2 clone beside the baseline, no FMA: the same
+ * bits): the statement of cel_row_diffuse_px below, lane by lane, with selects. */
+#if defined(__GNUC__) && !defined(__clang__)
+#  pragma GCC diagnostic ignored "-Wpsabi"
+#endif
+typedef float v8f __attribute__((vector_size(32)));
+typedef int32_t v8i __attribute__((vector_size(32)));
+#define S8(v) ((v8f){ (v), (v), (v), (v), (v), (v), (v), (v) })
+#define SEL8(m, a, b) ((v8f)(((v8i)(a) & (m)) | ((v8i)(b) & ~(m))))
+
+static inline __attribute__((always_inline)) v8f finite8(v8f v)
+{
+    v = SEL8(v == v, v, S8(0.0f));
+    v = SEL8(v > S8(FLT_MAX), S8(FLT_MAX), v);
+    return SEL8(v < S8(-FLT_MAX), S8(-FLT_MAX), v);
+}
+
+static inline __attribute__((always_inline)) v8f ramp_q8(const cel_job *j, v8f t)
+{
+    const int n = j->n;
+    if (n <= 1)
+        return S8(j->values[0]);
+    v8f v = S8(j->values[0]);
+    if (j->band_inv > 0.0f) {
+        for (int k = 1; k < n; k++) {
+            v8f u = (t - S8(j->band_lo[k])) * S8(j->band_inv);
+            u = SEL8(u > S8(0.0f), SEL8(u < S8(1.0f), u, S8(1.0f)), S8(0.0f));
+            v += u * u * (S8(3.0f) - S8(2.0f) * u) * S8(j->values[k] - j->values[k - 1]);
+        }
+    } else {
+        for (int k = 1; k < n; k++)
+            v += SEL8(t >= S8((float)k / (float)n), S8(1.0f), S8(0.0f)) * S8(j->values[k] - j->values[k - 1]);
+    }
+    return v;
+}
+
+#if defined(__GNUC__) && !defined(__clang__) && (defined(__x86_64__) || defined(__i386__)) && \
+    !defined(FX_NO_CLONES)
+#  define CEL_VEC __attribute__((target_clones("avx2", "default")))
+#else
+#  define CEL_VEC
+#endif
+
+/* One pixel (the tail of a row): the per-pixel statement. */
+static inline void cel_row_diffuse_px(const cel_job *j, int y, int x, const float *matte)
 {
     const fx_effect_run *run = j->run;
     const cel_params *p = j->p;
     const float inv_white = 1.0f / p->white, white = p->white, mix = p->mix;
     v4f oc;
     memcpy(&oc, p->outline_color, sizeof oc);
-    {
-        for (int x = run->roi.x0; x < run->roi.x1; x++) {
-            const size_t i = (size_t)y * run->width + x;
-            v4f s;
-            memcpy(&s, run->src + i * 4, sizeof s);
-            const v4f c = finite4(s);
-            v4f l3 = finite4(load3(j->diff_dir + i * j->dd_ch, j->dd_ch));
-            l3 = sel4(l3 > V4(0.0f), l3, V4(0.0f));
-            const float l = fx_luminance(l3[0], l3[1], l3[2]);
-            const float l_c = l < 1e30f ? l : 1e30f;
-            const float q = ramp_q(j, l_c * inv_white) * white;
-            const v4f col = finite4(load3(j->diff_col + i * j->dc_ch, j->dc_ch));
-            const v4f tint = l > 1e-8f ? l3 * V4(1.0f / l) : V4(1.0f); /* the light's colour */
-            v4f o = c + col * (V4(q) * tint - l3); /* lane 3: c + 0 */
-            if (matte) {
-                const float e = matte[x];
-                o += V4(e) * (oc - o); /* lane 3: alpha toward the outline's alpha */
-            }
-            o = finite4(c + V4(mix) * (o - c));
-            if (!matte)
-                o[3] = c[3];
-            memcpy(run->dst + i * 4, &o, sizeof o);
-        }
+    const size_t i = (size_t)y * run->width + x;
+    v4f s;
+    memcpy(&s, run->src + i * 4, sizeof s);
+    const v4f c = finite4(s);
+    v4f l3 = finite4(load3(j->diff_dir + i * j->dd_ch, j->dd_ch));
+    l3 = sel4(l3 > V4(0.0f), l3, V4(0.0f));
+    const float l = fx_luminance(l3[0], l3[1], l3[2]);
+    const float l_c = l < 1e30f ? l : 1e30f;
+    const float q = ramp_q(j, l_c * inv_white) * white;
+    const v4f col = finite4(load3(j->diff_col + i * j->dc_ch, j->dc_ch));
+    const v4f tint = l > 1e-8f ? l3 * V4(1.0f / l) : V4(1.0f); /* the light's colour */
+    v4f o = c + col * (V4(q) * tint - l3); /* lane 3: c + 0 */
+    if (matte) {
+        const float e = matte[x];
+        o += V4(e) * (oc - o); /* lane 3: alpha toward the outline's alpha */
     }
+    o = finite4(c + V4(mix) * (o - c));
+    if (!matte)
+        o[3] = c[3];
+    memcpy(run->dst + i * 4, &o, sizeof o);
+}
+
+/* diffuse_passes: matte: the row's outline matte (indexed by x), or NULL. */
+CEL_VEC static void cel_row_diffuse(const cel_job *j, int y, const float *matte)
+{
+    const fx_effect_run *run = j->run;
+    const cel_params *p = j->p;
+    const float inv_white = 1.0f / p->white, white = p->white, mix = p->mix;
+    const int dd = j->dd_ch, dc = j->dc_ch;
+    const size_t row = (size_t)y * run->width;
+    int x = run->roi.x0;
+    for (; x + 8 <= run->roi.x1; x += 8) {
+        float S[4][8], L[3][8], C[3][8];
+        const float *sp = run->src + (row + x) * 4, *lp = j->diff_dir + (row + x) * dd, *cp = j->diff_col + (row + x) * dc;
+        for (int k = 0; k < 8; k++) {
+            for (int ch = 0; ch < 4; ch++)
+                S[ch][k] = sp[4 * k + ch];
+            for (int ch = 0; ch < 3; ch++) {
+                L[ch][k] = lp[dd * k + ch];
+                C[ch][k] = cp[dc * k + ch];
+            }
+        }
+        v8f c[4], l3[3], col[3];
+        for (int ch = 0; ch < 4; ch++) {
+            memcpy(&c[ch], S[ch], sizeof c[ch]);
+            c[ch] = finite8(c[ch]);
+        }
+        for (int ch = 0; ch < 3; ch++) {
+            memcpy(&l3[ch], L[ch], sizeof l3[ch]);
+            l3[ch] = finite8(l3[ch]);
+            l3[ch] = SEL8(l3[ch] > S8(0.0f), l3[ch], S8(0.0f));
+            memcpy(&col[ch], C[ch], sizeof col[ch]);
+            col[ch] = finite8(col[ch]);
+        }
+        const v8f l = S8(FX_LUMA_R) * l3[0] + S8(FX_LUMA_G) * l3[1] + S8(FX_LUMA_B) * l3[2];
+        const v8f l_c = SEL8(l < S8(1e30f), l, S8(1e30f));
+        const v8f q = ramp_q8(j, l_c * S8(inv_white)) * S8(white);
+        const v8i lit = l > S8(1e-8f);
+        const v8f il = S8(1.0f) / SEL8(lit, l, S8(1.0f));
+        v8f o[4];
+        for (int ch = 0; ch < 3; ch++) {
+            const v8f tint = SEL8(lit, l3[ch] * il, S8(1.0f));
+            o[ch] = c[ch] + col[ch] * (q * tint - l3[ch]);
+        }
+        {   /* lane 3 of the per-pixel statement: colour and lighting alpha are 0 */
+            const v8f t3 = SEL8(lit, S8(0.0f) * il, S8(1.0f));
+            o[3] = c[3] + S8(0.0f) * (q * t3 - S8(0.0f));
+        }
+        if (matte) {
+            v8f e;
+            memcpy(&e, matte + x, sizeof e);
+            for (int ch = 0; ch < 4; ch++)
+                o[ch] += e * (S8(p->outline_color[ch]) - o[ch]);
+        }
+        for (int ch = 0; ch < 4; ch++)
+            o[ch] = finite8(c[ch] + S8(mix) * (o[ch] - c[ch]));
+        if (!matte)
+            o[3] = c[3];
+        for (int ch = 0; ch < 4; ch++)
+            memcpy(S[ch], &o[ch], sizeof o[ch]);
+        float *dp = run->dst + (row + x) * 4;
+        for (int k = 0; k < 8; k++)
+            for (int ch = 0; ch < 4; ch++)
+                dp[4 * k + ch] = S[ch][k];
+    }
+    for (; x < run->roi.x1; x++)
+        cel_row_diffuse_px(j, y, x, matte);
 }
 
 /* One row of the result; matte: the row's outline matte (indexed by x), or NULL. */
