@@ -283,7 +283,88 @@ SC_VEC static void sc_rows(void *user, int begin, int end)
             for (int t = 0; t < nt; t++)
                 for (int i = 0; i < SC_LANES; i++)
                     T[t][i] = q->thr[(((y & 7) << 3) | ((run->roi.x0 + i) & 7)) & q->phase_mask][t];
-        for (int x = run->roi.x0; x < run->roi.x1; x += SC_LANES) {
+        int x = run->roi.x0;
+        if (!j->quantise || vec) {
+            /* whole chunks with every value in vector registers: the lane loops below, op for
+             * op (the same bits), without the round trips through lane arrays */
+            typedef float v8f __attribute__((vector_size(32)));
+            typedef int32_t v8i __attribute__((vector_size(32)));
+#define S8(v) ((v8f){ (v), (v), (v), (v), (v), (v), (v), (v) })
+#define SEL8(m, a, b) ((v8f)(((v8i)(a) & (m)) | ((v8i)(b) & ~(m))))
+#define FIN8(v) (v = SEL8(v == v, v, S8(0.0f)), v = SEL8(v < S8(FLT_MAX), v, S8(FLT_MAX)), \
+                 v = SEL8(v > S8(-FLT_MAX), v, S8(-FLT_MAX)))
+            v8f T8[FX_LEVELS_VEC];
+            for (int t = 0; t < nt; t++)
+                memcpy(&T8[t], T[t], sizeof T8[t]);
+            for (; x + SC_LANES <= run->roi.x1; x += SC_LANES) {
+                const float *sp = s + 4 * (size_t)x;
+                /* 8 RGBA pixels to 4 channel vectors: two shuffle stages */
+                v8f m0, m1, m2, m3;
+                memcpy(&m0, sp, sizeof m0);
+                memcpy(&m1, sp + 8, sizeof m1);
+                memcpy(&m2, sp + 16, sizeof m2);
+                memcpy(&m3, sp + 24, sizeof m3);
+                const v8i lo = { 0, 4, 8, 12, 1, 5, 9, 13 }, hi = { 2, 6, 10, 14, 3, 7, 11, 15 };
+                const v8i h0 = { 0, 1, 2, 3, 8, 9, 10, 11 }, h1 = { 4, 5, 6, 7, 12, 13, 14, 15 };
+                const v8f t0 = __builtin_shuffle(m0, m1, lo), t1 = __builtin_shuffle(m0, m1, hi);
+                const v8f t2 = __builtin_shuffle(m2, m3, lo), t3 = __builtin_shuffle(m2, m3, hi);
+                v8f r = __builtin_shuffle(t0, t2, h0), g = __builtin_shuffle(t0, t2, h1);
+                v8f b = __builtin_shuffle(t1, t3, h0), a = __builtin_shuffle(t1, t3, h1);
+                FIN8(r);
+                FIN8(g);
+                FIN8(b);
+                FIN8(a);
+                v8f yv = lum ? S8(FX_LUMA_R) * r + S8(FX_LUMA_G) * g + S8(FX_LUMA_B) * b
+                             : r * S8(1.0f / 3.0f) + g * S8(1.0f / 3.0f) + b * S8(1.0f / 3.0f);
+                if (j->quantise) {
+                    const v8f u = yv * S8(q->inv_white);
+                    v8f o = S8(0.0f);
+                    for (int t = 0; t < nt; t++)
+                        o = SEL8(u >= T8[t], S8(V[t + 1]), o);
+                    const v8f yc = SEL8(yv < S8(3.4e38f), yv, S8(3.4e38f));
+                    yv = SEL8(u >= S8(1.0f), yc, o);
+                }
+                v8f k = S8(0.0f);
+                if (keep) {
+                    float R[SC_LANES], G[SC_LANES], B[SC_LANES], K[SC_LANES];
+                    memcpy(R, &r, sizeof R);
+                    memcpy(G, &g, sizeof G);
+                    memcpy(B, &b, sizeof B);
+                    keep_lanes(j, R, G, B, K);
+                    memcpy(&k, K, sizeof k);
+                    v8f c = S8(1.0f);
+                    if (cov)
+                        memcpy(&c, cov + x, sizeof c);
+                    k = SEL8(c > S8(0.0f), k * S8(ks) * c, S8(0.0f));
+                }
+                const v8f k1 = S8(1.0f) - k;
+                v8f p0 = k * r + k1 * yv, p1 = k * g + k1 * yv, p2 = k * b + k1 * yv;
+                if (mix < 1.0f) {
+                    p0 = r + S8(mix) * (p0 - r);
+                    p1 = g + S8(mix) * (p1 - g);
+                    p2 = b + S8(mix) * (p2 - b);
+                }
+                FIN8(p0);
+                FIN8(p1);
+                FIN8(p2);
+                /* back to RGBA pixels: the inverse shuffles */
+                const v8f u0 = __builtin_shuffle(p0, p1, h0), u1 = __builtin_shuffle(p2, a, h0);
+                const v8f u2 = __builtin_shuffle(p0, p1, h1), u3 = __builtin_shuffle(p2, a, h1);
+                m0 = __builtin_shuffle(u0, u1, lo);
+                m1 = __builtin_shuffle(u0, u1, hi);
+                m2 = __builtin_shuffle(u2, u3, lo);
+                m3 = __builtin_shuffle(u2, u3, hi);
+                float *dp = d + 4 * (size_t)x;
+                memcpy(dp, &m0, sizeof m0);
+                memcpy(dp + 8, &m1, sizeof m1);
+                memcpy(dp + 16, &m2, sizeof m2);
+                memcpy(dp + 24, &m3, sizeof m3);
+            }
+#undef S8
+#undef SEL8
+#undef FIN8
+        }
+        for (; x < run->roi.x1; x += SC_LANES) {
             const int n = run->roi.x1 - x < SC_LANES ? run->roi.x1 - x : SC_LANES;
             float R[SC_LANES], G[SC_LANES], B[SC_LANES], A[SC_LANES], Y[SC_LANES], K[SC_LANES];
             float tail[SC_LANES * 4], tcov[SC_LANES];
