@@ -13,6 +13,7 @@
 #include "math/edge_ops.h"
 #include "math/vec.h"
 #include "math/simd4.h"
+#include "math/simd8.h"
 
 #include <float.h>
 #include <stdint.h>
@@ -172,16 +173,8 @@ static inline v4f load3(const float *p, int ch) /* 3 channels (of ch >= 3), lane
 
 /* diffuse_passes: one vector per pixel (same formula as the scalar statement in the doc);
  * matte: the row's outline matte (indexed by x), or NULL. */
-/* 8 pixels in lanes (GCC vector types; an AVX2 clone beside the baseline, no FMA: the same
+/* 8 pixels in lanes (math/simd8.h; an AVX2 clone beside the baseline, no FMA: the same
  * bits): the statement of cel_row_diffuse_px below, lane by lane, with selects. */
-#if defined(__GNUC__) && !defined(__clang__)
-#  pragma GCC diagnostic ignored "-Wpsabi"
-#endif
-typedef float v8f __attribute__((vector_size(32)));
-typedef int32_t v8i __attribute__((vector_size(32)));
-#define S8(v) ((v8f){ (v), (v), (v), (v), (v), (v), (v), (v) })
-#define SEL8(m, a, b) ((v8f)(((v8i)(a) & (m)) | ((v8i)(b) & ~(m))))
-
 static inline __attribute__((always_inline)) v8f finite8(v8f v)
 {
     v = SEL8(v == v, v, S8(0.0f));
@@ -214,38 +207,6 @@ static inline __attribute__((always_inline)) v8f ramp_q8(const cel_job *j, v8f t
 #else
 #  define CEL_VEC
 #endif
-
-/* 8 pixels of 4 interleaved channels to 4 channel vectors and back (two shuffle stages). */
-static inline __attribute__((always_inline)) void load8x4(const float *p, v8f out[4])
-{
-    v8f m0, m1, m2, m3;
-    memcpy(&m0, p, sizeof m0);
-    memcpy(&m1, p + 8, sizeof m1);
-    memcpy(&m2, p + 16, sizeof m2);
-    memcpy(&m3, p + 24, sizeof m3);
-    const v8i lo = { 0, 4, 8, 12, 1, 5, 9, 13 }, hi = { 2, 6, 10, 14, 3, 7, 11, 15 };
-    const v8i h0 = { 0, 1, 2, 3, 8, 9, 10, 11 }, h1 = { 4, 5, 6, 7, 12, 13, 14, 15 };
-    const v8f t0 = __builtin_shuffle(m0, m1, lo), t1 = __builtin_shuffle(m0, m1, hi);
-    const v8f t2 = __builtin_shuffle(m2, m3, lo), t3 = __builtin_shuffle(m2, m3, hi);
-    out[0] = __builtin_shuffle(t0, t2, h0);
-    out[1] = __builtin_shuffle(t0, t2, h1);
-    out[2] = __builtin_shuffle(t1, t3, h0);
-    out[3] = __builtin_shuffle(t1, t3, h1);
-}
-
-static inline __attribute__((always_inline)) void store8x4(float *p, const v8f in[4])
-{
-    const v8i lo = { 0, 4, 8, 12, 1, 5, 9, 13 }, hi = { 2, 6, 10, 14, 3, 7, 11, 15 };
-    const v8i h0 = { 0, 1, 2, 3, 8, 9, 10, 11 }, h1 = { 4, 5, 6, 7, 12, 13, 14, 15 };
-    const v8f u0 = __builtin_shuffle(in[0], in[1], h0), u1 = __builtin_shuffle(in[2], in[3], h0);
-    const v8f u2 = __builtin_shuffle(in[0], in[1], h1), u3 = __builtin_shuffle(in[2], in[3], h1);
-    const v8f m0 = __builtin_shuffle(u0, u1, lo), m1 = __builtin_shuffle(u0, u1, hi);
-    const v8f m2 = __builtin_shuffle(u2, u3, lo), m3 = __builtin_shuffle(u2, u3, hi);
-    memcpy(p, &m0, sizeof m0);
-    memcpy(p + 8, &m1, sizeof m1);
-    memcpy(p + 16, &m2, sizeof m2);
-    memcpy(p + 24, &m3, sizeof m3);
-}
 
 /* 8 pixels of ch >= 3 channels: the first 3 into out[0..2] (out[3] = 0). */
 static inline __attribute__((always_inline)) void gather8x3(const float *p, int ch, v8f out[4])
@@ -301,13 +262,13 @@ CEL_VEC static void cel_row_diffuse(const cel_job *j, int y, const float *matte)
     for (; x + 8 <= run->roi.x1; x += 8) {
         const float *sp = run->src + (row + x) * 4, *lp = j->diff_dir + (row + x) * dd, *cp = j->diff_col + (row + x) * dc;
         v8f c[4], l3[4], col[4];
-        load8x4(sp, c);
+        fx_load8x4(sp, c);
         if (dd == 4)
-            load8x4(lp, l3);
+            fx_load8x4(lp, l3);
         else
             gather8x3(lp, dd, l3);
         if (dc == 4)
-            load8x4(cp, col);
+            fx_load8x4(cp, col);
         else
             gather8x3(cp, dc, col);
         for (int ch = 0; ch < 4; ch++)
@@ -341,7 +302,7 @@ CEL_VEC static void cel_row_diffuse(const cel_job *j, int y, const float *matte)
             o[ch] = finite8(c[ch] + S8(mix) * (o[ch] - c[ch]));
         if (!matte)
             o[3] = c[3];
-        store8x4(run->dst + (row + x) * 4, o);
+        fx_store8x4(run->dst + (row + x) * 4, o);
     }
     for (; x < run->roi.x1; x++)
         cel_row_diffuse_px(j, y, x, matte);

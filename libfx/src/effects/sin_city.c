@@ -8,6 +8,7 @@
 #include "core/parallel.h"
 #include "math/color.h"
 #include "math/levels.h"
+#include "math/simd8.h"
 #include "math/vec.h"
 
 #include <float.h>
@@ -287,10 +288,6 @@ SC_VEC static void sc_rows(void *user, int begin, int end)
         if (!j->quantise || vec) {
             /* whole chunks with every value in vector registers: the lane loops below, op for
              * op (the same bits), without the round trips through lane arrays */
-            typedef float v8f __attribute__((vector_size(32)));
-            typedef int32_t v8i __attribute__((vector_size(32)));
-#define S8(v) ((v8f){ (v), (v), (v), (v), (v), (v), (v), (v) })
-#define SEL8(m, a, b) ((v8f)(((v8i)(a) & (m)) | ((v8i)(b) & ~(m))))
 #define FIN8(v) (v = SEL8(v == v, v, S8(0.0f)), v = SEL8(v < S8(FLT_MAX), v, S8(FLT_MAX)), \
                  v = SEL8(v > S8(-FLT_MAX), v, S8(-FLT_MAX)))
             v8f T8[FX_LEVELS_VEC];
@@ -298,18 +295,9 @@ SC_VEC static void sc_rows(void *user, int begin, int end)
                 memcpy(&T8[t], T[t], sizeof T8[t]);
             for (; x + SC_LANES <= run->roi.x1; x += SC_LANES) {
                 const float *sp = s + 4 * (size_t)x;
-                /* 8 RGBA pixels to 4 channel vectors: two shuffle stages */
-                v8f m0, m1, m2, m3;
-                memcpy(&m0, sp, sizeof m0);
-                memcpy(&m1, sp + 8, sizeof m1);
-                memcpy(&m2, sp + 16, sizeof m2);
-                memcpy(&m3, sp + 24, sizeof m3);
-                const v8i lo = { 0, 4, 8, 12, 1, 5, 9, 13 }, hi = { 2, 6, 10, 14, 3, 7, 11, 15 };
-                const v8i h0 = { 0, 1, 2, 3, 8, 9, 10, 11 }, h1 = { 4, 5, 6, 7, 12, 13, 14, 15 };
-                const v8f t0 = __builtin_shuffle(m0, m1, lo), t1 = __builtin_shuffle(m0, m1, hi);
-                const v8f t2 = __builtin_shuffle(m2, m3, lo), t3 = __builtin_shuffle(m2, m3, hi);
-                v8f r = __builtin_shuffle(t0, t2, h0), g = __builtin_shuffle(t0, t2, h1);
-                v8f b = __builtin_shuffle(t1, t3, h0), a = __builtin_shuffle(t1, t3, h1);
+                v8f px[4]; /* 8 RGBA pixels to channel vectors (math/simd8.h) */
+                fx_load8x4(sp, px);
+                v8f r = px[0], g = px[1], b = px[2], a = px[3];
                 FIN8(r);
                 FIN8(g);
                 FIN8(b);
@@ -347,21 +335,9 @@ SC_VEC static void sc_rows(void *user, int begin, int end)
                 FIN8(p0);
                 FIN8(p1);
                 FIN8(p2);
-                /* back to RGBA pixels: the inverse shuffles */
-                const v8f u0 = __builtin_shuffle(p0, p1, h0), u1 = __builtin_shuffle(p2, a, h0);
-                const v8f u2 = __builtin_shuffle(p0, p1, h1), u3 = __builtin_shuffle(p2, a, h1);
-                m0 = __builtin_shuffle(u0, u1, lo);
-                m1 = __builtin_shuffle(u0, u1, hi);
-                m2 = __builtin_shuffle(u2, u3, lo);
-                m3 = __builtin_shuffle(u2, u3, hi);
-                float *dp = d + 4 * (size_t)x;
-                memcpy(dp, &m0, sizeof m0);
-                memcpy(dp + 8, &m1, sizeof m1);
-                memcpy(dp + 16, &m2, sizeof m2);
-                memcpy(dp + 24, &m3, sizeof m3);
+                const v8f po[4] = { p0, p1, p2, a };
+                fx_store8x4(d + 4 * (size_t)x, po);
             }
-#undef S8
-#undef SEL8
 #undef FIN8
         }
         for (; x < run->roi.x1; x += SC_LANES) {

@@ -10,6 +10,7 @@
 #include "core/parallel.h"
 #include "math/color.h"
 #include "math/srgb_lut.h"
+#include "math/simd8.h"
 #include "math/vec.h"
 
 #include <float.h>
@@ -290,8 +291,6 @@ static inline float normal_min_dot(const float *um, const float *u0, const float
 /* normal_min_dot over a row's columns [x0, x1) into md[x] and mixed[x] (0 or -1): the
  * interior 8 columns at a time in GCC vector types (compares that may raise FE_INVALID are
  * not if-converted by the auto-vectoriser), the rest per pixel; the same values. */
-typedef float v8f __attribute__((vector_size(32)));
-typedef int32_t v8i __attribute__((vector_size(32)));
 
 static inline __attribute__((always_inline)) v8f ld8(const float *p)
 {
