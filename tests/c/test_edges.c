@@ -332,6 +332,20 @@ static void test_properties(fx_context *c1, fx_context *c2)
     free(a);
     free(b);
     free(m);
+    /* the matte is streamed in bands of 32 rows: wide lines (reach 19) and planar depth read
+     * across band borders; threads and a mask must not change a bit */
+    const char *wide = "\"depth\":true,\"depth_mode\":\"planar\",\"normal\":true,\"line_width\":40,\"output\":\"matte\"";
+    a = run_pass(c1, f, recipe(wide, NULL), NULL);
+    b = run_pass(c2, f, recipe(wide, NULL), NULL);
+    CHECK(a && b && memcmp(a, b, np * sizeof(float)) == 0);
+    m = run_pass(c2, f, recipe(wide, "{\"rect\":[3,29,50,5]}"), NULL);
+    inside = m && a;
+    for (int y = 29; inside && y < 34; y++)
+        inside &= memcmp(m + ((size_t)y * w + 3) * 4, a + ((size_t)y * w + 3) * 4, 50 * 4 * sizeof(float)) == 0;
+    CHECK(inside);
+    free(a);
+    free(b);
+    free(m);
     free(d);
     free(n);
     fx_frame_free(f);

@@ -13,8 +13,10 @@
 #include "math/edge_ops.h"
 #include "math/vec.h"
 #include "math/simd4.h"
+#include "math/simd8.h"
 
 #include <float.h>
+#include <stdint.h>
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
@@ -130,7 +132,6 @@ typedef struct cel_job {
     float band_lo[RAMP_MAX]; /* band k's smoothstep starts here (edge k/n - softness/2) */
     float band_inv;          /* 1 / softness (0: hard bands) */
     int n;
-    const float *matte;
 } cel_job;
 
 static inline float finite_or(float v)
@@ -170,50 +171,155 @@ static inline v4f load3(const float *p, int ch) /* 3 channels (of ch >= 3), lane
     return v;
 }
 
-/* diffuse_passes: one vector per pixel (same formula as the scalar statement in the doc). */
-static void cel_rows_diffuse(const cel_job *j, int begin, int end)
+/* diffuse_passes: one vector per pixel (same formula as the scalar statement in the doc);
+ * matte: the row's outline matte (indexed by x), or NULL. */
+/* 8 pixels in lanes (math/simd8.h; an AVX2 clone beside the baseline, no FMA: the same
+ * bits): the statement of cel_row_diffuse_px below, lane by lane, with selects. */
+static inline __attribute__((always_inline)) v8f finite8(v8f v)
+{
+    v = SEL8(v == v, v, S8(0.0f));
+    v = SEL8(v > S8(FLT_MAX), S8(FLT_MAX), v);
+    return SEL8(v < S8(-FLT_MAX), S8(-FLT_MAX), v);
+}
+
+static inline __attribute__((always_inline)) v8f ramp_q8(const cel_job *j, v8f t)
+{
+    const int n = j->n;
+    if (n <= 1)
+        return S8(j->values[0]);
+    v8f v = S8(j->values[0]);
+    if (j->band_inv > 0.0f) {
+        for (int k = 1; k < n; k++) {
+            v8f u = (t - S8(j->band_lo[k])) * S8(j->band_inv);
+            u = SEL8(u > S8(0.0f), SEL8(u < S8(1.0f), u, S8(1.0f)), S8(0.0f));
+            v += u * u * (S8(3.0f) - S8(2.0f) * u) * S8(j->values[k] - j->values[k - 1]);
+        }
+    } else {
+        for (int k = 1; k < n; k++)
+            v += SEL8(t >= S8((float)k / (float)n), S8(1.0f), S8(0.0f)) * S8(j->values[k] - j->values[k - 1]);
+    }
+    return v;
+}
+
+#if defined(__GNUC__) && !defined(__clang__) && (defined(__x86_64__) || defined(__i386__)) && \
+    !defined(FX_NO_CLONES)
+#  define CEL_VEC __attribute__((target_clones("avx2", "default")))
+#else
+#  define CEL_VEC
+#endif
+
+/* 8 pixels of ch >= 3 channels: the first 3 into out[0..2] (out[3] = 0). */
+static inline __attribute__((always_inline)) void gather8x3(const float *p, int ch, v8f out[4])
+{
+    float L[3][8];
+    for (int k = 0; k < 8; k++)
+        for (int c = 0; c < 3; c++)
+            L[c][k] = p[ch * k + c];
+    for (int c = 0; c < 3; c++)
+        memcpy(&out[c], L[c], sizeof out[c]);
+    out[3] = (v8f){ 0 };
+}
+
+/* One pixel (the tail of a row): the per-pixel statement. */
+static inline void cel_row_diffuse_px(const cel_job *j, int y, int x, const float *matte)
 {
     const fx_effect_run *run = j->run;
     const cel_params *p = j->p;
     const float inv_white = 1.0f / p->white, white = p->white, mix = p->mix;
     v4f oc;
     memcpy(&oc, p->outline_color, sizeof oc);
-    for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++)
-        for (int x = run->roi.x0; x < run->roi.x1; x++) {
-            const size_t i = (size_t)y * run->width + x;
-            v4f s;
-            memcpy(&s, run->src + i * 4, sizeof s);
-            const v4f c = finite4(s);
-            v4f l3 = finite4(load3(j->diff_dir + i * j->dd_ch, j->dd_ch));
-            l3 = sel4(l3 > V4(0.0f), l3, V4(0.0f));
-            const float l = fx_luminance(l3[0], l3[1], l3[2]);
-            const float l_c = l < 1e30f ? l : 1e30f;
-            const float q = ramp_q(j, l_c * inv_white) * white;
-            const v4f col = finite4(load3(j->diff_col + i * j->dc_ch, j->dc_ch));
-            const v4f tint = l > 1e-8f ? l3 * V4(1.0f / l) : V4(1.0f); /* the light's colour */
-            v4f o = c + col * (V4(q) * tint - l3); /* lane 3: c + 0 */
-            if (j->matte) {
-                const float e = j->matte[i];
-                o += V4(e) * (oc - o); /* lane 3: alpha toward the outline's alpha */
-            }
-            o = finite4(c + V4(mix) * (o - c));
-            if (!j->matte)
-                o[3] = c[3];
-            memcpy(run->dst + i * 4, &o, sizeof o);
-        }
+    const size_t i = (size_t)y * run->width + x;
+    v4f s;
+    memcpy(&s, run->src + i * 4, sizeof s);
+    const v4f c = finite4(s);
+    v4f l3 = finite4(load3(j->diff_dir + i * j->dd_ch, j->dd_ch));
+    l3 = sel4(l3 > V4(0.0f), l3, V4(0.0f));
+    const float l = fx_luminance(l3[0], l3[1], l3[2]);
+    const float l_c = l < 1e30f ? l : 1e30f;
+    const float q = ramp_q(j, l_c * inv_white) * white;
+    const v4f col = finite4(load3(j->diff_col + i * j->dc_ch, j->dc_ch));
+    const v4f tint = l > 1e-8f ? l3 * V4(1.0f / l) : V4(1.0f); /* the light's colour */
+    v4f o = c + col * (V4(q) * tint - l3); /* lane 3: c + 0 */
+    if (matte) {
+        const float e = matte[x];
+        o += V4(e) * (oc - o); /* lane 3: alpha toward the outline's alpha */
+    }
+    o = finite4(c + V4(mix) * (o - c));
+    if (!matte)
+        o[3] = c[3];
+    memcpy(run->dst + i * 4, &o, sizeof o);
 }
 
-static void cel_rows(void *user, int begin, int end)
+/* diffuse_passes: matte: the row's outline matte (indexed by x), or NULL. */
+CEL_VEC static void cel_row_diffuse(const cel_job *j, int y, const float *matte)
+{
+    const fx_effect_run *run = j->run;
+    const cel_params *p = j->p;
+    const float inv_white = 1.0f / p->white, white = p->white, mix = p->mix;
+    const int dd = j->dd_ch, dc = j->dc_ch;
+    const size_t row = (size_t)y * run->width;
+    int x = run->roi.x0;
+    for (; x + 8 <= run->roi.x1; x += 8) {
+        const float *sp = run->src + (row + x) * 4, *lp = j->diff_dir + (row + x) * dd, *cp = j->diff_col + (row + x) * dc;
+        v8f c[4], l3[4], col[4];
+        fx_load8x4(sp, c);
+        if (dd == 4)
+            fx_load8x4(lp, l3);
+        else
+            gather8x3(lp, dd, l3);
+        if (dc == 4)
+            fx_load8x4(cp, col);
+        else
+            gather8x3(cp, dc, col);
+        for (int ch = 0; ch < 4; ch++)
+            c[ch] = finite8(c[ch]);
+        for (int ch = 0; ch < 3; ch++) {
+            l3[ch] = finite8(l3[ch]);
+            l3[ch] = SEL8(l3[ch] > S8(0.0f), l3[ch], S8(0.0f));
+            col[ch] = finite8(col[ch]);
+        }
+        const v8f l = S8(FX_LUMA_R) * l3[0] + S8(FX_LUMA_G) * l3[1] + S8(FX_LUMA_B) * l3[2];
+        const v8f l_c = SEL8(l < S8(1e30f), l, S8(1e30f));
+        const v8f q = ramp_q8(j, l_c * S8(inv_white)) * S8(white);
+        const v8i lit = l > S8(1e-8f);
+        const v8f il = S8(1.0f) / SEL8(lit, l, S8(1.0f));
+        v8f o[4];
+        for (int ch = 0; ch < 3; ch++) {
+            const v8f tint = SEL8(lit, l3[ch] * il, S8(1.0f));
+            o[ch] = c[ch] + col[ch] * (q * tint - l3[ch]);
+        }
+        {   /* lane 3 of the per-pixel statement: colour and lighting alpha are 0 */
+            const v8f t3 = SEL8(lit, S8(0.0f) * il, S8(1.0f));
+            o[3] = c[3] + S8(0.0f) * (q * t3 - S8(0.0f));
+        }
+        if (matte) {
+            v8f e;
+            memcpy(&e, matte + x, sizeof e);
+            for (int ch = 0; ch < 4; ch++)
+                o[ch] += e * (S8(p->outline_color[ch]) - o[ch]);
+        }
+        for (int ch = 0; ch < 4; ch++)
+            o[ch] = finite8(c[ch] + S8(mix) * (o[ch] - c[ch]));
+        if (!matte)
+            o[3] = c[3];
+        fx_store8x4(run->dst + (row + x) * 4, o);
+    }
+    for (; x < run->roi.x1; x++)
+        cel_row_diffuse_px(j, y, x, matte);
+}
+
+/* One row of the result; matte: the row's outline matte (indexed by x), or NULL. */
+static void cel_row(void *user, int y, const float *matte)
 {
     const cel_job *j = user;
     const fx_effect_run *run = j->run;
     const cel_params *p = j->p;
     if (p->lighting == LIGHT_DIFFUSE_PASSES) {
-        cel_rows_diffuse(j, begin, end);
+        cel_row_diffuse(j, y, matte);
         return;
     }
     const float inv_white = 1.0f / p->white;
-    for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++)
+    {
         for (int x = run->roi.x0; x < run->roi.x1; x++) {
             size_t i = (size_t)y * run->width + x;
             const float *s = run->src + i * 4;
@@ -231,16 +337,24 @@ static void cel_rows(void *user, int begin, int end)
                         o[k] = c[k] * ratio;
                 }
             }
-            if (j->matte) {
-                float e = j->matte[i];
+            if (matte) {
+                float e = matte[x];
                 for (int k = 0; k < 3; k++)
                     o[k] += e * (p->outline_color[k] - o[k]);
             }
             for (int k = 0; k < 3; k++)
                 d[k] = finite_or(c[k] + p->mix * (o[k] - c[k]));
             float a = finite_or(s[3]);
-            d[3] = j->matte ? finite_or(a + p->mix * j->matte[i] * (p->outline_color[3] - a)) : a;
+            d[3] = matte ? finite_or(a + p->mix * matte[x] * (p->outline_color[3] - a)) : a;
         }
+    }
+}
+
+static void cel_rows(void *user, int begin, int end)
+{
+    const cel_job *j = user;
+    for (int y = j->run->roi.y0 + begin; y < j->run->roi.y0 + end; y++)
+        cel_row(user, y, NULL);
 }
 
 static fx_result cel_process(const fx_effect_run *run)
@@ -295,24 +409,17 @@ static fx_result cel_process(const fx_effect_run *run)
     }
     fx_edge_settings es;
     edge_settings(p, &es);
-    float *matte = NULL;
-    fx_result r = FX_OK;
     if (es.use_depth || es.use_normal) {
+        /* the outline matte streams row by row into the shading: no frame-size plane */
         fx_edge_sources src;
-        if ((r = fx_edge_sources_from_frame(f, run->src, &es, &src, where)))
+        fx_result r = fx_edge_sources_from_frame(f, run->src, &es, &src, where);
+        if (r)
             return r;
-        matte = fx_mem_alloc((size_t)run->width * run->height * sizeof(float));
-        if (!matte)
-            return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the outlines", where);
-        r = fx_edge_matte(run->ctx, &src, &es, roi, matte, NULL, where);
-        j.matte = matte;
+        return fx_edge_matte_rows(run->ctx, &src, &es, roi, NULL, cel_row, &j, where);
     }
-    if (!r) {
-        int rows = roi->y1 - roi->y0;
-        fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), cel_rows, &j);
-    }
-    fx_mem_free(matte);
-    return r;
+    int rows = roi->y1 - roi->y0;
+    fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), cel_rows, &j);
+    return FX_OK;
 }
 
 static fx_result cel_validate(const void *params, char *err, size_t err_size)

@@ -105,12 +105,12 @@ static int edges_halo(const void *params, int width, int height)
 typedef struct draw_job {
     const fx_effect_run *run;
     const edges_params *p;
-    const float *matte;
+    float *matte_dbg; /* the debug matte pass, or NULL */
 } draw_job;
 
-
-/* d = s + a (t - s) per pixel, one RGBA vector at a time; NaN -> 0, +-Inf -> +-FLT_MAX. */
-static void draw_rows(void *user, int begin, int end)
+/* d = s + a (t - s) per pixel, one RGBA vector at a time; NaN -> 0, +-Inf -> +-FLT_MAX.
+ * Called by the edge engine with each finished matte row (math/edge_ops.h). */
+static void draw_row(void *user, int y, const float *matte)
 {
     const draw_job *j = user;
     const fx_effect_run *run = j->run;
@@ -120,26 +120,26 @@ static void draw_rows(void *user, int begin, int end)
     v4f lc;
     memcpy(&lc, j->p->line_color, sizeof lc);
     const v4f big = { FLT_MAX, FLT_MAX, FLT_MAX, FLT_MAX }, zero = { 0, 0, 0, 0 };
-    for (int y = roi->y0 + begin; y < roi->y0 + end; y++) {
-        const size_t row = (size_t)y * run->width;
-        for (int x = roi->x0; x < roi->x1; x++) {
-            v4f s, t;
-            memcpy(&s, run->src + (row + x) * 4, sizeof s);
-            const float e = j->matte[row + x];
-            float a;
-            if (matte_out) {
-                t = (v4f){ e, e, e, 1.0f };
-                a = op;
-            } else {
-                t = lc;
-                a = e * op;
-            }
-            v4f d = s + (v4f){ a, a, a, a } * (t - s);
-            d = sel4(d == d, d, zero);
-            d = sel4(d > big, big, d);
-            d = sel4(d < -big, -big, d);
-            memcpy(run->dst + (row + x) * 4, &d, sizeof d);
+    const size_t row = (size_t)y * run->width;
+    if (j->matte_dbg)
+        memcpy(j->matte_dbg + row + roi->x0, matte + roi->x0, (size_t)(roi->x1 - roi->x0) * sizeof(float));
+    for (int x = roi->x0; x < roi->x1; x++) {
+        v4f s, t;
+        memcpy(&s, run->src + (row + x) * 4, sizeof s);
+        const float e = matte[x];
+        float a;
+        if (matte_out) {
+            t = (v4f){ e, e, e, 1.0f };
+            a = op;
+        } else {
+            t = lc;
+            a = e * op;
         }
+        v4f d = s + (v4f){ a, a, a, a } * (t - s);
+        d = sel4(d == d, d, zero);
+        d = sel4(d > big, big, d);
+        d = sel4(d < -big, -big, d);
+        memcpy(run->dst + (row + x) * 4, &d, sizeof d);
     }
 }
 
@@ -166,21 +166,9 @@ static fx_result edges_process(const fx_effect_run *run)
     float *matte = fx_effect_debug_pass(run, "matte", 1, &dr);
     if (dr)
         return dr;
-    float *own = NULL;
-    if (!matte) {
-        own = fx_mem_alloc((size_t)run->width * run->height * sizeof(float));
-        if (!own)
-            return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the matte", where);
-        matte = own;
-    }
-    r = fx_edge_matte(run->ctx, &src, &s, roi, matte, strengths, where);
-    if (!r) {
-        draw_job j = { run, p, matte };
-        int rows = roi->y1 - roi->y0;
-        fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), draw_rows, &j);
-    }
-    fx_mem_free(own);
-    return r;
+    /* the matte streams row by row into the drawing: no frame-size plane */
+    draw_job j = { run, p, matte };
+    return fx_edge_matte_rows(run->ctx, &src, &s, roi, strengths, draw_row, &j, where);
 }
 
 static fx_result edges_validate(const void *params, char *err, size_t err_size)

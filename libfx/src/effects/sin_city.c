@@ -8,6 +8,7 @@
 #include "core/parallel.h"
 #include "math/color.h"
 #include "math/levels.h"
+#include "math/simd8.h"
 #include "math/vec.h"
 
 #include <float.h>
@@ -283,7 +284,63 @@ SC_VEC static void sc_rows(void *user, int begin, int end)
             for (int t = 0; t < nt; t++)
                 for (int i = 0; i < SC_LANES; i++)
                     T[t][i] = q->thr[(((y & 7) << 3) | ((run->roi.x0 + i) & 7)) & q->phase_mask][t];
-        for (int x = run->roi.x0; x < run->roi.x1; x += SC_LANES) {
+        int x = run->roi.x0;
+        if (!j->quantise || vec) {
+            /* whole chunks with every value in vector registers: the lane loops below, op for
+             * op (the same bits), without the round trips through lane arrays */
+#define FIN8(v) (v = SEL8(v == v, v, S8(0.0f)), v = SEL8(v < S8(FLT_MAX), v, S8(FLT_MAX)), \
+                 v = SEL8(v > S8(-FLT_MAX), v, S8(-FLT_MAX)))
+            v8f T8[FX_LEVELS_VEC];
+            for (int t = 0; t < nt; t++)
+                memcpy(&T8[t], T[t], sizeof T8[t]);
+            for (; x + SC_LANES <= run->roi.x1; x += SC_LANES) {
+                const float *sp = s + 4 * (size_t)x;
+                v8f px[4]; /* 8 RGBA pixels to channel vectors (math/simd8.h) */
+                fx_load8x4(sp, px);
+                v8f r = px[0], g = px[1], b = px[2], a = px[3];
+                FIN8(r);
+                FIN8(g);
+                FIN8(b);
+                FIN8(a);
+                v8f yv = lum ? S8(FX_LUMA_R) * r + S8(FX_LUMA_G) * g + S8(FX_LUMA_B) * b
+                             : r * S8(1.0f / 3.0f) + g * S8(1.0f / 3.0f) + b * S8(1.0f / 3.0f);
+                if (j->quantise) {
+                    const v8f u = yv * S8(q->inv_white);
+                    v8f o = S8(0.0f);
+                    for (int t = 0; t < nt; t++)
+                        o = SEL8(u >= T8[t], S8(V[t + 1]), o);
+                    const v8f yc = SEL8(yv < S8(3.4e38f), yv, S8(3.4e38f));
+                    yv = SEL8(u >= S8(1.0f), yc, o);
+                }
+                v8f k = S8(0.0f);
+                if (keep) {
+                    float R[SC_LANES], G[SC_LANES], B[SC_LANES], K[SC_LANES];
+                    memcpy(R, &r, sizeof R);
+                    memcpy(G, &g, sizeof G);
+                    memcpy(B, &b, sizeof B);
+                    keep_lanes(j, R, G, B, K);
+                    memcpy(&k, K, sizeof k);
+                    v8f c = S8(1.0f);
+                    if (cov)
+                        memcpy(&c, cov + x, sizeof c);
+                    k = SEL8(c > S8(0.0f), k * S8(ks) * c, S8(0.0f));
+                }
+                const v8f k1 = S8(1.0f) - k;
+                v8f p0 = k * r + k1 * yv, p1 = k * g + k1 * yv, p2 = k * b + k1 * yv;
+                if (mix < 1.0f) {
+                    p0 = r + S8(mix) * (p0 - r);
+                    p1 = g + S8(mix) * (p1 - g);
+                    p2 = b + S8(mix) * (p2 - b);
+                }
+                FIN8(p0);
+                FIN8(p1);
+                FIN8(p2);
+                const v8f po[4] = { p0, p1, p2, a };
+                fx_store8x4(d + 4 * (size_t)x, po);
+            }
+#undef FIN8
+        }
+        for (; x < run->roi.x1; x += SC_LANES) {
             const int n = run->roi.x1 - x < SC_LANES ? run->roi.x1 - x : SC_LANES;
             float R[SC_LANES], G[SC_LANES], B[SC_LANES], A[SC_LANES], Y[SC_LANES], K[SC_LANES];
             float tail[SC_LANES * 4], tcov[SC_LANES];

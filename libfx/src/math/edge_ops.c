@@ -1,9 +1,16 @@
 /* Edge operators over render passes (math/edge_ops.h has the definitions). */
+/* sqrt as the instruction, so the operator loops vectorise (errno is never read here; the
+ * value is the same IEEE square root). Before the includes: the header helpers inlined
+ * into the loops must carry the same optimisation options. */
+#if defined(__GNUC__) && !defined(__clang__)
+#  pragma GCC optimize("no-math-errno")
+#endif
 #include "math/edge_ops.h"
 
 #include "core/parallel.h"
 #include "math/color.h"
 #include "math/srgb_lut.h"
+#include "math/simd8.h"
 #include "math/vec.h"
 
 #include <float.h>
@@ -162,96 +169,177 @@ fx_result fx_edge_sources_from_frame(const fx_frame *f, const float *rgba, const
     return r;
 }
 
-/* ---- the work ---- */
+/* ---- the work ----
+ * Streaming, one band of output rows at a time: each band computes its fields (encoded
+ * luminance, log or inverse depth, unit normals) into small ring buffers of rows, the
+ * thresholded strength of each row once its field rows exist, and the line-width dilation
+ * of each output row once its strength rows exist, then hands the finished matte row to the
+ * caller (which draws it while the row's colour is still in cache). No frame-size plane is
+ * allocated; a band recomputes the few halo rows it shares with its neighbours (the same
+ * expressions, so the same bits). Every value is a function of the pixel alone: any band
+ * height and thread count gives the same matte. */
+
+#define EDGE_BAND 32 /* output rows per band */
+
+/* Vectorised clones (-O3's vectoriser): the baseline and an AVX2 one (no FMA: the same
+ * bits), as sin_city. No optimize() attribute: it would stop the header helpers from being
+ * inlined. */
+#if defined(__GNUC__) && !defined(__clang__)
+#  pragma GCC diagnostic ignored "-Wpsabi"
+#endif
+#if defined(__GNUC__) && !defined(__clang__) && (defined(__x86_64__) || defined(__i386__)) && \
+    !defined(FX_NO_CLONES)
+#  define EDGE_VEC __attribute__((target_clones("avx2", "default")))
+#else
+#  define EDGE_VEC
+#endif
 
 typedef struct edge_job {
     const fx_edge_sources *src;
     const fx_edge_settings *s;
     int w, h;
-    fx_rect field_rect;  /* where the luminance / log-depth fields are computed */
-    fx_rect strength_rect; /* where the thresholded strength is computed */
+    int opr;               /* field rows read around a strength row (>= 1) */
+    int reach;             /* dilation reach, rows and columns */
+    fx_rect field_rect;    /* columns where fields are computed */
+    fx_rect strength_rect; /* columns where strengths are computed */
     fx_rect roi;
-    float *lum, *ldepth;  /* fields (full-size planes, filled inside field_rect) */
-    float *unorm;         /* unit normals (3 per pixel; 0 0 0: background), inside field_rect */
-    const float *lut;     /* sRGB encoding table (math/srgb_lut.h) */
-    float *plane;         /* thresholded strength (full-size), when dilating */
-    float *matte;
+    const float *lut;      /* sRGB encoding table (math/srgb_lut.h) */
     float *strengths;
-    const int *disc;      /* dilation offsets (dx, dy) pairs */
-    int disc_count;
+    const int *span;       /* dilation: half-width of the disc at dy = -reach..reach */
+    fx_edge_row_fn emit;
+    void *user;
+    /* per-worker scratch: ring rows */
+    int rf, rs;            /* ring sizes: field rows, strength rows */
+    size_t scratch_floats;
+    float **scratch;       /* one block per worker */
+    int workers;
 } edge_job;
 
-/* Unit normal of pixel i, or 0 for background. */
-static inline int unit_normal(const float *n, size_t i, float u[3])
+/* Unit normal of (x, y, z), or 0 for background. */
+static inline void unit_normal3(const float *n, float *u)
 {
-    float x = n[3 * i], y = n[3 * i + 1], z = n[3 * i + 2];
+    float x = n[0], y = n[1], z = n[2];
     float l2 = x * x + y * y + z * z;
-    if (!(l2 >= FX_EDGE_MIN_NORMAL * FX_EDGE_MIN_NORMAL) || !(l2 <= 1e30f))
-        return 0;
+    if (!(l2 >= FX_EDGE_MIN_NORMAL * FX_EDGE_MIN_NORMAL) || !(l2 <= 1e30f)) {
+        u[0] = u[1] = u[2] = 0.0f;
+        return;
+    }
     float inv = 1.0f / sqrtf(l2);
     u[0] = x * inv;
     u[1] = y * inv;
     u[2] = z * inv;
-    return 1;
 }
 
-static void fields_rows(void *user, int begin, int end)
+EDGE_VEC static void lum_row(const float *p, const float *lut, int x0, int x1, float *out)
 {
-    const edge_job *j = user;
-    const fx_rect *fr = &j->field_rect;
-    for (int y = fr->y0 + begin; y < fr->y0 + end; y++) {
-        size_t row = (size_t)y * j->w;
-        if (j->lum) {
-            const float *p = j->src->rgba + row * 4;
-            for (int x = fr->x0; x < fr->x1; x++) {
-                float l = fx_luminance(p[4 * x], p[4 * x + 1], p[4 * x + 2]);
-                /* finite, clamped to the encoder's useful range (NaN -> 0) */
-                l = l > 0.0f ? (l < 1e6f ? l : 1e6f) : 0.0f;
-                j->lum[row + x] = fx_srgb_encode_lut(j->lut, l); /* no powf: math/srgb_lut.h */
-            }
-        }
-        if (j->ldepth) {
-            const float *d = j->src->depth + row;
-            for (int x = fr->x0; x < fr->x1; x++) {
-                float v = d[x];
-                v = v > FX_EDGE_NEAR_DEPTH ? (v < FX_EDGE_FAR_DEPTH ? v : FX_EDGE_FAR_DEPTH)
-                                           : (v == v ? FX_EDGE_NEAR_DEPTH : FX_EDGE_FAR_DEPTH);
-                j->ldepth[row + x] = j->s->depth_planar ? 1.0f / v : logf(v);
-            }
-        }
-        if (j->unorm) {
-            const float *n = j->src->normal;
-            for (int x = fr->x0; x < fr->x1; x++) {
-                float u[3] = { 0.0f, 0.0f, 0.0f };
-                unit_normal(n, row + x, u);
-                memcpy(j->unorm + (row + x) * 3, u, sizeof u);
-            }
-        }
+    for (int x = x0; x < x1; x++) {
+        float l = fx_luminance(p[4 * x], p[4 * x + 1], p[4 * x + 2]);
+        /* finite, clamped to the encoder's useful range (NaN -> 0) */
+        l = l > 0.0f ? (l < 1e6f ? l : 1e6f) : 0.0f;
+        out[x] = fx_srgb_encode_lut(lut, l); /* no powf: math/srgb_lut.h */
     }
 }
 
-/* Smallest cosine between the pixel's unit normal and its 4 neighbours' (from the plane of
- * unit normals), and whether surface and background meet there. */
-static inline float normal_min_dot(const float *un, int w, int h, int x, int y, int *mixed)
+static void depth_row(const float *d, int planar, int x0, int x1, float *out)
 {
-    const float *c = un + ((size_t)y * w + x) * 3;
-    const int hc = c[0] != 0.0f || c[1] != 0.0f || c[2] != 0.0f;
-    const size_t nb[4] = { (size_t)y * w + clampi(x - 1, 0, w - 1), (size_t)y * w + clampi(x + 1, 0, w - 1),
-                           (size_t)clampi(y - 1, 0, h - 1) * w + x, (size_t)clampi(y + 1, 0, h - 1) * w + x };
+    for (int x = x0; x < x1; x++) {
+        float v = d[x];
+        v = v > FX_EDGE_NEAR_DEPTH ? (v < FX_EDGE_FAR_DEPTH ? v : FX_EDGE_FAR_DEPTH)
+                                   : (v == v ? FX_EDGE_NEAR_DEPTH : FX_EDGE_FAR_DEPTH);
+        out[x] = planar ? 1.0f / v : logf(v);
+    }
+}
+
+/* Unit normals of a row into three planes (x, y, z components: out, out + w, out + 2 w). */
+EDGE_VEC static void normal_row(const float *n, int w, int x0, int x1, float *out)
+{
+    for (int x = x0; x < x1; x++) {
+        float u[3];
+        unit_normal3(n + 3 * (size_t)x, u);
+        out[x] = u[0];
+        out[x + w] = u[1];
+        out[x + 2 * (size_t)w] = u[2];
+    }
+}
+
+/* Smallest cosine between the pixel's unit normal and its 4 neighbours' (rows of unit
+ * normals in planes (see normal_row): above, this, below, each already clamped to the
+ * image), and whether surface and background meet there. */
+static inline float normal_min_dot(const float *um, const float *u0, const float *up, int w, int x, int *mixed)
+{
+    const size_t W = (size_t)w;
+    const float c0 = u0[x], c1 = u0[x + W], c2 = u0[x + 2 * W];
+    const int hc = c0 != 0.0f || c1 != 0.0f || c2 != 0.0f;
+    const float *rows[4] = { u0, u0, um, up };
+    const int cols[4] = { clampi(x - 1, 0, w - 1), clampi(x + 1, 0, w - 1), x, x };
     float min_dot = 1.0f;
     int mx = 0;
     for (int k = 0; k < 4; k++) {
-        const float *q = un + nb[k] * 3;
-        const int hq = q[0] != 0.0f || q[1] != 0.0f || q[2] != 0.0f;
+        const float q0 = rows[k][cols[k]], q1 = rows[k][cols[k] + W], q2 = rows[k][cols[k] + 2 * W];
+        const int hq = q0 != 0.0f || q1 != 0.0f || q2 != 0.0f;
         if (hc != hq)
             mx = 1;
         else if (hc) {
-            float d = c[0] * q[0] + c[1] * q[1] + c[2] * q[2];
+            float d = c0 * q0 + c1 * q1 + c2 * q2;
             min_dot = d < min_dot ? d : min_dot;
         }
     }
     *mixed = mx;
     return min_dot;
+}
+
+/* normal_min_dot over a row's columns [x0, x1) into md[x] and mixed[x] (0 or -1): the
+ * interior 8 columns at a time in GCC vector types (compares that may raise FE_INVALID are
+ * not if-converted by the auto-vectoriser), the rest per pixel; the same values. */
+
+static inline __attribute__((always_inline)) v8f ld8(const float *p)
+{
+    v8f v;
+    memcpy(&v, p, sizeof v);
+    return v;
+}
+
+EDGE_VEC static void normal_min_dot_row(const float *um, const float *u0, const float *up, int w, int x0, int x1,
+                                        float *md, int32_t *mixed)
+{
+    const size_t W = (size_t)w;
+    int xa = x0 > 1 ? x0 : 1, xb = x1 < w - 1 ? x1 : w - 1;
+    if (xb < xa)
+        xa = xb = x1;
+    int x = x0;
+    for (; x < xa && x < x1; x++) {
+        int m;
+        md[x] = normal_min_dot(um, u0, up, w, x, &m);
+        mixed[x] = -m;
+    }
+    const v8f zero = { 0 }, one = { 1, 1, 1, 1, 1, 1, 1, 1 };
+    for (; x + 8 <= xb; x += 8) {
+        const v8f c0 = ld8(u0 + x), c1 = ld8(u0 + W + x), c2 = ld8(u0 + 2 * W + x);
+        const v8i hc = (c0 != zero) | (c1 != zero) | (c2 != zero);
+        v8f mn = one;
+        v8i mx = { 0 };
+#define NB(p)                                                                                   \
+    do {                                                                                        \
+        const v8f q0 = ld8(p), q1 = ld8((p) + W), q2 = ld8((p) + 2 * W);                        \
+        const v8i hq = (q0 != zero) | (q1 != zero) | (q2 != zero);                              \
+        const v8f d = c0 * q0 + c1 * q1 + c2 * q2;                                              \
+        mx |= hc ^ hq;                                                                          \
+        const v8i take = hc & hq & (d < mn);                                                    \
+        mn = (v8f)(((v8i)d & take) | ((v8i)mn & ~take));                                        \
+    } while (0)
+        NB(u0 + x - 1);
+        NB(u0 + x + 1);
+        NB(um + x);
+        NB(up + x);
+#undef NB
+        memcpy(md + x, &mn, sizeof mn);
+        memcpy(mixed + x, &mx, sizeof mx);
+    }
+    for (; x < x1; x++) {
+        int m;
+        md[x] = normal_min_dot(um, u0, up, w, x, &m);
+        mixed[x] = -m;
+    }
 }
 
 static inline float normal_angle(float min_dot, int mixed)
@@ -331,19 +419,90 @@ static inline float ramp(ramp_k r, float s)
     return e > 0.0f ? (e < 1.0f ? e : 1.0f) : 0.0f;
 }
 
-/* The operator on row y of a field for x in [x0, x1) into out[x]: the interior without any
- * clamping (the same expressions as fx_edge_response_at, so the same bits), the borders
- * through fx_edge_response_at. */
-static void response_row(const float *f, int w, int h, int y, int x0, int x1, fx_edge_operator op, float *out)
+/* The operator at column x from the rows A = y - r, B = y, C = y + r (clamped to the image),
+ * columns clamped: the expressions of fx_edge_response_at, so the same bits. */
+static inline float response_at_rows(const float *A, const float *B, const float *C, int w, int x, int r,
+                                     fx_edge_operator op)
+{
+    const int xm = clampi(x - r, 0, w - 1), xp = clampi(x + r, 0, w - 1);
+    const float c = B[x];
+    const float nw = A[xm] - c, n = A[x] - c, ne = A[xp] - c;
+    const float we = B[xm] - c, ea = B[xp] - c;
+    const float sw = C[xm] - c, s = C[x] - c, se = C[xp] - c;
+    float v;
+    switch (op) {
+    case FX_EDGE_LAPLACE4:
+        v = fabsf((n + s) + (we + ea));
+        break;
+    case FX_EDGE_LAPLACE8:
+    case FX_EDGE_SPARSE7:
+        v = fabsf(((n + s) + (we + ea)) + ((nw + ne) + (sw + se))) * (1.0f / 3.0f);
+        break;
+    case FX_EDGE_SOBEL_X:
+        v = fabsf((ne - nw) + 2.0f * (ea - we) + (se - sw)) * 0.25f;
+        break;
+    case FX_EDGE_SOBEL_Y:
+        v = fabsf((sw - nw) + 2.0f * (s - n) + (se - ne)) * 0.25f;
+        break;
+    case FX_EDGE_SOBEL:
+    default: {
+        double gx = (double)(ne - nw) + 2.0 * (ea - we) + (se - sw);
+        double gy = (double)(sw - nw) + 2.0 * (s - n) + (se - ne);
+        v = (float)(sqrt(gx * gx + gy * gy) * 0.25);
+        break;
+    }
+    }
+    return v <= FLT_MAX ? v : FLT_MAX;
+}
+
+#if defined(__SSE2__)
+#  include <emmintrin.h>
+#  define EDGE_SSE2 1
+/* Sobel magnitude, r = 1, 4 interior columns at a time from xa; returns where it stopped.
+ * The scalar loop's operations in the same order (float differences, then double sums, the
+ * double square root as an instruction, rounded to float): the same bits. */
+static inline __attribute__((always_inline)) int sobel_row_sse2(const float *A, const float *B, const float *C,
+                                                                int xa, int xb, float *out)
+{
+    const __m128d two = _mm_set1_pd(2.0), quarter = _mm_set1_pd(0.25);
+    const __m128 big = _mm_set1_ps(FLT_MAX);
+    int x = xa;
+    for (; x + 4 <= xb; x += 4) {
+        const __m128 c = _mm_loadu_ps(B + x);
+        const __m128 n = _mm_sub_ps(_mm_loadu_ps(A + x), c), s = _mm_sub_ps(_mm_loadu_ps(C + x), c);
+        const __m128 we = _mm_sub_ps(_mm_loadu_ps(B + x - 1), c), ea = _mm_sub_ps(_mm_loadu_ps(B + x + 1), c);
+        const __m128 nw = _mm_sub_ps(_mm_loadu_ps(A + x - 1), c), ne = _mm_sub_ps(_mm_loadu_ps(A + x + 1), c);
+        const __m128 sw = _mm_sub_ps(_mm_loadu_ps(C + x - 1), c), se = _mm_sub_ps(_mm_loadu_ps(C + x + 1), c);
+        const __m128 gx1 = _mm_sub_ps(ne, nw), gx2 = _mm_sub_ps(ea, we), gx3 = _mm_sub_ps(se, sw);
+        const __m128 gy1 = _mm_sub_ps(sw, nw), gy2 = _mm_sub_ps(s, n), gy3 = _mm_sub_ps(se, ne);
+        __m128 half[2];
+        for (int k = 0; k < 2; k++) {
+#define LANES(v) (k == 0 ? _mm_cvtps_pd(v) : _mm_cvtps_pd(_mm_movehl_ps((v), (v))))
+            const __m128d gx = _mm_add_pd(_mm_add_pd(LANES(gx1), _mm_mul_pd(two, LANES(gx2))), LANES(gx3));
+            const __m128d gy = _mm_add_pd(_mm_add_pd(LANES(gy1), _mm_mul_pd(two, LANES(gy2))), LANES(gy3));
+#undef LANES
+            const __m128d m = _mm_mul_pd(_mm_sqrt_pd(_mm_add_pd(_mm_mul_pd(gx, gx), _mm_mul_pd(gy, gy))), quarter);
+            half[k] = _mm_cvtpd_ps(m);
+        }
+        __m128 v = _mm_movelh_ps(half[0], half[1]);
+        v = _mm_min_ps(v, big); /* v <= FLT_MAX ? v : FLT_MAX (v is never NaN) */
+        _mm_storeu_ps(out + x, v);
+    }
+    return x;
+}
+#endif
+
+/* The operator on one row for x in [x0, x1) into out[x]: the interior without any clamping
+ * (the same expressions, so the same bits), the borders through response_at_rows. */
+EDGE_VEC static void response_row(const float *A, const float *B, const float *C, int w, int x0, int x1,
+                                  fx_edge_operator op, float *out)
 {
     const int r = fx_edge_operator_radius(op);
-    const float *A = f + (size_t)clampi(y - r, 0, h - 1) * w, *B = f + (size_t)y * w;
-    const float *C = f + (size_t)clampi(y + r, 0, h - 1) * w;
     int xa = x0 > r ? x0 : r, xb = x1 < w - r ? x1 : w - r;
     if (xb < xa)
         xa = xb = x1;
     for (int x = x0; x < xa && x < x1; x++)
-        out[x] = fx_edge_response_at(f, 1, w, h, x, y, op);
+        out[x] = response_at_rows(A, B, C, w, x, r, op);
     switch (op) {
     case FX_EDGE_LAPLACE4:
         for (int x = xa; x < xb; x++) {
@@ -382,6 +541,9 @@ static void response_row(const float *f, int w, int h, int y, int x0, int x1, fx
         break;
     case FX_EDGE_SOBEL:
     default:
+#ifdef EDGE_SSE2
+        xa = sobel_row_sse2(A, B, C, xa, xb, out);
+#endif
         for (int x = xa; x < xb; x++) {
             const float c = B[x];
             const float n = A[x] - c, s = C[x] - c, we = B[x - r] - c, ea = B[x + r] - c;
@@ -394,7 +556,7 @@ static void response_row(const float *f, int w, int h, int y, int x0, int x1, fx
         break;
     }
     for (int x = xb > x0 ? xb : x0; x < x1; x++)
-        out[x] = fx_edge_response_at(f, 1, w, h, x, y, op);
+        out[x] = response_at_rows(A, B, C, w, x, r, op);
 }
 
 /* max of two non-NaN values, inline (fmaxf is a libm call here) */
@@ -403,127 +565,232 @@ static inline float maxf(float a, float b)
     return a > b ? a : b;
 }
 
-/* Planar depth strength at (x, y) (field: 1/depth, finite and > 0): see edge_ops.h. */
-static inline float planar_at(const float *f, int w, int h, int x, int y)
+/* Planar depth strength (field: 1/depth, finite and > 0; see edge_ops.h) on one row: A, C
+ * the rows above and below (used when has_v: both inside the image). */
+static void planar_row(const float *A, const float *B, const float *C, int has_v, int w, int x0, int x1, float *out)
 {
-    const float *B = f + (size_t)y * w;
-    const float c = B[x];
-    float sx = 0.0f, sy = 0.0f;
-    if (x > 0 && x + 1 < w)
-        sx = fabsf((B[x - 1] - c) + (B[x + 1] - c));
-    if (y > 0 && y + 1 < h)
-        sy = fabsf((B[x - w] - c) + (B[x + w] - c));
-    float v = (sx > sy ? sx : sy) / c; /* x depth */
-    return v <= FLT_MAX ? v : FLT_MAX;
+    for (int x = x0; x < x1; x++) {
+        const float c = B[x];
+        float sx = 0.0f, sy = 0.0f;
+        if (x > 0 && x + 1 < w)
+            sx = fabsf((B[x - 1] - c) + (B[x + 1] - c));
+        if (has_v)
+            sy = fabsf((A[x] - c) + (C[x] - c));
+        float v = (sx > sy ? sx : sy) / c; /* x depth */
+        out[x] = v <= FLT_MAX ? v : FLT_MAX;
+    }
 }
 
-static void planar_row(const float *f, int w, int h, int y, int x0, int x1, float *out)
+/* Per-band state: ring rows of the worker's scratch. */
+typedef struct band_rings {
+    float *lum, *ldepth, *unorm, *str, *sl, *sd, *out, *nmd;
+    int32_t *nmx;
+} band_rings;
+
+static inline const float *ring_row(const float *ring, int rows, size_t row_floats, int y)
 {
-    for (int x = x0; x < x1; x++)
-        out[x] = planar_at(f, w, h, x, y);
+    return ring + (size_t)(y % rows) * row_floats;
 }
 
-static void strength_rows(void *user, int begin, int end)
+static void field_row(const edge_job *j, const band_rings *b, int y)
 {
-    const edge_job *j = user;
+    const fx_rect *fr = &j->field_rect;
+    const size_t w = (size_t)j->w, row = (size_t)y * w;
+    if (b->lum)
+        lum_row(j->src->rgba + row * 4, j->lut, fr->x0, fr->x1, b->lum + (size_t)(y % j->rf) * w);
+    if (b->ldepth)
+        depth_row(j->src->depth + row, j->s->depth_planar, fr->x0, fr->x1, b->ldepth + (size_t)(y % j->rf) * w);
+    if (b->unorm)
+        normal_row(j->src->normal + row * 3, j->w, fr->x0, fr->x1, b->unorm + (size_t)(y % j->rf) * w * 3);
+}
+
+/* Thresholded strength of row y into out[x] for x in strength_rect's columns; the raw
+ * strengths into j->strengths when write_dbg (row y inside the ROI and owned by this band). */
+static void strength_row(const edge_job *j, const band_rings *b, int y, float *out, int write_dbg)
+{
     const fx_edge_settings *s = j->s;
     const fx_rect *sr = &j->strength_rect;
-    const int w = j->w, h = j->h;
+    const int w = j->w, h = j->h, rf = j->rf;
+    const size_t ws = (size_t)w;
     const ramp_k rl = ramp_of(s->luminance_threshold, s->softness), rd = ramp_of(s->depth_threshold, s->softness);
     const ramp_k rn = ramp_of(s->normal_threshold, s->softness), ri = ramp_of(s->id_threshold, s->softness);
     /* normals turning by less than the threshold give 0 without an acos: cos(threshold)
      * plus a margin so that rounding never hides a value ramp() would make positive */
     const float cos_skip = cosf(fx_clampf(s->normal_threshold, 0.0f, 180.0f) * (float)(3.14159265358979323846 / 180.0)) + 1e-5f;
-    float *sl_row = NULL, *sd_row = NULL;
-    if (s->use_luminance)
-        sl_row = fx_mem_alloc((size_t)w * sizeof(float));
-    if (s->use_depth)
-        sd_row = fx_mem_alloc((size_t)w * sizeof(float));
-    for (int y = sr->y0 + begin; y < sr->y0 + end; y++) {
-        const int in_roi_y = y >= j->roi.y0 && y < j->roi.y1;
-        float *out = j->plane ? j->plane + (size_t)y * w : j->matte + (size_t)y * w;
-        if (s->use_luminance) {
-            if (sl_row)
-                response_row(j->lum, w, h, y, sr->x0, sr->x1, s->op, sl_row);
-        }
-        if (s->use_depth) {
-            if (sd_row && s->depth_planar)
-                planar_row(j->ldepth, w, h, y, sr->x0, sr->x1, sd_row);
-            else if (sd_row)
-                response_row(j->ldepth, w, h, y, sr->x0, sr->x1, s->op, sd_row);
-        }
-        if (sl_row && sd_row && !s->use_normal && !s->use_object && !s->use_material && !j->strengths) {
-            for (int x = sr->x0; x < sr->x1; x++) { /* the common cases: simple loops */
-                float a = ramp(rl, sl_row[x]), b = ramp(rd, sd_row[x]);
-                out[x] = a > b ? a : b;
-            }
-            continue;
-        }
-        if (sl_row && !s->use_depth && !s->use_normal && !s->use_object && !s->use_material && !j->strengths) {
-            for (int x = sr->x0; x < sr->x1; x++)
-                out[x] = ramp(rl, sl_row[x]);
-            continue;
-        }
-        for (int x = sr->x0; x < sr->x1; x++) {
-            float sl = 0, sd = 0, sn = 0, si = 0, e = 0;
-            if (s->use_luminance) {
-                sl = sl_row ? sl_row[x] : fx_edge_response_at(j->lum, 1, w, h, x, y, s->op);
-                e = maxf(e, ramp(rl, sl));
-            }
-            if (s->use_depth) {
-                if (sd_row)
-                    sd = sd_row[x];
-                else if (s->depth_planar)
-                    sd = planar_at(j->ldepth, w, h, x, y);
-                else
-                    sd = fx_edge_response_at(j->ldepth, 1, w, h, x, y, s->op);
-                e = maxf(e, ramp(rd, sd));
-            }
-            if (s->use_normal) {
-                int mixed;
-                float md = normal_min_dot(j->unorm, w, h, x, y, &mixed);
-                if (mixed || md < cos_skip || j->strengths) {
-                    sn = normal_angle(md, mixed);
-                    e = maxf(e, ramp(rn, sn));
-                }
-            }
-            for (int k = 0; k < 2; k++)
-                if (k == 0 ? s->use_object : s->use_material) {
-                    float d = id_strength(j->src, k, w, h, x, y);
-                    si = maxf(si, d);
-                    e = maxf(e, ramp(ri, d));
-                }
-            out[x] = e;
-            if (j->strengths && in_roi_y && x >= j->roi.x0 && x < j->roi.x1) {
-                float *o = j->strengths + ((size_t)y * w + x) * 4;
-                o[0] = sl;
-                o[1] = sd;
-                o[2] = sn;
-                o[3] = si;
-            }
+    const int r = fx_edge_operator_radius(s->op);
+    float *sl_row = b->sl, *sd_row = b->sd;
+    if (s->use_luminance) {
+        const float *A = ring_row(b->lum, rf, ws, clampi(y - r, 0, h - 1));
+        const float *B = ring_row(b->lum, rf, ws, y), *C = ring_row(b->lum, rf, ws, clampi(y + r, 0, h - 1));
+        response_row(A, B, C, w, sr->x0, sr->x1, s->op, sl_row);
+    }
+    if (s->use_depth) {
+        if (s->depth_planar) {
+            const int has_v = y > 0 && y + 1 < h;
+            const float *B = ring_row(b->ldepth, rf, ws, y);
+            const float *A = has_v ? ring_row(b->ldepth, rf, ws, y - 1) : B;
+            const float *C = has_v ? ring_row(b->ldepth, rf, ws, y + 1) : B;
+            planar_row(A, B, C, has_v, w, sr->x0, sr->x1, sd_row);
+        } else {
+            const float *A = ring_row(b->ldepth, rf, ws, clampi(y - r, 0, h - 1));
+            const float *B = ring_row(b->ldepth, rf, ws, y), *C = ring_row(b->ldepth, rf, ws, clampi(y + r, 0, h - 1));
+            response_row(A, B, C, w, sr->x0, sr->x1, s->op, sd_row);
         }
     }
-    fx_mem_free(sl_row);
-    fx_mem_free(sd_row);
+    const int dbg = write_dbg && j->strengths;
+    if (s->use_luminance && s->use_depth && !s->use_normal && !s->use_object && !s->use_material && !dbg) {
+        for (int x = sr->x0; x < sr->x1; x++) { /* the common cases: simple loops */
+            float a = ramp(rl, sl_row[x]), c = ramp(rd, sd_row[x]);
+            out[x] = a > c ? a : c;
+        }
+        return;
+    }
+    if (s->use_luminance && !s->use_depth && !s->use_normal && !s->use_object && !s->use_material && !dbg) {
+        for (int x = sr->x0; x < sr->x1; x++)
+            out[x] = ramp(rl, sl_row[x]);
+        return;
+    }
+    /* luminance and depth first (simple loops), then the rest per pixel */
+    if (s->use_luminance && s->use_depth) {
+        for (int x = sr->x0; x < sr->x1; x++) {
+            float a = ramp(rl, sl_row[x]), c = ramp(rd, sd_row[x]);
+            out[x] = a > c ? a : c;
+        }
+    } else if (s->use_luminance) {
+        for (int x = sr->x0; x < sr->x1; x++)
+            out[x] = ramp(rl, sl_row[x]);
+    } else if (s->use_depth) {
+        for (int x = sr->x0; x < sr->x1; x++)
+            out[x] = ramp(rd, sd_row[x]);
+    } else {
+        for (int x = sr->x0; x < sr->x1; x++)
+            out[x] = 0.0f;
+    }
+    const float *um = NULL, *u0 = NULL, *up = NULL;
+    if (s->use_normal) {
+        um = ring_row(b->unorm, rf, ws * 3, clampi(y - 1, 0, h - 1));
+        u0 = ring_row(b->unorm, rf, ws * 3, y);
+        up = ring_row(b->unorm, rf, ws * 3, clampi(y + 1, 0, h - 1));
+    }
+    const int dbg_row = dbg && y >= j->roi.y0 && y < j->roi.y1;
+    if (!s->use_normal && !s->use_object && !s->use_material && !dbg_row)
+        return;
+    float *nmd = b->nmd;
+    int32_t *nmx = b->nmx;
+    if (s->use_normal) {
+        normal_min_dot_row(um, u0, up, w, sr->x0, sr->x1, nmd, nmx);
+        if (!s->use_object && !s->use_material && !dbg_row) {
+            /* only the pixels where the normals turn enough (few): the acos */
+            for (int x = sr->x0; x < sr->x1; x++)
+                if (nmx[x] || nmd[x] < cos_skip)
+                    out[x] = maxf(out[x], ramp(rn, normal_angle(nmd[x], nmx[x])));
+            return;
+        }
+    }
+    for (int x = sr->x0; x < sr->x1; x++) {
+        float sn = 0, si = 0, e = out[x];
+        if (s->use_normal) {
+            const int mixed = nmx[x];
+            const float md = nmd[x];
+            if (mixed || md < cos_skip || dbg_row) {
+                sn = normal_angle(md, mixed);
+                e = maxf(e, ramp(rn, sn));
+            }
+        }
+        for (int k = 0; k < 2; k++)
+            if (k == 0 ? s->use_object : s->use_material) {
+                float d = id_strength(j->src, k, w, h, x, y);
+                si = maxf(si, d);
+                e = maxf(e, ramp(ri, d));
+            }
+        out[x] = e;
+        if (dbg_row && x >= j->roi.x0 && x < j->roi.x1) {
+            float *o = j->strengths + ((size_t)y * w + x) * 4;
+            o[0] = s->use_luminance ? sl_row[x] : 0.0f;
+            o[1] = s->use_depth ? sd_row[x] : 0.0f;
+            o[2] = sn;
+            o[3] = si;
+        }
+    }
 }
 
-static void dilate_rows(void *user, int begin, int end)
+/* m[x] = max(m[x], row[x + dx]) for |dx| <= hw, x + dx inside the image, x in [x0, x1). */
+EDGE_VEC static void max_span(float *m, const float *row, int w, int x0, int x1, int hw)
+{
+    for (int dx = -hw; dx <= hw; dx++) {
+        int a = x0, b = x1;
+        if (a + dx < 0)
+            a = -dx;
+        if (b + dx > w)
+            b = w - dx;
+        for (int x = a; x < b; x++) {
+            float v = row[x + dx];
+            m[x] = v > m[x] ? v : m[x];
+        }
+    }
+}
+
+static void band_rows(void *user, int begin, int end, int worker)
 {
     const edge_job *j = user;
-    const int w = j->w, h = j->h;
-    for (int y = j->roi.y0 + begin; y < j->roi.y0 + end; y++) {
-        float *out = j->matte + (size_t)y * w;
-        for (int x = j->roi.x0; x < j->roi.x1; x++) {
-            float m = 0.0f;
-            for (int k = 0; k < j->disc_count; k++) {
-                int xx = x + j->disc[2 * k], yy = y + j->disc[2 * k + 1];
-                if (xx < 0 || yy < 0 || xx >= w || yy >= h)
-                    continue;
-                float v = j->plane[(size_t)yy * w + xx];
-                m = v > m ? v : m;
-            }
-            out[x] = m;
+    const int w = j->w, h = j->h, reach = j->reach;
+    const size_t ws = (size_t)w;
+    float *sc = j->scratch[worker];
+    band_rings b = { 0 };
+    /* carve the worker's block (sizes as in fx_edge_matte_rows) */
+    if (j->s->use_luminance) {
+        b.lum = sc;
+        sc += (size_t)j->rf * ws;
+        b.sl = sc;
+        sc += ws;
+    }
+    if (j->s->use_depth) {
+        b.ldepth = sc;
+        sc += (size_t)j->rf * ws;
+        b.sd = sc;
+        sc += ws;
+    }
+    if (j->s->use_normal) {
+        b.unorm = sc;
+        sc += (size_t)j->rf * ws * 3;
+        b.nmd = sc;
+        sc += ws;
+        b.nmx = (int32_t *)sc;
+        sc += ws;
+    }
+    b.str = sc;
+    sc += (size_t)j->rs * ws;
+    b.out = sc;
+    const int y0 = j->roi.y0 + begin * EDGE_BAND, y1 = j->roi.y0 + end * EDGE_BAND < j->roi.y1 ? j->roi.y0 + end * EDGE_BAND : j->roi.y1;
+    const int s_first = y0 - reach > 0 ? y0 - reach : 0;
+    const int f_first = s_first - j->opr > 0 ? s_first - j->opr : 0;
+    int next_s = s_first, next_f = f_first;
+    const int fields = j->s->use_luminance || j->s->use_depth || j->s->use_normal;
+    for (int y = y0; y < y1; y++) {
+        const int s_need = y + reach < h - 1 ? y + reach : h - 1;
+        while (next_s <= s_need) {
+            const int f_need = next_s + j->opr < h - 1 ? next_s + j->opr : h - 1;
+            while (fields && next_f <= f_need)
+                field_row(j, &b, next_f++);
+            strength_row(j, &b, next_s, b.str + (size_t)(next_s % j->rs) * ws, next_s >= y0 && next_s < y1);
+            next_s++;
         }
+        const float *row;
+        if (reach == 0) {
+            row = b.str + (size_t)(y % j->rs) * ws;
+        } else {
+            float *m = b.out;
+            for (int x = j->roi.x0; x < j->roi.x1; x++)
+                m[x] = 0.0f;
+            for (int dy = -reach; dy <= reach; dy++) {
+                const int yy = y + dy;
+                if (yy < 0 || yy >= h)
+                    continue;
+                max_span(m, b.str + (size_t)(yy % j->rs) * ws, w, j->roi.x0, j->roi.x1, j->span[dy + reach]);
+            }
+            row = m;
+        }
+        j->emit(j->user, y, row);
     }
 }
 
@@ -537,30 +804,15 @@ static fx_rect grow(const fx_rect *r, int by, int w, int h)
     return g;
 }
 
-fx_result fx_edge_matte(fx_context *ctx, const fx_edge_sources *src, const fx_edge_settings *s,
-                        const fx_rect *roi_in, float *matte, float *strengths, const char *where)
+fx_result fx_edge_matte_rows(fx_context *ctx, const fx_edge_sources *src, const fx_edge_settings *s,
+                             const fx_rect *roi_in, float *strengths, fx_edge_row_fn emit, void *user,
+                             const char *where)
 {
     const int w = src->width, h = src->height;
     fx_rect roi = roi_in ? *roi_in : (fx_rect){ 0, 0, w, h };
     roi = grow(&roi, 0, w, h);
     if (roi.x1 <= roi.x0 || roi.y1 <= roi.y0)
         return FX_OK;
-    edge_job j;
-    memset(&j, 0, sizeof j);
-    j.src = src;
-    j.s = s;
-    j.w = w;
-    j.h = h;
-    j.roi = roi;
-    j.matte = matte;
-    j.strengths = strengths;
-    const float rho = dilation_rho(s);
-    const int reach = dilation_reach(rho);
-    j.strength_rect = grow(&roi, reach, w, h);
-    j.field_rect = grow(&j.strength_rect, fx_edge_operator_radius(s->op), w, h);
-    const size_t n = (size_t)w * h;
-    fx_result r = FX_OK;
-    int disc[2 * (2 * 33 + 1) * (2 * 33 + 1)];
     if (s->use_luminance && !src->rgba)
         return fx_fail(ctx, FX_ERR_INTERNAL, "%s: no colour for luminance edges", where);
     if (s->use_depth && !src->depth)
@@ -571,43 +823,81 @@ fx_result fx_edge_matte(fx_context *ctx, const fx_edge_sources *src, const fx_ed
         if ((k == 0 ? s->use_object : s->use_material) && !src->index[k] && src->crypto_ranks[k] < 1)
             return fx_fail(ctx, FX_ERR_MISSING_PASS, "%s: no ID pass for %s edges", where,
                            k == 0 ? "object" : "material");
-    if ((s->use_luminance && !(j.lum = fx_mem_alloc(n * sizeof(float)))) ||
-        (s->use_depth && !(j.ldepth = fx_mem_alloc(n * sizeof(float)))) ||
-        (s->use_normal && !(j.unorm = fx_mem_alloc(n * 3 * sizeof(float)))) ||
-        (reach > 0 && !(j.plane = fx_mem_alloc(n * sizeof(float))))) {
-        r = fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the edge planes", where);
-        goto out;
-    }
-    if (j.lum)
-        j.lut = fx_srgb_lut();
-    /* field_rect (strength rect + the operator's radius >= 1) covers the normals' 4-neighbourhood too */
-    if (j.lum || j.ldepth || j.unorm) {
-        int rows = j.field_rect.y1 - j.field_rect.y0;
-        fx_parallel_for(ctx, rows, fx_grain_for(ctx, rows), fields_rows, &j);
-    }
+    edge_job j;
+    memset(&j, 0, sizeof j);
+    j.src = src;
+    j.s = s;
+    j.w = w;
+    j.h = h;
+    j.roi = roi;
+    j.strengths = strengths;
+    j.emit = emit;
+    j.user = user;
+    const float rho = dilation_rho(s);
+    j.reach = dilation_reach(rho);
+    j.opr = fx_edge_operator_radius(s->op); /* >= 1: normals and planar depth read 1 row away */
+    j.strength_rect = grow(&roi, j.reach, w, h);
+    j.field_rect = grow(&j.strength_rect, j.opr, w, h);
+    j.rf = 2 * j.opr + 1;
+    j.rs = 2 * j.reach + 1;
+    int span[2 * 33 + 1];
     {
-        int rows = j.strength_rect.y1 - j.strength_rect.y0;
-        fx_parallel_for(ctx, rows, fx_grain_for(ctx, rows), strength_rows, &j);
-    }
-    if (reach > 0) {
-        int c = 0;
         const float lim = (rho + 0.5f) * (rho + 0.5f);
-        for (int dy = -reach; dy <= reach; dy++)
-            for (int dx = -reach; dx <= reach; dx++)
-                if ((float)(dx * dx + dy * dy) <= lim) {
-                    disc[2 * c] = dx;
-                    disc[2 * c + 1] = dy;
-                    c++;
-                }
-        j.disc = disc;
-        j.disc_count = c;
-        int rows = roi.y1 - roi.y0;
-        fx_parallel_for(ctx, rows, fx_grain_for(ctx, rows), dilate_rows, &j);
+        for (int dy = -j.reach; dy <= j.reach; dy++) {
+            int hw = -1;
+            for (int dx = 0; dx <= j.reach; dx++)
+                if ((float)(dx * dx + dy * dy) <= lim)
+                    hw = dx;
+            span[dy + j.reach] = hw; /* -1: no tap in this row (max_span does nothing) */
+        }
     }
-out:
-    fx_mem_free(j.lum);
-    fx_mem_free(j.ldepth);
-    fx_mem_free(j.unorm);
-    fx_mem_free(j.plane);
+    j.span = span;
+    const size_t ws = (size_t)w;
+    size_t floats = (size_t)j.rs * ws + ws;
+    if (s->use_luminance)
+        floats += (size_t)j.rf * ws + ws;
+    if (s->use_depth)
+        floats += (size_t)j.rf * ws + ws;
+    if (s->use_normal)
+        floats += (size_t)j.rf * ws * 3 + 2 * ws; /* + min dots, mixed flags */
+    j.scratch_floats = floats;
+    j.workers = fx_parallel_workers(ctx);
+    fx_result r = FX_OK;
+    j.scratch = fx_mem_calloc((size_t)j.workers, sizeof *j.scratch);
+    if (!j.scratch)
+        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the edge rows", where);
+    for (int i = 0; i < j.workers && !r; i++)
+        if (!(j.scratch[i] = fx_mem_alloc(floats * sizeof(float))))
+            r = fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the edge rows", where);
+    if (!r) {
+        if (s->use_luminance)
+            j.lut = fx_srgb_lut();
+        const int bands = (roi.y1 - roi.y0 + EDGE_BAND - 1) / EDGE_BAND;
+        fx_parallel_for_worker(ctx, bands, 1, band_rows, &j);
+    }
+    for (int i = 0; i < j.workers; i++)
+        fx_mem_free(j.scratch[i]);
+    fx_mem_free(j.scratch);
     return r;
+}
+
+typedef struct matte_copy {
+    float *matte;
+    int w, x0, x1;
+} matte_copy;
+
+static void copy_matte_row(void *user, int y, const float *row)
+{
+    const matte_copy *c = user;
+    memcpy(c->matte + (size_t)y * c->w + c->x0, row + c->x0, (size_t)(c->x1 - c->x0) * sizeof(float));
+}
+
+fx_result fx_edge_matte(fx_context *ctx, const fx_edge_sources *src, const fx_edge_settings *s,
+                        const fx_rect *roi, float *matte, float *strengths, const char *where)
+{
+    const int w = src->width, h = src->height;
+    fx_rect rr = roi ? *roi : (fx_rect){ 0, 0, w, h };
+    rr = grow(&rr, 0, w, h);
+    matte_copy c = { matte, w, rr.x0, rr.x1 };
+    return fx_edge_matte_rows(ctx, src, s, &rr, strengths, copy_matte_row, &c, where);
 }

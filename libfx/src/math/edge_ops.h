@@ -109,6 +109,15 @@ fx_result fx_edge_sources_from_frame(const fx_frame *f, const float *rgba, const
 fx_result fx_edge_matte(fx_context *ctx, const fx_edge_sources *src, const fx_edge_settings *s,
                         const fx_rect *roi, float *matte, float *strengths, const char *where);
 
+/* The same matte, streamed: emit(user, y, row) for each row y of roi (row[x] valid for x in
+ * roi's columns; borrowed until emit returns), called from the worker threads in any order,
+ * each row once. No frame-size buffer is allocated: a caller that consumes the matte at once
+ * (draws it over the image) saves a plane's write and read. */
+typedef void (*fx_edge_row_fn)(void *user, int y, const float *row);
+fx_result fx_edge_matte_rows(fx_context *ctx, const fx_edge_sources *src, const fx_edge_settings *s,
+                             const fx_rect *roi, float *strengths, fx_edge_row_fn emit, void *user,
+                             const char *where);
+
 #ifdef __cplusplus
 }
 #endif
