@@ -186,7 +186,12 @@ static double plane_depth(const void *user, int x, int y, double px, double py)
     return isfinite(t) && t > 0.5 * d && t < 2.0 * d ? t : d;
 }
 
-static inline void sample_bilinear(const float *img, int w, int h, float px, float py, float out[3])
+/* Bilinear lookup at frame position (px, py) (pixel centres at +0.5, borders clamped to
+ * the frame) in an image that holds only the box [bx0, bx1) x [by0, by1) of the frame
+ * (row stride bx1 - bx0): a box covering the taps reads the same as the full frame;
+ * taps outside it are clamped into it (never out of the buffer). */
+static inline void sample_bilinear_box(const float *img, const fx_rect *box, int w, int h, float px, float py,
+                                       float out[3])
 {
     float fx = px - 0.5f, fy = py - 0.5f;
     fx = fx < 0 ? 0 : fx > w - 1 ? (float)(w - 1) : fx;
@@ -194,12 +199,24 @@ static inline void sample_bilinear(const float *img, int w, int h, float px, flo
     int x0 = (int)fx, y0 = (int)fy;
     int x1 = x0 + 1 < w ? x0 + 1 : x0, y1 = y0 + 1 < h ? y0 + 1 : y0;
     float ax = fx - x0, ay = fy - y0;
-    const float *a = img + ((size_t)y0 * w + x0) * 4, *b = img + ((size_t)y0 * w + x1) * 4;
-    const float *c = img + ((size_t)y1 * w + x0) * 4, *d = img + ((size_t)y1 * w + x1) * 4;
+    const int bw = box->x1 - box->x0;
+#define BOX_X(v) ((v) < box->x0 ? 0 : (v) >= box->x1 ? bw - 1 : (v) - box->x0)
+#define BOX_Y(v) ((v) < box->y0 ? 0 : (v) >= box->y1 ? box->y1 - box->y0 - 1 : (v) - box->y0)
+    int ux0 = BOX_X(x0), ux1 = BOX_X(x1), uy0 = BOX_Y(y0), uy1 = BOX_Y(y1);
+#undef BOX_X
+#undef BOX_Y
+    const float *a = img + ((size_t)uy0 * bw + ux0) * 4, *b = img + ((size_t)uy0 * bw + ux1) * 4;
+    const float *c = img + ((size_t)uy1 * bw + ux0) * 4, *d = img + ((size_t)uy1 * bw + ux1) * 4;
     for (int k = 0; k < 3; k++) {
         float top = a[k] + (b[k] - a[k]) * ax, bot = c[k] + (d[k] - c[k]) * ax;
         out[k] = top + (bot - top) * ay;
     }
+}
+
+static inline void sample_bilinear(const float *img, int w, int h, float px, float py, float out[3])
+{
+    const fx_rect frame = { 0, 0, w, h };
+    sample_bilinear_box(img, &frame, w, h, px, py, out);
 }
 
 /* The mirror face's frame for bending: centre, tangent, bitangent (view space) and the
@@ -229,8 +246,10 @@ typedef struct ssr_job {
     int cx0, cy0, ncx, ncy;    /* cell grid over the roi */
     cell_hit *cells;
     const float *lookup;       /* image the reflection is sampled from (blurred for glossy) */
-    const float *fin;          /* finished one-bounce image of this mirror (lookup elsewhere), or NULL */
-    float *out;                /* where shade_rows writes: run->dst, or a fin buffer */
+    const float *fin;          /* finished one-bounce image of this mirror (lookup elsewhere), or NULL;
+                                  it holds only fin_box of the frame */
+    fx_rect fin_box;           /* the mask's bounds + 2 px (every bilinear tap of an own pixel) */
+    float *out;                /* where shade_rows writes: run->dst, or a fin buffer (fin_box) */
     int last_bounce;           /* bounces left after the first: 0 while iterating fin */
     float opm[16];
     float *dbg_hit, *dbg_xy, *dbg_len;
@@ -418,7 +437,10 @@ static void ray_colour(const ssr_job *j, fx_vec3 ro, fx_vec3 rd, float px, float
     int hy = (int)fx_clampf(floorf(py), 0.0f, (float)(F->h - 1));
     int own = own_at(j, hx, hy);
     int other = !own && j->surfaces && j->surfaces->coverage[(size_t)hy * F->w + hx] > 0.5f;
-    sample_bilinear(own && j->fin ? j->fin : j->lookup, F->w, F->h, px, py, rgb);
+    if (own && j->fin)
+        sample_bilinear_box(j->fin, &j->fin_box, F->w, F->h, px, py, rgb);
+    else
+        sample_bilinear(j->lookup, F->w, F->h, px, py, rgb);
     if ((!own && !other) || left <= 0)
         return;
     float d;
@@ -512,7 +534,10 @@ static void shade_rows(void *user, int begin, int end)
         for (int x = run->roi.x0; x < run->roi.x1; x++) {
             size_t i = (size_t)y * w + x;
             const float *s = run->src + i * 4;
-            float *o = j->out + i * 4;
+            float *o = j->out == run->dst
+                           ? j->out + i * 4
+                           : j->out + ((size_t)(y - j->fin_box.y0) * (j->fin_box.x1 - j->fin_box.x0) +
+                                       (x - j->fin_box.x0)) * 4;
             if (j->out == run->dst)
                 memcpy(o, s, 4 * sizeof(float));
             if (!in_mask(m, w, x, y))
@@ -798,8 +823,14 @@ static fx_result ssr_process(const fx_effect_run *run)
     if (p->bounces > 1 && run->mask) {
         /* the finished one-bounce image of this mirror, Jacobi-iterated on the first-bounce
          * hits (a ray landing on this mirror sees its previous iterate): the estimate
-         * where the traced bounces run out. Two full-frame buffers (lookup elsewhere). */
-        size_t n4 = (size_t)F.w * F.h * 4;
+         * where the traced bounces run out. Two buffers over the mask's bounds + 2 px (lookup elsewhere). */
+        fx_rect fb = { roi->x0 - 2, roi->y0 - 2, roi->x1 + 2, roi->y1 + 2 };
+        fb.x0 = fb.x0 < 0 ? 0 : fb.x0;
+        fb.y0 = fb.y0 < 0 ? 0 : fb.y0;
+        fb.x1 = fb.x1 > F.w ? F.w : fb.x1;
+        fb.y1 = fb.y1 > F.h ? F.h : fb.y1;
+        j.fin_box = fb;
+        size_t bw = (size_t)(fb.x1 - fb.x0), n4 = bw * (size_t)(fb.y1 - fb.y0) * 4;
         if ((r = fx_check_budget(run->ctx, 2 * n4 * sizeof(float), "the mirror's multi-bounce estimate")))
             goto out;
         fin[0] = fx_mem_alloc(n4 * sizeof(float));
@@ -808,8 +839,11 @@ static fx_result ssr_process(const fx_effect_run *run)
             r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the multi-bounce estimate", where);
             goto out;
         }
-        memcpy(fin[0], j.lookup, n4 * sizeof(float));
-        memcpy(fin[1], j.lookup, n4 * sizeof(float));
+        for (int y = fb.y0; y < fb.y1; y++) {
+            const float *srow = j.lookup + ((size_t)y * F.w + fb.x0) * 4;
+            memcpy(fin[0] + (size_t)(y - fb.y0) * bw * 4, srow, bw * 4 * sizeof(float));
+            memcpy(fin[1] + (size_t)(y - fb.y0) * bw * 4, srow, bw * 4 * sizeof(float));
+        }
         j.last_bounce = 0;
         j.fin = NULL;
         for (int it = 0; it < FIN_ITERATIONS; it++) {
