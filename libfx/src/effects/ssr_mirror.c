@@ -68,6 +68,8 @@ typedef struct ssr_params {
     float thickness;
     float max_distance;
     float resolution_scale;
+    int retrace_edges;
+    int hiz;
 } ssr_params;
 
 enum { OP_NONE = 0, OP_SEPIA, OP_GRAYSCALE, OP_CEL };
@@ -127,6 +129,14 @@ static const fx_param_def ssr_param_defs[] = {
                "Longest ray in metres (view space)"),
     FX_P_FLOAT(ssr_params, resolution_scale, "resolution_scale", 1.0, 0.0625, 1.0, 0.125, 1.0, "factor",
                "Rays per pixel side: 0.5 traces one ray per 2x2 cell and interpolates the hit coordinates"),
+    FX_P_BOOL(ssr_params, retrace_edges, "retrace_edges", 1,
+              "With resolution_scale < 1: a pixel whose four surrounding cells disagree (a miss, the "
+              "mirror's border, or hits more than 2 cells apart: an edge in the reflection) traces its "
+              "own ray instead of taking its cell's hit (no stair steps; costs a ray per edge pixel)"),
+    FX_P_BOOL(ssr_params, hiz, "hiz", 0,
+              "Trace through a min-depth pyramid (Hi-Z, built once per entry): cells the ray passes in "
+              "front of are skipped whole and every other pixel is tested exactly, as with stride 1; "
+              "stride and growth are then unused and max_steps caps the walk"),
 };
 
 /* ---- helpers ---- */
@@ -245,7 +255,9 @@ typedef struct ssr_job {
     int cell;                  /* cell size in pixels */
     int cx0, cy0, ncx, ncy;    /* cell grid over the roi */
     cell_hit *cells;
+    cell_hit *hits;            /* per roi pixel (row stride roi width): cells resolved, or cells itself */
     const float *lookup;       /* image the reflection is sampled from (blurred for glossy) */
+    fx_rect lookup_box;        /* where lookup is valid (the blurred box; src elsewhere) */
     const float *fin;          /* finished one-bounce image of this mirror (lookup elsewhere), or NULL;
                                   it holds only fin_box of the frame */
     fx_rect fin_box;           /* the mask's bounds + 2 px (every bilinear tap of an own pixel) */
@@ -328,7 +340,7 @@ static void trace_cells(void *user, int begin, int end)
     for (int cy = begin; cy < end; cy++)
         for (int cx = 0; cx < j->ncx; cx++) {
             cell_hit *ch = &j->cells[(size_t)cy * j->ncx + cx];
-            ch->state = 0;
+            memset(ch, 0, sizeof *ch);
             int x0 = (j->cx0 + cx) * c, y0 = (j->cy0 + cy) * c;
             /* the cell's centre pixel if it is a mirror pixel, else the first one */
             int bx = -1, by = -1;
@@ -349,30 +361,42 @@ static void trace_cells(void *user, int begin, int end)
         }
 }
 
-/* Hit coordinates of pixel (x, y): its own trace at full resolution; with cells, the
- * bilinear blend of the 4 surrounding cells when all hit and agree within 2 cells,
- * else its own cell. */
-static cell_hit pixel_hit(const ssr_job *j, int x, int y)
+/* Hit coordinates of mirror pixel (x, y) with cells: the bilinear blend of the 4
+ * surrounding cells when all hit and agree within 2 cells; else (an edge in the
+ * reflection, a miss, the mirror's border) its own ray when retrace_edges is on, else
+ * its own cell's hit. */
+static cell_hit resolve_hit(const ssr_job *j, int x, int y)
 {
     const int c = j->cell;
     int gx = x / c - j->cx0, gy = y / c - j->cy0;
     cell_hit own = j->cells[(size_t)gy * j->ncx + gx];
-    if (c == 1)
-        return own;
     float fx = ((float)x + 0.5f) / (float)c - 0.5f - (float)j->cx0;
     float fy = ((float)y + 0.5f) / (float)c - 0.5f - (float)j->cy0;
     int ax = (int)floorf(fx), ay = (int)floorf(fy);
-    if (ax < 0 || ay < 0 || ax + 1 >= j->ncx || ay + 1 >= j->ncy)
-        return own;
-    const cell_hit *q[4] = { &j->cells[(size_t)ay * j->ncx + ax], &j->cells[(size_t)ay * j->ncx + ax + 1],
-                             &j->cells[(size_t)(ay + 1) * j->ncx + ax],
-                             &j->cells[(size_t)(ay + 1) * j->ncx + ax + 1] };
-    float lim = 2.0f * (float)c;
-    for (int k = 0; k < 4; k++) {
-        if (q[k]->state != 1 || q[k]->conf <= 0.0f)
+    int agree = ax >= 0 && ay >= 0 && ax + 1 < j->ncx && ay + 1 < j->ncy;
+    const cell_hit *q[4] = { NULL, NULL, NULL, NULL };
+    if (agree) {
+        q[0] = &j->cells[(size_t)ay * j->ncx + ax];
+        q[1] = &j->cells[(size_t)ay * j->ncx + ax + 1];
+        q[2] = &j->cells[(size_t)(ay + 1) * j->ncx + ax];
+        q[3] = &j->cells[(size_t)(ay + 1) * j->ncx + ax + 1];
+        float lim = 2.0f * (float)c;
+        for (int k = 0; k < 4 && agree; k++)
+            agree = q[k]->state == 1 && q[k]->conf > 0.0f && fabsf(q[k]->px - q[0]->px) <= lim &&
+                    fabsf(q[k]->py - q[0]->py) <= lim;
+    }
+    if (!agree) {
+        if (!j->p->retrace_edges)
             return own;
-        if (fabsf(q[k]->px - q[0]->px) > lim || fabsf(q[k]->py - q[0]->py) > lim)
+        /* all four traced and all missed: a miss region, nothing to sharpen */
+        int misses = 0;
+        for (int k = 0; k < 4 && q[0]; k++)
+            misses += q[k]->state == 1 && !(q[k]->conf > 0.0f);
+        if (misses == 4)
             return own;
+        cell_hit h;
+        trace_pixel(j, x, y, &h);
+        return h;
     }
     float tx = fx - ax, ty = fy - ay;
     float wts[4] = { (1 - tx) * (1 - ty), tx * (1 - ty), (1 - tx) * ty, tx * ty };
@@ -384,6 +408,28 @@ static cell_hit pixel_hit(const ssr_job *j, int x, int y)
         r.length += wts[k] * q[k]->length;
     }
     return r;
+}
+
+/* Fills j->hits for the mirror pixels of rows [begin, end) of the roi (cells > 1). */
+static void resolve_rows(void *user, int begin, int end)
+{
+    ssr_job *j = user;
+    const fx_rect *roi = &j->run->roi;
+    const int rw = roi->x1 - roi->x0;
+    for (int y = roi->y0 + begin; y < roi->y0 + end; y++)
+        for (int x = roi->x0; x < roi->x1; x++) {
+            cell_hit *h = &j->hits[(size_t)(y - roi->y0) * rw + (x - roi->x0)];
+            if (in_mask(j->run->mask, j->F->w, x, y))
+                *h = resolve_hit(j, x, y);
+            else
+                memset(h, 0, sizeof *h);
+        }
+}
+
+static inline cell_hit pixel_hit(const ssr_job *j, int x, int y)
+{
+    const fx_rect *roi = &j->run->roi;
+    return j->hits[(size_t)(y - roi->y0) * (roi->x1 - roi->x0) + (x - roi->x0)];
 }
 
 static inline int own_at(const ssr_job *j, int x, int y)
@@ -425,6 +471,21 @@ static fx_vec3 surface_point(const ssr_frame *F, int x, int y, float px, float p
     return q;
 }
 
+/* The reflected image at (px, py): the lookup (blurred for glossy mirrors) where all four
+ * bilinear taps lie in its box, else the unblurred current image (a later bounce landing
+ * outside the first hits' box). */
+static void sample_lookup(const ssr_job *j, float px, float py, float rgb[3])
+{
+    const int w = j->F->w, h = j->F->h;
+    float fx = fx_clampf(px - 0.5f, 0.0f, (float)(w - 1)), fy = fx_clampf(py - 0.5f, 0.0f, (float)(h - 1));
+    int x0 = (int)fx, y0 = (int)fy;
+    const fx_rect *b = &j->lookup_box;
+    if (x0 >= b->x0 && y0 >= b->y0 && (x0 + 1 < w ? x0 + 1 : x0) < b->x1 && (y0 + 1 < h ? y0 + 1 : y0) < b->y1)
+        sample_bilinear(j->lookup, w, h, px, py, rgb);
+    else
+        sample_bilinear(j->run->src, w, h, px, py, rgb);
+}
+
 /* Colour the ray o + t dir brings back from (px, py), where it landed. Not a mirror
  * there: the lookup. This entry's own mirror or a mirror_surfaces pixel: reflected
  * again (up to `left` more bounces). The estimate where no further bounce is traced or
@@ -440,7 +501,7 @@ static void ray_colour(const ssr_job *j, fx_vec3 ro, fx_vec3 rd, float px, float
     if (own && j->fin)
         sample_bilinear_box(j->fin, &j->fin_box, F->w, F->h, px, py, rgb);
     else
-        sample_bilinear(j->lookup, F->w, F->h, px, py, rgb);
+        sample_lookup(j, px, py, rgb);
     if ((!own && !other) || left <= 0)
         return;
     float d;
@@ -732,7 +793,7 @@ static fx_result ssr_process(const fx_effect_run *run)
     F.depth = dp->data;
     F.normal = np->data;
     F.nch = np->channels;
-    F.scene = (fx_ssr_scene){ &F.view, F.depth, F.w, F.h, front_facing, plane_depth, &F };
+    F.scene = (fx_ssr_scene){ &F.view, F.depth, F.w, F.h, front_facing, plane_depth, &F, NULL };
     /* the fx_ssr_scene points at F.view: F must not move from here on */
 
     ssr_job j;
@@ -748,7 +809,11 @@ static fx_result ssr_process(const fx_effect_run *run)
     fx_result r = FX_OK;
     fx_mask *surfaces = NULL;
     float *blurred = NULL, *fin[2] = { NULL, NULL };
+    const size_t frame_bytes = (size_t)F.w * F.h * 4 * sizeof(float);
+    const size_t hits_bytes = (size_t)F.w * F.h * sizeof(cell_hit);
     fx_mask_spec spec;
+    fx_depth_pyramid pyr;
+    memset(&pyr, 0, sizeof pyr);
     int has_surfaces = 0;
     if (p->bounces > 1 && (r = parse_surfaces(run->ctx, p->mirror_surfaces, where, &spec, &has_surfaces)))
         return r;
@@ -768,20 +833,44 @@ static fx_result ssr_process(const fx_effect_run *run)
     j.cy0 = roi->y0 / cell;
     j.ncx = (roi->x1 - 1) / cell - j.cx0 + 1;
     j.ncy = (roi->y1 - 1) / cell - j.cy0 + 1;
-    j.cells = fx_mem_calloc((size_t)j.ncx * j.ncy, sizeof *j.cells);
+    /* scratch buffers come from the context's store in frame-sized units, so the ten
+     * entries of a mirror room reuse memory already mapped instead of page-faulting
+     * fresh buffers (every byte read below is written first) */
+    if ((r = fx_check_budget(run->ctx, 2 * hits_bytes, "the ray hits")))
+        goto out;
+    j.cells = fx_buffer_get(run->ctx, hits_bytes);
     if (!j.cells) {
         r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for %d x %d ray cells", where, j.ncx, j.ncy);
         goto out;
     }
+    if (p->hiz) {
+        if ((r = fx_check_budget(run->ctx, (size_t)F.w * F.h / 3 * sizeof(float) + 64, "the depth pyramid")) ||
+            (r = fx_depth_pyramid_build(run->ctx, F.depth, F.w, F.h, 12, where, &pyr)))
+            goto out;
+        F.scene.hiz = &pyr;
+    }
     fx_parallel_for(run->ctx, j.ncy, 1, trace_cells, &j);
+    const int rows = roi->y1 - roi->y0;
+    const size_t rw = (size_t)(roi->x1 - roi->x0);
+    if (cell == 1) {
+        j.hits = j.cells; /* one cell per roi pixel, same layout */
+    } else {
+        j.hits = fx_buffer_get(run->ctx, hits_bytes);
+        if (!j.hits) {
+            r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the ray hits", where);
+            goto out;
+        }
+        fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), resolve_rows, &j);
+    }
 
     j.lookup = run->src;
+    j.lookup_box = (fx_rect){ 0, 0, F.w, F.h };
     fx_blur_spec bs = { p->glossiness, FX_BLUR_RECURSIVE, 3 };
     if (!fx_blur_is_identity(&bs)) {
         /* blur only the hits' bounding box (+1 px for the bilinear lookup) */
         float bx0 = 1e30f, by0 = 1e30f, bx1 = -1e30f, by1 = -1e30f;
-        for (size_t k = 0; k < (size_t)j.ncx * j.ncy; k++) {
-            const cell_hit *c = &j.cells[k];
+        for (size_t k = 0; k < rw * rows; k++) {
+            const cell_hit *c = &j.hits[k];
             if (c->state == 1 && c->conf > 0.0f) {
                 bx0 = fminf(bx0, c->px), by0 = fminf(by0, c->py);
                 bx1 = fmaxf(bx1, c->px), by1 = fmaxf(by1, c->py);
@@ -794,10 +883,9 @@ static fx_result ssr_process(const fx_effect_run *run)
             br.y0 = br.y0 < 0 ? 0 : br.y0;
             br.x1 = br.x1 > F.w ? F.w : br.x1;
             br.y1 = br.y1 > F.h ? F.h : br.y1;
-            size_t bytes = (size_t)F.w * F.h * 4 * sizeof(float);
-            if ((r = fx_check_budget(run->ctx, bytes, "the glossy reflection lookup")))
+            if ((r = fx_check_budget(run->ctx, frame_bytes, "the glossy reflection lookup")))
                 goto out;
-            blurred = fx_mem_alloc(bytes);
+            blurred = fx_buffer_get(run->ctx, frame_bytes);
             if (!blurred) {
                 r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the glossy lookup", where);
                 goto out;
@@ -809,6 +897,7 @@ static fx_result ssr_process(const fx_effect_run *run)
             if ((r = fx_blur_image(run->ctx, run->src, blurred, F.w, F.h, 4, &bs, &br, where)))
                 goto out;
             j.lookup = blurred;
+            j.lookup_box = br;
         }
     }
 
@@ -819,7 +908,6 @@ static fx_result ssr_process(const fx_effect_run *run)
         j.dbg_len = fx_effect_debug_pass(run, "ray_length", 1, &r);
     if (r)
         goto out;
-    int rows = roi->y1 - roi->y0;
     if (p->bounces > 1 && run->mask) {
         /* the finished one-bounce image of this mirror, Jacobi-iterated on the first-bounce
          * hits (a ray landing on this mirror sees its previous iterate): the estimate
@@ -830,20 +918,24 @@ static fx_result ssr_process(const fx_effect_run *run)
         fb.x1 = fb.x1 > F.w ? F.w : fb.x1;
         fb.y1 = fb.y1 > F.h ? F.h : fb.y1;
         j.fin_box = fb;
-        size_t bw = (size_t)(fb.x1 - fb.x0), n4 = bw * (size_t)(fb.y1 - fb.y0) * 4;
-        if ((r = fx_check_budget(run->ctx, 2 * n4 * sizeof(float), "the mirror's multi-bounce estimate")))
+        size_t bw = (size_t)(fb.x1 - fb.x0);
+        if ((r = fx_check_budget(run->ctx, 2 * frame_bytes, "the mirror's multi-bounce estimate")))
             goto out;
-        fin[0] = fx_mem_alloc(n4 * sizeof(float));
-        fin[1] = fx_mem_alloc(n4 * sizeof(float));
+        fin[0] = fx_buffer_get(run->ctx, frame_bytes);
+        fin[1] = fx_buffer_get(run->ctx, frame_bytes);
         if (!fin[0] || !fin[1]) {
             r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the multi-bounce estimate", where);
             goto out;
         }
-        for (int y = fb.y0; y < fb.y1; y++) {
-            const float *srow = j.lookup + ((size_t)y * F.w + fb.x0) * 4;
-            memcpy(fin[0] + (size_t)(y - fb.y0) * bw * 4, srow, bw * 4 * sizeof(float));
-            memcpy(fin[1] + (size_t)(y - fb.y0) * bw * 4, srow, bw * 4 * sizeof(float));
-        }
+        for (int y = fb.y0; y < fb.y1; y++)
+            for (int x = fb.x0; x < fb.x1; x++) {
+                const fx_rect *lb = &j.lookup_box;
+                int in = x >= lb->x0 && x < lb->x1 && y >= lb->y0 && y < lb->y1;
+                const float *sp = (in ? j.lookup : run->src) + ((size_t)y * F.w + x) * 4;
+                size_t o = ((size_t)(y - fb.y0) * bw + (x - fb.x0)) * 4;
+                memcpy(fin[0] + o, sp, 4 * sizeof(float));
+                memcpy(fin[1] + o, sp, 4 * sizeof(float));
+            }
         j.last_bounce = 0;
         j.fin = NULL;
         for (int it = 0; it < FIN_ITERATIONS; it++) {
@@ -856,11 +948,14 @@ static fx_result ssr_process(const fx_effect_run *run)
     j.last_bounce = p->bounces - 1;
     fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), shade_rows, &j);
 out:
-    fx_mem_free(fin[0]);
-    fx_mem_free(fin[1]);
-    fx_mem_free(j.cells);
-    fx_mem_free(blurred);
+    fx_buffer_put(run->ctx, fin[0], frame_bytes);
+    fx_buffer_put(run->ctx, fin[1], frame_bytes);
+    if (j.hits != j.cells)
+        fx_buffer_put(run->ctx, j.hits, hits_bytes);
+    fx_buffer_put(run->ctx, j.cells, hits_bytes);
+    fx_buffer_put(run->ctx, blurred, frame_bytes);
     fx_mask_free(surfaces);
+    fx_depth_pyramid_free(run->ctx, &pyr);
     return r;
 }
 

@@ -15,6 +15,7 @@
 #define LIBFX_MATH_SSR_TRACE_H
 
 #include "math/camera.h"
+#include "math/depth_pyramid.h"
 
 #ifdef __cplusplus
 extern "C" {
@@ -38,6 +39,12 @@ typedef struct fx_ssr_scene {
      * decimetres of depth per pixel, more than any useful thickness. NULL: the sample. */
     double (*surface_depth)(const void *user, int x, int y, double px, double py);
     const void *user;
+    /* Optional: the min-depth pyramid of `depth` (math/depth_pyramid.h). Given, the
+     * tracer walks it (Hi-Z): it steps over cells the ray crosses in front of every
+     * surface and tests every pixel it does not skip exactly (as stride 1); stride and
+     * growth are unused and max_steps caps the walk's steps (level changes included).
+     * NULL: the linear march with growing strides. */
+    const fx_depth_pyramid *hiz;
 } fx_ssr_scene;
 
 typedef struct fx_ssr_settings {
