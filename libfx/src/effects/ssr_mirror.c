@@ -130,13 +130,14 @@ static const fx_param_def ssr_param_defs[] = {
     FX_P_FLOAT(ssr_params, resolution_scale, "resolution_scale", 1.0, 0.0625, 1.0, 0.125, 1.0, "factor",
                "Rays per pixel side: 0.5 traces one ray per 2x2 cell and interpolates the hit coordinates"),
     FX_P_BOOL(ssr_params, retrace_edges, "retrace_edges", 1,
-              "With resolution_scale < 1: a pixel whose four surrounding cells disagree (a miss, the "
-              "mirror's border, or hits more than 2 cells apart: an edge in the reflection) traces its "
-              "own ray instead of taking its cell's hit (no stair steps; costs a ray per edge pixel)"),
+              "With resolution_scale < 1: a pixel whose four surrounding cells disagree (a partial miss, "
+              "the mirror's border, or hits not mapping the cells affinely: an edge in the reflection) "
+              "traces its own ray instead of taking its cell's hit (no stair steps; a ray per edge pixel)"),
     FX_P_BOOL(ssr_params, hiz, "hiz", 0,
-              "Trace through a min-depth pyramid (Hi-Z, built once per entry): cells the ray passes in "
-              "front of are skipped whole and every other pixel is tested exactly, as with stride 1; "
-              "stride and growth are then unused and max_steps caps the walk"),
+              "Experimental: trace through a min/max depth pyramid (Hi-Z, built per entry): cells the "
+              "ray passes in front of (or far behind) are skipped whole, every other pixel is tested "
+              "(stride and growth unused, max_steps caps the walk). Closer to reference on the mirror "
+              "room, but misses grazing hits between facing mirrors; no preset uses it"),
 };
 
 /* ---- helpers ---- */
@@ -178,22 +179,21 @@ static int front_facing(const void *user, int x, int y, fx_vec3 dir)
     return !view_normal_at(user, x, y, &n) || fx_v3_dot(n, dir) <= 0.25f;
 }
 
-/* Tracer: the planar depth of pixel (x, y)'s tangent plane at (px, py), within the
- * pixel's neighbourhood (else its sample): exact for the flat mirrors and walls that a
- * ray meets at grazing angles. */
-static double plane_depth(const void *user, int x, int y, double px, double py)
+/* Tracer: the tangent plane of pixel (x, y) (view space, n . p = n . centre), exact for
+ * the flat mirrors and walls that a ray meets at grazing angles. None for orthographic
+ * views (the depth samples serve). */
+static int surface_plane(const void *user, int x, int y, double plane[4])
 {
     const ssr_frame *F = user;
-    float d;
-    fx_vec3 c = view_pos_at(F, x, y, &d), n;
+    fx_vec3 n;
     if (F->view.orthographic || !view_normal_at(F, x, y, &n))
-        return d;
-    fx_vec3 e = fx_view_position(&F->view, fx_view_pixel_to_ndc(&F->view, (float)px, (float)py), 1.0f);
-    double den = fx_v3_dot(e, n);
-    if (!(fabs(den) > 1e-4))
-        return d;
-    double t = fx_v3_dot(c, n) / den; /* e has planar depth 1 */
-    return isfinite(t) && t > 0.5 * d && t < 2.0 * d ? t : d;
+        return 0;
+    fx_vec3 c = view_pos_at(F, x, y, NULL);
+    double nc = (double)n.x * c.x + (double)n.y * c.y + (double)n.z * c.z;
+    if (!isfinite(nc))
+        return 0;
+    plane[0] = n.x, plane[1] = n.y, plane[2] = n.z, plane[3] = nc;
+    return 1;
 }
 
 /* Bilinear lookup at frame position (px, py) (pixel centres at +0.5, borders clamped to
@@ -362,9 +362,10 @@ static void trace_cells(void *user, int begin, int end)
 }
 
 /* Hit coordinates of mirror pixel (x, y) with cells: the bilinear blend of the 4
- * surrounding cells when all hit and agree within 2 cells; else (an edge in the
- * reflection, a miss, the mirror's border) its own ray when retrace_edges is on, else
- * its own cell's hit. */
+ * surrounding cells when all hit and agree: within 2 cells of each other, or, with
+ * retrace_edges, within 8 cells and mapping the quad affinely to half a pixel. Else (an
+ * edge in the reflection, a partial miss, the mirror's border) its own ray with
+ * retrace_edges, else its own cell's hit. */
 static cell_hit resolve_hit(const ssr_job *j, int x, int y)
 {
     const int c = j->cell;
@@ -380,10 +381,16 @@ static cell_hit resolve_hit(const ssr_job *j, int x, int y)
         q[1] = &j->cells[(size_t)ay * j->ncx + ax + 1];
         q[2] = &j->cells[(size_t)(ay + 1) * j->ncx + ax];
         q[3] = &j->cells[(size_t)(ay + 1) * j->ncx + ax + 1];
-        float lim = 2.0f * (float)c;
+        float lim = (j->p->retrace_edges ? 8.0f : 2.0f) * (float)c;
         for (int k = 0; k < 4 && agree; k++)
             agree = q[k]->state == 1 && q[k]->conf > 0.0f && fabsf(q[k]->px - q[0]->px) <= lim &&
                     fabsf(q[k]->py - q[0]->py) <= lim;
+        if (agree && j->p->retrace_edges) {
+            /* the hits must map the quad affinely (to half a pixel): a smooth reflection
+             * may stretch it, an edge in the reflected image breaks it */
+            float ex = q[0]->px + q[3]->px - q[1]->px - q[2]->px, ey = q[0]->py + q[3]->py - q[1]->py - q[2]->py;
+            agree = fabsf(ex) <= 0.5f && fabsf(ey) <= 0.5f;
+        }
     }
     if (!agree) {
         if (!j->p->retrace_edges)
@@ -793,7 +800,7 @@ static fx_result ssr_process(const fx_effect_run *run)
     F.depth = dp->data;
     F.normal = np->data;
     F.nch = np->channels;
-    F.scene = (fx_ssr_scene){ &F.view, F.depth, F.w, F.h, front_facing, plane_depth, &F, NULL };
+    F.scene = (fx_ssr_scene){ &F.view, F.depth, F.w, F.h, front_facing, surface_plane, &F, NULL };
     /* the fx_ssr_scene points at F.view: F must not move from here on */
 
     ssr_job j;
@@ -838,7 +845,8 @@ static fx_result ssr_process(const fx_effect_run *run)
      * fresh buffers (every byte read below is written first) */
     if ((r = fx_check_budget(run->ctx, 2 * hits_bytes, "the ray hits")))
         goto out;
-    j.cells = fx_buffer_get(run->ctx, hits_bytes);
+    /* one scratch for the cells and the resolved hits (each at most one per frame pixel) */
+    j.cells = fx_buffer_get(run->ctx, 2 * hits_bytes);
     if (!j.cells) {
         r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for %d x %d ray cells", where, j.ncx, j.ncy);
         goto out;
@@ -855,11 +863,7 @@ static fx_result ssr_process(const fx_effect_run *run)
     if (cell == 1) {
         j.hits = j.cells; /* one cell per roi pixel, same layout */
     } else {
-        j.hits = fx_buffer_get(run->ctx, hits_bytes);
-        if (!j.hits) {
-            r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the ray hits", where);
-            goto out;
-        }
+        j.hits = j.cells + (size_t)F.w * F.h;
         fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), resolve_rows, &j);
     }
 
@@ -921,9 +925,9 @@ static fx_result ssr_process(const fx_effect_run *run)
         size_t bw = (size_t)(fb.x1 - fb.x0);
         if ((r = fx_check_budget(run->ctx, 2 * frame_bytes, "the mirror's multi-bounce estimate")))
             goto out;
-        fin[0] = fx_buffer_get(run->ctx, frame_bytes);
-        fin[1] = fx_buffer_get(run->ctx, frame_bytes);
-        if (!fin[0] || !fin[1]) {
+        fin[0] = fx_buffer_get(run->ctx, 2 * frame_bytes);
+        fin[1] = fin[0] ? fin[0] + (size_t)F.w * F.h * 4 : NULL;
+        if (!fin[0]) {
             r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the multi-bounce estimate", where);
             goto out;
         }
@@ -948,11 +952,8 @@ static fx_result ssr_process(const fx_effect_run *run)
     j.last_bounce = p->bounces - 1;
     fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), shade_rows, &j);
 out:
-    fx_buffer_put(run->ctx, fin[0], frame_bytes);
-    fx_buffer_put(run->ctx, fin[1], frame_bytes);
-    if (j.hits != j.cells)
-        fx_buffer_put(run->ctx, j.hits, hits_bytes);
-    fx_buffer_put(run->ctx, j.cells, hits_bytes);
+    fx_buffer_put(run->ctx, fin[0], 2 * frame_bytes);
+    fx_buffer_put(run->ctx, j.cells, 2 * hits_bytes);
     fx_buffer_put(run->ctx, blurred, frame_bytes);
     fx_mask_free(surfaces);
     fx_depth_pyramid_free(run->ctx, &pyr);
@@ -967,8 +968,10 @@ const fx_effect_class fx_effect_ssr_mirror = {
     .params = ssr_param_defs,
     .param_count = FX_COUNT_OF(ssr_param_defs),
     .presets = {
-        "{\"max_steps\": 24, \"stride\": 4, \"growth\": 1.15, \"refine\": 2, \"resolution_scale\": 0.5}",
-        "{\"max_steps\": 48, \"stride\": 2, \"growth\": 1.08, \"refine\": 4, \"resolution_scale\": 0.5}",
+        "{\"max_steps\": 48, \"stride\": 2, \"growth\": 1.08, \"refine\": 3, \"resolution_scale\": 0.25, "
+        "\"retrace_edges\": false}",
+        "{\"max_steps\": 96, \"stride\": 1.5, \"growth\": 1.04, \"refine\": 6, \"resolution_scale\": 0.5, "
+        "\"retrace_edges\": true}",
         "{\"max_steps\": 96, \"stride\": 1.5, \"growth\": 1.04, \"refine\": 6, \"resolution_scale\": 1}",
         "{\"max_steps\": 4096, \"stride\": 1, \"growth\": 1, \"refine\": 10, \"resolution_scale\": 1}",
     },

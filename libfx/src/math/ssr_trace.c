@@ -37,19 +37,43 @@ static double depth_at(const line_state *L, double s)
     return k > 0.0 ? -z / k : INFINITY;
 }
 
-/* Depth of the surface under the line at s (pixel ix, iy): its tangent plane there when
- * the scene gives one, else the pixel's sample; +inf for background. */
+/* A pixel's surface under the line: its depth sample, and its tangent plane if any. */
+typedef struct surface {
+    double depth; /* sample, +inf for background */
+    double plane[4];
+    int has_plane;
+} surface;
+
+static void surface_get(const fx_ssr_scene *sc, int ix, int iy, surface *sf)
+{
+    sf->depth = fx_ssr_depth_at(sc, ix, iy);
+    sf->has_plane = sc->surface_plane && isfinite(sf->depth) && sc->surface_plane(sc->user, ix, iy, sf->plane);
+}
+
+/* Depth of the surface sf under the line at s: where the view ray through the line's
+ * point meets the tangent plane, if that lies within [0.5, 2] x the sample; else the
+ * sample (+inf for background). */
+static double surface_depth_at(const surface *sf, const line_state *L, double s)
+{
+    if (!sf->has_plane)
+        return sf->depth;
+    double k = L->k0 + L->dk * s;
+    if (!(k > 0.0))
+        return sf->depth;
+    double P[3] = { (L->q0[0] + L->dq[0] * s) / k, (L->q0[1] + L->dq[1] * s) / k, (L->q0[2] + L->dq[2] * s) / k };
+    double den = sf->plane[0] * P[0] + sf->plane[1] * P[1] + sf->plane[2] * P[2];
+    double dr = -P[2]; /* the ray point's planar depth: P / dr has planar depth 1 */
+    if (!(fabs(den) > 1e-12) || !(dr > 0.0))
+        return sf->depth;
+    double t = sf->plane[3] * dr / den;
+    return isfinite(t) && t > 0.5 * sf->depth && t < 2.0 * sf->depth ? t : sf->depth;
+}
+
 static double surface_at(const fx_ssr_scene *sc, const line_state *L, double s, int ix, int iy)
 {
-    double d = fx_ssr_depth_at(sc, ix, iy);
-    if (sc->surface_depth && isfinite(d)) {
-        double x, y;
-        pixel_at(L, s, &x, &y);
-        double p = sc->surface_depth(sc->user, ix, iy, x, y);
-        if (isfinite(p) && p > 0.0)
-            return p;
-    }
-    return d;
+    surface sf;
+    surface_get(sc, ix, iy, &sf);
+    return surface_depth_at(&sf, L, s);
 }
 
 static int pixel_index(const line_state *L, double s, int *ix, int *iy)
@@ -98,10 +122,15 @@ static int test_span(const fx_ssr_scene *s, const line_state *L, fx_vec3 dir, co
         return 0;
     double dmin = d_prev < d_cur ? d_prev : d_cur, dmax = d_prev < d_cur ? d_cur : d_prev;
     int cand = dmax >= sd && dmin <= sd + thick;
-    /* a grazing surface: the ray was in front of this pixel's plane at the last step
-     * and is behind it now (crossed it), though the depth samples jump past the slab */
-    if (!cand && s->surface_depth && d_cur >= sd) {
-        double pp = surface_at(s, L, s_prev, ix, iy), pc = surface_at(s, L, s_cur, ix, iy);
+    /* a grazing surface: the ray was in front of this pixel's plane at the span's start
+     * and is behind it at its end (crossed it), though the depth samples jump past the
+     * slab (the plane's depth is within 2 x the sample: a ray already that far behind
+     * has not crossed it). With one-pixel spans (Hi-Z) a crossing that ends in front of
+     * the sample is missed: the linear march's longer spans catch more of them. */
+    if (!cand && s->surface_plane && d_cur >= sd && d_prev <= 2.0 * sd) {
+        surface sf;
+        surface_get(s, ix, iy, &sf);
+        double pp = surface_depth_at(&sf, L, s_prev), pc = surface_depth_at(&sf, L, s_cur);
         cand = d_prev <= pp && d_cur >= pc;
     }
     if (!cand)
@@ -234,6 +263,8 @@ int fx_ssr_trace(const fx_ssr_scene *s, const fx_ssr_settings *st, fx_vec3 origi
          * of the line gets the linear march's exact test. */
         const int top = hz->levels - 1;
         int level = 0;
+        /* the walk starts one pixel out, as the linear march's first test: the origin's
+         * own pixel is the surface the ray leaves */
         double s_prev = 0.0;
         for (int i = 0; i < max_steps && s_prev < s_end; i++) {
             out->steps = i + 1;
@@ -264,9 +295,11 @@ int fx_ssr_trace(const fx_ssr_scene *s, const fx_ssr_settings *st, fx_vec3 origi
             if (level > 0) {
                 const float *z = hz->level[level] + ((size_t)cy * hz->w[level] + cx) * 2;
                 double dmax = d_prev > d_cur ? d_prev : d_cur, dmin = d_prev > d_cur ? d_cur : d_prev;
-                /* in front of every surface of the cell, or behind all of them by more than
-                 * the thickness (a cell of background only holds (+inf, -inf)) */
-                if (dmax < z[0] || dmin > (double)z[1] + thick) {
+                /* no candidate in the cell: the ray passes in front of every sample, or
+                 * behind all of them by more than the thickness and the tangent planes'
+                 * reach (twice the sample); a cell of background only holds (+inf, -inf) */
+                double back = (double)z[1] + thick;
+                if (dmax < (double)z[0] || dmin > back) {
                     s_prev = s_next;
                     if (level < top)
                         level++;
