@@ -24,8 +24,10 @@
  * pixels of `mirror_surfaces`, is traced again with this entry's reflectivity.
  *
  * Cost follows the mirror: rays are traced only for masked pixels (or one per cell of
- * 1/resolution_scale pixels); the blurred copy for glossy mirrors covers only the
- * bounding box of the hits. Output is bit-identical for any thread count (per-pixel
+ * 1/resolution_scale pixels, with retrace_edges a pixel's own ray where its four cells
+ * disagree); the blurred copy for glossy mirrors covers only the bounding box of the
+ * hits; scratch buffers come from the context's store (the entries of a stack reuse
+ * them). hiz (opt-in) traces through a min/max depth pyramid (math/depth_pyramid.h). Output is bit-identical for any thread count (per-pixel
  * work, serial double-precision reductions) and finite for any input. */
 #include "core/effect.h"
 #include "core/mem_failures.h"
