@@ -548,11 +548,28 @@ static double now_s(void)
     return t.tv_sec + t.tv_nsec * 1e-9;
 }
 
+/* The quality paths: presets, plus Hi-Z (hiz) and reduced resolution with and without
+ * retrace_edges on top of final. */
+static const char *const variant_names[] = { "draft", "preview", "reference", "hiz", "hiz half retrace",
+                                             "quarter no retrace" };
+enum { VARIANTS = 6 };
+
+static fx_stack *variant_stack(fx_context *ctx, const char *mask, int k)
+{
+    fx_stack *st = ssr_stack(ctx, mask, k < 3 ? variant_names[k] : "final");
+    if (st && k >= 3) {
+        CHECK_OK(ctx, fx_stack_set_int(st, 0, "hiz", k != 5));
+        CHECK_OK(ctx, fx_stack_set_float(st, 0, "resolution_scale", k == 3 ? 1.0 : k == 4 ? 0.5 : 0.25));
+        CHECK_OK(ctx, fx_stack_set_int(st, 0, "retrace_edges", k == 4));
+    }
+    return st;
+}
+
 static void stable(fx_context *ctx, fx_frame *f, const char *mask, const char *what)
 {
-    const char *q[] = { "draft", "reference" };
-    for (int k = 0; k < 2; k++) {
-        fx_stack *st = ssr_stack(ctx, mask, q[k]);
+    const char *const *q = variant_names;
+    for (int k = 0; k < VARIANTS; k++) {
+        fx_stack *st = variant_stack(ctx, mask, k);
         double t0 = now_s();
         fx_frame *o = run_full(ctx, st, f);
         double dt = now_s() - t0;
@@ -607,6 +624,81 @@ static void test_stability(fx_context *ctx)
         nor[i * 3 + 2] = i % 4 == 3 ? -FLT_MAX : 0.1f;
     }
     stable(ctx, f, NULL, "NaN normals");
+    fx_frame_free(f);
+}
+
+/* Frames of 1x1, 1xN, Nx1 and odd sizes, masks of one pixel (smaller than a cell):
+ * every path finite and bit-identical for 1 and 2 threads. */
+static void test_small_sizes(fx_context *ctx1, fx_context *ctx2)
+{
+    const int sizes[][2] = { { 1, 1 }, { 1, 7 }, { 7, 1 }, { 2, 3 }, { 13, 9 }, { 37, 21 } };
+    const char *masks[] = { "{\"material_index\": 1}", NULL };
+    for (size_t z = 0; z < sizeof sizes / sizeof sizes[0]; z++) {
+        scene s;
+        scene_init(&s, sizes[z][0], sizes[z][1], 1.2, 0.0, 10.0);
+        fx_frame *f = scene_frame(ctx1, &s);
+        CHECK(f != NULL);
+        size_t n = (size_t)sizes[z][0] * sizes[z][1];
+        for (int m = 0; f && m < 2; m++)
+            for (int k = 0; k < VARIANTS; k++) {
+                fx_stack *a = variant_stack(ctx1, masks[m], k), *b = variant_stack(ctx2, masks[m], k);
+                fx_frame *oa = run_full(ctx1, a, f), *ob = run_full(ctx2, b, f);
+                const float *ca = pass_of(oa, "Combined"), *cb = pass_of(ob, "Combined");
+                int ok = ca && cb && tu_all_finite(ca, n * 4) && !memcmp(ca, cb, n * 4 * sizeof(float));
+                if (!ok)
+                    fprintf(stderr, "small size %dx%d, %s, %s: not finite or thread-dependent\n", sizes[z][0],
+                            sizes[z][1], masks[m] ? "mask" : "no mask", variant_names[k]);
+                CHECK(ok);
+                fx_frame_free(oa), fx_frame_free(ob);
+                fx_stack_free(a), fx_stack_free(b);
+            }
+        fx_frame_free(f);
+    }
+    /* a one-pixel mask on a 1080p-like aspect frame: below any cell */
+    scene s;
+    scene_init(&s, 64, 36, 1.2, 0.0, 10.0);
+    fx_frame *f = scene_frame(ctx1, &s);
+    float *ima = NULL;
+    int c;
+    if (f && fx_frame_pass(f, "IndexMA", &ima, &c) == FX_OK)
+        for (int i = 0; i < 64 * 36; i++)
+            ima[i] = i == 30 * 64 + 33 ? 7.0f : ima[i] == 7.0f ? 0.0f : ima[i];
+    for (int k = 0; f && k < VARIANTS; k++) {
+        fx_stack *a = variant_stack(ctx1, "{\"material_index\": 7}", k);
+        fx_frame *o = run_full(ctx1, a, f);
+        const float *co = pass_of(o, "Combined"), *ci = pass_of(f, "Combined");
+        int same_outside = co && ci;
+        for (int i = 0; same_outside && i < 64 * 36; i++)
+            if (i != 30 * 64 + 33 && memcmp(co + i * 4, ci + i * 4, 4 * sizeof(float)))
+                same_outside = 0;
+        CHECK(same_outside && tu_all_finite(co, 64 * 36 * 4));
+        fx_frame_free(o);
+        fx_stack_free(a);
+    }
+    fx_frame_free(f);
+}
+
+/* Hi-Z finds the law-of-reflection hits of the floor mirror like the linear march. */
+static void test_hiz_geometry(fx_context *ctx)
+{
+    scene s;
+    scene_init(&s, 192, 108, 1.2, 0.0, 10.0);
+    fx_frame *f = scene_frame(ctx, &s);
+    fx_stack *lin = variant_stack(ctx, "{\"material_index\": 1}", 2); /* reference */
+    fx_stack *hz = variant_stack(ctx, "{\"material_index\": 1}", 3);
+    fx_frame *ol = run_full(ctx, lin, f), *oh = run_full(ctx, hz, f);
+    const float *xl = pass_of(ol, "fx0_ssr_mirror_hit_xy"), *xh = pass_of(oh, "fx0_ssr_mirror_hit_xy");
+    int both = 0, agree = 0;
+    for (int i = 0; xl && xh && i < 192 * 108; i++)
+        if (xl[i * 3 + 2] > 0 && xh[i * 3 + 2] > 0) {
+            both++;
+            agree += fabsf(xl[i * 3] - xh[i * 3]) <= 1.0f && fabsf(xl[i * 3 + 1] - xh[i * 3 + 1]) <= 1.0f;
+        }
+    fprintf(stderr, "hiz vs reference: %d hits in both, %d within 1 px\n", both, agree);
+    CHECK(both > 1000);
+    CHECK(agree >= both * 98 / 100);
+    fx_frame_free(ol), fx_frame_free(oh);
+    fx_stack_free(lin), fx_stack_free(hz);
     fx_frame_free(f);
 }
 
@@ -697,6 +789,8 @@ int main(void)
     test_double(ctx2);
     test_multi_bounce(ctx1, ctx2);
     test_stability(ctx2);
+    test_small_sizes(ctx1, ctx2);
+    test_hiz_geometry(ctx2);
     test_errors(ctx1);
     test_position_from_depth(ctx1);
     fx_context_free(ctx1);

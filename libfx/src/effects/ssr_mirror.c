@@ -24,8 +24,10 @@
  * pixels of `mirror_surfaces`, is traced again with this entry's reflectivity.
  *
  * Cost follows the mirror: rays are traced only for masked pixels (or one per cell of
- * 1/resolution_scale pixels); the blurred copy for glossy mirrors covers only the
- * bounding box of the hits. Output is bit-identical for any thread count (per-pixel
+ * 1/resolution_scale pixels, with retrace_edges a pixel's own ray where its four cells
+ * disagree); the blurred copy for glossy mirrors covers only the bounding box of the
+ * hits; scratch buffers come from the context's store (the entries of a stack reuse
+ * them). hiz (opt-in) traces through a min/max depth pyramid (math/depth_pyramid.h). Output is bit-identical for any thread count (per-pixel
  * work, serial double-precision reductions) and finite for any input. */
 #include "core/effect.h"
 #include "core/mem_failures.h"
@@ -68,6 +70,8 @@ typedef struct ssr_params {
     float thickness;
     float max_distance;
     float resolution_scale;
+    int retrace_edges;
+    int hiz;
 } ssr_params;
 
 enum { OP_NONE = 0, OP_SEPIA, OP_GRAYSCALE, OP_CEL };
@@ -127,6 +131,15 @@ static const fx_param_def ssr_param_defs[] = {
                "Longest ray in metres (view space)"),
     FX_P_FLOAT(ssr_params, resolution_scale, "resolution_scale", 1.0, 0.0625, 1.0, 0.125, 1.0, "factor",
                "Rays per pixel side: 0.5 traces one ray per 2x2 cell and interpolates the hit coordinates"),
+    FX_P_BOOL(ssr_params, retrace_edges, "retrace_edges", 1,
+              "With resolution_scale < 1: a pixel whose four surrounding cells disagree (a partial miss, "
+              "the mirror's border, or hits not mapping the cells affinely: an edge in the reflection) "
+              "traces its own ray instead of taking its cell's hit (no stair steps; a ray per edge pixel)"),
+    FX_P_BOOL(ssr_params, hiz, "hiz", 0,
+              "Experimental: trace through a min/max depth pyramid (Hi-Z, built per entry): cells the "
+              "ray passes in front of (or far behind) are skipped whole, every other pixel is tested "
+              "(stride and growth unused, max_steps caps the walk). Closer to reference on the mirror "
+              "room, but misses grazing hits between facing mirrors; no preset uses it"),
 };
 
 /* ---- helpers ---- */
@@ -168,25 +181,29 @@ static int front_facing(const void *user, int x, int y, fx_vec3 dir)
     return !view_normal_at(user, x, y, &n) || fx_v3_dot(n, dir) <= 0.25f;
 }
 
-/* Tracer: the planar depth of pixel (x, y)'s tangent plane at (px, py), within the
- * pixel's neighbourhood (else its sample): exact for the flat mirrors and walls that a
- * ray meets at grazing angles. */
-static double plane_depth(const void *user, int x, int y, double px, double py)
+/* Tracer: the tangent plane of pixel (x, y) (view space, n . p = n . centre), exact for
+ * the flat mirrors and walls that a ray meets at grazing angles. None for orthographic
+ * views (the depth samples serve). */
+static int surface_plane(const void *user, int x, int y, double plane[4])
 {
     const ssr_frame *F = user;
-    float d;
-    fx_vec3 c = view_pos_at(F, x, y, &d), n;
+    fx_vec3 n;
     if (F->view.orthographic || !view_normal_at(F, x, y, &n))
-        return d;
-    fx_vec3 e = fx_view_position(&F->view, fx_view_pixel_to_ndc(&F->view, (float)px, (float)py), 1.0f);
-    double den = fx_v3_dot(e, n);
-    if (!(fabs(den) > 1e-4))
-        return d;
-    double t = fx_v3_dot(c, n) / den; /* e has planar depth 1 */
-    return isfinite(t) && t > 0.5 * d && t < 2.0 * d ? t : d;
+        return 0;
+    fx_vec3 c = view_pos_at(F, x, y, NULL);
+    double nc = (double)n.x * c.x + (double)n.y * c.y + (double)n.z * c.z;
+    if (!isfinite(nc))
+        return 0;
+    plane[0] = n.x, plane[1] = n.y, plane[2] = n.z, plane[3] = nc;
+    return 1;
 }
 
-static inline void sample_bilinear(const float *img, int w, int h, float px, float py, float out[3])
+/* Bilinear lookup at frame position (px, py) (pixel centres at +0.5, borders clamped to
+ * the frame) in an image that holds only the box [bx0, bx1) x [by0, by1) of the frame
+ * (row stride bx1 - bx0): a box covering the taps reads the same as the full frame;
+ * taps outside it are clamped into it (never out of the buffer). */
+static inline void sample_bilinear_box(const float *img, const fx_rect *box, int w, int h, float px, float py,
+                                       float out[3])
 {
     float fx = px - 0.5f, fy = py - 0.5f;
     fx = fx < 0 ? 0 : fx > w - 1 ? (float)(w - 1) : fx;
@@ -194,12 +211,24 @@ static inline void sample_bilinear(const float *img, int w, int h, float px, flo
     int x0 = (int)fx, y0 = (int)fy;
     int x1 = x0 + 1 < w ? x0 + 1 : x0, y1 = y0 + 1 < h ? y0 + 1 : y0;
     float ax = fx - x0, ay = fy - y0;
-    const float *a = img + ((size_t)y0 * w + x0) * 4, *b = img + ((size_t)y0 * w + x1) * 4;
-    const float *c = img + ((size_t)y1 * w + x0) * 4, *d = img + ((size_t)y1 * w + x1) * 4;
+    const int bw = box->x1 - box->x0;
+#define BOX_X(v) ((v) < box->x0 ? 0 : (v) >= box->x1 ? bw - 1 : (v) - box->x0)
+#define BOX_Y(v) ((v) < box->y0 ? 0 : (v) >= box->y1 ? box->y1 - box->y0 - 1 : (v) - box->y0)
+    int ux0 = BOX_X(x0), ux1 = BOX_X(x1), uy0 = BOX_Y(y0), uy1 = BOX_Y(y1);
+#undef BOX_X
+#undef BOX_Y
+    const float *a = img + ((size_t)uy0 * bw + ux0) * 4, *b = img + ((size_t)uy0 * bw + ux1) * 4;
+    const float *c = img + ((size_t)uy1 * bw + ux0) * 4, *d = img + ((size_t)uy1 * bw + ux1) * 4;
     for (int k = 0; k < 3; k++) {
         float top = a[k] + (b[k] - a[k]) * ax, bot = c[k] + (d[k] - c[k]) * ax;
         out[k] = top + (bot - top) * ay;
     }
+}
+
+static inline void sample_bilinear(const float *img, int w, int h, float px, float py, float out[3])
+{
+    const fx_rect frame = { 0, 0, w, h };
+    sample_bilinear_box(img, &frame, w, h, px, py, out);
 }
 
 /* The mirror face's frame for bending: centre, tangent, bitangent (view space) and the
@@ -228,9 +257,13 @@ typedef struct ssr_job {
     int cell;                  /* cell size in pixels */
     int cx0, cy0, ncx, ncy;    /* cell grid over the roi */
     cell_hit *cells;
+    cell_hit *hits;            /* per roi pixel (row stride roi width): cells resolved, or cells itself */
     const float *lookup;       /* image the reflection is sampled from (blurred for glossy) */
-    const float *fin;          /* finished one-bounce image of this mirror (lookup elsewhere), or NULL */
-    float *out;                /* where shade_rows writes: run->dst, or a fin buffer */
+    fx_rect lookup_box;        /* where lookup is valid (the blurred box; src elsewhere) */
+    const float *fin;          /* finished one-bounce image of this mirror (lookup elsewhere), or NULL;
+                                  it holds only fin_box of the frame */
+    fx_rect fin_box;           /* the mask's bounds + 2 px (every bilinear tap of an own pixel) */
+    float *out;                /* where shade_rows writes: run->dst, or a fin buffer (fin_box) */
     int last_bounce;           /* bounces left after the first: 0 while iterating fin */
     float opm[16];
     float *dbg_hit, *dbg_xy, *dbg_len;
@@ -309,7 +342,7 @@ static void trace_cells(void *user, int begin, int end)
     for (int cy = begin; cy < end; cy++)
         for (int cx = 0; cx < j->ncx; cx++) {
             cell_hit *ch = &j->cells[(size_t)cy * j->ncx + cx];
-            ch->state = 0;
+            memset(ch, 0, sizeof *ch);
             int x0 = (j->cx0 + cx) * c, y0 = (j->cy0 + cy) * c;
             /* the cell's centre pixel if it is a mirror pixel, else the first one */
             int bx = -1, by = -1;
@@ -330,30 +363,49 @@ static void trace_cells(void *user, int begin, int end)
         }
 }
 
-/* Hit coordinates of pixel (x, y): its own trace at full resolution; with cells, the
- * bilinear blend of the 4 surrounding cells when all hit and agree within 2 cells,
- * else its own cell. */
-static cell_hit pixel_hit(const ssr_job *j, int x, int y)
+/* Hit coordinates of mirror pixel (x, y) with cells: the bilinear blend of the 4
+ * surrounding cells when all hit and agree: within 2 cells of each other, or, with
+ * retrace_edges, within 8 cells and mapping the quad affinely to half a pixel. Else (an
+ * edge in the reflection, a partial miss, the mirror's border) its own ray with
+ * retrace_edges, else its own cell's hit. */
+static cell_hit resolve_hit(const ssr_job *j, int x, int y)
 {
     const int c = j->cell;
     int gx = x / c - j->cx0, gy = y / c - j->cy0;
     cell_hit own = j->cells[(size_t)gy * j->ncx + gx];
-    if (c == 1)
-        return own;
     float fx = ((float)x + 0.5f) / (float)c - 0.5f - (float)j->cx0;
     float fy = ((float)y + 0.5f) / (float)c - 0.5f - (float)j->cy0;
     int ax = (int)floorf(fx), ay = (int)floorf(fy);
-    if (ax < 0 || ay < 0 || ax + 1 >= j->ncx || ay + 1 >= j->ncy)
-        return own;
-    const cell_hit *q[4] = { &j->cells[(size_t)ay * j->ncx + ax], &j->cells[(size_t)ay * j->ncx + ax + 1],
-                             &j->cells[(size_t)(ay + 1) * j->ncx + ax],
-                             &j->cells[(size_t)(ay + 1) * j->ncx + ax + 1] };
-    float lim = 2.0f * (float)c;
-    for (int k = 0; k < 4; k++) {
-        if (q[k]->state != 1 || q[k]->conf <= 0.0f)
+    int agree = ax >= 0 && ay >= 0 && ax + 1 < j->ncx && ay + 1 < j->ncy;
+    const cell_hit *q[4] = { NULL, NULL, NULL, NULL };
+    if (agree) {
+        q[0] = &j->cells[(size_t)ay * j->ncx + ax];
+        q[1] = &j->cells[(size_t)ay * j->ncx + ax + 1];
+        q[2] = &j->cells[(size_t)(ay + 1) * j->ncx + ax];
+        q[3] = &j->cells[(size_t)(ay + 1) * j->ncx + ax + 1];
+        float lim = (j->p->retrace_edges ? 8.0f : 2.0f) * (float)c;
+        for (int k = 0; k < 4 && agree; k++)
+            agree = q[k]->state == 1 && q[k]->conf > 0.0f && fabsf(q[k]->px - q[0]->px) <= lim &&
+                    fabsf(q[k]->py - q[0]->py) <= lim;
+        if (agree && j->p->retrace_edges) {
+            /* the hits must map the quad affinely (to half a pixel): a smooth reflection
+             * may stretch it, an edge in the reflected image breaks it */
+            float ex = q[0]->px + q[3]->px - q[1]->px - q[2]->px, ey = q[0]->py + q[3]->py - q[1]->py - q[2]->py;
+            agree = fabsf(ex) <= 0.5f && fabsf(ey) <= 0.5f;
+        }
+    }
+    if (!agree) {
+        if (!j->p->retrace_edges)
             return own;
-        if (fabsf(q[k]->px - q[0]->px) > lim || fabsf(q[k]->py - q[0]->py) > lim)
+        /* all four traced and all missed: a miss region, nothing to sharpen */
+        int misses = 0;
+        for (int k = 0; k < 4 && q[0]; k++)
+            misses += q[k]->state == 1 && !(q[k]->conf > 0.0f);
+        if (misses == 4)
             return own;
+        cell_hit h;
+        trace_pixel(j, x, y, &h);
+        return h;
     }
     float tx = fx - ax, ty = fy - ay;
     float wts[4] = { (1 - tx) * (1 - ty), tx * (1 - ty), (1 - tx) * ty, tx * ty };
@@ -365,6 +417,28 @@ static cell_hit pixel_hit(const ssr_job *j, int x, int y)
         r.length += wts[k] * q[k]->length;
     }
     return r;
+}
+
+/* Fills j->hits for the mirror pixels of rows [begin, end) of the roi (cells > 1). */
+static void resolve_rows(void *user, int begin, int end)
+{
+    ssr_job *j = user;
+    const fx_rect *roi = &j->run->roi;
+    const int rw = roi->x1 - roi->x0;
+    for (int y = roi->y0 + begin; y < roi->y0 + end; y++)
+        for (int x = roi->x0; x < roi->x1; x++) {
+            cell_hit *h = &j->hits[(size_t)(y - roi->y0) * rw + (x - roi->x0)];
+            if (in_mask(j->run->mask, j->F->w, x, y))
+                *h = resolve_hit(j, x, y);
+            else
+                memset(h, 0, sizeof *h);
+        }
+}
+
+static inline cell_hit pixel_hit(const ssr_job *j, int x, int y)
+{
+    const fx_rect *roi = &j->run->roi;
+    return j->hits[(size_t)(y - roi->y0) * (roi->x1 - roi->x0) + (x - roi->x0)];
 }
 
 static inline int own_at(const ssr_job *j, int x, int y)
@@ -406,6 +480,21 @@ static fx_vec3 surface_point(const ssr_frame *F, int x, int y, float px, float p
     return q;
 }
 
+/* The reflected image at (px, py): the lookup (blurred for glossy mirrors) where all four
+ * bilinear taps lie in its box, else the unblurred current image (a later bounce landing
+ * outside the first hits' box). */
+static void sample_lookup(const ssr_job *j, float px, float py, float rgb[3])
+{
+    const int w = j->F->w, h = j->F->h;
+    float fx = fx_clampf(px - 0.5f, 0.0f, (float)(w - 1)), fy = fx_clampf(py - 0.5f, 0.0f, (float)(h - 1));
+    int x0 = (int)fx, y0 = (int)fy;
+    const fx_rect *b = &j->lookup_box;
+    if (x0 >= b->x0 && y0 >= b->y0 && (x0 + 1 < w ? x0 + 1 : x0) < b->x1 && (y0 + 1 < h ? y0 + 1 : y0) < b->y1)
+        sample_bilinear(j->lookup, w, h, px, py, rgb);
+    else
+        sample_bilinear(j->run->src, w, h, px, py, rgb);
+}
+
 /* Colour the ray o + t dir brings back from (px, py), where it landed. Not a mirror
  * there: the lookup. This entry's own mirror or a mirror_surfaces pixel: reflected
  * again (up to `left` more bounces). The estimate where no further bounce is traced or
@@ -418,7 +507,10 @@ static void ray_colour(const ssr_job *j, fx_vec3 ro, fx_vec3 rd, float px, float
     int hy = (int)fx_clampf(floorf(py), 0.0f, (float)(F->h - 1));
     int own = own_at(j, hx, hy);
     int other = !own && j->surfaces && j->surfaces->coverage[(size_t)hy * F->w + hx] > 0.5f;
-    sample_bilinear(own && j->fin ? j->fin : j->lookup, F->w, F->h, px, py, rgb);
+    if (own && j->fin)
+        sample_bilinear_box(j->fin, &j->fin_box, F->w, F->h, px, py, rgb);
+    else
+        sample_lookup(j, px, py, rgb);
     if ((!own && !other) || left <= 0)
         return;
     float d;
@@ -512,7 +604,10 @@ static void shade_rows(void *user, int begin, int end)
         for (int x = run->roi.x0; x < run->roi.x1; x++) {
             size_t i = (size_t)y * w + x;
             const float *s = run->src + i * 4;
-            float *o = j->out + i * 4;
+            float *o = j->out == run->dst
+                           ? j->out + i * 4
+                           : j->out + ((size_t)(y - j->fin_box.y0) * (j->fin_box.x1 - j->fin_box.x0) +
+                                       (x - j->fin_box.x0)) * 4;
             if (j->out == run->dst)
                 memcpy(o, s, 4 * sizeof(float));
             if (!in_mask(m, w, x, y))
@@ -707,7 +802,7 @@ static fx_result ssr_process(const fx_effect_run *run)
     F.depth = dp->data;
     F.normal = np->data;
     F.nch = np->channels;
-    F.scene = (fx_ssr_scene){ &F.view, F.depth, F.w, F.h, front_facing, plane_depth, &F };
+    F.scene = (fx_ssr_scene){ &F.view, F.depth, F.w, F.h, front_facing, surface_plane, &F, NULL };
     /* the fx_ssr_scene points at F.view: F must not move from here on */
 
     ssr_job j;
@@ -723,7 +818,11 @@ static fx_result ssr_process(const fx_effect_run *run)
     fx_result r = FX_OK;
     fx_mask *surfaces = NULL;
     float *blurred = NULL, *fin[2] = { NULL, NULL };
+    const size_t frame_bytes = (size_t)F.w * F.h * 4 * sizeof(float);
+    const size_t hits_bytes = (size_t)F.w * F.h * sizeof(cell_hit);
     fx_mask_spec spec;
+    fx_depth_pyramid pyr;
+    memset(&pyr, 0, sizeof pyr);
     int has_surfaces = 0;
     if (p->bounces > 1 && (r = parse_surfaces(run->ctx, p->mirror_surfaces, where, &spec, &has_surfaces)))
         return r;
@@ -743,20 +842,41 @@ static fx_result ssr_process(const fx_effect_run *run)
     j.cy0 = roi->y0 / cell;
     j.ncx = (roi->x1 - 1) / cell - j.cx0 + 1;
     j.ncy = (roi->y1 - 1) / cell - j.cy0 + 1;
-    j.cells = fx_mem_calloc((size_t)j.ncx * j.ncy, sizeof *j.cells);
+    /* scratch buffers come from the context's store in frame-sized units, so the ten
+     * entries of a mirror room reuse memory already mapped instead of page-faulting
+     * fresh buffers (every byte read below is written first) */
+    if ((r = fx_check_budget(run->ctx, 2 * hits_bytes, "the ray hits")))
+        goto out;
+    /* one scratch for the cells and the resolved hits (each at most one per frame pixel) */
+    j.cells = fx_buffer_get(run->ctx, 2 * hits_bytes);
     if (!j.cells) {
         r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for %d x %d ray cells", where, j.ncx, j.ncy);
         goto out;
     }
+    if (p->hiz) {
+        if ((r = fx_check_budget(run->ctx, (size_t)F.w * F.h / 3 * sizeof(float) + 64, "the depth pyramid")) ||
+            (r = fx_depth_pyramid_build(run->ctx, F.depth, F.w, F.h, 12, where, &pyr)))
+            goto out;
+        F.scene.hiz = &pyr;
+    }
     fx_parallel_for(run->ctx, j.ncy, 1, trace_cells, &j);
+    const int rows = roi->y1 - roi->y0;
+    const size_t rw = (size_t)(roi->x1 - roi->x0);
+    if (cell == 1) {
+        j.hits = j.cells; /* one cell per roi pixel, same layout */
+    } else {
+        j.hits = j.cells + (size_t)F.w * F.h;
+        fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), resolve_rows, &j);
+    }
 
     j.lookup = run->src;
+    j.lookup_box = (fx_rect){ 0, 0, F.w, F.h };
     fx_blur_spec bs = { p->glossiness, FX_BLUR_RECURSIVE, 3 };
     if (!fx_blur_is_identity(&bs)) {
         /* blur only the hits' bounding box (+1 px for the bilinear lookup) */
         float bx0 = 1e30f, by0 = 1e30f, bx1 = -1e30f, by1 = -1e30f;
-        for (size_t k = 0; k < (size_t)j.ncx * j.ncy; k++) {
-            const cell_hit *c = &j.cells[k];
+        for (size_t k = 0; k < rw * rows; k++) {
+            const cell_hit *c = &j.hits[k];
             if (c->state == 1 && c->conf > 0.0f) {
                 bx0 = fminf(bx0, c->px), by0 = fminf(by0, c->py);
                 bx1 = fmaxf(bx1, c->px), by1 = fmaxf(by1, c->py);
@@ -769,10 +889,9 @@ static fx_result ssr_process(const fx_effect_run *run)
             br.y0 = br.y0 < 0 ? 0 : br.y0;
             br.x1 = br.x1 > F.w ? F.w : br.x1;
             br.y1 = br.y1 > F.h ? F.h : br.y1;
-            size_t bytes = (size_t)F.w * F.h * 4 * sizeof(float);
-            if ((r = fx_check_budget(run->ctx, bytes, "the glossy reflection lookup")))
+            if ((r = fx_check_budget(run->ctx, frame_bytes, "the glossy reflection lookup")))
                 goto out;
-            blurred = fx_mem_alloc(bytes);
+            blurred = fx_buffer_get(run->ctx, frame_bytes);
             if (!blurred) {
                 r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the glossy lookup", where);
                 goto out;
@@ -784,6 +903,7 @@ static fx_result ssr_process(const fx_effect_run *run)
             if ((r = fx_blur_image(run->ctx, run->src, blurred, F.w, F.h, 4, &bs, &br, where)))
                 goto out;
             j.lookup = blurred;
+            j.lookup_box = br;
         }
     }
 
@@ -794,22 +914,34 @@ static fx_result ssr_process(const fx_effect_run *run)
         j.dbg_len = fx_effect_debug_pass(run, "ray_length", 1, &r);
     if (r)
         goto out;
-    int rows = roi->y1 - roi->y0;
     if (p->bounces > 1 && run->mask) {
         /* the finished one-bounce image of this mirror, Jacobi-iterated on the first-bounce
          * hits (a ray landing on this mirror sees its previous iterate): the estimate
-         * where the traced bounces run out. Two full-frame buffers (lookup elsewhere). */
-        size_t n4 = (size_t)F.w * F.h * 4;
-        if ((r = fx_check_budget(run->ctx, 2 * n4 * sizeof(float), "the mirror's multi-bounce estimate")))
+         * where the traced bounces run out. Two buffers over the mask's bounds + 2 px (lookup elsewhere). */
+        fx_rect fb = { roi->x0 - 2, roi->y0 - 2, roi->x1 + 2, roi->y1 + 2 };
+        fb.x0 = fb.x0 < 0 ? 0 : fb.x0;
+        fb.y0 = fb.y0 < 0 ? 0 : fb.y0;
+        fb.x1 = fb.x1 > F.w ? F.w : fb.x1;
+        fb.y1 = fb.y1 > F.h ? F.h : fb.y1;
+        j.fin_box = fb;
+        size_t bw = (size_t)(fb.x1 - fb.x0);
+        if ((r = fx_check_budget(run->ctx, 2 * frame_bytes, "the mirror's multi-bounce estimate")))
             goto out;
-        fin[0] = fx_mem_alloc(n4 * sizeof(float));
-        fin[1] = fx_mem_alloc(n4 * sizeof(float));
-        if (!fin[0] || !fin[1]) {
+        fin[0] = fx_buffer_get(run->ctx, 2 * frame_bytes);
+        fin[1] = fin[0] ? fin[0] + (size_t)F.w * F.h * 4 : NULL;
+        if (!fin[0]) {
             r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the multi-bounce estimate", where);
             goto out;
         }
-        memcpy(fin[0], j.lookup, n4 * sizeof(float));
-        memcpy(fin[1], j.lookup, n4 * sizeof(float));
+        for (int y = fb.y0; y < fb.y1; y++)
+            for (int x = fb.x0; x < fb.x1; x++) {
+                const fx_rect *lb = &j.lookup_box;
+                int in = x >= lb->x0 && x < lb->x1 && y >= lb->y0 && y < lb->y1;
+                const float *sp = (in ? j.lookup : run->src) + ((size_t)y * F.w + x) * 4;
+                size_t o = ((size_t)(y - fb.y0) * bw + (x - fb.x0)) * 4;
+                memcpy(fin[0] + o, sp, 4 * sizeof(float));
+                memcpy(fin[1] + o, sp, 4 * sizeof(float));
+            }
         j.last_bounce = 0;
         j.fin = NULL;
         for (int it = 0; it < FIN_ITERATIONS; it++) {
@@ -822,11 +954,11 @@ static fx_result ssr_process(const fx_effect_run *run)
     j.last_bounce = p->bounces - 1;
     fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), shade_rows, &j);
 out:
-    fx_mem_free(fin[0]);
-    fx_mem_free(fin[1]);
-    fx_mem_free(j.cells);
-    fx_mem_free(blurred);
+    fx_buffer_put(run->ctx, fin[0], 2 * frame_bytes);
+    fx_buffer_put(run->ctx, j.cells, 2 * hits_bytes);
+    fx_buffer_put(run->ctx, blurred, frame_bytes);
     fx_mask_free(surfaces);
+    fx_depth_pyramid_free(run->ctx, &pyr);
     return r;
 }
 
@@ -838,8 +970,10 @@ const fx_effect_class fx_effect_ssr_mirror = {
     .params = ssr_param_defs,
     .param_count = FX_COUNT_OF(ssr_param_defs),
     .presets = {
-        "{\"max_steps\": 24, \"stride\": 4, \"growth\": 1.15, \"refine\": 2, \"resolution_scale\": 0.5}",
-        "{\"max_steps\": 48, \"stride\": 2, \"growth\": 1.08, \"refine\": 4, \"resolution_scale\": 0.5}",
+        "{\"max_steps\": 48, \"stride\": 2, \"growth\": 1.08, \"refine\": 3, \"resolution_scale\": 0.25, "
+        "\"retrace_edges\": false}",
+        "{\"max_steps\": 96, \"stride\": 1.5, \"growth\": 1.04, \"refine\": 6, \"resolution_scale\": 0.5, "
+        "\"retrace_edges\": true}",
         "{\"max_steps\": 96, \"stride\": 1.5, \"growth\": 1.04, \"refine\": 6, \"resolution_scale\": 1}",
         "{\"max_steps\": 4096, \"stride\": 1, \"growth\": 1, \"refine\": 10, \"resolution_scale\": 1}",
     },

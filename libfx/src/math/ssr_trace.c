@@ -37,19 +37,43 @@ static double depth_at(const line_state *L, double s)
     return k > 0.0 ? -z / k : INFINITY;
 }
 
-/* Depth of the surface under the line at s (pixel ix, iy): its tangent plane there when
- * the scene gives one, else the pixel's sample; +inf for background. */
+/* A pixel's surface under the line: its depth sample, and its tangent plane if any. */
+typedef struct surface {
+    double depth; /* sample, +inf for background */
+    double plane[4];
+    int has_plane;
+} surface;
+
+static void surface_get(const fx_ssr_scene *sc, int ix, int iy, surface *sf)
+{
+    sf->depth = fx_ssr_depth_at(sc, ix, iy);
+    sf->has_plane = sc->surface_plane && isfinite(sf->depth) && sc->surface_plane(sc->user, ix, iy, sf->plane);
+}
+
+/* Depth of the surface sf under the line at s: where the view ray through the line's
+ * point meets the tangent plane, if that lies within [0.5, 2] x the sample; else the
+ * sample (+inf for background). */
+static double surface_depth_at(const surface *sf, const line_state *L, double s)
+{
+    if (!sf->has_plane)
+        return sf->depth;
+    double k = L->k0 + L->dk * s;
+    if (!(k > 0.0))
+        return sf->depth;
+    double P[3] = { (L->q0[0] + L->dq[0] * s) / k, (L->q0[1] + L->dq[1] * s) / k, (L->q0[2] + L->dq[2] * s) / k };
+    double den = sf->plane[0] * P[0] + sf->plane[1] * P[1] + sf->plane[2] * P[2];
+    double dr = -P[2]; /* the ray point's planar depth: P / dr has planar depth 1 */
+    if (!(fabs(den) > 1e-12) || !(dr > 0.0))
+        return sf->depth;
+    double t = sf->plane[3] * dr / den;
+    return isfinite(t) && t > 0.5 * sf->depth && t < 2.0 * sf->depth ? t : sf->depth;
+}
+
 static double surface_at(const fx_ssr_scene *sc, const line_state *L, double s, int ix, int iy)
 {
-    double d = fx_ssr_depth_at(sc, ix, iy);
-    if (sc->surface_depth && isfinite(d)) {
-        double x, y;
-        pixel_at(L, s, &x, &y);
-        double p = sc->surface_depth(sc->user, ix, iy, x, y);
-        if (isfinite(p) && p > 0.0)
-            return p;
-    }
-    return d;
+    surface sf;
+    surface_get(sc, ix, iy, &sf);
+    return surface_depth_at(&sf, L, s);
 }
 
 static int pixel_index(const line_state *L, double s, int *ix, int *iy)
@@ -84,6 +108,67 @@ static int clip_axis(double a, double b, double lo, double hi, double *t0, doubl
 }
 
 static int finite3(fx_vec3 v) { return isfinite(v.x) && isfinite(v.y) && isfinite(v.z); }
+
+/* The exact test of the line's span [s_prev, s_cur] against pixel (ix, iy): a candidate
+ * when the ray's depth interval meets the surface slab [depth, depth + thickness] (or
+ * crosses the pixel's tangent plane), refined by bisection, kept if it lies on the
+ * surface within the thickness and the scene accepts it. Fills *out on a hit. */
+static int test_span(const fx_ssr_scene *s, const line_state *L, fx_vec3 dir, const double o[3], double thick,
+                     int refine, double s_prev, double s_cur, double d_prev, double d_cur, int ix, int iy,
+                     fx_ssr_hit *out)
+{
+    double sd = fx_ssr_depth_at(s, ix, iy);
+    if (!isfinite(sd))
+        return 0;
+    double dmin = d_prev < d_cur ? d_prev : d_cur, dmax = d_prev < d_cur ? d_cur : d_prev;
+    int cand = dmax >= sd && dmin <= sd + thick;
+    /* a grazing surface: the ray was in front of this pixel's plane at the span's start
+     * and is behind it at its end (crossed it), though the depth samples jump past the
+     * slab (the plane's depth is within 2 x the sample: a ray already that far behind
+     * has not crossed it). With one-pixel spans (Hi-Z) a crossing that ends in front of
+     * the sample is missed: the linear march's longer spans catch more of them. */
+    if (!cand && s->surface_plane && d_cur >= sd && d_prev <= 2.0 * sd) {
+        surface sf;
+        surface_get(s, ix, iy, &sf);
+        double pp = surface_depth_at(&sf, L, s_prev), pc = surface_depth_at(&sf, L, s_cur);
+        cand = d_prev <= pp && d_cur >= pc;
+    }
+    if (!cand)
+        return 0;
+    double lo = s_prev, hi = s_cur;
+    for (int r = 0; r < refine; r++) {
+        double mid = 0.5 * (lo + hi);
+        int mx, my;
+        if (!pixel_index(L, mid, &mx, &my))
+            break;
+        double smid = surface_at(s, L, mid, mx, my);
+        if (isfinite(smid) && depth_at(L, mid) >= smid)
+            hi = mid;
+        else
+            lo = mid;
+    }
+    int hx, hy;
+    double slop = fabs(d_cur - d_prev) / (double)(1u << refine);
+    if (!pixel_index(L, hi, &hx, &hy))
+        return 0;
+    double sh = surface_at(s, L, hi, hx, hy), dh = depth_at(L, hi);
+    if (!(isfinite(sh) && dh >= sh - slop && dh <= sh + thick + slop && (!s->accept || s->accept(s->user, hx, hy, dir))))
+        return 0;
+    double x, y;
+    pixel_at(L, hi, &x, &y);
+    double k = L->k0 + L->dk * hi;
+    double vx = (L->q0[0] + L->dq[0] * hi) / k - o[0];
+    double vy = (L->q0[1] + L->dq[1] * hi) / k - o[1];
+    double vz = (L->q0[2] + L->dq[2] * hi) / k - o[2];
+    out->hit = 1;
+    out->px = (float)x;
+    out->py = (float)y;
+    out->ix = hx;
+    out->iy = hy;
+    double l = sqrt(vx * vx + vy * vy + vz * vz);
+    out->length = isfinite(l) ? (float)l : 0.0f;
+    return 1;
+}
 
 int fx_ssr_trace(const fx_ssr_scene *s, const fx_ssr_settings *st, fx_vec3 origin, fx_vec3 dir,
                  fx_ssr_hit *out)
@@ -168,10 +253,72 @@ int fx_ssr_trace(const fx_ssr_scene *s, const fx_ssr_settings *st, fx_vec3 origi
     L.dk = (k1 - k0) * inv;
 
     const double thick = st->thickness > 0.0f ? st->thickness : 0.0;
-    double stride = st->stride > 0.5f ? st->stride : 0.5;
-    const double growth = st->growth >= 1.0f && isfinite(st->growth) ? st->growth : 1.0;
     const int max_steps = st->max_steps > 0 ? st->max_steps : 1;
     const int refine = st->refine < 0 ? 0 : st->refine > 30 ? 30 : st->refine;
+    const fx_depth_pyramid *hz = s->hiz;
+    if (hz && hz->levels > 1 && hz->w[0] == s->width && hz->h[0] == s->height) {
+        /* Hi-Z: at level l the line crosses one 2^l cell per step; a cell whose nearest
+         * surface lies behind the ray's depths across it holds no candidate and is
+         * skipped whole (level up); otherwise level down, and at level 0 the pixel's span
+         * of the line gets the linear march's exact test. */
+        const int top = hz->levels - 1;
+        int level = 0;
+        /* the walk starts one pixel out, as the linear march's first test: the origin's
+         * own pixel is the surface the ray leaves */
+        double s_prev = 0.0;
+        for (int i = 0; i < max_steps && s_prev < s_end; i++) {
+            out->steps = i + 1;
+            double cell = (double)(1 << level);
+            /* the cell the line enters just after s_prev (a point on a boundary belongs
+             * to the cell ahead) */
+            double ahead = s_prev + 1e-6 < s_end ? s_prev + 1e-6 : s_prev;
+            double a = L.p0[0] + L.dp[0] * ahead, b = L.p0[1] + L.dp[1] * ahead;
+            double ca = floor(a / cell), cb = floor(b / cell);
+            a = L.p0[0] + L.dp[0] * s_prev;
+            b = L.p0[1] + L.dp[1] * s_prev;
+            double bound_a = L.dp[0] > 0 ? (ca + 1.0) * cell : ca * cell;
+            double s_next = s_prev + fabs(bound_a - a); /* |dp[0]| = 1 */
+            if (fabs(L.dp[1]) > 1e-12) {
+                double bound_b = L.dp[1] > 0 ? (cb + 1.0) * cell : cb * cell;
+                double sb = s_prev + (bound_b - b) / L.dp[1];
+                if (sb < s_next)
+                    s_next = sb;
+            }
+            if (!(s_next > s_prev)) /* rounding at a boundary: move on by a hair */
+                s_next = s_prev + 1e-6;
+            if (s_next > s_end)
+                s_next = s_end;
+            double d_prev = depth_at(&L, s_prev), d_cur = depth_at(&L, s_next);
+            int cx = (int)(L.swap ? cb : ca), cy = (int)(L.swap ? ca : cb);
+            cx = cx < 0 ? 0 : cx >= hz->w[level] ? hz->w[level] - 1 : cx;
+            cy = cy < 0 ? 0 : cy >= hz->h[level] ? hz->h[level] - 1 : cy;
+            if (level > 0) {
+                const float *z = hz->level[level] + ((size_t)cy * hz->w[level] + cx) * 2;
+                double dmax = d_prev > d_cur ? d_prev : d_cur, dmin = d_prev > d_cur ? d_cur : d_prev;
+                /* no candidate in the cell: the ray passes in front of every sample, or
+                 * behind all of them by more than the thickness and the tangent planes'
+                 * reach (twice the sample); a cell of background only holds (+inf, -inf) */
+                double back = (double)z[1] + thick;
+                if (dmax < (double)z[0] || dmin > back) {
+                    s_prev = s_next;
+                    if (level < top)
+                        level++;
+                } else {
+                    level--;
+                }
+                continue;
+            }
+            if (test_span(s, &L, dir, o, thick, refine, s_prev, s_next, d_prev, d_cur, cx, cy, out))
+                return 1;
+            s_prev = s_next;
+            if (top >= 1)
+                level = 1;
+        }
+        out->left_screen = clipped;
+        return 0;
+    }
+    double stride = st->stride > 0.5f ? st->stride : 0.5;
+    const double growth = st->growth >= 1.0f && isfinite(st->growth) ? st->growth : 1.0;
     double s_prev = 0.0, d_prev = -(double)origin.z;
     for (int i = 0; i < max_steps; i++) {
         double s_cur = s_prev + stride;
@@ -182,51 +329,8 @@ int fx_ssr_trace(const fx_ssr_scene *s, const fx_ssr_settings *st, fx_vec3 origi
         int ix, iy;
         if (!pixel_index(&L, s_cur, &ix, &iy))
             break;
-        double sd = fx_ssr_depth_at(s, ix, iy);
-        double dmin = d_prev < d_cur ? d_prev : d_cur, dmax = d_prev < d_cur ? d_cur : d_prev;
-        int cand = isfinite(sd) && dmax >= sd && dmin <= sd + thick;
-        /* a grazing surface: the ray was in front of this pixel's plane at the last step
-         * and is behind it now (crossed it), though the depth samples jump past the slab */
-        if (!cand && isfinite(sd) && s->surface_depth && d_cur >= sd) {
-            double pp = surface_at(s, &L, s_prev, ix, iy), pc = surface_at(s, &L, s_cur, ix, iy);
-            cand = d_prev <= pp && d_cur >= pc;
-        }
-        if (cand) {
-            double lo = s_prev, hi = s_cur;
-            for (int r = 0; r < refine; r++) {
-                double mid = 0.5 * (lo + hi);
-                int mx, my;
-                if (!pixel_index(&L, mid, &mx, &my))
-                    break;
-                double smid = surface_at(s, &L, mid, mx, my);
-                if (isfinite(smid) && depth_at(&L, mid) >= smid)
-                    hi = mid;
-                else
-                    lo = mid;
-            }
-            int hx, hy;
-            double slop = fabs(d_cur - d_prev) / (double)(1u << refine);
-            if (pixel_index(&L, hi, &hx, &hy)) {
-                double sh = surface_at(s, &L, hi, hx, hy), dh = depth_at(&L, hi);
-                if (isfinite(sh) && dh >= sh - slop && dh <= sh + thick + slop &&
-                    (!s->accept || s->accept(s->user, hx, hy, dir))) {
-                    double x, y;
-                    pixel_at(&L, hi, &x, &y);
-                    double k = L.k0 + L.dk * hi;
-                    double vx = (L.q0[0] + L.dq[0] * hi) / k - o[0];
-                    double vy = (L.q0[1] + L.dq[1] * hi) / k - o[1];
-                    double vz = (L.q0[2] + L.dq[2] * hi) / k - o[2];
-                    out->hit = 1;
-                    out->px = (float)x;
-                    out->py = (float)y;
-                    out->ix = hx;
-                    out->iy = hy;
-                    double l = sqrt(vx * vx + vy * vy + vz * vz);
-                    out->length = isfinite(l) ? (float)l : 0.0f;
-                    return 1;
-                }
-            }
-        }
+        if (test_span(s, &L, dir, o, thick, refine, s_prev, s_cur, d_prev, d_cur, ix, iy, out))
+            return 1;
         if (s_cur >= s_end)
             break;
         s_prev = s_cur;

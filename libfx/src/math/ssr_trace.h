@@ -15,6 +15,7 @@
 #define LIBFX_MATH_SSR_TRACE_H
 
 #include "math/camera.h"
+#include "math/depth_pyramid.h"
 
 #ifdef __cplusplus
 extern "C" {
@@ -32,12 +33,20 @@ typedef struct fx_ssr_scene {
      * (e.g. surfaces seen from behind: a ray leaving a mirror seen at a grazing angle
      * otherwise "hits" the far half of its own start pixel). NULL: every hit counts. */
     int (*accept)(const void *user, int x, int y, fx_vec3 dir);
-    /* Optional: planar depth of pixel (x, y)'s surface at the continuous frame position
-     * (px, py) (its tangent plane), used by the refinement and the final thickness test
-     * instead of the pixel's one depth sample: a surface seen at a grazing angle spans
-     * decimetres of depth per pixel, more than any useful thickness. NULL: the sample. */
-    double (*surface_depth)(const void *user, int x, int y, double px, double py);
+    /* Optional: the tangent plane of pixel (x, y)'s surface in view space, n . p = c as
+     * plane = {n.x, n.y, n.z, c}; returns 0 if it has none (then its depth sample is used).
+     * The refinement and the final thickness test take the plane's depth under the ray
+     * (within [0.5, 2] x the sample) instead of the pixel's one depth sample: a surface
+     * seen at a grazing angle spans decimetres of depth per pixel, more than any useful
+     * thickness. NULL: the samples. */
+    int (*surface_plane)(const void *user, int x, int y, double plane[4]);
     const void *user;
+    /* Optional: the min-depth pyramid of `depth` (math/depth_pyramid.h). Given, the
+     * tracer walks it (Hi-Z): it steps over cells the ray crosses in front of every
+     * surface and tests every pixel it does not skip exactly (as stride 1); stride and
+     * growth are unused and max_steps caps the walk's steps (level changes included).
+     * NULL: the linear march with growing strides. */
+    const fx_depth_pyramid *hiz;
 } fx_ssr_scene;
 
 typedef struct fx_ssr_settings {
