@@ -49,7 +49,7 @@
 #endif
 
 #define FOCUS_MAX 16.0
-#define NODE_MAX 10 /* floats per lattice node (lattice_shading; 4 without) */
+#define NODE_MAX 8 /* floats per lattice node (lattice_shading; 4 without) */
 
 typedef struct caustics_params {
     int points;
@@ -217,7 +217,8 @@ typedef struct caustics_job {
     float *col_t;            /* ... and the weight of the second */
     int node_size;           /* floats per node: 4, or NODE_MAX with lattice_shading */
     float *nodes;            /* nx * ny * node_size: a (gap or F1), noise, world x, world y (NaN:
-                                none), gain[3], add[3] (lattice_shading) */
+                                none), s, add[3] (lattice_shading: factors) */
+    int has_add;             /* lattice_shading: add is not always 0 (seed mode, environment) */
     int *node_id;            /* nx * ny * 2: the node's nearest two points */
 } caustics_job;
 
@@ -276,8 +277,9 @@ static inline float value_at(const caustics_job *j, float wx, float wy, int *ids
     return value_of(j, &h);
 }
 
-/* The effect at pixel i as out = src * gain + add (per channel) */
-static inline void factors(const caustics_job *j, size_t i, fx_vec3 P, float a, float noise, float gain[3], float add[3])
+/* The effect at pixel i as out = src * gain + add per channel, gain from one scalar s
+ * (gain_of): physical 1 + s tint, seed s. add is 0 without seed mode or environment. */
+static inline void factors(const caustics_job *j, size_t i, fx_vec3 P, float a, float noise, float *s, float add[3])
 {
     const caustics_params *p = j->p;
     if (p->mode == MODE_SEED) {
@@ -286,9 +288,9 @@ static inline void factors(const caustics_job *j, size_t i, fx_vec3 P, float a, 
         float L = (float)log1p((double)a);
         float alpha = 0.5f * L * p->strength;
         alpha = alpha > 0.0f ? (alpha < 1.0f ? alpha : 1.0f) : 0.0f;
+        *s = 1.0f - alpha;
         for (int k = 0; k < 3; k++) {
             float colour = (p->tint[k] + 0.75f * L) * 0.6f * noise * j->wave;
-            gain[k] = 1.0f - alpha;
             add[k] = colour * alpha;
         }
     } else {
@@ -296,10 +298,8 @@ static inline void factors(const caustics_job *j, size_t i, fx_vec3 P, float a, 
         float g = expf(-a * j->inv_lw) * j->inv_mean;
         g = (g < (float)FOCUS_MAX ? g : (float)FOCUS_MAX) - 1.0f;
         float amp = p->strength * (0.4f + 1.2f * noise); /* noise' with mean ~1 */
-        for (int k = 0; k < 3; k++) {
-            gain[k] = 1.0f + amp * g * p->tint[k];
-            add[k] = 0.0f;
-        }
+        *s = amp * g;
+        add[0] = add[1] = add[2] = 0.0f;
     }
     if (p->environment_strength > 0.0f && j->normal) {
         const float *nq = j->normal + i * 3;
@@ -315,6 +315,12 @@ static inline void factors(const caustics_job *j, size_t i, fx_vec3 P, float a, 
     }
 }
 
+static inline void gain_of(const caustics_job *j, float s, float gain[3])
+{
+    for (int k = 0; k < 3; k++)
+        gain[k] = j->p->mode == MODE_SEED ? s : 1.0f + s * j->p->tint[k];
+}
+
 static inline void apply(const caustics_job *j, size_t i, const float gain[3], const float add[3])
 {
     const float *s = j->run->src + i * 4;
@@ -328,9 +334,18 @@ static inline void apply(const caustics_job *j, size_t i, const float gain[3], c
 
 static inline void shade(const caustics_job *j, size_t i, fx_vec3 P, float a, float noise)
 {
-    float gain[3], add[3];
-    factors(j, i, P, a, noise, gain, add);
+    float sc, gain[3], add[3];
+    factors(j, i, P, a, noise, &sc, add);
+    gain_of(j, sc, gain);
     apply(j, i, gain, add);
+}
+
+/* lattice_shading: out from a node's (or interpolated) s and add */
+static inline void apply_s(const caustics_job *j, size_t i, const float *q)
+{
+    float gain[3];
+    gain_of(j, q[0], gain);
+    apply(j, i, gain, q + 1);
 }
 
 static inline int covered(const fx_effect_run *run, size_t i)
@@ -405,7 +420,7 @@ static void node_rows(void *user, int begin, int end)
             q[2] = P.x;
             q[3] = P.y;
             if (j->p->lattice_shading)
-                factors(j, (size_t)j->node_y[nj] * j->run->width + j->node_x[ni], P, q[0], q[1], q + 4, q + 7);
+                factors(j, (size_t)j->node_y[nj] * j->run->width + j->node_x[ni], P, q[0], q[1], q + 4, q + 5);
         }
 }
 
@@ -476,23 +491,33 @@ static void caustics_rows(void *user, int begin, int end)
                 if (node_row && x == j->node_x[i0] && !isnan(cv.q00[2])) {
                     /* a lattice node: its own values (what interpolation would give) */
                     if (j->p->lattice_shading)
-                        apply(j, i, cv.q00 + 4, cv.q00 + 7);
+                        apply_s(j, i, cv.q00 + 4);
                     else
                         shade(j, i, P, cv.q00[0], cv.q00[1]);
                     continue;
                 }
                 float tx = j->col_t[col];
                 float w00 = (1.0f - tx) * (1.0f - ty), w10 = tx * (1.0f - ty), w01 = (1.0f - tx) * ty, w11 = tx * ty;
+#define LERP4(ch) (w00 * cv.q00[ch] + w10 * cv.q10[ch] + w01 * cv.q01[ch] + w11 * cv.q11[ch])
                 float v[NODE_MAX];
-                int nc = j->p->lattice_shading ? NODE_MAX : 4;
-                for (int ch = 0; ch < nc; ch++)
-                    v[ch] = w00 * cv.q00[ch] + w10 * cv.q10[ch] + w01 * cv.q01[ch] + w11 * cv.q11[ch];
+                v[2] = LERP4(2);
+                v[3] = LERP4(3);
                 /* a pixel whose corners are not on its surface (NaN corners fail too): exact */
                 if (fabsf(v[2] - P.x) <= tol && fabsf(v[3] - P.y) <= tol) {
-                    if (j->p->lattice_shading) {
-                        apply(j, i, v + 4, v + 7);
+                    if (j->p->lattice_shading) { /* s, and add (0 without seed mode or environment) */
+                        v[4] = LERP4(4);
+                        v[5] = v[6] = v[7] = 0.0f;
+                        if (j->has_add) {
+                            v[5] = LERP4(5);
+                            v[6] = LERP4(6);
+                            v[7] = LERP4(7);
+                        }
+                        apply_s(j, i, v + 4);
                         continue;
                     }
+                    v[0] = LERP4(0);
+                    v[1] = LERP4(1);
+#undef LERP4
                     noise = v[1];
                     /* the same points all round: F1, F2 smooth in between; else a cell border
                      * (the bright line's kink) may cross: the pixel's own search */
@@ -666,6 +691,7 @@ static fx_result caustics_process(const fx_effect_run *run)
             lattice_pos(j.node_x, j.nx, j.f, run->roi.x0, run->roi.x0 + c, &j.col_i0[c], &j.col_i1[c], &j.col_t[c]);
         size_t count = (size_t)j.nx * j.ny;
         j.node_size = p->lattice_shading ? NODE_MAX : 4;
+        j.has_add = p->mode == MODE_SEED || (p->environment_strength > 0.0f && j.normal);
         j.nodes = fx_mem_alloc(count * j.node_size * sizeof(float));
         j.node_id = fx_mem_alloc(count * 2 * sizeof(int));
         if (!j.nodes || !j.node_id)

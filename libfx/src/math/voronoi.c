@@ -43,9 +43,19 @@ void fx_voronoi_point(const fx_voronoi *v, int index, double *x, double *y)
     *y = cy + 0.5 + 0.44 * sin(2.0 * M_PI * h2 + w2 * v->time);
 }
 
+/* floor(t) without a libm call (x86-64 without SSE4.1 has no rounding instruction): the
+ * same value for every t (|t| < 2^52 through an integer; beyond, or NaN, libm's floor) */
+static inline double floor_fast(double t)
+{
+    if (!(fabs(t) < 4503599627370496.0))
+        return floor(t);
+    double f = (double)(long long)t;
+    return f > t ? f - 1.0 : f;
+}
+
 static inline double wrap_tile(double a, double G)
 {
-    double r = a - G * floor(a / G);
+    double r = a - G * floor_fast(a / G);
     return r >= G ? 0.0 : r;
 }
 
@@ -147,6 +157,8 @@ void fx_voronoi_grid(const fx_voronoi *v, double x, double y, fx_voronoi_hit *ou
 }
 
 /* ---- per-frame point table ---- */
+
+static void cbrt_table(double *lut);
 
 /* The fast kinds' ordering key of an offset, in double (for the lists' bounds) */
 static double key_d(int kind, double ax, double ay)
@@ -282,6 +294,8 @@ int fx_voronoi_table_init(fx_voronoi_table *t, const fx_voronoi *v, int fast)
                 t->fy[k * 3 + s + 1] = (float)(t->y[k] + s * (double)G);
             }
     }
+    if (t->kind == 2)
+        cbrt_table(t->cbrt_lut);
     if (t->kind && G <= 64 && fast != 3) {
         t->sub = G <= 32 ? 4 : 2;
         const size_t squares = n * t->sub * t->sub;
@@ -333,31 +347,55 @@ static inline float key_of(int kind, float dx, float dy)
     }
 }
 
-/* k^(2/3) for the p = 1.5 key, without libm's cbrt (a third of a query's cost): the cube
- * root from an exponent-divided-by-3 guess (error < 4%) and two Halley steps in double
- * (cubic convergence: 1e-4, then below 1e-12), squared. k >= 0 and finite (|d| < G). */
-static inline double cbrt23(float kf)
+/* The cube root without libm (its bits differ between systems): Kahan's exponent / 3 bit
+ * trick (error < 4%) and three Halley steps in double (cubic convergence). For the table. */
+static double cbrt_iter(double k)
 {
-    double k = kf;
-    if (!(k > 0.0))
-        return 0.0;
     uint64_t b;
     memcpy(&b, &k, sizeof b);
-    b = b / 3 + UINT64_C(0x2A9F7893782DA1CE); /* Kahan's exponent / 3 bit trick */
+    b = b / 3 + UINT64_C(0x2A9F7893782DA1CE);
     double r;
     memcpy(&r, &b, sizeof r);
-    for (int it = 0; it < 2; it++) {
+    for (int it = 0; it < 3; it++) {
         double r3 = r * r * r;
         r *= (r3 + 2.0 * k) / (2.0 * r3 + k);
     }
-    return r * r;
+    return r;
 }
 
-static inline double dist_of_key(int kind, float k)
+static void cbrt_table(double *lut)
 {
-    switch (kind) {
+    for (int r = 0; r < 3; r++)
+        for (int i = 0; i < FX_VORONOI_CBRT_BINS; i++)
+            lut[r * FX_VORONOI_CBRT_BINS + i] = cbrt_iter((1.0 + (i + 0.5) / FX_VORONOI_CBRT_BINS) * (double)(1 << r));
+}
+
+/* k^(2/3) for the p = 1.5 key (a float key: k = 2^(3q + r) m, m in [1, 2)): 2^q times the
+ * table's cbrt(2^r m) at the middle of m's bin (relative error < 7e-4) and one Halley
+ * step in double (below 1e-9: far below the float key's own rounding), squared. */
+static inline double cbrt23(const double *lut, float kf)
+{
+    uint32_t b;
+    memcpy(&b, &kf, sizeof b);
+    if (!(kf > 0.0f) || (b >> 23) == 0) /* 0, or below 1.2e-38 (a distance below 1e-25) */
+        return 0.0;
+    int e = (int)(b >> 23) - 127;
+    int q = (e + 129) / 3 - 43; /* floor(e / 3), e in [-126, 127] */
+    int r = e - 3 * q;
+    uint64_t sb = (uint64_t)(q + 1023) << 52;
+    double scale;
+    memcpy(&scale, &sb, sizeof scale);
+    double x = scale * lut[r * FX_VORONOI_CBRT_BINS + (int)((b >> (23 - 8)) & (FX_VORONOI_CBRT_BINS - 1))];
+    double k = kf, x3 = x * x * x;
+    x *= (x3 + 2.0 * k) / (2.0 * x3 + k);
+    return x * x;
+}
+
+static inline double dist_of_key(const fx_voronoi_table *t, float k)
+{
+    switch (t->kind) {
     case 2:
-        return cbrt23(k);
+        return cbrt23(t->cbrt_lut, k);
     case 3:
         return sqrtf(k);
     default:
@@ -396,8 +434,8 @@ static void fast_out(const fx_voronoi_table *t, const fast_hit *h, fx_voronoi_hi
 {
     out->i1 = h->i1;
     out->i2 = h->i2;
-    out->f1 = dist_of_key(t->kind, h->k1);
-    out->f2 = dist_of_key(t->kind, h->k2);
+    out->f1 = dist_of_key(t, h->k1);
+    out->f2 = dist_of_key(t, h->k2);
 }
 
 static void fast_brute(const fx_voronoi_table *t, float qx, float qy, fx_voronoi_hit *out)
@@ -581,7 +619,7 @@ static inline double noise_blend(double tx, double ty, double a, double b, doubl
 
 double fx_value_noise2(double x, double y, uint32_t seed)
 {
-    double fx = floor(x), fy = floor(y);
+    double fx = floor_fast(x), fy = floor_fast(y);
     double a, b, c, d;
     noise_corners(fx, fy, seed, &a, &b, &c, &d);
     return noise_blend(x - fx, y - fy, a, b, c, d);
@@ -589,7 +627,7 @@ double fx_value_noise2(double x, double y, uint32_t seed)
 
 double fx_value_noise2_cached(double x, double y, uint32_t seed, fx_noise_cache *cache)
 {
-    double fx = floor(x), fy = floor(y);
+    double fx = floor_fast(x), fy = floor_fast(y);
     if (!cache->valid || fx != cache->fx || fy != cache->fy || seed != cache->seed) {
         noise_corners(fx, fy, seed, &cache->a, &cache->b, &cache->c, &cache->d);
         cache->fx = fx;
