@@ -305,7 +305,19 @@ static void comp_rows(void *user, int begin, int end)
     const fx_effect_run *run = j->run;
     const int w = run->width;
     const v4f fade = V4((float)j->fade);
-    for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++)
+    for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++) {
+        /* reduced: fx_radial_blur_upsample's bilinear, its row part once per row */
+        const float *r0 = NULL, *r1 = NULL;
+        v4f ty = V4(0.0f);
+        double inv_f = 1.0 / j->f;
+        if (!j->rays) {
+            double v = (y + 0.5) * inv_f - 0.5;
+            v = v < 0.0 ? 0.0 : v > j->lh - 1 ? j->lh - 1 : v;
+            int Y0 = (int)v, Y1 = Y0 + 1 < j->lh ? Y0 + 1 : Y0;
+            ty = V4((float)(v - Y0));
+            r0 = j->lrays + (size_t)Y0 * j->lw * 4;
+            r1 = j->lrays + (size_t)Y1 * j->lw * 4;
+        }
         for (int x = run->roi.x0; x < run->roi.x1; x++) {
             size_t i = (size_t)y * w + x;
             const v4f s = ld4(run->src + i * 4);
@@ -313,15 +325,20 @@ static void comp_rows(void *user, int begin, int end)
             if (j->rays) {
                 r = ld4(j->rays + i * 4);
             } else {
-                float o[4];
-                fx_radial_blur_upsample(j->lrays, j->lw, j->lh, j->f, x, y, o);
-                r = ld4(o);
+                double u = (x + 0.5) * inv_f - 0.5;
+                u = u < 0.0 ? 0.0 : u > j->lw - 1 ? j->lw - 1 : u;
+                int X0 = (int)u, X1 = X0 + 1 < j->lw ? X0 + 1 : X0;
+                v4f tx = V4((float)(u - X0));
+                v4f a0 = ld4(r0 + 4 * X0), a1 = ld4(r0 + 4 * X1), b0 = ld4(r1 + 4 * X0), b1 = ld4(r1 + 4 * X1);
+                v4f a = a0 + tx * (a1 - a0), b = b0 + tx * (b1 - b0);
+                r = a + ty * (b - a); /* the zero lane stays 0 */
             }
             v4f add = r * fade; /* alpha lane: rays hold 0 there */
             if (j->screen)
                 add *= V4(1.0f) - min4(max4(s, V4(0.0f)), V4(1.0f));
             st4(run->dst + i * 4, finite4(s + add));
         }
+    }
 }
 
 static void copy_roi(const fx_effect_run *run)
