@@ -23,9 +23,8 @@
  * bilinearly interpolated; g = exp(-gap / line_width) is applied per pixel, after the
  * interpolation. F2 - F1 is a V across a cell border (the bright line): interpolation
  * rounds its kink, so with `refine` a pixel whose four corners do not share their nearest
- * two points takes its own distances to the corners' points (sharp lines; exact unless
- * its true nearest two are none of them), except where no line can reach it (gap bound,
- * p >= 1). A pixel is evaluated exactly instead when its corners are not on its surface:
+ * two points gets its own exact search (sharp lines), except where no line can reach it
+ * (gap bound, p >= 1); a lattice node's pixel keeps the node's values. A pixel is evaluated exactly instead when its corners are not on its surface:
  * a corner without a position, or the corners' interpolated world XY more than 0.1 cell
  * from the pixel's own (a silhouette, a step). The shading (Fresnel, environment, mix)
  * stays per pixel (normals carry detail), or with `lattice_shading` (draft) is done at the
@@ -130,7 +129,7 @@ static const fx_param_def caustics_param_defs[] = {
               "exact: double precision pow"),
     FX_P_BOOL(caustics_params, refine, "refine", 1,
               "Quality (downsample > 1): pixels between lattice nodes that straddle a cell border "
-              "take their own distances to the nodes' points (sharp lines); off: interpolated"),
+              "get their own exact search (sharp lines); off: interpolated"),
     FX_P_BOOL(caustics_params, lattice_shading, "lattice_shading", 0,
               "Quality (downsample > 1): the whole effect (pattern, Fresnel, environment) shaded at "
               "the lattice nodes and interpolated as a per-pixel gain and offset; off: per pixel"),
