@@ -396,6 +396,36 @@ static void test_threads(void)
     free(img);
 }
 
+/* The reduced path (no full-size buffers: the map built reduced, the rays interpolated in
+ * the composite) and the full-size one (the rays written into the output) give the bits of
+ * the buffered path the debug outputs take (light inside the frame and off screen). */
+static void test_fused_equals_buffered(fx_context *ctx)
+{
+    float *img = spot_image(40, 12);
+    int bad = 0;
+    for (int k = 0; k < 6; k++) {
+        rset r = defaults();
+        r.method = "polar";
+        r.down = k % 3 == 0 ? 1 : k % 3 == 1 ? 2 : 4;
+        r.lx = k < 3 ? 0.5f : 1.7f; /* inside, and off screen */
+        float *o[2] = {NULL, NULL};
+        for (int dbg = 0; dbg < 2; dbg++) {
+            fx_frame *f = et_frame(ctx, W, H, img);
+            fx_stack *s = rays_stack(ctx, r);
+            if (s)
+                fx_stack_set_debug_outputs(s, dbg);
+            o[dbg] = s && f ? et_run(ctx, s, f) : NULL;
+            fx_stack_free(s);
+            fx_frame_free(f);
+        }
+        bad += !o[0] || !o[1] || memcmp(o[0], o[1], (size_t)W * H * 4 * sizeof(float)) != 0;
+        free(o[0]);
+        free(o[1]);
+    }
+    CHECK(bad == 0);
+    free(img);
+}
+
 int main(void)
 {
     fx_context *ctx = NULL;
@@ -408,6 +438,7 @@ int main(void)
     test_extremes(ctx);
     test_methods_converge(ctx);
     test_threads();
+    test_fused_equals_buffered(ctx);
     fx_context_free(ctx);
     return tu_finish("test_god_rays");
 }

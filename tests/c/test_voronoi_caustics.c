@@ -92,6 +92,42 @@ static void test_table(void)
     CHECK(fast_used == 4 * 4); /* G >= 10 and p in {1, 1.5, 2, inf} */
 }
 
+/* The fast kind's square lists (G <= 64): many queries, many on the squares' edges and
+ * corners, equal to brute force bit for bit; lists built in two halves (as the effect
+ * does in parallel) give the same. */
+static void test_lists(void)
+{
+    const int grids[] = {10, 14, 33, 64};
+    const double ps[] = {1.0, 1.5, 2.0, INFINITY};
+    int bad = 0, used = 0;
+    for (int gi = 0; gi < 4; gi++)
+        for (int pi = 0; pi < 4; pi++) {
+            fx_voronoi v = {grids[gi], 11u + (uint32_t)gi, 1.3 * pi, 2.0, ps[pi]};
+            fx_voronoi_table t;
+            CHECK(fx_voronoi_table_init(&t, &v, 2) == 0);
+            fx_voronoi_table_build_lists(&t, 0, grids[gi] / 2);
+            fx_voronoi_table_build_lists(&t, grids[gi] / 2, grids[gi]);
+            used += t.sub > 0;
+            for (int q = 0; q < 4000; q++) {
+                double x = (fx_rand4(q, gi, pi, 5) - 0.2) * 1.5 * grids[gi];
+                double y = (fx_rand4(q, gi, pi, 6) - 0.2) * 1.5 * grids[gi];
+                if (q % 3 == 0) /* on a square's edge or corner */
+                    x = floor(x * 4.0) / 4.0;
+                if (q % 5 == 0)
+                    y = floor(y * 2.0) / 2.0;
+                fx_voronoi_hit a, b;
+                fx_voronoi_table_grid(&t, x, y, &a);
+                fx_voronoi_table_brute(&t, x, y, &b);
+                if (memcmp(&a, &b, sizeof a) != 0 && bad++ < 5)
+                    fprintf(stderr, "lists G %d p %g (%g, %g): grid %d/%d brute %d/%d\n", grids[gi], ps[pi], x, y,
+                            a.i1, a.i2, b.i1, b.i2);
+            }
+            fx_voronoi_table_free(&t);
+        }
+    CHECK(bad == 0);
+    CHECK(used == 16);
+}
+
 static void test_minkowski(void)
 {
     CHECK(fx_minkowski2(3, 4, 2.0) == 5.0);
@@ -549,6 +585,7 @@ int main(void)
         return 1;
     test_brute_equals_grid();
     test_table();
+    test_lists();
     test_minkowski();
     test_world_anchoring(ctx);
     test_extremes_and_mask(ctx);

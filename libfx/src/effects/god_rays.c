@@ -218,42 +218,83 @@ typedef struct occ_job {
     double lx, ly, radius;
 } occ_job;
 
+/* The emitting colour of pixel (x, y) (a zero fourth lane) */
+static inline v4f occ_pixel(const occ_job *j, int x, int y)
+{
+    const god_rays_params *p = j->p;
+    const int w = j->run->width;
+    size_t i = (size_t)y * w + x;
+    /* emitting colour: negative, NaN and +Inf channels count as 0 */
+    v4f c = ld4(j->run->src + i * 4);
+    c = sel4(c > V4(0.0f), c, V4(0.0f));
+    c = sel4(c <= V4(FLT_MAX), c, V4(0.0f));
+    float lum = 0.2126f * c[0] + 0.7152f * c[1] + 0.0722f * c[2];
+    float m = p->knee > 0.0f ? fx_smoothstep(p->threshold, p->threshold + p->knee, lum)
+                             : (lum > p->threshold ? 1.0f : 0.0f);
+    if (p->occlusion == OCC_SKY) {
+        float sky = j->depth && j->depth[i] > p->sky_distance ? 1.0f : 0.0f;
+        if (j->material)
+            sky = fmaxf(sky, j->material->coverage[i]);
+        m *= sky;
+    }
+    if (j->radius > 0.0 && m > 0.0f) {
+        double d = hypot(x + 0.5 - j->lx, y + 0.5 - j->ly) / j->radius;
+        m *= d >= 1.0 ? 0.0f : (float)((1.0 - d * d) * (1.0 - d * d));
+    }
+    float k = m;
+    if (lum > p->max_source && lum > 0.0f)
+        k *= p->max_source / lum;
+    return c * (v4f){k, k, k, 0.0f};
+}
+
 static void occ_rows(void *user, int begin, int end)
 {
     const occ_job *j = user;
-    const god_rays_params *p = j->p;
     const int w = j->run->width;
-    const int soft = p->knee > 0.0f, sky_test = p->occlusion == OCC_SKY;
     for (int y = begin; y < end; y++)
-        for (int x = 0; x < w; x++) {
-            size_t i = (size_t)y * w + x;
-            /* emitting colour: negative, NaN and +Inf channels count as 0 */
-            v4f c = ld4(j->run->src + i * 4);
-            c = sel4(c > V4(0.0f), c, V4(0.0f));
-            c = sel4(c <= V4(FLT_MAX), c, V4(0.0f));
-            float lum = 0.2126f * c[0] + 0.7152f * c[1] + 0.0722f * c[2];
-            float m = soft ? fx_smoothstep(p->threshold, p->threshold + p->knee, lum)
-                           : (lum > p->threshold ? 1.0f : 0.0f);
-            if (sky_test) {
-                float sky = j->depth && j->depth[i] > p->sky_distance ? 1.0f : 0.0f;
-                if (j->material)
-                    sky = fmaxf(sky, j->material->coverage[i]);
-                m *= sky;
-            }
-            if (j->radius > 0.0 && m > 0.0f) {
-                double d = hypot(x + 0.5 - j->lx, y + 0.5 - j->ly) / j->radius;
-                m *= d >= 1.0 ? 0.0f : (float)((1.0 - d * d) * (1.0 - d * d));
-            }
-            float k = m;
-            if (lum > p->max_source && lum > 0.0f)
-                k *= p->max_source / lum;
-            st4(j->occ + i * 4, c * (v4f){k, k, k, 0.0f});
+        for (int x = 0; x < w; x++)
+            st4(j->occ + ((size_t)y * w + x) * 4, occ_pixel(j, x, y));
+}
+
+/* The reduced map straight from the pixels (the f x f box means radial_blur's reduction
+ * computes from a full-size map: the same sums in the same order, no full-size buffer) */
+typedef struct occ_lo_job {
+    const occ_job *oj;
+    float *lo;
+    int lw, f;
+} occ_lo_job;
+
+static void occ_lo_rows(void *user, int begin, int end)
+{
+    const occ_lo_job *j = user;
+    const int w = j->oj->run->width, h = j->oj->run->height, f = j->f;
+    for (int Y = begin; Y < end; Y++) {
+        int y0 = Y * f, y1 = y0 + f > h ? h : y0 + f;
+        for (int X = 0; X < j->lw; X++) {
+            int x0 = X * f, x1 = x0 + f > w ? w : x0 + f;
+            double acc[3] = {0, 0, 0};
+            for (int y = y0; y < y1; y++)
+                for (int x = x0; x < x1; x++) {
+                    v4f q = occ_pixel(j->oj, x, y);
+                    acc[0] += q[0];
+                    acc[1] += q[1];
+                    acc[2] += q[2];
+                }
+            double inv = 1.0 / ((double)(y1 - y0) * (x1 - x0));
+            float *o = j->lo + ((size_t)Y * j->lw + X) * 4;
+            o[0] = (float)(acc[0] * inv);
+            o[1] = (float)(acc[1] * inv);
+            o[2] = (float)(acc[2] * inv);
+            o[3] = 0.0f;
         }
+    }
 }
 
 typedef struct comp_job {
     const fx_effect_run *run;
-    const float *rays;
+    const float *rays;   /* full size (may be run->dst itself: read before written), or NULL: */
+    const float *lrays;  /* the reduced rays (lw x lh, factor f), interpolated here */
+    int lw, lh, f;
     double fade;
     int screen;
 } comp_job;
@@ -264,15 +305,40 @@ static void comp_rows(void *user, int begin, int end)
     const fx_effect_run *run = j->run;
     const int w = run->width;
     const v4f fade = V4((float)j->fade);
-    for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++)
+    for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++) {
+        /* reduced: fx_radial_blur_upsample's bilinear, its row part once per row */
+        const float *r0 = NULL, *r1 = NULL;
+        v4f ty = V4(0.0f);
+        double inv_f = 1.0 / j->f;
+        if (!j->rays) {
+            double v = (y + 0.5) * inv_f - 0.5;
+            v = v < 0.0 ? 0.0 : v > j->lh - 1 ? j->lh - 1 : v;
+            int Y0 = (int)v, Y1 = Y0 + 1 < j->lh ? Y0 + 1 : Y0;
+            ty = V4((float)(v - Y0));
+            r0 = j->lrays + (size_t)Y0 * j->lw * 4;
+            r1 = j->lrays + (size_t)Y1 * j->lw * 4;
+        }
         for (int x = run->roi.x0; x < run->roi.x1; x++) {
             size_t i = (size_t)y * w + x;
             const v4f s = ld4(run->src + i * 4);
-            v4f add = ld4(j->rays + i * 4) * fade; /* alpha lane: rays hold 0 there */
+            v4f r;
+            if (j->rays) {
+                r = ld4(j->rays + i * 4);
+            } else {
+                double u = (x + 0.5) * inv_f - 0.5;
+                u = u < 0.0 ? 0.0 : u > j->lw - 1 ? j->lw - 1 : u;
+                int X0 = (int)u, X1 = X0 + 1 < j->lw ? X0 + 1 : X0;
+                v4f tx = V4((float)(u - X0));
+                v4f a0 = ld4(r0 + 4 * X0), a1 = ld4(r0 + 4 * X1), b0 = ld4(r1 + 4 * X0), b1 = ld4(r1 + 4 * X1);
+                v4f a = a0 + tx * (a1 - a0), b = b0 + tx * (b1 - b0);
+                r = a + ty * (b - a); /* the zero lane stays 0 */
+            }
+            v4f add = r * fade; /* alpha lane: rays hold 0 there */
             if (j->screen)
                 add *= V4(1.0f) - min4(max4(s, V4(0.0f)), V4(1.0f));
             st4(run->dst + i * 4, finite4(s + add));
         }
+    }
 }
 
 static void copy_roi(const fx_effect_run *run)
@@ -337,29 +403,6 @@ static fx_result god_rays_process(const fx_effect_run *run)
             oj.material = material;
         }
     }
-    /* occlusion and rays: RGB + a zero lane per pixel (four-lane vectors) */
-    size_t n4 = 0;
-    if (!fx_size_mul(&n4, (size_t)w, (size_t)h, 4)) {
-        fx_mask_free(material);
-        return fx_fail(run->ctx, FX_ERR_LIMIT, "%s: frame too large", where);
-    }
-    /* frame-sized: from the context's buffer store (no page faults frame after frame);
-     * occ is written whole, rays inside the ROI (the debug pass wants it whole) */
-    const size_t bytes = n4 * sizeof(float);
-    float *occ = fx_buffer_get(run->ctx, bytes);
-    float *rays = fx_buffer_get(run->ctx, bytes);
-    if (occ && rays && run->debug)
-        memset(rays, 0, bytes);
-    if (!occ || !rays) {
-        fx_buffer_put(run->ctx, occ, bytes);
-        fx_buffer_put(run->ctx, rays, bytes);
-        fx_mask_free(material);
-        return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the occlusion map", where);
-    }
-    oj.occ = occ;
-    fx_parallel_for(run->ctx, h, fx_grain_for(run->ctx, h), occ_rows, &oj);
-    fx_mask_free(material);
-
     fx_radial_blur rb;
     memset(&rb, 0, sizeof rb);
     rb.light_x = lx;
@@ -375,12 +418,64 @@ static fx_result god_rays_process(const fx_effect_run *run)
     rb.angular = 1.0 / p->polar_resolution;
     rb.levels = p->polar_levels;
     rb.downsample = p->polar_downsample;
+    int lw = 0, lh = 0;
+    if (p->method == METHOD_POLAR && !run->debug && fx_radial_blur_reduced_size(&rb, w, h, &lw, &lh)) {
+        /* reduced: the map built reduced, the rays interpolated in the composite; no
+         * frame-sized temporary (the same bits as through full-size buffers) */
+        const size_t lbytes = (size_t)lw * lh * 4 * sizeof(float);
+        r = fx_check_budget(run->ctx, (uint64_t)lbytes * 2, where);
+        float *lo = r == FX_OK ? fx_buffer_get(run->ctx, lbytes) : NULL;
+        float *lrays = r == FX_OK ? fx_buffer_get(run->ctx, lbytes) : NULL;
+        if (r == FX_OK && (!lo || !lrays))
+            r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the reduced occlusion map", where);
+        if (r == FX_OK) {
+            memset(lrays, 0, lbytes);
+            occ_lo_job lj = {&oj, lo, lw, rb.downsample};
+            fx_parallel_for(run->ctx, lh, fx_grain_for(run->ctx, lh), occ_lo_rows, &lj);
+            r = fx_radial_blur_polar_reduced(run->ctx, lo, lrays, w, h, &rb, &run->roi, where);
+        }
+        if (r == FX_OK) {
+            comp_job cj = {run, NULL, lrays, lw, lh, rb.downsample, fade, p->composite == COMP_SCREEN};
+            int rows = run->roi.y1 - run->roi.y0;
+            fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), comp_rows, &cj);
+        }
+        fx_buffer_put(run->ctx, lo, lbytes);
+        fx_buffer_put(run->ctx, lrays, lbytes);
+        fx_mask_free(material);
+        return r;
+    }
+    /* occlusion and rays: RGB + a zero lane per pixel (four-lane vectors) */
+    size_t n4 = 0;
+    if (!fx_size_mul(&n4, (size_t)w, (size_t)h, 4)) {
+        fx_mask_free(material);
+        return fx_fail(run->ctx, FX_ERR_LIMIT, "%s: frame too large", where);
+    }
+    /* frame-sized: from the context's buffer store (no page faults frame after frame);
+     * occ is written whole, rays inside the ROI (the debug pass wants it whole) */
+    const size_t bytes = n4 * sizeof(float);
+    float *occ = fx_buffer_get(run->ctx, bytes);
+    /* the rays go to dst (same layout; the composite reads each pixel before writing it)
+     * unless the debug pass wants them whole */
+    float *rays = run->debug ? fx_buffer_get(run->ctx, bytes) : run->dst;
+    if (occ && rays && run->debug)
+        memset(rays, 0, bytes);
+    if (!occ || !rays) {
+        fx_buffer_put(run->ctx, occ, bytes);
+        if (run->debug)
+            fx_buffer_put(run->ctx, rays, bytes);
+        fx_mask_free(material);
+        return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the occlusion map", where);
+    }
+    oj.occ = occ;
+    fx_parallel_for(run->ctx, h, fx_grain_for(run->ctx, h), occ_rows, &oj);
+    fx_mask_free(material);
+
     if (p->method == METHOD_NAIVE)
         r = fx_radial_blur_naive(run->ctx, occ, rays, w, h, &rb, &run->roi, where);
     else
         r = fx_radial_blur_polar(run->ctx, occ, rays, w, h, &rb, &run->roi, where);
     if (r == FX_OK) {
-        comp_job cj = {run, rays, fade, p->composite == COMP_SCREEN};
+        comp_job cj = {run, rays, NULL, 0, 0, 1, fade, p->composite == COMP_SCREEN};
         int rows = run->roi.y1 - run->roi.y0;
         fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), comp_rows, &cj);
         if (run->debug) {
@@ -393,7 +488,8 @@ static fx_result god_rays_process(const fx_effect_run *run)
         }
     }
     fx_buffer_put(run->ctx, occ, bytes);
-    fx_buffer_put(run->ctx, rays, bytes);
+    if (run->debug)
+        fx_buffer_put(run->ctx, rays, bytes);
     return r;
 }
 

@@ -23,9 +23,8 @@
  * bilinearly interpolated; g = exp(-gap / line_width) is applied per pixel, after the
  * interpolation. F2 - F1 is a V across a cell border (the bright line): interpolation
  * rounds its kink, so with `refine` a pixel whose four corners do not share their nearest
- * two points takes its own distances to the corners' points (sharp lines; exact unless
- * its true nearest two are none of them), except where no line can reach it (gap bound,
- * p >= 1). A pixel is evaluated exactly instead when its corners are not on its surface:
+ * two points gets its own exact search (sharp lines), except where no line can reach it
+ * (gap bound, p >= 1); a lattice node's pixel keeps the node's values. A pixel is evaluated exactly instead when its corners are not on its surface:
  * a corner without a position, or the corners' interpolated world XY more than 0.1 cell
  * from the pixel's own (a silhouette, a step). The shading (Fresnel, environment, mix)
  * stays per pixel (normals carry detail), or with `lattice_shading` (draft) is done at the
@@ -49,7 +48,7 @@
 #endif
 
 #define FOCUS_MAX 16.0
-#define NODE 10 /* floats per lattice node */
+#define NODE_MAX 8 /* floats per lattice node (lattice_shading; 4 without) */
 
 typedef struct caustics_params {
     int points;
@@ -130,7 +129,7 @@ static const fx_param_def caustics_param_defs[] = {
               "exact: double precision pow"),
     FX_P_BOOL(caustics_params, refine, "refine", 1,
               "Quality (downsample > 1): pixels between lattice nodes that straddle a cell border "
-              "take their own distances to the nodes' points (sharp lines); off: interpolated"),
+              "get their own exact search (sharp lines); off: interpolated"),
     FX_P_BOOL(caustics_params, lattice_shading, "lattice_shading", 0,
               "Quality (downsample > 1): the whole effect (pattern, Fresnel, environment) shaded at "
               "the lattice nodes and interpolated as a per-pixel gain and offset; off: per pixel"),
@@ -215,8 +214,10 @@ typedef struct caustics_job {
     unsigned char *cell_any; /* (nx) x (ny): a masked pixel in the cell right/below the node */
     int *col_i0, *col_i1;    /* per ROI column: its lattice corners ... */
     float *col_t;            /* ... and the weight of the second */
-    float *nodes;            /* nx * ny * NODE: a (gap or F1), noise, world x, world y (NaN: none),
-                                gain[3], add[3] (lattice_shading) */
+    int node_size;           /* floats per node: 4, or NODE_MAX with lattice_shading */
+    float *nodes;            /* nx * ny * node_size: a (gap or F1), noise, world x, world y (NaN:
+                                none), s, add[3] (lattice_shading: factors) */
+    int has_add;             /* lattice_shading: add is not always 0 (seed mode, environment) */
     int *node_id;            /* nx * ny * 2: the node's nearest two points */
 } caustics_job;
 
@@ -250,10 +251,11 @@ static inline int world_at(const caustics_job *j, int x, int y, fx_vec3 *P)
     return isfinite(P->x) && isfinite(P->y) && isfinite(P->z) && fabsf(P->x) <= 1e15f && fabsf(P->y) <= 1e15f;
 }
 
-/* The interpolated pair at a world point: a = F2 - F1 (physical) or F1 (seed), and the noise */
-static inline float noise_at(const caustics_job *j, float wx, float wy)
+/* The noise at a world point (cache: the same bits, fewer hashes along a row) */
+static inline float noise_at(const caustics_job *j, float wx, float wy, fx_noise_cache *cache)
 {
-    return (float)fx_value_noise2(wx / j->p->noise_scale, wy / j->p->noise_scale, (uint32_t)j->p->seed ^ 0xc0ffeeu);
+    return (float)fx_value_noise2_cached(wx / j->p->noise_scale, wy / j->p->noise_scale,
+                                         (uint32_t)j->p->seed ^ 0xc0ffeeu, cache);
 }
 
 static inline float value_of(const caustics_job *j, const fx_voronoi_hit *h)
@@ -262,7 +264,8 @@ static inline float value_of(const caustics_job *j, const fx_voronoi_hit *h)
     return !(v >= 0.0) ? 0.0f : v > 1e30 ? 1e30f : (float)v;
 }
 
-static void pattern_at(const caustics_job *j, float wx, float wy, float *a, float *noise, int *ids)
+/* The pattern's value at a world point: a = F2 - F1 (physical) or F1 (seed) */
+static inline float value_at(const caustics_job *j, float wx, float wy, int *ids)
 {
     fx_voronoi_hit h;
     evaluate(j, wx, wy, &h);
@@ -270,12 +273,12 @@ static void pattern_at(const caustics_job *j, float wx, float wy, float *a, floa
         ids[0] = h.i1;
         ids[1] = h.i2;
     }
-    *a = value_of(j, &h);
-    *noise = noise_at(j, wx, wy);
+    return value_of(j, &h);
 }
 
-/* The effect at pixel i as out = src * gain + add (per channel) */
-static inline void factors(const caustics_job *j, size_t i, fx_vec3 P, float a, float noise, float gain[3], float add[3])
+/* The effect at pixel i as out = src * gain + add per channel, gain from one scalar s
+ * (gain_of): physical 1 + s tint, seed s. add is 0 without seed mode or environment. */
+static inline void factors(const caustics_job *j, size_t i, fx_vec3 P, float a, float noise, float *s, float add[3])
 {
     const caustics_params *p = j->p;
     if (p->mode == MODE_SEED) {
@@ -284,9 +287,9 @@ static inline void factors(const caustics_job *j, size_t i, fx_vec3 P, float a, 
         float L = (float)log1p((double)a);
         float alpha = 0.5f * L * p->strength;
         alpha = alpha > 0.0f ? (alpha < 1.0f ? alpha : 1.0f) : 0.0f;
+        *s = 1.0f - alpha;
         for (int k = 0; k < 3; k++) {
             float colour = (p->tint[k] + 0.75f * L) * 0.6f * noise * j->wave;
-            gain[k] = 1.0f - alpha;
             add[k] = colour * alpha;
         }
     } else {
@@ -294,10 +297,8 @@ static inline void factors(const caustics_job *j, size_t i, fx_vec3 P, float a, 
         float g = expf(-a * j->inv_lw) * j->inv_mean;
         g = (g < (float)FOCUS_MAX ? g : (float)FOCUS_MAX) - 1.0f;
         float amp = p->strength * (0.4f + 1.2f * noise); /* noise' with mean ~1 */
-        for (int k = 0; k < 3; k++) {
-            gain[k] = 1.0f + amp * g * p->tint[k];
-            add[k] = 0.0f;
-        }
+        *s = amp * g;
+        add[0] = add[1] = add[2] = 0.0f;
     }
     if (p->environment_strength > 0.0f && j->normal) {
         const float *nq = j->normal + i * 3;
@@ -313,6 +314,12 @@ static inline void factors(const caustics_job *j, size_t i, fx_vec3 P, float a, 
     }
 }
 
+static inline void gain_of(const caustics_job *j, float s, float gain[3])
+{
+    for (int k = 0; k < 3; k++)
+        gain[k] = j->p->mode == MODE_SEED ? s : 1.0f + s * j->p->tint[k];
+}
+
 static inline void apply(const caustics_job *j, size_t i, const float gain[3], const float add[3])
 {
     const float *s = j->run->src + i * 4;
@@ -326,9 +333,18 @@ static inline void apply(const caustics_job *j, size_t i, const float gain[3], c
 
 static inline void shade(const caustics_job *j, size_t i, fx_vec3 P, float a, float noise)
 {
-    float gain[3], add[3];
-    factors(j, i, P, a, noise, gain, add);
+    float sc, gain[3], add[3];
+    factors(j, i, P, a, noise, &sc, add);
+    gain_of(j, sc, gain);
     apply(j, i, gain, add);
+}
+
+/* lattice_shading: out from a node's (or interpolated) s and add */
+static inline void apply_s(const caustics_job *j, size_t i, const float *q)
+{
+    float gain[3];
+    gain_of(j, q[0], gain);
+    apply(j, i, gain, q + 1);
 }
 
 static inline int covered(const fx_effect_run *run, size_t i)
@@ -376,10 +392,12 @@ static void cell_rows(void *user, int begin, int end)
 static void node_rows(void *user, int begin, int end)
 {
     caustics_job *j = user;
+    const int ns = j->node_size;
+    fx_noise_cache cache = {0};
     for (int nj = begin; nj < end; nj++)
         for (int ni = 0; ni < j->nx; ni++) {
-            float *q = j->nodes + ((size_t)nj * j->nx + ni) * NODE;
-            for (int c = 0; c < NODE; c++)
+            float *q = j->nodes + ((size_t)nj * j->nx + ni) * ns;
+            for (int c = 0; c < ns; c++)
                 q[c] = NAN;
             int *id = j->node_id + ((size_t)nj * j->nx + ni) * 2;
             id[0] = id[1] = -1;
@@ -396,12 +414,46 @@ static void node_rows(void *user, int begin, int end)
             fx_vec3 P;
             if (!world_at(j, j->node_x[ni], j->node_y[nj], &P))
                 continue;
-            pattern_at(j, P.x, P.y, &q[0], &q[1], id);
+            q[0] = value_at(j, P.x, P.y, id);
+            q[1] = noise_at(j, P.x, P.y, &cache);
             q[2] = P.x;
             q[3] = P.y;
             if (j->p->lattice_shading)
-                factors(j, (size_t)j->node_y[nj] * j->run->width + j->node_x[ni], P, q[0], q[1], q + 4, q + 7);
+                factors(j, (size_t)j->node_y[nj] * j->run->width + j->node_x[ni], P, q[0], q[1], q + 4, q + 5);
         }
+}
+
+/* What a pixel row needs of one lattice cell (between columns i0 and i1 of node rows j0, j1) */
+typedef struct cell_view {
+    const float *q00, *q10, *q01, *q11;
+    int smooth; /* the same nearest points at the four corners, or no line can reach: interpolate */
+} cell_view;
+
+static void cell_view_at(const caustics_job *j, int j0, int j1, int i0, int i1, cell_view *c)
+{
+    const int ns = j->node_size;
+    c->q00 = j->nodes + ((size_t)j0 * j->nx + i0) * ns;
+    c->q10 = j->nodes + ((size_t)j0 * j->nx + i1) * ns;
+    c->q01 = j->nodes + ((size_t)j1 * j->nx + i0) * ns;
+    c->q11 = j->nodes + ((size_t)j1 * j->nx + i1) * ns;
+    const int *d00 = j->node_id + ((size_t)j0 * j->nx + i0) * 2;
+    const int *d10 = j->node_id + ((size_t)j0 * j->nx + i1) * 2;
+    const int *d01 = j->node_id + ((size_t)j1 * j->nx + i0) * 2;
+    const int *d11 = j->node_id + ((size_t)j1 * j->nx + i1) * 2;
+    int same = d00[0] == d10[0] && d00[0] == d01[0] && d00[0] == d11[0];
+    if (j->p->mode == MODE_PHYSICAL)
+        same = same && d00[1] == d10[1] && d00[1] == d01[1] && d00[1] == d11[1];
+    if (!same && j->far_gap > 0.0f) {
+        /* no line can reach the cell: gap is 2-Lipschitz (p >= 1) over the corners'
+         * footprint (its L1 extent), so gap >= min corner gap - 2 ext (NaN: not far) */
+        const float *q00 = c->q00, *q10 = c->q10, *q01 = c->q01, *q11 = c->q11;
+        float ext = fabsf(q00[2] - q11[2]) + fabsf(q00[3] - q11[3]) + fabsf(q10[2] - q01[2]) + fabsf(q10[3] - q01[3]);
+        float lo = q00[0] < q10[0] ? q00[0] : q10[0];
+        lo = lo < q01[0] ? lo : q01[0];
+        lo = lo < q11[0] ? lo : q11[0];
+        same = lo - 2.0f * ext * j->inv_cell > j->far_gap;
+    }
+    c->smooth = same || !j->p->refine;
 }
 
 static void caustics_rows(void *user, int begin, int end)
@@ -410,11 +462,15 @@ static void caustics_rows(void *user, int begin, int end)
     const fx_effect_run *run = j->run;
     const int w = run->width;
     const float tol = (float)(0.1 * j->cell); /* world units: a tenth of a cell */
+    fx_noise_cache cache = {0};
     for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++) {
         int j0 = 0, j1 = 0;
         float ty = 0.0f;
         if (j->nodes)
             lattice_pos(j->node_y, j->ny, j->f, run->roi.y0, y, &j0, &j1, &ty);
+        const int node_row = j->nodes && y == j->node_y[j0];
+        cell_view cv = {NULL, NULL, NULL, NULL, 0};
+        int cv_col = -1;
         for (int x = run->roi.x0; x < run->roi.x1; x++) {
             size_t i = (size_t)y * w + x;
             const float *s = run->src + i * 4;
@@ -425,67 +481,52 @@ static void caustics_rows(void *user, int begin, int end)
                 continue;
             }
             float a, noise;
-            int exact = 1;
             if (j->nodes) {
-                int col = x - run->roi.x0, i0 = j->col_i0[col], i1 = j->col_i1[col];
-                float tx = j->col_t[col];
-                const float *q00 = j->nodes + ((size_t)j0 * j->nx + i0) * NODE;
-                const float *q10 = j->nodes + ((size_t)j0 * j->nx + i1) * NODE;
-                const float *q01 = j->nodes + ((size_t)j1 * j->nx + i0) * NODE;
-                const float *q11 = j->nodes + ((size_t)j1 * j->nx + i1) * NODE;
-                float w00 = (1.0f - tx) * (1.0f - ty), w10 = tx * (1.0f - ty), w01 = (1.0f - tx) * ty, w11 = tx * ty;
-                float v[NODE];
-                int nc = j->p->lattice_shading ? NODE : 4;
-                for (int ch = 0; ch < nc; ch++)
-                    v[ch] = w00 * q00[ch] + w10 * q10[ch] + w01 * q01[ch] + w11 * q11[ch];
-                /* NaN corners fail the test too */
-                int on_surface = fabsf(v[2] - P.x) <= tol && fabsf(v[3] - P.y) <= tol;
-                if (on_surface && j->p->lattice_shading) {
-                    apply(j, i, v + 4, v + 7);
+                int col = x - run->roi.x0, i0 = j->col_i0[col];
+                if (i0 != cv_col) {
+                    cell_view_at(j, j0, j1, i0, j->col_i1[col], &cv);
+                    cv_col = i0;
+                }
+                if (node_row && x == j->node_x[i0] && !isnan(cv.q00[2])) {
+                    /* a lattice node: its own values (what interpolation would give) */
+                    if (j->p->lattice_shading)
+                        apply_s(j, i, cv.q00 + 4);
+                    else
+                        shade(j, i, P, cv.q00[0], cv.q00[1]);
                     continue;
                 }
-                if (on_surface) {
-                    noise = v[1];
-                    exact = 0;
-                    const int *d00 = j->node_id + ((size_t)j0 * j->nx + i0) * 2;
-                    const int *d10 = j->node_id + ((size_t)j0 * j->nx + i1) * 2;
-                    const int *d01 = j->node_id + ((size_t)j1 * j->nx + i0) * 2;
-                    const int *d11 = j->node_id + ((size_t)j1 * j->nx + i1) * 2;
-                    int same = d00[0] == d10[0] && d00[0] == d01[0] && d00[0] == d11[0];
-                    if (j->p->mode == MODE_PHYSICAL)
-                        same = same && d00[1] == d10[1] && d00[1] == d01[1] && d00[1] == d11[1];
-                    if (!same && j->far_gap > 0.0f) {
-                        /* no line can reach the pixel: gap is 2-Lipschitz (p >= 1) over the
-                         * corners' footprint (its L1 extent), so gap >= min corner gap - 2 ext */
-                        float ext = fabsf(q00[2] - q11[2]) + fabsf(q00[3] - q11[3]) + fabsf(q10[2] - q01[2]) +
-                                    fabsf(q10[3] - q01[3]);
-                        float lo = q00[0] < q10[0] ? q00[0] : q10[0];
-                        lo = lo < q01[0] ? lo : q01[0];
-                        lo = lo < q11[0] ? lo : q11[0];
-                        same = lo - 2.0f * ext * j->inv_cell > j->far_gap;
-                    }
-                    if (same || !j->p->refine) {
-                        a = v[0]; /* the same points all round: F1, F2 smooth in between */
-                    } else {
-                        /* a cell border in between: F2 - F1 has its kink (the bright line)
-                         * here; the pixel's own distances to the corners' points keep it sharp */
-                        int cand[8], n = 0;
-                        const int *all[4] = {d00, d10, d01, d11};
-                        for (int c = 0; c < 8; c++) {
-                            int id = all[c >> 1][c & 1], seen = 0;
-                            for (int e = 0; e < n; e++)
-                                seen |= cand[e] == id;
-                            if (!seen)
-                                cand[n++] = id;
+                float tx = j->col_t[col];
+                float w00 = (1.0f - tx) * (1.0f - ty), w10 = tx * (1.0f - ty), w01 = (1.0f - tx) * ty, w11 = tx * ty;
+#define LERP4(ch) (w00 * cv.q00[ch] + w10 * cv.q10[ch] + w01 * cv.q01[ch] + w11 * cv.q11[ch])
+                float v[NODE_MAX];
+                v[2] = LERP4(2);
+                v[3] = LERP4(3);
+                /* a pixel whose corners are not on its surface (NaN corners fail too): exact */
+                if (fabsf(v[2] - P.x) <= tol && fabsf(v[3] - P.y) <= tol) {
+                    if (j->p->lattice_shading) { /* s, and add (0 without seed mode or environment) */
+                        v[4] = LERP4(4);
+                        v[5] = v[6] = v[7] = 0.0f;
+                        if (j->has_add) {
+                            v[5] = LERP4(5);
+                            v[6] = LERP4(6);
+                            v[7] = LERP4(7);
                         }
-                        fx_voronoi_hit h;
-                        fx_voronoi_table_among(&j->table, P.x / j->cell, P.y / j->cell, cand, n, &h);
-                        a = value_of(j, &h);
+                        apply_s(j, i, v + 4);
+                        continue;
                     }
+                    v[0] = LERP4(0);
+                    v[1] = LERP4(1);
+#undef LERP4
+                    noise = v[1];
+                    /* the same points all round: F1, F2 smooth in between; else a cell border
+                     * (the bright line's kink) may cross: the pixel's own search */
+                    a = cv.smooth ? v[0] : value_at(j, P.x, P.y, NULL);
+                    shade(j, i, P, a, noise);
+                    continue;
                 }
             }
-            if (exact)
-                pattern_at(j, P.x, P.y, &a, &noise, NULL);
+            a = value_at(j, P.x, P.y, NULL);
+            noise = noise_at(j, P.x, P.y, &cache);
             shade(j, i, P, a, noise);
         }
     }
@@ -511,6 +552,11 @@ static void mean_rows(void *user, int begin, int end)
         }
         m->partial[r] = acc;
     }
+}
+
+static void list_rows(void *user, int begin, int end)
+{
+    fx_voronoi_table_build_lists(user, begin, end);
 }
 
 static void job_free(caustics_job *j)
@@ -603,8 +649,17 @@ static fx_result caustics_process(const fx_effect_run *run)
             j.env.h = envf->height;
         }
     }
-    if (fx_voronoi_table_init(&j.table, &j.vor, p->distance == DIST_FAST) != 0)
-        goto oom;
+    {
+        /* the square lists cost about two ring searches per square: built (in parallel)
+         * only when the ROI has many more pixels than squares; same bits either way */
+        double area = (double)(run->roi.x1 - run->roi.x0) * (run->roi.y1 - run->roi.y0);
+        double squares = 16.0 * j.vor.grid * j.vor.grid;
+        int fast = p->distance != DIST_FAST ? 0 : area >= 16.0 * squares ? 2 : 3;
+        if (fx_voronoi_table_init(&j.table, &j.vor, fast) != 0)
+            goto oom;
+        if (j.table.sub)
+            fx_parallel_for(run->ctx, j.vor.grid, 1, list_rows, &j.table);
+    }
     j.mean_g = 1.0;
     if (p->mode == MODE_PHYSICAL) {
         mean_job m = {&j, NULL, 64};
@@ -634,7 +689,9 @@ static fx_result caustics_process(const fx_effect_run *run)
         for (int c = 0; c < roi_w; c++)
             lattice_pos(j.node_x, j.nx, j.f, run->roi.x0, run->roi.x0 + c, &j.col_i0[c], &j.col_i1[c], &j.col_t[c]);
         size_t count = (size_t)j.nx * j.ny;
-        j.nodes = fx_mem_alloc(count * NODE * sizeof(float));
+        j.node_size = p->lattice_shading ? NODE_MAX : 4;
+        j.has_add = p->mode == MODE_SEED || (p->environment_strength > 0.0f && j.normal);
+        j.nodes = fx_mem_alloc(count * j.node_size * sizeof(float));
         j.node_id = fx_mem_alloc(count * 2 * sizeof(int));
         if (!j.nodes || !j.node_id)
             goto oom;

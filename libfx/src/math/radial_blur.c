@@ -736,40 +736,48 @@ typedef struct up_job {
 static void up_rows(void *user, int begin, int end)
 {
     const up_job *j = user;
-    const double inv_f = 1.0 / j->f;
     for (int yy = begin; yy < end; yy++) {
         int y = j->roi.y0 + yy;
-        double v = (y + 0.5) * inv_f - 0.5;
-        v = v < 0.0 ? 0.0 : v > j->lh - 1 ? j->lh - 1 : v;
-        int Y0 = (int)v, Y1 = Y0 + 1 < j->lh ? Y0 + 1 : Y0;
-        float ty = (float)(v - Y0);
-        const float *r0 = j->lo + (size_t)Y0 * j->lw * 4, *r1 = j->lo + (size_t)Y1 * j->lw * 4;
-        for (int x = j->roi.x0; x < j->roi.x1; x++) {
-            double u = (x + 0.5) * inv_f - 0.5;
-            u = u < 0.0 ? 0.0 : u > j->lw - 1 ? j->lw - 1 : u;
-            int X0 = (int)u, X1 = X0 + 1 < j->lw ? X0 + 1 : X0;
-            float tx = (float)(u - X0);
-            float *o = j->rays + ((size_t)y * j->w + x) * 4;
-            for (int ch = 0; ch < 3; ch++) {
-                float a = r0[4 * X0 + ch] + tx * (r0[4 * X1 + ch] - r0[4 * X0 + ch]);
-                float b = r1[4 * X0 + ch] + tx * (r1[4 * X1 + ch] - r1[4 * X0 + ch]);
-                o[ch] = a + ty * (b - a);
-            }
-            o[3] = 0.0f;
-        }
+        for (int x = j->roi.x0; x < j->roi.x1; x++)
+            fx_radial_blur_upsample(j->lo, j->lw, j->lh, j->f, x, y, j->rays + ((size_t)y * j->w + x) * 4);
     }
+}
+
+int fx_radial_blur_reduced_size(const fx_radial_blur *rb, int width, int height, int *lw, int *lh)
+{
+    int f = rb->downsample;
+    if (f <= 1 || width < 4 * f || height < 4 * f || rb->decay <= 0.0 || rb->density <= 0.0)
+        return 0;
+    *lw = (width + f - 1) / f;
+    *lh = (height + f - 1) / f;
+    return 1;
+}
+
+fx_result fx_radial_blur_polar_reduced(fx_context *ctx, const float *lo, float *lrays, int width, int height,
+                                       const fx_radial_blur *rb, const fx_rect *roi, const char *where)
+{
+    int f = rb->downsample, lw = 0, lh = 0;
+    fx_rect r = whole_or(roi, width, height);
+    if (r.x1 <= r.x0 || r.y1 <= r.y0 || !fx_radial_blur_reduced_size(rb, width, height, &lw, &lh))
+        return FX_OK;
+    fx_radial_blur lrb = *rb;
+    lrb.light_x = rb->light_x / f;
+    lrb.light_y = rb->light_y / f;
+    lrb.downsample = 1;
+    /* the reduced pixels the bilinear interpolation reads */
+    fx_rect lr = {r.x0 / f - 1, r.y0 / f - 1, (r.x1 + f - 1) / f + 1, (r.y1 + f - 1) / f + 1};
+    return polar_full(ctx, lo, lrays, lw, lh, &lrb, &lr, where);
 }
 
 fx_result fx_radial_blur_polar(fx_context *ctx, const float *occ, float *rays, int width, int height,
                                const fx_radial_blur *rb, const fx_rect *roi, const char *where)
 {
-    int f = rb->downsample;
+    int f = rb->downsample, lw = 0, lh = 0;
     fx_rect r = whole_or(roi, width, height);
     if (r.x1 <= r.x0 || r.y1 <= r.y0)
         return FX_OK;
-    if (f <= 1 || width < 4 * f || height < 4 * f || rb->decay <= 0.0 || rb->density <= 0.0)
+    if (!fx_radial_blur_reduced_size(rb, width, height, &lw, &lh))
         return polar_full(ctx, occ, rays, width, height, rb, roi, where);
-    int lw = (width + f - 1) / f, lh = (height + f - 1) / f;
     size_t n = (size_t)lw * lh * 4;
     fx_result res = fx_check_budget(ctx, (uint64_t)n * 2 * sizeof(float), where);
     if (res != FX_OK)
@@ -785,13 +793,7 @@ fx_result fx_radial_blur_polar(fx_context *ctx, const float *occ, float *rays, i
     }
     down_job dj = {occ, lo, width, height, lw, f};
     fx_parallel_for(ctx, lh, fx_grain_for(ctx, lh), down_rows, &dj);
-    fx_radial_blur lrb = *rb;
-    lrb.light_x = rb->light_x / f;
-    lrb.light_y = rb->light_y / f;
-    lrb.downsample = 1;
-    /* the reduced pixels the bilinear interpolation reads */
-    fx_rect lr = {r.x0 / f - 1, r.y0 / f - 1, (r.x1 + f - 1) / f + 1, (r.y1 + f - 1) / f + 1};
-    res = polar_full(ctx, lo, lrays, lw, lh, &lrb, &lr, where);
+    res = fx_radial_blur_polar_reduced(ctx, lo, lrays, width, height, rb, roi, where);
     if (res == FX_OK) {
         up_job uj = {lrays, rays, width, lw, lh, f, r};
         int rows = r.y1 - r.y0;

@@ -77,6 +77,38 @@ fx_result fx_radial_blur_naive(fx_context *ctx, const float *occ, float *rays, i
 fx_result fx_radial_blur_polar(fx_context *ctx, const float *occ, float *rays, int width, int height,
                                const fx_radial_blur *rb, const fx_rect *roi, const char *where);
 
+/* The reduced polar method in pieces, for callers that build the reduced map themselves
+ * (no full-size occlusion or rays buffer): fx_radial_blur_polar with downsample f > 1 is
+ * exactly reduce (f x f box means, summed in double in row order), then polar_reduced,
+ * then fx_radial_blur_upsample per pixel.
+ * fx_radial_blur_reduced_size: 1 and the reduced size if downsample applies (f > 1, the
+ * frame at least 4 f each way, decay and density > 0), else 0. */
+int fx_radial_blur_reduced_size(const fx_radial_blur *rb, int width, int height, int *lw, int *lh);
+/* lo: lw x lh reduced map (4 floats a pixel); lrays: zeroed, same size, gets the reduced
+ * rays around roi (NULL: all) of the width x height frame. */
+fx_result fx_radial_blur_polar_reduced(fx_context *ctx, const float *lo, float *lrays, int width, int height,
+                                       const fx_radial_blur *rb, const fx_rect *roi, const char *where);
+/* The rays of pixel (x, y) (RGB and a 0 lane), bilinear from the reduced rays. */
+static inline void fx_radial_blur_upsample(const float *lrays, int lw, int lh, int f, int x, int y, float out[4])
+{
+    const double inv_f = 1.0 / f;
+    double v = (y + 0.5) * inv_f - 0.5;
+    v = v < 0.0 ? 0.0 : v > lh - 1 ? lh - 1 : v;
+    int Y0 = (int)v, Y1 = Y0 + 1 < lh ? Y0 + 1 : Y0;
+    float ty = (float)(v - Y0);
+    const float *r0 = lrays + (size_t)Y0 * lw * 4, *r1 = lrays + (size_t)Y1 * lw * 4;
+    double u = (x + 0.5) * inv_f - 0.5;
+    u = u < 0.0 ? 0.0 : u > lw - 1 ? lw - 1 : u;
+    int X0 = (int)u, X1 = X0 + 1 < lw ? X0 + 1 : X0;
+    float tx = (float)(u - X0);
+    for (int ch = 0; ch < 3; ch++) {
+        float a = r0[4 * X0 + ch] + tx * (r0[4 * X1 + ch] - r0[4 * X0 + ch]);
+        float b = r1[4 * X0 + ch] + tx * (r1[4 * X1 + ch] - r1[4 * X0 + ch]);
+        out[ch] = a + ty * (b - a);
+    }
+    out[3] = 0.0f;
+}
+
 #ifdef __cplusplus
 }
 #endif

@@ -43,9 +43,19 @@ void fx_voronoi_point(const fx_voronoi *v, int index, double *x, double *y)
     *y = cy + 0.5 + 0.44 * sin(2.0 * M_PI * h2 + w2 * v->time);
 }
 
+/* floor(t) without a libm call (x86-64 without SSE4.1 has no rounding instruction): the
+ * same value for every t (|t| < 2^52 through an integer; beyond, or NaN, libm's floor) */
+static inline double floor_fast(double t)
+{
+    if (!(fabs(t) < 4503599627370496.0))
+        return floor(t);
+    double f = (double)(long long)t;
+    return f > t ? f - 1.0 : f;
+}
+
 static inline double wrap_tile(double a, double G)
 {
-    double r = a - G * floor(a / G);
+    double r = a - G * floor_fast(a / G);
     return r >= G ? 0.0 : r;
 }
 
@@ -148,6 +158,115 @@ void fx_voronoi_grid(const fx_voronoi *v, double x, double y, fx_voronoi_hit *ou
 
 /* ---- per-frame point table ---- */
 
+static void cbrt_table(double *lut);
+
+/* The fast kinds' ordering key of an offset, in double (for the lists' bounds) */
+static double key_d(int kind, double ax, double ay)
+{
+    ax = fabs(ax);
+    ay = fabs(ay);
+    switch (kind) {
+    case 1:
+        return ax + ay;
+    case 2:
+        return ax * sqrt(ax) + ay * sqrt(ay);
+    case 3:
+        return ax * ax + ay * ay;
+    default:
+        return ax > ay ? ax : ay;
+    }
+}
+
+/* Neighbour (dx, dy) of cell (cx, cy): its point's index and the image's coordinates */
+static inline int neighbour(const fx_voronoi_table *t, int cx, int cy, int dx, int dy, double *px, double *py,
+                            int *e)
+{
+    const int G = t->grid;
+    int gx = cx + dx, sx = gx < 0 ? -1 : gx >= G ? 1 : 0;
+    int gy = cy + dy, sy = gy < 0 ? -1 : gy >= G ? 1 : 0;
+    int k = (gy - sy * G) * G + (gx - sx * G);
+    *px = t->x[k] + sx * (double)G;
+    *py = t->y[k] + sy * (double)G;
+    e[0] = k * 3 + sx + 1;
+    e[1] = k * 3 + sy + 1;
+    return k;
+}
+
+/* The lists of cell (cx, cy)'s squares. Bounds in double with a margin of 1e-3 (+1e-4
+ * relative) in key units: the float keys err by below 1e-4 (coordinates < 130 rounded to
+ * float, |offsets| < 3). A square whose limit reaches 2.05 cells (points beyond the 5 x 5
+ * cells are >= 2.06 away along an axis: >= 0.06 inside their cell), or whose list would
+ * exceed FX_VORONOI_LIST_MAX, keeps the ring search (-1). */
+static inline double max_d(double a, double b)
+{
+    return a > b ? a : b;
+}
+
+static void cell_lists(fx_voronoi_table *t, int cx, int cy)
+{
+    const int S = t->sub, GS = t->grid * S;
+    double px[25], py[25];
+    int k[25], e[25][2];
+    for (int n = 0; n < 25; n++)
+        k[n] = neighbour(t, cx, cy, n % 5 - 2, n / 5 - 2, &px[n], &py[n], e[n]);
+    const double far_key = key_d(t->kind, 2.05, 0.0);
+    for (int sy = 0; sy < S; sy++)
+        for (int sx = 0; sx < S; sx++) {
+            const int ux = cx * S + sx, uy = cy * S + sy;
+            const double x0 = (double)ux / S, x1 = (double)(ux + 1) / S;
+            const double y0 = (double)uy / S, y1 = (double)(uy + 1) / S;
+            double u1 = INFINITY, u2 = INFINITY;
+            for (int dy = -1; dy <= 1; dy++)
+                for (int dx = -1; dx <= 1; dx++) {
+                    int n = (dy + 2) * 5 + dx + 2;
+                    double f = key_d(t->kind, max_d(fabs(x0 - px[n]), fabs(x1 - px[n])),
+                                     max_d(fabs(y0 - py[n]), fabs(y1 - py[n])));
+                    if (f < u1) {
+                        u2 = u1;
+                        u1 = f;
+                    } else if (f < u2) {
+                        u2 = f;
+                    }
+                }
+            const double lim = u2 + 1e-3 + 1e-4 * u2;
+            const size_t sq = (size_t)uy * GS + ux, base = sq * FX_VORONOI_LIST_MAX;
+            int cnt = 0;
+            if (!(lim < far_key))
+                cnt = -1;
+            /* the largest offset along one axis within the limit (a cheap first test) */
+            const double axis = t->kind == 1 || t->kind == 4 ? lim : t->kind == 3 ? sqrt(lim) : cbrt(lim * lim);
+            for (int n = 0; n < 25 && cnt >= 0; n++) {
+                double ox = max_d(0.0, max_d(x0 - px[n], px[n] - x1)), oy = max_d(0.0, max_d(y0 - py[n], py[n] - y1));
+                if (ox > axis * 1.0001 || oy > axis * 1.0001 || key_d(t->kind, ox, oy) > lim)
+                    continue;
+                if (cnt == FX_VORONOI_LIST_MAX) {
+                    cnt = -1;
+                    break;
+                }
+                int at = cnt++;
+                while (at > 0 && t->lk[base + at - 1] > k[n]) { /* insertion: increasing k */
+                    t->lk[base + at] = t->lk[base + at - 1];
+                    t->lx[base + at] = t->lx[base + at - 1];
+                    t->ly[base + at] = t->ly[base + at - 1];
+                    at--;
+                }
+                t->lk[base + at] = k[n];
+                t->lx[base + at] = t->fx[e[n][0]];
+                t->ly[base + at] = t->fy[e[n][1]];
+            }
+            t->list_n[sq] = cnt;
+        }
+}
+
+void fx_voronoi_table_build_lists(fx_voronoi_table *t, int row0, int row1)
+{
+    if (!t->sub)
+        return;
+    for (int cy = row0; cy < row1 && cy < t->grid; cy++)
+        for (int cx = 0; cx < t->grid; cx++)
+            cell_lists(t, cx, cy);
+}
+
 int fx_voronoi_table_init(fx_voronoi_table *t, const fx_voronoi *v, int fast)
 {
     memset(t, 0, sizeof *t);
@@ -175,6 +294,22 @@ int fx_voronoi_table_init(fx_voronoi_table *t, const fx_voronoi *v, int fast)
                 t->fy[k * 3 + s + 1] = (float)(t->y[k] + s * (double)G);
             }
     }
+    if (t->kind == 2)
+        cbrt_table(t->cbrt_lut);
+    if (t->kind && G <= 64 && fast != 3) {
+        t->sub = G <= 32 ? 4 : 2;
+        const size_t squares = n * t->sub * t->sub;
+        t->list_n = fx_mem_alloc(squares * sizeof(int));
+        t->lx = fx_mem_alloc(squares * FX_VORONOI_LIST_MAX * sizeof(float));
+        t->ly = fx_mem_alloc(squares * FX_VORONOI_LIST_MAX * sizeof(float));
+        t->lk = fx_mem_alloc(squares * FX_VORONOI_LIST_MAX * sizeof(int));
+        if (!t->list_n || !t->lx || !t->ly || !t->lk) {
+            fx_voronoi_table_free(t);
+            return -1;
+        }
+        if (fast != 2)
+            fx_voronoi_table_build_lists(t, 0, G);
+    }
     return 0;
 }
 
@@ -184,8 +319,15 @@ void fx_voronoi_table_free(fx_voronoi_table *t)
     fx_mem_free(t->y);
     fx_mem_free(t->fx);
     fx_mem_free(t->fy);
+    fx_mem_free(t->list_n);
+    fx_mem_free(t->lx);
+    fx_mem_free(t->ly);
+    fx_mem_free(t->lk);
     t->x = t->y = NULL;
     t->fx = t->fy = NULL;
+    t->list_n = t->lk = NULL;
+    t->lx = t->ly = NULL;
+    t->sub = 0;
 }
 
 /* fast: ordering key, monotone in the distance (correctly rounded sqrt, products and sums
@@ -205,31 +347,55 @@ static inline float key_of(int kind, float dx, float dy)
     }
 }
 
-/* k^(2/3) for the p = 1.5 key, without libm's cbrt (a third of a query's cost): the cube
- * root from an exponent-divided-by-3 guess (error < 4%) and two Halley steps in double
- * (cubic convergence: 1e-4, then below 1e-12), squared. k >= 0 and finite (|d| < G). */
-static inline double cbrt23(float kf)
+/* The cube root without libm (its bits differ between systems): Kahan's exponent / 3 bit
+ * trick (error < 4%) and three Halley steps in double (cubic convergence). For the table. */
+static double cbrt_iter(double k)
 {
-    double k = kf;
-    if (!(k > 0.0))
-        return 0.0;
     uint64_t b;
     memcpy(&b, &k, sizeof b);
-    b = b / 3 + UINT64_C(0x2A9F7893782DA1CE); /* Kahan's exponent / 3 bit trick */
+    b = b / 3 + UINT64_C(0x2A9F7893782DA1CE);
     double r;
     memcpy(&r, &b, sizeof r);
-    for (int it = 0; it < 2; it++) {
+    for (int it = 0; it < 3; it++) {
         double r3 = r * r * r;
         r *= (r3 + 2.0 * k) / (2.0 * r3 + k);
     }
-    return r * r;
+    return r;
 }
 
-static inline double dist_of_key(int kind, float k)
+static void cbrt_table(double *lut)
 {
-    switch (kind) {
+    for (int r = 0; r < 3; r++)
+        for (int i = 0; i < FX_VORONOI_CBRT_BINS; i++)
+            lut[r * FX_VORONOI_CBRT_BINS + i] = cbrt_iter((1.0 + (i + 0.5) / FX_VORONOI_CBRT_BINS) * (double)(1 << r));
+}
+
+/* k^(2/3) for the p = 1.5 key (a float key: k = 2^(3q + r) m, m in [1, 2)): 2^q times the
+ * table's cbrt(2^r m) at the middle of m's bin (relative error < 7e-4) and one Halley
+ * step in double (below 1e-9: far below the float key's own rounding), squared. */
+static inline double cbrt23(const double *lut, float kf)
+{
+    uint32_t b;
+    memcpy(&b, &kf, sizeof b);
+    if (!(kf > 0.0f) || (b >> 23) == 0) /* 0, or below 1.2e-38 (a distance below 1e-25) */
+        return 0.0;
+    int e = (int)(b >> 23) - 127;
+    int q = (e + 129) / 3 - 43; /* floor(e / 3), e in [-126, 127] */
+    int r = e - 3 * q;
+    uint64_t sb = (uint64_t)(q + 1023) << 52;
+    double scale;
+    memcpy(&scale, &sb, sizeof scale);
+    double x = scale * lut[r * FX_VORONOI_CBRT_BINS + (int)((b >> (23 - 8)) & (FX_VORONOI_CBRT_BINS - 1))];
+    double k = kf, x3 = x * x * x;
+    x *= (x3 + 2.0 * k) / (2.0 * x3 + k);
+    return x * x;
+}
+
+static inline double dist_of_key(const fx_voronoi_table *t, float k)
+{
+    switch (t->kind) {
     case 2:
-        return cbrt23(k);
+        return cbrt23(t->cbrt_lut, k);
     case 3:
         return sqrtf(k);
     default:
@@ -268,8 +434,8 @@ static void fast_out(const fx_voronoi_table *t, const fast_hit *h, fx_voronoi_hi
 {
     out->i1 = h->i1;
     out->i2 = h->i2;
-    out->f1 = dist_of_key(t->kind, h->k1);
-    out->f2 = dist_of_key(t->kind, h->k2);
+    out->f1 = dist_of_key(t, h->k1);
+    out->f2 = dist_of_key(t, h->k2);
 }
 
 static void fast_brute(const fx_voronoi_table *t, float qx, float qy, fx_voronoi_hit *out)
@@ -331,12 +497,71 @@ static inline float bound_key(int kind, float b)
     return kind == 2 ? b * sqrtf(b) : kind == 3 ? b * b : b;
 }
 
+/* A square's list. Each candidate as one integer, key bits (a float >= 0: its bits order as
+ * its value) above the point index: the brute force's (key, index) order exactly, and the
+ * nearest two kept by min/max without branches. One loop per kind. */
+static inline uint64_t packed(float key, int k)
+{
+    uint32_t b;
+    memcpy(&b, &key, sizeof b);
+    return (uint64_t)b << 32 | (uint32_t)k;
+}
+
+#define LIST_LOOP(KEY)                                                                                    \
+    for (int c = 0; c < n; c++) {                                                                        \
+        float ax = fabsf(qx - lx[c]), ay = fabsf(qy - ly[c]);                                            \
+        uint64_t v = packed(KEY, lk[c]);                                                                 \
+        uint64_t hi = v > m1 ? v : m1;                                                                   \
+        m1 = v < m1 ? v : m1;                                                                            \
+        m2 = hi < m2 ? hi : m2;                                                                          \
+    }
+
+static void list_search(const fx_voronoi_table *t, float qx, float qy, int n, size_t base, fast_hit *h)
+{
+    const float *lx = t->lx + base, *ly = t->ly + base;
+    const int *lk = t->lk + base;
+    uint64_t m1 = UINT64_MAX, m2 = UINT64_MAX;
+    switch (t->kind) {
+    case 1:
+        LIST_LOOP(ax + ay)
+        break;
+    case 2:
+        LIST_LOOP(ax * sqrtf(ax) + ay * sqrtf(ay))
+        break;
+    case 3:
+        LIST_LOOP(ax * ax + ay * ay)
+        break;
+    default:
+        LIST_LOOP(ax > ay ? ax : ay)
+        break;
+    }
+    uint32_t b1 = (uint32_t)(m1 >> 32), b2 = (uint32_t)(m2 >> 32);
+    memcpy(&h->k1, &b1, sizeof b1);
+    memcpy(&h->k2, &b2, sizeof b2);
+    h->i1 = (int)(uint32_t)m1;
+    h->i2 = (int)(uint32_t)m2;
+}
+
 void fx_voronoi_table_grid(const fx_voronoi_table *t, double x, double y, fx_voronoi_hit *out)
 {
     const int G = t->grid;
     if (t->kind) {
         float qx, qy;
         fast_query(t, x, y, &qx, &qy);
+        if (t->sub) {
+            const int GS = G * t->sub;
+            int ux = (int)(qx * (float)t->sub), uy = (int)(qy * (float)t->sub); /* exact: sub = 2^j */
+            ux = ux < GS ? ux : GS - 1;
+            uy = uy < GS ? uy : GS - 1;
+            size_t sq = (size_t)uy * GS + ux;
+            int n = t->list_n[sq];
+            if (n >= 2) {
+                fast_hit h;
+                list_search(t, qx, qy, n, sq * FX_VORONOI_LIST_MAX, &h);
+                fast_out(t, &h, out);
+                return;
+            }
+        }
         int cx = (int)qx, cy = (int)qy;
         if (cx >= G) cx = G - 1;
         if (cy >= G) cy = G - 1;
@@ -373,17 +598,42 @@ void fx_voronoi_table_grid(const fx_voronoi_table *t, double x, double y, fx_vor
     exact_grid(&s, x, y, out);
 }
 
-double fx_value_noise2(double x, double y, uint32_t seed)
+static inline void noise_corners(double fx, double fy, uint32_t seed, double *a, double *b, double *c, double *d)
 {
-    double fx = floor(x), fy = floor(y);
-    double tx = x - fx, ty = y - fy;
     /* lattice coordinates kept in int range (fmod is the identity below 2^20: skip its cost) */
     double mx = fabs(fx) < 1048576.0 ? fx : fmod(fx, 1048576.0);
     double my = fabs(fy) < 1048576.0 ? fy : fmod(fy, 1048576.0);
     int ix = (int)mx, iy = (int)my;
-    double a = fx_rand4(ix, iy, (int32_t)seed, 7), b = fx_rand4(ix + 1, iy, (int32_t)seed, 7);
-    double c = fx_rand4(ix, iy + 1, (int32_t)seed, 7), d = fx_rand4(ix + 1, iy + 1, (int32_t)seed, 7);
+    *a = fx_rand4(ix, iy, (int32_t)seed, 7);
+    *b = fx_rand4(ix + 1, iy, (int32_t)seed, 7);
+    *c = fx_rand4(ix, iy + 1, (int32_t)seed, 7);
+    *d = fx_rand4(ix + 1, iy + 1, (int32_t)seed, 7);
+}
+
+static inline double noise_blend(double tx, double ty, double a, double b, double c, double d)
+{
     tx = tx * tx * (3.0 - 2.0 * tx);
     ty = ty * ty * (3.0 - 2.0 * ty);
     return (a + (b - a) * tx) * (1.0 - ty) + (c + (d - c) * tx) * ty;
+}
+
+double fx_value_noise2(double x, double y, uint32_t seed)
+{
+    double fx = floor_fast(x), fy = floor_fast(y);
+    double a, b, c, d;
+    noise_corners(fx, fy, seed, &a, &b, &c, &d);
+    return noise_blend(x - fx, y - fy, a, b, c, d);
+}
+
+double fx_value_noise2_cached(double x, double y, uint32_t seed, fx_noise_cache *cache)
+{
+    double fx = floor_fast(x), fy = floor_fast(y);
+    if (!cache->valid || fx != cache->fx || fy != cache->fy || seed != cache->seed) {
+        noise_corners(fx, fy, seed, &cache->a, &cache->b, &cache->c, &cache->d);
+        cache->fx = fx;
+        cache->fy = fy;
+        cache->seed = seed;
+        cache->valid = 1;
+    }
+    return noise_blend(x - fx, y - fy, cache->a, cache->b, cache->c, cache->d);
 }

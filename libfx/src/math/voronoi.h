@@ -67,10 +67,32 @@ typedef struct fx_voronoi_table {
     int kind;          /* 0 exact; 1: p = 1, 2: p = 1.5, 3: p = 2, 4: inf */
     double *x, *y;     /* G*G point positions (fx_voronoi_point's doubles) */
     float *fx, *fy;    /* fast: 3 per point (x - G, x, x + G), index point * 3 + s + 1 */
+    /* fast, 10 <= G <= 64: per square candidate lists. Each cell is split into sub x sub
+     * squares (sub = 4 up to G = 32, 2 up to 64: at most 16 384 squares); a
+     * square's list holds every point that can be the nearest or second nearest of some
+     * query inside it (a point is left out only if its distance lower bound over the
+     * square exceeds, by a margin far above float rounding, the second smallest distance
+     * upper bound among the 3 x 3 cells' points), at the image the brute force uses, in
+     * increasing point index: a query visits about 4 points (G = 14, sub 4) instead of 9
+     * to 25, and gets the brute force's bits. */
+    int sub;           /* squares per cell side; 0: no lists (ring search) */
+    int *list_n;       /* per square (row-major over G * sub columns): count; -1: ring search */
+    float *lx, *ly;    /* FX_VORONOI_LIST_MAX per square: the candidate's coordinates (its image) */
+    int *lk;           /* ... and its point index */
+    double cbrt_lut[3 * 256]; /* p = 1.5: cbrt(2^r m) at the middle of m's bins (FX_VORONOI_CBRT_BINS) */
 } fx_voronoi_table;
 
-/* Fills t (allocates; 0 on success, -1 out of memory). fast: use the fast kind when p allows. */
+#define FX_VORONOI_CBRT_BINS 256
+
+#define FX_VORONOI_LIST_MAX 12
+
+/* Fills t (allocates; 0 on success, -1 out of memory). fast: 0 exact; 1 the fast kind when
+ * p allows; 2 the same, but the square lists (if any) are left for the caller to build
+ * with fx_voronoi_table_build_lists over all cell rows [0, G) (in parallel, say) before
+ * any query; 3 the fast kind without lists (a few queries: not worth building them). */
 int fx_voronoi_table_init(fx_voronoi_table *t, const fx_voronoi *v, int fast);
+/* Builds the lists of the squares of cell rows [row0, row1) (no-op without lists). */
+void fx_voronoi_table_build_lists(fx_voronoi_table *t, int row0, int row1);
 void fx_voronoi_table_free(fx_voronoi_table *t);
 void fx_voronoi_table_brute(const fx_voronoi_table *t, double x, double y, fx_voronoi_hit *out);
 void fx_voronoi_table_grid(const fx_voronoi_table *t, double x, double y, fx_voronoi_hit *out);
@@ -83,6 +105,16 @@ void fx_voronoi_table_among(const fx_voronoi_table *t, double x, double y, const
 
 /* Smooth value noise in [0, 1] (bilinear over hashed lattice values, smoothstep weights). */
 double fx_value_noise2(double x, double y, uint32_t seed);
+
+/* The same bits, keeping the last lattice cell's four hashed values: nearby queries (a
+ * row of pixels inside one noise cell) hash nothing. Initialise with valid = 0. */
+typedef struct fx_noise_cache {
+    int valid;
+    double fx, fy;
+    uint32_t seed;
+    double a, b, c, d;
+} fx_noise_cache;
+double fx_value_noise2_cached(double x, double y, uint32_t seed, fx_noise_cache *cache);
 
 #ifdef __cplusplus
 }
