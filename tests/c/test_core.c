@@ -570,6 +570,11 @@ static void test_in_place(void)
     check_consume(ctx, f, json, (const char *const[]){s1, s2, s3, s2, NULL}, 0);
     snprintf(json, sizeof json, R("%s, %s"), pm, cm);
     check_consume(ctx, f, json, (const char *const[]){s3, s2, NULL}, 0);
+    const char *sc = E("\"sin_city\", \"params\": {\"levels\": 3, \"mix\": 0.8}");
+    snprintf(s1, sizeof s1, R("%s"), sc);
+    snprintf(s3, sizeof s3, R("%s"), po);
+    snprintf(json, sizeof json, R("%s, %s"), sc, po);
+    check_consume(ctx, f, json, (const char *const[]){s1, s3, NULL}, 1);
     /* the blur writes over its input with every algorithm (not when it keeps alpha) */
     static const char *const blurs[] = {
         E("\"gaussian_blur\", \"params\": {\"sigma\": 3.5, \"algorithm\": \"box\"}"),
