@@ -28,19 +28,10 @@ static inline int clampi(int v, int lo, int hi)
     return v < lo ? lo : v > hi ? hi : v;
 }
 
-float fx_edge_response_at(const float *f, int stride, int w, int h, int x, int y, fx_edge_operator op)
+/* The operator on the 3x3 differences from the centre (exactly 0 on a constant field). */
+static inline float stencil(fx_edge_operator op, float nw, float n, float ne, float we, float ea, float sw, float s,
+                            float se)
 {
-    const int r = fx_edge_operator_radius(op);
-    const int xm = clampi(x - r, 0, w - 1), xp = clampi(x + r, 0, w - 1);
-    const int ym = clampi(y - r, 0, h - 1), yp = clampi(y + r, 0, h - 1);
-    const size_t rm = (size_t)ym * w, r0 = (size_t)y * w, rp = (size_t)yp * w;
-#define F(row, col) f[((row) + (size_t)(col)) * (size_t)stride]
-    const float c = F(r0, x);
-    /* differences from the centre: exactly 0 on a constant field */
-    const float nw = F(rm, xm) - c, n = F(rm, x) - c, ne = F(rm, xp) - c;
-    const float we = F(r0, xm) - c, ea = F(r0, xp) - c;
-    const float sw = F(rp, xm) - c, s = F(rp, x) - c, se = F(rp, xp) - c;
-#undef F
     float v;
     switch (op) {
     case FX_EDGE_LAPLACE4:
@@ -64,6 +55,23 @@ float fx_edge_response_at(const float *f, int stride, int w, int h, int x, int y
         break;
     }
     }
+    return v;
+}
+
+float fx_edge_response_at(const float *f, int stride, int w, int h, int x, int y, fx_edge_operator op)
+{
+    const int r = fx_edge_operator_radius(op);
+    const int xm = clampi(x - r, 0, w - 1), xp = clampi(x + r, 0, w - 1);
+    const int ym = clampi(y - r, 0, h - 1), yp = clampi(y + r, 0, h - 1);
+    const size_t rm = (size_t)ym * w, r0 = (size_t)y * w, rp = (size_t)yp * w;
+#define F(row, col) f[((row) + (size_t)(col)) * (size_t)stride]
+    const float c = F(r0, x);
+    /* differences from the centre: exactly 0 on a constant field */
+    const float nw = F(rm, xm) - c, n = F(rm, x) - c, ne = F(rm, xp) - c;
+    const float we = F(r0, xm) - c, ea = F(r0, xp) - c;
+    const float sw = F(rp, xm) - c, s = F(rp, x) - c, se = F(rp, xp) - c;
+#undef F
+    float v = stencil(op, nw, n, ne, we, ea, sw, s, se);
     return v <= FLT_MAX ? v : FLT_MAX; /* also maps NaN (impossible: fields are finite) to itself */
 }
 
@@ -429,29 +437,7 @@ static inline float response_at_rows(const float *A, const float *B, const float
     const float nw = A[xm] - c, n = A[x] - c, ne = A[xp] - c;
     const float we = B[xm] - c, ea = B[xp] - c;
     const float sw = C[xm] - c, s = C[x] - c, se = C[xp] - c;
-    float v;
-    switch (op) {
-    case FX_EDGE_LAPLACE4:
-        v = fabsf((n + s) + (we + ea));
-        break;
-    case FX_EDGE_LAPLACE8:
-    case FX_EDGE_SPARSE7:
-        v = fabsf(((n + s) + (we + ea)) + ((nw + ne) + (sw + se))) * (1.0f / 3.0f);
-        break;
-    case FX_EDGE_SOBEL_X:
-        v = fabsf((ne - nw) + 2.0f * (ea - we) + (se - sw)) * 0.25f;
-        break;
-    case FX_EDGE_SOBEL_Y:
-        v = fabsf((sw - nw) + 2.0f * (s - n) + (se - ne)) * 0.25f;
-        break;
-    case FX_EDGE_SOBEL:
-    default: {
-        double gx = (double)(ne - nw) + 2.0 * (ea - we) + (se - sw);
-        double gy = (double)(sw - nw) + 2.0 * (s - n) + (se - ne);
-        v = (float)(sqrt(gx * gx + gy * gy) * 0.25);
-        break;
-    }
-    }
+    float v = stencil(op, nw, n, ne, we, ea, sw, s, se);
     return v <= FLT_MAX ? v : FLT_MAX;
 }
 
