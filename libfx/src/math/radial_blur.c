@@ -716,12 +716,7 @@ static void down_rows(void *user, int begin, int end)
                     acc[2] += q[2];
                 }
             }
-            double inv = 1.0 / ((double)(y1 - y0) * (x1 - x0));
-            float *o = j->lo + ((size_t)Y * j->lw + X) * 4;
-            o[0] = (float)(acc[0] * inv);
-            o[1] = (float)(acc[1] * inv);
-            o[2] = (float)(acc[2] * inv);
-            o[3] = 0.0f;
+            fx_radial_store_cell(j->lo + ((size_t)Y * j->lw + X) * 4, acc, (double)(y1 - y0) * (x1 - x0));
         }
     }
 }

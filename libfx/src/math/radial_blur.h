@@ -109,6 +109,16 @@ static inline void fx_radial_blur_upsample(const float *lrays, int lw, int lh, i
     out[3] = 0.0f;
 }
 
+/* One cell of the reduced occlusion map: the mean of `count` RGB sums, alpha 0. */
+static inline void fx_radial_store_cell(float *o, const double acc[3], double count)
+{
+    double inv = 1.0 / count;
+    o[0] = (float)(acc[0] * inv);
+    o[1] = (float)(acc[1] * inv);
+    o[2] = (float)(acc[2] * inv);
+    o[3] = 0.0f;
+}
+
 #ifdef __cplusplus
 }
 #endif
