@@ -75,11 +75,12 @@ fx_result fx_aux_views_apply(fx_frame *f, const struct cJSON *list);
  * makes safe; an entry in use (acquired and not released) is never evicted. */
 typedef struct fx_aux_map {
     const fx_aux_view *av;   /* its camera and name; av->depth is NULL (the raw depth is dropped) */
-    const fx_shadow_map *sm; /* normalised depth and (filtered) moments */
+    const fx_shadow_map *sm; /* normalised depth; moments only when a filter asked for them */
     int cached;              /* 1: came from (or went into) the cache; 0: private */
 } fx_aux_map;
 
-/* filter < 0 or width <= 1: moments unfiltered. */
+/* filter < 0 or width <= 1: no moments are made (PCF and the hard test read only the
+ * depth; VSM asks for a width above 1). */
 fx_result fx_aux_map_acquire(const fx_frame *f, const char *name, int derivative_bias, int filter, float width,
                              const char *where, fx_aux_map *out);
 void fx_aux_map_release(fx_context *ctx, fx_aux_map *m);
