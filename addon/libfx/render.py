@@ -25,7 +25,7 @@ _lock = threading.Lock()
 CAMERAS = {}     # (scene name, frame) -> camera dict (rows)
 AUX = {}         # (scene name, frame) -> aux view sidecar entries (aux_views.prepare)
 RESULTS = {}     # (scene name, frame) -> {"ok": bool, "error": str, "paths": {...}, "timings": [...]}
-_ui_queue = []   # callables to run on the main thread (F12)
+_ui_queue = []   # callables (or (callable, tries so far)) to run on the main thread (F12)
 
 
 def log(msg, err=False):
@@ -334,6 +334,11 @@ def _to_ui(fn):
         pass
 
 
+#: How often a UI update Blender refused ("not allowed in this context") is tried again,
+#: 0.1 s apart: the refusal can outlast the render job by a moment (seen on 4.3).
+UI_RETRIES = 50
+
+
 def _drain_ui():
     # While the render job runs Blender refuses writes to data-blocks (an image's
     # name, a reload): try again when it has finished.
@@ -342,11 +347,20 @@ def _drain_ui():
     with _lock:
         todo = list(_ui_queue)
         _ui_queue.clear()
-    for fn in todo:
+    again = []
+    for item in todo:
+        fn, tries = item if isinstance(item, tuple) else (item, 0)
         try:
             fn()
         except Exception as e:
-            log("UI update failed: %s" % e, err=True)
+            if "not allowed" in str(e) and tries < UI_RETRIES:
+                again.append((fn, tries + 1))
+            else:
+                log("UI update failed: %s" % e, err=True)
+    if again:
+        with _lock:
+            _ui_queue[:0] = again
+        return 0.1
     return None
 
 
