@@ -84,9 +84,10 @@ typedef struct fx_effect_run {
 } fx_effect_run;
 
 /* Class flags. */
-/* process() passes every output row it writes through fx_effect_finish_row while the row
- * is in cache, so the stack need not read the whole output again to find NaN/Inf
- * (for a per-pixel effect that re-read is a third of its memory traffic). */
+/* process() writes only finite values: by construction (posterize, sin_city clamp every
+ * value) or by passing rows that may not be through fx_effect_finish_row while they are in
+ * cache. The stack then need not read the whole output again to find NaN/Inf (for a
+ * per-pixel effect that re-read is a third of its memory traffic). */
 #define FX_EFFECT_OWN_FINITE 1u
 /* process() may get dst == src (no mask then): it reads each pixel before writing that
  * pixel and nothing else. The stack then writes over a buffer it owns instead of filling

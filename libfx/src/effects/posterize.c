@@ -55,12 +55,10 @@ static void post_rows(void *user, int begin, int end)
     const post_job *j = user;
     const fx_effect_run *run = j->run;
     const int gray = j->p->mode == MODE_COLOR ? 0 : j->p->mode == MODE_LUMINANCE ? 1 : 2;
-    for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++) {
-        float *d = run->dst + (size_t)y * run->width * 4;
-        fx_levels_rgba_row(&j->q, run->src + (size_t)y * run->width * 4, d, run->roi.x0, run->roi.x1, y, gray,
-                           j->p->mix);
-        fx_effect_finish_row(run, d + (size_t)run->roi.x0 * 4, (size_t)(run->roi.x1 - run->roi.x0) * 4);
-    }
+    /* fx_levels_rgba_row clamps every value it writes: the output is finite (OWN_FINITE) */
+    for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++)
+        fx_levels_rgba_row(&j->q, run->src + (size_t)y * run->width * 4, run->dst + (size_t)y * run->width * 4,
+                           run->roi.x0, run->roi.x1, y, gray, j->p->mix);
 }
 
 static fx_result posterize_process(const fx_effect_run *run)

@@ -429,8 +429,6 @@ SC_VEC static void sc_rows(void *user, int begin, int end)
                 dp[4 * i + 3] = A[i];
             }
         }
-        /* the row is still in cache: the stack need not read it again */
-        fx_effect_finish_row(run, d + 4 * (size_t)run->roi.x0, (size_t)(run->roi.x1 - run->roi.x0) * 4);
     }
 }
 
@@ -504,7 +502,8 @@ const fx_effect_class fx_effect_sin_city = {
     .params = sin_city_param_defs,
     .param_count = FX_COUNT_OF(sin_city_param_defs),
     .presets = { NULL, NULL, NULL, NULL },
-    .flags = FX_EFFECT_OWN_FINITE | FX_EFFECT_IN_PLACE, /* each 8-pixel chunk is read before it is written */
+    /* every value written is clamped finite; each 8-pixel chunk is read before it is written */
+    .flags = FX_EFFECT_OWN_FINITE | FX_EFFECT_IN_PLACE,
     .passes = sin_city_passes,
     .needs_camera = NULL,
     .halo = NULL,
