@@ -86,7 +86,9 @@ static int clear_error(const char *effect, fx_result r, const char *msg)
 
 /* Runs s on f. must_run: FX_OK is required (else a clear error is accepted). Checks every
  * float of every output pass. Returns the result. */
-static fx_result run_case(fx_context *ctx, fx_stack *s, const fx_frame *f, const char *effect, int must_run)
+/* Runs one case and checks it; *keep (when not NULL) gets the output, for more checks. */
+static fx_result run_case_keep(fx_context *ctx, fx_stack *s, const fx_frame *f, const char *effect, int must_run,
+                               fx_frame **keep)
 {
     fx_context_clear_warnings(ctx);
     alarm(CASE_HARD_LIMIT_S);
@@ -143,8 +145,16 @@ static fx_result run_case(fx_context *ctx, fx_stack *s, const fx_frame *f, const
             printf("refused (clear error): %s: %s: \"%s\"\n", current_case, fx_result_name(r), msg);
         }
     }
-    fx_frame_free(out);
+    if (keep)
+        *keep = out;
+    else
+        fx_frame_free(out);
     return r;
+}
+
+static fx_result run_case(fx_context *ctx, fx_stack *s, const fx_frame *f, const char *effect, int must_run)
+{
+    return run_case_keep(ctx, s, f, effect, must_run, NULL);
 }
 
 static fx_stack *stack_for(fx_context *ctx, const char *effect, int quality)
@@ -507,7 +517,7 @@ int main(void)
                     if (masked)
                         CHECK_OK(ctx, fx_stack_set_mask_json(s, 0, mask));
                     fx_frame *out = NULL;
-                    if (run_case(ctx, s, f, effect, 1) == FX_OK && masked && fx_stack_run(s, f, &out) == FX_OK) {
+                    if (run_case_keep(ctx, s, f, effect, 1, &out) == FX_OK && masked) {
                         const float *o = NULL;
                         fx_frame_pass_read(out, "Combined", &o, NULL);
                         int outside_kept = 1;
