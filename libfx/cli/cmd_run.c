@@ -17,6 +17,7 @@
 typedef struct run_opts {
     const char *stack_path, *camera_path, *layer, *view, *quality, *png, *in, *out, *compression;
     long threads;
+    long proxy; /* --proxy N: run on a 1/N proxy (0: off) */
     double fps;
     long frame; /* --frame, for a single file */
     int has_frame;
@@ -122,6 +123,10 @@ static int parse_options(int argc, char **argv, run_opts *o)
         } else if (is(opt, "-j", "--threads")) {
             VALUE(v);
             if (!cli_parse_int(a.cmd, opt, v, 0, 1024, &o->threads))
+                return CLI_EXIT_USAGE;
+        } else if (is(opt, "--proxy", NULL)) {
+            VALUE(v);
+            if (!cli_parse_int(a.cmd, opt, v, 1, 16, &o->proxy))
                 return CLI_EXIT_USAGE;
         } else if (is(opt, "--fps", NULL)) {
             VALUE(v);
@@ -363,6 +368,16 @@ static int run_frame(run_job *job, const run_item *it)
     }
     if (it->has_frame)
         fx_frame_set_time(in, (double)it->frame, o->fps);
+    if (o->proxy > 1) {
+        fx_frame *proxy = NULL;
+        r = fx_frame_reduce(in, (int)o->proxy, &proxy);
+        fx_frame_free(in);
+        in = proxy;
+        if (r != FX_OK) {
+            rc = cli_fail(ctx, r, CLI_PHASE_INPUT, it->in);
+            goto done;
+        }
+    }
     t_read = cli_now() - t0;
     if (cli_interrupted())
         goto interrupted;

@@ -104,7 +104,11 @@ typedef struct fx_param_info {
     const char *name;
     const char *doc;
     fx_param_type type;
-    const char *hint;          /* UI hint: "", "pixels", "color", "matrix4", "angle", "factor", "path" */
+    const char *hint;          /* UI hint: "", "pixels", "color", "matrix4", "angle", "factor", "path",
+                                  "texels". "pixels": a length in frame pixels, divided by the proxy
+                                  factor when the stack runs on a proxy (fx_frame_reduce); "texels":
+                                  a length in pixels of another raster (a light map, a pyramid
+                                  level, a 720-line reference image), never scaled */
     double default_value;      /* FLOAT, INT, BOOL, ENUM (index) */
     double min, max;           /* hard range: values outside are errors */
     double soft_min, soft_max; /* the useful range, for sliders */
@@ -226,6 +230,31 @@ typedef struct fx_write_options {
 FX_API fx_result fx_frame_write_exr(const fx_frame *f, const char *path, const fx_write_options *opts);
 /* 8-bit sRGB PNG preview of a pass (NULL: Combined), exposure in stops. Atomic. */
 FX_API fx_result fx_frame_write_png(const fx_frame *f, const char *path, const char *pass, float exposure);
+
+/* ---- Proxy resolutions (interactive previews) ------------------------------ */
+
+/* A proxy of `in` at 1/factor resolution, factor 1..16 (1: a copy sharing in's pixels):
+ * ceil(w/factor) x ceil(h/factor) pixels, windows scaled to match (the camera then maps
+ * world points to the right proxy pixels), camera, time, metadata and aux views kept.
+ * Each proxy pixel stands for a factor x factor block of in (edge blocks: the part inside
+ * the frame). Colour and light passes (Combined, Alpha, Diff*, Gloss*, Trans*, Emit, Env,
+ * AO, Shadow, Volume*) are the mean of the block's finite values; every other pass
+ * (IndexOB, IndexMA, Crypto*, Depth, Mist, Normal, Position, Vector, UV, unknown names)
+ * takes all its values from one pixel of the block, the same for every such pass: the one
+ * nearest the block's centre. IDs are never mixed. The stack run on a proxy divides every
+ * parameter whose hint is "pixels" by the factor, and mask rectangles too, so that the
+ * proxy looks like the full frame. Reducing a proxy multiplies the factors. */
+FX_API fx_result fx_frame_reduce(const fx_frame *in, int factor, fx_frame **out);
+/* 1 for a full frame; the factor of fx_frame_reduce for a proxy and for the output of a
+ * stack run on a proxy. 0 for NULL. */
+FX_API int fx_frame_proxy_factor(const fx_frame *f);
+/* Fills rgba (width * height * 4 floats, the caller's) from a pass (NULL: "Combined"):
+ * 4 channels as they are, 3 with alpha 1, 1 as grey with alpha 1 (2: the two, 0, 1).
+ * Another size than the frame's is resampled, pixel centres aligned: bilinear for colour
+ * passes, nearest for the others (IDs are not mixed). bottom_up = 1 writes rows bottom to
+ * top (Blender's Image.pixels). Values are finite (NaN -> 0, +-Inf -> +-FLT_MAX). */
+FX_API fx_result fx_frame_read_pixels(const fx_frame *f, const char *pass, int width, int height,
+                                      int bottom_up, float *rgba);
 
 /* ---- Stacks and recipes -------------------------------------------------- */
 

@@ -81,6 +81,9 @@ typedef struct fx_effect_run {
     const char *where;      /* "effect <index> (<name>)": the prefix of this effect's messages */
     fx_frame *debug;        /* add debug passes here ("<name>" is prefixed by the stack), or NULL */
     atomic_size_t *nonfinite; /* FX_EFFECT_OWN_FINITE: fx_effect_finish_row counts here */
+    int proxy_factor;       /* 1, or f on a proxy (fx_frame_reduce): a frame pixel is f full
+                               pixels wide. Parameters hinted "pixels" come divided by f
+                               already; an effect scales its own fixed pixel distances by it */
 } fx_effect_run;
 
 /* Class flags. */

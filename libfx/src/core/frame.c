@@ -35,6 +35,7 @@ fx_result fx_frame_new(fx_context *ctx, int width, int height, fx_frame **out)
     memcpy(f->display_window, win, sizeof win);
     f->fps = 24.0;
     f->frame_number = 1.0;
+    f->proxy_factor = 1;
     fx_context_frame_born(ctx);
     *out = f;
     return FX_OK;
@@ -447,6 +448,9 @@ fx_result fx_frame_new_like(const fx_frame *f, fx_frame **out)
     o->camera = f->camera;
     o->frame_number = f->frame_number;
     o->fps = f->fps;
+    o->proxy_factor = f->proxy_factor;
+    memcpy(o->full_data_window, f->full_data_window, sizeof o->full_data_window);
+    memcpy(o->full_display_window, f->full_display_window, sizeof o->full_display_window);
     for (int i = 0; i < f->meta_count; i++) {
         r = fx_frame_set_meta(o, f->meta[i].key, f->meta[i].value);
         if (r) {

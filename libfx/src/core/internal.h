@@ -121,6 +121,12 @@ struct fx_frame {
     double frame_number, fps;
     fx_meta *meta;
     int meta_count, meta_cap;
+    /* A proxy (fx_frame_reduce): frame pixel (x, y) covers the full frame's pixels
+     * [x f, x f + f) x [y f, y f + f) of its data window, f = proxy_factor (1: a full frame).
+     * full_*_window are the full frame's windows (valid when proxy_factor > 1): the camera
+     * maps pixels through them exactly, also when a size is not a multiple of f. */
+    int proxy_factor;
+    int full_data_window[4], full_display_window[4];
 };
 
 /* Lookup without error reporting; NULL if absent. */
@@ -134,7 +140,7 @@ fx_result fx_frame_adopt_pass(fx_frame *f, const char *name, int channels, float
 fx_result fx_frame_share_pass(fx_frame *dst, const char *name, const fx_frame *src, const fx_pass *src_pass);
 /* How many passes (in any frames) hold p's pixels. */
 int fx_frame_pixels_holders(const fx_pass *p);
-/* New frame with f's size, windows, camera, time and metadata, no passes. */
+/* New frame with f's size, windows, camera, time, metadata and proxy factor, no passes. */
 fx_result fx_frame_new_like(const fx_frame *f, fx_frame **out);
 
 /* Replaces NaN with 0 and +-Inf with +-FLT_MAX in place; returns how many were replaced.

@@ -75,6 +75,37 @@ void fx_params_set_defaults(const fx_effect_class *cls, void *params)
     }
 }
 
+static double clamp_range(double v, const fx_param_info *in)
+{
+    return v < in->min ? in->min : v > in->max ? in->max : v;
+}
+
+void fx_params_scale_pixels(const fx_effect_class *cls, void *params, int factor)
+{
+    if (factor <= 1)
+        return;
+    for (int i = 0; i < cls->param_count; i++) {
+        const fx_param_def *d = &cls->params[i];
+        if (!d->info.hint || strcmp(d->info.hint, "pixels") != 0)
+            continue;
+        void *p = field(params, d);
+        switch (d->info.type) {
+        case FX_PARAM_FLOAT:
+            *(float *)p = (float)clamp_range((double)*(float *)p / factor, &d->info);
+            break;
+        case FX_PARAM_INT:
+            *(int *)p = (int)clamp_range((double)lround((double)*(int *)p / factor), &d->info);
+            break;
+        case FX_PARAM_FLOATS:
+            for (int k = 0; k < d->info.count; k++)
+                ((float *)p)[k] = (float)clamp_range((double)((float *)p)[k] / factor, &d->info);
+            break;
+        default:
+            break;
+        }
+    }
+}
+
 static const char *type_name(fx_param_type t)
 {
     switch (t) {

@@ -18,6 +18,9 @@ fx_result fx_params_set_object(fx_context *ctx, const fx_effect_class *cls, void
 cJSON *fx_param_to_json(const fx_param_def *def, const void *params);
 /* Copies one parameter's storage from src to dst. */
 void fx_param_copy(const fx_param_def *def, void *dst, const void *src);
+/* For a run on a proxy of 1/factor: every parameter whose hint is "pixels" divided by
+ * factor (ints rounded), kept inside its hard range (so never below its min). */
+void fx_params_scale_pixels(const fx_effect_class *cls, void *params, int factor);
 /* Parameter info and defaults as JSON (used by describe). */
 cJSON *fx_param_info_json(const fx_param_def *def);
 

@@ -72,3 +72,12 @@ int fx_pass_lookup(const char *name)
             return (int)pass_aliases[i].id;
     return -1;
 }
+
+int fx_pass_is_blendable(const char *name)
+{
+    int id = fx_pass_lookup(name);
+    if (id >= 0)
+        return pass_table[id].is_color && !pass_table[id].categorical;
+    /* Blender's volume light passes are not in the table: light, so blendable */
+    return name && strncmp(name, "Volume", 6) == 0;
+}

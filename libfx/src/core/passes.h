@@ -57,6 +57,15 @@ const fx_pass_desc *fx_pass_describe(fx_pass_id id);
  * Returns -1 for names libfx does not know (they are still read when all passes are). */
 int fx_pass_lookup(const char *name);
 
+/* How a pass is reduced to a proxy resolution (fx_frame_reduce) and resampled for display
+ * (fx_frame_read_pixels): 1 for colour and light passes (Combined, Alpha, Diff*, Gloss*,
+ * Trans*, Emit, Env, AO, Shadow, and passes named Volume*), whose values may be averaged
+ * and interpolated; 0 for everything else: categorical passes (IndexOB, IndexMA, Crypto*)
+ * and geometric ones (Depth, Mist, Normal, Position, Vector, UV) take whole pixels, so IDs
+ * are never mixed and depth, normal and IDs stay consistent with each other. Unknown names
+ * (debug passes, other software's AOVs) are not blended either. */
+int fx_pass_is_blendable(const char *name);
+
 #ifdef __cplusplus
 }
 #endif

@@ -9,6 +9,7 @@
 #include <cjson/cJSON.h>
 #include <errno.h>
 #include <float.h>
+#include <limits.h>
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
@@ -841,6 +842,64 @@ static void image_moved(run_buffers *b, float *dst, fx_rect roi)
     b->image = dst;
 }
 
+/* ---- proxies ---- */
+
+static long floor_div_l(long a, long b)
+{
+    long q = a / b;
+    return (a % b != 0 && a < 0) ? q - 1 : q;
+}
+
+static long clamp_l(long v)
+{
+    return v < -1000000000L ? -1000000000L : v > 1000000000L ? 1000000000L : v;
+}
+
+/* The mask of a run on a proxy: its rectangle (given in the full frame's display-window
+ * pixels, or as fractions of it) becomes the proxy pixels it touches, so a rectangle
+ * smaller than a proxy pixel still selects that pixel. A shallow copy: the name and index
+ * lists stay the entry's. */
+static fx_mask_spec proxy_mask_spec(const fx_mask_spec *m, const fx_frame *in)
+{
+    fx_mask_spec s = *m;
+    const long f = in->proxy_factor;
+    if (f <= 1 || (!m->has_rect && !m->has_rect_relative))
+        return s;
+    const int *dw = in->full_data_window, *dp = in->full_display_window;
+    long x0 = LONG_MIN / 4, y0 = LONG_MIN / 4, x1 = LONG_MAX / 4, y1 = LONG_MAX / 4;
+    if (m->has_rect) {
+        x0 = m->rect[0];
+        y0 = m->rect[1];
+        x1 = x0 + m->rect[2];
+        y1 = y0 + m->rect[3];
+    }
+    if (m->has_rect_relative) {
+        /* as fx_mask_build rounds it on the full frame */
+        double w = (double)dp[2] - dp[0] + 1, h = (double)dp[3] - dp[1] + 1;
+        const float *q = m->rect_relative;
+        long rx0 = lround(q[0] * w), ry0 = lround(q[1] * h);
+        long rx1 = lround((q[0] + q[2]) * w), ry1 = lround((q[1] + q[3]) * h);
+        if (rx0 > x0) x0 = rx0;
+        if (ry0 > y0) y0 = ry0;
+        if (rx1 < x1) x1 = rx1;
+        if (ry1 < y1) y1 = ry1;
+    }
+    /* full data-window pixels -> the proxy pixels they touch -> the proxy's display window */
+    long fx0 = x0 + dp[0] - dw[0], fy0 = y0 + dp[1] - dw[1];
+    long fx1 = x1 + dp[0] - dw[0], fy1 = y1 + dp[1] - dw[1];
+    long px0 = floor_div_l(fx0, f), py0 = floor_div_l(fy0, f);
+    long px1 = fx1 > fx0 ? -floor_div_l(-fx1, f) : px0, py1 = fy1 > fy0 ? -floor_div_l(-fy1, f) : py0;
+    long ox = (long)in->display_window[0] - in->data_window[0];
+    long oy = (long)in->display_window[1] - in->data_window[1];
+    s.has_rect = 1;
+    s.has_rect_relative = 0;
+    s.rect[0] = (int)clamp_l(px0 - ox);
+    s.rect[1] = (int)clamp_l(py0 - oy);
+    s.rect[2] = (int)clamp_l(px1 - px0);
+    s.rect[3] = (int)clamp_l(py1 - py0);
+    return s;
+}
+
 /* Runs one enabled effect on the current image. */
 static fx_result run_entry(fx_stack *s, fx_entry *e, int i, const fx_frame *in, fx_frame *o, run_buffers *b,
                            const char *where)
@@ -855,13 +914,17 @@ static fx_result run_entry(fx_stack *s, fx_entry *e, int i, const fx_frame *in, 
     fx_result r = effective_params(s, e, i, quality, params);
     if (!r)
         r = check_passes(s, in, e->cls->passes ? e->cls->passes(params) : 0, where);
+    if (!r && in->proxy_factor > 1)
+        fx_params_scale_pixels(e->cls, params, in->proxy_factor); /* the proxy looks like the frame */
     if (!r && e->cls->needs_camera && e->cls->needs_camera(params) && !in->has_camera)
         r = fx_fail(ctx, FX_ERR_NO_CAMERA,
                     "%s needs the camera matrices: the file has no worldToCamera/worldToNDC "
                     "attributes (give a camera sidecar with --camera)",
                     where);
-    if (!r)
-        r = fx_mask_build(ctx, &e->mask, in, where, &mask);
+    if (!r) {
+        fx_mask_spec spec = proxy_mask_spec(&e->mask, in);
+        r = fx_mask_build(ctx, &spec, in, where, &mask);
+    }
     if (!r && mask && mask->bounds.x1 <= mask->bounds.x0)
         goto out; /* nothing selected: the effect is skipped and the image passes through */
     float *dst = NULL;
@@ -885,6 +948,7 @@ static fx_result run_entry(fx_stack *s, fx_entry *e, int i, const fx_frame *in, 
     run.effect_name = e->cls->name;
     run.where = where;
     run.debug = s->debug ? o : NULL;
+    run.proxy_factor = in->proxy_factor > 1 ? in->proxy_factor : 1;
     atomic_size_t own_bad;
     atomic_init(&own_bad, 0);
     run.nonfinite = &own_bad;

@@ -59,7 +59,7 @@ static const fx_param_def bloom_param_defs[] = {
     FX_P_FLOAT(bloom_params, radius, "radius", 64.0, 0.0, 65536.0, 0.0, 512.0, "pixels",
                "Reach of the glow: the pyramid has floor(log2(radius)) levels (clamped to the image); "
                "below 2 there is no spread"),
-    FX_P_FLOAT(bloom_params, level_sigma, "level_sigma", 1.25, 0.0, 8.0, 0.5, 3.0, "pixels",
+    FX_P_FLOAT(bloom_params, level_sigma, "level_sigma", 1.25, 0.0, 8.0, 0.5, 3.0, "texels",
                "Gaussian sigma of each level's blur, in that level's pixels (smoothness)"),
     FX_P_FLOAT(bloom_params, intensity, "intensity", 0.5, 0.0, 100.0, 0.0, 2.0, "",
                "Strength of the glow; 0 is the identity"),

@@ -44,9 +44,9 @@ static const float default_color[3] = {0.8f, 0.85f, 0.9f};
 static const fx_param_def rain_param_defs[] = {
     FX_P_FLOAT(rain_params, density, "density", 0.35, 0.0, 1.0, 0.0, 1.0, "factor",
                "Fraction of pattern cells holding a streak"),
-    FX_P_FLOAT(rain_params, length, "streak_length", 40.0, 1.0, 2000.0, 5.0, 200.0, "pixels",
+    FX_P_FLOAT(rain_params, length, "streak_length", 40.0, 1.0, 2000.0, 5.0, 200.0, "texels",
                "Streak length of the near layer, in pixels of a 720-line image (scales with the height)"),
-    FX_P_FLOAT(rain_params, width, "streak_width", 1.2, 0.3, 20.0, 0.5, 4.0, "pixels",
+    FX_P_FLOAT(rain_params, width, "streak_width", 1.2, 0.3, 20.0, 0.5, 4.0, "texels",
                "Streak width of the near layer (720-line pixels)"),
     FX_P_FLOAT(rain_params, brightness, "brightness", 0.35, 0.0, 10.0, 0.0, 2.0, "",
                "Added radiance of a streak's core (times colour)"),

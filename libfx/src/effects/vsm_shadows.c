@@ -63,7 +63,7 @@ static const fx_param_def vsm_param_defs[] = {
               "How the moments are filtered: box_sat: a box, as separable running sums in double (the "
               "means of a summed-area table without its table); gaussian: separable recursive Gaussian "
               "of the box's variance"),
-    FX_P_FLOAT(vsm_params, filter_size, "filter_size", 5.0, 1.0, 1025.0, 1.0, 65.0, "pixels",
+    FX_P_FLOAT(vsm_params, filter_size, "filter_size", 5.0, 1.0, 1025.0, 1.0, 65.0, "texels",
                "Filter width in light-map texels (box: rounded to odd); sets the penumbra width"),
     FX_P_FLOAT(vsm_params, min_std, "min_std", 0.01, 0.0, 10.0, 0.0, 0.1, "",
                "Minimum standard deviation of the occluder depth, metres (the min-variance clamp)"),

@@ -36,6 +36,16 @@ static inline int fx_view_init(fx_view *v, const fx_frame *f)
     v->disp_h = (float)(f->display_window[3] - f->display_window[1] + 1);
     v->off_x = (float)(f->data_window[0] - f->display_window[0]);
     v->off_y = (float)(f->data_window[1] - f->display_window[1]);
+    if (f->proxy_factor > 1) {
+        /* a proxy: its pixel x spans the full frame's [x f, x f + f), whatever the rounding
+         * of its windows */
+        const int *dw = f->full_data_window, *dp = f->full_display_window;
+        const float k = (float)f->proxy_factor;
+        v->disp_w = (float)(dp[2] - dp[0] + 1) / k;
+        v->disp_h = (float)(dp[3] - dp[1] + 1) / k;
+        v->off_x = (float)(dw[0] - dp[0]) / k;
+        v->off_y = (float)(dw[1] - dp[1]) / k;
+    }
     v->orthographic = v->cam.orthographic;
     return v->disp_w > 0 && v->disp_h > 0;
 }
