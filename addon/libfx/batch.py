@@ -3,6 +3,7 @@
     blender -b scene.blend --python addon/libfx/batch.py -- \\
         --frames 1-2 --output /path/prefix_ --resolution 320x180 --samples 4 \\
         [--recipe r.json] [--quality final] [--threads 0] [--skip-existing]
+        [--keep-passes] [--passes-codec NONE|RLE|ZIP]
 
 Blender exits 0 even when a handler raises (GUIDE §3); this runner exits 1 if
 any frame's stack failed (the message names the frame and the effect), 2 on a
@@ -21,7 +22,8 @@ farm relies on (docs/farm.md; tests/blender/test_batch_contract.py):
 
 Per frame it writes, beside the output prefix:
   <prefix>####.<ext>               Blender's own render (as the scene is set up)
-  <prefix>libfx_passes.####.exr    the passes the stack needs (File Output node)
+  <prefix>libfx_passes.####.exr    the passes the stack needs (File Output node; removed
+                                   once the result is written, unless --keep-passes)
   <prefix>libfx.####.exr           the result: Combined + the passes + camera attributes
   <prefix>libfx.####.<ext>         the result in the scene's format (if not EXR)
   <prefix>libfx.####.camera.json   the camera sidecar (for `libfx run --camera`)
@@ -86,6 +88,11 @@ def parse_args(argv):
     ap.add_argument("--threads", type=int, help="libfx worker threads (0: one per core)")
     ap.add_argument("--skip-existing", action="store_true",
                     help="skip frames whose libfx outputs exist already")
+    ap.add_argument("--keep-passes", action="store_true",
+                    help="keep each frame's passes file (default: removed once the result, "
+                         "which holds the same passes, is written)")
+    ap.add_argument("--passes-codec", choices=("NONE", "RLE", "ZIP"),
+                    help="EXR codec of the passes file (default: the scene's, NONE: fastest)")
     return ap.parse_args(argv)
 
 
@@ -214,6 +221,10 @@ def main():
         scene.libfx.quality = args.quality
     if args.threads is not None:
         scene.libfx.threads = args.threads
+    if args.keep_passes:
+        scene.libfx.keep_passes = True
+    if args.passes_codec:
+        scene.libfx.passes_codec = args.passes_codec
     if not fx.scene_setup.has_stack(scene):
         die("scene '%s' has no enabled libfx effect (no stack, no %s text, no --recipe)"
             % (scene.name, fx.recipe.TEXT_NAME))

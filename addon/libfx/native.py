@@ -94,6 +94,9 @@ _SIGNATURES = {
     "fx_frame_read_exr": (c_int, [c_void_p, c_char_p, P(fx_read_options), _PP]),
     "fx_frame_write_exr": (c_int, [c_void_p, c_char_p, P(fx_write_options)]),
     "fx_frame_copy_passes": (c_int, [c_void_p, c_void_p]),
+    "fx_frame_reduce": (c_int, [c_void_p, c_int, _PP]),
+    "fx_frame_proxy_factor": (c_int, [c_void_p]),
+    "fx_frame_read_pixels": (c_int, [c_void_p, c_char_p, c_int, c_int, c_int, P(c_float)]),
     "fx_stack_new": (c_int, [c_void_p, _PP]),
     "fx_stack_free": (None, [c_void_p]),
     "fx_stack_load_json": (c_int, [c_void_p, c_char_p]),
@@ -104,7 +107,13 @@ _SIGNATURES = {
     "fx_stack_run": (c_int, [c_void_p, c_void_p, _PP]),
     "fx_stack_run_consume": (c_int, [c_void_p, c_void_p, c_int, _PP]),
     "fx_stack_timings_json": (c_int, [c_void_p, _PSTR]),
+    "fx_stack_set_quality": (c_int, [c_void_p, c_int]),
+    "fx_stack_set_debug_outputs": (None, [c_void_p, c_int]),
+    "fx_context_set_progress": (None, [c_void_p, c_void_p, c_void_p]),
 }
+
+#: int (*fx_progress_fn)(void *user, const char *stage, double fraction): non-zero cancels.
+PROGRESS_FN = ctypes.CFUNCTYPE(c_int, c_void_p, c_char_p, c_double)
 
 _lock = threading.Lock()
 _lib = None
@@ -275,6 +284,16 @@ class Context:
             self._L.fx_context_clear_warnings(self._ptr)
         return out
 
+    def set_cancel_check(self, should_cancel):
+        """``should_cancel()`` is asked between effects (on the calling thread); True stops
+        the run with FX_ERR_CANCELLED. None: never."""
+        if should_cancel is None:
+            self._progress = None
+            self._L.fx_context_set_progress(self._ptr, None, None)
+            return
+        self._progress = PROGRESS_FN(lambda user, stage, fraction: 1 if should_cancel() else 0)
+        self._L.fx_context_set_progress(self._ptr, ctypes.cast(self._progress, c_void_p), None)
+
     def describe(self, effect):
         out = c_void_p()
         self.check(self._L.fx_effect_describe_json(self._ptr, effect.encode(), ctypes.byref(out)),
@@ -370,6 +389,16 @@ class Stack:
                                                      ctypes.byref(out)), "fx_stack_run_consume")
         return Frame(self._ctx, out)
 
+    def set_quality(self, quality):
+        """The stack's preset by name ("draft"...): effects with their own quality keep it."""
+        q = self._L.fx_quality_from_name(quality.encode())
+        if q < 0:
+            raise LibfxError("unknown quality '%s'" % quality, "FX_ERR_BAD_PARAM")
+        self._ctx.check(self._L.fx_stack_set_quality(self._ptr, q), "set quality %s" % quality)
+
+    def set_debug_outputs(self, enabled):
+        self._L.fx_stack_set_debug_outputs(self._ptr, 1 if enabled else 0)
+
     def timings(self):
         out = c_void_p()
         self._ctx.check(self._L.fx_stack_timings_json(self._ptr, ctypes.byref(out)), "timings")
@@ -435,6 +464,27 @@ class Frame:
 
     def set_time(self, frame, fps):
         self._L.fx_frame_set_time(self._ptr, float(frame), float(fps))
+
+    def reduce(self, factor):
+        """A 1/factor proxy of this frame (colour averaged, IDs/depth/normals from one pixel
+        per block); the stack scales pixel-sized parameters when it runs on it."""
+        out = c_void_p()
+        self._ctx.check(self._L.fx_frame_reduce(self._ptr, int(factor), ctypes.byref(out)),
+                        "reduce the frame to 1/%d" % factor)
+        return Frame(self._ctx, out)
+
+    @property
+    def proxy_factor(self):
+        return self._L.fx_frame_proxy_factor(self._ptr)
+
+    def read_pixels(self, pass_name, width, height, out, bottom_up=True):
+        """Fills ``out`` (a writable float32 buffer of width*height*4, e.g. a numpy array)
+        with the pass as RGBA, resampled to width x height, rows bottom-up for Blender."""
+        addr = out.ctypes.data if hasattr(out, "ctypes") else ctypes.addressof(out)
+        self._ctx.check(self._L.fx_frame_read_pixels(self._ptr, pass_name.encode(), int(width), int(height),
+                                                     1 if bottom_up else 0,
+                                                     ctypes.cast(addr, P(c_float))),
+                        "read pass %s" % pass_name)
 
     def copy_passes_from(self, other):
         self._ctx.check(self._L.fx_frame_copy_passes(self._ptr, other.ptr), "copy passes")

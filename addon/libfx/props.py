@@ -50,12 +50,44 @@ class suspended:
         _suspend[0] -= 1
 
 
+def _scene_of(self, context):
+    return self.id_data if isinstance(self.id_data, bpy.types.Scene) else context.scene
+
+
 def _on_change(self, context):
     if _suspend[0]:
         return
-    from . import scene_setup
-    scene = self.id_data if isinstance(self.id_data, bpy.types.Scene) else context.scene
+    from . import live, scene_setup
+    scene = _scene_of(self, context)
     scene_setup.request_sync(scene)
+    live.changed(scene)
+
+
+def _on_live_change(self, context):
+    """Live settings: the stack is the same, only what is shown or how it runs changed."""
+    if _suspend[0]:
+        return
+    from . import live
+    live.changed(_scene_of(self, context))
+
+
+def _on_view_change(self, context):
+    if _suspend[0]:
+        return
+    from . import live
+    live.reshow(_scene_of(self, context))
+
+
+_DEBUG_ITEMS = []   # Blender keeps no copy of dynamic enum strings: they live here
+
+
+def _debug_pass_items(self, context):
+    from . import live
+    s = live.session(_scene_of(self, context)) if context else None
+    names = s.debug_passes if s is not None else []
+    _DEBUG_ITEMS[:] = [("NONE", "Result", "Show the stack's result", 0)] + [
+        (n, n, "Show the debug pass %s of the last run" % n, i + 1) for i, n in enumerate(names)]
+    return _DEBUG_ITEMS
 
 
 def _param_property(p):
@@ -163,6 +195,18 @@ def _stack_item_class(cat):
 
 _GROUPS = {}
 
+#: The passes file's codecs, fastest first (Blender write + libfx read, docs/performance.md).
+PASSES_CODECS = [
+    ("NONE", "None (fastest)", "Uncompressed: the fastest to write and read, about 4x the disk of ZIP", 0),
+    ("RLE", "RLE", "Run-length: in between in speed and size", 1),
+    ("ZIP", "ZIP (smallest)", "ZIP: the smallest kept file, about 2.5x slower to write and read", 2),
+]
+
+
+def _live_items(name):
+    from . import live
+    return list(getattr(live, name))
+
 
 def _settings_class(item_cls):
     ann = {
@@ -175,6 +219,32 @@ def _settings_class(item_cls):
                                description="libfx worker threads (0: one per core)"),
         "show_result": BoolProperty(name="Show Result", default=True,
                                     description="After F12, show 'libfx Result' in an Image Editor"),
+        "keep_passes": BoolProperty(
+            name="Keep Passes Files",
+            description=("Keep each frame's passes file beside the output (for Apply to Last Render "
+                         "and for scrubbing a rendered sequence live); off: removed once the result, "
+                         "which holds the same passes, is written"),
+            default=False),
+        "passes_codec": EnumProperty(
+            name="Passes Codec", items=PASSES_CODECS, default="NONE",
+            description="EXR codec of the passes file Blender writes for libfx (docs/performance.md)"),
+        "live": BoolProperty(
+            name="Live Update", default=True, update=_on_live_change,
+            description=("Keep the rendered frame's passes in memory and re-run the stack on every "
+                         "change, into 'libfx Result'")),
+        "live_setting": EnumProperty(
+            name="While Changing", items=_live_items("SETTING_ITEMS"), default="HALF_DRAFT",
+            update=_on_live_change,
+            description="How the stack runs while values change; the final run follows when they settle"),
+        "live_view": EnumProperty(name="Show", items=_live_items("VIEW_ITEMS"), default="RESULT",
+                                  update=_on_view_change, description="Result, plain render, or both"),
+        "live_split": FloatProperty(name="Split", default=0.5, min=0.0, max=1.0, subtype="FACTOR",
+                                    update=_on_view_change,
+                                    description="Where the plain render ends in the split view"),
+        "live_solo": BoolProperty(name="Solo", default=False, update=_on_live_change,
+                                  description="Run only the active effect"),
+        "live_debug_pass": EnumProperty(name="Inspect", items=_debug_pass_items, update=_on_live_change,
+                                        description="Show one of the effects' debug passes instead of the result"),
         # What the add-on changed in the scene, to undo it (JSON, see scene_setup.py).
         "owned": StringProperty(default="{}", options={"HIDDEN"}),
     }

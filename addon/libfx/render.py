@@ -96,6 +96,12 @@ def on_frame_change_post(scene, depsgraph=None):
     if cam is not None:
         with _lock:
             CAMERAS[(scene.name, scene.frame_current)] = cam
+    if not bpy.app.background:
+        from . import live
+        try:
+            live.on_frame_change(scene)
+        except Exception as e:
+            log("live: frame %d: %s" % (scene.frame_current, e), err=True)
 
 
 # ---------------------------------------------------------------- render
@@ -136,10 +142,15 @@ def on_render_init(scene, *args):
 
 
 def _record(scene, frame, error=None, **kw):
+    return _record_named(scene.name, frame, error=error, **kw)
+
+
+def _record_named(scene_name, frame, error=None, **kw):
+    """Any thread: the frame's result record (batch turns failures into an exit code)."""
     rec = {"ok": error is None, "error": error, "frame": frame}
     rec.update(kw)
     with _lock:
-        RESULTS[(scene.name, frame)] = rec
+        RESULTS[(scene_name, frame)] = rec
     if error:
         log("frame %d: %s" % (frame, error), err=True)
         if not bpy.app.background:
@@ -169,12 +180,19 @@ def free_context():
         _CTX["ctx"] = _CTX["threads"] = None
 
 
-def process_frame(scene, frame, recipe_dict=None, passes_file=None, camera=None, fps=None):
-    """Runs the scene's stack on the File Output EXR of a frame and writes the results.
-    Returns the result record; raises nothing."""
-    paths = scene_setup.result_paths(scene, frame)
-    passes_file = passes_file or scene_setup.passes_path(scene, frame)
-    recipe_dict = recipe_dict or recipe.to_recipe(scene)
+def ctx_lock():
+    """The lock around every call into the shared context (render thread, live worker)."""
+    return _ctx_lock
+
+
+def shared_context(threads):
+    """The context frames are read and run with; call with ctx_lock() held."""
+    return _context(threads)
+
+
+def sidecar_for(scene, frame, camera=None):
+    """The scene sidecar of a frame: its camera (from frame_change_post), lights, time and
+    the aux views rendered for it. None when the frame's camera is unknown."""
     if camera is None:
         with _lock:
             camera = CAMERAS.get((scene.name, frame))
@@ -187,7 +205,28 @@ def process_frame(scene, frame, recipe_dict=None, passes_file=None, camera=None,
             log("frame %d: aux views: %s" % (frame, e), err=True)
     if aux and camera is not None:
         camera = dict(camera, aux_views=aux)
+    return camera
+
+
+def process_frame(scene, frame, recipe_dict=None, passes_file=None, camera=None, fps=None,
+                  hold=False, show=False, defer_write=False):
+    """Runs the scene's stack on the File Output EXR of a frame and writes the results.
+
+    hold: keep the decoded passes in memory for live re-runs (live.py). show: put the result
+    into the "libfx Result" image from memory (UI). defer_write: write the result files on
+    the live worker after this returns (F12: the render job ends and the image shows while
+    the EXR is written).
+    Returns the result record ({"pending": True} until a deferred write is done); raises
+    nothing."""
+    from . import live
+    paths = scene_setup.result_paths(scene, frame)
+    passes_file = passes_file or scene_setup.passes_path(scene, frame)
+    recipe_dict = recipe_dict or recipe.to_recipe(scene)
+    camera = sidecar_for(scene, frame, camera)
     fps = fps or scene.render.fps / (scene.render.fps_base or 1.0)
+    keep_passes = scene.libfx.keep_passes
+    writes_image = scene_setup.writes_image(scene)
+    scene_name = scene.name
     try:
         if not os.path.exists(passes_file):
             raise native.LibfxError("the passes file %s was not written (is the compositor on, "
@@ -197,34 +236,72 @@ def process_frame(scene, frame, recipe_dict=None, passes_file=None, camera=None,
             ctx = _context(scene.libfx.threads)
             ctx.warnings()   # drop what an earlier frame left
             stack = native.Stack(ctx, recipe_dict)
-            fin = native.Frame.read(ctx, passes_file, stack)
-            if camera is not None:
-                fin.apply_sidecar(camera)
-            fin.set_time(frame, fps)
-            fout = stack.run_consume(fin, keep_passes=True)   # the passes go along, not copied
-            os.makedirs(os.path.dirname(paths["exr"]) or ".", exist_ok=True)
-            fout.write_exr(paths["exr"], input_path=passes_file)
-            timings = stack.timings()
-            warnings = ctx.warnings()
-            fout.close()
-            fin.close()
-            stack.close()
-        if camera is not None:
-            _write_json(paths["camera"], camera)
-        _write_json(paths["recipe"], recipe_dict)
-        total = (time.perf_counter() - t0) * 1000.0
-        log("frame %d: %s (%.1f ms in all) -> %s" % (
-            frame, ", ".join("%s %.1f ms" % (t.get("effect"), t.get("ms", 0.0))
-                             for t in timings if t.get("enabled", True)) or "no effect",
-            total, paths["exr"]))
-        for w in warnings:
-            log("frame %d: warning: %s" % (frame, w), err=True)
-        return _record(scene, frame, paths=paths, timings=timings, warnings=warnings,
-                       passes_file=passes_file)
+            try:
+                # held: every pass, so that any later stack can run on it
+                fin = native.Frame.read(ctx, passes_file, None if hold else stack)
+                if camera is not None:
+                    fin.apply_sidecar(camera)
+                fin.set_time(frame, fps)
+                if hold:
+                    fout = stack.run(fin)
+                    fout.copy_passes_from(fin)   # shared with the held frame, not copied
+                    live.hold(scene_name, frame, fin, passes_file if keep_passes else None, camera)
+                else:
+                    fout = stack.run_consume(fin, keep_passes=True)   # the passes go along, not copied
+                timings = stack.timings()
+                if show:
+                    live.show_after_render(scene_name, frame, fout, timings)
+                warnings = ctx.warnings()
+            finally:
+                stack.close()
+        t_run = time.perf_counter()
     except native.LibfxError as e:
         return _record(scene, frame, error=str(e), paths=paths)
     except Exception as e:  # never let a handler die silently
         return _record(scene, frame, error="%s: %s" % (type(e).__name__, e), paths=paths)
+
+    def write():
+        try:
+            with _ctx_lock:
+                try:
+                    os.makedirs(os.path.dirname(paths["exr"]) or ".", exist_ok=True)
+                    fout.write_exr(paths["exr"], input_path=passes_file)
+                finally:
+                    fout.close()
+            if camera is not None:
+                _write_json(paths["camera"], camera)
+            _write_json(paths["recipe"], recipe_dict)
+            if not keep_passes:
+                _remove_quietly(passes_file)   # the result holds every pass it had
+            total = (time.perf_counter() - t0) * 1000.0
+            log("frame %d: %s (%.1f ms in all, %.1f ms to the result) -> %s" % (
+                frame, ", ".join("%s %.1f ms" % (t.get("effect"), t.get("ms", 0.0))
+                                 for t in timings if t.get("enabled", True)) or "no effect",
+                total, (t_run - t0) * 1000.0, paths["exr"]))
+            for w in warnings:
+                log("frame %d: warning: %s" % (frame, w), err=True)
+            rec = _record_named(scene_name, frame, paths=paths, timings=timings, warnings=warnings,
+                                passes_file=passes_file)
+            if writes_image and not bpy.app.background:
+                exr, image = paths["exr"], paths["image"]
+                _to_ui(lambda: _ui_save_image(scene_name, exr, image))
+            return rec
+        except native.LibfxError as e:
+            return _record_named(scene_name, frame, error=str(e), paths=paths)
+        except Exception as e:
+            return _record_named(scene_name, frame, error="%s: %s" % (type(e).__name__, e), paths=paths)
+
+    if defer_write:
+        live.WORKER.submit_task(write)
+        return {"ok": True, "pending": True, "frame": frame, "paths": paths, "timings": timings}
+    return write()
+
+
+def _remove_quietly(path):
+    try:
+        os.unlink(path)
+    except OSError as e:
+        log("cannot remove %s: %s" % (path, e.strerror or e), err=True)
 
 
 def _write_json(path, obj):
@@ -292,25 +369,23 @@ def on_render_post(scene, *args):
     if not scene_setup.has_stack(scene):
         return
     frame = scene.frame_current
-    rec = process_frame(scene, frame)
-    if not rec["ok"]:
-        return
-    if scene_setup.writes_image(scene):
-        if bpy.app.background:
+    if bpy.app.background:
+        rec = process_frame(scene, frame)
+        if rec["ok"] and scene_setup.writes_image(scene):
             try:
                 save_image(scene, rec["paths"]["exr"], rec["paths"]["image"])
             except Exception as e:
                 _record(scene, frame, error="cannot save %s: %s" % (rec["paths"]["image"], e))
-        else:
-            name, exr, image = scene.name, rec["paths"]["exr"], rec["paths"]["image"]
-            _to_ui(lambda: _ui_save_image(name, exr, image))
-    if not bpy.app.background and scene.libfx.show_result:
-        exr = rec["paths"]["exr"]
-        _to_ui(lambda: _ui_show_result(exr))
+        return
+    # F12 / UI animation render: the result shows from memory (held for live re-runs when
+    # live is on); the files are written by the live worker meanwhile.
+    process_frame(scene, frame, hold=scene.libfx.live, show=scene.libfx.show_result, defer_write=True)
 
 
 @persistent
 def on_load_post(*args):
+    from . import live
+    live.drop()   # frames held for the scenes of the file that was open
     for scene in bpy.data.scenes:
         if getattr(scene, "libfx", None) is None:
             continue
@@ -323,6 +398,11 @@ def on_load_post(*args):
 
 
 # ---------------------------------------------------------------- UI side (main thread)
+
+def to_ui(fn):
+    """Runs fn on the main thread when Blender allows data changes (after the render job)."""
+    _to_ui(fn)
+
 
 def _to_ui(fn):
     with _lock:
@@ -382,19 +462,6 @@ def _ui_save_image(scene_name, exr, image):
             _ui_report("ERROR", "libfx: cannot save %s: %s" % (image, e))
 
 
-def _ui_show_result(exr_path):
-    img = _image_showing(RESULT_IMAGE, exr_path)
-    wm = bpy.context.window_manager
-    for win in wm.windows:
-        for area in win.screen.areas:
-            if area.type == "IMAGE_EDITOR":
-                space = area.spaces.active
-                if space.image is None or space.image.type == "RENDER_RESULT" or space.image == img:
-                    space.image = img
-                    area.tag_redraw()
-                    return
-
-
 HANDLERS = (("frame_change_post", on_frame_change_post),
             ("render_init", on_render_init),
             ("render_post", on_render_post),
@@ -411,6 +478,8 @@ def register():
 
 def unregister():
     """Removes only our handlers, also those of an older copy of this module (reload)."""
+    from . import live
+    live.unregister()
     free_context()
     for name, fn in HANDLERS:
         lst = getattr(bpy.app.handlers, name)

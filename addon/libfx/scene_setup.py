@@ -276,7 +276,7 @@ def ensure_nodes(scene, passes):
         fo.location = (0, -500)
     fo.label = "libfx passes (written by the libfx add-on)"
     fo.mute = False
-    compat.file_output_format(fo, "OPEN_EXR_MULTILAYER", "32", "ZIP")
+    compat.file_output_format(fo, "OPEN_EXR_MULTILAYER", "32", scene.libfx.passes_codec)
     compat.file_output_set_prefix(fo, passes_base(scene))
     wanted = []
     missing = []

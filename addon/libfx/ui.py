@@ -7,7 +7,7 @@ import bpy
 from bpy.props import EnumProperty, IntProperty, StringProperty
 from bpy_extras.io_utils import ExportHelper, ImportHelper
 
-from . import native, props, recipe, render, scene_setup
+from . import live, native, props, recipe, render, scene_setup
 
 
 def _settings(context):
@@ -23,6 +23,7 @@ def _active(context):
 
 def _changed(context):
     scene_setup.request_sync(context.scene)
+    live.changed(context.scene)
 
 
 # ---------------------------------------------------------------- operators
@@ -227,8 +228,37 @@ class LIBFX_OT_recipe_text(bpy.types.Operator):
 class LIBFX_OT_rerun(bpy.types.Operator):
     bl_idname = "libfx.rerun"
     bl_label = "Apply to Last Render"
-    bl_description = ("Run the stack again on the passes already rendered for the current frame "
-                      "(tweak parameters without rendering)")
+    bl_description = ("Run the stack again on the passes rendered for the current frame, from "
+                      "memory or from its passes file, and write the results")
+
+    @classmethod
+    def poll(cls, context):
+        s = context.scene
+        return scene_setup.has_stack(s) and (
+            live.has_frame(s) or os.path.exists(scene_setup.passes_path(s, s.frame_current)))
+
+    def execute(self, context):
+        scene = context.scene
+        frame = scene.frame_current
+        if (scene.name, frame) not in render.CAMERAS:
+            render.on_frame_change_post(scene, context.evaluated_depsgraph_get())
+        if not os.path.exists(scene_setup.passes_path(scene, frame)):
+            live.changed(scene)   # only in memory: a live run of the held frame
+            return {"FINISHED"}
+        rec = render.process_frame(scene, frame, hold=scene.libfx.live, show=True)
+        if not rec["ok"]:
+            self.report({"ERROR"}, "libfx: %s" % rec["error"])
+            return {"CANCELLED"}
+        ms = sum(t.get("ms", 0.0) for t in rec.get("timings", []))
+        self.report({"INFO"}, "libfx: frame %d in %.0f ms -> %s" % (frame, ms, rec["paths"]["exr"]))
+        return {"FINISHED"}
+
+
+class LIBFX_OT_live_load(bpy.types.Operator):
+    bl_idname = "libfx.live_load"
+    bl_label = "Load Passes"
+    bl_description = ("Hold the current frame's passes file in memory and show its result; "
+                      "changes then re-run the stack live")
 
     @classmethod
     def poll(cls, context):
@@ -237,16 +267,10 @@ class LIBFX_OT_rerun(bpy.types.Operator):
 
     def execute(self, context):
         scene = context.scene
-        frame = scene.frame_current
-        if (scene.name, frame) not in render.CAMERAS:
+        if (scene.name, scene.frame_current) not in render.CAMERAS:
             render.on_frame_change_post(scene, context.evaluated_depsgraph_get())
-        rec = render.process_frame(scene, frame)
-        if not rec["ok"]:
-            self.report({"ERROR"}, "libfx: %s" % rec["error"])
-            return {"CANCELLED"}
-        render._ui_show_result(rec["paths"]["exr"])
-        ms = sum(t.get("ms", 0.0) for t in rec.get("timings", []))
-        self.report({"INFO"}, "libfx: frame %d in %.0f ms -> %s" % (frame, ms, rec["paths"]["exr"]))
+        scene.libfx.live = True
+        live.start(scene)
         return {"FINISHED"}
 
 
@@ -461,10 +485,53 @@ def draw_stack(layout, context):
     row.operator(LIBFX_OT_rerun.bl_idname, icon="FILE_REFRESH")
     row.prop(s, "show_result", text="", icon="IMAGE")
     row.prop(s, "threads")
+    _draw_live(layout, context, s, width)
+    row = layout.row(align=True)
+    row.prop(s, "keep_passes")
+    row.prop(s, "passes_codec", text="")
     if cat.ok:
         layout.label(text="libfx %s  %s" % (cat.version, cat.path), icon="CHECKMARK")
     for w in cat.warnings:
         layout.label(text=w, icon="ERROR")
+
+
+def _draw_live(layout, context, s, width):
+    box = layout.box()
+    row = box.row(align=True)
+    row.prop(s, "live", icon="PLAY" if s.live else "PAUSE")
+    row.prop(s, "live_setting", text="")
+    row.operator(LIBFX_OT_live_load.bl_idname, text="", icon="FILE_FOLDER")
+    if not s.live:
+        return
+    sess = live.session(context.scene)
+    row = box.row(align=True)
+    row.prop(s, "live_view", expand=True)
+    if s.live_view == "SPLIT":
+        row.prop(s, "live_split", text="")
+    row = box.row(align=True)
+    row.prop(s, "live_solo", toggle=True, icon="SOLO_ON" if s.live_solo else "SOLO_OFF")
+    row.prop(s, "live_debug_pass", text="")
+    if sess is None or not sess.frames:
+        box.label(text="Render (F12) or Load Passes to start", icon="INFO")
+        return
+    live.refresh_if_stale(context.scene)
+    shown = sess.shown
+    if shown:
+        what = {"render": "render", "interactive": "interactive", "final": "final"}.get(shown["kind"], shown["kind"])
+        size = "full size" if shown.get("factor", 1) == 1 else "1/%d size" % shown["factor"]
+        ms = shown.get("ms", {}).get("total")
+        box.label(text="Frame %d: %s, %s, %s%s" % (
+            shown["frame"], what, shown.get("quality") or s.quality, size,
+            (", %.0f ms" % ms) if ms is not None else ""), icon="TIME")
+        col = box.column(align=True)
+        for t in shown.get("timings", []):
+            if t.get("enabled", True):
+                col.label(text="  %s  %.1f ms" % (t.get("effect"), t.get("ms", 0.0)))
+    if sess.error:
+        b = box.box()
+        b.alert = True
+        for i, line in enumerate(_wrap(sess.error, width)):
+            b.label(text=line, icon="ERROR" if i == 0 else "BLANK1")
 
 
 def _wrap(text, width):
@@ -523,6 +590,7 @@ classes = (
     LIBFX_OT_stack_add, LIBFX_OT_stack_remove, LIBFX_OT_stack_duplicate, LIBFX_OT_stack_move,
     LIBFX_OT_param_reset, LIBFX_OT_mask_name_add, LIBFX_OT_mask_name_remove,
     LIBFX_OT_recipe_import, LIBFX_OT_recipe_export, LIBFX_OT_recipe_text, LIBFX_OT_rerun,
+    LIBFX_OT_live_load,
     LIBFX_OT_restore_scene, LIBFX_OT_report,
     LIBFX_UL_stack, LIBFX_MT_add, LIBFX_PT_output, LIBFX_PT_compositor,
 )

@@ -17,7 +17,7 @@ SAMPLES = 4
 
 def batch(blend, out_prefix, library, *extra, expr=None):
     return T.run_blender([], blend=blend, env=T.addon_env(library), python_expr=expr, python=T.BATCH,
-                         script_args=["--frames", "1", "--output", out_prefix, "--resolution", RES,
+                         script_args=["--keep-passes", "--frames", "1", "--output", out_prefix, "--resolution", RES,
                                       "--samples", SAMPLES, *extra], timeout=400)
 
 
@@ -117,7 +117,7 @@ def test_image_in_scene_format_through_colour_management(blender, library, tmp_p
         {"effect": "gaussian_blur", "params": {"sigma": 3.0}, "mask": {"object": "Cube"}}]}))
     prefix = str(tmp_path / "cube_")
     proc = T.run_blender([], env=T.addon_env(library), python_expr=SETUP_CUBE, python=T.BATCH,
-                         script_args=["--frames", "1", "--output", prefix, "--resolution", "160x90",
+                         script_args=["--keep-passes", "--frames", "1", "--output", prefix, "--resolution", "160x90",
                                       "--samples", "2", "--recipe", recipe])
     out = proc.stdout + proc.stderr
     assert proc.returncode == 0, out[-4000:]

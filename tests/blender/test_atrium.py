@@ -17,7 +17,7 @@ RES = "160x90"
 
 def batch(out_prefix, library, *extra, frames="1-2"):
     return T.run_blender([], blend=BLEND, env=T.addon_env(library), python=T.BATCH,
-                         script_args=["--frames", frames, "--output", out_prefix, "--resolution", RES,
+                         script_args=["--keep-passes", "--frames", frames, "--output", out_prefix, "--resolution", RES,
                                       "--samples", "2", *extra], timeout=600)
 
 

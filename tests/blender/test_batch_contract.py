@@ -33,7 +33,7 @@ pytestmark = pytest.mark.skipif(not BLEND.is_file(), reason="blend_scenes/mirror
 def batch(library, out_dir, *extra, expr=None, frames="1-3", timeout=240):
     args = ["--frames", frames] if frames is not None else []
     return T.run_blender([], blend=BLEND, env=T.addon_env(library), python_expr=expr, python=T.BATCH,
-                         script_args=args + ["--output", str(out_dir / "o_"), "--resolution", RES,
+                         script_args=args + ["--keep-passes", "--output", str(out_dir / "o_"), "--resolution", RES,
                                              "--samples", SAMPLES, *extra], timeout=timeout)
 
 
@@ -168,7 +168,7 @@ def test_runtime_failure_exits_1_and_leaves_no_result(blender, library, tmp_path
 def test_usage_errors_exit_2_before_rendering(blender, library, tmp_path, args, names):
     out = tmp_path / "out"
     proc = T.run_blender([], blend=BLEND, env=T.addon_env(library), python=T.BATCH,
-                         script_args=args + ["--output", str(out / "o_"), "--samples", SAMPLES])
+                         script_args=args + ["--keep-passes", "--output", str(out / "o_"), "--samples", SAMPLES])
     assert proc.returncode == 2, out_text(proc)
     err = proc.stderr
     for n in names:

@@ -15,7 +15,7 @@ RES = (320, 180)
 
 def batch(prefix, library, frames="1,8"):
     return T.run_blender([], blend=BLEND, env=T.addon_env(library), python=T.BATCH,
-                         script_args=["--frames", frames, "--output", prefix, "--resolution",
+                         script_args=["--keep-passes", "--frames", frames, "--output", prefix, "--resolution",
                                       "%dx%d" % RES, "--samples", 4], timeout=600)
 
 

@@ -13,7 +13,7 @@ def test_mirror_room_ssr(blender, library, tmp_path):
     T.need_oiio()
     prefix = str(tmp_path / "mr_")
     proc = T.run_blender([], blend=BLEND, env=T.addon_env(library), python=T.BATCH,
-                         script_args=["--frames", "1", "--output", prefix, "--resolution", "320x180",
+                         script_args=["--keep-passes", "--frames", "1", "--output", prefix, "--resolution", "320x180",
                                       "--samples", "4"], timeout=400)
     out = proc.stdout + proc.stderr
     assert proc.returncode == 0, out[-5000:]

@@ -225,7 +225,7 @@ print('STATE OK')
     out = _ok(T.run_blender([], env=T.addon_env(library), blend=blend, python_expr=script, factory=True))
     assert "STATE OK" in out
     proc = T.run_blender([], env=T.addon_env(library), blend=blend, python=T.BATCH,
-                         script_args=["--frames", "1", "--samples", "2"])
+                         script_args=["--keep-passes", "--frames", "1", "--samples", "2"])
     _ok(proc, "batch render of the 3.4 file")
     result = T.Exr(tmp_path / "state_out" / "state_libfx.0001.exr")
     plain = T.Exr(tmp_path / "state_out" / "state_libfx_passes.0001.exr")
@@ -297,6 +297,7 @@ def test_animation_render_dash_a_and_apply_to_last_render(blender, library, cli,
              "s.render.resolution_x, s.render.resolution_y, s.render.resolution_percentage = 64, 36, 100\n"
              "s.cycles.samples = 2\n"
              "s.frame_start, s.frame_end = 1, 3\n"
+             "s.libfx.keep_passes = True\n"
              "bpy.data.objects['Cube'].rotation_euler.z = 0.0\n"
              "bpy.data.objects['Cube'].keyframe_insert('rotation_euler', frame=1)\n"
              "bpy.data.objects['Cube'].rotation_euler.z = 1.0\n"
