@@ -56,11 +56,37 @@ VIEW_ITEMS = [
 
 _lock = threading.Lock()
 SESSIONS = {}        # scene name -> Session
+_free_buffers = []   # display-sized float32 arrays given back after the image took their pixels
+
+
+def _take_buffer(n):
+    """A float32 array of n values: reused, since a fresh 1080p one costs 8k page faults."""
+    import numpy as np
+    with _lock:
+        for i, b in enumerate(_free_buffers):
+            if b.size == n:
+                return _free_buffers.pop(i)
+    return np.empty(n, dtype=np.float32)
+
+
+def _give_buffer(b):
+    with _lock:
+        if len(_free_buffers) < 2:
+            _free_buffers.append(b)
 _state = {"generation": 0, "last_change": 0.0, "pending": set(), "final_due": set()}
 
 
 def log(msg):
     render.log("live: " + msg)
+
+
+_TRACE = bool(os.environ.get("LIBFX_LIVE_TRACE"))
+
+
+def trace(what):
+    """LIBFX_LIVE_TRACE=1: when each step of the loop happens (where a change's time goes)."""
+    if _TRACE:
+        render.log("live trace %.3f %s" % (time.perf_counter(), what))
 
 
 class Held:
@@ -264,7 +290,9 @@ class _Worker:
                     continue
                 self.running = job
             try:
+                trace("job %s start" % job.kind)
                 out = _run_job(job, lambda: self._obsolete(job))
+                trace("job %s end" % job.kind)
             except Exception as e:  # never let the thread die
                 out = {"job": job, "error": "%s: %s" % (type(e).__name__, e)}
             with self.cv:
@@ -334,7 +362,7 @@ def _run_job(job, obsolete):
             t_run = time.perf_counter()
             try:
                 w, h = held.frame.width, held.frame.height
-                pixels = np.empty(w * h * 4, dtype=np.float32)
+                pixels = _take_buffer(w * h * 4)
                 names = fout.pass_names()
                 show = job.debug_pass if job.debug_pass in names else "Combined"
                 if job.view != "RESULT" or held.before is None:
@@ -359,7 +387,8 @@ def _run_job(job, obsolete):
 
 def _compose(result, before, view, split, w, h):
     if view == "BEFORE" and before is not None:
-        return before.copy()
+        result[:] = before
+        return result
     if view == "SPLIT" and before is not None:
         out = result.reshape(h, w, 4)
         x = max(0, min(w, int(round(split * w))))
@@ -401,6 +430,7 @@ def changed(scene):
     """A stack setting changed (property update, operator): re-run soon."""
     if not active(scene):
         return
+    trace("changed")
     _state["last_change"] = time.monotonic()
     _state["pending"].add(scene.name)
     _state["final_due"].add(scene.name)
@@ -426,6 +456,7 @@ def _register_timer(fn, interval):
 
 def _kick():
     """Debounced: the interactive run of every scene that changed."""
+    trace("kick")
     names, _state["pending"] = _state["pending"], set()
     for name in names:
         scene = bpy.data.scenes.get(name)
@@ -485,6 +516,9 @@ def _apply(out):
     s.debug_passes = out["debug_passes"]
     show_pixels(out["pixels"], out["width"], out["height"])
     out["applied_at"] = time.perf_counter()
+    trace("applied %s" % job.kind)
+    if not out.get("keep_pixels"):
+        _give_buffer(out.pop("pixels"))
     s.shown = {"kind": job.kind, "factor": job.factor or 1, "quality": job.quality or scene.libfx.quality,
                "frame": out["frame"], "timings": out["timings"], "ms": out["ms"],
                "warnings": out["warnings"], "time": time.time(), "generation": job.generation}
@@ -553,15 +587,16 @@ def _redraw_panels():
 def show_after_render(scene_name, frame_no, fout, timings):
     """From process_frame (render thread, context lock held): the result's pixels now, the
     image on the main thread as soon as the render job lets it."""
-    import numpy as np
     w, h = fout.width, fout.height
-    pixels = np.empty(w * h * 4, dtype=np.float32)
+    pixels = _take_buffer(w * h * 4)
     fout.read_pixels("Combined", w, h, pixels)
     info = {"kind": "render", "factor": 1, "quality": None, "frame": frame_no, "timings": timings,
             "ms": {}, "warnings": [], "time": time.time(), "generation": _state["generation"]}
 
     def show():
         show_pixels(pixels, w, h)
+        _give_buffer(pixels)
+        info["shown_at"] = time.perf_counter()
         with _lock:
             s = SESSIONS.get(scene_name)
         if s is not None:
@@ -628,11 +663,12 @@ def flush(timeout=60.0):
     then the final one, each applied to the image. Returns the results applied."""
     applied = []
 
-    def drain():
+    def drain():   # the pixels stay with the results for the caller
         WORKER.wait_idle(timeout)
         with WORKER.cv:
             res, WORKER.results = WORKER.results, []
         for out in res:
+            out["keep_pixels"] = True
             _apply(out)
         applied.extend(res)
 

@@ -59,6 +59,7 @@ def _on_change(self, context):
         return
     from . import live, scene_setup
     scene = _scene_of(self, context)
+    live.trace("update callback")
     scene_setup.request_sync(scene)
     live.changed(scene)
 

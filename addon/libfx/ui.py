@@ -517,10 +517,11 @@ def _draw_live(layout, context, s, width):
     live.refresh_if_stale(context.scene)
     shown = sess.shown
     if shown:
-        what = {"render": "render", "interactive": "interactive", "final": "final"}.get(shown["kind"], shown["kind"])
+        what = {"render": "After render", "interactive": "Interactive", "final": "Final"}.get(
+            shown["kind"], shown["kind"])
         size = "full size" if shown.get("factor", 1) == 1 else "1/%d size" % shown["factor"]
         ms = shown.get("ms", {}).get("total")
-        box.label(text="Frame %d: %s, %s, %s%s" % (
+        box.label(text="Frame %d. %s: %s preset, %s%s" % (
             shown["frame"], what, shown.get("quality") or s.quality, size,
             (", %.0f ms" % ms) if ms is not None else ""), icon="TIME")
         col = box.column(align=True)

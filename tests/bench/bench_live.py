@@ -54,6 +54,7 @@ def img():
     im = bpy.data.images[live.RESULT_IMAGE]; a = np.empty(im.size[0] * im.size[1] * 4, np.float32)
     im.pixels.foreach_get(a); return a.reshape(-1, 4)[:, :3]
 def err(a, b):
+    a = np.clip(a, 0.0, 1.0); b = np.clip(b, 0.0, 1.0)   # display range: the sun's 1e3 would rule
     mae = float(np.abs(a - b).mean()); mse = float(((a - b) ** 2).mean())
     return mae, (99.0 if mse == 0 else 10 * math.log10(1.0 / mse))
 # held: load + final
@@ -98,7 +99,7 @@ for setting in A["settings"]:
         if knob is None:
             continue
         base = getattr(group, knob.prop)
-        ti, tf, errs = [], [], []
+        ti, tf, errs, parts = [], [], [], []
         for r in range(A["runs"]):
             step = (knob.soft_max - knob.soft_min) * 0.05 * (1 if r % 2 == 0 else -1)
             v = base + step
@@ -113,6 +114,8 @@ for setting in A["settings"]:
             if inter:
                 ti.append((inter[0]["applied_at"] - t0) * 1e3)
                 ipx = inter[0]["pixels"].reshape(-1, 4)[:, :3]
+                m = inter[0]["ms"]
+                parts.append((m["proxy"], m["stack"], m["pixels"], (inter[0]["applied_at"] - t0) * 1e3 - m["total"]))
             if fin:
                 tf.append((fin[0]["applied_at"] - fin[0]["job"].created) * 1e3)
                 if inter:
@@ -121,6 +124,9 @@ for setting in A["settings"]:
             live.flush()
         row = {"what": "change %s.%s" % (it.effect, knob.name), "effect": it.effect, "setting": setting,
                "interactive_ms": med(ti), "final_ms": med(tf)}
+        if parts:
+            row["parts"] = "proxy %.1f, stack %.1f, pixels %.1f, Blender side %.1f" % tuple(
+                med([p[k] for p in parts]) for k in range(4))
         if errs:
             row["mae"] = med([e[0] for e in errs]); row["psnr_db"] = med([e[1] for e in errs])
         rows.append(row)
@@ -174,19 +180,20 @@ def main():
         for r in json.loads(line[7:]):
             r["scene"] = scene
             all_rows.append(r)
-    keys = ["scene", "what", "effect", "setting", "ms", "interactive_ms", "final_ms", "mae", "psnr_db"]
+    keys = ["scene", "what", "effect", "setting", "ms", "interactive_ms", "final_ms", "mae", "psnr_db", "parts"]
     with open(os.path.join(a.out, "bench_live.csv"), "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=keys)
         w.writeheader()
         for r in all_rows:
             w.writerow({k: r.get(k, "") for k in keys})
     fmt = lambda v: "" if v in (None, "") else ("%.1f" % v if isinstance(v, float) else str(v))
-    print("| scene | what | setting | ms | interactive ms | final ms | MAE | PSNR dB |")
-    print("|---|---|---|---:|---:|---:|---:|---:|")
+    print("| scene | what | setting | ms | interactive ms | final ms | MAE | PSNR dB | interactive: where the time goes (ms) |")
+    print("|---|---|---|---:|---:|---:|---:|---:|---|")
     for r in all_rows:
-        print("| %s | %s | %s | %s | %s | %s | %s | %s |" % (
+        print("| %s | %s | %s | %s | %s | %s | %s | %s | %s |" % (
             r["scene"], r["what"], r.get("setting", ""), fmt(r.get("ms")), fmt(r.get("interactive_ms")),
-            fmt(r.get("final_ms")), ("%.4f" % r["mae"]) if "mae" in r else "", fmt(r.get("psnr_db"))))
+            fmt(r.get("final_ms")), ("%.4f" % r["mae"]) if "mae" in r else "", fmt(r.get("psnr_db")),
+            r.get("parts", "")))
 
 
 if __name__ == "__main__":

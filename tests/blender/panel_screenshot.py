@@ -6,9 +6,14 @@
 
 Registers the add-on from this tree, adds a second effect, renders F12-style
 (INVOKE_DEFAULT: handlers on the render thread, results through timers), waits
-for "libfx Result" to appear in the Image Editor, then saves a screenshot of the
-window and quits (exit code 1 if the F12 path did not produce the result).
+for "libfx Result" to appear in the Image Editor, then changes the blur's sigma
+and waits for the live loop to show the interactive and then the final result
+(issue 13), and saves a screenshot of the window (and OUT-split.png with the
+before/after split view) and quits (exit code 1 if the F12 path or the live loop
+did not produce its result). The times it prints ("timing: ...") are from the UI's
+own event loop: render_post to result shown, and a change to each live image.
 """
+import time
 import os
 import shutil
 import subprocess
@@ -22,7 +27,23 @@ import libfx  # noqa: E402
 
 OUT = sys.argv[sys.argv.index("--") + 1] if "--" in sys.argv else "addon_panel.png"
 OUT = os.path.abspath(OUT)
-state = {"t": 0, "phase": "setup", "ok": False}
+state = {"t": 0, "phase": "setup", "ok": False, "live_ok": False}
+stamps = {}
+
+
+@bpy.app.handlers.persistent
+def _stamp_post(*args):
+    stamps.setdefault("render_post", time.perf_counter())
+
+
+def pixels_sum():
+    img = bpy.data.images.get("libfx Result")
+    if img is None:
+        return None
+    import numpy as np
+    a = np.empty(img.size[0] * img.size[1] * 4, dtype=np.float32)
+    img.pixels.foreach_get(a)
+    return float(a[0::4].sum())
 
 
 def log(*a):
@@ -52,6 +73,8 @@ def setup():
     item.mask_objects.add().name = "Statue"
     s.active_index = len(s.stack) - 1
     libfx.scene_setup.request_sync(scene)
+    # first in the list: runs before the add-on's own render_post handler
+    bpy.app.handlers.render_post.insert(0, _stamp_post)
     win = bpy.context.window_manager.windows[0]
     big = max(win.screen.areas, key=lambda a: a.width * a.height)
     with bpy.context.temp_override(window=win, area=big):
@@ -77,6 +100,17 @@ def scroll_properties():
     return True
 
 
+def shoot(path):
+    win = bpy.context.window_manager.windows[0]
+    if shutil.which("import") and os.environ.get("DISPLAY"):
+        # 4.3+ on Mesa's software GL under Xvfb read their window back black:
+        # the X display's own picture (ImageMagick) works for every release.
+        subprocess.run(["import", "-window", "root", path], check=True, timeout=60)
+    else:
+        with bpy.context.temp_override(window=win, area=win.screen.areas[0]):
+            bpy.ops.screen.screenshot(filepath=path)
+
+
 def tick():
     state["t"] += 1
     try:
@@ -91,33 +125,72 @@ def tick():
             with bpy.context.temp_override(window=win):
                 bpy.ops.render.render("INVOKE_DEFAULT")
             state["phase"] = "wait"
+            state["t_render"] = time.perf_counter()
             return 1.0
         if state["phase"] == "wait":
             done = "libfx Result" in bpy.data.images and not bpy.app.is_job_running("RENDER")
-            if done or state["t"] > 120:
+            if done or time.perf_counter() - state["t_render"] > 120:
                 state["ok"] = done
                 log("F12 result image:", done)
+                sess = libfx.live.session(bpy.context.scene)
+                if done and sess is not None and sess.shown and "render_post" in stamps:
+                    log("timing: render_post to result shown %.0f ms (the add-on's handler, the "
+                        "stack and the image; the result EXR is written after)"
+                        % ((sess.shown["shown_at"] - stamps["render_post"]) * 1e3))
+                state["phase"] = "live" if done else "scroll"
+                return 1.0
+            return 0.05
+        if state["phase"] == "live":
+            scene = bpy.context.scene
+            item = scene.libfx.stack[scene.libfx.active_index]
+            state["before_sum"] = pixels_sum()
+            state["gen"] = libfx.live.session(scene).shown.get("generation", -1)
+            state["t_change"] = time.perf_counter()
+            libfx.props.effect_group(item).sigma = 6.0   # the update callback starts the live run
+            log("timing: the property set (update callback included) took %.0f ms"
+                % ((time.perf_counter() - state["t_change"]) * 1e3))
+            state["phase"] = "live_wait"
+            return 0.005
+        if state["phase"] == "live_wait":
+            shown = libfx.live.session(bpy.context.scene).shown
+            if shown.get("generation", -1) > state["gen"]:
+                kind = shown["kind"]
+                if kind not in state:
+                    state[kind] = (time.perf_counter() - state["t_change"]) * 1e3
+                    log("timing: change to %s image shown %.0f ms (%s)" % (kind, state[kind], shown.get("ms")))
+                if kind == "final":
+                    state["live_ok"] = pixels_sum() != state["before_sum"]
+                    log("live result differs from the F12 one:", state["live_ok"])
+                    state["phase"] = "scroll"
+                    return 1.0
+            if time.perf_counter() - state["t_change"] > 60:
+                log("live loop: no final image within 60 s")
                 state["phase"] = "scroll"
-            return 1.0
+                return 1.0
+            return 0.005
         if state["phase"] == "scroll":
             if scroll_properties() or state["t"] > 150:
                 state["phase"] = "shot"
             return 1.0
         if state["phase"] == "shot":
             os.makedirs(os.path.dirname(OUT), exist_ok=True)
-            win = bpy.context.window_manager.windows[0]
-            if shutil.which("import") and os.environ.get("DISPLAY"):
-                # 4.3+ on Mesa's software GL under Xvfb read their window back black:
-                # the X display's own picture (ImageMagick) works for every release.
-                subprocess.run(["import", "-window", "root", OUT], check=True, timeout=60)
-            else:
-                with bpy.context.temp_override(window=win, area=win.screen.areas[0]):
-                    bpy.ops.screen.screenshot(filepath=OUT)
+            shoot(OUT)
             log("saved", OUT)
+            scene = bpy.context.scene
+            scene.libfx.live_view = "SPLIT"
+            state["phase"] = "split"
+            state["gen"] = libfx.live.session(scene).shown.get("generation", -1)
+            return 0.5
+        if state["phase"] == "split":
+            if libfx.live.session(bpy.context.scene).shown.get("generation", -1) <= state["gen"] and state["t"] < 400:
+                return 0.2
+            split = OUT[:-4] + "-split.png"
+            shoot(split)
+            log("saved", split)
             rec = libfx.render.RESULTS.get((bpy.context.scene.name, bpy.context.scene.frame_current))
             log("result record:", rec and {k: rec[k] for k in ("ok", "error")})
             sys.stdout.flush()
-            os._exit(0 if state["ok"] and rec and rec["ok"] else 1)
+            os._exit(0 if state["ok"] and state["live_ok"] and rec and rec["ok"] else 1)
     except Exception:
         import traceback
         traceback.print_exc()
