@@ -146,7 +146,8 @@ def _record(scene, frame, error=None, **kw):
 
 
 def _record_named(scene_name, frame, error=None, **kw):
-    """Any thread: the frame's result record (batch turns failures into an exit code)."""
+    """Any thread: the frame's result record (batch turns failures into an exit code);
+    an error is also reported in the UI."""
     rec = {"ok": error is None, "error": error, "frame": frame}
     rec.update(kw)
     with _lock:
@@ -209,92 +210,118 @@ def sidecar_for(scene, frame, camera=None):
 
 
 def process_frame(scene, frame, recipe_dict=None, passes_file=None, camera=None, fps=None,
-                  hold=False, show=False, defer_write=False):
+                  hold=False, show=False, defer_write=False, in_background=False):
     """Runs the scene's stack on the File Output EXR of a frame and writes the results.
 
     hold: keep the decoded passes in memory for live re-runs (live.py). show: put the result
     into the "libfx Result" image from memory (UI). defer_write: write the result files on
     the live worker after this returns (F12: the render job ends and the image shows while
-    the EXR is written).
-    Returns the result record ({"pending": True} until a deferred write is done); raises
-    nothing."""
+    the EXR is written). in_background: all of it on the worker (an operator: Blender's UI
+    thread never waits for a read, a stack or a write).
+    Returns the result record ({"pending": True} until the worker is done); raises nothing."""
+    # Everything taken from Blender's data here, on the calling thread.
+    job = {
+        "scene": scene.name, "frame": frame, "threads": scene.libfx.threads,
+        "paths": scene_setup.result_paths(scene, frame),
+        "passes_file": passes_file or scene_setup.passes_path(scene, frame),
+        "recipe": recipe_dict or recipe.to_recipe(scene),
+        "camera": sidecar_for(scene, frame, camera),
+        "fps": fps or scene.render.fps / (scene.render.fps_base or 1.0),
+        "keep_passes": scene.libfx.keep_passes, "writes_image": scene_setup.writes_image(scene),
+        "hold": hold, "show": show,
+    }
     from . import live
-    paths = scene_setup.result_paths(scene, frame)
-    passes_file = passes_file or scene_setup.passes_path(scene, frame)
-    recipe_dict = recipe_dict or recipe.to_recipe(scene)
-    camera = sidecar_for(scene, frame, camera)
-    fps = fps or scene.render.fps / (scene.render.fps_base or 1.0)
-    keep_passes = scene.libfx.keep_passes
-    writes_image = scene_setup.writes_image(scene)
-    scene_name = scene.name
+    if in_background:
+        live.WORKER.submit_task(lambda: _run_and_write(job))
+        return {"ok": True, "pending": True, "frame": frame, "paths": job["paths"]}
+    done = _run(job)
+    if not done["ok"]:
+        return done
+    if defer_write:
+        live.WORKER.submit_task(lambda: _write(job, done))
+        return {"ok": True, "pending": True, "frame": frame, "paths": job["paths"],
+                "timings": done["timings"]}
+    return _write(job, done)
+
+
+def _run_and_write(job):
+    done = _run(job)
+    return _write(job, done) if done["ok"] else done
+
+
+def _run(job):
+    """Any thread: reads the passes, runs the stack; holds and shows as asked."""
+    from . import live
+    frame, paths, passes_file = job["frame"], job["paths"], job["passes_file"]
     try:
         if not os.path.exists(passes_file):
             raise native.LibfxError("the passes file %s was not written (is the compositor on, "
                                     "and the node '%s' unmuted?)" % (passes_file, scene_setup.FO_NODE))
         t0 = time.perf_counter()
         with _ctx_lock:   # one thread at a time per context (F12's render thread, batch's main)
-            ctx = _context(scene.libfx.threads)
+            ctx = _context(job["threads"])
             ctx.warnings()   # drop what an earlier frame left
-            stack = native.Stack(ctx, recipe_dict)
+            stack = native.Stack(ctx, job["recipe"])
             try:
                 # held: every pass, so that any later stack can run on it
-                fin = native.Frame.read(ctx, passes_file, None if hold else stack)
-                if camera is not None:
-                    fin.apply_sidecar(camera)
-                fin.set_time(frame, fps)
-                if hold:
+                fin = native.Frame.read(ctx, passes_file, None if job["hold"] else stack)
+                if job["camera"] is not None:
+                    fin.apply_sidecar(job["camera"])
+                fin.set_time(frame, job["fps"])
+                if job["hold"]:
                     fout = stack.run(fin)
                     fout.copy_passes_from(fin)   # shared with the held frame, not copied
-                    live.hold(scene_name, frame, fin, passes_file if keep_passes else None, camera)
+                    live.hold(job["scene"], frame, fin, passes_file if job["keep_passes"] else None,
+                              job["camera"])
                 else:
                     fout = stack.run_consume(fin, keep_passes=True)   # the passes go along, not copied
                 timings = stack.timings()
-                if show:
-                    live.show_after_render(scene_name, frame, fout, timings)
+                if job["show"]:
+                    live.show_after_render(job["scene"], frame, fout, timings)
                 warnings = ctx.warnings()
             finally:
                 stack.close()
-        t_run = time.perf_counter()
+        return {"ok": True, "fout": fout, "timings": timings, "warnings": warnings, "t0": t0,
+                "t_run": time.perf_counter()}
     except native.LibfxError as e:
-        return _record(scene, frame, error=str(e), paths=paths)
+        return _record_named(job["scene"], frame, error=str(e), paths=paths)
     except Exception as e:  # never let a handler die silently
-        return _record(scene, frame, error="%s: %s" % (type(e).__name__, e), paths=paths)
+        return _record_named(job["scene"], frame, error="%s: %s" % (type(e).__name__, e), paths=paths)
 
-    def write():
-        try:
-            with _ctx_lock:
-                try:
-                    os.makedirs(os.path.dirname(paths["exr"]) or ".", exist_ok=True)
-                    fout.write_exr(paths["exr"], input_path=passes_file)
-                finally:
-                    fout.close()
-            if camera is not None:
-                _write_json(paths["camera"], camera)
-            _write_json(paths["recipe"], recipe_dict)
-            if not keep_passes:
-                _remove_quietly(passes_file)   # the result holds every pass it had
-            total = (time.perf_counter() - t0) * 1000.0
-            log("frame %d: %s (%.1f ms in all, %.1f ms to the result) -> %s" % (
-                frame, ", ".join("%s %.1f ms" % (t.get("effect"), t.get("ms", 0.0))
-                                 for t in timings if t.get("enabled", True)) or "no effect",
-                total, (t_run - t0) * 1000.0, paths["exr"]))
-            for w in warnings:
-                log("frame %d: warning: %s" % (frame, w), err=True)
-            rec = _record_named(scene_name, frame, paths=paths, timings=timings, warnings=warnings,
-                                passes_file=passes_file)
-            if writes_image and not bpy.app.background:
-                exr, image = paths["exr"], paths["image"]
-                _to_ui(lambda: _ui_save_image(scene_name, exr, image))
-            return rec
-        except native.LibfxError as e:
-            return _record_named(scene_name, frame, error=str(e), paths=paths)
-        except Exception as e:
-            return _record_named(scene_name, frame, error="%s: %s" % (type(e).__name__, e), paths=paths)
 
-    if defer_write:
-        live.WORKER.submit_task(write)
-        return {"ok": True, "pending": True, "frame": frame, "paths": paths, "timings": timings}
-    return write()
+def _write(job, done):
+    """Any thread: the result files, the record; the passes file goes unless kept."""
+    frame, paths, passes_file, scene_name = job["frame"], job["paths"], job["passes_file"], job["scene"]
+    timings, warnings, fout = done["timings"], done["warnings"], done["fout"]
+    try:
+        with _ctx_lock:
+            try:
+                os.makedirs(os.path.dirname(paths["exr"]) or ".", exist_ok=True)
+                fout.write_exr(paths["exr"], input_path=passes_file)
+            finally:
+                fout.close()
+        if job["camera"] is not None:
+            _write_json(paths["camera"], job["camera"])
+        _write_json(paths["recipe"], job["recipe"])
+        if not job["keep_passes"]:
+            _remove_quietly(passes_file)   # the result holds every pass it had
+        total = (time.perf_counter() - done["t0"]) * 1000.0
+        log("frame %d: %s (%.1f ms in all, %.1f ms to the result) -> %s" % (
+            frame, ", ".join("%s %.1f ms" % (t.get("effect"), t.get("ms", 0.0))
+                             for t in timings if t.get("enabled", True)) or "no effect",
+            total, (done["t_run"] - done["t0"]) * 1000.0, paths["exr"]))
+        for w in warnings:
+            log("frame %d: warning: %s" % (frame, w), err=True)
+        rec = _record_named(scene_name, frame, paths=paths, timings=timings, warnings=warnings,
+                            passes_file=passes_file)
+        if job["writes_image"] and not bpy.app.background:
+            exr, image = paths["exr"], paths["image"]
+            _to_ui(lambda: _ui_save_image(scene_name, exr, image))
+        return rec
+    except native.LibfxError as e:
+        return _record_named(scene_name, frame, error=str(e), paths=paths)
+    except Exception as e:
+        return _record_named(scene_name, frame, error="%s: %s" % (type(e).__name__, e), paths=paths)
 
 
 def _remove_quietly(path):

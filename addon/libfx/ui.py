@@ -245,12 +245,15 @@ class LIBFX_OT_rerun(bpy.types.Operator):
         if not os.path.exists(scene_setup.passes_path(scene, frame)):
             live.changed(scene)   # only in memory: a live run of the held frame
             return {"FINISHED"}
-        rec = render.process_frame(scene, frame, hold=scene.libfx.live, show=True)
-        if not rec["ok"]:
-            self.report({"ERROR"}, "libfx: %s" % rec["error"])
-            return {"CANCELLED"}
-        ms = sum(t.get("ms", 0.0) for t in rec.get("timings", []))
-        self.report({"INFO"}, "libfx: frame %d in %.0f ms -> %s" % (frame, ms, rec["paths"]["exr"]))
+        if bpy.app.background:   # no UI to keep responsive: done when the operator returns
+            rec = render.process_frame(scene, frame)
+            if not rec["ok"]:
+                self.report({"ERROR"}, "libfx: %s" % rec["error"])
+                return {"CANCELLED"}
+            return {"FINISHED"}
+        # read, stack and write on the worker: the UI never waits for them
+        render.process_frame(scene, frame, hold=scene.libfx.live, show=True, in_background=True)
+        self.report({"INFO"}, "libfx: running the stack on frame %d" % frame)
         return {"FINISHED"}
 
 

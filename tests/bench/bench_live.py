@@ -6,8 +6,9 @@ headless Blender session driven by a script (not a timed test).
         [--scenes greek_bath,atrium,mirror_room] [--out out/bench_live]
 
 For each scene it needs a 1920x1080 batch render with kept passes: DIR/<scene>_1920x1080/
-r_libfx_passes.0001.exr and r_libfx.0001.camera.json (bench_all.py's render stage makes
-them; missing ones are rendered here through the add-on's batch runner, 4 samples).
+r_libfx_passes.0001.exr and r_libfx.0001.camera.json (default DIR: OUT/renders; missing
+ones are rendered here through the add-on's batch runner, 4 samples, with the add-on's
+default passes codec, NONE, so the read is the one F12 meets).
 In one Blender session per scene:
 
 - **held**: `live.start()` reads the passes into memory and shows the final result
@@ -53,10 +54,15 @@ def med(v):
 def img():
     im = bpy.data.images[live.RESULT_IMAGE]; a = np.empty(im.size[0] * im.size[1] * 4, np.float32)
     im.pixels.foreach_get(a); return a.reshape(-1, 4)[:, :3]
+def box4(a):
+    h, w = 1080 // 4, 1920 // 4
+    return a.reshape(1080, 1920, 3)[:h * 4, :w * 4].reshape(h, 4, w, 4, 3).mean(axis=(1, 3))
 def err(a, b):
     a = np.clip(a, 0.0, 1.0); b = np.clip(b, 0.0, 1.0)   # display range: the sun's 1e3 would rule
     mae = float(np.abs(a - b).mean()); mse = float(((a - b) ** 2).mean())
-    return mae, (99.0 if mse == 0 else 10 * math.log10(1.0 / mse))
+    # at 1/4 scale, where the render's noise (which a proxy averages away) is gone
+    mae4 = float(np.abs(box4(a) - box4(b)).mean())
+    return mae, (99.0 if mse == 0 else 10 * math.log10(1.0 / mse)), mae4
 # held: load + final
 t = []
 for r in range(A["runs"]):
@@ -129,6 +135,7 @@ for setting in A["settings"]:
                 med([p[k] for p in parts]) for k in range(4))
         if errs:
             row["mae"] = med([e[0] for e in errs]); row["psnr_db"] = med([e[1] for e in errs])
+            row["mae_quarter"] = med([e[2] for e in errs])
         rows.append(row)
 print("RESULT " + json.dumps(rows))
 '''
@@ -147,20 +154,22 @@ def render_if_missing(scene, d, which):
     os.makedirs(d, exist_ok=True)
     cmd = blender_cmd(which) + ["-b", os.path.join(ROOT, "blend_scenes", scene, scene + ".blend"),
                                 "--python", os.path.join(ROOT, "addon", "libfx", "batch.py"), "--",
-                                "--keep-passes", "--frames", "1", "--output", os.path.join(d, "r_"),
+                                "--keep-passes", "--passes-codec", "NONE", "--frames", "1",
+                                "--output", os.path.join(d, "r_"),
                                 "--resolution", "1920x1080", "--samples", "4"]
     subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
 
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--renders", default=os.path.join(ROOT, "out", "r1080", "renders"))
+    ap.add_argument("--renders", default=None, help="default: OUT/renders")
     ap.add_argument("--runs", type=int, default=5)
     ap.add_argument("--blender", default="host")
     ap.add_argument("--scenes", default=",".join(SCENES))
     ap.add_argument("--settings", default="HALF_DRAFT,QUARTER_DRAFT")
     ap.add_argument("--out", default=os.path.join(ROOT, "out", "bench_live"))
     a = ap.parse_args()
+    a.renders = a.renders or os.path.join(a.out, "renders")
     os.makedirs(a.out, exist_ok=True)
     all_rows = []
     for scene in a.scenes.split(","):
@@ -180,20 +189,20 @@ def main():
         for r in json.loads(line[7:]):
             r["scene"] = scene
             all_rows.append(r)
-    keys = ["scene", "what", "effect", "setting", "ms", "interactive_ms", "final_ms", "mae", "psnr_db", "parts"]
+    keys = ["scene", "what", "effect", "setting", "ms", "interactive_ms", "final_ms", "mae", "psnr_db", "mae_quarter", "parts"]
     with open(os.path.join(a.out, "bench_live.csv"), "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=keys)
         w.writeheader()
         for r in all_rows:
             w.writerow({k: r.get(k, "") for k in keys})
     fmt = lambda v: "" if v in (None, "") else ("%.1f" % v if isinstance(v, float) else str(v))
-    print("| scene | what | setting | ms | interactive ms | final ms | MAE | PSNR dB | interactive: where the time goes (ms) |")
-    print("|---|---|---|---:|---:|---:|---:|---:|---|")
+    print("| scene | what | setting | ms | interactive ms | final ms | MAE | PSNR dB | MAE at 1/4 | interactive: where the time goes (ms) |")
+    print("|---|---|---|---:|---:|---:|---:|---:|---:|---|")
     for r in all_rows:
-        print("| %s | %s | %s | %s | %s | %s | %s | %s | %s |" % (
+        print("| %s | %s | %s | %s | %s | %s | %s | %s | %s | %s |" % (
             r["scene"], r["what"], r.get("setting", ""), fmt(r.get("ms")), fmt(r.get("interactive_ms")),
             fmt(r.get("final_ms")), ("%.4f" % r["mae"]) if "mae" in r else "", fmt(r.get("psnr_db")),
-            r.get("parts", "")))
+            ("%.4f" % r["mae_quarter"]) if "mae_quarter" in r else "", r.get("parts", "")))
 
 
 if __name__ == "__main__":

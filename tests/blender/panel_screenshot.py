@@ -89,6 +89,10 @@ def scroll_properties():
     still refuses (4.3 does for a moment after a render)."""
     win = bpy.context.window_manager.windows[0]
     try:
+        for a in areas("IMAGE_EDITOR"):   # the result fills its editor
+            region = [r for r in a.regions if r.type == "WINDOW"][0]
+            with bpy.context.temp_override(window=win, area=a, region=region):
+                bpy.ops.image.view_all(fit_view=True)
         for a in areas("PROPERTIES"):
             region = [r for r in a.regions if r.type == "WINDOW"][0]
             with bpy.context.temp_override(window=win, area=a, region=region):
