@@ -96,12 +96,11 @@ def on_frame_change_post(scene, depsgraph=None):
     if cam is not None:
         with _lock:
             CAMERAS[(scene.name, scene.frame_current)] = cam
-    if not bpy.app.background:
-        from . import live
-        try:
-            live.on_frame_change(scene)
-        except Exception as e:
-            log("live: frame %d: %s" % (scene.frame_current, e), err=True)
+    from . import live
+    try:
+        live.on_frame_change(scene)   # scrubbing a held sequence (a no-op in batch renders)
+    except Exception as e:
+        log("live: frame %d: %s" % (scene.frame_current, e), err=True)
 
 
 # ---------------------------------------------------------------- render

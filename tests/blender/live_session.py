@@ -105,7 +105,18 @@ save("solo", image())
 scene.libfx.live_solo = False
 live.flush()
 
-# 5. The passes file changes on disk (a re-render): noticed and read again.
+# 5. Scrubbing: frame 2's kept passes are read and shown; back on frame 1, the held one.
+scene.frame_set(2)
+applied = live.flush()
+res["scrub"] = [{"kind": a["job"].kind, "frame": a.get("frame"), "error": a.get("error")} for a in applied]
+save("frame2", image())
+scene.frame_set(1)
+applied = live.flush()
+res["scrub_back"] = [{"kind": a["job"].kind, "frame": a.get("frame"), "load": a["job"].load is not None}
+                     for a in applied]
+res["scrub_back_same"] = bool(np.array_equal(image(), img1))
+
+# 6. The passes file changes on disk (a re-render): noticed and read again.
 shutil.copyfile(prefix + "libfx_passes.0002.exr", passes1 + ".tmp")
 os.replace(passes1 + ".tmp", passes1)
 live.refresh_if_stale(scene)

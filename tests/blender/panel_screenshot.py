@@ -184,10 +184,15 @@ def tick():
             scene.libfx.live_view = "SPLIT"
             state["phase"] = "split"
             state["gen"] = libfx.live.session(scene).shown.get("generation", -1)
+            state["t_split"] = time.perf_counter()
             return 0.5
         if state["phase"] == "split":
-            if libfx.live.session(bpy.context.scene).shown.get("generation", -1) <= state["gen"] and state["t"] < 400:
+            if (libfx.live.session(bpy.context.scene).shown.get("generation", -1) <= state["gen"]
+                    and time.perf_counter() - state["t_split"] < 60):
                 return 0.2
+            state["phase"] = "split_shot"
+            return 1.0   # the redraw after the image changed
+        if state["phase"] == "split_shot":
             split = OUT[:-4] + "-split.png"
             shoot(split)
             log("saved", split)

@@ -80,11 +80,12 @@ def test_live_loop(blender, library, cli, tmp_path):
     final = npy("final")
     assert not np.array_equal(final, result1)            # the image shows the new result
     # ... which is what `libfx run` makes of the changed recipe
-    def cli_run(passes, out_name):
+    def cli_run(passes, out_name, frame=1):
         ref = tmp_path / out_name
         p = subprocess.run([str(cli), "run", "--quiet", "--stack", str(tmp_path / "changed_recipe.json"),
-                            "--camera", str(tmp_path / "bath_libfx.0001.camera.json"), "--frame", "1",
-                            str(passes), "-o", str(ref)], capture_output=True, text=True, timeout=120)
+                            "--camera", str(tmp_path / ("bath_libfx.%04d.camera.json" % frame)),
+                            "--frame", str(frame), str(passes), "-o", str(ref)],
+                           capture_output=True, text=True, timeout=120)
         assert p.returncode == 0, p.stderr
         return T.Exr(ref).get("Combined", "RGBA")
     assert np.array_equal(final, cli_run(tmp_path / "orig1.exr", "cli1.exr"))
@@ -109,6 +110,12 @@ def test_live_loop(blender, library, cli, tmp_path):
     assert np.array_equal(split[:, w // 2 + 1:], final[:, w // 2 + 1:])
     solo = npy("solo")   # pixelate alone: no god rays over the sky
     assert not np.array_equal(solo, final) and not np.array_equal(solo, plain1)
+
+    # Scrubbing: frame 2 read from its kept passes file and shown; frame 1 again from memory.
+    assert [(c["kind"], c["frame"], c["error"]) for c in r["scrub"]] == [("final", 2, None)], r["scrub"]
+    assert np.array_equal(npy("frame2"), cli_run(tmp_path / "orig2.exr", "cli_f2.exr", frame=2))
+    assert r["scrub_back"] == [{"kind": "final", "frame": 1, "load": False}], r["scrub_back"]
+    assert r["scrub_back_same"]
 
     # The passes file replaced on disk (frame 2's): read again; deleted: said so.
     after = npy("after_file_change")
