@@ -225,6 +225,18 @@ class LIBFX_OT_recipe_text(bpy.types.Operator):
         return {"FINISHED"}
 
 
+def _passes_on_disk(scene):
+    return os.path.exists(scene_setup.passes_path(scene, scene.frame_current))
+
+
+def _ensure_camera(context):
+    """The current frame's camera for its sidecar (frame_change_post has not run for it when
+    the file was just opened)."""
+    scene = context.scene
+    if (scene.name, scene.frame_current) not in render.CAMERAS:
+        render.on_frame_change_post(scene, context.evaluated_depsgraph_get())
+
+
 class LIBFX_OT_rerun(bpy.types.Operator):
     bl_idname = "libfx.rerun"
     bl_label = "Apply to Last Render"
@@ -234,15 +246,13 @@ class LIBFX_OT_rerun(bpy.types.Operator):
     @classmethod
     def poll(cls, context):
         s = context.scene
-        return scene_setup.has_stack(s) and (
-            live.has_frame(s) or os.path.exists(scene_setup.passes_path(s, s.frame_current)))
+        return scene_setup.has_stack(s) and (live.has_frame(s) or _passes_on_disk(s))
 
     def execute(self, context):
         scene = context.scene
         frame = scene.frame_current
-        if (scene.name, frame) not in render.CAMERAS:
-            render.on_frame_change_post(scene, context.evaluated_depsgraph_get())
-        if not os.path.exists(scene_setup.passes_path(scene, frame)):
+        _ensure_camera(context)
+        if not _passes_on_disk(scene):
             live.changed(scene)   # only in memory: a live run of the held frame
             return {"FINISHED"}
         if bpy.app.background:   # no UI to keep responsive: done when the operator returns
@@ -265,13 +275,11 @@ class LIBFX_OT_live_load(bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        s = context.scene
-        return scene_setup.has_stack(s) and os.path.exists(scene_setup.passes_path(s, s.frame_current))
+        return scene_setup.has_stack(context.scene) and _passes_on_disk(context.scene)
 
     def execute(self, context):
         scene = context.scene
-        if (scene.name, scene.frame_current) not in render.CAMERAS:
-            render.on_frame_change_post(scene, context.evaluated_depsgraph_get())
+        _ensure_camera(context)
         scene.libfx.live = True
         live.start(scene)
         return {"FINISHED"}
