@@ -86,7 +86,7 @@ static void errors(const float *a, const float *ref, size_t npx, double *mae, do
         for (int c = 0; c < 3; c++) {
             double r = ref[i * 4 + c], v = a[i * 4 + c];
             s += fabs(v - r);
-            double ac = fmin(fmax(v, 0.0), 1.0), rc = fmin(fmax(r, 0.0), 1.0);
+            double ac = v < 0.0 ? 0.0 : v > 1.0 ? 1.0 : v, rc = r < 0.0 ? 0.0 : r > 1.0 ? 1.0 : r;
             s2 += (ac - rc) * (ac - rc);
         }
     *mae = s / (3.0 * (double)npx);
