@@ -324,6 +324,13 @@ static void test_camera(fx_context *ctx)
             if (worst > 1e-3)
                 fprintf(stderr, "camera on a 1/%d proxy (window %d): off by %g proxy pixels\n", k, win, worst);
             CHECK(worst < 1e-3);
+            /* setting the windows it has changes nothing */
+            int dw[4], dp[4];
+            fx_frame_windows(p, dw, dp);
+            CHECK_OK(ctx, fx_frame_set_windows(p, dw, dp));
+            fx_view v2;
+            memset(&v2, 0, sizeof v2);
+            CHECK(fx_view_init(&v2, p) && v2.disp_w == vp.disp_w && v2.off_x == vp.off_x && v2.off_y == vp.off_y);
             fx_frame_free(p);
         }
         fx_frame_free(f);

@@ -100,9 +100,11 @@ fx_result fx_frame_set_windows(fx_frame *f, const int data_window[4], const int 
     if (display_window[2] < display_window[0] - 1 || display_window[3] < display_window[1] - 1)
         return fx_fail(f->ctx, FX_ERR_INVALID_ARGUMENT, "display window (%d,%d)-(%d,%d) is inverted",
                        display_window[0], display_window[1], display_window[2], display_window[3]);
+    int same = memcmp(f->data_window, data_window, 4 * sizeof(int)) == 0 &&
+               memcmp(f->display_window, display_window, 4 * sizeof(int)) == 0;
     memcpy(f->data_window, data_window, 4 * sizeof(int));
     memcpy(f->display_window, display_window, 4 * sizeof(int));
-    if (f->proxy_factor > 1) {
+    if (f->proxy_factor > 1 && !same) {
         /* a proxy given new windows: the full frame's are these, f times larger */
         const long long k = f->proxy_factor;
         for (int i = 0; i < 2; i++) {
