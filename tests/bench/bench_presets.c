@@ -31,8 +31,8 @@
  *    W x H RGBA floats (in + out) on the same thread pool, the median of samples taken just
  *    before and just after that effect's timings.
  *  - kind scaling_res: `final`, scaling-threads, on the frame resampled to 0.25..4 MP
- *    (same aspect; Combined and light passes bilinear, every data pass nearest: IDs,
- *    Cryptomatte, depth, normals, positions are never blended).
+ *    (same aspect; fx_frame_read_pixels per pass: Combined and light passes bilinear, every
+ *    data pass nearest: IDs, Cryptomatte, depth, normals, positions are never blended).
  *  - kind scaling_mask: `final`, scaling-threads, the masks cut by a rectangle [0, 0, x, H]
  *    whose x keeps 25..100 % of the masked pixels (the whole frame without a mask).
  * CSV (docs/performance.md): kind,scene,effect,setting,width,height,threads,runs,ms_median,
@@ -416,58 +416,28 @@ static const fx_param_info *find_param(const char *effect, const char *name)
 
 /* ---- resampling (scaling rows) ------------------------------------------- */
 
-static int blendable(const char *name)
-{
-    static const char *const pre[] = {"Combined", "Diff", "Gloss", "Trans", "Emit", "Env", "AO", "Shadow", "Volume"};
-    for (size_t i = 0; i < sizeof pre / sizeof pre[0]; i++)
-        if (strncmp(name, pre[i], strlen(pre[i])) == 0)
-            return 1;
-    return 0; /* Depth, Position, Normal, Index*, Crypto*, Vector, UV...: nearest */
-}
-
+/* The library's display resampling (fx_frame_read_pixels: bilinear for colour and light
+ * passes, nearest for IDs, depth, normals...; pixel centres aligned), pass by pass. */
 static fx_frame *resample(fx_context *ctx, const fx_frame *src, int W, int H, const char *sidecar)
 {
-    int w = fx_frame_width(src), h = fx_frame_height(src);
     fx_frame *f = NULL;
     if (fx_frame_new(ctx, W, H, &f))
         die("frame", ctx);
+    float *rgba = malloc((size_t)W * H * 4 * sizeof(float));
     for (int p = 0; p < fx_frame_pass_count(src); p++) {
         const char *name = fx_frame_pass_name(src, p);
-        float *in = NULL;
-        int ch = 0;
-        fx_frame_pass(src, name, &in, &ch);
+        int ch = fx_frame_pass_channels(src, p);
+        if (fx_frame_read_pixels(src, name, W, H, 0, rgba))
+            die("resample", ctx);
         float *out = malloc((size_t)W * H * ch * sizeof(float));
-        int lin = blendable(name);
-        for (int y = 0; y < H; y++) {
-            double fy = (y + 0.5) * h / H - 0.5;
-            for (int x = 0; x < W; x++) {
-                double fx = (x + 0.5) * w / W - 0.5;
-                float *o = out + ((size_t)y * W + x) * ch;
-                if (!lin) {
-                    int sx = (int)((x + 0.5) * w / W), sy = (int)((y + 0.5) * h / H);
-                    sx = sx < w ? sx : w - 1;
-                    sy = sy < h ? sy : h - 1;
-                    memcpy(o, in + ((size_t)sy * w + sx) * ch, (size_t)ch * sizeof(float));
-                    continue;
-                }
-                int x0 = (int)floor(fx), y0 = (int)floor(fy);
-                double ax = fx - x0, ay = fy - y0;
-                int x1 = x0 + 1, y1 = y0 + 1;
-                x0 = x0 < 0 ? 0 : x0 >= w ? w - 1 : x0;
-                x1 = x1 < 0 ? 0 : x1 >= w ? w - 1 : x1;
-                y0 = y0 < 0 ? 0 : y0 >= h ? h - 1 : y0;
-                y1 = y1 < 0 ? 0 : y1 >= h ? h - 1 : y1;
-                for (int c = 0; c < ch; c++) {
-                    double a = in[((size_t)y0 * w + x0) * ch + c], b = in[((size_t)y0 * w + x1) * ch + c];
-                    double d = in[((size_t)y1 * w + x0) * ch + c], e = in[((size_t)y1 * w + x1) * ch + c];
-                    o[c] = (float)((a * (1 - ax) + b * ax) * (1 - ay) + (d * (1 - ax) + e * ax) * ay);
-                }
-            }
-        }
+        for (size_t i = 0; i < (size_t)W * H; i++)
+            for (int c = 0; c < ch; c++)
+                out[i * ch + c] = rgba[i * 4 + c];
         if (fx_frame_add_pass(f, name, ch, out))
             die("add pass", ctx);
         free(out);
     }
+    free(rgba);
     fx_camera cam;
     if (fx_frame_camera(src, &cam))
         fx_frame_set_camera(f, &cam);

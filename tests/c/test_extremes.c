@@ -18,6 +18,7 @@
  *  - Every case: no crash, every float of every output pass finite (debug outputs on),
  *    a wall limit per case (SIGALRM names the case that hangs), or a clear error.
  *  - A few reference-quality cases.
+ *  - Every preset on 1/2 and 1/4 proxies (fx_frame_reduce) of the hostile odd frames.
  */
 #include "fx_scene_test.h"
 
@@ -533,6 +534,63 @@ int main(void)
                     fx_frame_free(out);
                     fx_stack_free(s);
                 }
+        }
+        fx_frame_free(f);
+    }
+
+    /* 2c. proxies (issue 13): every preset on 1/2 and 1/4 proxies of the hostile frames
+     * (fx_frame_reduce: colour averaged, data passes from one pixel per block), whole and
+     * under a one-pixel mask given in full-frame pixels (smaller than a proxy pixel: it
+     * selects the proxy pixel holding it). Output at the proxy's size, finite, and
+     * untouched outside that proxy pixel. */
+    for (int z = 0; z < FX_COUNT_OF(odd); z++) {
+        const int w = odd[z][0], h = odd[z][1];
+        fx_frame *f = make_frame(ctx, w, h, HOSTILE_EXR, SIDECAR_LIGHTS_FRONT);
+        CHECK(f != NULL);
+        for (int factor = 2; f && factor <= 4; factor *= 2) {
+            fx_frame *p = NULL;
+            CHECK_OK(ctx, fx_frame_reduce(f, factor, &p));
+            if (!p)
+                continue;
+            const int pw = (w + factor - 1) / factor, ph = (h + factor - 1) / factor;
+            CHECK(fx_frame_width(p) == pw && fx_frame_height(p) == ph && fx_frame_proxy_factor(p) == factor);
+            const float *in_px = NULL;
+            fx_frame_pass_read(p, "Combined", &in_px, NULL);
+            const int mx = (w / 2) | 1, my = (h / 2) | 1;
+            const int x0 = mx < w ? mx : w - 1, y0 = my < h ? my : h - 1;
+            const int px = x0 / factor, py = y0 / factor;
+            for (int e = 0; e < fx_effect_count(); e++) {
+                const char *effect = fx_effect_name(e);
+                for (int q = FX_QUALITY_DRAFT; q <= FX_QUALITY_REFERENCE; q++)
+                    for (int masked = 0; masked < 2; masked++) {
+                        snprintf(current_case, sizeof current_case, "%s (%s) on a 1/%d proxy of hostile %dx%d%s",
+                                 effect, fx_quality_name(q), factor, w, h, masked ? ", one-pixel mask" : "");
+                        fx_stack *s = stack_for(ctx, effect, q);
+                        if (!s)
+                            continue;
+                        char mask[96];
+                        snprintf(mask, sizeof mask, "{\"rect\": [%d, %d, 1, 1]}", x0, y0);
+                        if (masked)
+                            CHECK_OK(ctx, fx_stack_set_mask_json(s, 0, mask));
+                        fx_frame *out = NULL;
+                        if (run_case_keep(ctx, s, p, effect, 1, &out) == FX_OK && masked) {
+                            const float *o = NULL;
+                            fx_frame_pass_read(out, "Combined", &o, NULL);
+                            int outside_kept = 1;
+                            for (int y = 0; y < ph; y++)
+                                for (int x = 0; x < pw; x++)
+                                    if ((x != px || y != py) &&
+                                        memcmp(o + ((size_t)y * pw + x) * 4, in_px + ((size_t)y * pw + x) * 4, 16) != 0)
+                                        outside_kept = 0;
+                            if (!outside_kept)
+                                fprintf(stderr, "WROTE OUTSIDE ITS MASK: %s\n", current_case);
+                            CHECK(outside_kept);
+                        }
+                        fx_frame_free(out);
+                        fx_stack_free(s);
+                    }
+            }
+            fx_frame_free(p);
         }
         fx_frame_free(f);
     }

@@ -3,6 +3,7 @@
 #include "core/parallel.h"
 
 #include <float.h>
+#include <limits.h>
 #include <math.h>
 #include <stdatomic.h>
 #include <stdio.h>
@@ -99,8 +100,22 @@ fx_result fx_frame_set_windows(fx_frame *f, const int data_window[4], const int 
     if (display_window[2] < display_window[0] - 1 || display_window[3] < display_window[1] - 1)
         return fx_fail(f->ctx, FX_ERR_INVALID_ARGUMENT, "display window (%d,%d)-(%d,%d) is inverted",
                        display_window[0], display_window[1], display_window[2], display_window[3]);
+    int same = memcmp(f->data_window, data_window, 4 * sizeof(int)) == 0 &&
+               memcmp(f->display_window, display_window, 4 * sizeof(int)) == 0;
     memcpy(f->data_window, data_window, 4 * sizeof(int));
     memcpy(f->display_window, display_window, 4 * sizeof(int));
+    if (f->proxy_factor > 1 && !same) {
+        /* a proxy given new windows: the full frame's are these, f times larger */
+        const long long k = f->proxy_factor;
+        for (int i = 0; i < 2; i++) {
+            long long a = data_window[i] * k, b = (data_window[i + 2] + 1LL) * k - 1;
+            long long c = display_window[i] * k, d = (display_window[i + 2] + 1LL) * k - 1;
+            f->full_data_window[i] = (int)(a < INT_MIN ? INT_MIN : a > INT_MAX ? INT_MAX : a);
+            f->full_data_window[i + 2] = (int)(b < INT_MIN ? INT_MIN : b > INT_MAX ? INT_MAX : b);
+            f->full_display_window[i] = (int)(c < INT_MIN ? INT_MIN : c > INT_MAX ? INT_MAX : c);
+            f->full_display_window[i + 2] = (int)(d < INT_MIN ? INT_MIN : d > INT_MAX ? INT_MAX : d);
+        }
+    }
     return FX_OK;
 }
 

@@ -10,9 +10,11 @@
  * block's centre: offset (f - 1) / 2 in each axis, clamped to the frame. */
 #include "core/internal.h"
 #include "core/parallel.h"
+#include "math/simd4.h"
 
 #include <float.h>
 #include <math.h>
+#include <stdint.h>
 #include <string.h>
 
 #define FX_PROXY_FACTOR_MAX 16
@@ -51,6 +53,46 @@ typedef struct reduce_job {
     int f;
 } reduce_job;
 
+/* The mean of a block's finite values per channel; a channel without any takes the
+ * representative's value, made finite. All-finite blocks (the usual case) take one pass
+ * with a branch-free check; ch is a constant in each caller, so the loops unroll. */
+static inline void block_mean(const float *src, int w, int ch, int bx0, int bx1, int by0, int by1,
+                              const float *rep, float *o)
+{
+    double sum[4] = {0, 0, 0, 0};
+    uint32_t bad = 0;
+    for (int y = by0; y < by1; y++) {
+        const float *s = src + ((size_t)y * w + bx0) * ch;
+        for (int x = bx0; x < bx1; x++, s += ch)
+            for (int c = 0; c < ch; c++) {
+                uint32_t b;
+                memcpy(&b, s + c, sizeof b);
+                bad |= (uint32_t)((b & 0x7f800000u) == 0x7f800000u);
+                sum[c] += s[c];
+            }
+    }
+    if (!bad) {
+        const double n = (double)(bx1 - bx0) * (by1 - by0);
+        for (int c = 0; c < ch; c++)
+            o[c] = (float)(sum[c] / n);
+        return;
+    }
+    int n[4] = {0, 0, 0, 0};
+    for (int c = 0; c < 4; c++)
+        sum[c] = 0;
+    for (int y = by0; y < by1; y++) {
+        const float *s = src + ((size_t)y * w + bx0) * ch;
+        for (int x = bx0; x < bx1; x++, s += ch)
+            for (int c = 0; c < ch; c++)
+                if (isfinite(s[c])) {
+                    sum[c] += s[c];
+                    n[c]++;
+                }
+    }
+    for (int c = 0; c < ch; c++)
+        o[c] = n[c] ? (float)(sum[c] / n[c]) : finite_or(rep[c]);
+}
+
 static void reduce_rows(void *user, int y0, int y1)
 {
     const reduce_job *j = user;
@@ -62,29 +104,23 @@ static void reduce_rows(void *user, int y0, int y1)
             const reduce_pass *rp = &j->passes[p];
             const int ch = rp->ch;
             float *out = rp->dst + (size_t)oy * j->ow * ch;
+            const float *rep_row = rp->src + (size_t)ry * w * ch;
             for (int ox = 0; ox < j->ow; ox++) {
                 const int bx0 = ox * f, bx1 = bx0 + f < w ? bx0 + f : w;
                 const int rx = bx0 + (f - 1) / 2 < w ? bx0 + (f - 1) / 2 : w - 1;
-                const float *rep = rp->src + ((size_t)ry * w + rx) * ch;
+                const float *rep = rep_row + (size_t)rx * ch;
                 float *o = out + (size_t)ox * ch;
                 if (!rp->blend) {
-                    for (int c = 0; c < ch; c++)
+                    for (int c = 0; c < ch; c++) /* a call to memcpy per pixel costs more */
                         o[c] = rep[c];
                     continue;
                 }
-                double sum[4] = {0, 0, 0, 0};
-                int n[4] = {0, 0, 0, 0};
-                for (int y = by0; y < by1; y++) {
-                    const float *s = rp->src + ((size_t)y * w + bx0) * ch;
-                    for (int x = bx0; x < bx1; x++, s += ch)
-                        for (int c = 0; c < ch; c++)
-                            if (isfinite(s[c])) {
-                                sum[c] += s[c];
-                                n[c]++;
-                            }
+                switch (ch) {
+                case 1: block_mean(rp->src, w, 1, bx0, bx1, by0, by1, rep, o); break;
+                case 3: block_mean(rp->src, w, 3, bx0, bx1, by0, by1, rep, o); break;
+                case 4: block_mean(rp->src, w, 4, bx0, bx1, by0, by1, rep, o); break;
+                default: block_mean(rp->src, w, ch, bx0, bx1, by0, by1, rep, o); break;
                 }
-                for (int c = 0; c < ch; c++)
-                    o[c] = n[c] ? (float)(sum[c] / n[c]) : finite_or(rep[c]);
             }
         }
     }
@@ -220,19 +256,40 @@ static inline void expand(const float *s, int ch, float o[4])
     }
 }
 
+/* One source row as RGBA (the expansion of 1..3 channels). */
+static void expand_row(const float *s, int ch, int w, float *o)
+{
+    if (ch == 4) {
+        memcpy(o, s, (size_t)w * 4 * sizeof(float));
+        return;
+    }
+    for (int x = 0; x < w; x++)
+        expand(s + (size_t)x * ch, ch, o + (size_t)x * 4);
+}
+
+/* Bilinear, separable: the two source rows blended vertically into one RGBA row of the
+ * source's width (`mix`, per chunk), then each output pixel from two of its pixels. */
 static void read_rows(void *user, int y0, int y1)
 {
     const read_job *j = user;
     const int ch = j->ch, w = j->w, h = j->h, W = j->W, H = j->H;
+    float *mix = NULL, *ra4 = NULL, *rb4 = NULL;
+    if (!j->nearest && !(w == W && h == H)) {
+        mix = fx_mem_alloc((size_t)w * 4 * sizeof(float) * 3);
+        if (!mix) { /* no scratch: nearest rather than nothing (still finite) */
+            read_job k = *j;
+            k.nearest = 1;
+            read_rows(&k, y0, y1);
+            return;
+        }
+        ra4 = mix + (size_t)w * 4;
+        rb4 = ra4 + (size_t)w * 4;
+    }
+    int have_a = -1, have_b = -1;
     for (int y = y0; y < y1; y++) {
         float *out = j->dst + (size_t)(j->bottom_up ? H - 1 - y : y) * W * 4;
         if (w == W && h == H) {
-            const float *s = j->src + (size_t)y * w * ch;
-            if (ch == 4)
-                memcpy(out, s, (size_t)w * 4 * sizeof(float));
-            else
-                for (int x = 0; x < W; x++)
-                    expand(s + (size_t)x * ch, ch, out + (size_t)x * 4);
+            expand_row(j->src + (size_t)y * w * ch, ch, w, out);
         } else if (j->nearest) {
             long long sy = ((long long)2 * y + 1) * h / (2LL * H);
             const float *row = j->src + (size_t)(sy < h ? sy : h - 1) * w * ch;
@@ -241,28 +298,39 @@ static void read_rows(void *user, int y0, int y1)
         } else {
             double fy = (y + 0.5) * h / H - 0.5;
             int ya = (int)floor(fy);
-            float ty = (float)(fy - ya);
+            const float ty = (float)(fy - ya), sy = 1.0f - ty;
             int yb = ya + 1;
             ya = ya < 0 ? 0 : ya >= h ? h - 1 : ya;
             yb = yb < 0 ? 0 : yb >= h ? h - 1 : yb;
-            const float *ra = j->src + (size_t)ya * w * ch, *rb = j->src + (size_t)yb * w * ch;
-            for (int x = 0; x < W; x++) {
-                float a[4], b[4], c[4], d[4];
-                expand(ra + (size_t)j->x0[x] * ch, ch, a);
-                expand(ra + (size_t)j->x1[x] * ch, ch, b);
-                expand(rb + (size_t)j->x0[x] * ch, ch, c);
-                expand(rb + (size_t)j->x1[x] * ch, ch, d);
-                const float tx = j->tx[x], sx = 1.0f - tx, sy = 1.0f - ty;
-                float *o = out + (size_t)x * 4;
-                for (int k = 0; k < 4; k++) {
-                    /* weights, not differences: FLT_MAX neighbours do not overflow */
-                    float top = a[k] * sx + b[k] * tx, bot = c[k] * sx + d[k] * tx;
-                    o[k] = top * sy + bot * ty;
+            if (have_a != ya) {
+                if (have_b == ya) { /* the next output row moved down by one source row */
+                    float *t = ra4;
+                    ra4 = rb4;
+                    rb4 = t;
+                    have_b = -1;
+                } else {
+                    expand_row(j->src + (size_t)ya * w * ch, ch, w, ra4);
                 }
+                have_a = ya;
             }
+            if (have_b != yb) {
+                expand_row(j->src + (size_t)yb * w * ch, ch, w, rb4);
+                have_b = yb;
+            }
+            /* weights, not differences: FLT_MAX neighbours do not overflow */
+            const v4f vs = V4(sy), vt = V4(ty);
+            for (int x = 0; x < w; x++)
+                st4(mix + (size_t)x * 4, ld4(ra4 + (size_t)x * 4) * vs + ld4(rb4 + (size_t)x * 4) * vt);
+            for (int x = 0; x < W; x++) {
+                const float tx = j->tx[x];
+                v4f v = ld4(mix + (size_t)j->x0[x] * 4) * V4(1.0f - tx) + ld4(mix + (size_t)j->x1[x] * 4) * V4(tx);
+                st4(out + (size_t)x * 4, finite4(v));
+            }
+            continue; /* finite already */
         }
         fx_span_make_finite(out, (size_t)W * 4);
     }
+    fx_mem_free(mix);
 }
 
 fx_result fx_frame_read_pixels(const fx_frame *f, const char *pass, int width, int height, int bottom_up,
