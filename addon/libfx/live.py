@@ -176,23 +176,31 @@ def drop(scene_name=None):
 
 # ---------------------------------------------------------------- holding frames
 
-def hold(scene_name, frame_no, frame, path, sidecar):
-    """Keeps a decoded frame (called with the context lock held, any thread)."""
+def hold(scene_name, frame_no, frame, path, sidecar, proxy_factor=None):
+    """Keeps a decoded frame (called with the context lock held, any thread). proxy_factor:
+    build that proxy on the worker now, so that the first drag does not pay for it."""
+    held = Held(frame_no, frame, path, sidecar)
     with _lock:
         s = SESSIONS.get(scene_name)
         if s is None:
             s = SESSIONS[scene_name] = Session(scene_name)
-        s.add(Held(frame_no, frame, path, sidecar))
+        s.add(held)
         s.error = None
+    if proxy_factor and proxy_factor > 1:
+        def build():
+            with render.ctx_lock():
+                if held.frame.ptr:   # not dropped meanwhile
+                    held.proxy(proxy_factor)
+        WORKER.submit_task(build)
 
 
-def _read_held(ctx, scene_name, frame_no, path, sidecar, fps):
+def _read_held(ctx, scene_name, frame_no, path, sidecar, fps, proxy_factor=None):
     """Reads a passes file into a held frame (worker thread, context lock held)."""
     fin = native.Frame.read(ctx, path, None)   # every pass the file has: any later stack can run
     if sidecar is not None:
         fin.apply_sidecar(sidecar)
     fin.set_time(frame_no, fps)
-    hold(scene_name, frame_no, fin, path, sidecar)
+    hold(scene_name, frame_no, fin, path, sidecar, proxy_factor)
 
 
 # ---------------------------------------------------------------- the worker
@@ -210,7 +218,7 @@ class _Job:
         self.split = split
         self.debug_pass = debug_pass
         self.threads = threads
-        self.load = load              # (frame_no, path, sidecar, fps): read this frame first
+        self.load = load              # (frame_no, path, sidecar, fps, proxy factor): read this frame first
         self.created = time.perf_counter()
 
 
@@ -323,10 +331,10 @@ def _run_job(job, obsolete):
     with render.ctx_lock():
         ctx = render.shared_context(job.threads)
         if job.load is not None:
-            frame_no, path, sidecar, fps = job.load
+            frame_no, path, sidecar, fps, proxy_factor = job.load
             t0 = time.perf_counter()
             try:
-                _read_held(ctx, job.scene_name, frame_no, path, sidecar, fps)
+                _read_held(ctx, job.scene_name, frame_no, path, sidecar, fps, proxy_factor)
             except native.LibfxError as e:
                 return {"job": job, "error": str(e)}
             log("frame %d: passes read in %.0f ms" % (frame_no, (time.perf_counter() - t0) * 1e3))
@@ -403,6 +411,12 @@ def _compose(result, before, view, split, w, h):
 
 def _settings_of(scene):
     return getattr(scene, "libfx", None)
+
+
+def proxy_factor_of(scene):
+    """The proxy factor of the scene's interactive setting (None: full size)."""
+    s = _settings_of(scene)
+    return SETTINGS.get(s.live_setting, (None, None))[0] if s is not None and s.live else None
 
 
 def active(scene):
@@ -619,7 +633,7 @@ def start(scene, frame_no=None, path=None, sidecar=None):
         if scene.name not in SESSIONS:
             SESSIONS[scene.name] = Session(scene.name)
     fps = scene.render.fps / (scene.render.fps_base or 1.0)
-    _submit(_make_job(scene, "final", load=(frame_no, path, sidecar, fps)))
+    _submit(_make_job(scene, "final", load=(frame_no, path, sidecar, fps, proxy_factor_of(scene))))
 
 
 def refresh_if_stale(scene):

@@ -230,6 +230,7 @@ def process_frame(scene, frame, recipe_dict=None, passes_file=None, camera=None,
         "hold": hold, "show": show,
     }
     from . import live
+    job["proxy_factor"] = live.proxy_factor_of(scene) if hold else None
     if in_background:
         live.WORKER.submit_task(lambda: _run_and_write(job))
         return {"ok": True, "pending": True, "frame": frame, "paths": job["paths"]}
@@ -271,7 +272,7 @@ def _run(job):
                     fout = stack.run(fin)
                     fout.copy_passes_from(fin)   # shared with the held frame, not copied
                     live.hold(job["scene"], frame, fin, passes_file if job["keep_passes"] else None,
-                              job["camera"])
+                              job["camera"], job["proxy_factor"])
                 else:
                     fout = stack.run_consume(fin, keep_passes=True)   # the passes go along, not copied
                 timings = stack.timings()
