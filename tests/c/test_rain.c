@@ -427,8 +427,9 @@ static void test_rain_layers_extremes(fx_context *ctx)
                                  {"rain", "\"cover_material\": \"\", \"downsample\": 8"},
                                  {"rain", "\"cover_material\": \"\", \"downsample\": 2"},
                                  {"rain_splashes", ""},
-                                 {"wet_surfaces", ""}};
-        for (int r = 0; r < 6; r++) {
+                                 {"wet_surfaces", ""},
+                                 {"wet_surfaces", "\"downsample\": 2"}};
+        for (int r = 0; r < 7; r++) {
             float *out = et_run_effect(ctx, runs[r][0], g, runs[r][1], NULL);
             CHECK(out && tu_all_finite(out, (size_t)w * h * 4));
             free(out);
@@ -525,6 +526,45 @@ static void test_rain_downsample(fx_context *ctx)
     fx_frame_free(b);
 }
 
+/* wet_surfaces' downsample: the lattice cells on one smooth surface interpolate, the
+ * others (across the wall band's creases) are computed exactly: the wall's edge columns
+ * have final's bits, the rest is close to it (the cover edge's soft wetness interpolated
+ * over 3 pixels), 1 and 2 threads agree. */
+static void test_wet_downsample(fx_context *ctx)
+{
+    fx_camera mc;
+    const char *map = rain_map(ctx, 1.0f, 3.0f, &mc, "wet_ds");
+    fx_frame *f = ground_frame(ctx, map, &mc, 1);
+    float *full = et_run_effect(ctx, "wet_surfaces", f, "\"edge_softness\": 1.0, \"downsample\": 1", NULL);
+    float *ds = et_run_effect(ctx, "wet_surfaces", f, "\"edge_softness\": 1.0, \"downsample\": 3", NULL);
+    CHECK(full && ds && tu_all_finite(ds, N * N * 4));
+    float maxd = 0.0f;
+    int wall_diff = 0, changed = 0;
+    const float *src = et_combined(f);
+    for (int i = 0; full && ds && i < N * N; i++) {
+        int x = i % N;
+        for (int c = 0; c < 4; c++) {
+            float d = fabsf(ds[4 * i + c] - full[4 * i + c]);
+            maxd = d > maxd ? d : maxd;
+            if (x == 40 || x == 47) /* the crease columns: in cells with floor and wall corners */
+                wall_diff += d != 0.0f;
+            changed += ds[4 * i + c] != src[4 * i + c];
+        }
+    }
+    CHECK(maxd < 0.05f && wall_diff == 0 && changed > 0);
+    fx_context *c1 = NULL;
+    fx_context_new(&c1, 1);
+    fx_frame *f1 = ground_frame(c1, map, &mc, 1);
+    float *ds1 = et_run_effect(c1, "wet_surfaces", f1, "\"edge_softness\": 1.0, \"downsample\": 3", NULL);
+    CHECK(ds1 && ds && memcmp(ds1, ds, N * N * 4 * sizeof(float)) == 0);
+    free(ds1);
+    fx_frame_free(f1);
+    fx_context_free(c1);
+    free(full);
+    free(ds);
+    fx_frame_free(f);
+}
+
 int main(void)
 {
     fx_context *ctx = NULL;
@@ -534,6 +574,7 @@ int main(void)
     test_cache();
     test_rain_layers_extremes(ctx);
     test_rain_downsample(ctx);
+    test_wet_downsample(ctx);
     fx_context_free(ctx);
     return tu_finish("test_rain");
 }
