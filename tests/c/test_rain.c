@@ -5,6 +5,7 @@
 #include "fx_effect_test.h"
 
 #include "core/aux_view.h"
+#include "core/mask.h"
 
 #include <math.h>
 
@@ -423,9 +424,12 @@ static void test_rain_layers_extremes(fx_context *ctx)
         CHECK_OK(ctx, fx_frame_set_aux_view(g, "rain_map", open, &mc));
         const char *runs[][2] = {{"rain", "\"cover_material\": \"\", \"layers\": 1"},
                                  {"rain", "\"cover_material\": \"\", \"layers\": 3"},
+                                 {"rain", "\"cover_material\": \"\", \"downsample\": 8"},
+                                 {"rain", "\"cover_material\": \"\", \"downsample\": 2"},
                                  {"rain_splashes", ""},
-                                 {"wet_surfaces", ""}};
-        for (int r = 0; r < 4; r++) {
+                                 {"wet_surfaces", ""},
+                                 {"wet_surfaces", "\"downsample\": 2"}};
+        for (int r = 0; r < 7; r++) {
             float *out = et_run_effect(ctx, runs[r][0], g, runs[r][1], NULL);
             CHECK(out && tu_all_finite(out, (size_t)w * h * 4));
             free(out);
@@ -437,6 +441,130 @@ static void test_rain_layers_extremes(fx_context *ctx)
     }
 }
 
+/* rain's downsample knob (streaks on every N-th row, interpolated along their slant): the
+ * depth test stays per pixel (a wall nearer than every layer gets nothing), close to every
+ * row, bit-identical on 1 and 2 threads, light only added; the cover quads' coverage read
+ * lazily from Cryptomatte gives the same bits as the whole-frame mask (forced with more
+ * than 8 rank passes). */
+static void add_crypto(fx_frame *f, int ranks)
+{
+    float id = fx_cryptomatte_id("Rain_Cover"), other = fx_cryptomatte_id("Wall");
+    for (int r = 0; r < ranks; r++) {
+        float *c = calloc((size_t)N * N * 4, sizeof(float));
+        for (int i = 0; r == 0 && i < N * N; i++) {
+            int y = i / N;
+            c[4 * i] = y >= 20 && y < 40 ? id : other;
+            c[4 * i + 1] = y == 20 ? 0.03f : 1.0f; /* a partly covered edge row */
+        }
+        char name[32];
+        snprintf(name, sizeof name, "CryptoMaterial%02d", r);
+        fx_frame_add_pass(f, name, 4, c);
+        free(c);
+    }
+}
+
+static void test_rain_downsample(fx_context *ctx)
+{
+    fx_camera mc;
+    const char *open = rain_map(ctx, -100.0f, 0.0f, &mc, "open_ds");
+    const char *base = "\"cover_material\": \"\", \"density\": 1.0, \"streak_length\": 30.0, \"streak_width\": 2.0";
+    char params[256];
+    /* a wall at 1.5 m (nearer than every layer) on the left half: nothing there */
+    fx_frame *f = street_frame(ctx, 1.5f, open, &mc, 10);
+    snprintf(params, sizeof params, "%s, \"downsample\": 4", base);
+    float *o = et_run_effect(ctx, "rain", f, params, NULL);
+    CHECK(o && tu_all_finite(o, N * N * 4));
+    CHECK(o && count_changed(o, f, 0) == 0 && count_changed(o, f, 1) > 0);
+    free(o);
+    fx_frame_free(f);
+    /* open street: close to every row, never darker, thread count invariant */
+    f = street_frame(ctx, 1e10f, open, &mc, 10);
+    snprintf(params, sizeof params, "%s, \"downsample\": 1", base);
+    float *full = et_run_effect(ctx, "rain", f, params, NULL);
+    snprintf(params, sizeof params, "%s, \"downsample\": 4", base);
+    float *ds = et_run_effect(ctx, "rain", f, params, NULL);
+    const float *src = et_combined(f);
+    double err = 0.0, sum = 0.0;
+    int darker = 0;
+    for (int i = 0; full && ds && i < N * N * 4; i++) {
+        err += fabs((double)ds[i] - full[i]);
+        sum += full[i] - src[i];
+        darker += ds[i] < src[i];
+    }
+    CHECK(full && ds && darker == 0 && sum > 0.0 && err < 0.5 * sum);
+    fx_context *c1 = NULL;
+    fx_context_new(&c1, 1);
+    fx_frame *f1 = street_frame(c1, 1e10f, open, &mc, 10);
+    float *ds1 = et_run_effect(c1, "rain", f1, params, NULL);
+    CHECK(ds1 && ds && memcmp(ds1, ds, N * N * 4 * sizeof(float)) == 0);
+    free(ds1);
+    fx_frame_free(f1);
+    fx_context_free(c1);
+    free(full);
+    free(ds);
+    fx_frame_free(f);
+    /* the camera under a roof: only the cover quads (rows 20..39) get rain */
+    const char *roofed = rain_map(ctx, 100.0f, 50.0f, &mc, "roofed_ds");
+    const char *cov = "\"cover_material\": \"Rain_Cover\", \"density\": 1.0, \"streak_length\": 30.0, "
+                      "\"streak_width\": 2.0, \"downsample\": 4";
+    fx_frame *a = street_frame(ctx, 3.0f, roofed, &mc, 10), *b = street_frame(ctx, 3.0f, roofed, &mc, 10);
+    add_crypto(a, 2);
+    add_crypto(b, 9);
+    float *oa = et_run_effect(ctx, "rain", a, cov, NULL), *ob = et_run_effect(ctx, "rain", b, cov, NULL);
+    CHECK(oa && ob && memcmp(oa, ob, N * N * 4 * sizeof(float)) == 0);
+    const float *sa = et_combined(a);
+    int outside = 0, inside = 0;
+    for (int i = 0; oa && i < N * N; i++) {
+        int y = i / N, changed = memcmp(oa + 4 * i, sa + 4 * i, 16) != 0;
+        outside += changed && !(y >= 20 && y < 40);
+        inside += changed;
+    }
+    CHECK(outside == 0 && inside > 0);
+    free(oa);
+    free(ob);
+    fx_frame_free(a);
+    fx_frame_free(b);
+}
+
+/* wet_surfaces' downsample: the lattice cells on one smooth surface interpolate, the
+ * others (across the wall band's creases) are computed exactly: the wall's edge columns
+ * have final's bits, the rest is close to it (the cover edge's soft wetness interpolated
+ * over 3 pixels), 1 and 2 threads agree. */
+static void test_wet_downsample(fx_context *ctx)
+{
+    fx_camera mc;
+    const char *map = rain_map(ctx, 1.0f, 3.0f, &mc, "wet_ds");
+    fx_frame *f = ground_frame(ctx, map, &mc, 1);
+    float *full = et_run_effect(ctx, "wet_surfaces", f, "\"edge_softness\": 1.0, \"downsample\": 1", NULL);
+    float *ds = et_run_effect(ctx, "wet_surfaces", f, "\"edge_softness\": 1.0, \"downsample\": 3", NULL);
+    CHECK(full && ds && tu_all_finite(ds, N * N * 4));
+    float maxd = 0.0f;
+    int wall_diff = 0, changed = 0;
+    const float *src = et_combined(f);
+    for (int i = 0; full && ds && i < N * N; i++) {
+        int x = i % N;
+        for (int c = 0; c < 4; c++) {
+            float d = fabsf(ds[4 * i + c] - full[4 * i + c]);
+            maxd = d > maxd ? d : maxd;
+            if (x == 40 || x == 47) /* the crease columns: in cells with floor and wall corners */
+                wall_diff += d != 0.0f;
+            changed += ds[4 * i + c] != src[4 * i + c];
+        }
+    }
+    CHECK(maxd < 0.05f && wall_diff == 0 && changed > 0);
+    fx_context *c1 = NULL;
+    fx_context_new(&c1, 1);
+    fx_frame *f1 = ground_frame(c1, map, &mc, 1);
+    float *ds1 = et_run_effect(c1, "wet_surfaces", f1, "\"edge_softness\": 1.0, \"downsample\": 3", NULL);
+    CHECK(ds1 && ds && memcmp(ds1, ds, N * N * 4 * sizeof(float)) == 0);
+    free(ds1);
+    fx_frame_free(f1);
+    fx_context_free(c1);
+    free(full);
+    free(ds);
+    fx_frame_free(f);
+}
+
 int main(void)
 {
     fx_context *ctx = NULL;
@@ -445,6 +573,8 @@ int main(void)
     test_splashes_and_wet(ctx);
     test_cache();
     test_rain_layers_extremes(ctx);
+    test_rain_downsample(ctx);
+    test_wet_downsample(ctx);
     fx_context_free(ctx);
     return tu_finish("test_rain");
 }

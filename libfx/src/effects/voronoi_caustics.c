@@ -196,6 +196,7 @@ typedef struct caustics_job {
     fx_voronoi vor;
     fx_voronoi_table table; /* the frame's points */
     double cell;      /* world units per cell */
+    double inv_cell_d;
     double mean_g;
     double time;
     float inv_mean, inv_lw, wave;
@@ -223,10 +224,14 @@ typedef struct caustics_job {
 
 static void evaluate(const caustics_job *j, double wx, double wy, fx_voronoi_hit *h)
 {
+    /* the fast kinds (float searches) take the product by 1 / cell: no division per query;
+     * the exact kind (reference) keeps the quotient */
+    double cx = j->table.kind ? wx * j->inv_cell_d : wx / j->cell;
+    double cy = j->table.kind ? wy * j->inv_cell_d : wy / j->cell;
     if (j->p->method == METHOD_BRUTE)
-        fx_voronoi_table_brute(&j->table, wx / j->cell, wy / j->cell, h);
+        fx_voronoi_table_brute(&j->table, cx, cy, h);
     else
-        fx_voronoi_table_grid(&j->table, wx / j->cell, wy / j->cell, h);
+        fx_voronoi_table_grid(&j->table, cx, cy, h);
 }
 
 static double pattern_g(const caustics_params *p, const fx_voronoi_hit *h)
@@ -306,9 +311,11 @@ static inline void factors(const caustics_job *j, size_t i, fx_vec3 P, float a, 
         fx_vec3 V = fx_v3_normalize_or(fx_v3_sub(j->eye, P), N);
         float c = 1.0f - fx_saturate(fx_v3_dot(N, V));
         float F = 0.02f + 0.98f * (c * c) * (c * c) * c; /* Schlick: (1 - cos)^5 without powf */
-        fx_vec3 R = fx_v3_reflect(fx_v3_scale(V, -1.0f), N);
         float env[3];
-        env_lookup(&j->env, p->world_color, R, env);
+        if (j->env.rgba) /* world_color alone needs no reflected direction */
+            env_lookup(&j->env, p->world_color, fx_v3_reflect(fx_v3_scale(V, -1.0f), N), env);
+        else
+            env_lookup(&j->env, p->world_color, N, env);
         for (int k = 0; k < 3; k++)
             add[k] += p->environment_strength * F * env[k];
     }
@@ -605,6 +612,7 @@ static fx_result caustics_process(const fx_effect_run *run)
     j.cell = (double)p->tile_size / j.vor.grid;
     j.inv_lw = (float)(1.0 / p->line_width);
     j.inv_cell = (float)(1.0 / j.cell);
+    j.inv_cell_d = 1.0 / j.cell;
     /* exp(-10) = 5e-5: below any visible change of the focus ratio */
     j.far_gap = p->mode == MODE_PHYSICAL && exponent_of(p) >= 1.0 ? (float)(10.0 * p->line_width) : 0.0f;
     j.wave = (float)sin(2.0 * j.time);

@@ -79,10 +79,11 @@ typedef struct fx_voronoi_table {
     int *list_n;       /* per square (row-major over G * sub columns): count; -1: ring search */
     float *lx, *ly;    /* FX_VORONOI_LIST_MAX per square: the candidate's coordinates (its image) */
     int *lk;           /* ... and its point index */
-    double cbrt_lut[3 * 256]; /* p = 1.5: cbrt(2^r m) at the middle of m's bins (FX_VORONOI_CBRT_BINS) */
+    double inv_grid;   /* 1 / G: the fast kinds wrap queries with a product, no division */
+    double cbrt_lut[3 * (1024 + 1)]; /* p = 1.5: cbrt(2^r m) at m = 1 + i / FX_VORONOI_CBRT_BINS */
 } fx_voronoi_table;
 
-#define FX_VORONOI_CBRT_BINS 256
+#define FX_VORONOI_CBRT_BINS 1024
 
 #define FX_VORONOI_LIST_MAX 12
 
