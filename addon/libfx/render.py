@@ -489,12 +489,23 @@ def _ui_save_image(scene_name, exr, image):
             _ui_report("ERROR", "libfx: cannot save %s: %s" % (image, e))
 
 
+@persistent
+def on_undo_redo(*args):
+    """Undo/redo puts values back without update callbacks: re-run live sessions."""
+    from . import live
+    for scene in bpy.data.scenes:
+        if getattr(scene, "libfx", None) is not None:
+            live.changed(scene)
+
+
 HANDLERS = (("frame_change_post", on_frame_change_post),
             ("render_init", on_render_init),
             ("render_post", on_render_post),
             ("render_complete", on_render_done),
             ("render_cancel", on_render_done),
-            ("load_post", on_load_post))
+            ("load_post", on_load_post),
+            ("undo_post", on_undo_redo),
+            ("redo_post", on_undo_redo))
 
 
 def register():
