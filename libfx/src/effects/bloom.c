@@ -366,11 +366,13 @@ static void composite_coarse_rows(void *user, int begin, int end, int worker)
         const float *srow = run->src + (size_t)y * run->width * 4;
         float *drow = run->dst + (size_t)y * run->width * 4;
         const int screen = p->composite == COMP_SCREEN;
+        const int *restrict cx = j->cx, last = c->w - 1;
+        const float *restrict cw = j->cw;
         for (int x = run->roi.x0; x < run->roi.x1; x++) {
             const v4f s = finite4(ld4(srow + 4 * (size_t)x));
-            const int x0 = j->cx[x], x1 = x0 + 1 < c->w ? x0 + 1 : x0;
+            const int x0 = cx[x], x1 = x0 < last ? x0 + 1 : x0;
             const v4f a = ld4(row + 4 * (size_t)x0);
-            v4f g = a + V4(j->cw[x]) * (ld4(row + 4 * (size_t)x1) - a);
+            v4f g = a + V4(cw[x]) * (ld4(row + 4 * (size_t)x1) - a);
             if (screen) {
                 v4f s01 = sel4(s > V4(0.0f), s, V4(0.0f));
                 s01 = sel4(s01 < V4(1.0f), s01, V4(1.0f));
