@@ -262,8 +262,17 @@ static float shade_lo(const vsm_job *j, int x, int y, int *has_surface, float *a
     const int xs[4] = {X0, X1, X0, X1}, ys[4] = {Y0, Y0, Y1, Y1};
     const float bw[4] = {(1.0f - tx) * (1.0f - ty), tx * (1.0f - ty), (1.0f - tx) * ty, tx * ty};
     float acc = 0.0f, acc_a = 0.0f, wsum = 0.0f;
+    /* the four texels alike in value (a lit or evenly shadowed area: most pixels): the
+     * first one on the pixel's surface gives the answer */
+    size_t id[4];
+    for (int k = 0; k < 4; k++)
+        id[k] = (size_t)ys[k] * j->lw + xs[k];
+    const float v0 = j->lo_v[id[0]], a0 = j->lo_a[id[0]];
+    int uniform = 1;
+    for (int k = 1; k < 4; k++)
+        uniform &= j->lo_v[id[k]] == v0 && j->lo_a[id[k]] == a0;
     for (int k = 0; k < 4; k++) {
-        const size_t i = (size_t)ys[k] * j->lw + xs[k];
+        const size_t i = id[k];
         const float ds = j->lo_d[i];
         if (!(ds > 0.0f))
             continue;
@@ -275,6 +284,11 @@ static float shade_lo(const vsm_job *j, int x, int y, int *has_surface, float *a
             const float c = pn[0] * m[0] + pn[1] * m[1] + pn[2] * m[2];
             if (!(c > 0.0f && c * c > 0.64f * nn))
                 continue;
+        }
+        if (uniform) {
+            *has_surface = 1;
+            *a = fx_saturate(a0);
+            return fx_saturate(v0);
         }
         const float w = (bw[k] + 1e-3f) * (1.0f - dd * inv_lim);
         acc += w * j->lo_v[i];
@@ -295,7 +309,7 @@ static void vsm_rows(void *user, int y0, int y1)
     vsm_job *j = user;
     const fx_effect_run *run = j->run;
     const fx_rect *roi = &run->roi;
-    for (int y = roi->y0 + y0; y < roi->y0 + y1; y++)
+    for (int y = roi->y0 + y0; y < roi->y0 + y1; y++) {
         for (int x = roi->x0; x < roi->x1; x++) {
             size_t i = (size_t)y * run->width + x;
             const float *s = run->src + 4 * i;
@@ -307,6 +321,12 @@ static void vsm_rows(void *user, int y0, int y1)
                 float v = shade_lo(j, x, y, &has, &a);
                 if (j->vis_out)
                     j->vis_out[i] = v;
+                if (a == 0.0f) {
+                    /* nothing lost (most lit pixels): both formulas below give s itself */
+                    if (o != s)
+                        memcpy(o, s, 4 * sizeof(float));
+                    continue;
+                }
                 if (j->p->apply == APPLY_COMBINED) {
                     for (int c = 0; c < 3; c++)
                         o[c] = s[c] * (1.0f - a);
@@ -353,6 +373,10 @@ static void vsm_rows(void *user, int y0, int y1)
             }
             o[3] = s[3];
         }
+        /* NaN/Inf replaced while the row is in cache (FX_EFFECT_OWN_FINITE: the stack does
+         * not read the output again) */
+        fx_effect_finish_row(run, run->dst + ((size_t)y * run->width + roi->x0) * 4, (size_t)(roi->x1 - roi->x0) * 4);
+    }
 }
 
 static fx_result vsm_process(const fx_effect_run *run)
@@ -465,6 +489,7 @@ const fx_effect_class fx_effect_vsm_shadows = {
     .passes = vsm_passes,
     .needs_camera = vsm_needs_camera,
     .aux_views = vsm_aux_views,
+    .flags = FX_EFFECT_OWN_FINITE,
     .halo = NULL,
     .validate = NULL,
     .process = vsm_process,
