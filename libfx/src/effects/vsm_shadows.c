@@ -373,9 +373,6 @@ static void vsm_rows(void *user, int y0, int y1)
             }
             o[3] = s[3];
         }
-        /* NaN/Inf replaced while the row is in cache (FX_EFFECT_OWN_FINITE: the stack does
-         * not read the output again) */
-        fx_effect_finish_row(run, run->dst + ((size_t)y * run->width + roi->x0) * 4, (size_t)(roi->x1 - roi->x0) * 4);
     }
 }
 
@@ -489,7 +486,6 @@ const fx_effect_class fx_effect_vsm_shadows = {
     .passes = vsm_passes,
     .needs_camera = vsm_needs_camera,
     .aux_views = vsm_aux_views,
-    .flags = FX_EFFECT_OWN_FINITE,
     .halo = NULL,
     .validate = NULL,
     .process = vsm_process,
