@@ -100,8 +100,9 @@ static void test_properties(fx_context *c1, fx_context *c2)
         px[i] *= 4.0f;
     fx_frame_free(f);
     const char *ps[] = { "\"threshold\":0.8", "\"mode\":\"seed\",\"radius\":300", "\"composite\":\"screen\",\"radius\":7",
-                         "\"threshold\":0.8,\"fine_level\":\"fast\"" };
-    for (int k = 0; k < 4; k++) {
+                         "\"threshold\":0.8,\"fine_level\":\"fast\"", "\"threshold\":0.8,\"fine_level\":\"coarse\"",
+                         "\"composite\":\"screen\",\"fine_level\":\"coarse\",\"radius\":5" };
+    for (int k = 0; k < 6; k++) {
         float *a = run_px(c1, px, w, h, ps[k], NULL), *b = run_px(c2, px, w, h, ps[k], NULL);
         CHECK(a && b && memcmp(a, b, n * sizeof(float)) == 0 && memcmp(a, px, n * sizeof(float)) != 0);
         float *m = run_px(c2, px, w, h, ps[k], "{\"rect\":[10,5,40,30]}");
@@ -126,9 +127,45 @@ static void test_properties(fx_context *c1, fx_context *c2)
     for (size_t i = 0; close && i < n; i++)
         close &= fabsf(full[i] - fast[i]) <= 1e-5f * (1.0f + fabsf(full[i]));
     CHECK(close);
+    /* coarse too (level 2 carries level 1's share: the same energy), for 2 to 6 levels and
+     * odd sizes, where the interpolation clamps at the edges */
+    const float radii[] = { 4, 16, 100 };
+    for (int k = 0; k < 3; k++) {
+        char pc[96], pf[96];
+        snprintf(pc, sizeof pc, "\"radius\":%g,\"fine_level\":\"coarse\"", radii[k]);
+        snprintf(pf, sizeof pf, "\"radius\":%g", radii[k]);
+        float *co = run_px(c1, cst, w, h, pc, NULL), *fu = run_px(c1, cst, w, h, pf, NULL);
+        close = co && fu;
+        for (size_t i = 0; close && i < n; i++)
+            close &= fabsf(fu[i] - co[i]) <= 1e-5f * (1.0f + fabsf(fu[i]));
+        CHECK(close);
+        free(co);
+        free(fu);
+    }
     free(full);
     free(fast);
     free(cst);
+    /* coarse on a single bright pixel: no energy lost or made but the bright pass's (of the
+     * 4x4 block's mean instead of the pixel's) */
+    {
+        const int W = 129, H = 97;
+        float *dot = filled(W, H, 0, 0, 0, 1);
+        float *dp = dot + ((size_t)48 * W + 64) * 4;
+        dp[0] = dp[1] = dp[2] = 1000.0f;
+        float *co = run_px(c1, dot, W, H, "\"radius\":16,\"fine_level\":\"coarse\",\"knee\":0", NULL);
+        float *fu = run_px(c1, dot, W, H, "\"radius\":16,\"knee\":0", NULL);
+        double sc = 0, sf = 0;
+        for (int i = 0; co && fu && i < W * H; i++) {
+            sc += co[4 * i] - dot[4 * i];
+            sf += fu[4 * i] - dot[4 * i];
+        }
+        /* full's bright pass of the dot: 1000 - 1 (threshold 1); coarse's, of its 4x4 block's
+         * mean: 16 (1000 / 16 - 1) = 984 */
+        CHECK(co && fu && sf > 100.0 && fabs(sc / sf - 984.0 / 999.0) < 1e-3);
+        free(co);
+        free(fu);
+        free(dot);
+    }
 }
 
 static void test_extremes(fx_context *ctx)
@@ -140,13 +177,21 @@ static void test_extremes(fx_context *ctx)
     const char *ps[] = { "", "\"mode\":\"seed\"", "\"threshold\":0,\"knee\":0", "\"mode\":\"seed\",\"threshold\":0",
                          "\"radius\":65536,\"intensity\":100,\"clamp\":3e38", "\"radius\":0",
                          "\"composite\":\"screen\",\"level_sigma\":8", "\"mode\":\"seed\",\"scene_luminance\":65504,\"middle_grey\":100",
-                         "\"fine_level\":\"fast\",\"radius\":65536,\"clamp\":3e38", "\"fine_level\":\"fast\",\"mode\":\"seed\"" };
-    for (int k = 0; k < 10; k++) {
+                         "\"fine_level\":\"fast\",\"radius\":65536,\"clamp\":3e38", "\"fine_level\":\"fast\",\"mode\":\"seed\"",
+                         "\"fine_level\":\"coarse\",\"radius\":65536,\"clamp\":3e38", "\"fine_level\":\"coarse\",\"radius\":3",
+                         "\"fine_level\":\"coarse\",\"composite\":\"screen\"" };
+    for (int k = 0; k < 13; k++) {
         float *o = run_px(ctx, px, 13, 7, ps[k], NULL);
         CHECK(o && tu_all_finite(o, 13 * 7 * 4));
         free(o);
         o = run_px(ctx, px, 1, 1, ps[k], NULL);
         CHECK(o && tu_all_finite(o, 4));
+        free(o);
+        o = run_px(ctx, px, 1, 13, ps[k], NULL);
+        CHECK(o && tu_all_finite(o, 13 * 4));
+        free(o);
+        o = run_px(ctx, px, 13, 1, ps[k], NULL);
+        CHECK(o && tu_all_finite(o, 13 * 4));
         free(o);
     }
 }

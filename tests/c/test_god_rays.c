@@ -426,6 +426,43 @@ static void test_fused_equals_buffered(fx_context *ctx)
     free(img);
 }
 
+/* occlusion sky: with every pixel beyond sky_distance it is luminance's picture bit for bit
+ * (at full size and reduced); with none (and NaN depth) the identity: the pixels that are
+ * not sky are skipped before their colour is looked at, which must change nothing. */
+static void test_sky_skip(fx_context *ctx)
+{
+    float *img = spot_image(40, 12);
+    float *far = malloc((size_t)W * H * sizeof(float)), *near = malloc((size_t)W * H * sizeof(float));
+    for (int i = 0; i < W * H; i++) {
+        far[i] = 1e10f;
+        near[i] = i % 7 == 3 ? NAN : 5.0f;
+    }
+    for (int k = 0; k < 3; k++) {
+        rset r = defaults();
+        r.method = "polar";
+        r.down = k == 0 ? 1 : k == 1 ? 2 : 4;
+        float *lum_out = run_rays(ctx, img, r);
+        float *o[2] = {NULL, NULL};
+        for (int d = 0; d < 2; d++) {
+            fx_frame *f = et_frame(ctx, W, H, img);
+            fx_frame_add_pass(f, "Depth", 1, d ? near : far);
+            fx_stack *s = rays_stack(ctx, r);
+            if (s && fx_stack_set_enum(s, 0, "occlusion", "sky") == FX_OK)
+                o[d] = et_run(ctx, s, f);
+            fx_stack_free(s);
+            fx_frame_free(f);
+        }
+        CHECK(lum_out && o[0] && memcmp(lum_out, o[0], (size_t)W * H * 4 * sizeof(float)) == 0);
+        CHECK(o[1] && memcmp(img, o[1], (size_t)W * H * 4 * sizeof(float)) == 0);
+        free(lum_out);
+        free(o[0]);
+        free(o[1]);
+    }
+    free(far);
+    free(near);
+    free(img);
+}
+
 int main(void)
 {
     fx_context *ctx = NULL;
@@ -439,6 +476,7 @@ int main(void)
     test_methods_converge(ctx);
     test_threads();
     test_fused_equals_buffered(ctx);
+    test_sky_skip(ctx);
     fx_context_free(ctx);
     return tu_finish("test_god_rays");
 }

@@ -34,12 +34,12 @@ typedef struct bloom_params {
 
 enum { MODE_SOFT_KNEE = 0, MODE_SEED };
 enum { COMP_ADD = 0, COMP_SCREEN };
-enum { FINE_FULL = 0, FINE_FAST };
+enum { FINE_FULL = 0, FINE_FAST, FINE_COARSE };
 #define MAX_LEVELS 16
 
 static const char *const mode_items[] = { "soft_knee", "seed" };
 static const char *const comp_items[] = { "add", "screen" };
-static const char *const fine_items[] = { "full", "fast" };
+static const char *const fine_items[] = { "full", "fast", "coarse" };
 
 static const fx_param_def bloom_param_defs[] = {
     FX_P_ENUM(bloom_params, mode, "mode", MODE_SOFT_KNEE, mode_items,
@@ -68,7 +68,10 @@ static const fx_param_def bloom_param_defs[] = {
     FX_P_ENUM(bloom_params, fine_level, "fine_level", FINE_FULL, fine_items,
               "The half-resolution level (a quality knob): full: the bright pass of every pixel, "
               "averaged 2x2, then blurred; fast: the bright pass of each 2x2 average, not blurred "
-              "(about a third of bloom's work; the finest glow is a little less smooth)"),
+              "(about a third of bloom's work; the finest glow is a little less smooth); coarse: as "
+              "fast, but the half-resolution level is never stored: the quarter-resolution level is "
+              "made straight from the frame, carries the finest level's share of the glow too, and "
+              "is interpolated to full size (the draft: cheapest, the glow a little wider)"),
 };
 
 typedef struct level {
@@ -85,6 +88,10 @@ typedef struct bloom_job {
     level lv[MAX_LEVELS + 1];
     int nlev;
     int from, to;   /* the levels a step reads and writes */
+    int coarse;     /* fine_level coarse with at least 2 levels: level 1 is not stored */
+    float self;     /* up_rows: level `to` = self x itself + the upsampled level `from` */
+    int *cx;        /* coarse composite: left tap of each full-resolution column */
+    float *cw;      /* and its weight towards the right tap */
     double *row_sums;
 } bloom_job;
 
@@ -149,6 +156,66 @@ static void luminance_rows(void *user, int begin, int end)
     }
 }
 
+/* fine_level fast's level-1 texel from the source's 2x2 block (rows r0, r1, columns x0, x1):
+ * the bright pass of the block's mean (inputs clamped first: NaN -> 0). */
+static inline v4f fast_texel(const bloom_job *j, const float *r0, const float *r1, int x0, int x1)
+{
+    const float cv = j->p->clamp_value;
+    v4f a0 = ld4(r0 + 4 * x0), a1 = ld4(r0 + 4 * x1), a2 = ld4(r1 + 4 * x0), a3 = ld4(r1 + 4 * x1);
+#define CL(v) v = sel4(v > V4(0.0f), v, V4(0.0f)), v = sel4(v < V4(cv), v, V4(cv))
+    CL(a0);
+    CL(a1);
+    CL(a2);
+    CL(a3);
+#undef CL
+    float m[4];
+    st4(m, ((a0 + a1) + (a2 + a3)) * V4(0.25f));
+    v4f acc = bright4(j, m) * V4(4.0f) * V4(0.25f); /* as down_rows: x 4, then its 0.25 */
+    acc[3] = 0.0f;
+    return acc;
+}
+
+/* fine_level coarse: level 2 straight from the source: the bright pass of each 4x4 block's
+ * mean (inputs clamped first: NaN -> 0; rows and columns past the edge replicated, as the
+ * 2x2 steps do). One bright pass per 16 pixels: the frame is read once, at memory speed. */
+static void down2_rows(void *user, int begin, int end)
+{
+    const bloom_job *j = user;
+    const fx_effect_run *run = j->run;
+    const int sw = run->width, sh = run->height;
+    const level *d = &j->lv[2];
+    const float cv = j->p->clamp_value;
+    for (int y = begin; y < end; y++) {
+        const float *r[4];
+        for (int k = 0; k < 4; k++) {
+            int sy = 4 * y + k < sh ? 4 * y + k : sh - 1;
+            r[k] = run->src + (size_t)sy * sw * 4;
+        }
+        float *o = d->px + (size_t)y * d->w * 4;
+        for (int x = 0; x < d->w; x++) {
+            int c[4];
+            for (int k = 0; k < 4; k++)
+                c[k] = 4 * (4 * x + k < sw ? 4 * x + k : sw - 1);
+            v4f acc = V4(0.0f);
+            for (int k = 0; k < 4; k++) {
+                v4f a0 = ld4(r[k] + c[0]), a1 = ld4(r[k] + c[1]), a2 = ld4(r[k] + c[2]), a3 = ld4(r[k] + c[3]);
+#define CL(v) v = sel4(v > V4(0.0f), v, V4(0.0f)), v = sel4(v < V4(cv), v, V4(cv))
+                CL(a0);
+                CL(a1);
+                CL(a2);
+                CL(a3);
+#undef CL
+                acc += (a0 + a1) + (a2 + a3);
+            }
+            float m[4];
+            st4(m, acc * V4(1.0f / 16.0f));
+            acc = bright4(j, m);
+            acc[3] = 0.0f;
+            st4(o + 4 * (size_t)x, acc);
+        }
+    }
+}
+
 /* Level `to` from level `from` (from == 0: the source through the bright pass, fused). */
 static void down_rows(void *user, int begin, int end)
 {
@@ -165,19 +232,9 @@ static void down_rows(void *user, int begin, int end)
         for (int x = 0; x < d->w; x++) {
             const int x0 = 2 * x, x1 = 2 * x + 1 < sw ? 2 * x + 1 : sw - 1;
             v4f acc;
-            if (j->from == 0 && j->p->fine_level == FINE_FAST) {
-                /* the bright pass of the 2x2 average (inputs clamped first: NaN -> 0) */
-                const float cv = j->p->clamp_value;
-                v4f a0 = ld4(r0 + 4 * x0), a1 = ld4(r0 + 4 * x1), a2 = ld4(r1 + 4 * x0), a3 = ld4(r1 + 4 * x1);
-#define CL(v) v = sel4(v > V4(0.0f), v, V4(0.0f)), v = sel4(v < V4(cv), v, V4(cv))
-                CL(a0);
-                CL(a1);
-                CL(a2);
-                CL(a3);
-#undef CL
-                float m[4];
-                st4(m, ((a0 + a1) + (a2 + a3)) * V4(0.25f));
-                acc = bright4(j, m) * V4(4.0f); /* x 4: the 0.25 below */
+            if (j->from == 0 && j->p->fine_level != FINE_FULL) {
+                st4(o + 4 * (size_t)x, fast_texel(j, r0, r1, x0, x1));
+                continue;
             } else if (j->from == 0)
                 acc = (bright4(j, r0 + 4 * x0) + bright4(j, r0 + 4 * x1)) +
                       (bright4(j, r1 + 4 * x0) + bright4(j, r1 + 4 * x1));
@@ -223,6 +280,12 @@ static void up_rows(void *user, int begin, int end)
         tent(y, c->h, &ya, &yb);
         const float *ra = c->px + (size_t)ya * c->w * 4, *rb = c->px + (size_t)yb * c->w * 4;
         float *o = f->px + (size_t)y * f->w * 4;
+        if (j->self != 1.0f) {
+            const v4f k = V4(j->self);
+            for (int x = 0; x < f->w; x++)
+                st4(o + 4 * (size_t)x, k * ld4(o + 4 * (size_t)x) + up4(c, j->tx[0], j->tx[1], x, ra, rb));
+            continue;
+        }
         for (int x = 0; x < f->w; x++)
             st4(o + 4 * (size_t)x, ld4(o + 4 * (size_t)x) + up4(c, j->tx[0], j->tx[1], x, ra, rb));
     }
@@ -272,6 +335,54 @@ static void composite_rows(void *user, int begin, int end)
     }
 }
 
+/* fine_level coarse: the glow is level 2 interpolated bilinearly (4x, texel centres
+ * aligned); each row first blends its two level-2 rows (per-worker scratch), then each
+ * pixel blends two texels of that row. */
+typedef struct coarse_comp {
+    const bloom_job *j;
+    float **scratch; /* per worker: level 2's width of RGBA */
+} coarse_comp;
+
+static void composite_coarse_rows(void *user, int begin, int end, int worker)
+{
+    const coarse_comp *cc = user;
+    const bloom_job *j = cc->j;
+    const fx_effect_run *run = j->run;
+    const bloom_params *p = j->p;
+    const level *c = &j->lv[2];
+    const float scale = p->intensity / (float)j->nlev;
+    const v4f sc = { scale, scale, scale, 0.0f }; /* alpha passes */
+    float *row = cc->scratch[worker];
+    for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++) {
+        float v = ((float)y + 0.5f) * 0.25f - 0.5f;
+        v = v > 0.0f ? (v < (float)(c->h - 1) ? v : (float)(c->h - 1)) : 0.0f;
+        const int y0 = (int)v, y1 = y0 + 1 < c->h ? y0 + 1 : y0;
+        const v4f ty = V4(v - (float)y0);
+        const float *ra = c->px + (size_t)y0 * c->w * 4, *rb = c->px + (size_t)y1 * c->w * 4;
+        for (int x = 0; x < c->w; x++) {
+            const v4f a = ld4(ra + 4 * (size_t)x);
+            st4(row + 4 * (size_t)x, (a + ty * (ld4(rb + 4 * (size_t)x) - a)) * sc);
+        }
+        const float *srow = run->src + (size_t)y * run->width * 4;
+        float *drow = run->dst + (size_t)y * run->width * 4;
+        const int screen = p->composite == COMP_SCREEN;
+        const int *restrict cx = j->cx, last = c->w - 1;
+        const float *restrict cw = j->cw;
+        for (int x = run->roi.x0; x < run->roi.x1; x++) {
+            const v4f s = finite4(ld4(srow + 4 * (size_t)x));
+            const int x0 = cx[x], x1 = x0 < last ? x0 + 1 : x0;
+            const v4f a = ld4(row + 4 * (size_t)x0);
+            v4f g = a + V4(cw[x]) * (ld4(row + 4 * (size_t)x1) - a);
+            if (screen) {
+                v4f s01 = sel4(s > V4(0.0f), s, V4(0.0f));
+                s01 = sel4(s01 < V4(1.0f), s01, V4(1.0f));
+                g *= V4(1.0f) - s01;
+            }
+            st4(drow + 4 * (size_t)x, finite4(s + g));
+        }
+    }
+}
+
 static int levels_for(const bloom_params *p, int w, int h)
 {
     int n = 0;
@@ -301,12 +412,8 @@ static fx_result bloom_process(const fx_effect_run *run)
     if (roi->x1 <= roi->x0 || roi->y1 <= roi->y0)
         return FX_OK;
     const int w = run->width, h = run->height;
-    if (!(p->intensity > 0.0f)) {
-        for (int y = roi->y0; y < roi->y1; y++)
-            memcpy(run->dst + ((size_t)y * w + roi->x0) * 4, run->src + ((size_t)y * w + roi->x0) * 4,
-                   (size_t)(roi->x1 - roi->x0) * 4 * sizeof(float));
-        return FX_OK;
-    }
+    if (!(p->intensity > 0.0f))
+        return fx_effect_pass_through(run); /* zero intensity: the identity */
     const char *where = run->where;
     bloom_job j;
     memset(&j, 0, sizeof j);
@@ -334,6 +441,8 @@ static fx_result bloom_process(const fx_effect_run *run)
         j.exposure = (float)(e < 1e30 ? e : 1e30);
     }
     j.nlev = levels_for(p, w, h);
+    j.coarse = p->fine_level == FINE_COARSE && j.nlev >= 2;
+    j.self = 1.0f;
     int lw = w, lh = h;
     for (int l = 1; l <= j.nlev; l++) {
         lw = (lw + 1) / 2;
@@ -342,21 +451,24 @@ static fx_result bloom_process(const fx_effect_run *run)
         j.lv[l].h = lh;
         /* from the context's buffer store: the same sizes frame after frame, already mapped
          * (a fresh 1080p level 1 is 8 MB of page faults and zeroing per run) */
+        if (l == 1 && j.coarse)
+            continue; /* never stored */
         j.lv[l].px = fx_buffer_get(run->ctx, (size_t)lw * lh * 4 * sizeof(float));
         if (!j.lv[l].px) {
             r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for pyramid level %d", where, l);
             goto out;
         }
     }
-    for (int l = 1; l <= j.nlev; l++) {
+    for (int l = j.coarse ? 2 : 1; l <= j.nlev; l++) {
         j.from = l - 1;
         j.to = l;
-        fx_parallel_for(run->ctx, j.lv[l].h, fx_grain_for(run->ctx, j.lv[l].h), down_rows, &j);
+        fx_parallel_for(run->ctx, j.lv[l].h, fx_grain_for(run->ctx, j.lv[l].h), l == 2 && j.coarse ? down2_rows : down_rows,
+                        &j);
     }
     /* extended-box cascade (3 passes): cost independent of sigma, and at the small per-level
      * sigmas (~1.25) several times cheaper than the exact FIR recursive switches to */
     fx_blur_spec spec = { p->level_sigma, FX_BLUR_BOX, 3 };
-    for (int l = p->fine_level == FINE_FAST ? 2 : 1; l <= j.nlev && !r; l++)
+    for (int l = p->fine_level != FINE_FULL ? 2 : 1; l <= j.nlev && !r; l++)
         r = fx_blur_image(run->ctx, j.lv[l].px, j.lv[l].px, j.lv[l].w, j.lv[l].h, 4, &spec, NULL, where);
     if (!r && j.nlev > 0) {
         j.tx[0] = fx_mem_alloc((size_t)w * sizeof(int));
@@ -364,19 +476,53 @@ static fx_result bloom_process(const fx_effect_run *run)
         if (!j.tx[0] || !j.tx[1])
             r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
     }
-    for (int l = j.nlev - 1; l >= 1 && !r; l--) {
+    /* coarse: level 2 stands in for level 1 too (its own glow counts twice: the same energy) */
+    if (!r && j.coarse && j.nlev == 2) {
+        float *q = j.lv[2].px;
+        for (size_t i = 0, n = (size_t)j.lv[2].w * j.lv[2].h * 4; i < n; i++)
+            q[i] *= 2.0f;
+    }
+    for (int l = j.nlev - 1; l >= (j.coarse ? 2 : 1) && !r; l--) {
         j.from = l + 1;
         j.to = l;
+        j.self = j.coarse && l == 2 ? 2.0f : 1.0f;
         tent_columns(&j.lv[l + 1], j.lv[l].w, j.tx[0], j.tx[1]);
         fx_parallel_for(run->ctx, j.lv[l].h, fx_grain_for(run->ctx, j.lv[l].h), up_rows, &j);
     }
-    if (!r) {
+    if (!r && j.coarse) {
+        int workers = fx_parallel_workers(run->ctx);
+        coarse_comp cc = { &j, fx_mem_alloc((size_t)workers * sizeof(float *)) };
+        j.cx = fx_mem_alloc((size_t)w * sizeof(int));
+        j.cw = fx_mem_alloc((size_t)w * sizeof(float));
+        if (cc.scratch)
+            memset(cc.scratch, 0, (size_t)workers * sizeof(float *));
+        int ok = cc.scratch && j.cx && j.cw;
+        for (int k = 0; ok && k < workers; k++)
+            ok = (cc.scratch[k] = fx_mem_alloc((size_t)j.lv[2].w * 4 * sizeof(float))) != NULL;
+        if (ok) {
+            for (int x = 0; x < w; x++) {
+                float u = ((float)x + 0.5f) * 0.25f - 0.5f;
+                u = u > 0.0f ? (u < (float)(j.lv[2].w - 1) ? u : (float)(j.lv[2].w - 1)) : 0.0f;
+                j.cx[x] = (int)u;
+                j.cw[x] = u - (float)j.cx[x];
+            }
+            int rows = roi->y1 - roi->y0;
+            fx_parallel_for_worker(run->ctx, rows, fx_grain_for(run->ctx, rows), composite_coarse_rows, &cc);
+        } else {
+            r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
+        }
+        for (int k = 0; cc.scratch && k < workers; k++)
+            fx_mem_free(cc.scratch[k]);
+        fx_mem_free(cc.scratch);
+    } else if (!r) {
         if (j.nlev > 0)
             tent_columns(&j.lv[1], w, j.tx[0], j.tx[1]);
         int rows = roi->y1 - roi->y0;
         fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), composite_rows, &j);
     }
 out:
+    fx_mem_free(j.cx);
+    fx_mem_free(j.cw);
     fx_mem_free(j.tx[0]);
     fx_mem_free(j.tx[1]);
     for (int l = 1; l <= MAX_LEVELS; l++)
@@ -390,11 +536,15 @@ const fx_effect_class fx_effect_bloom = {
     .params_size = sizeof(bloom_params),
     .params = bloom_param_defs,
     .param_count = FX_COUNT_OF(bloom_param_defs),
-    .presets = { "{\"level_sigma\": 0.8, \"fine_level\": \"fast\"}", "{\"level_sigma\": 1.0, \"fine_level\": \"fast\"}",
+    .presets = { "{\"level_sigma\": 0.8, \"fine_level\": \"coarse\"}", "{\"level_sigma\": 1.0, \"fine_level\": \"fast\"}",
                  "{\"level_sigma\": 1.25, \"fine_level\": \"full\"}", "{\"level_sigma\": 2.0, \"fine_level\": \"full\"}" },
     .passes = NULL,
     .needs_camera = NULL,
     .halo = bloom_halo,
     .validate = NULL,
     .process = bloom_process,
+    /* the composite writes finite4() of every pixel. (Not FX_EFFECT_IN_PLACE, though it
+     * could be: tests/python/test_cli_no_data_loss.py's out-of-memory case counts on bloom
+     * needing a second frame-sized buffer.) */
+    .flags = FX_EFFECT_OWN_FINITE,
 };

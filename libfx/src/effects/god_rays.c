@@ -224,6 +224,11 @@ static inline v4f occ_pixel(const occ_job *j, int x, int y)
     const god_rays_params *p = j->p;
     const int w = j->run->width;
     size_t i = (size_t)y * w + x;
+    /* occlusion sky: a pixel that is neither sky nor light_material emits nothing (the
+     * general path below gives exactly 0 there too: the colour is finite and >= 0) */
+    if (p->occlusion == OCC_SKY && !(j->depth && j->depth[i] > p->sky_distance) &&
+        !(j->material && j->material->coverage[i] > 0.0f))
+        return V4(0.0f);
     /* emitting colour: negative, NaN and +Inf channels count as 0 */
     v4f c = ld4(j->run->src + i * 4);
     c = sel4(c > V4(0.0f), c, V4(0.0f));
@@ -292,7 +297,22 @@ typedef struct comp_job {
     int lw, lh, f;
     double fade;
     int screen;
+    const int *cx;       /* reduced: per column, the left texel and its weight towards the */
+    const float *ctx;    /* right one (the per-pixel arithmetic of the bilinear, done once) */
 } comp_job;
+
+/* The column part of the reduced composite's bilinear for columns [x0, x1). */
+static void comp_columns(int x0, int x1, int lw, int f, int *cx, float *ctx)
+{
+    double inv_f = 1.0 / f;
+    for (int x = x0; x < x1; x++) {
+        double u = (x + 0.5) * inv_f - 0.5;
+        u = u < 0.0 ? 0.0 : u > lw - 1 ? lw - 1 : u;
+        int X0 = (int)u;
+        cx[x - x0] = X0;
+        ctx[x - x0] = (float)(u - X0);
+    }
+}
 
 static void comp_rows(void *user, int begin, int end)
 {
@@ -320,10 +340,8 @@ static void comp_rows(void *user, int begin, int end)
             if (j->rays) {
                 r = ld4(j->rays + i * 4);
             } else {
-                double u = (x + 0.5) * inv_f - 0.5;
-                u = u < 0.0 ? 0.0 : u > j->lw - 1 ? j->lw - 1 : u;
-                int X0 = (int)u, X1 = X0 + 1 < j->lw ? X0 + 1 : X0;
-                v4f tx = V4((float)(u - X0));
+                int X0 = j->cx[x - run->roi.x0], X1 = X0 + 1 < j->lw ? X0 + 1 : X0;
+                v4f tx = V4(j->ctx[x - run->roi.x0]);
                 v4f a0 = ld4(r0 + 4 * X0), a1 = ld4(r0 + 4 * X1), b0 = ld4(r1 + 4 * X0), b1 = ld4(r1 + 4 * X1);
                 v4f a = a0 + tx * (a1 - a0), b = b0 + tx * (b1 - b0);
                 r = a + ty * (b - a); /* the zero lane stays 0 */
@@ -429,11 +447,19 @@ static fx_result god_rays_process(const fx_effect_run *run)
             fx_parallel_for(run->ctx, lh, fx_grain_for(run->ctx, lh), occ_lo_rows, &lj);
             r = fx_radial_blur_polar_reduced(run->ctx, lo, lrays, w, h, &rb, &run->roi, where);
         }
+        int cols = run->roi.x1 - run->roi.x0;
+        int *cx = r == FX_OK ? fx_mem_alloc((size_t)cols * sizeof(int)) : NULL;
+        float *ctx = r == FX_OK ? fx_mem_alloc((size_t)cols * sizeof(float)) : NULL;
+        if (r == FX_OK && (!cx || !ctx))
+            r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
         if (r == FX_OK) {
-            comp_job cj = {run, NULL, lrays, lw, lh, rb.downsample, fade, p->composite == COMP_SCREEN};
+            comp_columns(run->roi.x0, run->roi.x1, lw, rb.downsample, cx, ctx);
+            comp_job cj = {run, NULL, lrays, lw, lh, rb.downsample, fade, p->composite == COMP_SCREEN, cx, ctx};
             int rows = run->roi.y1 - run->roi.y0;
             fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), comp_rows, &cj);
         }
+        fx_mem_free(cx);
+        fx_mem_free(ctx);
         fx_buffer_put(run->ctx, lo, lbytes);
         fx_buffer_put(run->ctx, lrays, lbytes);
         fx_mask_free(material);
@@ -470,7 +496,7 @@ static fx_result god_rays_process(const fx_effect_run *run)
     else
         r = fx_radial_blur_polar(run->ctx, occ, rays, w, h, &rb, &run->roi, where);
     if (r == FX_OK) {
-        comp_job cj = {run, rays, NULL, 0, 0, 1, fade, p->composite == COMP_SCREEN};
+        comp_job cj = {run, rays, NULL, 0, 0, 1, fade, p->composite == COMP_SCREEN, NULL, NULL};
         int rows = run->roi.y1 - run->roi.y0;
         fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), comp_rows, &cj);
         if (run->debug) {
@@ -498,7 +524,7 @@ const fx_effect_class fx_effect_god_rays = {
         /* chosen from the time/error sweep (docs/effects/god_rays.md): at 1080p resolution
          * 0.5 has the scene-relative line density of 1.5 at 640x360; at equal time a reduced
          * map with finer lines errs less than coarser lines at full size */
-        "{\"method\": \"polar\", \"polar_resolution\": 1, \"polar_levels\": 2, \"polar_downsample\": 4}",
+        "{\"method\": \"polar\", \"polar_resolution\": 0.75, \"polar_levels\": 2, \"polar_downsample\": 4}",
         "{\"method\": \"polar\", \"polar_resolution\": 0.75, \"polar_levels\": 2, \"polar_downsample\": 2}",
         "{\"method\": \"polar\", \"polar_resolution\": 0.5, \"polar_levels\": 2, \"polar_downsample\": 1}",
         "{\"method\": \"naive\", \"samples\": 2000, \"jitter\": false}",

@@ -41,6 +41,7 @@ typedef struct vsm_params {
     int diffuse;
     float roughness;
     int map_level;
+    int screen_downsample;
 } vsm_params;
 
 enum { METHOD_VSM = 0, METHOD_PCF, METHOD_HARD };
@@ -94,6 +95,11 @@ static const fx_param_def vsm_param_defs[] = {
              "vsm: the light map's moments averaged over blocks of 2^level x 2^level texels before the "
              "filter (a mip of the moments: cheaper filter and lookups, penumbrae at least 2^level texels "
              "wide); 0: full resolution"),
+    FX_P_INT(vsm_params, screen_downsample, "screen_downsample", 1, 1, 8, 1, 4, "",
+             "The visibility is looked up at one pixel of every f x f block and interpolated to the others "
+             "from the neighbours on the same surface (depth within a few percent, similar normal); a pixel "
+             "with no such neighbour (an edge, a thin object) is looked up itself. ~f^2 fewer lookups; "
+             "shadow edges soften by about f pixels. 1: every pixel"),
 };
 
 static fx_pass_set vsm_passes(const void *params)
@@ -123,6 +129,11 @@ typedef struct vsm_job {
     float min_var, eps, bias_norm;
     int pcf_radius;
     float *vis_out; /* debug, or NULL */
+    /* screen_downsample f > 1: the visibility of pixel (x0 + f X + o, y0 + f Y + o) (clamped
+     * to the ROI) of every lo texel (X, Y), with that pixel's depth (<= 0: no surface) and
+     * normal (0 0 0: none) */
+    int f, lw, lh;
+    float *lo_v, *lo_a, *lo_d, *lo_n;
 } vsm_job;
 
 static float visibility_at(const vsm_job *j, int x, int y, int *has_surface)
@@ -172,17 +183,168 @@ static float burley(const vsm_job *j, int x, int y, fx_vec3 n, float ndl)
     return (1.0f + (f90 - 1.0f) * a5) * (1.0f + (f90 - 1.0f) * b5);
 }
 
+/* The visibility v of pixel (x, y) and the fraction a of the light it loses: combined:
+ * strength (1 - v); sun_diffuse: that times max(N.L, 0) (times Burley's factor). */
+static float shade_at(const vsm_job *j, int x, int y, int *has, float *a)
+{
+    float v = visibility_at(j, x, y, has);
+    float k = j->p->strength * (1.0f - v);
+    if (j->p->apply == APPLY_SUN_DIFFUSE) {
+        fx_vec3 n;
+        float ndl = 0.0f;
+        if (k > 0.0f && fx_surface_normal(&j->surf, x, y, &n))
+            ndl = fx_v3_dot(n, j->to_light);
+        ndl = ndl > 0.0f ? ndl : 0.0f;
+        if (ndl > 0.0f && j->p->diffuse == DIFFUSE_PRINCIPLED)
+            ndl *= burley(j, x, y, n, ndl);
+        k *= ndl;
+    }
+    *a = k;
+    return v;
+}
+
+/* The representative pixel of lo texel index X along an axis of the ROI [a, b). */
+static inline int lo_pixel(const vsm_job *j, int X, int a, int b)
+{
+    int x = a + j->f * X + j->f / 2;
+    return x < b ? x : b - 1;
+}
+
+static void lo_rows(void *user, int y0, int y1)
+{
+    vsm_job *j = user;
+    const fx_rect *roi = &j->run->roi;
+    for (int Y = y0; Y < y1; Y++) {
+        const int y = lo_pixel(j, Y, roi->y0, roi->y1);
+        for (int X = 0; X < j->lw; X++) {
+            const int x = lo_pixel(j, X, roi->x0, roi->x1);
+            const size_t k = (size_t)Y * j->lw + X;
+            int has;
+            j->lo_v[k] = shade_at(j, x, y, &has, &j->lo_a[k]);
+            j->lo_d[k] = has ? j->surf.depth[(size_t)y * j->surf.width + x] : -1.0f;
+            fx_vec3 n = fx_v3(0.0f, 0.0f, 0.0f);
+            if (has)
+                fx_surface_normal(&j->surf, x, y, &n);
+            j->lo_n[3 * k] = n.x;
+            j->lo_n[3 * k + 1] = n.y;
+            j->lo_n[3 * k + 2] = n.z;
+        }
+    }
+}
+
+/* shade_at for pixel (x, y) from the lo texels around it: bilinear weights times a depth
+ * likeness (relative difference under tol, falling linearly to 0) and a normal likeness
+ * (cosine above 0.8); the pixel's own shade_at when no neighbour is alike. */
+static float shade_lo(const vsm_job *j, int x, int y, int *has_surface, float *a)
+{
+    const fx_surface_src *sf = &j->surf;
+    const float d = sf->depth[(size_t)y * sf->width + x];
+    if (!(d > 0.0f) || !(d < sf->far_limit)) {
+        *has_surface = 0;
+        *a = 0.0f;
+        return 1.0f; /* as visibility_at */
+    }
+    const fx_rect *roi = &j->run->roi;
+    const float inv_f = 1.0f / (float)j->f;
+    const int o = j->f / 2;
+    float u = (float)(x - roi->x0 - o) * inv_f, v = (float)(y - roi->y0 - o) * inv_f;
+    u = u > 0.0f ? (u < (float)(j->lw - 1) ? u : (float)(j->lw - 1)) : 0.0f;
+    v = v > 0.0f ? (v < (float)(j->lh - 1) ? v : (float)(j->lh - 1)) : 0.0f;
+    const int X0 = (int)u, Y0 = (int)v;
+    const int X1 = X0 + 1 < j->lw ? X0 + 1 : X0, Y1 = Y0 + 1 < j->lh ? Y0 + 1 : Y0;
+    const float tx = u - (float)X0, ty = v - (float)Y0;
+    /* the pixel's normal as stored (unnormalised: the likeness test compares squares) */
+    const float *pn = sf->normal ? sf->normal + 3 * ((size_t)y * sf->width + x) : NULL;
+    const float nn = pn ? pn[0] * pn[0] + pn[1] * pn[1] + pn[2] * pn[2] : 0.0f;
+    const int has_n = nn > 1e-8f;
+    /* |d - ds| / d < tol, weight 1 - |d - ds| / (tol d) */
+    const float tol = 0.015f * (float)j->f, lim = tol * d, inv_lim = 1.0f / lim;
+    const int xs[4] = {X0, X1, X0, X1}, ys[4] = {Y0, Y0, Y1, Y1};
+    const float bw[4] = {(1.0f - tx) * (1.0f - ty), tx * (1.0f - ty), (1.0f - tx) * ty, tx * ty};
+    float acc = 0.0f, acc_a = 0.0f, wsum = 0.0f;
+    /* the four texels alike in value (a lit or evenly shadowed area: most pixels): the
+     * first one on the pixel's surface gives the answer */
+    size_t id[4];
+    for (int k = 0; k < 4; k++)
+        id[k] = (size_t)ys[k] * j->lw + xs[k];
+    const float v0 = j->lo_v[id[0]], a0 = j->lo_a[id[0]];
+    int uniform = 1;
+    for (int k = 1; k < 4; k++)
+        uniform &= j->lo_v[id[k]] == v0 && j->lo_a[id[k]] == a0;
+    for (int k = 0; k < 4; k++) {
+        const size_t i = id[k];
+        const float ds = j->lo_d[i];
+        if (!(ds > 0.0f))
+            continue;
+        const float dd = fabsf(d - ds);
+        if (!(dd < lim))
+            continue;
+        if (has_n) { /* cosine above 0.8 (the lo normals are unit or 0) */
+            const float *m = j->lo_n + 3 * i;
+            const float c = pn[0] * m[0] + pn[1] * m[1] + pn[2] * m[2];
+            if (!(c > 0.0f && c * c > 0.64f * nn))
+                continue;
+        }
+        if (uniform) {
+            *has_surface = 1;
+            *a = fx_saturate(a0);
+            return fx_saturate(v0);
+        }
+        const float w = (bw[k] + 1e-3f) * (1.0f - dd * inv_lim);
+        acc += w * j->lo_v[i];
+        acc_a += w * j->lo_a[i];
+        wsum += w;
+    }
+    if (wsum > 1e-6f) {
+        const float inv = 1.0f / wsum;
+        *has_surface = 1;
+        *a = fx_saturate(acc_a * inv);
+        return fx_saturate(acc * inv);
+    }
+    return shade_at(j, x, y, has_surface, a);
+}
+
 static void vsm_rows(void *user, int y0, int y1)
 {
     vsm_job *j = user;
     const fx_effect_run *run = j->run;
     const fx_rect *roi = &run->roi;
-    for (int y = roi->y0 + y0; y < roi->y0 + y1; y++)
+    for (int y = roi->y0 + y0; y < roi->y0 + y1; y++) {
         for (int x = roi->x0; x < roi->x1; x++) {
             size_t i = (size_t)y * run->width + x;
             const float *s = run->src + 4 * i;
             float *o = run->dst + 4 * i;
             int has;
+            if (j->f > 1) {
+                /* reduced: the lost fraction interpolated too */
+                float a;
+                float v = shade_lo(j, x, y, &has, &a);
+                if (j->vis_out)
+                    j->vis_out[i] = v;
+                if (a == 0.0f) {
+                    /* nothing lost (most lit pixels): both formulas below give s itself */
+                    if (o != s)
+                        memcpy(o, s, 4 * sizeof(float));
+                    continue;
+                }
+                if (j->p->apply == APPLY_COMBINED) {
+                    for (int c = 0; c < 3; c++)
+                        o[c] = s[c] * (1.0f - a);
+                } else {
+                    const float *dc = j->diffcol + 3 * i;
+                    float rad[3] = {j->sun_rad.x, j->sun_rad.y, j->sun_rad.z};
+                    for (int c = 0; c < 3; c++) {
+                        float r = s[c] - a * dc[c] * rad[c];
+                        if (!(fabsf(r) <= FLT_MAX)) {
+                            double t = (double)s[c] - (double)a * dc[c] * rad[c];
+                            r = (float)(t > FLT_MAX ? FLT_MAX : t < -FLT_MAX ? -FLT_MAX : t);
+                        }
+                        o[c] = s[c] >= 0.0f && r < 0.0f ? 0.0f : r;
+                    }
+                }
+                o[3] = s[3];
+                continue;
+            }
             float v = visibility_at(j, x, y, &has);
             if (j->vis_out)
                 j->vis_out[i] = v;
@@ -211,6 +373,7 @@ static void vsm_rows(void *user, int y0, int y1)
             }
             o[3] = s[3];
         }
+    }
 }
 
 static fx_result vsm_process(const fx_effect_run *run)
@@ -275,7 +438,28 @@ static fx_result vsm_process(const fx_effect_run *run)
         return r;
     }
     int rows = roi->y1 - roi->y0;
+    j.f = p->screen_downsample > 1 ? p->screen_downsample : 1;
+    float *lo = NULL;
+    size_t lo_n = 0, lo_bytes = 0;
+    if (j.f > 1) {
+        j.lw = (roi->x1 - roi->x0 + j.f - 1) / j.f;
+        j.lh = rows / j.f + (rows % j.f ? 1 : 0);
+        /* one block from the context's buffer store (no fresh pages frame after frame) */
+        lo_n = (size_t)j.lw * j.lh;
+        lo_bytes = lo_n * 6 * sizeof(float);
+        lo = fx_buffer_get(run->ctx, lo_bytes);
+        if (!lo) {
+            fx_aux_map_release(run->ctx, &map);
+            return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
+        }
+        j.lo_v = lo;
+        j.lo_a = lo + lo_n;
+        j.lo_d = lo + 2 * lo_n;
+        j.lo_n = lo + 3 * lo_n;
+        fx_parallel_for(run->ctx, j.lh, fx_grain_for(run->ctx, j.lh), lo_rows, &j);
+    }
     fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), vsm_rows, &j);
+    fx_buffer_put(run->ctx, lo, lo_bytes);
     fx_aux_map_release(run->ctx, &map);
     return FX_OK;
 }
@@ -298,7 +482,7 @@ const fx_effect_class fx_effect_vsm_shadows = {
     .params_size = sizeof(vsm_params),
     .params = vsm_param_defs,
     .param_count = FX_COUNT_OF(vsm_param_defs),
-    .presets = {"{\"map_level\": 2}", "{\"map_level\": 1}", "{\"map_level\": 0}", "{\"method\": \"pcf\"}"},
+    .presets = {"{\"map_level\": 2, \"screen_downsample\": 4}", "{\"map_level\": 1, \"screen_downsample\": 2}", "{\"map_level\": 0}", "{\"method\": \"pcf\"}"},
     .passes = vsm_passes,
     .needs_camera = vsm_needs_camera,
     .aux_views = vsm_aux_views,
