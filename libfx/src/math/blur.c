@@ -32,6 +32,7 @@
 #  define FX_BLUR_FLOAT 1 /* 0: recursive always in double (for comparisons) */
 #endif
 
+int fx_blur_dev_pf = 32, fx_blur_dev_double = 0; /* DEV */
 #define FX_BLUR_MAX_SIGMA 1.0e5 /* larger sigmas are clamped: the result is already the limit */
 #define V_LANES 32              /* floats per vertical strip (lane kernels) */
 #define V_LANES_REC 32          /* floats per vertical strip (recursive, row-wise) */
@@ -222,7 +223,7 @@ static fx_result plan_init(blur_plan *p, const fx_blur_spec *spec)
         p->gain_c = (p->dn[0] + p->dn[1] + p->dn[2] + p->dn[3]) / sd;
         p->gain_a = (p->dm[0] + p->dm[1] + p->dm[2] + p->dm[3]) / sd;
         p->halo = (int)ceil(FX_BLUR_RECURSIVE_HALO_SIGMAS * sigma);
-        p->use_float = FX_BLUR_FLOAT && sigma <= FX_BLUR_FLOAT_MAX_SIGMA;
+        p->use_float = FX_BLUR_FLOAT && !fx_blur_dev_double && sigma <= FX_BLUR_FLOAT_MAX_SIGMA;
         if (p->use_float)
             fx_deriche_sections(sigma, &p->sec);
         return FX_OK;
@@ -678,6 +679,7 @@ static void deriche_rows4(const blur_plan *p, const float *const *in, float *con
 
 #define VF_MAX_G 8 /* v8f groups of a float vertical strip at most */
 #define V_LANES_F 64 /* floats per vertical strip (float recursive) */
+#define VF_PREFETCH fx_blur_dev_pf
 #define HF_ROWS 4   /* rows per block of the float RGBA horizontal pass (two per v8f) */
 
 static inline __attribute__((always_inline)) v8f ld8(const float *p)
@@ -739,9 +741,9 @@ static int derf_vertical(const fx_deriche_sec *p, const float *in, size_t stride
     }
     for (int i = 0; i < n; i++) {
         const float *f = in + (size_t)i * stride;
-        if (i + 8 < n) /* rows are a page or more apart: no prefetcher follows that stride */
+        if (i + VF_PREFETCH < n) /* rows are a page or more apart: no prefetcher follows that stride */
             for (int l = 0; l < L; l += 16)
-                __builtin_prefetch(f + 8 * stride + l);
+                __builtin_prefetch(f + VF_PREFETCH * stride + l);
         float *x = x0 + (size_t)i * L8;
         memcpy(x, f, (size_t)L * sizeof(float));
         if (L < L8)
@@ -1452,6 +1454,15 @@ fx_result fx_blur_image(fx_context *ctx, const float *src, float *dst, int width
                         int channels, const fx_blur_spec *spec, const fx_rect *roi,
                         const char *where)
 {
+    return fx_blur_image_finite(ctx, src, dst, width, height, channels, spec, roi, where, NULL);
+}
+
+fx_result fx_blur_image_finite(fx_context *ctx, const float *src, float *dst, int width, int height,
+                               int channels, const fx_blur_spec *spec, const fx_rect *roi,
+                               const char *where, int *finite)
+{
+    if (finite)
+        *finite = 0;
     if (!where)
         where = "blur";
     if (!src || !dst || !spec || width <= 0 || height <= 0 || channels < 1 || channels > 4)
@@ -1559,6 +1570,8 @@ fx_result fx_blur_image(fx_context *ctx, const float *src, float *dst, int width
     fx_parallel_for_worker(ctx, strips, fx_grain_for(ctx, strips), vertical_range, j);
     int blocks = (r.y1 - r.y0 + j->block_rows - 1) / j->block_rows;
     fx_parallel_for_worker(ctx, blocks, fx_grain_for(ctx, blocks), horizontal_range, j);
+    if (finite)
+        *finite = j->use_float && !atomic_load(&j->fallback);
     fx_mem_free(scratch_raw);
 out:
     fx_mem_free(tmp);

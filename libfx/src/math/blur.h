@@ -78,6 +78,13 @@ fx_result fx_blur_image(fx_context *ctx, const float *src, float *dst, int width
                         int channels, const fx_blur_spec *spec, const fx_rect *roi,
                         const char *where);
 
+/* fx_blur_image that also says whether every value it wrote is finite by construction:
+ * *finite = 1 when the float recursive kernels did all the work (they check that every
+ * input is finite and below FX_BLUR_FLOAT_MAX_VALUE), else 0 (the caller checks). */
+fx_result fx_blur_image_finite(fx_context *ctx, const float *src, float *dst, int width, int height,
+                               int channels, const fx_blur_spec *spec, const fx_rect *roi,
+                               const char *where, int *finite);
+
 /* One 1-D line of n samples, `stride` floats apart (in and out may be equal), with the
  * same code as fx_blur_image (for tests and small users). */
 fx_result fx_blur_line(fx_context *ctx, const float *in, float *out, int n, int stride,
