@@ -32,7 +32,6 @@
 #  define FX_BLUR_FLOAT 1 /* 0: recursive always in double (for comparisons) */
 #endif
 
-int fx_blur_dev_pf = 32, fx_blur_dev_double = 0; /* DEV */
 #define FX_BLUR_MAX_SIGMA 1.0e5 /* larger sigmas are clamped: the result is already the limit */
 #define V_LANES 32              /* floats per vertical strip (lane kernels) */
 #define V_LANES_REC 32          /* floats per vertical strip (recursive, row-wise) */
@@ -223,7 +222,7 @@ static fx_result plan_init(blur_plan *p, const fx_blur_spec *spec)
         p->gain_c = (p->dn[0] + p->dn[1] + p->dn[2] + p->dn[3]) / sd;
         p->gain_a = (p->dm[0] + p->dm[1] + p->dm[2] + p->dm[3]) / sd;
         p->halo = (int)ceil(FX_BLUR_RECURSIVE_HALO_SIGMAS * sigma);
-        p->use_float = FX_BLUR_FLOAT && !fx_blur_dev_double && sigma <= FX_BLUR_FLOAT_MAX_SIGMA;
+        p->use_float = FX_BLUR_FLOAT && sigma <= FX_BLUR_FLOAT_MAX_SIGMA;
         if (p->use_float)
             fx_deriche_sections(sigma, &p->sec);
         return FX_OK;
@@ -679,7 +678,7 @@ static void deriche_rows4(const blur_plan *p, const float *const *in, float *con
 
 #define VF_MAX_G 8 /* v8f groups of a float vertical strip at most */
 #define V_LANES_F 64 /* floats per vertical strip (float recursive) */
-#define VF_PREFETCH fx_blur_dev_pf
+#define VF_PREFETCH 32 /* rows ahead the float vertical pass prefetches */
 #define HF_ROWS 4   /* rows per block of the float RGBA horizontal pass (two per v8f) */
 
 static inline __attribute__((always_inline)) v8f ld8(const float *p)
