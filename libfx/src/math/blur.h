@@ -6,8 +6,10 @@
  *  - FX_BLUR_EXACT: FIR with sampled, normalised taps exp(-k^2 / 2 sigma^2) over |k| <= ceil(5 sigma),
  *    accumulated in double. Cost O(min(radius, size)) per pixel: the reference.
  *  - FX_BLUR_RECURSIVE: Deriche's (1993) fourth-order recursive Gaussian (causal +
- *    anticausal sum, the optimised constants ITK uses), normalised to unit DC gain, run
- *    in double. In the parallel (sum) form the replicate extension is exact: the causal
+ *    anticausal sum, the optimised constants ITK uses), normalised to unit DC gain. Up to
+ *    FX_BLUR_FLOAT_MAX_SIGMA it runs in float as two second-order sections
+ *    (fx_deriche_sections); above, and for strips holding |x| >= FX_BLUR_FLOAT_MAX_VALUE or
+ *    non-finite values, in double. In the parallel (sum) form the replicate extension is exact: the causal
  *    filter starts in the steady state of the left edge value, the anticausal one in that
  *    of the right (the role Triggs-Sdika conditions play for the cascaded Young-van Vliet
  *    form, which we measured at 2-5% of the peak against 2.9e-3 here for any sigma).
