@@ -521,6 +521,44 @@ static inline __attribute__((always_inline)) int sobel_row_sse2(const float *A, 
     }
     return x;
 }
+
+#  if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && !defined(FX_NO_CLONES)
+#    include <immintrin.h>
+#    define EDGE_AVX2 1
+/* sobel_row_sse2 8 columns at a time in AVX2 (4 doubles per register): the same operations
+ * in the same order, so the same bits. Called only when the CPU has AVX2. */
+__attribute__((target("avx2"), noinline)) static int sobel_row_avx2(const float *A, const float *B,
+                                                                   const float *C, int xa, int xb,
+                                                                   float *out)
+{
+    const __m256d two = _mm256_set1_pd(2.0), quarter = _mm256_set1_pd(0.25);
+    const __m256 big = _mm256_set1_ps(FLT_MAX);
+    int x = xa;
+    for (; x + 8 <= xb; x += 8) {
+        const __m256 c = _mm256_loadu_ps(B + x);
+        const __m256 n = _mm256_sub_ps(_mm256_loadu_ps(A + x), c), s = _mm256_sub_ps(_mm256_loadu_ps(C + x), c);
+        const __m256 we = _mm256_sub_ps(_mm256_loadu_ps(B + x - 1), c), ea = _mm256_sub_ps(_mm256_loadu_ps(B + x + 1), c);
+        const __m256 nw = _mm256_sub_ps(_mm256_loadu_ps(A + x - 1), c), ne = _mm256_sub_ps(_mm256_loadu_ps(A + x + 1), c);
+        const __m256 sw = _mm256_sub_ps(_mm256_loadu_ps(C + x - 1), c), se = _mm256_sub_ps(_mm256_loadu_ps(C + x + 1), c);
+        const __m256 gx1 = _mm256_sub_ps(ne, nw), gx2 = _mm256_sub_ps(ea, we), gx3 = _mm256_sub_ps(se, sw);
+        const __m256 gy1 = _mm256_sub_ps(sw, nw), gy2 = _mm256_sub_ps(s, n), gy3 = _mm256_sub_ps(se, ne);
+        __m128 half[2];
+        for (int k = 0; k < 2; k++) {
+#define LANES(v) _mm256_cvtps_pd(k == 0 ? _mm256_castps256_ps128(v) : _mm256_extractf128_ps((v), 1))
+            const __m256d gx = _mm256_add_pd(_mm256_add_pd(LANES(gx1), _mm256_mul_pd(two, LANES(gx2))), LANES(gx3));
+            const __m256d gy = _mm256_add_pd(_mm256_add_pd(LANES(gy1), _mm256_mul_pd(two, LANES(gy2))), LANES(gy3));
+#undef LANES
+            const __m256d m = _mm256_mul_pd(_mm256_sqrt_pd(_mm256_add_pd(_mm256_mul_pd(gx, gx), _mm256_mul_pd(gy, gy))),
+                                            quarter);
+            half[k] = _mm256_cvtpd_ps(m);
+        }
+        __m256 v = _mm256_set_m128(half[1], half[0]);
+        v = _mm256_min_ps(v, big); /* v <= FLT_MAX ? v : FLT_MAX (v is never NaN) */
+        _mm256_storeu_ps(out + x, v);
+    }
+    return x;
+}
+#  endif
 #endif
 
 /* The operator on one row for x in [x0, x1) into out[x]: the interior without any clamping
@@ -572,6 +610,10 @@ EDGE_VEC static void response_row(const float *A, const float *B, const float *C
         break;
     case FX_EDGE_SOBEL:
     default:
+#ifdef EDGE_AVX2
+        if (__builtin_cpu_supports("avx2"))
+            xa = sobel_row_avx2(A, B, C, xa, xb, out);
+#endif
 #ifdef EDGE_SSE2
         xa = sobel_row_sse2(A, B, C, xa, xb, out);
 #endif
