@@ -289,6 +289,35 @@ static void test_images(fx_context *ctx1, fx_context *ctx2)
     }
 }
 
+/* The float recursive kernels: a strip holding a huge or non-finite value goes to the double
+ * kernels (and so does the horizontal pass); thread counts agree bit for bit. */
+static void test_float_fallback(fx_context *ctx1, fx_context *ctx2)
+{
+    int w = 150, h = 97;
+    size_t n = (size_t)w * h * 4;
+    float *src = pattern(w, h, 4, 21), *a1 = malloc(n * 4), *a2 = malloc(n * 4);
+    fx_blur_spec s = spec(9.0, FX_BLUR_RECURSIVE, 3);
+    int fin = -1;
+    CHECK_OK(ctx2, fx_blur_image_finite(ctx2, src, a1, w, h, 4, &s, NULL, "t", &fin));
+    CHECK(fin == 1);
+    fx_blur_spec big = spec(FX_BLUR_FLOAT_MAX_SIGMA * 1.5, FX_BLUR_RECURSIVE, 3);
+    CHECK_OK(ctx2, fx_blur_image_finite(ctx2, src, a1, w, h, 4, &big, NULL, "t", &fin));
+    CHECK(fin == 0 && tu_all_finite(a1, n));
+    const float bad[] = { 2e30f, -3e38f, FLT_MAX, NAN, INFINITY };
+    for (int k = 0; k < 5; k++) {
+        float *in = pattern(w, h, 4, 22);
+        in[((size_t)40 * w + 77) * 4 + 1] = bad[k];
+        CHECK_OK(ctx1, fx_blur_image_finite(ctx1, in, a1, w, h, 4, &s, NULL, "t", &fin));
+        CHECK(fin == 0);
+        CHECK_OK(ctx2, fx_blur_image(ctx2, in, a2, w, h, 4, &s, NULL, "t"));
+        CHECK(memcmp(a1, a2, n * sizeof(float)) == 0);
+        if (k < 3)
+            CHECK(tu_all_finite(a1, n));
+        free(in);
+    }
+    free(src), free(a1), free(a2);
+}
+
 static void test_convolve(fx_context *ctx)
 {
     double k[9] = { 0, 0, 0, 0, 0, 1, 0, 0, 0 }; /* shift left by one, replicate at the edge */
@@ -308,6 +337,7 @@ int main(void)
     test_impulse(c1);
     test_borders_and_extremes(c1);
     test_images(c1, c2);
+    test_float_fallback(c1, c2);
     test_convolve(c1);
     fx_context_free(c1);
     fx_context_free(c2);

@@ -108,8 +108,29 @@ typedef struct draw_job {
     float *matte_dbg; /* the debug matte pass, or NULL */
 } draw_job;
 
+/* One pixel of draw_row's "over" case. */
+static inline void draw_px(const float *srow, float *drow, const float *matte, int x, float op, v4f lc,
+                           int in_place)
+{
+    const v4f big = { FLT_MAX, FLT_MAX, FLT_MAX, FLT_MAX };
+    const v4f s = ld4(srow + 4 * (size_t)x);
+    const float a = matte[x] * op;
+    if (a == 0.0f) {
+        /* no line: the pixel as it is (made finite) */
+        const v4i ok = (s == s) & (s <= big) & (s >= -big);
+        if (ok[0] & ok[1] & ok[2] & ok[3]) {
+            if (!in_place)
+                st4(drow + 4 * (size_t)x, s);
+            return;
+        }
+    }
+    st4(drow + 4 * (size_t)x, finite4(s + V4(a) * (lc - s)));
+}
+
 /* d = s + a (t - s) per pixel, one RGBA vector at a time; NaN -> 0, +-Inf -> +-FLT_MAX.
- * Called by the edge engine with each finished matte row (math/edge_ops.h). */
+ * Where a is 0 (no line: most pixels) d = s, not written at all in place (the cache line
+ * stays clean: no write back). Called by the edge engine with each finished matte row
+ * (math/edge_ops.h). */
 static void draw_row(void *user, int y, const float *matte)
 {
     const draw_job *j = user;
@@ -117,29 +138,46 @@ static void draw_row(void *user, int y, const float *matte)
     const fx_rect *roi = &run->roi;
     const float op = j->p->opacity;
     const int matte_out = j->p->output == OUT_MATTE;
+    const int in_place = run->dst == run->src;
     v4f lc;
     memcpy(&lc, j->p->line_color, sizeof lc);
-    const v4f big = { FLT_MAX, FLT_MAX, FLT_MAX, FLT_MAX }, zero = { 0, 0, 0, 0 };
     const size_t row = (size_t)y * run->width;
+    const float *srow = run->src + row * 4;
+    float *drow = run->dst + row * 4;
     if (j->matte_dbg)
         memcpy(j->matte_dbg + row + roi->x0, matte + roi->x0, (size_t)(roi->x1 - roi->x0) * sizeof(float));
-    for (int x = roi->x0; x < roi->x1; x++) {
-        v4f s, t;
-        memcpy(&s, run->src + (row + x) * 4, sizeof s);
-        const float e = matte[x];
-        float a;
-        if (matte_out) {
-            t = (v4f){ e, e, e, 1.0f };
-            a = op;
-        } else {
-            t = lc;
-            a = e * op;
+    if (matte_out) {
+        for (int x = roi->x0; x < roi->x1; x++) {
+            const float e = matte[x];
+            const v4f s = ld4(srow + 4 * x), t = { e, e, e, 1.0f };
+            st4(drow + 4 * x, finite4(s + V4(op) * (t - s)));
         }
-        v4f d = s + (v4f){ a, a, a, a } * (t - s);
-        d = sel4(d == d, d, zero);
-        d = sel4(d > big, big, d);
-        d = sel4(d < -big, -big, d);
-        memcpy(run->dst + (row + x) * 4, &d, sizeof d);
+        return;
+    }
+    int x = roi->x0;
+    while (x < roi->x1) {
+        /* 8 pixels without a line and with finite values (the usual case): as they are */
+        if (x + 8 <= roi->x1) {
+            v4f m0 = ld4(matte + x), m1 = ld4(matte + x + 4);
+            v4i nz = (m0 != V4(0.0f)) | (m1 != V4(0.0f));
+            if (!(nz[0] | nz[1] | nz[2] | nz[3])) {
+                v4i bad = { 0, 0, 0, 0 };
+                for (int k = 0; k < 32; k += 4) {
+                    v4i b;
+                    memcpy(&b, srow + 4 * (size_t)x + k, sizeof b);
+                    bad |= (b & 0x7f800000) == 0x7f800000; /* Inf or NaN */
+                }
+                if (!(bad[0] | bad[1] | bad[2] | bad[3])) {
+                    if (!in_place)
+                        memcpy(drow + 4 * (size_t)x, srow + 4 * (size_t)x, 32 * sizeof(float));
+                    x += 8;
+                    continue;
+                }
+            }
+        }
+        const int xe = x + 8 < roi->x1 ? x + 8 : roi->x1;
+        for (; x < xe; x++)
+            draw_px(srow, drow, matte, x, op, lc, in_place);
     }
 }
 
@@ -151,7 +189,14 @@ static fx_result edges_process(const fx_effect_run *run)
         return FX_OK;
     if (!(p->opacity > 0.0f) ||
         !(p->luminance || p->depth || p->normal || p->object_id || p->material_id))
-        return fx_effect_pass_through(run); /* zero strength: the identity */
+    {
+        if (run->dst != run->src)
+            return fx_effect_pass_through(run); /* zero strength: the identity */
+        for (int y = roi->y0; y < roi->y1; y++) /* in place: only the finiteness we promise */
+            fx_effect_finish_row(run, run->dst + ((size_t)y * run->width + roi->x0) * 4,
+                                 (size_t)(roi->x1 - roi->x0) * 4);
+        return FX_OK;
+    }
     const char *where = run->where;
     fx_edge_settings s;
     settings_of(p, &s);
@@ -159,6 +204,7 @@ static fx_result edges_process(const fx_effect_run *run)
     fx_result r = fx_edge_sources_from_frame(run->frame, run->src, &s, &src, where);
     if (r)
         return r;
+    src.rgba_written = run->dst == run->src; /* in place (edges_in_place) */
     fx_result dr = FX_OK;
     float *strengths = fx_effect_debug_pass(run, "strengths", 4, &dr);
     if (dr)
@@ -169,6 +215,15 @@ static fx_result edges_process(const fx_effect_run *run)
     /* the matte streams row by row into the drawing: no frame-size plane */
     draw_job j = { run, p, matte };
     return fx_edge_matte_rows(run->ctx, &src, &s, roi, strengths, draw_row, &j, where);
+}
+
+/* In place (FX_EFFECT_IN_PLACE's contract: each pixel read before it is written) when the
+ * edge engine can take the luminance of the rows where its bands meet first: a small halo. */
+static int edges_in_place(const void *params)
+{
+    fx_edge_settings s;
+    settings_of(params, &s);
+    return fx_edge_halo(&s) <= FX_EDGE_IN_PLACE_MAX_HALO;
 }
 
 static fx_result edges_validate(const void *params, char *err, size_t err_size)
@@ -189,8 +244,10 @@ const fx_effect_class fx_effect_edges = {
     .params = edges_param_defs,
     .param_count = FX_COUNT_OF(edges_param_defs),
     .presets = { NULL, NULL, NULL, NULL },
+    .flags = FX_EFFECT_OWN_FINITE, /* draw_row writes finite values */
     .passes = edges_passes,
     .needs_camera = NULL,
+    .in_place = edges_in_place,
     .halo = edges_halo,
     .validate = edges_validate,
     .process = edges_process,

@@ -11,6 +11,7 @@
 #include "math/blur.h"
 
 #include "core/parallel.h"
+#include "math/simd8.h"
 
 #include <float.h>
 #include <math.h>
@@ -25,6 +26,10 @@
 #  define FX_CLONES __attribute__((target_clones("avx2", "default")))
 #else
 #  define FX_CLONES
+#endif
+
+#ifndef FX_BLUR_FLOAT
+#  define FX_BLUR_FLOAT 1 /* 0: recursive always in double (for comparisons) */
 #endif
 
 #define FX_BLUR_MAX_SIGMA 1.0e5 /* larger sigmas are clamped: the result is already the limit */
@@ -117,6 +122,40 @@ void fx_deriche_coefficients(double sigma, double n[4], double m[4], double d[4]
     m[3] = -d4 * n0;
 }
 
+void fx_deriche_sections(double sigma, fx_deriche_sec *o)
+{
+    /* Deriche's impulse response is a sum of two damped cosine/sine terms,
+     *   h(n) = e_k^n (a_k cos(w_k n / sigma) + b_k sin(w_k n / sigma)),  e_k = exp(l_k / sigma),
+     * each one a second-order section (a_k + c1 z^-1) / (1 + p1 z^-1 + p2 z^-2) with
+     * c1 = e (b sin - a cos), p1 = -2 e cos, p2 = e^2. The anticausal half (n >= 1, mirrored)
+     * of the same section is (c1 - a p1) z^-1 - a p2 z^-2 over the same denominator.
+     * The denominators are rounded to float first and the numerators normalised (in double)
+     * for unit DC gain of the filter the float coefficients define. */
+    const double A[2] = { 1.3530, -0.3531 }, B[2] = { 1.8151, 0.0902 };
+    const double Wf[2] = { 0.6681, 2.0787 }, Lf[2] = { -1.3932, -1.3732 };
+    double c0[2], c1[2], m1[2], m2[2], D[2], gain = 0.0;
+    for (int k = 0; k < 2; k++) {
+        double e = exp(Lf[k] / sigma), th = Wf[k] / sigma;
+        float p1 = (float)(-2.0 * e * cos(th)), p2 = (float)(e * e);
+        o->p1[k] = p1;
+        o->p2[k] = p2;
+        c0[k] = A[k];
+        c1[k] = e * (B[k] * sin(th) - A[k] * cos(th));
+        m1[k] = c1[k] - c0[k] * (double)p1;
+        m2[k] = -c0[k] * (double)p2;
+        D[k] = (1.0 + (double)p1) + (double)p2;
+        gain += ((c0[k] + c1[k]) + (m1[k] + m2[k])) / D[k];
+    }
+    for (int k = 0; k < 2; k++) {
+        o->b0[k] = (float)(c0[k] / gain);
+        o->b1[k] = (float)(c1[k] / gain);
+        o->m1[k] = (float)(m1[k] / gain);
+        o->m2[k] = (float)(m2[k] / gain);
+        /* the anticausal section's steady state for a unit constant */
+        o->ga[k] = (float)(((double)o->m1[k] + (double)o->m2[k]) / D[k]);
+    }
+}
+
 /* ---- plan: everything an algorithm needs for one sigma --------------------------------- */
 
 typedef struct blur_plan {
@@ -135,6 +174,10 @@ typedef struct blur_plan {
     int ext;   /* rows of a lane buffer before and after the data (>= PAD) */
     /* recursive (Deriche 4th order: causal n[], anticausal m[], shared d[]) */
     double dn[4], dm[4], dd[4], gain_c, gain_a;
+    /* recursive in float (sigma <= FX_BLUR_FLOAT_MAX_SIGMA): the same filter as two
+     * second-order sections (fx_deriche_sections) */
+    int use_float;
+    fx_deriche_sec sec;
     int halo;
 } blur_plan;
 
@@ -179,6 +222,9 @@ static fx_result plan_init(blur_plan *p, const fx_blur_spec *spec)
         p->gain_c = (p->dn[0] + p->dn[1] + p->dn[2] + p->dn[3]) / sd;
         p->gain_a = (p->dm[0] + p->dm[1] + p->dm[2] + p->dm[3]) / sd;
         p->halo = (int)ceil(FX_BLUR_RECURSIVE_HALO_SIGMAS * sigma);
+        p->use_float = FX_BLUR_FLOAT && sigma <= FX_BLUR_FLOAT_MAX_SIGMA;
+        if (p->use_float)
+            fx_deriche_sections(sigma, &p->sec);
         return FX_OK;
     }
     p->alg = FX_BLUR_EXACT;
@@ -439,6 +485,8 @@ typedef struct blur_job {
     int strip_lanes;  /* vertical: floats per strip */
     int block_rows;   /* horizontal: rows per block */
     int fast_v, fast_h; /* recursive: direct row-wise kernels */
+    int use_float;      /* recursive in float (plan.use_float) */
+    atomic_int fallback; /* a vertical strip went to the double kernels: so does the rest */
     char *scratch;    /* per worker: scratch_bytes each */
     size_t scratch_bytes;
 } blur_job;
@@ -609,6 +657,287 @@ static void deriche_rows4(const blur_plan *p, const float *const *in, float *con
                 store4_clamped(out[r] + (size_t)i * 4, c[r] + v);
         }
     }
+}
+
+/* ---- recursive in float ------------------------------------------------------------------
+ * Deriche's filter as two second-order sections (fx_deriche_sections), run on d = x - c with
+ * c the line's first sample: the causal half then starts at rest (its steady state for the
+ * left edge is 0), constant lines come out exact, and the rounding of the states follows the
+ * line's contrast, not its level. Eight lanes per vector (one AVX register in the AVX2 clone,
+ * two SSE ones in the baseline: the same IEEE operations lane by lane, no FMA, so the same
+ * bits). Per lane every kernel below does exactly these operations in this order:
+ *   d = x - c
+ *   u_k = (b0_k d + b1_k d[-1]) - (p1_k u_k[-1] + p2_k u_k[-2])       k = 0, 1
+ *   yc = u_0 + u_1
+ *   v_k = (m1_k d[+1] + m2_k d[+2]) - (p1_k v_k[+1] + p2_k v_k[+2])
+ *   out = (yc + (v_0 + v_1)) + c
+ * with u = 0 and d[-1] = 0 before the first sample, d = d[n-1] and v_k = ga_k d[n-1] past the
+ * last. Inputs must be finite and below FX_BLUR_FLOAT_MAX_VALUE (checked: the kernels report
+ * a failure and the caller runs the double kernels); the states are then bounded by the
+ * filter's gain, far from overflow, and the outputs need no clamp. */
+
+#define VF_MAX_G 8 /* v8f groups of a float vertical strip at most */
+#define V_LANES_F 64 /* floats per vertical strip (float recursive) */
+#define VF_PREFETCH 32 /* rows ahead the float vertical pass prefetches */
+#define HF_ROWS 4   /* rows per block of the float RGBA horizontal pass (two per v8f) */
+
+static inline __attribute__((always_inline)) v8f ld8(const float *p)
+{
+    v8f v;
+    memcpy(&v, p, sizeof v);
+    return v;
+}
+
+static inline __attribute__((always_inline)) void st8(float *p, v8f v)
+{
+    memcpy(p, &v, sizeof v);
+}
+
+/* all 8 lanes finite and |x| < FX_BLUR_FLOAT_MAX_VALUE: -1 per lane, else 0 */
+static inline __attribute__((always_inline)) v8i small8(v8f x)
+{
+    const v8i absmask = { 0x7fffffff, 0x7fffffff, 0x7fffffff, 0x7fffffff,
+                          0x7fffffff, 0x7fffffff, 0x7fffffff, 0x7fffffff };
+    v8f a = (v8f)((v8i)x & absmask);
+    return a < S8(FX_BLUR_FLOAT_MAX_VALUE); /* false for NaN */
+}
+
+static inline __attribute__((always_inline)) int all8(v8i m)
+{
+    int32_t t[8];
+    memcpy(t, &m, sizeof t);
+    return (t[0] & t[1] & t[2] & t[3] & t[4] & t[5] & t[6] & t[7]) != 0;
+}
+
+/* Vertical, straight from the image rows: strip of L <= V_LANES_F floats (any channels),
+ * rows 0..n-1 of `in` (`stride` floats apart), output rows o0..o1-1 to out (row o0 at `out`,
+ * `ostride` apart). xs: (n + 3) x L8 floats (L8 = L rounded up to 8): the strip's d, contiguous
+ * (strided rows would thrash L2's sets on the way back), after a row of zeros (d[-1]) and
+ * before the two replicated rows past the end; cb: (o1 - o0) x L8 floats, the causal result of the output rows. Returns 0,
+ * having written nothing, when the strip holds a value the float kernels do not take.
+ * out may alias in (in is only read in the causal pass). */
+FX_CLONES
+static int derf_vertical(const fx_deriche_sec *p, const float *in, size_t stride, int n, int o0, int o1,
+                         float *out, size_t ostride, int L, float *xs, float *cb)
+{
+    const int G = (L + 7) / 8, L8 = 8 * G;
+    const v8f b00 = S8(p->b0[0]), b01 = S8(p->b0[1]), b10 = S8(p->b1[0]), b11 = S8(p->b1[1]);
+    const v8f m10 = S8(p->m1[0]), m11 = S8(p->m1[1]), m20 = S8(p->m2[0]), m21 = S8(p->m2[1]);
+    const v8f p10 = S8(p->p1[0]), p11 = S8(p->p1[1]), p20 = S8(p->p2[0]), p21 = S8(p->p2[1]);
+    /* states: section 0 in s0a/s0b, section 1 in s1a/s1b; the newer of each pair is the one
+     * `a` points at, the step writes over the older and the pointers swap (no copies) */
+    v8f c[VF_MAX_G], s0a[VF_MAX_G], s0b[VF_MAX_G], s1a[VF_MAX_G], s1b[VF_MAX_G];
+    v8f *n0 = s0a, *o0s = s0b, *n1 = s1a, *o1s = s1b;
+    v8i ok = (v8i){ -1, -1, -1, -1, -1, -1, -1, -1 };
+    float *x0 = xs + L8; /* row -1 (d = 0) at xs */
+    memset(xs, 0, (size_t)L8 * sizeof(float));
+    memcpy(x0, in, (size_t)L * sizeof(float));
+    if (L < L8)
+        memset(x0 + L, 0, (size_t)(L8 - L) * sizeof(float));
+    for (int g = 0; g < G; g++) {
+        c[g] = ld8(x0 + 8 * g);
+        s0a[g] = s0b[g] = s1a[g] = s1b[g] = S8(0.0f);
+    }
+    for (int i = 0; i < n; i++) {
+        const float *f = in + (size_t)i * stride;
+        if (i + VF_PREFETCH < n) /* rows are a page or more apart: no prefetcher follows that stride */
+            for (int l = 0; l < L; l += 16)
+                __builtin_prefetch(f + VF_PREFETCH * stride + l);
+        float *x = x0 + (size_t)i * L8;
+        memcpy(x, f, (size_t)L * sizeof(float));
+        if (L < L8)
+            memset(x + L, 0, (size_t)(L8 - L) * sizeof(float));
+        float *cr = i >= o0 && i < o1 ? cb + (size_t)(i - o0) * L8 : NULL;
+        for (int g = 0; g < G; g++) {
+            const v8f xv = ld8(x + 8 * g), dp = ld8(x - L8 + 8 * g);
+            ok &= small8(xv);
+            const v8f d = xv - c[g];
+            st8(x + 8 * g, d);
+            const v8f u0 = (b00 * d + b10 * dp) - (p10 * n0[g] + p20 * o0s[g]);
+            const v8f u1 = (b01 * d + b11 * dp) - (p11 * n1[g] + p21 * o1s[g]);
+            o0s[g] = u0;
+            o1s[g] = u1;
+            if (cr)
+                st8(cr + 8 * g, u0 + u1);
+        }
+        v8f *t = n0;
+        n0 = o0s, o0s = t;
+        t = n1, n1 = o1s, o1s = t;
+    }
+    if (!all8(ok))
+        return 0;
+    /* anticausal: e1 = d[i+1], e2 = d[i+2] (replicated past the end) */
+    const float *xl = x0 + (size_t)(n - 1) * L8;
+    memcpy(x0 + (size_t)n * L8, xl, (size_t)L8 * sizeof(float));
+    memcpy(x0 + (size_t)(n + 1) * L8, xl, (size_t)L8 * sizeof(float));
+    for (int g = 0; g < G; g++) {
+        const v8f dl = ld8(xl + 8 * g);
+        n0[g] = o0s[g] = S8(p->ga[0]) * dl;
+        n1[g] = o1s[g] = S8(p->ga[1]) * dl;
+    }
+    for (int i = n - 1; i >= o0; i--) {
+        const float *e1p = x0 + (size_t)(i + 1) * L8, *e2p = e1p + L8;
+        if (i < o1) {
+            float *o = out + (size_t)(i - o0) * ostride;
+            const float *cr = cb + (size_t)(i - o0) * L8;
+            for (int g = 0; g < G; g++) {
+                const v8f e1 = ld8(e1p + 8 * g), e2 = ld8(e2p + 8 * g);
+                const v8f v0 = (m10 * e1 + m20 * e2) - (p10 * n0[g] + p20 * o0s[g]);
+                const v8f v1 = (m11 * e1 + m21 * e2) - (p11 * n1[g] + p21 * o1s[g]);
+                o0s[g] = v0;
+                o1s[g] = v1;
+                const v8f r = (ld8(cr + 8 * g) + (v0 + v1)) + c[g];
+                if (8 * g + 8 <= L) {
+                    st8(o + 8 * g, r);
+                } else {
+                    float tl[8];
+                    st8(tl, r);
+                    memcpy(o + 8 * g, tl, (size_t)(L - 8 * g) * sizeof(float));
+                }
+            }
+        } else {
+            for (int g = 0; g < G; g++) {
+                const v8f e1 = ld8(e1p + 8 * g), e2 = ld8(e2p + 8 * g);
+                o0s[g] = (m10 * e1 + m20 * e2) - (p10 * n0[g] + p20 * o0s[g]);
+                o1s[g] = (m11 * e1 + m21 * e2) - (p11 * n1[g] + p21 * o1s[g]);
+            }
+        }
+        v8f *t = n0;
+        n0 = o0s, o0s = t;
+        t = n1, n1 = o1s, o1s = t;
+    }
+    return 1;
+}
+
+/* Two RGBA pixels (rows a and b) as one v8f, and back. */
+static inline __attribute__((always_inline)) v8f ld2px(const float *a, const float *b)
+{
+    v4f lo, hi;
+    memcpy(&lo, a, sizeof lo);
+    memcpy(&hi, b, sizeof hi);
+    return __builtin_shufflevector(lo, hi, 0, 1, 2, 3, 4, 5, 6, 7);
+}
+
+static inline __attribute__((always_inline)) void st2px(float *a, float *b, v8f v)
+{
+    v4f lo = __builtin_shufflevector(v, v, 0, 1, 2, 3), hi = __builtin_shufflevector(v, v, 4, 5, 6, 7);
+    if (a)
+        memcpy(a, &lo, sizeof lo);
+    if (b)
+        memcpy(b, &hi, sizeof hi);
+}
+
+/* Horizontal, RGBA: HF_ROWS rows at once, rows 2q and 2q+1 in one v8f (as deriche_rows4:
+ * in[r] row r at column sx0, n pixels; out[r] row r at column sx0, NULL: row absent; pixels
+ * o0..o1-1 written). cb: (o1 - o0) x 4 HF_ROWS floats. out may alias in: pixel i is read
+ * before it is written. The inputs are the vertical pass's float outputs, which passed its
+ * check: no test here. */
+FX_CLONES
+static void derf_rows4(const fx_deriche_sec *p, const float *const *in, float *const *out, int n, int o0,
+                       int o1, float *cb)
+{
+    enum { Q = HF_ROWS / 2 };
+    const v8f b00 = S8(p->b0[0]), b01 = S8(p->b0[1]), b10 = S8(p->b1[0]), b11 = S8(p->b1[1]);
+    const v8f m10 = S8(p->m1[0]), m11 = S8(p->m1[1]), m20 = S8(p->m2[0]), m21 = S8(p->m2[1]);
+    const v8f p10 = S8(p->p1[0]), p11 = S8(p->p1[1]), p20 = S8(p->p2[0]), p21 = S8(p->p2[1]);
+    v8f c[Q], d1[Q], ua[Q], ub[Q], uc[Q], ud[Q];
+    for (int q = 0; q < Q; q++) {
+        c[q] = ld2px(in[2 * q], in[2 * q + 1]);
+        d1[q] = ua[q] = ub[q] = uc[q] = ud[q] = S8(0.0f);
+    }
+    for (int i = 0; i < n; i++) {
+        float *cr = i >= o0 && i < o1 ? cb + (size_t)(i - o0) * 4 * HF_ROWS : NULL;
+#pragma GCC unroll 2
+        for (int q = 0; q < Q; q++) {
+            const v8f d = ld2px(in[2 * q] + (size_t)i * 4, in[2 * q + 1] + (size_t)i * 4) - c[q];
+            const v8f u0 = (b00 * d + b10 * d1[q]) - (p10 * ua[q] + p20 * ub[q]);
+            const v8f u1 = (b01 * d + b11 * d1[q]) - (p11 * uc[q] + p21 * ud[q]);
+            ub[q] = ua[q], ua[q] = u0;
+            ud[q] = uc[q], uc[q] = u1;
+            d1[q] = d;
+            if (cr)
+                st8(cr + 8 * q, u0 + u1);
+        }
+    }
+    v8f e1[Q], e2[Q];
+    for (int q = 0; q < Q; q++) {
+        const v8f dl = ld2px(in[2 * q] + (size_t)(n - 1) * 4, in[2 * q + 1] + (size_t)(n - 1) * 4) - c[q];
+        e1[q] = e2[q] = dl;
+        ua[q] = ub[q] = S8(p->ga[0]) * dl;
+        uc[q] = ud[q] = S8(p->ga[1]) * dl;
+    }
+    for (int i = n - 1; i >= o0; i--) {
+        const float *cr = i < o1 ? cb + (size_t)(i - o0) * 4 * HF_ROWS : NULL;
+#pragma GCC unroll 2
+        for (int q = 0; q < Q; q++) {
+            const v8f v0 = (m10 * e1[q] + m20 * e2[q]) - (p10 * ua[q] + p20 * ub[q]);
+            const v8f v1 = (m11 * e1[q] + m21 * e2[q]) - (p11 * uc[q] + p21 * ud[q]);
+            ub[q] = ua[q], ua[q] = v0;
+            ud[q] = uc[q], uc[q] = v1;
+            const v8f d = ld2px(in[2 * q] + (size_t)i * 4, in[2 * q + 1] + (size_t)i * 4) - c[q]; /* before out is written */
+            e2[q] = e1[q], e1[q] = d;
+            if (cr) {
+                const v8f r = (ld8(cr + 8 * q) + (v0 + v1)) + c[q];
+                st2px(out[2 * q] ? out[2 * q] + (size_t)i * 4 : NULL,
+                      out[2 * q + 1] ? out[2 * q + 1] + (size_t)i * 4 : NULL, r);
+            }
+        }
+    }
+}
+
+/* Lanes: x holds n + 2 steps x L lanes (step i at x + i L; the input in steps 0..n-1),
+ * overwritten with d; the result goes to y (n x L); st holds 7 L floats. Returns 0, having
+ * written nothing, when a value is not taken (see above). The lane loops vectorise (any
+ * width: the same bits). */
+FX_CLONES
+static int derf_lanes(const fx_deriche_sec *p, float *restrict x, float *restrict y, int n, int L,
+                      float *restrict st)
+{
+    int ok = 1;
+    for (size_t i = 0; i < (size_t)n * L; i++)
+        ok &= fabsf(x[i]) < FX_BLUR_FLOAT_MAX_VALUE;
+    if (!ok)
+        return 0;
+    const float b00 = p->b0[0], b01 = p->b0[1], b10 = p->b1[0], b11 = p->b1[1];
+    const float m10 = p->m1[0], m11 = p->m1[1], m20 = p->m2[0], m21 = p->m2[1];
+    const float p10 = p->p1[0], p11 = p->p1[1], p20 = p->p2[0], p21 = p->p2[1];
+    float *restrict c = st, *restrict d1 = st + L, *restrict ua = st + 2 * L, *restrict ub = st + 3 * L;
+    float *restrict uc = st + 4 * L, *restrict ud = st + 5 * L;
+    for (int l = 0; l < L; l++) {
+        c[l] = x[l];
+        d1[l] = ua[l] = ub[l] = uc[l] = ud[l] = 0.0f;
+    }
+    for (int i = 0; i < n; i++) {
+        float *restrict xi = x + (size_t)i * L, *restrict yi = y + (size_t)i * L;
+        for (int l = 0; l < L; l++) {
+            const float d = xi[l] - c[l];
+            xi[l] = d;
+            const float u0 = (b00 * d + b10 * d1[l]) - (p10 * ua[l] + p20 * ub[l]);
+            const float u1 = (b01 * d + b11 * d1[l]) - (p11 * uc[l] + p21 * ud[l]);
+            ub[l] = ua[l], ua[l] = u0;
+            ud[l] = uc[l], uc[l] = u1;
+            d1[l] = d;
+            yi[l] = u0 + u1;
+        }
+    }
+    const float *last = x + (size_t)(n - 1) * L;
+    for (int l = 0; l < L; l++) {
+        x[(size_t)n * L + l] = x[(size_t)(n + 1) * L + l] = last[l];
+        ua[l] = ub[l] = p->ga[0] * last[l];
+        uc[l] = ud[l] = p->ga[1] * last[l];
+    }
+    for (int i = n - 1; i >= 0; i--) {
+        const float *restrict e1 = x + (size_t)(i + 1) * L, *restrict e2 = e1 + L;
+        float *restrict yi = y + (size_t)i * L;
+        for (int l = 0; l < L; l++) {
+            const float v0 = (m10 * e1[l] + m20 * e2[l]) - (p10 * ua[l] + p20 * ub[l]);
+            const float v1 = (m11 * e1[l] + m21 * e2[l]) - (p11 * uc[l] + p21 * ud[l]);
+            ub[l] = ua[l], ua[l] = v0;
+            ud[l] = uc[l], uc[l] = v1;
+            yi[l] = (yi[l] + (v0 + v1)) + c[l];
+        }
+    }
+    return 1;
 }
 
 /* box_lanes on groups of 4 lanes straight from float rows, one group at a time over blocks
@@ -984,6 +1313,13 @@ static void vertical_range(void *user, int begin, int end, int worker)
                          j->oy1 - j->sy0, j->vorigin + c0, j->vstride, L, (v4d *)A);
             continue;
         }
+        if (j->fast_v && j->use_float) {
+            float *xs = (float *)A, *cb = xs + ((size_t)n + 3) * Lmax;
+            if (derf_vertical(&j->plan->sec, j->src + (size_t)j->sy0 * row + c0, row, n, j->oy0 - j->sy0,
+                              j->oy1 - j->sy0, j->vorigin + c0, j->vstride, L, xs, cb))
+                continue;
+            atomic_store(&j->fallback, 1);
+        }
         if (j->fast_v) {
             v4d *st = (v4d *)A, *cb = st + 5 * (size_t)(Lmax / 4);
             float *xs = (float *)(cb + (size_t)(j->oy1 - j->oy0) * (Lmax / 4));
@@ -1022,10 +1358,31 @@ static void horizontal_range(void *user, int begin, int end, int worker)
     const int R = j->block_rows, Lmax = R * C;
     const int rows = j->oy1 - j->oy0;
     const int ext = j->plan->ext;
+    const int float_h = j->use_float && !atomic_load(&j->fallback);
     double *A = worker_scratch(j, worker);
     for (int blk = begin; blk < end; blk++) {
         int r0 = blk * R;
         int nr = rows - r0 < R ? rows - r0 : R;
+        if (float_h && !j->fast_h) { /* 1-3 channels: rows gathered x-major, float lanes */
+            const int L = nr * C;
+            float *xa = (float *)A, *ya = xa + ((size_t)n + 2) * L, *st = ya + (size_t)n * L;
+            for (int r = 0; r < nr; r++) {
+                const float *restrict in = j->vorigin + (size_t)(r0 + r) * j->vstride + (size_t)j->sx0 * C;
+                for (int i = 0; i < n; i++)
+                    for (int c = 0; c < C; c++)
+                        xa[(size_t)i * L + r * C + c] = in[(size_t)i * C + c];
+            }
+            if (derf_lanes(&j->plan->sec, xa, ya, n, L, st)) { /* always: the vertical pass checked */
+                for (int r = 0; r < nr; r++) {
+                    float *restrict o = j->dst + (size_t)(j->oy0 + r0 + r) * row + (size_t)j->ox0 * C;
+                    const float *restrict v = ya + (size_t)(j->ox0 - j->sx0) * L + r * C;
+                    for (int x = 0; x < j->ox1 - j->ox0; x++)
+                        for (int c = 0; c < C; c++)
+                            o[(size_t)x * C + c] = v[(size_t)x * L + c];
+                }
+                continue;
+            }
+        }
         if (j->fast_h) {
             const float *in[H_ROWS];
             float *out[H_ROWS];
@@ -1036,6 +1393,8 @@ static void horizontal_range(void *user, int begin, int end, int worker)
             }
             if (j->plan->alg == FX_BLUR_BOX)
                 box_rows4(j->plan, in, out, n, j->ox0 - j->sx0, j->ox1 - j->sx0, (v4d *)A);
+            else if (float_h)
+                derf_rows4(&j->plan->sec, in, out, n, j->ox0 - j->sx0, j->ox1 - j->sx0, (float *)A);
             else
                 deriche_rows4(j->plan, in, out, n, j->ox0 - j->sx0, j->ox1 - j->sx0, (v4d *)A);
             continue;
@@ -1094,6 +1453,15 @@ fx_result fx_blur_image(fx_context *ctx, const float *src, float *dst, int width
                         int channels, const fx_blur_spec *spec, const fx_rect *roi,
                         const char *where)
 {
+    return fx_blur_image_finite(ctx, src, dst, width, height, channels, spec, roi, where, NULL);
+}
+
+fx_result fx_blur_image_finite(fx_context *ctx, const float *src, float *dst, int width, int height,
+                               int channels, const fx_blur_spec *spec, const fx_rect *roi,
+                               const char *where, int *finite)
+{
+    if (finite)
+        *finite = 0;
     if (!where)
         where = "blur";
     if (!src || !dst || !spec || width <= 0 || height <= 0 || channels < 1 || channels > 4)
@@ -1132,7 +1500,9 @@ fx_result fx_blur_image(fx_context *ctx, const float *src, float *dst, int width
     j->sy1 = (int)((long long)r.y1 + H > height ? height : (long long)r.y1 + H);
     j->fast_v = FX_BLUR_FAST && (plan.alg == FX_BLUR_RECURSIVE || plan.alg == FX_BLUR_BOX);
     j->fast_h = j->fast_v && channels == 4;
-    j->strip_lanes = j->fast_v && plan.alg == FX_BLUR_RECURSIVE ? V_LANES_REC : V_LANES;
+    j->use_float = plan.alg == FX_BLUR_RECURSIVE && plan.use_float;
+    atomic_init(&j->fallback, 0);
+    j->strip_lanes = j->fast_v && plan.alg == FX_BLUR_RECURSIVE ? (j->use_float ? V_LANES_F : V_LANES_REC) : V_LANES;
     j->block_rows = j->fast_h ? H_ROWS : (H_LANES / channels < 1 ? 1 : H_LANES / channels);
 
     /* Scratch per worker, sized for both passes. */
@@ -1153,6 +1523,13 @@ fx_result fx_blur_image(fx_context *ctx, const float *src, float *dst, int width
         sh = (size_t)(r.x1 - r.x0) * H_ROWS * sizeof(v4d);
     else
         sh = (2 * (nh + 2 * ext) * Lh + lane_state_doubles(&plan, (int)Lh)) * d;
+    if (j->use_float) { /* the float kernels' buffers (the double ones stay for the fallback) */
+        size_t fv = ((nv + 3) + (size_t)(r.y1 - r.y0)) * j->strip_lanes * sizeof(float);
+        size_t fh = j->fast_h ? (size_t)(r.x1 - r.x0) * 4 * HF_ROWS * sizeof(float)
+                              : ((nh + 2) + nh + 8) * Lh * sizeof(float);
+        sv = sv > fv ? sv : fv;
+        sh = sh > fh ? sh : fh;
+    }
     j->scratch_bytes = round_up64(sv > sh ? sv : sh);
 
     /* The vertical result goes straight to dst when the computed columns are the written
@@ -1192,6 +1569,8 @@ fx_result fx_blur_image(fx_context *ctx, const float *src, float *dst, int width
     fx_parallel_for_worker(ctx, strips, fx_grain_for(ctx, strips), vertical_range, j);
     int blocks = (r.y1 - r.y0 + j->block_rows - 1) / j->block_rows;
     fx_parallel_for_worker(ctx, blocks, fx_grain_for(ctx, blocks), horizontal_range, j);
+    if (finite)
+        *finite = j->use_float && !atomic_load(&j->fallback);
     fx_mem_free(scratch_raw);
 out:
     fx_mem_free(tmp);
@@ -1214,6 +1593,25 @@ fx_result fx_blur_line(fx_context *ctx, const float *in, float *out, int n, int 
             for (int i = 0; i < n; i++)
                 out[(size_t)i * stride] = in[(size_t)i * stride];
         return FX_OK;
+    }
+    if (plan.alg == FX_BLUR_RECURSIVE && plan.use_float) {
+        float *fb = fx_mem_alloc(((size_t)n * 2 + 2 + 8) * sizeof(float));
+        if (!fb) {
+            plan_free(&plan);
+            return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
+        }
+        float *y = fb + (size_t)n + 2;
+        for (int i = 0; i < n; i++)
+            fb[i] = in[(size_t)i * stride];
+        int done = derf_lanes(&plan.sec, fb, y, n, 1, y + n);
+        if (done)
+            for (int i = 0; i < n; i++)
+                out[(size_t)i * stride] = y[i];
+        fx_mem_free(fb);
+        if (done) {
+            plan_free(&plan);
+            return FX_OK;
+        }
     }
     double *A = lane_buffer(n, 1, plan.ext), *Bf = lane_buffer(n, 1, plan.ext);
     double *s = fx_mem_alloc(lane_state_doubles(&plan, 1) * sizeof(double));

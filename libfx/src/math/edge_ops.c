@@ -11,6 +11,9 @@
 #include "math/color.h"
 #include "math/srgb_lut.h"
 #include "math/simd8.h"
+
+typedef uint32_t v8ui __attribute__((vector_size(32)));
+#define S8I(v) ((v8i){ (v), (v), (v), (v), (v), (v), (v), (v) })
 #include "math/vec.h"
 
 #include <float.h>
@@ -216,6 +219,11 @@ typedef struct edge_job {
     const int *span;       /* dilation: half-width of the disc at dy = -reach..reach */
     fx_edge_row_fn emit;
     void *user;
+    /* rgba_written: encoded luminance of the rows within `hf` of each inner band boundary
+     * (boundary k = 1..bands-1 at roi.y0 + k EDGE_BAND: rows [yb - hf, yb + hf), 2 hf rows
+     * of w floats each, field_rect's columns valid), taken before the bands run */
+    float *saved;
+    int hf, bands;
     /* per-worker scratch: ring rows */
     int rf, rs;            /* ring sizes: field rows, strength rows */
     size_t scratch_floats;
@@ -238,14 +246,51 @@ static inline void unit_normal3(const float *n, float *u)
     u[2] = z * inv;
 }
 
+/* Encoded luminance of a pixel: finite, clamped to the encoder's useful range (NaN -> 0). */
+static inline float lum_px(const float *p, const float *lut)
+{
+    float l = fx_luminance(p[0], p[1], p[2]);
+    l = l > 0.0f ? (l < 1e6f ? l : 1e6f) : 0.0f;
+    return fx_srgb_encode_lut(lut, l); /* no powf: math/srgb_lut.h */
+}
+
+/* 8 pixels at a time in GCC vector types (the transpose of math/simd8.h, then lum_px's
+ * operations lane by lane: the same bits), the table read per lane; the rest per pixel. */
 EDGE_VEC static void lum_row(const float *p, const float *lut, int x0, int x1, float *out)
 {
-    for (int x = x0; x < x1; x++) {
-        float l = fx_luminance(p[4 * x], p[4 * x + 1], p[4 * x + 2]);
-        /* finite, clamped to the encoder's useful range (NaN -> 0) */
-        l = l > 0.0f ? (l < 1e6f ? l : 1e6f) : 0.0f;
-        out[x] = fx_srgb_encode_lut(lut, l); /* no powf: math/srgb_lut.h */
+    int x = x0;
+    const v8f lo = S8(0.001953125f); /* 2^-9 */
+    const v8i imask = { 0, 0, 0, 0, 0, 0, 0, 0 };
+    for (; x + 8 <= x1; x += 8) {
+        v8f c[4];
+        fx_load8x4(p + 4 * (size_t)x, c);
+        v8f l = S8(FX_LUMA_R) * c[0] + S8(FX_LUMA_G) * c[1] + S8(FX_LUMA_B) * c[2];
+        const v8i pos = l > S8(0.0f); /* false for NaN: 0, as lum_px */
+        l = SEL8(pos, SEL8(l < S8(1e6f), l, S8(1e6f)), S8(0.0f));
+        const v8i small = l < lo;
+        v8i b;
+        memcpy(&b, &l, sizeof b);
+        v8i i = (v8i)(((v8ui)b >> (23 - FX_SRGB_LUT_BITS)) -
+                      (v8ui)S8I((int32_t)((uint32_t)(127 + FX_SRGB_LUT_MIN_EXP) << FX_SRGB_LUT_BITS)));
+        i = (i & ~small) | (imask & small);
+        const v8f t = __builtin_convertvector(b & S8I((1 << (23 - FX_SRGB_LUT_BITS)) - 1), v8f) *
+                      S8(1.0f / (float)(1u << (23 - FX_SRGB_LUT_BITS)));
+        int32_t ii[8];
+        memcpy(ii, &i, sizeof ii);
+        v8f l0, l1;
+        float a0[8], a1[8];
+        for (int k = 0; k < 8; k++) {
+            a0[k] = lut[ii[k]];
+            a1[k] = lut[ii[k] + 1];
+        }
+        memcpy(&l0, a0, sizeof l0);
+        memcpy(&l1, a1, sizeof l1);
+        const v8f e = l0 + t * (l1 - l0);
+        const v8f v = SEL8(small, S8(12.92f) * l, e);
+        memcpy(out + x, &v, sizeof v);
     }
+    for (; x < x1; x++)
+        out[x] = lum_px(p + 4 * (size_t)x, lut);
 }
 
 static void depth_row(const float *d, int planar, int x0, int x1, float *out)
@@ -476,6 +521,44 @@ static inline __attribute__((always_inline)) int sobel_row_sse2(const float *A, 
     }
     return x;
 }
+
+#  if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && !defined(FX_NO_CLONES)
+#    include <immintrin.h>
+#    define EDGE_AVX2 1
+/* sobel_row_sse2 8 columns at a time in AVX2 (4 doubles per register): the same operations
+ * in the same order, so the same bits. Called only when the CPU has AVX2. */
+__attribute__((target("avx2"), noinline)) static int sobel_row_avx2(const float *A, const float *B,
+                                                                   const float *C, int xa, int xb,
+                                                                   float *out)
+{
+    const __m256d two = _mm256_set1_pd(2.0), quarter = _mm256_set1_pd(0.25);
+    const __m256 big = _mm256_set1_ps(FLT_MAX);
+    int x = xa;
+    for (; x + 8 <= xb; x += 8) {
+        const __m256 c = _mm256_loadu_ps(B + x);
+        const __m256 n = _mm256_sub_ps(_mm256_loadu_ps(A + x), c), s = _mm256_sub_ps(_mm256_loadu_ps(C + x), c);
+        const __m256 we = _mm256_sub_ps(_mm256_loadu_ps(B + x - 1), c), ea = _mm256_sub_ps(_mm256_loadu_ps(B + x + 1), c);
+        const __m256 nw = _mm256_sub_ps(_mm256_loadu_ps(A + x - 1), c), ne = _mm256_sub_ps(_mm256_loadu_ps(A + x + 1), c);
+        const __m256 sw = _mm256_sub_ps(_mm256_loadu_ps(C + x - 1), c), se = _mm256_sub_ps(_mm256_loadu_ps(C + x + 1), c);
+        const __m256 gx1 = _mm256_sub_ps(ne, nw), gx2 = _mm256_sub_ps(ea, we), gx3 = _mm256_sub_ps(se, sw);
+        const __m256 gy1 = _mm256_sub_ps(sw, nw), gy2 = _mm256_sub_ps(s, n), gy3 = _mm256_sub_ps(se, ne);
+        __m128 half[2];
+        for (int k = 0; k < 2; k++) {
+#define LANES(v) _mm256_cvtps_pd(k == 0 ? _mm256_castps256_ps128(v) : _mm256_extractf128_ps((v), 1))
+            const __m256d gx = _mm256_add_pd(_mm256_add_pd(LANES(gx1), _mm256_mul_pd(two, LANES(gx2))), LANES(gx3));
+            const __m256d gy = _mm256_add_pd(_mm256_add_pd(LANES(gy1), _mm256_mul_pd(two, LANES(gy2))), LANES(gy3));
+#undef LANES
+            const __m256d m = _mm256_mul_pd(_mm256_sqrt_pd(_mm256_add_pd(_mm256_mul_pd(gx, gx), _mm256_mul_pd(gy, gy))),
+                                            quarter);
+            half[k] = _mm256_cvtpd_ps(m);
+        }
+        __m256 v = _mm256_set_m128(half[1], half[0]);
+        v = _mm256_min_ps(v, big); /* v <= FLT_MAX ? v : FLT_MAX (v is never NaN) */
+        _mm256_storeu_ps(out + x, v);
+    }
+    return x;
+}
+#  endif
 #endif
 
 /* The operator on one row for x in [x0, x1) into out[x]: the interior without any clamping
@@ -527,6 +610,10 @@ EDGE_VEC static void response_row(const float *A, const float *B, const float *C
         break;
     case FX_EDGE_SOBEL:
     default:
+#ifdef EDGE_AVX2
+        if (__builtin_cpu_supports("avx2"))
+            xa = sobel_row_avx2(A, B, C, xa, xb, out);
+#endif
 #ifdef EDGE_SSE2
         xa = sobel_row_sse2(A, B, C, xa, xb, out);
 #endif
@@ -578,11 +665,39 @@ static inline const float *ring_row(const float *ring, int rows, size_t row_floa
     return ring + (size_t)(y % rows) * row_floats;
 }
 
+/* The saved luminance row y (see edge_job.saved), or NULL. */
+static const float *saved_row(const edge_job *j, int y)
+{
+    if (!j->saved)
+        return NULL;
+    const int k = (y - j->roi.y0 + j->hf) / EDGE_BAND; /* y - roi.y0 + hf >= 0: fields start there at most */
+    const int yb = j->roi.y0 + k * EDGE_BAND;
+    if (y - j->roi.y0 + j->hf < 0 || k < 1 || k >= j->bands || y < yb - j->hf || y >= yb + j->hf)
+        return NULL;
+    return j->saved + ((size_t)(k - 1) * 2 * j->hf + (size_t)(y - (yb - j->hf))) * (size_t)j->w;
+}
+
+static void save_boundaries(void *user, int begin, int end)
+{
+    const edge_job *j = user;
+    const size_t w = (size_t)j->w;
+    for (int k = begin + 1; k < end + 1; k++) {
+        const int yb = j->roi.y0 + k * EDGE_BAND;
+        for (int y = yb - j->hf; y < yb + j->hf; y++)
+            if (y >= 0 && y < j->h)
+                lum_row(j->src->rgba + (size_t)y * w * 4, j->lut, j->field_rect.x0, j->field_rect.x1,
+                        j->saved + ((size_t)(k - 1) * 2 * j->hf + (size_t)(y - (yb - j->hf))) * w);
+    }
+}
+
 static void field_row(const edge_job *j, const band_rings *b, int y)
 {
     const fx_rect *fr = &j->field_rect;
     const size_t w = (size_t)j->w, row = (size_t)y * w;
-    if (b->lum)
+    const float *sv = b->lum ? saved_row(j, y) : NULL;
+    if (sv)
+        memcpy(b->lum + (size_t)(y % j->rf) * w + fr->x0, sv + fr->x0, (size_t)(fr->x1 - fr->x0) * sizeof(float));
+    else if (b->lum)
         lum_row(j->src->rgba + row * 4, j->lut, fr->x0, fr->x1, b->lum + (size_t)(y % j->rf) * w);
     if (b->ldepth)
         depth_row(j->src->depth + row, j->s->depth_planar, fr->x0, fr->x1, b->ldepth + (size_t)(y % j->rf) * w);
@@ -855,12 +970,24 @@ fx_result fx_edge_matte_rows(fx_context *ctx, const fx_edge_sources *src, const 
     for (int i = 0; i < j.workers && !r; i++)
         if (!(j.scratch[i] = fx_mem_alloc(floats * sizeof(float))))
             r = fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the edge rows", where);
+    const int bands = (roi.y1 - roi.y0 + EDGE_BAND - 1) / EDGE_BAND;
+    if (!r && s->use_luminance && src->rgba_written && bands > 1) {
+        j.hf = j.opr + j.reach;
+        j.bands = bands;
+        if (j.hf > FX_EDGE_IN_PLACE_MAX_HALO)
+            r = fx_fail(ctx, FX_ERR_INTERNAL, "%s: edges in place with a halo of %d rows (at most %d)", where,
+                        j.hf, FX_EDGE_IN_PLACE_MAX_HALO);
+        else if (!(j.saved = fx_mem_alloc((size_t)(bands - 1) * 2 * (size_t)j.hf * ws * sizeof(float))))
+            r = fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the edge rows", where);
+    }
     if (!r) {
         if (s->use_luminance)
             j.lut = fx_srgb_lut();
-        const int bands = (roi.y1 - roi.y0 + EDGE_BAND - 1) / EDGE_BAND;
+        if (j.saved)
+            fx_parallel_for(ctx, bands - 1, 1, save_boundaries, &j);
         fx_parallel_for_worker(ctx, bands, 1, band_rows, &j);
     }
+    fx_mem_free(j.saved);
     for (int i = 0; i < j.workers; i++)
         fx_mem_free(j.scratch[i]);
     fx_mem_free(j.scratch);

@@ -96,7 +96,15 @@ typedef struct fx_edge_sources {
     const float *crypto[2][FX_EDGE_MAX_RANKS]; /* CryptoObjectNN, CryptoMaterialNN: RGBA */
     int crypto_ranks[2];
     int width, height;
+    /* Non-zero when the caller's emit writes into rgba while the matte streams (an in-place
+     * effect): the luminance of the rows where bands meet is then taken before any band
+     * runs, so no band reads a row another band has drawn. Needs fx_edge_halo(s) <=
+     * FX_EDGE_IN_PLACE_MAX_HALO (fx_edge_matte_rows fails otherwise). */
+    int rgba_written;
 } fx_edge_sources;
+
+/* Largest halo for which rgba_written is allowed (half a band of rows). */
+#define FX_EDGE_IN_PLACE_MAX_HALO 16
 
 /* Fills `out` from a frame (rgba: the current Combined). Fails with FX_ERR_MISSING_PASS
  * naming `where` and the pass when the settings need a pass the frame lacks. */
