@@ -131,6 +131,7 @@ typedef struct cel_job {
     float values[RAMP_MAX];
     float band_lo[RAMP_MAX]; /* band k's smoothstep starts here (edge k/n - softness/2) */
     float band_inv;          /* 1 / softness (0: hard bands) */
+    float outline_weight;    /* 1; on a proxy, outlines under a pixel drawn lighter (edges.c's proxy_adjust) */
     int n;
 } cel_job;
 
@@ -241,7 +242,7 @@ static inline void cel_row_diffuse_px(const cel_job *j, int y, int x, const floa
     const v4f tint = l > 1e-8f ? l3 * V4(1.0f / l) : V4(1.0f); /* the light's colour */
     v4f o = c + col * (V4(q) * tint - l3); /* lane 3: c + 0 */
     if (matte) {
-        const float e = matte[x];
+        const float e = matte[x] * j->outline_weight;
         o += V4(e) * (oc - o); /* lane 3: alpha toward the outline's alpha */
     }
     o = finite4(c + V4(mix) * (o - c));
@@ -295,6 +296,7 @@ CEL_VEC static void cel_row_diffuse(const cel_job *j, int y, const float *matte)
         if (matte) {
             v8f e;
             memcpy(&e, matte + x, sizeof e);
+            e = e * S8(j->outline_weight);
             for (int ch = 0; ch < 4; ch++)
                 o[ch] += e * (S8(p->outline_color[ch]) - o[ch]);
         }
@@ -338,14 +340,14 @@ static void cel_row(void *user, int y, const float *matte)
                 }
             }
             if (matte) {
-                float e = matte[x];
+                float e = matte[x] * j->outline_weight;
                 for (int k = 0; k < 3; k++)
                     o[k] += e * (p->outline_color[k] - o[k]);
             }
             for (int k = 0; k < 3; k++)
                 d[k] = finite_or(c[k] + p->mix * (o[k] - c[k]));
             float a = finite_or(s[3]);
-            d[3] = matte ? finite_or(a + p->mix * matte[x] * (p->outline_color[3] - a)) : a;
+            d[3] = matte ? finite_or(a + p->mix * (matte[x] * j->outline_weight) * (p->outline_color[3] - a)) : a;
         }
     }
 }
@@ -409,6 +411,14 @@ static fx_result cel_process(const fx_effect_run *run)
     }
     fx_edge_settings es;
     edge_settings(p, &es);
+    j.outline_weight = 1.0f;
+    if (run->proxy_factor > 1) {
+        /* as edges.c's proxy_adjust: the width was divided, the engine draws 2 pixels at least */
+        if (!es.depth_planar)
+            es.depth_threshold *= (float)run->proxy_factor;
+        if (p->outline_width < 1.0f)
+            j.outline_weight = p->outline_width;
+    }
     if (es.use_depth || es.use_normal) {
         /* the outline matte streams row by row into the shading: no frame-size plane */
         fx_edge_sources src;

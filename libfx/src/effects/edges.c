@@ -106,7 +106,25 @@ typedef struct draw_job {
     const fx_effect_run *run;
     const edges_params *p;
     float *matte_dbg; /* the debug matte pass, or NULL */
+    float opacity;    /* p->opacity, thinned on a proxy (proxy_adjust) */
 } draw_job;
+
+/* On a proxy (run->proxy_factor f > 1) the stack has divided line_width by f, but the engine
+ * draws any width up to 2 at its operator's own 2 pixels. A line under one proxy pixel wide
+ * is drawn lighter, by its width: it stays a visible stroke, not a faint band (lines of one
+ * to two proxy pixels come out up to twice as wide as on the full frame). Relative depth
+ * jumps between neighbours grow with the pixel step (the sea towards the horizon): the
+ * threshold grows with it, or the proxy draws lines along planes the full frame leaves
+ * clean. Returns the opacity to draw with. */
+static float proxy_adjust(const fx_effect_run *run, const edges_params *p, fx_edge_settings *s)
+{
+    const int f = run->proxy_factor;
+    if (f <= 1)
+        return p->opacity;
+    if (!s->depth_planar)
+        s->depth_threshold *= (float)f;
+    return p->line_width < 1.0f ? p->opacity * (p->line_width > 0.0f ? p->line_width : 0.0f) : p->opacity;
+}
 
 /* One pixel of draw_row's "over" case. */
 static inline void draw_px(const float *srow, float *drow, const float *matte, int x, float op, v4f lc,
@@ -136,7 +154,7 @@ static void draw_row(void *user, int y, const float *matte)
     const draw_job *j = user;
     const fx_effect_run *run = j->run;
     const fx_rect *roi = &run->roi;
-    const float op = j->p->opacity;
+    const float op = j->opacity;
     const int matte_out = j->p->output == OUT_MATTE;
     const int in_place = run->dst == run->src;
     v4f lc;
@@ -200,6 +218,7 @@ static fx_result edges_process(const fx_effect_run *run)
     const char *where = run->where;
     fx_edge_settings s;
     settings_of(p, &s);
+    const float opacity = proxy_adjust(run, p, &s);
     fx_edge_sources src;
     fx_result r = fx_edge_sources_from_frame(run->frame, run->src, &s, &src, where);
     if (r)
@@ -213,7 +232,7 @@ static fx_result edges_process(const fx_effect_run *run)
     if (dr)
         return dr;
     /* the matte streams row by row into the drawing: no frame-size plane */
-    draw_job j = { run, p, matte };
+    draw_job j = { run, p, matte, opacity };
     return fx_edge_matte_rows(run->ctx, &src, &s, roi, strengths, draw_row, &j, where);
 }
 
