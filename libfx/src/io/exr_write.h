@@ -33,6 +33,13 @@ fx_result fx_exr_parse_compression(const fx_context *ctx, const char *text, fx_e
 fx_result fx_exr_write(const fx_frame *f, const char *path, const fx_write_options *opts,
                        const fx_exr_write_params *params);
 
+/* Who deflates ZIP/ZIPS chunks. AUTO: libdeflate when built with it (io/exr_zip.h),
+ * else OpenEXRCore's zlib; STOCK: OpenEXRCore's zlib always; LIBDEFLATE: refused
+ * (FX_ERR_INVALID_ARGUMENT) when built without it. For tests and benchmarks. */
+typedef enum fx_exr_zip_impl { FX_EXR_ZIP_AUTO, FX_EXR_ZIP_STOCK, FX_EXR_ZIP_LIBDEFLATE } fx_exr_zip_impl;
+fx_result fx_exr_write_with(const fx_frame *f, const char *path, const fx_write_options *opts,
+                            const fx_exr_write_params *params, fx_exr_zip_impl impl);
+
 #ifdef __cplusplus
 }
 #endif
