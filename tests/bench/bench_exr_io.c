@@ -8,9 +8,11 @@
  * medians. --levels also writes every pass at ZIP levels 1..9 (2 threads) and prints
  * time and size per level: the data behind FX_EXR_DEFAULT_ZIP_LEVEL (io/exr_write.h).
  * --zip only writes (the file is read once): ZIP at the default level through
- * OpenEXRCore's zlib and through libdeflate (io/exr_zip.c), interleaved per run, 1 and
+ * OpenEXRCore's own deflater (zlib in 3.1, libdeflate from 3.2) and through libfx's
+ * (io/exr_zip.c, libdeflate), interleaved per run, 1 and
  * 2 threads, every pass and Combined only; prints medians, the median of the per-run
- * ratios and the sizes, then checks both files decode to the same pixels.
+ * ratios and the sizes, then checks both files decode to the same pixels; with
+ * --levels also libdeflate levels 1..9 beside zlib level 1 (2 threads).
  *
  * Not built by CMake (tests/bench/CMakeLists.txt belongs to the benches' owner); build
  * against a Release build tree:
@@ -159,7 +161,7 @@ int main(int argc, char **argv)
         }
         printf("# %s: %dx%d, %d passes; ZIP level %d, write only, median of %d runs (ms)\n", in,
                fx_frame_width(f[0]), fx_frame_height(f[0]), fx_frame_pass_count(f[0]), p.zip_level, reps);
-        printf("| write | threads | OpenEXR zlib | libdeflate | zlib / libdeflate | zlib MB | libdeflate MB |\n"
+        printf("| write | threads | OpenEXR | libfx+libdeflate | OpenEXR / libfx | OpenEXR MB | libfx MB |\n"
                "|---|---:|---:|---:|---:|---:|---:|\n");
         for (int c = 0; c < 2; c++)
             for (int t = 0; t < 2; t++) {
@@ -171,6 +173,36 @@ int main(int argc, char **argv)
                        m0 * 1e3, m1 * 1e3, median(ratio, reps), sz[0][c] / 1e6, sz[1][c] / 1e6);
             }
         printf("decoded pixels of the two: %s\n", same ? "identical" : "DIFFERENT");
+        if (levels) {
+            /* libdeflate levels 1..9 beside zlib 1, interleaved per run, 2 threads */
+            static double tl[10][2][MAX_REPS];
+            long szl[10][2];
+            for (int r = 0; r < reps; r++)
+                for (int l = 0; l <= 9; l++)
+                    for (int c = 0; c < 2; c++) {
+                        fx_exr_write_params q = fx_exr_write_defaults();
+                        q.zip_level = l ? l : 1;
+                        fx_write_options wo = {sizeof wo, 0, c, NULL, NULL};
+                        double t0 = now();
+                        if (fx_exr_write_with(f[1], out, &wo, &q, l ? FX_EXR_ZIP_LIBDEFLATE : FX_EXR_ZIP_STOCK) != FX_OK)
+                            die(ctx[1], "write");
+                        tl[l][c][r] = now() - t0;
+                        szl[l][c] = file_size(out);
+                    }
+            printf("\n# ZIP levels, 2 threads, median of %d runs (ms; time relative to zlib level 1 from the "
+                   "same runs)\n| deflater | level | all passes ms | rel. | MB | Combined ms | rel. | MB |\n"
+                   "|---|---:|---:|---:|---:|---:|---:|---:|\n", reps);
+            for (int l = 0; l <= 9; l++) {
+                double rel[2][MAX_REPS];
+                for (int c = 0; c < 2; c++)
+                    for (int r = 0; r < reps; r++)
+                        rel[c][r] = tl[l][c][r] / tl[0][c][r];
+                double m0 = median(tl[l][0], reps), m1 = median(tl[l][1], reps);
+                printf("| %s | %d | %.1f | %.2f | %.2f | %.1f | %.2f | %.2f |\n", l ? "libfx+libdeflate" : "OpenEXR",
+                       l ? l : 1, m0 * 1e3, median(rel[0], reps), szl[l][0] / 1e6, m1 * 1e3, median(rel[1], reps),
+                       szl[l][1] / 1e6);
+            }
+        }
         unlink(out2);
         unlink(out);
         for (int t = 0; t < 2; t++) {
