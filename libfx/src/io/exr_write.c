@@ -143,8 +143,9 @@ static exr_result_t write_attributes(exr_context_t exr, int part, const fx_frame
  * count. Batches of chunks bound the memory held for compressed data.
  *
  * ZIP/ZIPS through libdeflate: the pipeline's compress_fn is zip_chunk, which deflates
- * the packed bytes straight into the chunk's slot (the pipeline's compressed_buffer
- * stays OpenEXR's and unused); stash_chunk then only records the size. */
+ * the packed bytes into the worker's own buffer (the pipeline's compressed_buffer stays
+ * OpenEXR's and unused); stash_chunk copies from there, so a slot holds only the
+ * compressed size, as on OpenEXR's path. */
 typedef struct chunk_slot {
     uint8_t *data;
     size_t size, cap;
@@ -154,7 +155,9 @@ typedef struct chunk_slot {
 typedef struct encode_worker {
     chunk_slot *slot;  /* the chunk being encoded */
     fx_exr_zip *zip;   /* libdeflate path: this worker's compressor, made on first use */
-    int in_slot;       /* zip_chunk already put the chunk into slot */
+    uint8_t *buf;      /* libdeflate path: the compressed chunk */
+    size_t buf_cap;
+    int in_buf;        /* zip_chunk put this chunk into buf */
 } encode_worker;
 
 typedef struct encode_job {
@@ -190,12 +193,18 @@ static int grow_slot(chunk_slot *slot, size_t n)
 static exr_result_t zip_chunk(exr_encode_pipeline_t *enc)
 {
     encode_worker *w = enc->encoding_user_data;
-    size_t n = (size_t)enc->packed_bytes, out = 0;
-    if (!grow_slot(w->slot, fx_exr_zip_bound(w->zip, n)) ||
-        fx_exr_zip_compress(w->zip, enc->packed_buffer, n, w->slot->data, w->slot->cap, &out) != 0)
+    size_t n = (size_t)enc->packed_bytes, out = 0, need = fx_exr_zip_bound(w->zip, n);
+    if (need > w->buf_cap) {
+        uint8_t *grown = fx_mem_realloc(w->buf, need);
+        if (!grown)
+            return EXR_ERR_OUT_OF_MEMORY;
+        w->buf = grown;
+        w->buf_cap = need;
+    }
+    if (fx_exr_zip_compress(w->zip, enc->packed_buffer, n, w->buf, w->buf_cap, &out) != 0)
         return EXR_ERR_OUT_OF_MEMORY;
     enc->compressed_bytes = out;
-    w->in_slot = 1;
+    w->in_buf = 1;
     return EXR_ERR_SUCCESS;
 }
 
@@ -204,16 +213,12 @@ static exr_result_t stash_chunk(exr_encode_pipeline_t *enc)
     encode_worker *w = enc->encoding_user_data;
     chunk_slot *slot = w->slot;
     size_t n = (size_t)enc->compressed_bytes;
-    slot->y = enc->chunk.start_y;
-    if (w->in_slot) {
-        slot->size = n;
-        return EXR_ERR_SUCCESS;
-    }
     if (!grow_slot(slot, n))
         return EXR_ERR_OUT_OF_MEMORY;
     if (n)
-        memcpy(slot->data, enc->compressed_buffer, n);
+        memcpy(slot->data, w->in_buf ? w->buf : (const uint8_t *)enc->compressed_buffer, n);
     slot->size = n;
+    slot->y = enc->chunk.start_y;
     return EXR_ERR_SUCCESS;
 }
 
@@ -223,7 +228,7 @@ static void encode_chunk(encode_job *j, int k, int worker)
     exr_encode_pipeline_t *enc = &j->enc[worker];
     encode_worker *w = &j->wk[worker];
     w->slot = &j->slots[k - j->first];
-    w->in_slot = 0;
+    w->in_buf = 0;
     int y = k * j->lines;
     int fy = f->data_window[1] + y;
     exr_chunk_info_t ci;
@@ -340,6 +345,7 @@ static fx_result encode_pixels(const fx_frame *f, exr_context_t exr, int part, c
         if (j.have_enc[w])
             exr_encoding_destroy(exr, &j.enc[w]);
         fx_exr_zip_free(j.wk[w].zip);
+        fx_mem_free(j.wk[w].buf);
     }
     for (int i = 0; i < batch; i++)
         fx_mem_free(j.slots[i].data);
