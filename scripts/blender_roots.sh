@@ -14,7 +14,7 @@ cd "$(dirname "$0")/.."
 ROOTS=${LIBFX_ROOTS:-/var/cache/libfx-roots}
 # Everything the build and the Blender tests need inside a root. xvfb/xauth/mesa for
 # the UI screenshot under a virtual display.
-PACKAGES=blender,cmake,build-essential,pkg-config,libopenexr-dev,libcjson-dev,libpng-dev
+PACKAGES=blender,cmake,build-essential,pkg-config,libopenexr-dev,libcjson-dev,libpng-dev,libdeflate-dev
 PACKAGES+=,python3-numpy,python3-pytest,python3-openimageio,openimageio-tools
 PACKAGES+=,xvfb,xauth,libgl1-mesa-dri,ca-certificates
 PACKAGES+=,nodejs   # the farm test runs the Flamenco job type

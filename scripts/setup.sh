@@ -7,6 +7,7 @@ cd "$(dirname "$0")/.."
 packages=(
   build-essential cmake pkg-config          # toolchain
   libopenexr-dev libcjson-dev libpng-dev    # the library's dependencies
+  libdeflate-dev                            # ZIP EXR writes ~3x faster (optional at build time)
   openimageio-tools python3-openimageio     # oiiotool/idiff and OIIO from Python, for tests and comparisons
   python3-numpy python3-pytest              # Python tests (run with /usr/bin/python3)
   python3-matplotlib python3-pil            # plots and GIF flip-books in docs/

@@ -1,12 +1,18 @@
 /* bench_exr_io: EXR read and write times for 1 and 2 threads (and a ZIP level sweep).
  *
- *   bench_exr_io IN.exr [reps] [--levels]
+ *   bench_exr_io IN.exr [reps] [--levels] [--zip]
  *
  * Per repetition and thread count (interleaved, so ratios come from one run on a noisy
  * shared machine): read every pass, read Combined only (what `libfx run` decodes for a
  * Combined-only stack is close to this), write every pass, write Combined only. Prints
  * medians. --levels also writes every pass at ZIP levels 1..9 (2 threads) and prints
  * time and size per level: the data behind FX_EXR_DEFAULT_ZIP_LEVEL (io/exr_write.h).
+ * --zip only writes (the file is read once): ZIP at the default level through
+ * OpenEXRCore's own deflater (zlib in 3.1, libdeflate from 3.2) and through libfx's
+ * (io/exr_zip.c, libdeflate), interleaved per run, 1 and
+ * 2 threads, every pass and Combined only; prints medians, the median of the per-run
+ * ratios and the sizes, then checks both files decode to the same pixels; with
+ * --levels also libdeflate levels 1..9 beside zlib level 1 (2 threads).
  *
  * Not built by CMake (tests/bench/CMakeLists.txt belongs to the benches' owner); build
  * against a Release build tree:
@@ -18,6 +24,7 @@
 #include "libfx/fx.h"
 #ifndef BENCH_PUBLIC_ONLY /* -DBENCH_PUBLIC_ONLY: no --levels, for builds before io/exr_write.h */
 #include "io/exr_write.h"
+#include "io/exr_zip.h"
 #endif
 
 #include <stdio.h>
@@ -30,6 +37,25 @@
 #include "bench_util.h"
 
 #define MAX_REPS 64
+
+#ifndef BENCH_PUBLIC_ONLY
+static int frames_same(const fx_frame *a, const fx_frame *b)
+{
+    if (fx_frame_width(a) != fx_frame_width(b) || fx_frame_height(a) != fx_frame_height(b) ||
+        fx_frame_pass_count(a) != fx_frame_pass_count(b))
+        return 0;
+    size_t px = (size_t)fx_frame_width(a) * (size_t)fx_frame_height(a);
+    for (int i = 0; i < fx_frame_pass_count(a); i++) {
+        const char *name = fx_frame_pass_name(a, i);
+        float *pa = NULL, *pb = NULL;
+        int ca = 0, cb = 0;
+        if (fx_frame_pass(a, name, &pa, &ca) != FX_OK || fx_frame_pass(b, name, &pb, &cb) != FX_OK || ca != cb ||
+            memcmp(pa, pb, px * (size_t)ca * sizeof(float)) != 0)
+            return 0;
+    }
+    return 1;
+}
+#endif
 
 static double now(void)
 {
@@ -73,10 +99,12 @@ int main(int argc, char **argv)
         return 2;
     }
     const char *in = argv[1];
-    int reps = 7, levels = 0;
+    int reps = 7, levels = 0, zip = 0;
     for (int i = 2; i < argc; i++) {
         if (strcmp(argv[i], "--levels") == 0)
             levels = 1;
+        else if (strcmp(argv[i], "--zip") == 0)
+            zip = 1;
         else
             reps = atoi(argv[i]);
     }
@@ -93,6 +121,100 @@ int main(int argc, char **argv)
             return 1;
         stack[t] = combined_stack(ctx[t]);
     }
+#ifndef BENCH_PUBLIC_ONLY
+    if (zip) {
+        /* [threads][stock, libdeflate][all, Combined][run] */
+        static double tz[2][2][2][MAX_REPS];
+        long sz[2][2] = {{0, 0}, {0, 0}};
+        static const fx_exr_zip_impl impl[2] = {FX_EXR_ZIP_STOCK, FX_EXR_ZIP_LIBDEFLATE};
+        char out2[300];
+        snprintf(out2, sizeof out2, "%s.libdeflate.exr", out);
+        fx_frame *f[2] = {NULL, NULL};
+        for (int t = 0; t < 2; t++)
+            if (fx_frame_read_exr(ctx[t], in, NULL, &f[t]) != FX_OK)
+                die(ctx[t], "read");
+        fx_exr_write_params p = fx_exr_write_defaults();
+        for (int r = 0; r < reps; r++)
+            for (int t = 0; t < 2; t++)
+                for (int k = 0; k < 2; k++)
+                    for (int c = 0; c < 2; c++) {
+                        fx_write_options wo = {sizeof wo, 0, c, NULL, NULL};
+                        const char *path = k ? out2 : out;
+                        double t0 = now();
+                        if (fx_exr_write_with(f[t], path, &wo, &p, impl[k]) != FX_OK)
+                            die(ctx[t], "write");
+                        tz[t][k][c][r] = now() - t0;
+                        sz[k][c] = file_size(path);
+                    }
+        /* the last files written are Combined only; check every pass too */
+        int same = 1;
+        for (int c = 1; c >= 0; c--) {
+            fx_write_options wo = {sizeof wo, 0, c, NULL, NULL};
+            fx_frame *a = NULL, *b = NULL;
+            if (fx_exr_write_with(f[1], out, &wo, &p, FX_EXR_ZIP_STOCK) != FX_OK ||
+                fx_exr_write_with(f[1], out2, &wo, &p, FX_EXR_ZIP_LIBDEFLATE) != FX_OK ||
+                fx_frame_read_exr(ctx[1], out, NULL, &a) != FX_OK || fx_frame_read_exr(ctx[1], out2, NULL, &b) != FX_OK)
+                die(ctx[1], "check");
+            same = same && frames_same(a, b);
+            fx_frame_free(a);
+            fx_frame_free(b);
+        }
+        printf("# %s: %dx%d, %d passes; ZIP level %d, write only, median of %d runs (ms)\n", in,
+               fx_frame_width(f[0]), fx_frame_height(f[0]), fx_frame_pass_count(f[0]), p.zip_level, reps);
+        printf("| write | threads | OpenEXR | libfx+libdeflate | OpenEXR / libfx | OpenEXR MB | libfx MB |\n"
+               "|---|---:|---:|---:|---:|---:|---:|\n");
+        for (int c = 0; c < 2; c++)
+            for (int t = 0; t < 2; t++) {
+                double ratio[MAX_REPS];
+                for (int r = 0; r < reps; r++)
+                    ratio[r] = tz[t][0][c][r] / tz[t][1][c][r];
+                double m0 = median(tz[t][0][c], reps), m1 = median(tz[t][1][c], reps);
+                printf("| %s | %d | %.1f | %.1f | %.2f | %.2f | %.2f |\n", c ? "Combined" : "all passes", threads[t],
+                       m0 * 1e3, m1 * 1e3, median(ratio, reps), sz[0][c] / 1e6, sz[1][c] / 1e6);
+            }
+        printf("decoded pixels of the two: %s\n", same ? "identical" : "DIFFERENT");
+        if (levels) {
+            /* libdeflate levels 1..9 beside zlib 1, interleaved per run, 2 threads */
+            static double tl[10][2][MAX_REPS];
+            long szl[10][2];
+            for (int r = 0; r < reps; r++)
+                for (int l = 0; l <= 9; l++)
+                    for (int c = 0; c < 2; c++) {
+                        fx_exr_write_params q = fx_exr_write_defaults();
+                        q.zip_level = l ? l : 1;
+                        fx_write_options wo = {sizeof wo, 0, c, NULL, NULL};
+                        double t0 = now();
+                        if (fx_exr_write_with(f[1], out, &wo, &q, l ? FX_EXR_ZIP_LIBDEFLATE : FX_EXR_ZIP_STOCK) != FX_OK)
+                            die(ctx[1], "write");
+                        tl[l][c][r] = now() - t0;
+                        szl[l][c] = file_size(out);
+                    }
+            printf("\n# ZIP levels, 2 threads, median of %d runs (ms; time relative to zlib level 1 from the "
+                   "same runs)\n| deflater | level | all passes ms | rel. | MB | Combined ms | rel. | MB |\n"
+                   "|---|---:|---:|---:|---:|---:|---:|---:|\n", reps);
+            for (int l = 0; l <= 9; l++) {
+                double rel[2][MAX_REPS];
+                for (int c = 0; c < 2; c++)
+                    for (int r = 0; r < reps; r++)
+                        rel[c][r] = tl[l][c][r] / tl[0][c][r];
+                double m0 = median(tl[l][0], reps), m1 = median(tl[l][1], reps);
+                printf("| %s | %d | %.1f | %.2f | %.2f | %.1f | %.2f | %.2f |\n", l ? "libfx+libdeflate" : "OpenEXR",
+                       l ? l : 1, m0 * 1e3, median(rel[0], reps), szl[l][0] / 1e6, m1 * 1e3, median(rel[1], reps),
+                       szl[l][1] / 1e6);
+            }
+        }
+        unlink(out2);
+        unlink(out);
+        for (int t = 0; t < 2; t++) {
+            fx_frame_free(f[t]);
+            fx_stack_free(stack[t]);
+            fx_context_free(ctx[t]);
+        }
+        return same ? 0 : 1;
+    }
+#else
+    (void)zip;
+#endif
     double rd_all[2][MAX_REPS], rd_comb[2][MAX_REPS], wr_all[2][MAX_REPS], wr_comb[2][MAX_REPS];
     int w = 0, h = 0, passes = 0;
     long size_all = 0, size_comb = 0;
@@ -147,7 +269,8 @@ int main(int argc, char **argv)
         fx_frame *f = NULL;
         if (fx_frame_read_exr(ctx[1], in, NULL, &f) != FX_OK)
             die(ctx[1], "read");
-        printf("\n# ZIP level sweep, every pass, 2 threads, median of %d runs\n", reps);
+        printf("\n# ZIP level sweep (%s), every pass, 2 threads, median of %d runs\n",
+               fx_exr_zip_available() ? "libdeflate" : "OpenEXR's zlib", reps);
         printf("| level | write ms | MB | MB Combined only | write ms Combined only |\n|---:|---:|---:|---:|---:|\n");
         for (int level = 1; level <= 9; level++) {
             double tv[MAX_REPS], tc[MAX_REPS];

@@ -1,6 +1,9 @@
 /* fx_frame_write_exr: round trips (bit-exact float, half, windows, camera, time,
- * metadata, Cryptomatte) and refusals (output == input, unwritable folder). */
+ * metadata, Cryptomatte), refusals (output == input, unwritable folder), and ZIP/ZIPS
+ * through libdeflate (io/exr_zip.c) decoding to the same values as OpenEXR's zlib. */
 #include "testutil.h"
+#include "io/exr_write.h"
+#include "io/exr_zip.h"
 
 #include <dirent.h>
 #include <stddef.h>
@@ -294,6 +297,159 @@ static void test_refusals(fx_context *ctx, const char *dir)
     fx_frame_free(g);
 }
 
+/* A hash of (i, seed): incompressible bits for the raw-chunk path. */
+static uint32_t zip_hash(uint32_t i, uint32_t seed)
+{
+    uint32_t h = i * 0x9e3779b1u ^ seed * 0x85ebca77u;
+    h ^= h >> 16, h *= 0x7feb352du, h ^= h >> 15, h *= 0x846ca68bu, h ^= h >> 16;
+    return h;
+}
+
+/* rich_frame plus a noise pass (finite floats of random bits) and a constant pass;
+ * `noisy`: Combined is noise too, so every chunk of it is stored raw. */
+static fx_frame *zip_frame(fx_context *ctx, int w, int h, int noisy)
+{
+    fx_frame *f = rich_frame(ctx, w, h);
+    if (!f)
+        return NULL;
+    size_t n = (size_t)w * h;
+    float *noise = malloc(n * 3 * sizeof *noise), *flat = malloc(n * sizeof *flat);
+    for (size_t i = 0; i < n * 3; i++) {
+        uint32_t bits = (zip_hash((uint32_t)i, 11) & 0x807fffffu) | ((60u + zip_hash((uint32_t)i, 12) % 100u) << 23);
+        memcpy(&noise[i], &bits, 4);
+    }
+    for (size_t i = 0; i < n; i++)
+        flat[i] = 0.5f;
+    fx_frame_add_pass(f, "Noise", 3, noise);
+    fx_frame_add_pass(f, "Flat", 1, flat);
+    if (noisy) {
+        float *c = NULL;
+        fx_frame_pass(f, "Combined", &c, NULL);
+        for (size_t i = 0; i < n * 4; i++) {
+            uint32_t bits = (zip_hash((uint32_t)i, 13) & 0x807fffffu) | ((100u + zip_hash((uint32_t)i, 14) % 40u) << 23);
+            memcpy(&c[i], &bits, 4);
+        }
+    }
+    free(noise), free(flat);
+    return f;
+}
+
+static void test_zip(fx_context *ctx, const char *dir)
+{
+    /* the predictor against its definition: even bytes, then odd, then differences */
+    for (size_t n = 0; n <= 41; n++) {
+        uint8_t in[41] = {0}, want[41] = {0}, got[41] = {0}, r[41] = {0};
+        for (size_t i = 0; i < n; i++)
+            in[i] = (uint8_t)zip_hash((uint32_t)i, (uint32_t)n);
+        size_t k = 0;
+        for (size_t i = 0; i < n; i += 2)
+            r[k++] = in[i];
+        for (size_t i = 1; i < n; i += 2)
+            r[k++] = in[i];
+        for (size_t i = 0; i < n; i++)
+            want[i] = i ? (uint8_t)(r[i] - r[i - 1] + 128) : r[0];
+        fx_exr_zip_predict(in, n, got);
+        CHECK(n == 0 || memcmp(want, got, n) == 0);
+    }
+    if (!fx_exr_zip_available()) {
+        fprintf(stderr, "test_exr_write: built without libdeflate, ZIP through OpenEXR's zlib only\n");
+    } else {
+        /* a chunk that does not shrink is stored as it is; one that does, smaller */
+        fx_exr_zip *z = fx_exr_zip_new(FX_EXR_DEFAULT_ZIP_LEVEL);
+        CHECK(z != NULL);
+        if (z) {
+            enum { N = 4096 };
+            uint8_t in[N], *out = malloc(fx_exr_zip_bound(z, N));
+            for (size_t i = 0; i < N; i++)
+                in[i] = (uint8_t)zip_hash((uint32_t)i, 5);
+            size_t got = 0;
+            CHECK(out && fx_exr_zip_compress(z, in, N, out, fx_exr_zip_bound(z, N), &got) == 0);
+            CHECK(out && got == N && memcmp(in, out, N) == 0);
+            memset(in, 7, N);
+            CHECK(out && fx_exr_zip_compress(z, in, N, out, fx_exr_zip_bound(z, N), &got) == 0);
+            CHECK(got > 2 && got < N / 8 && (out[0] & 0x0f) == 8); /* a zlib stream: deflate */
+            CHECK(fx_exr_zip_compress(z, in, N, out, N - 1, &got) != 0); /* too small for raw */
+            free(out);
+            fx_exr_zip_free(z);
+        }
+    }
+    fx_exr_zip_free(NULL);
+
+    /* Whole files: odd widths, 1x1, rows, columns, several chunks (ZIP: 16 lines, ZIPS:
+     * 1), half and float channels, raw chunks among compressed ones. Decoded by OpenEXR
+     * (libfx's reader), the libdeflate file equals the zlib one and floats the source. */
+    static const int sizes[][3] = {{1, 1, 0}, {1, 9, 0}, {9, 1, 1}, {33, 17, 0}, {257, 40, 0}, {31, 35, 1}};
+    static const exr_compression_t codecs[2] = {EXR_COMPRESSION_ZIP, EXR_COMPRESSION_ZIPS};
+    fx_context *one = NULL;
+    CHECK(fx_context_new(&one, 1) == FX_OK);
+    for (size_t s = 0; s < sizeof sizes / sizeof sizes[0]; s++)
+        for (int c = 0; c < 2; c++)
+            for (int half = 0; half < 2; half++) {
+                fx_frame *f = zip_frame(ctx, sizes[s][0], sizes[s][1], sizes[s][2]);
+                CHECK(f != NULL);
+                if (!f)
+                    continue;
+                char a[600], b[600];
+                snprintf(a, sizeof a, "%s/zip_deflate_%zu_%d_%d.exr", dir, s, c, half);
+                snprintf(b, sizeof b, "%s/zip_zlib_%zu_%d_%d.exr", dir, s, c, half);
+                fx_exr_write_params p = fx_exr_write_defaults();
+                p.compression = codecs[c];
+                fx_write_options wo = {sizeof wo, half, 0, NULL, NULL};
+                fx_exr_zip_impl mine = fx_exr_zip_available() ? FX_EXR_ZIP_LIBDEFLATE : FX_EXR_ZIP_AUTO;
+                CHECK_OK(ctx, fx_exr_write_with(f, a, &wo, &p, mine));
+                CHECK_OK(ctx, fx_exr_write_with(f, b, &wo, &p, FX_EXR_ZIP_STOCK));
+                fx_frame *ra = NULL, *rb = NULL;
+                CHECK_OK(ctx, fx_frame_read_exr(ctx, a, NULL, &ra));
+                CHECK_OK(ctx, fx_frame_read_exr(ctx, b, NULL, &rb));
+                if (ra && rb) {
+                    CHECK(fx_frame_pass_count(ra) == fx_frame_pass_count(f));
+                    for (int i = 0; i < fx_frame_pass_count(f); i++) {
+                        const char *name = fx_frame_pass_name(f, i);
+                        same_pass(ctx, ra, rb, name, 1);
+                        if (!half || strcmp(name, "Combined") != 0)
+                            same_pass(ctx, f, ra, name, 1);
+                    }
+                    if (half) { /* half rounding of finite values: relative 2^-11 */
+                        float *pf = NULL, *pa = NULL;
+                        fx_frame_pass(f, "Combined", &pf, NULL);
+                        fx_frame_pass(ra, "Combined", &pa, NULL);
+                        size_t n = (size_t)sizes[s][0] * sizes[s][1] * 4;
+                        int ok = 1;
+                        for (size_t i = 0; i < n && pf && pa; i++)
+                            if (fabsf(pf[i]) < 60000.0f && fabsf(pf[i]) > 1e-4f &&
+                                !(fabsf(pa[i] - pf[i]) <= fabsf(pf[i]) * (1.0f / 1024.0f)))
+                                ok = 0;
+                        CHECK(ok);
+                    }
+                }
+                /* the same bytes from one worker as from two */
+                if (s == 4 && one) {
+                    char o[600];
+                    snprintf(o, sizeof o, "%s/zip_deflate_one_%d_%d.exr", dir, c, half);
+                    fx_frame *g = zip_frame(one, sizes[s][0], sizes[s][1], sizes[s][2]);
+                    CHECK_OK(one, fx_exr_write_with(g, o, &wo, &p, mine));
+                    size_t l1 = 0, l2 = 0;
+                    char *b1 = tu_slurp(a, &l1), *b2 = tu_slurp(o, &l2);
+                    CHECK(b1 && b2 && l1 == l2 && memcmp(b1, b2, l1) == 0);
+                    free(b1), free(b2);
+                    fx_frame_free(g);
+                }
+                fx_frame_free(ra);
+                fx_frame_free(rb);
+                fx_frame_free(f);
+            }
+    /* built without libdeflate, asking for it is refused */
+    if (!fx_exr_zip_available()) {
+        fx_frame *f = zip_frame(ctx, 3, 3, 0);
+        char a[600];
+        snprintf(a, sizeof a, "%s/zip_refused.exr", dir);
+        CHECK_FAIL(ctx, fx_exr_write_with(f, a, NULL, NULL, FX_EXR_ZIP_LIBDEFLATE), FX_ERR_INVALID_ARGUMENT,
+                   "libdeflate");
+        fx_frame_free(f);
+    }
+    fx_context_free(one);
+}
+
 static void test_png(fx_context *ctx, const char *dir)
 {
     fx_frame *f = NULL;
@@ -331,6 +487,7 @@ int main(void)
     char d[512];
     snprintf(d, sizeof d, "%s", dir);
     test_round_trip(ctx, d);
+    test_zip(ctx, d);
     test_refusals(ctx, d);
     test_png(ctx, d);
     fx_context_free(ctx);

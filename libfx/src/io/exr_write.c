@@ -1,5 +1,7 @@
-/* fx_frame_write_exr: a frame as one scanline part, ZIP compressed (zlib level
- * FX_EXR_DEFAULT_ZIP_LEVEL; other lossless codecs through fx_exr_write).
+/* fx_frame_write_exr: a frame as one scanline part, ZIP compressed (level
+ * FX_EXR_DEFAULT_ZIP_LEVEL; other lossless codecs through fx_exr_write). ZIP and ZIPS
+ * chunks are deflated by libdeflate (io/exr_zip.c) when libfx is built with it, by
+ * OpenEXRCore's zlib otherwise: the same format, any reader decodes either.
  *
  * Channel names: `<Pass>.<letter>` with the letters of passes.h ("Combined.R",
  * "Depth.Z", "Normal.X", "CryptoObject00.R"), passes libfx does not know get R, G, B, A
@@ -16,6 +18,7 @@
 #include "io/exr_common.h"
 #include "io/atomic_file.h"
 #include "io/exr_write.h"
+#include "io/exr_zip.h"
 #include "core/parallel.h"
 
 #include <errno.h>
@@ -137,12 +140,25 @@ static exr_result_t write_attributes(exr_context_t exr, int part, const fx_frame
  * write_fn copies the compressed chunk into a slot of the current batch and
  * yield_until_ready_fn (which would insist on file order) is dropped. The bytes of a
  * chunk do not depend on who compressed it, so the file is the same for any thread
- * count. Batches of chunks bound the memory held for compressed data. */
+ * count. Batches of chunks bound the memory held for compressed data.
+ *
+ * ZIP/ZIPS through libdeflate: the pipeline's compress_fn is zip_chunk, which deflates
+ * the packed bytes into the worker's own buffer (the pipeline's compressed_buffer stays
+ * OpenEXR's and unused); stash_chunk copies from there, so a slot holds only the
+ * compressed size, as on OpenEXR's path. */
 typedef struct chunk_slot {
     uint8_t *data;
     size_t size, cap;
     int y;
 } chunk_slot;
+
+typedef struct encode_worker {
+    chunk_slot *slot;  /* the chunk being encoded */
+    fx_exr_zip *zip;   /* libdeflate path: this worker's compressor, made on first use */
+    uint8_t *buf;      /* libdeflate path: the compressed chunk */
+    size_t buf_cap;
+    int in_buf;        /* zip_chunk put this chunk into buf */
+} encode_worker;
 
 typedef struct encode_job {
     const fx_frame *f;
@@ -156,22 +172,51 @@ typedef struct encode_job {
     chunk_slot *slots;
     exr_encode_pipeline_t *enc;    /* per worker */
     unsigned char *have_enc;       /* per worker */
+    encode_worker *wk;             /* per worker */
+    int zip_level;                 /* > 0: ZIP/ZIPS through libdeflate at this level */
     fx_exr_job_error err;
 } encode_job;
 
-static exr_result_t stash_chunk(exr_encode_pipeline_t *enc)
+static int grow_slot(chunk_slot *slot, size_t n)
 {
-    chunk_slot *slot = enc->encoding_user_data;
-    size_t n = (size_t)enc->compressed_bytes;
-    if (n > slot->cap) {
-        uint8_t *grown = fx_mem_realloc(slot->data, n);
+    if (n <= slot->cap)
+        return 1;
+    uint8_t *grown = fx_mem_realloc(slot->data, n);
+    if (!grown)
+        return 0;
+    slot->data = grown;
+    slot->cap = n;
+    return 1;
+}
+
+/* compress_fn for ZIP/ZIPS (the libdeflate path). */
+static exr_result_t zip_chunk(exr_encode_pipeline_t *enc)
+{
+    encode_worker *w = enc->encoding_user_data;
+    size_t n = (size_t)enc->packed_bytes, out = 0, need = fx_exr_zip_bound(w->zip, n);
+    if (need > w->buf_cap) {
+        uint8_t *grown = fx_mem_realloc(w->buf, need);
         if (!grown)
             return EXR_ERR_OUT_OF_MEMORY;
-        slot->data = grown;
-        slot->cap = n;
+        w->buf = grown;
+        w->buf_cap = need;
     }
+    if (fx_exr_zip_compress(w->zip, enc->packed_buffer, n, w->buf, w->buf_cap, &out) != 0)
+        return EXR_ERR_OUT_OF_MEMORY;
+    enc->compressed_bytes = out;
+    w->in_buf = 1;
+    return EXR_ERR_SUCCESS;
+}
+
+static exr_result_t stash_chunk(exr_encode_pipeline_t *enc)
+{
+    encode_worker *w = enc->encoding_user_data;
+    chunk_slot *slot = w->slot;
+    size_t n = (size_t)enc->compressed_bytes;
+    if (!grow_slot(slot, n))
+        return EXR_ERR_OUT_OF_MEMORY;
     if (n)
-        memcpy(slot->data, enc->compressed_buffer, n);
+        memcpy(slot->data, w->in_buf ? w->buf : (const uint8_t *)enc->compressed_buffer, n);
     slot->size = n;
     slot->y = enc->chunk.start_y;
     return EXR_ERR_SUCCESS;
@@ -181,7 +226,9 @@ static void encode_chunk(encode_job *j, int k, int worker)
 {
     const fx_frame *f = j->f;
     exr_encode_pipeline_t *enc = &j->enc[worker];
-    chunk_slot *slot = &j->slots[k - j->first];
+    encode_worker *w = &j->wk[worker];
+    w->slot = &j->slots[k - j->first];
+    w->in_buf = 0;
     int y = k * j->lines;
     int fy = f->data_window[1] + y;
     exr_chunk_info_t ci;
@@ -213,10 +260,14 @@ static void encode_chunk(encode_job *j, int k, int worker)
     }
     if (rv == EXR_ERR_SUCCESS)
         rv = exr_encoding_choose_default_routines(j->exr, j->part, enc);
+    if (rv == EXR_ERR_SUCCESS && j->zip_level > 0 && !w->zip && !(w->zip = fx_exr_zip_new(j->zip_level)))
+        rv = EXR_ERR_OUT_OF_MEMORY;
     if (rv == EXR_ERR_SUCCESS) {
         enc->yield_until_ready_fn = NULL;
         enc->write_fn = stash_chunk;
-        enc->encoding_user_data = slot;
+        if (j->zip_level > 0)
+            enc->compress_fn = zip_chunk;
+        enc->encoding_user_data = w;
         rv = exr_encoding_run(j->exr, j->part, enc);
     }
     if (rv != EXR_ERR_SUCCESS) {
@@ -239,7 +290,7 @@ static void encode_range(void *user, int begin, int end, int worker)
 }
 
 static fx_result encode_pixels(const fx_frame *f, exr_context_t exr, int part, const out_chan *chans, int nchan,
-                               const char *path)
+                               const char *path, int zip_level)
 {
     int32_t lines = 0;
     exr_result_t rv = exr_get_scanlines_per_chunk(exr, part, &lines);
@@ -256,13 +307,16 @@ static fx_result encode_pixels(const fx_frame *f, exr_context_t exr, int part, c
     encode_job j;
     memset(&j, 0, sizeof j);
     j.f = f, j.exr = exr, j.part = part, j.chans = chans, j.nchan = nchan, j.path = path, j.lines = lines;
+    j.zip_level = zip_level;
     j.slots = fx_mem_calloc((size_t)batch, sizeof *j.slots);
     j.enc = fx_mem_calloc((size_t)workers, sizeof *j.enc);
     j.have_enc = fx_mem_calloc((size_t)workers, 1);
-    if (!j.slots || !j.enc || !j.have_enc) {
+    j.wk = fx_mem_calloc((size_t)workers, sizeof *j.wk);
+    if (!j.slots || !j.enc || !j.have_enc || !j.wk) {
         fx_mem_free(j.slots);
         fx_mem_free(j.enc);
         fx_mem_free(j.have_enc);
+        fx_mem_free(j.wk);
         return fx_fail(f->ctx, FX_ERR_OUT_OF_MEMORY, "cannot write '%s': out of memory", path);
     }
     fx_exr_job_error_init(&j.err);
@@ -287,20 +341,24 @@ static fx_result encode_pixels(const fx_frame *f, exr_context_t exr, int part, c
             r = fx_progress(f->ctx, "write", (double)(j.first + n) / chunks);
     }
 
-    for (int w = 0; w < workers; w++)
+    for (int w = 0; w < workers; w++) {
         if (j.have_enc[w])
             exr_encoding_destroy(exr, &j.enc[w]);
+        fx_exr_zip_free(j.wk[w].zip);
+        fx_mem_free(j.wk[w].buf);
+    }
     for (int i = 0; i < batch; i++)
         fx_mem_free(j.slots[i].data);
     fx_exr_job_error_destroy(&j.err);
     fx_mem_free(j.slots);
     fx_mem_free(j.enc);
     fx_mem_free(j.have_enc);
+    fx_mem_free(j.wk);
     return r;
 }
 
 static fx_result write_to(const fx_frame *f, const char *tmp, const char *path, const fx_write_options *opts,
-                          const fx_exr_write_params *params)
+                          const fx_exr_write_params *params, int zip_level)
 {
     out_chan *chans = NULL;
     int nchan = 0;
@@ -361,7 +419,7 @@ static fx_result write_to(const fx_frame *f, const char *tmp, const char *path, 
         r = fx_fail(f->ctx, rv == EXR_ERR_FILE_ACCESS || rv == EXR_ERR_WRITE_IO ? FX_ERR_IO : FX_ERR_INTERNAL,
                     "cannot write '%s': %s: %s", path, failed, m[0] ? m : exr_get_default_error_message(rv));
     } else {
-        r = encode_pixels(f, exr, part, chans, nchan, path);
+        r = encode_pixels(f, exr, part, chans, nchan, path, zip_level);
     }
     if (exr) {
         exr_result_t fin = exr_finish(&exr);
@@ -379,8 +437,8 @@ fx_exr_write_params fx_exr_write_defaults(void)
     return p;
 }
 
-fx_result fx_exr_write(const fx_frame *f, const char *path, const fx_write_options *opts,
-                       const fx_exr_write_params *params)
+fx_result fx_exr_write_with(const fx_frame *f, const char *path, const fx_write_options *opts,
+                            const fx_exr_write_params *params, fx_exr_zip_impl impl)
 {
     fx_context *ctx = f ? f->ctx : NULL;
     if (!f || !path || !path[0])
@@ -413,14 +471,26 @@ fx_result fx_exr_write(const fx_frame *f, const char *path, const fx_write_optio
         (p.zip_level < 1 || p.zip_level > 9))
         return fx_fail(ctx, FX_ERR_INVALID_ARGUMENT, "cannot write '%s': ZIP level %d is not in 1..9", path,
                        p.zip_level);
+    if (impl == FX_EXR_ZIP_LIBDEFLATE && !fx_exr_zip_available())
+        return fx_fail(ctx, FX_ERR_INVALID_ARGUMENT, "cannot write '%s': libfx was built without libdeflate", path);
+    int zip_level = 0; /* > 0: libdeflate */
+    if ((p.compression == EXR_COMPRESSION_ZIP || p.compression == EXR_COMPRESSION_ZIPS) &&
+        impl != FX_EXR_ZIP_STOCK && fx_exr_zip_available())
+        zip_level = p.zip_level;
     fx_result r = fx_refuse_input(ctx, path, opts ? opts->input_path : NULL);
     if (r != FX_OK)
         return r;
     char *tmp = NULL;
     if ((r = fx_temp_create(ctx, path, &tmp)) != FX_OK)
         return r;
-    r = write_to(f, tmp, path, opts, &p);
+    r = write_to(f, tmp, path, opts, &p, zip_level);
     return fx_temp_commit(ctx, tmp, path, r);
+}
+
+fx_result fx_exr_write(const fx_frame *f, const char *path, const fx_write_options *opts,
+                       const fx_exr_write_params *params)
+{
+    return fx_exr_write_with(f, path, opts, params, FX_EXR_ZIP_AUTO);
 }
 
 fx_result fx_exr_parse_compression(const fx_context *ctx, const char *text, fx_exr_write_params *out)

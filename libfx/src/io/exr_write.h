@@ -11,9 +11,12 @@
 extern "C" {
 #endif
 
-/* zlib level for ZIP/ZIPS output. Measured on Blender renders (docs/performance.md,
- * "EXR I/O"): level 1 writes ~3x faster than zlib's default 6 for files a few percent
- * larger; levels above 4 cost much more time for under 1% of size. */
+/* Level for ZIP/ZIPS output (zlib's scale; libdeflate, when libfx has it, takes the
+ * same number: io/exr_zip.c). Measured on Blender renders (docs/performance.md, "EXR
+ * I/O" and "Writing EXR: ZIP through libfx's compressor"): with zlib, level 1 writes
+ * ~3x faster than the default 6 for files a few percent larger; with libdeflate,
+ * levels 1..6 cost about the same on renders (within the machine's noise) and the
+ * sizes differ by under 0.5%, level 1 being the fastest on Combined alone. */
 #define FX_EXR_DEFAULT_ZIP_LEVEL 1
 
 typedef struct fx_exr_write_params {
@@ -32,6 +35,13 @@ fx_result fx_exr_parse_compression(const fx_context *ctx, const char *text, fx_e
 /* fx_frame_write_exr with explicit encoding; params NULL: the defaults. */
 fx_result fx_exr_write(const fx_frame *f, const char *path, const fx_write_options *opts,
                        const fx_exr_write_params *params);
+
+/* Who deflates ZIP/ZIPS chunks. AUTO: libdeflate when built with it (io/exr_zip.h),
+ * else OpenEXRCore's zlib; STOCK: OpenEXRCore's zlib always; LIBDEFLATE: refused
+ * (FX_ERR_INVALID_ARGUMENT) when built without it. For tests and benchmarks. */
+typedef enum fx_exr_zip_impl { FX_EXR_ZIP_AUTO, FX_EXR_ZIP_STOCK, FX_EXR_ZIP_LIBDEFLATE } fx_exr_zip_impl;
+fx_result fx_exr_write_with(const fx_frame *f, const char *path, const fx_write_options *opts,
+                            const fx_exr_write_params *params, fx_exr_zip_impl impl);
 
 #ifdef __cplusplus
 }
