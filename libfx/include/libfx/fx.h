@@ -220,7 +220,8 @@ typedef struct fx_write_options {
     int only_combined;      /* 1: write Combined only; 0: every pass in the frame */
     const char *input_path; /* refuse to write over this file (the input) */
     /* Appended after 0.1.0 (a smaller `size` is accepted and means the default):
-     * "zip" (default, zlib level 1: fast, a few % larger than level 6), "zip:1".."zip:9",
+     * "zip" (default, deflate level 1 through libdeflate when built with it, else OpenEXR's
+     * zlib: fast, a few % larger than level 6), "zip:1".."zip:9",
      * "zips", "zips:N", "piz", "rle", "none"; NULL: the default. Lossless only. */
     const char *compression;
 } fx_write_options;
