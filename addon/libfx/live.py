@@ -32,9 +32,14 @@ RESULT_IMAGE = render.RESULT_IMAGE
 DEBOUNCE_S = 0.02     # a burst of property updates (one drag step sets several) runs once
 SETTLE_S = 0.35       # no change for this long: the final run
 CACHE_FRAMES = 3      # held frames per scene while scrubbing a sequence
+BUDGET_MS = 100.0     # a change's interactive image within this (issue 13); AUTO keeps to it
+AUTO_UP_MS = 70.0     # an interactive run (library + pixels) slower than this: a quarter next
+AUTO_DOWN_MS = 20.0   # a quarter-size run faster than this: half next
 
-#: live_setting -> (proxy factor, quality or None for the stack's own)
+#: live_setting -> (proxy factor, quality or None for the stack's own); "AUTO": the factor
+#: follows the time the last interactive run took (Session.auto_factor).
 SETTINGS = {
+    "AUTO": ("auto", "draft"),
     "HALF_DRAFT": (2, "draft"),
     "QUARTER_DRAFT": (4, "draft"),
     "HALF": (2, None),
@@ -42,6 +47,8 @@ SETTINGS = {
     "FINAL_ONLY": (None, None),
 }
 SETTING_ITEMS = [
+    ("AUTO", "Auto Draft", "While values change: draft preset at half resolution, or a quarter when "
+     "half takes longer than the budget of %d ms" % 100, 5),
     ("HALF_DRAFT", "1/2 Draft", "While values change: half resolution, draft preset", 0),
     ("QUARTER_DRAFT", "1/4 Draft", "While values change: quarter resolution, draft preset", 1),
     ("HALF", "1/2", "While values change: half resolution, the stack's quality", 2),
@@ -125,6 +132,7 @@ class Session:
         self.shown = {}               # what the image shows: setting, ms, timings, frame
         self.error = None             # the last refused change (the image keeps the last good one)
         self.debug_passes = []        # debug pass names of the last run
+        self.auto_factor = 2          # the proxy factor of the AUTO setting
 
     def held(self):
         return self.frames.get(self.current)
@@ -416,7 +424,10 @@ def _settings_of(scene):
 def proxy_factor_of(scene):
     """The proxy factor of the scene's interactive setting (None: full size)."""
     s = _settings_of(scene)
-    return SETTINGS.get(s.live_setting, (None, None))[0] if s is not None and s.live else None
+    if s is None or not s.live:
+        return None
+    f = SETTINGS.get(s.live_setting, (None, None))[0]
+    return 2 if f == "auto" else f
 
 
 def active(scene):
@@ -427,6 +438,9 @@ def active(scene):
 def _make_job(scene, kind, load=None):
     s = _settings_of(scene)
     factor, quality = SETTINGS.get(s.live_setting, (None, None)) if kind == "interactive" else (None, None)
+    if factor == "auto":
+        sess = session(scene)
+        factor = sess.auto_factor if sess is not None else 2
     rec = recipe.to_recipe(scene)
     if s.live_solo and 0 <= s.active_index < len(s.stack):
         for i, entry in enumerate(rec.get("effects", [])):
@@ -528,6 +542,12 @@ def _apply(out):
         return
     s.error = None
     s.debug_passes = out["debug_passes"]
+    if job.kind == "interactive":   # AUTO: keep the next interactive run inside the budget
+        ms = out["ms"]["total"]
+        if ms > AUTO_UP_MS and job.factor == 2:
+            s.auto_factor = 4
+        elif ms < AUTO_DOWN_MS and job.factor == 4:
+            s.auto_factor = 2
     show_pixels(out["pixels"], out["width"], out["height"])
     out["applied_at"] = time.perf_counter()
     trace("applied %s" % job.kind)

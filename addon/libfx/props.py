@@ -234,7 +234,7 @@ def _settings_class(item_cls):
             description=("Keep the rendered frame's passes in memory and re-run the stack on every "
                          "change, into 'libfx Result'")),
         "live_setting": EnumProperty(
-            name="While Changing", items=_live_items("SETTING_ITEMS"), default="HALF_DRAFT",
+            name="While Changing", items=_live_items("SETTING_ITEMS"), default="AUTO",
             update=_on_live_change,
             description="How the stack runs while values change; the final run follows when they settle"),
         "live_view": EnumProperty(name="Show", items=_live_items("VIEW_ITEMS"), default="RESULT",

@@ -129,15 +129,25 @@ def has_stack(scene):
 
 # ---------------------------------------------------------------- sync
 
+_QUERY_CTX = {"ctx": None}
+
+
+def _query_context():
+    """One small context for the main thread's questions (a new one per property change
+    cost a few ms of every live update). Main thread only."""
+    c = _QUERY_CTX["ctx"]
+    if c is None or c._L is not native.lib():
+        c = _QUERY_CTX["ctx"] = native.Context(1)
+    return c
+
+
 def query(scene):
     from . import recipe
-    ctx = native.Context(1)
-    stack = native.Stack(ctx, recipe.to_recipe(scene))
+    stack = native.Stack(_query_context(), recipe.to_recipe(scene))
     try:
         return stack.required()
     finally:
         stack.close()
-        ctx.close()
 
 
 def request_sync(scene):

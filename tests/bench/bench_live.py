@@ -166,7 +166,7 @@ def main():
     ap.add_argument("--runs", type=int, default=5)
     ap.add_argument("--blender", default="host")
     ap.add_argument("--scenes", default=",".join(SCENES))
-    ap.add_argument("--settings", default="HALF_DRAFT,QUARTER_DRAFT")
+    ap.add_argument("--settings", default="AUTO,HALF_DRAFT,QUARTER_DRAFT")
     ap.add_argument("--out", default=os.path.join(ROOT, "out", "bench_live"))
     a = ap.parse_args()
     a.renders = a.renders or os.path.join(a.out, "renders")
