@@ -144,7 +144,11 @@ print("RESULT " + json.dumps(rows))
 def blender_cmd(which):
     if which == "host":
         return ["blender"]
-    return ["bash", os.path.join(ROOT, "scripts", "in_root.sh"), which, "blender"]
+    # the root's own libfx build (build-<suite>, scripts/blender_matrix.sh) unless told
+    lib = os.environ.get("LIBFX_LIBRARY_" + which.upper(),
+                         os.path.join(ROOT, "build-" + which, "libfx", "libfx.so"))
+    return ["bash", os.path.join(ROOT, "scripts", "in_root.sh"), which, "env", "LIBFX_LIBRARY=" + lib,
+            "PYTHONDONTWRITEBYTECODE=1", "blender"]
 
 
 def render_if_missing(scene, d, which):

@@ -100,7 +100,7 @@ typedef struct wet_job {
 #define WET_NODE 9 /* gain, offset[3], depth (NaN: no surface), normal[3], wetness */
 
 /* The wet look of pixel i = (x, y) as out = src gain + offset: 0 without a surface (the
- * source then), wet returned for the debug pass. The same expressions as wet_rows. */
+ * source then), wet returned for the debug pass. wet_rows (every pixel) and the lattice nodes both use it. */
 static int wet_pixel(const wet_job *j, int x, int y, size_t i, float *gain, float off[3], float *wet_out)
 {
     const wet_params *p = j->p;
@@ -261,7 +261,6 @@ static void wet_rows(void *user, int y0, int y1)
 {
     wet_job *j = user;
     const fx_effect_run *run = j->run;
-    const wet_params *p = j->p;
     const fx_rect *roi = &run->roi;
     for (int y = roi->y0 + y0; y < roi->y0 + y1; y++)
         for (int x = roi->x0; x < roi->x1; x++) {
@@ -269,39 +268,9 @@ static void wet_rows(void *user, int y0, int y1)
             const float *s = run->src + 4 * i;
             float *o = run->dst + 4 * i;
             memcpy(o, s, 4 * sizeof(float));
-            fx_vec3 w, n;
-            float d;
-            float wet = 0.0f;
-            if (fx_surface_world(&j->surf, x, y, &w, &d) && fx_surface_normal(&j->surf, x, y, &n)) {
-                float facing = n.z >= 0.0f ? fx_lerpf(p->wall_wetness, 1.0f, fx_smoothstep(0.0f, p->up_threshold, n.z))
-                                           : p->wall_wetness * (1.0f - fx_smoothstep(0.0f, 0.3f, -n.z));
-                if (facing > 0.0f) {
-                    /* off the surface a little, so the surface itself does not cover it */
-                    fx_vec3 q = fx_v3_add(w, fx_v3_scale(n, 0.05f));
-                    wet = p->wetness * facing * fx_rain_map_soft(&j->rm, q);
-                    if (!(wet > 0.0f))
-                        wet = 0.0f; /* also NaN */
-                }
-                if (wet > 0.0f) {
-                    fx_vec3 eye = fx_v3(j->surf.view.camera_to_world[3], j->surf.view.camera_to_world[7],
-                                        j->surf.view.camera_to_world[11]);
-                    fx_vec3 v = fx_v3_normalize_or(fx_v3_sub(eye, w), n);
-                    if (j->surf.view.orthographic)
-                        v = fx_v3_normalize_or(fx_v3(j->surf.view.camera_to_world[2], j->surf.view.camera_to_world[6],
-                                                     j->surf.view.camera_to_world[10]), n);
-                    float ndv = fx_saturate(fx_v3_dot(n, v));
-                    float m = 1.0f - ndv, m2 = m * m;
-                    float fres = 0.02f + 0.98f * m2 * m2 * m;
-                    for (int c = 0; c < 3; c++) {
-                        float add = p->specular * fres * p->sky[c];
-                        if (j->gdir && j->gcol)
-                            add += p->gloss_boost * j->gdir[3 * i + c] * j->gcol[3 * i + c];
-                        float r = s[c] * (1.0f - p->darken * wet) + wet * add;
-                        /* hostile 1e38 glossy passes overflow the product: keep it finite */
-                        o[c] = r != r ? s[c] : fx_clampf(r, -FLT_MAX, FLT_MAX);
-                    }
-                }
-            }
+            float gain, off[3], wet = 0.0f;
+            if (wet_pixel(j, x, y, i, &gain, off, &wet) && wet > 0.0f)
+                wet_apply(s, o, gain, off);
             if (j->dbg)
                 j->dbg[i] = wet;
         }
