@@ -185,20 +185,26 @@ static float burley(const vsm_job *j, int x, int y, fx_vec3 n, float ndl)
 
 /* The visibility v of pixel (x, y) and the fraction a of the light it loses: combined:
  * strength (1 - v); sun_diffuse: that times max(N.L, 0) (times Burley's factor). */
+/* The sun's diffuse cosine at (x, y), Burley's factor included with the principled model;
+ * 0 where nothing is removed (k <= 0) or the surface faces away. */
+static float sun_cosine(const vsm_job *j, int x, int y, float k)
+{
+    fx_vec3 n;
+    float ndl = 0.0f;
+    if (k > 0.0f && fx_surface_normal(&j->surf, x, y, &n))
+        ndl = fx_v3_dot(n, j->to_light);
+    ndl = ndl > 0.0f ? ndl : 0.0f;
+    if (ndl > 0.0f && j->p->diffuse == DIFFUSE_PRINCIPLED)
+        ndl *= burley(j, x, y, n, ndl);
+    return ndl;
+}
+
 static float shade_at(const vsm_job *j, int x, int y, int *has, float *a)
 {
     float v = visibility_at(j, x, y, has);
     float k = j->p->strength * (1.0f - v);
-    if (j->p->apply == APPLY_SUN_DIFFUSE) {
-        fx_vec3 n;
-        float ndl = 0.0f;
-        if (k > 0.0f && fx_surface_normal(&j->surf, x, y, &n))
-            ndl = fx_v3_dot(n, j->to_light);
-        ndl = ndl > 0.0f ? ndl : 0.0f;
-        if (ndl > 0.0f && j->p->diffuse == DIFFUSE_PRINCIPLED)
-            ndl *= burley(j, x, y, n, ndl);
-        k *= ndl;
-    }
+    if (j->p->apply == APPLY_SUN_DIFFUSE)
+        k *= sun_cosine(j, x, y, k);
     *a = k;
     return v;
 }
@@ -353,13 +359,7 @@ static void vsm_rows(void *user, int y0, int y1)
                 for (int c = 0; c < 3; c++)
                     o[c] = s[c] * (1.0f - k);
             } else {
-                fx_vec3 n;
-                float ndl = 0.0f;
-                if (k > 0.0f && fx_surface_normal(&j->surf, x, y, &n))
-                    ndl = fx_v3_dot(n, j->to_light);
-                ndl = ndl > 0.0f ? ndl : 0.0f;
-                if (ndl > 0.0f && j->p->diffuse == DIFFUSE_PRINCIPLED)
-                    ndl *= burley(j, x, y, n, ndl);
+                const float ndl = sun_cosine(j, x, y, k);
                 const float *dc = j->diffcol + 3 * i;
                 float rad[3] = {j->sun_rad.x, j->sun_rad.y, j->sun_rad.z};
                 for (int c = 0; c < 3; c++) {
