@@ -158,6 +158,23 @@ static fx_result run_case(fx_context *ctx, fx_stack *s, const fx_frame *f, const
     return run_case_keep(ctx, s, f, effect, must_run, NULL);
 }
 
+/* A run under a one-pixel mask at (x0, y0) left every other pixel of the w x h output as
+ * the input had it, bit for bit. */
+static void check_outside_kept(const fx_frame *out, const float *in_px, int w, int h, int x0, int y0)
+{
+    const float *o = NULL;
+    fx_frame_pass_read(out, "Combined", &o, NULL);
+    int outside_kept = 1;
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++)
+            if ((x != x0 || y != y0) &&
+                memcmp(o + ((size_t)y * w + x) * 4, in_px + ((size_t)y * w + x) * 4, 16) != 0)
+                outside_kept = 0;
+    if (!outside_kept)
+        fprintf(stderr, "WROTE OUTSIDE ITS MASK: %s\n", current_case);
+    CHECK(outside_kept);
+}
+
 static fx_stack *stack_for(fx_context *ctx, const char *effect, int quality)
 {
     fx_stack *s = et_stack(ctx, effect);
@@ -518,19 +535,8 @@ int main(void)
                     if (masked)
                         CHECK_OK(ctx, fx_stack_set_mask_json(s, 0, mask));
                     fx_frame *out = NULL;
-                    if (run_case_keep(ctx, s, f, effect, 1, &out) == FX_OK && masked) {
-                        const float *o = NULL;
-                        fx_frame_pass_read(out, "Combined", &o, NULL);
-                        int outside_kept = 1;
-                        for (int y = 0; y < h; y++)
-                            for (int x = 0; x < w; x++)
-                                if ((x != x0 || y != y0) &&
-                                    memcmp(o + ((size_t)y * w + x) * 4, in_px + ((size_t)y * w + x) * 4, 16) != 0)
-                                    outside_kept = 0;
-                        if (!outside_kept)
-                            fprintf(stderr, "WROTE OUTSIDE ITS MASK: %s\n", current_case);
-                        CHECK(outside_kept);
-                    }
+                    if (run_case_keep(ctx, s, f, effect, 1, &out) == FX_OK && masked)
+                        check_outside_kept(out, in_px, w, h, x0, y0);
                     fx_frame_free(out);
                     fx_stack_free(s);
                 }
@@ -573,19 +579,8 @@ int main(void)
                         if (masked)
                             CHECK_OK(ctx, fx_stack_set_mask_json(s, 0, mask));
                         fx_frame *out = NULL;
-                        if (run_case_keep(ctx, s, p, effect, 1, &out) == FX_OK && masked) {
-                            const float *o = NULL;
-                            fx_frame_pass_read(out, "Combined", &o, NULL);
-                            int outside_kept = 1;
-                            for (int y = 0; y < ph; y++)
-                                for (int x = 0; x < pw; x++)
-                                    if ((x != px || y != py) &&
-                                        memcmp(o + ((size_t)y * pw + x) * 4, in_px + ((size_t)y * pw + x) * 4, 16) != 0)
-                                        outside_kept = 0;
-                            if (!outside_kept)
-                                fprintf(stderr, "WROTE OUTSIDE ITS MASK: %s\n", current_case);
-                            CHECK(outside_kept);
-                        }
+                        if (run_case_keep(ctx, s, p, effect, 1, &out) == FX_OK && masked)
+                            check_outside_kept(out, in_px, pw, ph, px, py);
                         fx_frame_free(out);
                         fx_stack_free(s);
                     }
