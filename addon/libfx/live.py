@@ -362,7 +362,7 @@ def _run_job(job, obsolete):
                     stack.set_quality(job.quality)
             except native.LibfxError as e:
                 return {"job": job, "error": str(e), "refused": True}
-            stack.set_debug_outputs(bool(job.debug_pass))
+            stack.set_debug_outputs(job.debug_pass is not None)
             src = held.proxy(job.factor)
             t_reduce = time.perf_counter()
             ctx.warnings()
@@ -449,7 +449,9 @@ def _make_job(scene, kind, load=None):
             else:
                 entry["enabled"] = True
     _state["generation"] += 1
-    debug = s.live_debug_pass if s.live_debug_pass not in ("", "NONE") else None
+    debug = None
+    if s.live_debug:   # debug outputs on; "NONE" shows the result still
+        debug = s.live_debug_pass if s.live_debug_pass not in ("", "NONE") else "NONE"
     return _Job(scene.name, _state["generation"], rec, kind, factor, quality, s.live_view,
                 s.live_split, debug, s.threads, load=load)
 

@@ -244,6 +244,9 @@ def _settings_class(item_cls):
                                     description="Where the plain render ends in the split view"),
         "live_solo": BoolProperty(name="Solo", default=False, update=_on_live_change,
                                   description="Run only the active effect"),
+        "live_debug": BoolProperty(name="Debug Passes", default=False, update=_on_live_change,
+                                   description="Live runs also make the effects' debug passes (mask "
+                                               "coverage, hit maps, shadow visibility...) to inspect"),
         "live_debug_pass": EnumProperty(name="Inspect", items=_debug_pass_items, update=_on_live_change,
                                         description="Show one of the effects' debug passes instead of the result"),
         # What the add-on changed in the scene, to undo it (JSON, see scene_setup.py).

@@ -521,7 +521,9 @@ def _draw_live(layout, context, s, width):
         row.prop(s, "live_split", text="")
     row = box.row(align=True)
     row.prop(s, "live_solo", toggle=True, icon="SOLO_ON" if s.live_solo else "SOLO_OFF")
-    row.prop(s, "live_debug_pass", text="")
+    row.prop(s, "live_debug", toggle=True, icon="VIEWZOOM")
+    if s.live_debug:
+        row.prop(s, "live_debug_pass", text="")
     if sess is None or not sess.frames:
         box.label(text="Render (F12) or Load Passes to start", icon="INFO")
         return

@@ -104,6 +104,17 @@ live.flush()
 save("solo", image())
 scene.libfx.live_solo = False
 live.flush()
+# Inspect: debug passes on, one of them shown, then the result again
+scene.libfx.live_debug = True
+live.flush()
+res["debug_passes"] = list(live.session(scene).debug_passes)
+if res["debug_passes"]:
+    scene.libfx.live_debug_pass = res["debug_passes"][0]
+    live.flush()
+    save("debug", image())
+scene.libfx.live_debug = False
+live.flush()
+res["debug_off_same"] = bool(np.array_equal(image(), img1))
 
 # 5. Scrubbing: frame 2's kept passes are read and shown; back on frame 1, the held one.
 scene.frame_set(2)

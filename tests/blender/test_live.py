@@ -111,6 +111,12 @@ def test_live_loop(blender, library, cli, tmp_path):
     solo = npy("solo")   # pixelate alone: no god rays over the sky
     assert not np.array_equal(solo, final) and not np.array_equal(solo, plain1)
 
+    # Inspect: the effects' debug passes listed, one shown; off again: the result
+    assert r["debug_passes"] and all(n.startswith("fx") for n in r["debug_passes"]), r["debug_passes"]
+    dbg = npy("debug")
+    assert dbg.shape == final.shape and np.isfinite(dbg).all() and not np.array_equal(dbg, final)
+    assert r["debug_off_same"]
+
     # Scrubbing: frame 2 read from its kept passes file and shown; frame 1 again from memory.
     assert [(c["kind"], c["frame"], c["error"]) for c in r["scrub"]] == [("final", 2, None)], r["scrub"]
     assert np.array_equal(npy("frame2"), cli_run(tmp_path / "orig2.exr", "cli_f2.exr", frame=2))
