@@ -48,7 +48,7 @@ SETTINGS = {
 }
 SETTING_ITEMS = [
     ("AUTO", "Auto Draft", "While values change: draft preset at half resolution, or a quarter when "
-     "half takes longer than the budget of %d ms" % 100, 5),
+     "half takes longer than the budget of %d ms" % BUDGET_MS, 5),
     ("HALF_DRAFT", "1/2 Draft", "While values change: half resolution, draft preset", 0),
     ("QUARTER_DRAFT", "1/4 Draft", "While values change: quarter resolution, draft preset", 1),
     ("HALF", "1/2", "While values change: half resolution, the stack's quality", 2),
