@@ -44,7 +44,7 @@ for scene in greek_bath atrium mirror_room; do
   start=$(date +%s.%N)
   "${run[@]}" env LIBFX_LIBRARY="$PWD/$build/libfx/libfx.so" \
     blender -b "blend_scenes/$scene/$scene.blend" --python addon/libfx/batch.py -- \
-    --frames "$frames" --output "$out/" --resolution "$resolution" --samples "$samples" \
+    --keep-passes --frames "$frames" --output "$out/" --resolution "$resolution" --samples "$samples" \
     > "$out/blender.log" 2>&1 || { echo "demo: $scene failed, see $out/blender.log" >&2; tail -20 "$out/blender.log" >&2; exit 1; }
   grep -E "^libfx" "$out/blender.log" | tail -3 || true
   f=$(printf %04d "$first")

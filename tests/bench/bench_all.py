@@ -239,7 +239,7 @@ def render_scene(scene, w, h, spp, out, env):
     rpath.write_text(rtext)
     t0 = time.time()
     run(["blender", "-b", ROOT / "blend_scenes" / scene / ("%s.blend" % scene), "--python",
-         ROOT / "addon" / "libfx" / "batch.py", "--", "--frames", str(FRAME), "--output", str(d / "r_"),
+         ROOT / "addon" / "libfx" / "batch.py", "--", "--keep-passes", "--frames", str(FRAME), "--output", str(d / "r_"),
          "--resolution", "%dx%d" % (w, h), "--samples", str(spp), "--recipe", rpath], env=env)
     dt = time.time() - t0
     sp.write_text(json.dumps(stamp))

@@ -60,7 +60,7 @@ def batch(out, frames, res, samples, expr=None, recipe=None, check=None):
     args = ["blender", "-b", str(BLEND)]
     if expr:
         args += ["--python-expr", expr]
-    args += ["--python", str(ROOT / "addon" / "libfx" / "batch.py"), "--", "--frames", frames,
+    args += ["--python", str(ROOT / "addon" / "libfx" / "batch.py"), "--", "--keep-passes", "--frames", frames,
              "--output", out, "--resolution", res, "--samples", str(samples)]
     if recipe:
         args += ["--recipe", recipe]

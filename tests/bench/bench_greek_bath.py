@@ -98,7 +98,7 @@ def main():
     if a.render:
         prefix = os.path.join(a.out, "bath_")
         subprocess.run([BLENDER, "-b", os.path.join(ROOT, "blend_scenes", "greek_bath", "greek_bath.blend"),
-                        "--python", os.path.join(ROOT, "addon", "libfx", "batch.py"), "--", "--frames", "1",
+                        "--python", os.path.join(ROOT, "addon", "libfx", "batch.py"), "--", "--keep-passes", "--frames", "1",
                         "--output", prefix, "--resolution", a.render, "--samples", "4"], check=True)
         a.exr, a.sidecar = prefix + "libfx_passes.0001.exr", prefix + "libfx.0001.camera.json"
     csv_path = os.path.join(a.out, "bench_greek_bath.csv")

@@ -16,7 +16,7 @@ for size in "320x180:4" "1280x720:16"; do
     rm -rf "$dir"; mkdir -p "$dir"
     t0=$(date +%s.%N)
     blender -b "blend_scenes/$scene/$scene.blend" --python addon/libfx/batch.py -- \
-      --frames 1 --output "$dir/" --resolution "$res" --samples "$spp" > "$dir/log.txt" 2>&1
+      --keep-passes --frames 1 --output "$dir/" --resolution "$res" --samples "$spp" > "$dir/log.txt" 2>&1
     t1=$(date +%s.%N)
     # "libfx: frame 1: pixelate 2.2 ms (166.0 ms in all) -> ..."
     line=$(grep -E "^libfx: frame 1:" "$dir/log.txt" | tail -1)

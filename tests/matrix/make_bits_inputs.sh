@@ -12,7 +12,7 @@ mkdir -p "$dir"
 export LIBFX_LIBRARY="$PWD/build/libfx/libfx.so"
 for scene in greek_bath atrium mirror_room; do
   blender -b --factory-startup "blend_scenes/$scene/$scene.blend" --python-exit-code 3 \
-    --python addon/libfx/batch.py -- --frames 1 --output "$dir/$scene/" \
+    --python addon/libfx/batch.py -- --keep-passes --frames 1 --output "$dir/$scene/" \
     --resolution 160x90 --samples 2 >"$dir/$scene.log" 2>&1 \
     || { echo "make_bits_inputs: $scene failed (see $dir/$scene.log)" >&2; tail -5 "$dir/$scene.log" >&2; exit 1; }
 done
