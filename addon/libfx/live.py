@@ -175,11 +175,11 @@ def drop(scene_name=None):
     """Frees held frames (one scene, or all): on unregister, file load."""
     with _lock:
         names = [scene_name] if scene_name else list(SESSIONS)
-        for n in names:
-            s = SESSIONS.pop(n, None)
-            if s is not None:
-                with render.ctx_lock():
-                    s.close()
+        gone = [s for s in (SESSIONS.pop(n, None) for n in names) if s is not None]
+    # the context lock is taken before _lock everywhere else (hold()): never inside it
+    with render.ctx_lock():
+        for s in gone:
+            s.close()
 
 
 # ---------------------------------------------------------------- holding frames
