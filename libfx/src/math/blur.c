@@ -28,9 +28,6 @@
 #  define FX_CLONES
 #endif
 
-#ifndef FX_BLUR_FLOAT
-#  define FX_BLUR_FLOAT 1 /* 0: recursive always in double (for comparisons) */
-#endif
 
 #define FX_BLUR_MAX_SIGMA 1.0e5 /* larger sigmas are clamped: the result is already the limit */
 #define V_LANES 32              /* floats per vertical strip (lane kernels) */
