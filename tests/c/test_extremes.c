@@ -175,6 +175,27 @@ static void check_outside_kept(const fx_frame *out, const float *in_px, int w, i
     CHECK(outside_kept);
 }
 
+static fx_stack *stack_for(fx_context *ctx, const char *effect, int quality);
+
+/* One preset of one effect on f, whole or (masked) under a one-pixel mask at (x0, y0) in
+ * full-frame pixels; masked, every pixel of the w x h output but (cx, cy) must be in_px's. */
+static void run_masked_case(fx_context *ctx, const fx_frame *f, const float *in_px, const char *effect,
+                            int quality, int masked, int x0, int y0, int w, int h, int cx, int cy)
+{
+    fx_stack *s = stack_for(ctx, effect, quality);
+    if (!s)
+        return;
+    char mask[96];
+    snprintf(mask, sizeof mask, "{\"rect\": [%d, %d, 1, 1]}", x0, y0);
+    if (masked)
+        CHECK_OK(ctx, fx_stack_set_mask_json(s, 0, mask));
+    fx_frame *out = NULL;
+    if (run_case_keep(ctx, s, f, effect, 1, &out) == FX_OK && masked)
+        check_outside_kept(out, in_px, w, h, cx, cy);
+    fx_frame_free(out);
+    fx_stack_free(s);
+}
+
 static fx_stack *stack_for(fx_context *ctx, const char *effect, int quality)
 {
     fx_stack *s = et_stack(ctx, effect);
@@ -527,18 +548,7 @@ int main(void)
                     const int x0 = mx < w ? mx : w - 1, y0 = my < h ? my : h - 1;
                     snprintf(current_case, sizeof current_case, "%s (%s) on hostile %dx%d%s", effect,
                              fx_quality_name(q), w, h, masked ? ", one-pixel mask" : "");
-                    fx_stack *s = stack_for(ctx, effect, q);
-                    if (!s)
-                        continue;
-                    char mask[96];
-                    snprintf(mask, sizeof mask, "{\"rect\": [%d, %d, 1, 1]}", x0, y0);
-                    if (masked)
-                        CHECK_OK(ctx, fx_stack_set_mask_json(s, 0, mask));
-                    fx_frame *out = NULL;
-                    if (run_case_keep(ctx, s, f, effect, 1, &out) == FX_OK && masked)
-                        check_outside_kept(out, in_px, w, h, x0, y0);
-                    fx_frame_free(out);
-                    fx_stack_free(s);
+                    run_masked_case(ctx, f, in_px, effect, q, masked, x0, y0, w, h, x0, y0);
                 }
         }
         fx_frame_free(f);
@@ -571,18 +581,7 @@ int main(void)
                     for (int masked = 0; masked < 2; masked++) {
                         snprintf(current_case, sizeof current_case, "%s (%s) on a 1/%d proxy of hostile %dx%d%s",
                                  effect, fx_quality_name(q), factor, w, h, masked ? ", one-pixel mask" : "");
-                        fx_stack *s = stack_for(ctx, effect, q);
-                        if (!s)
-                            continue;
-                        char mask[96];
-                        snprintf(mask, sizeof mask, "{\"rect\": [%d, %d, 1, 1]}", x0, y0);
-                        if (masked)
-                            CHECK_OK(ctx, fx_stack_set_mask_json(s, 0, mask));
-                        fx_frame *out = NULL;
-                        if (run_case_keep(ctx, s, p, effect, 1, &out) == FX_OK && masked)
-                            check_outside_kept(out, in_px, pw, ph, px, py);
-                        fx_frame_free(out);
-                        fx_stack_free(s);
+                        run_masked_case(ctx, p, in_px, effect, q, masked, x0, y0, pw, ph, px, py);
                     }
             }
             fx_frame_free(p);

@@ -34,7 +34,7 @@ def _library_path():
     env = os.environ.get("LIBFX_LIBRARY")
     if env:
         return pathlib.Path(env)
-    for build in ("build", "build-io", "build-addon"):
+    for build in ("build", "build-h", "build-io", "build-addon"):
         p = REPO / build / "libfx" / "libfx.so.1"
         if p.is_file():
             return p

@@ -9,7 +9,6 @@ chunks of noise that are stored raw because they do not shrink.
 The library is $LIBFX_LIBRARY, else build*/libfx/libfx.so.1 under the repository root.
 """
 import ctypes
-import os
 import pathlib
 import subprocess
 
@@ -27,15 +26,8 @@ class WriteOptions(ctypes.Structure):
                 ("compression", ctypes.c_char_p)]
 
 
-def _library_path():
-    env = os.environ.get("LIBFX_LIBRARY")
-    if env:
-        return pathlib.Path(env)
-    for build in ("build", "build-h", "build-io"):
-        p = REPO / build / "libfx" / "libfx.so.1"
-        if p.is_file():
-            return p
-    return REPO / "build" / "libfx" / "libfx.so.1"
+# the library this directory's tests load (one lookup for both ctypes test files)
+from test_exr_interop import _library_path  # noqa: E402
 
 
 @pytest.fixture(scope="module")
