@@ -79,7 +79,7 @@ static void test_identity_and_presets(fx_context *ctx1, fx_context *ctx2)
             free(o);
         }
     fx_stack_free(s);
-    /* quality presets: draft (box 3) / preview (box 4) / final (recursive) vs reference (exact) */
+    /* quality presets: draft = preview = final (recursive) vs reference (exact) */
     float *q[4] = { 0 };
     for (int qi = 0; qi < 4; qi++) {
         s = et_stack(ctx1, "gaussian_blur");
@@ -103,12 +103,9 @@ static void test_identity_and_presets(fx_context *ctx1, fx_context *ctx2)
         double e0 = tu_max_abs_diff(q[0], q[3], n), e1 = tu_max_abs_diff(q[1], q[3], n);
         double e2 = tu_max_abs_diff(q[2], q[3], n);
         /* pattern values are in [0, 1.5]: absolute bounds (docs/effects/gaussian_blur.md) */
-        CHECK(e2 < 2e-3);
-        CHECK(e1 < 2e-2);
-        CHECK(e0 < 3e-2);
-        CHECK(e2 < e1 && e2 > 0);
-        CHECK(e1 < e0); /* the ladder: error strictly decreases draft -> preview -> final */
-        if (getenv("FX_TEST_VERBOSE") || !(e2 < 2e-3 && e1 < 2e-2 && e0 < 3e-2 && e1 < e0))
+        CHECK(e2 < 2e-3 && e2 > 0);
+        CHECK(memcmp(q[0], q[2], n * sizeof(float)) == 0 && memcmp(q[1], q[2], n * sizeof(float)) == 0);
+        if (getenv("FX_TEST_VERBOSE") || !(e2 < 2e-3))
             fprintf(stderr, "preset errors: draft %g preview %g final %g\n", e0, e1, e2);
     }
     for (int qi = 0; qi < 4; qi++)

@@ -28,6 +28,9 @@
 #  define FX_CLONES
 #endif
 
+#ifndef FX_BLUR_FLOAT
+#  define FX_BLUR_FLOAT 1 /* 0: recursive always in double (for comparisons) */
+#endif
 
 #define FX_BLUR_MAX_SIGMA 1.0e5 /* larger sigmas are clamped: the result is already the limit */
 #define V_LANES 32              /* floats per vertical strip (lane kernels) */
@@ -148,8 +151,11 @@ void fx_deriche_sections(double sigma, fx_deriche_sec *o)
         o->b1[k] = (float)(c1[k] / gain);
         o->m1[k] = (float)(m1[k] / gain);
         o->m2[k] = (float)(m2[k] / gain);
-        /* the anticausal section's steady state for a unit constant */
-        o->ga[k] = (float)(((double)o->m1[k] + (double)o->m2[k]) / D[k]);
+        /* The anticausal section's steady state for a unit constant, from the double
+         * numerators: gcc 12 at -O3 (its SLP vectorizer) dropped the rounding of a float
+         * round trip here, so a formula over the rounded o->m1/o->m2 gave other bits
+         * than gcc 14 did. Pure double arithmetic is the same everywhere. */
+        o->ga[k] = (float)((m1[k] / gain + m2[k] / gain) / D[k]);
     }
 }
 

@@ -48,13 +48,6 @@ extern "C" {
 #define FX_BLUR_RECURSIVE_MIN_SIGMA 2.0
 /* recursive runs in float up to this sigma (above: in double; see fx_deriche_sections). */
 #define FX_BLUR_FLOAT_MAX_SIGMA 64.0
-/* The float recursive path is off: its output differed in the last bit between the gcc 12
- * and gcc 14 builds (tests/matrix/test_same_bits.py, 2026-11-26; cause not found yet), and
- * every build must give the same bits. 1 turns it on (-DFX_BLUR_FLOAT=1) for measurements. */
-#ifndef FX_BLUR_FLOAT
-#  define FX_BLUR_FLOAT 0
-#endif
-
 /* The float kernels take lines whose every |value| is below this (finite); a strip or
  * line holding a larger or non-finite value is filtered in double instead. */
 #define FX_BLUR_FLOAT_MAX_VALUE 1.0e30f
