@@ -16,11 +16,14 @@
 #include "io/exr_dwa_fallback.h"
 #include "core/parallel.h"
 
+#include <errno.h>
+#include <fcntl.h>
 #include <limits.h>
 #include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 /* Provided by the stack (core/stack.c): the passes its enabled effects and masks need. */
 
@@ -93,7 +96,82 @@ typedef struct decode_job {
     atomic_int done;
     int reported;                  /* chunks done at the last progress report (worker 0) */
     fx_exr_job_error err;
+    /* Uncompressed parts whose decoded channels are all float (see raw_chunk): */
+    int raw_fd;                    /* >= 0: read the chunks' bytes with pread */
+    size_t raw_line;               /* bytes of one scanline of all channels */
+    size_t *raw_off;               /* per part channel: its byte offset in a scanline */
 } decode_job;
+
+/* An uncompressed scanline chunk holds, for each of its lines, each channel's row in
+ * the header's order. A pass file from Blender has some 35 channels of which a stack
+ * may need 4: OpenEXRCore would read the whole chunk, so only the rows of the decoded
+ * channels are read here, adjacent channels in one pread. Only for float channels
+ * without subsampling on a little-endian host (the file's byte order), which is what
+ * Blender writes; anything else takes OpenEXRCore's path. */
+static int raw_part_ok(const reader *rd, const fx_exr_part *pt)
+{
+    const uint16_t probe = 1;
+    if (pt->storage != EXR_STORAGE_SCANLINE || pt->compression != EXR_COMPRESSION_NONE ||
+        *(const uint8_t *)&probe != 1)
+        return 0;
+    for (int c = 0; c < pt->channel_count; c++) {
+        const fx_exr_chan *ch = &rd->f->chans[pt->first_chan + c];
+        if (ch->x_sampling != 1 || ch->y_sampling != 1 ||
+            (rd->dest[pt->first_chan + c].base && ch->type != EXR_PIXEL_FLOAT))
+            return 0;
+    }
+    return 1;
+}
+
+static void raw_chunk(decode_job *j, int k, const exr_chunk_info_t *ci, int x0, int y0, float *scratch,
+                      const char *what)
+{
+    reader *rd = j->rd;
+    const fx_exr_part *pt = &rd->f->parts[j->p];
+    size_t row = (size_t)ci->width * sizeof(float);
+    if (ci->packed_size != (uint64_t)j->raw_line * (uint64_t)ci->height) {
+        fx_exr_job_fail(&j->err, k, FX_ERR_BAD_FILE, "'%s': %s: uncompressed chunk of %llu bytes, expected %llu",
+                        rd->f->path, what, (unsigned long long)ci->packed_size,
+                        (unsigned long long)j->raw_line * (unsigned long long)ci->height);
+        return;
+    }
+    for (int y = 0; y < ci->height; y++) {
+        uint64_t line = ci->data_offset + (uint64_t)y * j->raw_line;
+        for (int c = 0; c < pt->channel_count;) {
+            if (!rd->dest[pt->first_chan + c].base) {
+                c++;
+                continue;
+            }
+            int end = c + 1; /* a run of decoded channels, adjacent in the line */
+            while (end < pt->channel_count && rd->dest[pt->first_chan + end].base)
+                end++;
+            size_t want = (size_t)(end - c) * row, got = 0;
+            while (got < want) {
+                ssize_t n = pread(j->raw_fd, (char *)scratch + got, want - got,
+                                  (off_t)(line + j->raw_off[c] + got));
+                if (n < 0 && errno == EINTR)
+                    continue;
+                if (n <= 0) {
+                    fx_exr_job_fail(&j->err, k, n < 0 ? FX_ERR_IO : FX_ERR_BAD_FILE, "'%s': %s: %s", rd->f->path,
+                                    what, n < 0 ? strerror(errno) : "the file ends inside the chunk");
+                    return;
+                }
+                got += (size_t)n;
+            }
+            for (int i = c; i < end; i++) {
+                const chan_dest *d = &rd->dest[pt->first_chan + i];
+                const float *src = scratch + (size_t)(i - c) * (size_t)ci->width;
+                float *dst = d->base +
+                             ((size_t)(y0 + y - rd->dw[1]) * (size_t)rd->width + (size_t)(x0 - rd->dw[0])) *
+                                 (size_t)d->stride +
+                             (size_t)d->slot;
+                for (int x = 0; x < ci->width; x++)
+                    dst[(size_t)x * (size_t)d->stride] = src[x];
+            }
+            c = end;
+        }
+    }
+}
 
 static void decode_chunk(decode_job *j, int k, int worker)
 {
@@ -124,6 +202,16 @@ static void decode_chunk(decode_job *j, int k, int worker)
     }
     if (rv != EXR_ERR_SUCCESS) {
         fx_exr_job_fail_exr(&j->err, k, f->path, rv, what);
+        return;
+    }
+    if (j->raw_fd >= 0) {
+        if (ci.width != (int64_t)pt->dw[2] - pt->dw[0] + 1 || ci.height <= 0 || ci.height > j->chh ||
+            y0 + (int64_t)ci.height - 1 > pt->dw[3]) {
+            fx_exr_job_fail(&j->err, k, FX_ERR_BAD_FILE, "'%s': %s: chunk of %dx%d outside the data window",
+                            f->path, what, ci.width, ci.height);
+            return;
+        }
+        raw_chunk(j, k, &ci, x0, y0, scratch, what);
         return;
     }
     rv = j->have_dec[worker] ? exr_decoding_update(f->exr, p, &ci, dec)
@@ -266,6 +354,15 @@ static fx_result decode_core_part(reader *rd, int p)
     }
     atomic_init(&j.done, 0);
     fx_exr_job_error_init(&j.err);
+    j.raw_fd = -1;
+    if (raw_part_ok(rd, pt) && (j.raw_off = fx_mem_calloc((size_t)pt->channel_count + 1, sizeof *j.raw_off))) {
+        for (int c = 0; c < pt->channel_count; c++) {
+            int type = f->chans[pt->first_chan + c].type;
+            j.raw_off[c] = j.raw_line;
+            j.raw_line += (size_t)pw * (type == EXR_PIXEL_HALF ? 2u : 4u);
+        }
+        j.raw_fd = open(f->path, O_RDONLY | O_CLOEXEC); /* < 0: OpenEXRCore's path after all */
+    }
 
     /* One chunk per task (a chunk is thousands of pixels); tasks are taken in
      * increasing order, which the error rule of fx_exr_job_error relies on. With
@@ -280,6 +377,9 @@ static fx_result decode_core_part(reader *rd, int p)
         if (j.have_dec[w])
             exr_decoding_destroy(f->exr, &j.dec[w]);
     fx_exr_job_error_destroy(&j.err);
+    if (j.raw_fd >= 0)
+        close(j.raw_fd);
+    fx_mem_free(j.raw_off);
     fx_mem_free(j.have_dec);
     fx_mem_free(j.dec);
     fx_mem_free(j.scratch);
