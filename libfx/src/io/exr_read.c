@@ -496,6 +496,22 @@ static fx_result read_attributes(reader *rd, int part)
     return FX_OK;
 }
 
+/* Whether decoding writes every value of the pass: each slot has a source channel, not
+ * subsampled, in a part whose data window is the frame's. Such a pass is not filled first:
+ * that fill is a serial write of every page of it, which the parallel decode then
+ * overwrites. */
+static int pass_fully_decoded(const reader *rd, const fx_exr_plan_pass *pp)
+{
+    for (int s = 0; s < pp->channels; s++) {
+        if (pp->src[s] < 0)
+            return 0;
+        const fx_exr_chan *ch = &rd->f->chans[pp->src[s]];
+        if (ch->x_sampling != 1 || ch->y_sampling != 1 || memcmp(rd->f->parts[ch->part].dw, rd->dw, sizeof rd->dw))
+            return 0;
+    }
+    return 1;
+}
+
 static fx_result read_frame(fx_context *ctx, fx_exr_file *f, const fx_read_options *opts, fx_frame **out)
 {
     const char *layer = NULL, *view = NULL;
@@ -598,9 +614,10 @@ static fx_result read_frame(fx_context *ctx, fx_exr_file *f, const fx_read_optio
         size_t count = (size_t)rd.width * (size_t)rd.height;
         int nc = pp->channels;
         int from_half = 1;
-        for (size_t px = 0; px < count; px++)
-            for (int s = 0; s < nc; s++)
-                data[px * nc + s] = pp->src[s] >= 0 ? 0.0f : pp->fill[s];
+        if (!pass_fully_decoded(&rd, pp))
+            for (size_t px = 0; px < count; px++)
+                for (int s = 0; s < nc; s++)
+                    data[px * nc + s] = pp->src[s] >= 0 ? 0.0f : pp->fill[s];
         for (int s = 0; s < nc; s++) {
             if (pp->src[s] < 0)
                 continue;
