@@ -112,8 +112,7 @@ static inline v4f bright4(const bloom_job *j, const float *s)
     const bloom_params *p = j->p;
     const float cv = p->clamp_value;
     v4f c = ld4(s);
-    c = sel4(c > V4(0.0f), c, V4(0.0f)); /* NaN -> 0 */
-    c = sel4(c < V4(cv), c, V4(cv));
+    c = clamp4_pos(c, V4(cv)); /* NaN -> 0 */
     c[3] = 0.0f;
     if (p->mode == MODE_SOFT_KNEE) {
         float b = c[0] > c[1] ? c[0] : c[1];
@@ -162,7 +161,7 @@ static inline v4f fast_texel(const bloom_job *j, const float *r0, const float *r
 {
     const float cv = j->p->clamp_value;
     v4f a0 = ld4(r0 + 4 * x0), a1 = ld4(r0 + 4 * x1), a2 = ld4(r1 + 4 * x0), a3 = ld4(r1 + 4 * x1);
-#define CL(v) v = sel4(v > V4(0.0f), v, V4(0.0f)), v = sel4(v < V4(cv), v, V4(cv))
+#define CL(v) v = clamp4_pos(v, V4(cv))
     CL(a0);
     CL(a1);
     CL(a2);
@@ -199,7 +198,7 @@ static void down2_rows(void *user, int begin, int end)
             v4f acc = V4(0.0f);
             for (int k = 0; k < 4; k++) {
                 v4f a0 = ld4(r[k] + c[0]), a1 = ld4(r[k] + c[1]), a2 = ld4(r[k] + c[2]), a3 = ld4(r[k] + c[3]);
-#define CL(v) v = sel4(v > V4(0.0f), v, V4(0.0f)), v = sel4(v < V4(cv), v, V4(cv))
+#define CL(v) v = clamp4_pos(v, V4(cv))
                 CL(a0);
                 CL(a1);
                 CL(a2);

@@ -53,12 +53,18 @@ static inline v4f max4(v4f a, v4f b)
 #endif
 }
 
+/* Lanes that are NaN or <= 0 become +0, lanes above hi become hi (hi not NaN): the same
+ * bits as sel4(v > 0, v, 0) then sel4(v < hi, v, hi), in three instructions. */
+static inline v4f clamp4_pos(v4f v, v4f hi)
+{
+    return min4((v4f)((v4i)v & (v > V4(0.0f))), hi);
+}
+
 /* NaN -> 0, +-Inf -> +-FLT_MAX */
 static inline v4f finite4(v4f v)
 {
-    v = sel4(v == v, v, V4(0.0f));
-    v = sel4(v > V4(FLT_MAX), V4(FLT_MAX), v);
-    return sel4(v < V4(-FLT_MAX), V4(-FLT_MAX), v);
+    v = (v4f)((v4i)v & (v == v)); /* NaN lanes to +0; then min/max need no select */
+    return max4(min4(v, V4(FLT_MAX)), V4(-FLT_MAX));
 }
 
 #endif
