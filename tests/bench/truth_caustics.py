@@ -15,7 +15,7 @@ mean (and its ratio to the truth's), contrast (std / mean) at full resolution an
 4x4 box average (which divides uncorrelated pixel noise by 4: the truth's Monte Carlo
 noise inflates its full-resolution contrast), and the dominant spatial frequency: the peak
 of the radially averaged power spectrum (Hann window, DC and the first bin excluded), as
-a period in metres (the camera's ortho scale / width per pixel).
+a period in metres (the orthographic camera's width / pixels, from the sidecar).
 """
 import argparse
 import json
@@ -26,8 +26,6 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import truth_common as C  # noqa: E402
-
-sys.path.insert(0, str(C.scene_dir("caustics")))
 
 
 def stats(img, m_per_px):
@@ -69,8 +67,8 @@ def main():
     tpass, _, _ = C.batch(blend, p + "truth_", a.res, a.spp, expr=C.truth_expr("caustics"), recipe=noop)
     t2pass, _, _ = C.batch(blend, p + "truth2_", a.res, a.spp, expr=C.truth_expr("caustics"), recipe=noop, seed=17)
     truth, truth2, plain = C.rgb(tpass), C.rgb(t2pass), C.rgb(passes)
-    import make_truth_caustics as S
-    m_per_px = S.ORTHO_SCALE / plain.shape[1]
+    # the orthographic camera's width in metres is 2 / projection[0][0] (the sidecar)
+    m_per_px = 2.0 / json.load(open(side))["projection"][0][0] / plain.shape[1]
     outs = C.run_presets(recipe, passes, side, a.out, "c", runs=a.runs, frame=1)
     tmean = stats(truth, m_per_px)[0]
     rows, spectra = [], {}

@@ -214,9 +214,9 @@ def save_strip(path, images, width=480):
     out.close()
 
 
-def plot_time_error(path, series, title, ylabel="region MAE vs Cycles"):
-    """series: {label: (rows)}: each libfx preset as a point (ms, region MAE), the
-    no-effect error as a dashed line of the series' colour."""
+def plot_time_error(path, series, title, ylabel="region MAE vs Cycles", col=2):
+    """series: {label: (rows)}: each libfx preset as a point (ms, the row's column `col`:
+    the region MAE), the no-effect error as a dashed line of the series' colour."""
     try:
         import matplotlib
         matplotlib.use("Agg")
@@ -225,13 +225,13 @@ def plot_time_error(path, series, title, ylabel="region MAE vs Cycles"):
         return False
     fig, ax = plt.subplots(figsize=(6, 3.6), dpi=100)
     for i, (label, rows) in enumerate(series.items()):
-        col = "C%d" % i
+        colour = "C%d" % i
         pts = [r for r in rows if r[0].startswith("libfx ")]
-        ax.plot([r[1] for r in pts], [r[2] for r in pts], "o-", color=col, label=label)
+        ax.plot([r[1] for r in pts], [r[col] for r in pts], "o-", color=colour, label=label)
         for r in pts:
-            ax.annotate(r[0].split()[1], (r[1], r[2]), fontsize=7, xytext=(3, 3), textcoords="offset points")
-        none = [r for r in rows if r[0].startswith("no effect")][0][2]
-        ax.axhline(none, color=col, ls="--", lw=0.8)
+            ax.annotate(r[0].split()[1], (r[1], r[col]), fontsize=7, xytext=(3, 3), textcoords="offset points")
+        none = [r for r in rows if r[0].startswith("no effect")][0][col]
+        ax.axhline(none, color=colour, ls="--", lw=0.8)
     ax.set_xscale("log")
     ax.set_xlabel("libfx effects time, ms (2 threads; dashed: no effect)")
     ax.set_ylabel(ylabel)

@@ -67,6 +67,11 @@ def main():
             os.makedirs(os.path.join(a.docs, "images"), exist_ok=True)
             C.save_strip(os.path.join(a.docs, "images", "truth_shadows_%s.png" % v),
                          [truth, outs["final"][0], plain])
+            if v == "floor":  # a crop: truth | reference (pcf) | final (vsm)
+                h, w = truth.shape[:2]
+                crop = (slice(int(0.22 * h), int(0.74 * h)), slice(int(0.21 * w), int(0.71 * w)))
+                C.save_strip(os.path.join(a.docs, "images", "truth_shadows_pcf_acne.png"),
+                             [truth[crop], outs["reference"][0][crop], outs["final"][0][crop]])
     with open(os.path.join(a.out, "truth_shadows.md"), "w") as f:
         f.write("\n".join(md))
     with open(os.path.join(a.out, "truth_shadows.json"), "w") as f:
