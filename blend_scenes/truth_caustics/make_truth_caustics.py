@@ -68,7 +68,7 @@ def main():
         nt.nodes.remove(n)
     out = nt.nodes.new("ShaderNodeOutputMaterial")
     glass = nt.nodes.new("ShaderNodeBsdfGlass")
-    glass.distribution = 'SHARP'
+    sc.sharp_bsdf(glass)
     glass.inputs["IOR"].default_value = 1.33
     glass.inputs["Color"].default_value = (1, 1, 1, 1)
     nt.links.new(glass.outputs[0], out.inputs["Surface"])

@@ -199,7 +199,7 @@ def apply_truth(scene=None):
         nt.nodes.remove(n)
     out = nt.nodes.new("ShaderNodeOutputMaterial")
     g = nt.nodes.new("ShaderNodeBsdfGlossy")
-    g.distribution = 'SHARP'
+    sc.sharp_bsdf(g)
     g.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
     g.inputs["Roughness"].default_value = 0.0
     nt.links.new(g.outputs[0], out.inputs["Surface"])
