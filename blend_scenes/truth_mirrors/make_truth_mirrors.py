@@ -7,9 +7,11 @@ a perfect Cycles mirror (the ground truth, tests/bench/truth_mirrors.py).
         [-- --variant facing|grazing|pair|curved|all]
 
 Variants (all: the default), each written to truth_mirrors_<variant>.blend:
-  facing   the issue's scene: a card standing at a slant (15 deg about Z) facing the camera, coloured blocks and a sphere in front of it, a
-           brick wall behind the camera (seen only in the mirror);
-  grazing  a long mirror on the left wall seen at a grazing angle (~75 deg incidence);
+  facing   the issue's scene: a card standing at a slant (15 deg about Z) facing
+           the camera, coloured blocks and a sphere in front of it, a brick wall
+           behind the camera (seen only in the mirror);
+  grazing  a long mirror on the left wall seen at a grazing angle (60-80 deg incidence,
+           the camera near that wall);
   pair     two mirrors facing each other on the left and right walls (the recipe's
            one entry traces bounces between them);
   curved   a convex mirror: a 120 deg section of a vertical cylinder (r 0.9 m).
@@ -167,7 +169,7 @@ def build(variant):
     elif variant == "grazing":
         props(mats, y=2.0)
         mirror_card(mats["Mirror"], (-RX + 0.05, 2.6, 1.3), (5.0, 1.8), rz=90.0)
-        cam_loc, target = (-0.6, -1.8, 1.5), (-0.4, 5.0, 1.1)
+        cam_loc, target = (-1.9, -1.8, 1.5), (-0.6, 5.0, 1.1)
     elif variant == "pair":
         props(mats, y=2.2)
         mirror_card(mats["Mirror"], (-RX + 0.05, 3.0, 1.3), (2.4, 1.8), rz=90.0, name="Mirror_Left")
