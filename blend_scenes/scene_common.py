@@ -521,6 +521,16 @@ def tex_wood(nt, bsdf, color, bump, scale=3.0):
     _bump(nt, bsdf, n.outputs["Fac"], bump)
 
 
+def sharp_bsdf(node):
+    """A perfectly sharp Glossy/Glass BSDF node: distribution 'SHARP' up to Blender 3.6;
+    4.0 dropped it (GGX at roughness 0 is the same there)."""
+    try:
+        node.distribution = 'SHARP'
+    except TypeError:
+        node.distribution = 'GGX'
+    node.inputs["Roughness"].default_value = 0.0
+
+
 def transparent_material(name, pass_index, opacity=0.07, tint=(1.0, 1.0, 1.0)):
     """A see-through veil: one Transparent BSDF whose colour is
     ``tint * (1 - opacity)``; Cycles treats it as alpha = ``opacity``."""

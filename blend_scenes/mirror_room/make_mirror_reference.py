@@ -77,9 +77,12 @@ def _reset(mat):
 
 def _glossy(nt, roughness=0.0):
     g = nt.nodes.new("ShaderNodeBsdfGlossy")
-    g.distribution = 'SHARP' if roughness == 0.0 else 'GGX'
     g.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
-    g.inputs["Roughness"].default_value = roughness
+    if roughness == 0.0:
+        sc.sharp_bsdf(g)          # 'SHARP' is gone from 4.0
+    else:
+        g.distribution = 'GGX'
+        g.inputs["Roughness"].default_value = roughness
     return g
 
 
