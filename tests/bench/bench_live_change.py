@@ -3,12 +3,14 @@
 not the library's run), per scene, in a headless session (not a timed test).
 
     /usr/bin/python3 tests/bench/bench_live_change.py [--blender host|unstable] [--runs 30]
-        [--scenes greek_bath,atrium,mirror_room] [--resolution 320x180] [--out out/bench_live_change]
+        [--scenes greek_bath,atrium,mirror_room] [--resolution 320x180] [--fresh] [--busy]
+        [--out out/bench_live_change]
 
 For each scene it renders frame 1 through the batch runner at --resolution (kept passes;
 reused when present), holds it live, then changes each effect's first numeric parameter
---runs times (with --busy the next change comes while the worker still runs the last
-one, as in a drag). Per change it measures, on the main thread:
+--runs times: back and forth around its value, or with --fresh a new value each time;
+with --busy the next change comes while the worker still runs the last one (a drag).
+Per change it measures, on the main thread:
 
 - **update**: the property's update callbacks (pass sync + scheduling the live run);
 - **kick**: the debounced timer that builds the interactive job;
@@ -68,10 +70,13 @@ for it in scene.libfx.stack:
     base = getattr(group, knob.prop)
     tu, tk, ts, nr, ns = [], [], [], [], []
     for r in range(A["runs"]):
-        step = (knob.soft_max - knob.soft_min) * 0.01 * (1 if r % 2 == 0 else -1)
+        if A["fresh"]:   # a drag: every value new (no answer of the library is reused)
+            step = (knob.soft_max - knob.soft_min) * 0.001 * (r + 1)
+        else:            # back and forth around the value, as bench_live.py changes it
+            step = (knob.soft_max - knob.soft_min) * 0.01 * (1 if r % 2 == 0 else -1)
         v = max(knob.min, min(knob.max, base + step))
         if knob.type == "int":
-            v = int(base) + (1 if step > 0 else -1)
+            v = int(base) + (r + 1 if A["fresh"] else (1 if step > 0 else -1))
             v = max(int(knob.min), min(int(knob.max), v))
         count["recipe"] = count["stack"] = 0
         t0 = time.perf_counter()
@@ -122,7 +127,8 @@ def run_scene(a, scene):
     render_if_missing(scene, d, a.blender, a.resolution)
     args = {"addon": os.path.join(ROOT, "addon"), "prefix": os.path.join(a.out, scene + "_"),
             "passes": os.path.join(d, "r_libfx_passes.0001.exr"),
-            "sidecar": os.path.join(d, "r_libfx.0001.camera.json"), "runs": a.runs, "busy": a.busy}
+            "sidecar": os.path.join(d, "r_libfx.0001.camera.json"), "runs": a.runs, "busy": a.busy,
+            "fresh": a.fresh}
     cmd = blender_cmd(a.blender) + ["-b", os.path.join(ROOT, "blend_scenes", scene, scene + ".blend"),
                                     "--python-expr", SCRIPT, "--", json.dumps(args)]
     p = subprocess.run(cmd, capture_output=True, text=True,
@@ -140,6 +146,8 @@ def main():
     ap.add_argument("--blender", default="host")
     ap.add_argument("--scenes", default=",".join(SCENES))
     ap.add_argument("--resolution", default="320x180")
+    ap.add_argument("--fresh", action="store_true",
+                    help="every change sets a new value (default: back and forth around it)")
     ap.add_argument("--busy", action="store_true",
                     help="the next change comes while the worker still runs the last one (a drag)")
     ap.add_argument("--out", default=os.path.join(ROOT, "out", "bench_live_change"))
