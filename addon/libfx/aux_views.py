@@ -46,7 +46,7 @@ def needed(scene):
     if not scene_setup.has_stack(scene) or native.load() is None:
         return []
     if not native.has("aux_views"):
-        log("; ".join(p for p in native.feature_problems() if "aux" in p))
+        log(native.feature_problem("aux_views"))
         return []
     return scene_setup.answers(recipe.to_recipe(scene))["aux_views"]
 

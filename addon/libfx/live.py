@@ -682,7 +682,7 @@ def start(scene, frame_no=None, path=None, sidecar=None):
     and shows its final result: "Apply to Last Render", scrubbing, file reloads."""
     from . import scene_setup
     if not native.has("live"):
-        log("; ".join(p for p in native.feature_problems() if "live" in p) or "live is unavailable")
+        log(native.feature_problem("live") or "live look-dev is unavailable")
         return
     frame_no = scene.frame_current if frame_no is None else frame_no
     path = path or scene_setup.passes_path(scene, frame_no)

@@ -218,18 +218,23 @@ def has(feature):
     return load() is not None and not any(f in _missing_optional for f in FEATURES[feature][1])
 
 
-def feature_problems(quiet=False):
-    """One message per feature the loaded library lacks (naming the library and the
-    functions); ``quiet``: also those whose absence is expected (_QUIET)."""
+def feature_problem(feature):
+    """Why ``feature`` is off (naming the library and the functions it lacks), or None."""
     if load() is None:
-        return []
-    out = []
-    for feature, (what, names) in FEATURES.items():
-        gone = [n for n in names if n in _missing_optional]
-        if gone and (quiet or feature not in _QUIET):
-            out.append("libfx at %s has no %s (an older library?), so this is off: %s. "
-                       "Install the matching add-on zip." % (_lib_path, ", ".join(gone), what))
-    return out
+        return None
+    what, names = FEATURES[feature]
+    gone = [n for n in names if n in _missing_optional]
+    if not gone:
+        return None
+    return ("libfx at %s has no %s (an older library?), so this is off: %s. "
+            "Install the matching add-on zip." % (_lib_path, ", ".join(gone), what))
+
+
+def feature_problems(include_expected=False):
+    """feature_problem() of every feature that is off; ``include_expected``: also those
+    whose absence is expected today (_QUIET)."""
+    return [m for m in (feature_problem(f) for f in FEATURES if include_expected or f not in _QUIET)
+            if m is not None]
 
 
 def retry_if_failed():
