@@ -71,4 +71,4 @@ def unregister():
             pass
     _registered.clear()
     props.unregister()
-    scene_setup.STATUS.clear()
+    scene_setup.forget()

@@ -45,15 +45,10 @@ def needed(scene):
     from . import recipe
     if not scene_setup.has_stack(scene) or native.load() is None:
         return []
-    ctx = native.Context(1)
-    try:
-        stack = native.Stack(ctx, recipe.to_recipe(scene))
-        try:
-            return stack.required_aux_views()
-        finally:
-            stack.close()
-    finally:
-        ctx.close()
+    if not native.has("aux_views"):
+        log(native.feature_problem("aux_views"))
+        return []
+    return scene_setup.answers(recipe.to_recipe(scene))["aux_views"]
 
 
 # ---------------------------------------------------------------- geometry

@@ -26,7 +26,8 @@ Per frame it writes, beside the output prefix:
                                    once the result is written, unless --keep-passes)
   <prefix>libfx.####.exr           the result: Combined + the passes + camera attributes
   <prefix>libfx.####.<ext>         the result in the scene's format (if not EXR)
-  <prefix>libfx.####.camera.json   the camera sidecar (for `libfx run --camera`)
+  <prefix>libfx.####.camera.json   the scene sidecar: camera, lights, time, aux views
+                                   (for `libfx run --sidecar`; the file keeps its old name)
   <prefix>libfx_recipe.json        the recipe that ran
 """
 
@@ -162,7 +163,8 @@ def discard(paths):
     """Removes a frame's results and the temporary files an interrupted writer left
     (the library writes '<dir>/.<name>.tmp-<pid>-<n>' and renames it when complete;
     the sidecar goes through '<name>.tmp')."""
-    for key in ("exr", "image", "camera"):
+    # "camera": how an add-on older than this runner names the sidecar
+    for key in ("exr", "image", "sidecar" if "sidecar" in paths else "camera"):
         p = paths[key]
         d, name = os.path.split(p)
         for q in [p, p + ".tmp"] + glob.glob(os.path.join(d, "." + glob.escape(name) + ".tmp-*")):
@@ -172,9 +174,9 @@ def discard(paths):
                 pass
 
 
-def main():
-    args = parse_args(_argv())
-    # Usage errors first: a farm's wrong command must fail before anything renders.
+def check_usage(args):
+    """The options that need no scene, checked before anything renders (a farm's wrong
+    command must fail at once): (frames or None for the scene's range, (w, h) or None)."""
     frames = None
     if args.frames is not None:
         try:
@@ -191,17 +193,22 @@ def main():
             die("--resolution wants WxH, got %r" % args.resolution)
     if args.samples is not None and args.samples < 1:
         die("--samples wants a positive number, got %d" % args.samples)
+    return frames, size
 
+
+def open_addon():
+    """The add-on, enabled, on a Blender it supports, with its library loaded."""
     fx = enable_addon()
     problem = fx.compat.version_problem()
     if problem:
         die(problem)
-    scene = bpy.context.scene
     if fx.props.catalog() is None or not fx.props.catalog().ok:
         die(fx.native.load_error() or "libfx library unavailable")
-    loaded = fx.scene_setup.status(scene).get("error")
-    if loaded and not args.recipe:
-        die("scene '%s': %s" % (scene.name, loaded))
+    return fx
+
+
+def apply_overrides(fx, scene, args, size):
+    """The command line's output, size, samples, recipe and stack settings, on the scene."""
     r = scene.render
     if args.output:
         r.filepath = args.output
@@ -225,6 +232,11 @@ def main():
         scene.libfx.keep_passes = True
     if args.passes_codec:
         scene.libfx.passes_codec = args.passes_codec
+
+
+def check_scene(fx, scene, args):
+    """The scene can run its stack: a stack, a camera, an output path, the passes set up.
+    Returns the status of the pass sync (its "passes")."""
     if not fx.scene_setup.has_stack(scene):
         die("scene '%s' has no enabled libfx effect (no stack, no %s text, no --recipe)"
             % (scene.name, fx.recipe.TEXT_NAME))
@@ -237,67 +249,94 @@ def main():
         die("the stack cannot run: %s" % st["error"], 1)
     for w in st.get("warnings", []):
         print("libfx batch: warning: " + w, file=sys.stderr)
-    if frames is None:
-        frames = parse_frames(None, scene)
-    with_image = fx.scene_setup.writes_image(scene)
+    return st
 
-    say("scene '%s', frames %s, %dx%d, passes %s" % (
-        scene.name, args.frames or "%d-%d" % (scene.frame_start, scene.frame_end),
-        r.resolution_x, r.resolution_y, ", ".join(st.get("passes", []))))
+
+def render_frame(fx, scene, frame, files, paths, span):
+    """Renders one frame and runs its stack; None when its results are written, else why
+    not (the frame's results are removed then)."""
+    # From here until it succeeds the frame has no result: never an older one.
+    discard(paths)
+    fx.render.RESULTS.pop((scene.name, frame), None)
+    # Auxiliary views (light view, rain map) only when the stack needs them; reused
+    # while light and geometry do not move.
+    try:
+        scene.frame_set(frame)
+        aux = fx.aux_views.prepare(scene, span)
+    except Exception as e:
+        return "frame %d: auxiliary views: %s" % (frame, e)
+    with fx.render._lock:
+        fx.render.AUX[(scene.name, frame)] = aux
+    # A one-frame animation: Blender numbers the file (a still would not) and
+    # frame_change_post gives this frame's scene sidecar.
+    scene.frame_start = scene.frame_end = frame
+    try:
+        bpy.ops.render.render(animation=True)
+    except RuntimeError as e:
+        discard(paths)
+        return "frame %d: Blender's render failed: %s" % (frame, str(e).strip())
+    rec = fx.render.RESULTS.get((scene.name, frame))
+    failed = None
+    if rec is None:
+        failed = "frame %d: the stack did not run (no render_post)" % frame
+    elif not rec["ok"]:
+        failed = "frame %d: %s" % (frame, rec["error"])
+    else:
+        missing = [p for p in files if not os.path.exists(p)]
+        if missing:
+            failed = "frame %d: not written: %s" % (frame, ", ".join(missing))
+    if failed:
+        discard(paths)
+    return failed
+
+
+def render_frames(fx, scene, frames, skip_existing):
+    """Every frame asked for, in order: (failures, frames skipped as complete)."""
+    with_image = fx.scene_setup.writes_image(scene)
     failures = []
     skipped = 0
-    check_ctx = fx.native.Context(1) if args.skip_existing else None
+    check_ctx = fx.native.Context(1) if skip_existing else None
     # The aux views cover the camera over the scene's whole range (and the frames asked
     # for), so every frame and every later run can reuse them.
     span = sorted(set(frames) | set(range(scene.frame_start, scene.frame_end + 1)))
-    for frame in frames:
-        files, paths = result_files(fx, scene, frame, with_image)
-        if args.skip_existing:
-            why = unfinished(fx, check_ctx, files)
-            if why is None:
-                say("frame %d: exists, skipped" % frame)
-                skipped += 1
-                continue
-            if os.path.exists(files[0]) or any(os.path.exists(p) for p in files[1:]):
-                say("frame %d: %s: rendering it again" % (frame, why))
-        # From here until it succeeds the frame has no result: never an older one.
-        discard(paths)
-        fx.render.RESULTS.pop((scene.name, frame), None)
-        # Auxiliary views (light view, rain map) only when the stack needs them; reused
-        # while light and geometry do not move.
-        try:
-            scene.frame_set(frame)
-            aux = fx.aux_views.prepare(scene, span)
-        except Exception as e:
-            failures.append("frame %d: auxiliary views: %s" % (frame, e))
-            continue
-        with fx.render._lock:
-            fx.render.AUX[(scene.name, frame)] = aux
-        # A one-frame animation: Blender numbers the file (a still would not) and
-        # frame_change_post gives this frame's camera.
-        scene.frame_start = scene.frame_end = frame
-        try:
-            bpy.ops.render.render(animation=True)
-        except RuntimeError as e:
-            failures.append("frame %d: Blender's render failed: %s" % (frame, str(e).strip()))
-            discard(paths)
-            continue
-        rec = fx.render.RESULTS.get((scene.name, frame))
-        failed = None
-        if rec is None:
-            failed = "frame %d: the stack did not run (no render_post)" % frame
-        elif not rec["ok"]:
-            failed = "frame %d: %s" % (frame, rec["error"])
-        else:
-            missing = [p for p in files if not os.path.exists(p)]
-            if missing:
-                failed = "frame %d: not written: %s" % (frame, ", ".join(missing))
-        if failed:
-            failures.append(failed)
-            discard(paths)
-        sys.stdout.flush()
-    if check_ctx is not None:
-        check_ctx.close()
+    try:
+        for frame in frames:
+            files, paths = result_files(fx, scene, frame, with_image)
+            if skip_existing:
+                why = unfinished(fx, check_ctx, files)
+                if why is None:
+                    say("frame %d: exists, skipped" % frame)
+                    skipped += 1
+                    continue
+                if os.path.exists(files[0]) or any(os.path.exists(p) for p in files[1:]):
+                    say("frame %d: %s: rendering it again" % (frame, why))
+            failed = render_frame(fx, scene, frame, files, paths, span)
+            if failed:
+                failures.append(failed)
+            sys.stdout.flush()
+    finally:
+        if check_ctx is not None:
+            check_ctx.close()
+    return failures, skipped
+
+
+def main():
+    args = parse_args(_argv())
+    frames, size = check_usage(args)
+    fx = open_addon()
+    scene = bpy.context.scene
+    loaded = fx.scene_setup.status(scene).get("error")
+    if loaded and not args.recipe:
+        die("scene '%s': %s" % (scene.name, loaded))
+    apply_overrides(fx, scene, args, size)
+    st = check_scene(fx, scene, args)
+    if frames is None:
+        frames = parse_frames(None, scene)
+    r = scene.render
+    say("scene '%s', frames %s, %dx%d, passes %s" % (
+        scene.name, args.frames or "%d-%d" % (scene.frame_start, scene.frame_end),
+        r.resolution_x, r.resolution_y, ", ".join(st.get("passes", []))))
+    failures, skipped = render_frames(fx, scene, frames, args.skip_existing)
     if failures:
         die("%d of %d frame(s) failed:\n  %s" % (len(failures), len(frames), "\n  ".join(failures)), 1)
     say("%d frame(s) done: %d rendered, %d skipped" % (len(frames), len(frames) - skipped, skipped))

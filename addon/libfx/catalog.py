@@ -26,7 +26,8 @@ class Param:
 
 
 class Effect:
-    __slots__ = ("name", "doc", "params", "presets", "passes", "camera", "halo", "raw")
+    __slots__ = ("name", "doc", "params", "presets", "passes", "needs_camera", "halo", "raw",
+                 "params_version")
 
     def param(self, name):
         for p in self.params:
@@ -119,13 +120,15 @@ def normalise(name, d):
         presets = {names[i]: v for i, v in enumerate(presets) if i < len(names) and v}
     e.presets = {k: (v or {}) for k, v in presets.items()}
     e.passes = list(d.get("passes", []))
-    e.camera = bool(d.get("camera", d.get("needs_camera", False)))
+    e.needs_camera = bool(d.get("camera", d.get("needs_camera", False)))
+    e.params_version = 1
     e.halo = d.get("halo", 0)
     return e
 
 
 class Catalog:
-    """Everything the library says about its effects, loaded once per registration."""
+    """Everything the library says about its effects (parameters, presets, parameter
+    versions), asked once per registration and kept for the session."""
 
     def __init__(self):
         self.effects = {}
@@ -147,10 +150,12 @@ class Catalog:
             cat.version = native.version()
             cat.path = native.library_path()
             cat.qualities = native.quality_names()
+            cat.warnings.extend(native.feature_problems())
             with native.Context(1) as ctx:
                 for name in native.effect_names():
                     try:
                         cat.effects[name] = normalise(name, ctx.describe(name))
+                        cat.effects[name].params_version = native.effect_params_version(name)
                         cat.order.append(name)
                     except (native.LibfxError, ValueError, KeyError) as e:
                         cat.warnings.append("effect %s cannot be described: %s" % (name, e))

@@ -432,7 +432,24 @@ def proxy_factor_of(scene):
 
 def active(scene):
     s = _settings_of(scene)
-    return s is not None and s.live and session(scene) is not None
+    return s is not None and s.live and session(scene) is not None and native.has("live")
+
+
+#: scene name -> the recipe the last stack change built (scene_setup.stack_changed): its
+#: interactive and final runs use it instead of building it again; dropped once the final
+#: run is submitted, and by any change that comes without one (undo, live settings).
+_RECIPES = {}
+
+
+def _job_recipe(scene, solo):
+    rec = _RECIPES.get(scene.name)
+    if rec is None:
+        rec = recipe.to_recipe(scene)
+    if solo is None:
+        return rec
+    # solo: the active effect alone (a copy: the kept recipe stays as built)
+    return dict(rec, effects=[dict(entry, enabled=(i == solo))
+                              for i, entry in enumerate(rec.get("effects", []))])
 
 
 def _make_job(scene, kind, load=None):
@@ -441,13 +458,8 @@ def _make_job(scene, kind, load=None):
     if factor == "auto":
         sess = session(scene)
         factor = sess.auto_factor if sess is not None else 2
-    rec = recipe.to_recipe(scene)
-    if s.live_solo and 0 <= s.active_index < len(s.stack):
-        for i, entry in enumerate(rec.get("effects", [])):
-            if i != s.active_index:
-                entry["enabled"] = False
-            else:
-                entry["enabled"] = True
+    solo = s.active_index if s.live_solo and 0 <= s.active_index < len(s.stack) else None
+    rec = _job_recipe(scene, solo)
     _state["generation"] += 1
     debug = None
     if s.live_debug:   # debug outputs on; "NONE" shows the result still
@@ -456,11 +468,18 @@ def _make_job(scene, kind, load=None):
                 s.live_split, debug, s.threads, load=load)
 
 
-def changed(scene):
-    """A stack setting changed (property update, operator): re-run soon."""
+def changed(scene, rec=None):
+    """A setting changed (property update, operator): re-run soon. ``rec``: the stack's
+    recipe as the change left it (built once per change by scene_setup.stack_changed);
+    None: built again when the run is made."""
     if not active(scene):
+        _RECIPES.pop(scene.name, None)
         return
     trace("changed")
+    if rec is None:
+        _RECIPES.pop(scene.name, None)
+    else:
+        _RECIPES[scene.name] = rec
     _state["last_change"] = time.monotonic()
     _state["pending"].add(scene.name)
     _state["final_due"].add(scene.name)
@@ -495,7 +514,7 @@ def _kick():
         s = _settings_of(scene)
         if SETTINGS.get(s.live_setting, (None, None))[0] is None:
             continue   # final only
-        _submit(_make_job(scene, "interactive"))
+        _submit_new(scene, "interactive")
     return None
 
 
@@ -508,8 +527,23 @@ def _settle():
     for name in names:
         scene = bpy.data.scenes.get(name)
         if scene is not None and active(scene):
-            _submit(_make_job(scene, "final"))
+            _submit_new(scene, "final")
+        _RECIPES.pop(name, None)   # this change is done with its recipe
     return None
+
+
+def _submit_new(scene, kind):
+    """A job for the scene's stack; a recipe the add-on cannot build (a mask's index list
+    that is not numbers) goes to the panel instead, the last image stays."""
+    try:
+        job = _make_job(scene, kind)
+    except recipe.RecipeError as e:
+        s = session(scene)
+        if s is not None:
+            s.error = str(e)
+            _redraw_panels()
+        return
+    _submit(job)
 
 
 POLL_S = 0.01
@@ -647,6 +681,9 @@ def start(scene, frame_no=None, path=None, sidecar=None):
     """Loads a frame's passes (from ``path``, default the scene's passes file of the frame)
     and shows its final result: "Apply to Last Render", scrubbing, file reloads."""
     from . import scene_setup
+    if not native.has("live"):
+        log(native.feature_problem("live") or "live look-dev is unavailable")
+        return
     frame_no = scene.frame_current if frame_no is None else frame_no
     path = path or scene_setup.passes_path(scene, frame_no)
     if sidecar is None:

@@ -5,7 +5,10 @@ Nothing here imports bpy, so the module can be used by plain Python tools and
 tests.  Every function used is declared with ``argtypes``/``restype`` at load
 time; a missing or mismatched library never raises at import: ``load()``
 returns None and ``load_error()`` says why, so the add-on can still register
-and show the message in its panel.
+and show the message in its panel.  The functions every path needs (_CORE) must
+all be there; a function only one feature uses (_OPTIONAL, FEATURES) may be
+missing from an older library: that feature is off (``has()``) and
+``feature_problems()`` says so.
 """
 
 import ctypes
@@ -33,15 +36,6 @@ class LibfxError(RuntimeError):
         self.code = code
 
 
-class fx_camera(ctypes.Structure):
-    _fields_ = [("size", ctypes.c_size_t),
-                ("world_to_camera", c_float * 16),
-                ("projection", c_float * 16),
-                ("clip_start", c_float),
-                ("clip_end", c_float),
-                ("orthographic", c_int)]
-
-
 class fx_read_options(ctypes.Structure):
     _fields_ = [("size", ctypes.c_size_t),
                 ("layer", c_char_p),
@@ -61,15 +55,15 @@ P = ctypes.POINTER
 _PP = P(c_void_p)          # fx_xxx **out
 _PSTR = P(c_void_p)        # char **out_json (freed with fx_free)
 
-# name: (restype, argtypes).  fx_result is an int.
-_SIGNATURES = {
+# name: (restype, argtypes).  fx_result is an int.  Every add-on path needs these: a
+# library without one of them is refused at load, naming the function.
+_CORE = {
     "fx_abi_version": (c_int, []),
     "fx_version_string": (c_char_p, []),
     "fx_result_name": (c_char_p, [c_int]),
     "fx_free": (None, [c_void_p]),
     "fx_context_new": (c_int, [_PP, c_int]),
     "fx_context_free": (None, [c_void_p]),
-    "fx_context_threads": (c_int, [c_void_p]),
     "fx_context_error": (c_char_p, [c_void_p]),
     "fx_context_warning_count": (c_int, [c_void_p]),
     "fx_context_warning": (c_char_p, [c_void_p, c_int]),
@@ -79,38 +73,51 @@ _SIGNATURES = {
     "fx_effect_describe_json": (c_int, [c_void_p, c_char_p, _PSTR]),
     "fx_quality_from_name": (c_int, [c_char_p]),
     "fx_quality_name": (c_char_p, [c_int]),
-    "fx_camera_from_json": (c_int, [c_void_p, c_char_p, P(fx_camera)]),
     "fx_frame_free": (None, [c_void_p]),
     "fx_frame_width": (c_int, [c_void_p]),
     "fx_frame_height": (c_int, [c_void_p]),
     "fx_frame_pass_count": (c_int, [c_void_p]),
     "fx_frame_pass_name": (c_char_p, [c_void_p, c_int]),
-    "fx_frame_pass_channels": (c_int, [c_void_p, c_int]),
-    "fx_frame_pass": (c_int, [c_void_p, c_char_p, P(P(c_float)), P(c_int)]),
-    "fx_frame_set_camera": (c_int, [c_void_p, P(fx_camera)]),
     "fx_frame_apply_sidecar": (c_int, [c_void_p, c_char_p]),
-    "fx_frame_camera": (c_int, [c_void_p, P(fx_camera)]),
     "fx_frame_set_time": (None, [c_void_p, c_double, c_double]),
     "fx_frame_read_exr": (c_int, [c_void_p, c_char_p, P(fx_read_options), _PP]),
     "fx_frame_write_exr": (c_int, [c_void_p, c_char_p, P(fx_write_options)]),
     "fx_frame_copy_passes": (c_int, [c_void_p, c_void_p]),
-    "fx_frame_reduce": (c_int, [c_void_p, c_int, _PP]),
-    "fx_frame_proxy_factor": (c_int, [c_void_p]),
-    "fx_frame_read_pixels": (c_int, [c_void_p, c_char_p, c_int, c_int, c_int, P(c_float)]),
     "fx_stack_new": (c_int, [c_void_p, _PP]),
     "fx_stack_free": (None, [c_void_p]),
     "fx_stack_load_json": (c_int, [c_void_p, c_char_p]),
     "fx_stack_to_json": (c_int, [c_void_p, _PSTR]),
     "fx_stack_count": (c_int, [c_void_p]),
     "fx_stack_required_passes": (c_int, [c_void_p, _PSTR]),
-    "fx_stack_required_aux_views": (c_int, [c_void_p, _PSTR]),
     "fx_stack_run": (c_int, [c_void_p, c_void_p, _PP]),
-    "fx_stack_run_consume": (c_int, [c_void_p, c_void_p, c_int, _PP]),
     "fx_stack_timings_json": (c_int, [c_void_p, _PSTR]),
     "fx_stack_set_quality": (c_int, [c_void_p, c_int]),
     "fx_stack_set_debug_outputs": (None, [c_void_p, c_int]),
     "fx_context_set_progress": (None, [c_void_p, c_void_p, c_void_p]),
 }
+
+# Functions only some features use (added to ABI 1 after its first release, or not yet
+# there): a library without one loads, and only that feature is off, with a message.
+_OPTIONAL = {
+    "fx_frame_reduce": (c_int, [c_void_p, c_int, _PP]),
+    "fx_frame_read_pixels": (c_int, [c_void_p, c_char_p, c_int, c_int, c_int, P(c_float)]),
+    "fx_stack_required_aux_views": (c_int, [c_void_p, _PSTR]),
+    "fx_stack_run_consume": (c_int, [c_void_p, c_void_p, c_int, _PP]),
+    "fx_effect_params_version": (c_int, [c_char_p, P(c_int)]),
+}
+
+#: feature -> (what it does, for the message; the optional functions it needs).
+FEATURES = {
+    "live": ("live look-dev and showing the result from memory", ("fx_frame_reduce", "fx_frame_read_pixels")),
+    "aux_views": ("auxiliary views (light views, the rain map)", ("fx_stack_required_aux_views",)),
+    "run_in_place": ("runs that reuse the input's memory (a plain run is used instead)",
+                     ("fx_stack_run_consume",)),
+    "params_version": ("migrating parameters saved by an older libfx (every effect is taken as version 1)",
+                       ("fx_effect_params_version",)),
+}
+
+#: Features whose absence is expected today and not worth a warning in the panel.
+_QUIET = {"params_version"}
 
 #: int (*fx_progress_fn)(void *user, const char *stage, double fraction): non-zero cancels.
 PROGRESS_FN = ctypes.CFUNCTYPE(c_int, c_void_p, c_char_p, c_double)
@@ -137,9 +144,10 @@ def candidate_paths():
     return out
 
 
-def _declare(lib):
+def _bind(lib, signatures):
+    """Declares argtypes/restype of each function the library has; returns the missing."""
     missing = []
-    for name, (restype, argtypes) in _SIGNATURES.items():
+    for name, (restype, argtypes) in signatures.items():
         fn = getattr(lib, name, None)
         if fn is None:
             missing.append(name)
@@ -147,6 +155,27 @@ def _declare(lib):
         fn.restype = restype
         fn.argtypes = argtypes
     return missing
+
+
+def _check(lib, path):
+    """None when the library at ``path`` can be used, else why not (and the missing
+    optional functions are recorded)."""
+    if getattr(lib, "fx_abi_version", None) is None:
+        return "%s is not libfx (it has no fx_abi_version)" % path
+    missing = _bind(lib, _CORE)
+    abi = lib.fx_abi_version()
+    if abi != ABI_VERSION:
+        return ("libfx at %s has ABI %d; this add-on was written for ABI %d: "
+                "install the matching add-on zip" % (path, abi, ABI_VERSION))
+    if missing:
+        return ("libfx at %s lacks the function%s %s that the add-on needs (an older or "
+                "foreign build?): install the matching add-on zip"
+                % (path, "s" if len(missing) > 1 else "", ", ".join(missing)))
+    _missing_optional[:] = _bind(lib, _OPTIONAL)
+    return None
+
+
+_missing_optional = []
 
 
 def load():
@@ -166,17 +195,8 @@ def load():
             except OSError as e:
                 _load_error = "libfx library at %s cannot be loaded: %s" % (path, e)
                 return None
-            missing = _declare(lib)
-            if "fx_abi_version" in missing:
-                _load_error = "%s is not libfx (no fx_abi_version)" % path
-                return None
-            abi = lib.fx_abi_version()
-            if abi != ABI_VERSION:
-                _load_error = ("libfx at %s has ABI %d; this add-on was written for ABI %d: "
-                               "install the matching add-on zip" % (path, abi, ABI_VERSION))
-                return None
-            if missing:
-                _load_error = "libfx at %s lacks functions: %s" % (path, ", ".join(missing))
+            _load_error = _check(lib, path)
+            if _load_error is not None:
                 return None
             _lib, _lib_path = lib, path
             return lib
@@ -193,6 +213,30 @@ def library_path():
     return _lib_path
 
 
+def has(feature):
+    """Whether the loaded library has every function ``feature`` (a FEATURES key) needs."""
+    return load() is not None and not any(f in _missing_optional for f in FEATURES[feature][1])
+
+
+def feature_problem(feature):
+    """Why ``feature`` is off (naming the library and the functions it lacks), or None."""
+    if load() is None:
+        return None
+    what, names = FEATURES[feature]
+    gone = [n for n in names if n in _missing_optional]
+    if not gone:
+        return None
+    return ("libfx at %s has no %s (an older library?), so this is off: %s. "
+            "Install the matching add-on zip." % (_lib_path, ", ".join(gone), what))
+
+
+def feature_problems(include_expected=False):
+    """feature_problem() of every feature that is off; ``include_expected``: also those
+    whose absence is expected today (_QUIET)."""
+    return [m for m in (feature_problem(f) for f in FEATURES if include_expected or f not in _QUIET)
+            if m is not None]
+
+
 def retry_if_failed():
     """A later registration looks again (the library may have been installed since)."""
     global _tried, _load_error
@@ -200,13 +244,6 @@ def retry_if_failed():
         if _lib is None:
             _tried = False
             _load_error = None
-
-
-def _reset_for_tests():
-    global _lib, _lib_path, _load_error, _tried
-    with _lock:
-        _lib = _lib_path = _load_error = None
-        _tried = False
 
 
 def lib():
@@ -314,23 +351,15 @@ class Context:
         self.close()
 
 
-def camera_struct(world_to_camera, projection, clip_start, clip_end, orthographic=False):
-    """fx_camera from row lists (4x4 nested or 16 flat)."""
-    cam = fx_camera()
-    cam.size = ctypes.sizeof(fx_camera)
-
-    def flat(m):
-        vals = [float(v) for row in m for v in row] if hasattr(m[0], "__len__") else [float(v) for v in m]
-        if len(vals) != 16:
-            raise LibfxError("camera matrix must have 16 values, got %d" % len(vals), "FX_ERR_INVALID_ARGUMENT")
-        return vals
-
-    cam.world_to_camera[:] = flat(world_to_camera)
-    cam.projection[:] = flat(projection)
-    cam.clip_start = float(clip_start)
-    cam.clip_end = float(clip_end)
-    cam.orthographic = 1 if orthographic else 0
-    return cam
+def effect_params_version(effect):
+    """The version of ``effect``'s parameter table (1 for a library without parameter
+    versions, and for an effect it does not know)."""
+    if not has("params_version"):
+        return 1
+    v = c_int(1)
+    if lib().fx_effect_params_version(effect.encode("utf-8"), ctypes.byref(v)) != 0:
+        return 1
+    return max(1, v.value)
 
 
 class Stack:
@@ -369,7 +398,10 @@ class Stack:
 
     def required_aux_views(self):
         """[{"name": "light:Sun", "kind": "light", "light": "Sun"}, {"name": "rain_map", ...}]:
-        the auxiliary views the enabled effects need (empty for most stacks)."""
+        the auxiliary views the enabled effects need (empty for most stacks, and with a
+        library that cannot say: see feature_problems())."""
+        if not has("aux_views"):
+            return []
         out = c_void_p()
         self._ctx.check(self._L.fx_stack_required_aux_views(self._ptr, ctypes.byref(out)),
                         "fx_stack_required_aux_views")
@@ -383,6 +415,14 @@ class Stack:
     def run_consume(self, frame, keep_passes=False):
         """run() for a frame not needed again: the library may write the result over its
         pixels (no second frame-sized buffer) and frees it; ``frame`` is closed either way."""
+        if not has("run_in_place"):
+            try:
+                fout = self.run(frame)
+                if keep_passes:
+                    fout.copy_passes_from(frame)
+                return fout
+            finally:
+                frame.close()
         out = c_void_p()
         ptr, frame._ptr = frame._ptr, None   # the library frees it, success or not
         self._ctx.check(self._L.fx_stack_run_consume(self._ptr, ptr, 1 if keep_passes else 0,
@@ -449,18 +489,10 @@ class Frame:
         return [_s(self._L.fx_frame_pass_name(self._ptr, i))
                 for i in range(self._L.fx_frame_pass_count(self._ptr))]
 
-    def set_camera(self, cam):
-        self._ctx.check(self._L.fx_frame_set_camera(self._ptr, ctypes.byref(cam)), "set camera")
-
     def apply_sidecar(self, sidecar):
         """Camera, lights and time from a scene sidecar dict (docs/recipes.md)."""
         text = json.dumps(sidecar).encode("utf-8")
         self._ctx.check(self._L.fx_frame_apply_sidecar(self._ptr, text), "apply the scene sidecar")
-
-    def camera(self):
-        cam = fx_camera()
-        cam.size = ctypes.sizeof(fx_camera)
-        return cam if self._L.fx_frame_camera(self._ptr, ctypes.byref(cam)) else None
 
     def set_time(self, frame, fps):
         self._L.fx_frame_set_time(self._ptr, float(frame), float(fps))
@@ -472,10 +504,6 @@ class Frame:
         self._ctx.check(self._L.fx_frame_reduce(self._ptr, int(factor), ctypes.byref(out)),
                         "reduce the frame to 1/%d" % factor)
         return Frame(self._ctx, out)
-
-    @property
-    def proxy_factor(self):
-        return self._L.fx_frame_proxy_factor(self._ptr)
 
     def read_pixels(self, pass_name, width, height, out, bottom_up=True):
         """Fills ``out`` (a writable float32 buffer of width*height*4, e.g. a numpy array)

@@ -58,10 +58,8 @@ def _on_change(self, context):
     if _suspend[0]:
         return
     from . import live, scene_setup
-    scene = _scene_of(self, context)
     live.trace("update callback")
-    scene_setup.request_sync(scene)
-    live.changed(scene)
+    scene_setup.stack_changed(_scene_of(self, context))
 
 
 def _on_live_change(self, context):
@@ -188,6 +186,11 @@ def _stack_item_class(cat):
                                     update=_on_change),
         # Recipe entry of an effect this library does not know, kept verbatim.
         "raw_json": StringProperty(options={"HIDDEN"}),
+        # The version of the effect's parameter table the stored values were made with
+        # (files saved before versions existed read the default: 1). Older than the
+        # library's: the values are sent as stored and the library migrates them
+        # (recipe.migrate_stack writes the migrated values back).
+        "params_version": IntProperty(options={"HIDDEN"}, default=1, min=1),
     }
     for name in cat.order:
         ann[group_attr(name)] = PointerProperty(type=_GROUPS[name])

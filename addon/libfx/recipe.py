@@ -93,6 +93,55 @@ def _value_to_json(p, v, resolve_paths):
     return s
 
 
+def _raw_to_json(v):
+    """An ID-property value the current parameter table does not describe, as JSON."""
+    if hasattr(v, "to_dict"):
+        return {k: _raw_to_json(x) for k, x in v.to_dict().items()}
+    if hasattr(v, "to_list"):
+        v = v.to_list()
+    if isinstance(v, (list, tuple)):
+        return [_raw_to_json(x) for x in v]
+    if isinstance(v, float):
+        return _f32(v)
+    return v
+
+
+def set_params(item, eff, resolve_paths=True):
+    """The parameters the user set, by the library's names (the rest are left to the
+    effect's defaults and the quality presets)."""
+    group = props.effect_group(item)
+    params = {}
+    for p in eff.params:
+        if group is not None and group.is_property_set(p.prop):
+            params[p.name] = _value_to_json(p, getattr(group, p.prop), resolve_paths)
+    return params
+
+
+def stored_params(item, eff, resolve_paths=True):
+    """Every value stored in the item's parameter group, also under names the current
+    table no longer has (a parameter renamed since the file was saved: its value stays
+    in the .blend as an ID property the new class does not show). Known names are
+    converted by their type; unknown ones are sent as stored, for the library to
+    migrate."""
+    group = props.effect_group(item)
+    if group is None:
+        return {}
+    known = {p.prop: p for p in eff.params}
+    params = {}
+    for key in group.keys():
+        p = known.get(key)
+        if p is not None:
+            if group.is_property_set(p.prop):
+                params[p.name] = _value_to_json(p, getattr(group, p.prop), resolve_paths)
+        else:
+            params[key] = _raw_to_json(group[key])
+    return params
+
+
+def needs_migration(item, eff):
+    return eff is not None and item.params_version < eff.params_version
+
+
 def item_to_json(item, resolve_paths=True):
     cat = props.catalog()
     eff = cat.effects.get(item.effect) if cat else None
@@ -107,11 +156,13 @@ def item_to_json(item, resolve_paths=True):
         entry["label"] = item.label
     if item.quality != "STACK":
         entry["quality"] = item.quality
-    group = props.effect_group(item)
-    params = {}
-    for p in eff.params:
-        if group is not None and group.is_property_set(p.prop):
-            params[p.name] = _value_to_json(p, getattr(group, p.prop), resolve_paths)
+    if needs_migration(item, eff):
+        # values from an older table: all of them, as stored, for the library to migrate
+        params = stored_params(item, eff, resolve_paths)
+    else:
+        params = set_params(item, eff, resolve_paths)
+    if item.params_version != 1 or needs_migration(item, eff):
+        entry["params_version"] = int(item.params_version)   # absent: version 1
     if params:
         entry["params"] = params
     mask = mask_to_json(item)
@@ -178,7 +229,8 @@ def _fill_mask(item, mask):
 
 
 def fill_item(item, entry, n=0):
-    """Sets a stack item from one recipe entry (only the parameters it names)."""
+    """Sets a stack item from one recipe entry (only the parameters it names). An entry
+    of an older parameter version is migrated by the library first."""
     cat = props.catalog()
     name = entry.get("effect", "")
     where = "effect %d (%s)" % (n, name)
@@ -193,12 +245,75 @@ def fill_item(item, entry, n=0):
         if eff is None:
             item.raw_json = json.dumps(entry)
             return
+        if int(entry.get("params_version", 1)) < eff.params_version:
+            entry, _ = library_migrate(entry)
+        item.params_version = eff.params_version
         group = props.effect_group(item)
         for pname, value in (entry.get("params") or {}).items():
             p = eff.param(pname)
             if p is None:
                 raise RecipeError("%s: unknown parameter '%s'" % (where, pname))
             _set_param(group, p, value, where)
+
+
+# ---------------------------------------------------------------- parameter versions
+
+def library_migrate(entry):
+    """(the entry with its parameters migrated by the library to the effect's current
+    table, the library's warnings): fx_stack_load_json migrates an entry that carries an
+    older "params_version", fx_stack_to_json writes the result."""
+    with native.Context(1) as ctx:
+        stack = native.Stack(ctx, {"version": RECIPE_VERSION, "effects": [entry]})
+        try:
+            out = stack.to_json()["effects"][0]
+        finally:
+            stack.close()
+        return out, ctx.warnings()
+
+
+def migrate_item(item, n=0, migrate=library_migrate):
+    """Brings an item whose parameters were saved with an older table up to the library's:
+    its stored values (old names included) go through ``migrate``, the migrated values are
+    written back, old names the table no longer has are removed, and the version is bumped.
+    Returns the messages to show, or [] when there was nothing to do. Raises
+    native.LibfxError / RecipeError when the values cannot be migrated (the item is left
+    as it was: runs still send the stored values for the library to migrate)."""
+    cat = props.catalog()
+    eff = cat.effects.get(item.effect) if cat else None
+    if not needs_migration(item, eff):
+        return []
+    where = "effect %d (%s)" % (n, item.effect)
+    old = item.params_version
+    entry = item_to_json(item, resolve_paths=False)
+    migrated, warnings = migrate(entry)
+    new_params = migrated.get("params") or {}
+    group = props.effect_group(item)
+    with props.suspended():
+        known = {p.prop for p in eff.params}
+        for key in list(group.keys()):
+            if key not in known:
+                del group[key]           # migrated: its value now lives under the new name
+        for p in eff.params:
+            if p.name in new_params:
+                _set_param(group, p, new_params[p.name], where)
+            elif group.is_property_set(p.prop):
+                group.property_unset(p.prop)
+        item.params_version = eff.params_version
+    return ["%s: parameters saved with version %d migrated to version %d" % (where, old, eff.params_version)] + [
+        "%s: %s" % (where, w) for w in warnings]
+
+
+def migrate_stack(scene, migrate=library_migrate):
+    """migrate_item for every item of the scene's stack (file load); returns the messages
+    (also the failures: such an item stays as stored)."""
+    out = []
+    for n, item in enumerate(scene.libfx.stack):
+        try:
+            out += migrate_item(item, n, migrate)
+        except (native.LibfxError, RecipeError, ValueError, KeyError, IndexError) as e:
+            out.append("effect %d (%s): parameters saved with version %d cannot be migrated: %s"
+                       % (n, item.effect, item.params_version, e))
+    return out
 
 
 def parse(text):
@@ -235,7 +350,7 @@ def from_recipe(scene, recipe, check=True):
             fill_item(s.stack.add(), entry, n)
         s.active_index = 0
     from . import scene_setup
-    scene_setup.request_sync(scene)
+    scene_setup.stack_changed(scene)
 
 
 def load_text_block(scene, force=False):

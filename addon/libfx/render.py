@@ -1,4 +1,4 @@
-"""Render handlers: camera per frame, node setup, running the stack after a render.
+"""Render handlers: the scene sidecar per frame, node setup, running the stack after a render.
 
 Order (GUIDE §3): ``-b -f/-a``: render_init, then per frame frame_change_post ->
 render_pre -> render_post -> render_write, render_complete; all on the main
@@ -22,7 +22,7 @@ from . import aux_views, native, recipe, scene_setup
 RESULT_IMAGE = "libfx Result"
 
 _lock = threading.Lock()
-CAMERAS = {}     # (scene name, frame) -> camera dict (rows)
+SIDECARS = {}    # (scene name, frame) -> the frame's scene sidecar (camera, lights, time)
 AUX = {}         # (scene name, frame) -> aux view sidecar entries (aux_views.prepare)
 RESULTS = {}     # (scene name, frame) -> {"ok": bool, "error": str, "paths": {...}, "timings": [...]}
 _ui_queue = []   # callables (or (callable, tries so far)) to run on the main thread (F12)
@@ -34,7 +34,7 @@ def log(msg, err=False):
     stream.flush()
 
 
-# ---------------------------------------------------------------- camera
+# ---------------------------------------------------------------- the scene sidecar
 
 def lights_list(scene, depsgraph):
     """The scene's rendered lights for the sidecar: position, travel direction (-Z of
@@ -57,8 +57,9 @@ def lights_list(scene, depsgraph):
     return out
 
 
-def camera_dict(scene, depsgraph):
-    """The frame's scene sidecar: camera (matrices as rows), lights and time."""
+def frame_sidecar(scene, depsgraph):
+    """The frame's scene sidecar: camera (matrices as rows), lights and time (the aux views
+    are added by sidecar_for). None without a scene camera."""
     cam = scene.camera
     if cam is None:
         return None
@@ -89,13 +90,13 @@ def on_frame_change_post(scene, depsgraph=None):
     if not scene_setup.has_stack(scene):
         return
     try:
-        cam = camera_dict(scene, depsgraph)
+        sidecar = frame_sidecar(scene, depsgraph)
     except Exception as e:  # a light as camera, no depsgraph...
         log("frame %d: camera matrices unavailable: %s" % (scene.frame_current, e), err=True)
         return
-    if cam is not None:
+    if sidecar is not None:
         with _lock:
-            CAMERAS[(scene.name, scene.frame_current)] = cam
+            SIDECARS[(scene.name, scene.frame_current)] = sidecar
     from . import live
     try:
         live.on_frame_change(scene)   # scrubbing a held sequence (a no-op in batch renders)
@@ -130,12 +131,12 @@ def on_render_init(scene, *args):
     if missing:
         log("warning: %s does not render pass(es) %s that the stack needs" %
             (scene.render.engine, ", ".join(missing)), err=True)
-    if scene.camera is not None and (scene.name, scene.frame_current) not in CAMERAS:
+    if scene.camera is not None and (scene.name, scene.frame_current) not in SIDECARS:
         # F12 of the current frame: the evaluated camera of the current frame.
         try:
             dg = bpy.context.evaluated_depsgraph_get()
             with _lock:
-                CAMERAS[(scene.name, scene.frame_current)] = camera_dict(scene, dg)
+                SIDECARS[(scene.name, scene.frame_current)] = frame_sidecar(scene, dg)
         except Exception:
             pass
 
@@ -190,25 +191,25 @@ def shared_context(threads):
     return _context(threads)
 
 
-def sidecar_for(scene, frame, camera=None):
+def sidecar_for(scene, frame, sidecar=None):
     """The scene sidecar of a frame: its camera (from frame_change_post), lights, time and
     the aux views rendered for it. None when the frame's camera is unknown."""
-    if camera is None:
+    if sidecar is None:
         with _lock:
-            camera = CAMERAS.get((scene.name, frame))
+            sidecar = SIDECARS.get((scene.name, frame))
     with _lock:
         aux = AUX.get((scene.name, frame))
-    if aux is None and camera is not None:
+    if aux is None and sidecar is not None:
         try:
             aux = aux_views.from_disk(scene)
         except Exception as e:
             log("frame %d: aux views: %s" % (frame, e), err=True)
-    if aux and camera is not None:
-        camera = dict(camera, aux_views=aux)
-    return camera
+    if aux and sidecar is not None:
+        sidecar = dict(sidecar, aux_views=aux)
+    return sidecar
 
 
-def process_frame(scene, frame, recipe_dict=None, passes_file=None, camera=None, fps=None,
+def process_frame(scene, frame, recipe_dict=None, passes_file=None, sidecar=None, fps=None,
                   hold=False, show=False, defer_write=False, in_background=False):
     """Runs the scene's stack on the File Output EXR of a frame and writes the results.
 
@@ -219,12 +220,14 @@ def process_frame(scene, frame, recipe_dict=None, passes_file=None, camera=None,
     thread never waits for a read, a stack or a write).
     Returns the result record ({"pending": True} until the worker is done); raises nothing."""
     # Everything taken from Blender's data here, on the calling thread.
+    if not native.has("live"):   # an older library: the files only (the panel says why)
+        hold = show = False
     job = {
         "scene": scene.name, "frame": frame, "threads": scene.libfx.threads,
         "paths": scene_setup.result_paths(scene, frame),
         "passes_file": passes_file or scene_setup.passes_path(scene, frame),
         "recipe": recipe_dict or recipe.to_recipe(scene),
-        "camera": sidecar_for(scene, frame, camera),
+        "sidecar": sidecar_for(scene, frame, sidecar),
         "fps": fps or scene.render.fps / (scene.render.fps_base or 1.0),
         "keep_passes": scene.libfx.keep_passes, "writes_image": scene_setup.writes_image(scene),
         "hold": hold, "show": show,
@@ -265,14 +268,14 @@ def _run(job):
             try:
                 # held: every pass, so that any later stack can run on it
                 fin = native.Frame.read(ctx, passes_file, None if job["hold"] else stack)
-                if job["camera"] is not None:
-                    fin.apply_sidecar(job["camera"])
+                if job["sidecar"] is not None:
+                    fin.apply_sidecar(job["sidecar"])
                 fin.set_time(frame, job["fps"])
                 if job["hold"]:
                     fout = stack.run(fin)
                     fout.copy_passes_from(fin)   # shared with the held frame, not copied
                     live.hold(job["scene"], frame, fin, passes_file if job["keep_passes"] else None,
-                              job["camera"], job["proxy_factor"])
+                              job["sidecar"], job["proxy_factor"])
                 else:
                     fout = stack.run_consume(fin, keep_passes=True)   # the passes go along, not copied
                 timings = stack.timings()
@@ -300,8 +303,8 @@ def _write(job, done):
                 fout.write_exr(paths["exr"], input_path=passes_file)
             finally:
                 fout.close()
-        if job["camera"] is not None:
-            _write_json(paths["camera"], job["camera"])
+        if job["sidecar"] is not None:
+            _write_json(paths["sidecar"], job["sidecar"])
         _write_json(paths["recipe"], job["recipe"])
         if not job["keep_passes"]:
             _remove_quietly(passes_file)   # the result holds every pass it had
@@ -422,6 +425,19 @@ def on_load_post(*args):
         except Exception as e:
             scene_setup.STATUS.setdefault(scene.name, {})["error"] = "recipe text: %s" % e
             log("scene '%s': recipe text %s: %s" % (scene.name, recipe.TEXT_NAME, e), err=True)
+        migrate_parameters(scene)
+
+
+def migrate_parameters(scene):
+    """Effect parameters saved with an older parameter table are migrated by the library
+    and written back (recipe.migrate_stack); the panel and the log say so."""
+    try:
+        notes = recipe.migrate_stack(scene)
+    except Exception as e:  # never let a file load fail on it
+        notes = ["parameter migration failed: %s: %s" % (type(e).__name__, e)]
+    scene_setup.STATUS.setdefault(scene.name, {})["migrated"] = notes
+    for note in notes:
+        log("scene '%s': warning: %s" % (scene.name, note), err=True)
 
 
 # ---------------------------------------------------------------- UI side (main thread)

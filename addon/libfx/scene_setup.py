@@ -12,6 +12,8 @@
 import json
 import os
 import re
+import threading
+from collections import OrderedDict
 
 import bpy
 
@@ -60,7 +62,9 @@ def passes_path(scene, frame):
 
 def result_paths(scene, frame):
     base = "%slibfx.%04d" % (output_prefix(scene), frame)
-    return {"exr": base + ".exr", "camera": base + ".camera.json",
+    # The sidecar keeps the name earlier add-ons gave it (batch outputs, farms and
+    # `libfx run --sidecar` command lines name it).
+    return {"exr": base + ".exr", "sidecar": base + ".camera.json",
             "image": base + scene.render.file_extension,
             "recipe": output_prefix(scene) + "libfx_recipe.json"}
 
@@ -129,37 +133,85 @@ def has_stack(scene):
 
 # ---------------------------------------------------------------- sync
 
-_QUERY_CTX = {"ctx": None}
+_query_lock = threading.Lock()
+_QUERY = {"ctx": None, "lib": None}
+_ANSWERS = OrderedDict()   # recipe JSON text -> the library's answers about it
+_ANSWERS_KEPT = 32
 
 
 def _query_context():
-    """One small context for the main thread's questions (a new one per property change
-    cost a few ms of every live update). Main thread only."""
-    c = _QUERY_CTX["ctx"]
-    if c is None or c._L is not native.lib():
-        c = _QUERY_CTX["ctx"] = native.Context(1)
-    return c
+    """One small context for the questions about a recipe (a new one per property change
+    cost a few ms of every live update). Call with _query_lock held: F12's render thread
+    asks too (the aux views of a frame)."""
+    L = native.lib()
+    if _QUERY["ctx"] is None or _QUERY["lib"] is not L:
+        _ANSWERS.clear()   # another library may answer otherwise
+        _QUERY["ctx"], _QUERY["lib"] = native.Context(1), L
+    return _QUERY["ctx"]
 
 
-def query(scene):
+def answers(rec):
+    """What the library says about a recipe: {"required": fx_stack_required_passes,
+    "aux_views": fx_stack_required_aux_views}. Kept per recipe text for the session: the
+    answers depend on the recipe alone, and a drag or an undo meets the same recipe again."""
+    key = json.dumps(rec, sort_keys=True)
+    with _query_lock:
+        ctx = _query_context()
+        got = _ANSWERS.get(key)
+        if got is not None:
+            _ANSWERS.move_to_end(key)
+            return got
+        stack = native.Stack(ctx, key)
+        try:
+            got = {"required": stack.required(), "aux_views": stack.required_aux_views()}
+        finally:
+            stack.close()
+        _ANSWERS[key] = got
+        while len(_ANSWERS) > _ANSWERS_KEPT:
+            _ANSWERS.popitem(last=False)
+        return got
+
+
+def forget():
+    """Drops the query context and the answers (unregister)."""
+    with _query_lock:
+        if _QUERY["ctx"] is not None:
+            _QUERY["ctx"].close()
+        _QUERY["ctx"] = _QUERY["lib"] = None
+        _ANSWERS.clear()
+    STATUS.clear()
+
+
+def query(scene, rec=None):
+    """The library's fx_stack_required_passes answer for the scene's stack (``rec``: its
+    recipe, when the caller has built it already)."""
     from . import recipe
-    stack = native.Stack(_query_context(), recipe.to_recipe(scene))
+    return answers(recipe.to_recipe(scene) if rec is None else rec)["required"]
+
+
+def stack_changed(scene):
+    """A stack setting changed (property update, operator, import): the recipe is built once
+    here, the passes follow it and the live loop runs it."""
+    from . import live, recipe
     try:
-        return stack.required()
-    finally:
-        stack.close()
+        rec = recipe.to_recipe(scene)
+    except ValueError:
+        rec = None   # sync builds it again and puts the message in the panel
+    request_sync(scene, rec)
+    live.changed(scene, rec)
 
 
-def request_sync(scene):
+def request_sync(scene, rec=None):
     """From property updates and imports: keep the view layer passes in step."""
     try:
-        sync(scene)
+        sync(scene, rec)
     except Exception as e:  # never let a UI update raise
         _set_status(scene, error=str(e))
 
 
-def sync(scene):
-    """Enables exactly the passes the stack needs; returns the library's answer or None."""
+def sync(scene, rec=None):
+    """Enables exactly the passes the stack needs; returns the library's answer or None.
+    ``rec``: the stack's recipe, when the caller has built it already."""
     if native.load() is None:
         _set_status(scene, error=native.load_error())
         return None
@@ -168,7 +220,7 @@ def sync(scene):
         _set_status(scene, error=None, warnings=[], passes=[], camera=False)
         return None
     try:
-        req = query(scene)
+        req = query(scene, rec)
     except (native.LibfxError, ValueError) as e:
         _set_status(scene, error=str(e))
         return None

@@ -22,8 +22,7 @@ def _active(context):
 
 
 def _changed(context):
-    scene_setup.request_sync(context.scene)
-    live.changed(context.scene)
+    scene_setup.stack_changed(context.scene)
 
 
 # ---------------------------------------------------------------- operators
@@ -49,6 +48,7 @@ class LIBFX_OT_stack_add(bpy.types.Operator):
         with props.suspended():
             item = s.stack.add()
             item.effect = self.effect
+            item.params_version = cat.effects[self.effect].params_version
         s.active_index = len(s.stack) - 1
         _changed(context)
         return {"FINISHED"}
@@ -113,6 +113,7 @@ class LIBFX_OT_stack_move(bpy.types.Operator):
         if 0 <= j < len(s.stack):
             s.stack.move(i, j)
             s.active_index = j
+            _changed(context)   # the order is part of the stack: the passes and live follow
         return {"FINISHED"}
 
 
@@ -229,11 +230,11 @@ def _passes_on_disk(scene):
     return os.path.exists(scene_setup.passes_path(scene, scene.frame_current))
 
 
-def _ensure_camera(context):
-    """The current frame's camera for its sidecar (frame_change_post has not run for it when
-    the file was just opened)."""
+def _ensure_sidecar(context):
+    """The current frame's scene sidecar (frame_change_post has not run for it when the
+    file was just opened)."""
     scene = context.scene
-    if (scene.name, scene.frame_current) not in render.CAMERAS:
+    if (scene.name, scene.frame_current) not in render.SIDECARS:
         render.on_frame_change_post(scene, context.evaluated_depsgraph_get())
 
 
@@ -251,7 +252,7 @@ class LIBFX_OT_rerun(bpy.types.Operator):
     def execute(self, context):
         scene = context.scene
         frame = scene.frame_current
-        _ensure_camera(context)
+        _ensure_sidecar(context)
         if not _passes_on_disk(scene):
             live.changed(scene)   # only in memory: a live run of the held frame
             return {"FINISHED"}
@@ -279,7 +280,7 @@ class LIBFX_OT_live_load(bpy.types.Operator):
 
     def execute(self, context):
         scene = context.scene
-        _ensure_camera(context)
+        _ensure_sidecar(context)
         scene.libfx.live = True
         live.start(scene)
         return {"FINISHED"}
@@ -479,7 +480,7 @@ def draw_stack(layout, context):
         b.alert = True
         for i, line in enumerate(_wrap(st["error"], width)):
             b.label(text=line, icon="ERROR" if i == 0 else "BLANK1")
-    for w in st.get("warnings", []):
+    for w in st.get("warnings", []) + st.get("migrated", []):
         for i, line in enumerate(_wrap(w, width)):
             layout.label(text=line, icon="ERROR" if i == 0 else "BLANK1")
     if st.get("passes"):

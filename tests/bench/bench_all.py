@@ -839,7 +839,7 @@ def update_performance_md(path, section):
 
 # ---------------------------------------------------------------- main
 
-def main():
+def parse_args():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="1280x720, 2 runs, 2 threads, coarse sweeps, no Cycles")
     ap.add_argument("--runs", type=int, help="runs per setting (default 5; --quick 2)")
@@ -863,26 +863,17 @@ def main():
     a.ref_max_ms = 15000
     a.scaling_res = "0.25,1" if a.quick else SCALING_RES
     a.scaling_mask = "50,100" if a.quick else SCALING_MASK
-    sizes = SIZES_QUICK if a.quick else SIZES_FULL
-    skip = set(filter(None, a.skip.split(",")))
+    a.sizes = SIZES_QUICK if a.quick else SIZES_FULL
+    a.skip_stages = set(filter(None, a.skip.split(",")))
     if a.quick:
-        skip.add("cycles")
-    only = set(filter(None, a.only_effects.split(",")))
-    out = pathlib.Path(a.out).resolve()
-    out.mkdir(parents=True, exist_ok=True)
-    build = pathlib.Path(a.build).resolve()
-    command = "/usr/bin/python3 tests/bench/bench_all.py" + "".join(" " + x for x in sys.argv[1:])
-    info = machine()
-    info["load_start"] = loadavg()
-    info["source"] = source_state()
-    info["date"] = datetime.datetime.utcnow().strftime("%Y-%m-%d %H:%M")
-    info["sizes"], info["spp"] = sizes, a.spp
-    log("%s; %s cores; load %s" % (info["cpu"], info["cores"], info["load_start"]))
+        a.skip_stages.add("cycles")
+    a.only = set(filter(None, a.only_effects.split(",")))
+    return a
 
-    # the plan, with rough cost estimates (s) for the ETA (measured on the 2-core VM)
-    plan = {sc: scene_plan(sc)[2] for sc in SCENES}
-    if only:
-        plan = {sc: [e for e in effs if e in only] for sc, effs in plan.items()}
+
+def plan_stages(a, plan):
+    """The stages with rough cost estimates (s) for the ETA (measured on the 2-core VM)."""
+    sizes, skip = a.sizes, a.skip_stages
     # seconds per effect at 1280x720 in a --quick run (2-core VM); the full run's 720p pass
     # (presets only, 2 thread counts, 5 runs) costs ~1.5x that, its 1080p pass (with the
     # sweeps and scaling rows) ~4x
@@ -903,8 +894,11 @@ def main():
     if "cycles" not in skip:
         stages += [("cycles: ssr_mirror", 240), ("cycles: vsm_shadows", 180)]
     stages.append(("report", 15))
-    prog = Progress(stages)
+    return stages
 
+
+def build_stage(build, prog):
+    """Builds the bench tools: (bench_presets, the CLI, the environment naming the build)."""
     prog.start("build")
     if not (build / "CMakeCache.txt").exists():
         run(["cmake", "-S", ROOT, "-B", build, "-DCMAKE_BUILD_TYPE=Release", "-DLIBFX_BUILD_BENCH=ON"])
@@ -916,14 +910,22 @@ def main():
             raise SystemExit("bench_all: %s not built (configure %s with -DLIBFX_BUILD_BENCH=ON)" % (p, build))
     env = dict(os.environ, LIBFX_LIBRARY=str(lib), LIBFX_CLI=str(cli), LIBFX_BENCH_DIR=str(build / "tests" / "bench"))
     prog.end()
+    return bench_bin, cli, env
 
+
+def render_stage(a, out, env, prog):
     renders = {}
     for sc in SCENES:
-        for (w, h) in sizes:
+        for (w, h) in a.sizes:
             prog.start("render: %s %dx%d" % (sc, w, h))
             renders[(sc, w, h)] = render_scene(sc, w, h, a.spp, out, env)
             prog.end()
+    return renders
 
+
+def effects_stage(a, bench_bin, plan, renders, out, prog):
+    """Every planned effect at every size: the rows of bench_presets."""
+    sizes = a.sizes
     rows = []
     tmp = out / "bench_presets.tmp.csv"
     for (w, h) in sizes:
@@ -936,46 +938,64 @@ def main():
                 log("  %s on %s %dx%d: %d rows in %.0f s" % (e, sc, w, h, len(rows), dt))
                 write_csv(out / "bench_all.partial.csv", rows)
     tmp.unlink(missing_ok=True)
+    return rows
 
-    if "first" not in skip:
-        w, h = sizes[-1]
-        for sc in SCENES:
-            prog.start("first frame: %s" % sc)
-            passes, side, recipe = renders[(sc, w, h)][:3]
-            if sc == SCENES[0]:
-                rows.append(fresh_pages_row(build / "tests" / "bench", sc, w, h))
-            rows += first_frame_rows(cli, sc, passes, side, recipe, plan[sc], w, h, 3, out / "first_frame" / sc)
-            prog.end()
-        write_csv(out / "bench_all.partial.csv", rows)
 
-    peer_rows, peer_note = [], None
-    if "peers" not in skip:
-        prog.start("peers")
-        w, h = sizes[-1]
-        passes, side = renders[("greek_bath", w, h)][:2]
-        peer_rows, peer_note = peers_stage(passes, side, w, h, min(a.runs, 3), out, env)
-        rows += peer_rows
+def first_frame_stage(a, build, cli, plan, renders, out, prog):
+    rows = []
+    w, h = a.sizes[-1]
+    for sc in SCENES:
+        prog.start("first frame: %s" % sc)
+        passes, side, recipe = renders[(sc, w, h)][:3]
+        if sc == SCENES[0]:
+            rows.append(fresh_pages_row(build / "tests" / "bench", sc, w, h))
+        rows += first_frame_rows(cli, sc, passes, side, recipe, plan[sc], w, h, 3, out / "first_frame" / sc)
         prog.end()
+    return rows
 
-    if "cycles" not in skip:
-        prog.start("cycles: ssr_mirror")
-        try:
-            rows += cycles_ssr(out, env, a.cycles_ssr_res, 2, cli)
-        except SystemExit as e:
-            log("cycles ssr_mirror failed: %s" % str(e)[:2000])
-        prog.end()
-        prog.start("cycles: vsm_shadows")
-        try:
-            rows += cycles_vsm(out, env, a.cycles_vsm_res, 16, 1)
-        except SystemExit as e:
-            log("cycles vsm_shadows failed: %s" % str(e)[:2000])
-        prog.end()
 
+def cycles_stage(a, cli, out, env, prog):
+    rows = []
+    prog.start("cycles: ssr_mirror")
+    try:
+        rows += cycles_ssr(out, env, a.cycles_ssr_res, 2, cli)
+    except SystemExit as e:
+        log("cycles ssr_mirror failed: %s" % str(e)[:2000])
+    prog.end()
+    prog.start("cycles: vsm_shadows")
+    try:
+        rows += cycles_vsm(out, env, a.cycles_vsm_res, 16, 1)
+    except SystemExit as e:
+        log("cycles vsm_shadows failed: %s" % str(e)[:2000])
+    prog.end()
+    return rows
+
+
+def write_docs(a, rows, peer_rows, peer_note, effects, halos, images, info, durations, command, cli):
+    """--docs: the CSV, the plots and the performance.md section in the docs tree, and the
+    effect pages' generated blocks."""
+    droot = pathlib.Path(a.docs_root).resolve()
+    write_csv(droot / "docs" / "bench" / "bench_all.csv", rows)
+    dimg = droot / "docs" / "images"
+    dimg.mkdir(parents=True, exist_ok=True)
+    for p in images:
+        shutil.copyfile(p, dimg / p.name)
+    section = report_md(a, info, rows, peer_rows, peer_note, effects, halos, images, "images/", durations,
+                        command)
+    update_performance_md(droot / "docs" / "performance.md", section)
+    gen = droot / "scripts" / "gen_effect_docs.py"
+    if gen.exists():
+        p = run(["/usr/bin/python3", gen, "--cli", cli, "--docs", droot / "docs" / "effects", "--bench-csv",
+                 droot / "docs" / "bench" / "bench_all.csv"], check=False)
+        log("gen_effect_docs.py: exit %d\n%s" % (p.returncode, (p.stdout + p.stderr)[-1500:]))
+
+
+def report_stage(a, cli, rows, peer_rows, peer_note, info, out, prog, command):
     prog.start("report")
     effects = [l.split("\t")[0] for l in run([cli, "list"]).stdout.splitlines() if l.strip()]
     halos = {e: describe(cli, e).get("halo", 99) for e in effects}
     missing = [e for e in effects if not any(r["effect"] == e and r["kind"] == "effect" for r in rows)]
-    if missing and not only:
+    if missing and not a.only:
         log("WARNING: no rows for %s" % ", ".join(missing))
     info["load_end"] = loadavg()
     info["seconds"] = time.time() - T0
@@ -986,21 +1006,45 @@ def main():
     md = report_md(a, info, rows, peer_rows, peer_note, effects, halos, images, "images/", durations, command)
     (out / "bench_all.md").write_text(md)
     if a.docs:
-        droot = pathlib.Path(a.docs_root).resolve()
-        write_csv(droot / "docs" / "bench" / "bench_all.csv", rows)
-        dimg = droot / "docs" / "images"
-        dimg.mkdir(parents=True, exist_ok=True)
-        for p in images:
-            shutil.copyfile(p, dimg / p.name)
-        section = report_md(a, info, rows, peer_rows, peer_note, effects, halos, images, "images/", durations,
-                            command)
-        update_performance_md(droot / "docs" / "performance.md", section)
-        gen = droot / "scripts" / "gen_effect_docs.py"
-        if gen.exists():
-            p = run(["/usr/bin/python3", gen, "--cli", cli, "--docs", droot / "docs" / "effects", "--bench-csv",
-                     droot / "docs" / "bench" / "bench_all.csv"], check=False)
-            log("gen_effect_docs.py: exit %d\n%s" % (p.returncode, (p.stdout + p.stderr)[-1500:]))
+        write_docs(a, rows, peer_rows, peer_note, effects, halos, images, info, durations, command, cli)
     prog.end()
+
+
+def main():
+    a = parse_args()
+    sizes, skip = a.sizes, a.skip_stages
+    out = pathlib.Path(a.out).resolve()
+    out.mkdir(parents=True, exist_ok=True)
+    build = pathlib.Path(a.build).resolve()
+    command = "/usr/bin/python3 tests/bench/bench_all.py" + "".join(" " + x for x in sys.argv[1:])
+    info = machine()
+    info["load_start"] = loadavg()
+    info["source"] = source_state()
+    info["date"] = datetime.datetime.utcnow().strftime("%Y-%m-%d %H:%M")
+    info["sizes"], info["spp"] = sizes, a.spp
+    log("%s; %s cores; load %s" % (info["cpu"], info["cores"], info["load_start"]))
+
+    plan = {sc: scene_plan(sc)[2] for sc in SCENES}
+    if a.only:
+        plan = {sc: [e for e in effs if e in a.only] for sc, effs in plan.items()}
+    prog = Progress(plan_stages(a, plan))
+    bench_bin, cli, env = build_stage(build, prog)
+    renders = render_stage(a, out, env, prog)
+    rows = effects_stage(a, bench_bin, plan, renders, out, prog)
+    if "first" not in skip:
+        rows += first_frame_stage(a, build, cli, plan, renders, out, prog)
+        write_csv(out / "bench_all.partial.csv", rows)
+    peer_rows, peer_note = [], None
+    if "peers" not in skip:
+        prog.start("peers")
+        w, h = sizes[-1]
+        passes, side = renders[("greek_bath", w, h)][:2]
+        peer_rows, peer_note = peers_stage(passes, side, w, h, min(a.runs, 3), out, env)
+        rows += peer_rows
+        prog.end()
+    if "cycles" not in skip:
+        rows += cycles_stage(a, cli, out, env, prog)
+    report_stage(a, cli, rows, peer_rows, peer_note, info, out, prog, command)
     durations = dict(prog.durations)
     log("done in %s: %s" % (fmt_s(time.time() - T0), ", ".join("%s %s" % (k, fmt_s(v)) for k, v in durations.items())))
     log("wrote %s, %s%s" % (out / "bench_all.csv", out / "bench_all.md", " and docs/" if a.docs else ""))

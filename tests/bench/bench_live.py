@@ -71,13 +71,13 @@ for r in range(A["runs"]):
     t.append((time.perf_counter() - t0) * 1e3)
 rows.append({"what": "load passes + final + image", "effect": "stack", "ms": med(t)})
 # after render: process_frame as F12 calls it (hold, show), the write apart
-render.CAMERAS[(scene.name, 1)] = side
+render.SIDECARS[(scene.name, 1)] = side
 scene.libfx.keep_passes = True
 tr, tw = [], []
 for r in range(A["runs"]):
     live.drop()
     t0 = time.perf_counter()
-    rec = render.process_frame(scene, 1, passes_file=A["passes"], camera=side, hold=True, show=True,
+    rec = render.process_frame(scene, 1, passes_file=A["passes"], sidecar=side, hold=True, show=True,
                                defer_write=True)
     render._drain_ui()
     t1 = time.perf_counter()

@@ -90,27 +90,8 @@ def scene_recipe(root, overrides=None, quality=None):
     return rec
 
 
-def main():
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--cli", required=True)
-    ap.add_argument("--dir", default="/tmp/ssr")
-    ap.add_argument("--res", default="640x360")
-    ap.add_argument("--out", default="docs")
-    ap.add_argument("--runs", type=int, default=3)
-    a = ap.parse_args()
-    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-    W = a.res.split("x")[0]
-    d = a.dir
-    src, cam = os.path.join(d, "back%s.exr" % W), os.path.join(d, "back%s.camera.json" % W)
-    back = read(src)
-    ref = read(os.path.join(d, "ref%s.exr" % W))
-    ima = chan(back, "IndexMA.X", "IndexMA.V", "IndexMA")
-    truth = rgb(ref)
-    before = rgb(back)
-    phys = np.isin(np.rint(ima), list(PHYSICAL.values()))
-    rec_path = os.path.join(d, "ssr_recipe_tmp.json")
-
-    # presets: output + the reference preset's hits define the region
+def run_presets(a, root, d, src, cam, rec_path):
+    """Each quality preset's output (with debug passes) and its median time."""
     outs, times = {}, {}
     for q in ("draft", "preview", "final", "reference"):
         json.dump(scene_recipe(root, quality=q), open(rec_path, "w"))
@@ -118,30 +99,43 @@ def main():
         ts = [run_cli(a.cli, rec_path, src, cam, out, debug=True) for _ in range(a.runs)]
         times[q] = float(np.median(ts))
         outs[q] = read(out)
-    refo = outs["reference"]
+    return outs, times
+
+
+def measured_region(phys, ima, reference_out):
+    """Physical mirrors whose reflected point the reference preset found on screen."""
     hit = np.zeros_like(ima, dtype=bool)
-    for k in refo:
+    for k in reference_out:
         if re.match(r"fx\d+_ssr_mirror_hit\.", k) or re.match(r"fx\d+_ssr_mirror_hit$", k):
-            hit |= refo[k] > 0.5
-    region = phys & hit
+            hit |= reference_out[k] > 0.5
+    return phys & hit
+
+
+def method_rows(d, W, before, truth, region, outs, times):
+    """(method, MAE, PSNR, ms): the input, each preset, Eevee with and without SSR."""
     rows = [("no reflection (input)", *errors(before, truth, region), 0.0)]
     for q in ("draft", "preview", "final", "reference"):
         rows.append(("libfx %s" % q, *errors(rgb(outs[q]), truth, region), times[q]))
-    eevee = {}
     for mode in ("eevee_ssr", "eevee_nossr"):
         p = os.path.join(d, "%s%s.exr" % (mode, W))
         if os.path.exists(p):
             t = json.load(open(os.path.join(d, "%s%s.time.json" % (mode, W))))
-            eevee[mode] = t
             rows.append(("Eevee %s" % ("SSR on" if mode == "eevee_ssr" else "SSR off"),
                          *errors(rgb(read(p)), truth, region), t["seconds"] * 1e3))
-    per_mirror = []
+    return rows
+
+
+def mirror_rows(ima, before, truth, region, final):
+    out = []
     for name, idx in sorted(PHYSICAL.items(), key=lambda kv: kv[1]):
         m = region & (np.rint(ima) == idx)
         if m.sum() == 0:
             continue
-        per_mirror.append((name, int(m.sum()), errors(before, truth, m)[0],
-                           errors(rgb(outs["final"]), truth, m)[0]))
+        out.append((name, int(m.sum()), errors(before, truth, m)[0], errors(final, truth, m)[0]))
+    return out
+
+
+def write_tables(a, rows, per_mirror, region, phys):
     os.makedirs(os.path.join(a.out, "images"), exist_ok=True)
     with open(os.path.join(a.out, "ssr_accuracy.csv"), "w") as f:
         f.write("method,mae,psnr_db,ms\n")
@@ -156,7 +150,9 @@ def main():
     for r in per_mirror:
         print("  %-18s %6d px  MAE none %.4f  final %.4f" % r)
 
-    # error vs time over the knobs
+
+def knob_curve(a, root, d, src, cam, rec_path, truth, region):
+    """Error against time over the knobs (steps, refinement, resolution scale)."""
     variants = []
     for steps in (8, 16, 32, 64, 128, 256):
         variants.append(("steps %d" % steps, {"max_steps": steps, "stride": 2.0, "growth": 1.05,
@@ -179,10 +175,10 @@ def main():
         f.write("variant,ms,mae,psnr_db\n")
         for c in curve:
             f.write("%s,%.2f,%.5f,%.2f\n" % c)
+    return curve
 
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+
+def plot_curve(plt, a, curve, rows):
     fig, ax = plt.subplots(figsize=(7, 4.2), dpi=100)
     for fam, mk in (("steps", "o-"), ("refine", "s-"), ("scale", "^-")):
         pts = [c for c in curve if c[0].startswith(fam)]
@@ -204,11 +200,15 @@ def main():
     fig.tight_layout()
     fig.savefig(os.path.join(a.out, "images", "ssr_error_vs_time.png"))
 
-    # side by side: input | libfx final | Cycles truth | Eevee SSR
-    def srgb(x):
-        x = np.clip(x, 0, 1)
-        return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
-    tiles = [("input (mirror backing)", before), ("libfx ssr_mirror (final)", rgb(outs["final"])),
+
+def srgb(x):
+    x = np.clip(x, 0, 1)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+
+
+def plot_images(plt, a, d, W, before, final, truth, region):
+    """Side by side: input | libfx final | Cycles truth | Eevee SSR; and the region."""
+    tiles = [("input (mirror backing)", before), ("libfx ssr_mirror (final)", final),
              ("Cycles true mirrors", truth)]
     pe = os.path.join(d, "eevee_ssr%s.exr" % W)
     if os.path.exists(pe):
@@ -220,7 +220,6 @@ def main():
         axx.axis("off")
     fig.tight_layout()
     fig.savefig(os.path.join(a.out, "images", "ssr_mirror_room.png"))
-    # the region
     fig, axx = plt.subplots(figsize=(6.4, 3.6), dpi=100)
     show = srgb(truth) * 0.35
     show[region] = [1.0, 0.55, 0.0]
@@ -229,6 +228,40 @@ def main():
     axx.axis("off")
     fig.tight_layout()
     fig.savefig(os.path.join(a.out, "images", "ssr_region.png"))
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--cli", required=True)
+    ap.add_argument("--dir", default="/tmp/ssr")
+    ap.add_argument("--res", default="640x360")
+    ap.add_argument("--out", default="docs")
+    ap.add_argument("--runs", type=int, default=3)
+    a = ap.parse_args()
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    W = a.res.split("x")[0]
+    d = a.dir
+    src, cam = os.path.join(d, "back%s.exr" % W), os.path.join(d, "back%s.camera.json" % W)
+    back = read(src)
+    ref = read(os.path.join(d, "ref%s.exr" % W))
+    ima = chan(back, "IndexMA.X", "IndexMA.V", "IndexMA")
+    truth = rgb(ref)
+    before = rgb(back)
+    phys = np.isin(np.rint(ima), list(PHYSICAL.values()))
+    rec_path = os.path.join(d, "ssr_recipe_tmp.json")
+
+    outs, times = run_presets(a, root, d, src, cam, rec_path)
+    region = measured_region(phys, ima, outs["reference"])
+    rows = method_rows(d, W, before, truth, region, outs, times)
+    final = rgb(outs["final"])
+    write_tables(a, rows, mirror_rows(ima, before, truth, region, final), region, phys)
+    curve = knob_curve(a, root, d, src, cam, rec_path, truth, region)
+
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    plot_curve(plt, a, curve, rows)
+    plot_images(plt, a, d, W, before, final, truth, region)
 
 
 if __name__ == "__main__":

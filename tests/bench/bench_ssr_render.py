@@ -70,7 +70,7 @@ def parse(argv):
     return o
 
 
-def camera_dict(scene):
+def camera_sidecar(scene):
     dg = bpy.context.evaluated_depsgraph_get()
     cam = scene.camera.evaluated_get(dg)
     r = scene.render
@@ -129,7 +129,7 @@ def main():
     scene.render.use_compositing = False
     scene.render.filepath = o["prefix"] + ".exr"
     with open(o["prefix"] + ".camera.json", "w") as f:
-        json.dump(camera_dict(scene), f, indent=1)
+        json.dump(camera_sidecar(scene), f, indent=1)
     times = []
     for _ in range(o["repeat"]):
         t0 = time.perf_counter()
