@@ -4,7 +4,7 @@
 #include "testutil.h"
 
 #include "core/effect.h"
-#include "core/lights.h"
+#include "scene/lights.h"
 #include "core/mask.h"
 #include "core/parallel.h"
 

@@ -4,7 +4,7 @@
  * pixels; finite output; clear errors without a rain map. */
 #include "fx_effect_test.h"
 
-#include "core/aux_view.h"
+#include "scene/aux_map.h"
 #include "core/mask.h"
 
 #include <math.h>

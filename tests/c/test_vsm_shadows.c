@@ -4,7 +4,7 @@
  * against the multi-occluder leak; aux views through the sidecar; threads; NaN input. */
 #include "fx_effect_test.h"
 
-#include "core/aux_view.h"
+#include "scene/aux_map.h"
 #include "math/sat.h"
 #include "math/shadow_map.h"
 

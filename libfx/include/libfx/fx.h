@@ -148,10 +148,9 @@ typedef struct fx_camera {
     int orthographic;
 } fx_camera;
 
-/* Camera sidecar JSON: {"world_to_camera": [[4],[4],[4],[4]], "projection": [...],
- * "clip_start": f, "clip_end": f}. Matrices as rows. */
+/* A camera as JSON, as the scene sidecar holds it: {"world_to_camera": [[4],[4],[4],[4]],
+ * "projection": [...], "clip_start": f, "clip_end": f}. Matrices as rows. */
 FX_API fx_result fx_camera_from_json(fx_context *ctx, const char *json, fx_camera *out);
-FX_API fx_result fx_camera_load_file(fx_context *ctx, const char *path, fx_camera *out);
 
 /* ---- Frames ------------------------------------------------------------- */
 /* (fx_frame_apply_sidecar, below the frame functions, applies a whole scene sidecar.) */

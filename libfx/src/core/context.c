@@ -1,5 +1,7 @@
 /* Contexts: thread count, limits, progress callback, per-thread last error, warnings. */
-#include "core/internal.h"
+#include "core/buffers.h"
+#include "core/context.h"
+#include "core/mem.h"
 #include "core/parallel.h"
 
 #include <stdio.h>
@@ -74,7 +76,8 @@ fx_result fx_context_new(fx_context **out, int threads)
 static void context_destroy(fx_context *ctx)
 {
     fx_pool_free(ctx->pool);
-    fx_aux_cache_free(ctx);
+    if (ctx->aux_cache_free)
+        ctx->aux_cache_free(ctx);
     fx_buffers_free(ctx);
     for (int i = 0; i < ctx->warning_count; i++)
         fx_mem_free(ctx->warnings[i]);
@@ -191,6 +194,13 @@ const char *fx_context_error(const fx_context *ctx)
     const char *m = e ? e->message : "";
     pthread_mutex_unlock(&c->lock);
     return m;
+}
+
+void fx_fail_prefix(const fx_context *ctx, fx_result code, const char *prefix)
+{
+    char msg[1024];
+    snprintf(msg, sizeof msg, "%s", fx_context_error(ctx));
+    fx_fail(ctx, code, "%s: %s", prefix, msg);
 }
 
 void fx_warn(const fx_context *ctx, const char *fmt, ...)

@@ -1,4 +1,7 @@
 #include "io/atomic_file.h"
+#include "core/context.h"
+#include "core/frame.h"
+#include "core/mem.h"
 
 #include <errno.h>
 #include <fcntl.h>

@@ -1,6 +1,7 @@
 #include "io/cryptomatte_meta.h"
 
 #include "core/mask.h"
+#include "core/mem.h"
 
 #include <errno.h>
 #include <stdio.h>

@@ -1,4 +1,6 @@
 #include "io/exr_channels.h"
+#include "core/frame.h"
+#include "core/mem.h"
 
 #include <ctype.h>
 #include <stdio.h>

@@ -1,6 +1,8 @@
 #include "io/exr_common.h"
 
 #include "io/cryptomatte_meta.h"
+#include "core/frame.h"
+#include "core/mem.h"
 
 #include <errno.h>
 #include <limits.h>

@@ -11,7 +11,9 @@
  * Atomic: the file is written as "<dir>/.<name>.tmp-<pid>-<n>" and renamed over the
  * destination only when complete; on any failure the temporary file is removed and
  * the destination (and the input) are untouched. */
-#include "core/internal.h"
+#include "core/context.h"
+#include "core/frame.h"
+#include "core/mem.h"
 #include "core/passes.h"
 #include "io/cryptomatte_meta.h"
 #include "io/exr_camera.h"

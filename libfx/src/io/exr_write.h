@@ -3,7 +3,8 @@
 #ifndef LIBFX_IO_EXR_WRITE_H
 #define LIBFX_IO_EXR_WRITE_H
 
-#include "core/internal.h"
+#include "core/context.h"
+#include "core/frame.h"
 
 #include <openexr.h>
 

@@ -1,6 +1,6 @@
 /* EXR ZIP chunks through libdeflate: see io/exr_zip.h for the format. */
 #include "io/exr_zip.h"
-#include "core/internal.h"
+#include "core/mem.h"
 
 #include <string.h>
 

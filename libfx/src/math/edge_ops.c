@@ -10,11 +10,13 @@
 #include "core/parallel.h"
 #include "math/color.h"
 #include "math/srgb_lut.h"
-#include "math/simd8.h"
+#include "core/simd8.h"
 
 typedef uint32_t v8ui __attribute__((vector_size(32)));
 #define S8I(v) ((v8i){ (v), (v), (v), (v), (v), (v), (v), (v) })
 #include "math/vec.h"
+#include "core/frame.h"
+#include "core/mem.h"
 
 #include <float.h>
 #include <math.h>

@@ -8,8 +8,8 @@
 #ifndef LIBFX_MATH_SAT_H
 #define LIBFX_MATH_SAT_H
 
-#include "core/internal.h"
-#include "core/mask.h"
+#include "core/context.h"
+#include "core/rect.h"
 
 typedef struct fx_sat {
     int width, height, channels;

@@ -11,7 +11,8 @@
 #ifndef LIBFX_MATH_SHADOW_MAP_H
 #define LIBFX_MATH_SHADOW_MAP_H
 
-#include "core/internal.h"
+#include "core/context.h"
+#include "core/frame.h"
 #include "math/vec.h"
 
 typedef enum fx_shadow_filter {

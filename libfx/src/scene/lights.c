@@ -1,5 +1,6 @@
 /* Lights from the frame's "libfx:lights" metadata (checked when the sidecar was applied). */
-#include "core/lights.h"
+#include "scene/lights.h"
+#include "core/context.h"
 #include "core/mem_failures.h"
 
 #include <cjson/cJSON.h>

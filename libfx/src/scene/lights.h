@@ -1,8 +1,8 @@
 /* The scene's lights, as the sidecar delivered them (frame metadata "libfx:lights"). */
-#ifndef LIBFX_LIGHTS_H
-#define LIBFX_LIGHTS_H
+#ifndef LIBFX_SCENE_LIGHTS_H
+#define LIBFX_SCENE_LIGHTS_H
 
-#include "core/internal.h"
+#include "core/frame.h"
 #include "math/vec.h"
 
 typedef enum fx_light_type { FX_LIGHT_SUN, FX_LIGHT_POINT, FX_LIGHT_SPOT, FX_LIGHT_AREA } fx_light_type;
