@@ -166,7 +166,7 @@ static void test_rain(fx_context *ctx)
     fx_stack *s = et_stack(ctx, "rain");
     fx_stack_set_string(s, 0, "cover_material", "");
     fx_frame *out = NULL;
-    CHECK_FAIL(ctx, fx_stack_run(s, bare, &out), FX_ERR_NO_CAMERA, "rain_map");
+    CHECK_FAIL(ctx, fx_stack_run(s, bare, &out), FX_ERR_NO_AUX_VIEW, "rain_map");
     char *req = NULL;
     CHECK_OK(ctx, fx_stack_required_aux_views(s, &req));
     CHECK(req && tu_contains(req, "rain_map"));

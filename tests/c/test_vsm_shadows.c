@@ -339,7 +339,7 @@ static void test_sidecar_threads_errors(fx_context *ctx)
     fx_stack *s = et_stack(ctx, "vsm_shadows");
     fx_stack_set_enum(s, 0, "apply", "combined");
     fx_frame *out = NULL;
-    CHECK_FAIL(ctx, fx_stack_run(s, none, &out), FX_ERR_NO_CAMERA, "light:");
+    CHECK_FAIL(ctx, fx_stack_run(s, none, &out), FX_ERR_NO_AUX_VIEW, "light:");
     /* required aux views */
     char *req = NULL;
     CHECK_OK(ctx, fx_stack_required_aux_views(s, &req));

@@ -54,7 +54,12 @@ typedef enum fx_result {
     FX_ERR_BAD_RECIPE = 9,       /* malformed JSON, or JSON that is not a recipe/mask/camera */
     FX_ERR_NO_CAMERA = 10,       /* an effect needs camera matrices and the frame has none */
     FX_ERR_CANCELLED = 11,       /* the progress callback asked to stop */
-    FX_ERR_INTERNAL = 12
+    FX_ERR_INTERNAL = 12,
+    /* Appended after 0.1.0 (the values above never change): */
+    FX_ERR_NO_AUX_VIEW = 13,     /* an effect needs an auxiliary view (light depth view, rain map)
+                                    the frame does not list (fx_stack_required_aux_views) */
+    FX_ERR_NO_LIGHTS = 14        /* an effect needs the scene's lights and the frame has none
+                                    (they come with the scene sidecar) */
 } fx_result;
 
 typedef struct fx_context fx_context; /* threads, limits, per-thread last error, warnings */

@@ -43,6 +43,8 @@ const char *fx_result_name(fx_result r)
     case FX_ERR_NO_CAMERA: return "FX_ERR_NO_CAMERA";
     case FX_ERR_CANCELLED: return "FX_ERR_CANCELLED";
     case FX_ERR_INTERNAL: return "FX_ERR_INTERNAL";
+    case FX_ERR_NO_AUX_VIEW: return "FX_ERR_NO_AUX_VIEW";
+    case FX_ERR_NO_LIGHTS: return "FX_ERR_NO_LIGHTS";
     }
     return "FX_ERR_UNKNOWN";
 }

@@ -33,7 +33,7 @@ typedef struct fx_aux_view {
 } fx_aux_view;
 
 /* Loads the aux view `name` of frame f (see above for "light:"). `where` names the
- * caller in messages. Fails with FX_ERR_NO_CAMERA when the frame has no such view (the
+ * caller in messages. Fails with FX_ERR_NO_AUX_VIEW when the frame has no such view (the
  * message lists those it has and says where they come from), FX_ERR_MISSING_PASS when
  * the EXR has no Depth pass, and the reader's errors. */
 fx_result fx_aux_view_load(const fx_frame *f, const char *name, const char *where, fx_aux_view **out);

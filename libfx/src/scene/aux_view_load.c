@@ -85,7 +85,7 @@ fx_result fx_aux_view_load(const fx_frame *f, const char *name, const char *wher
     }
     if (!found) {
         cJSON_Delete(list);
-        return fx_fail(ctx, FX_ERR_NO_CAMERA,
+        return fx_fail(ctx, FX_ERR_NO_AUX_VIEW,
                        "%s needs the auxiliary view '%s%s', which the frame does not carry (it has: %s); the "
                        "Blender add-on renders it when the stack needs it (fx_stack_required_aux_views) and "
                        "lists it in the scene sidecar's \"aux_views\"",

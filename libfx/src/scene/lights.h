@@ -18,9 +18,9 @@ typedef struct fx_light {
 } fx_light;
 
 /* Finds a light by name; an empty or NULL name picks the first sun (else the first
- * light). Fails with FX_ERR_MISSING_PASS-like clarity: FX_ERR_BAD_PARAM naming `where`
- * and the lights the frame has, or FX_ERR_NO_CAMERA when the frame carries no lights
- * (they come with the scene sidecar: --camera, or the add-on). */
+ * light). Fails with FX_ERR_BAD_PARAM naming `where` and the lights the frame has, or
+ * FX_ERR_NO_LIGHTS when the frame carries no lights (they come with the scene sidecar:
+ * the CLI's --sidecar, or the add-on). */
 fx_result fx_frame_find_light(const fx_frame *f, const char *name, const char *where, fx_light *out);
 
 #endif
