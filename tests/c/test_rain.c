@@ -303,7 +303,7 @@ static void test_splashes_and_wet(fx_context *ctx)
     fx_frame_free(f);
 }
 
-/* The rain map goes through the context's cache (core/aux_view.h): a stack of wet_surfaces,
+/* The rain map goes through the context's cache (scene/aux_map.h): a stack of wet_surfaces,
  * rain_splashes and rain over frames 1..4 in one context builds the map once (plus the
  * filtered copy for the soft edges) and gives the same bits as a context without cache. */
 static void test_cache(void)

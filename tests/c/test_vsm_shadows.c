@@ -439,7 +439,7 @@ static void test_sun_diffuse(fx_context *ctx)
     }
 }
 
-/* The per-context cache of built light maps (core/aux_view.h): frames 2..N reuse the map
+/* The per-context cache of built light maps (scene/aux_map.h): frames 2..N reuse the map
  * and give the same bits as an uncached context (1 and 2 threads, box and Gaussian); a
  * replaced view file, other filter parameters or a too small limit build again. */
 static void test_cache(void)

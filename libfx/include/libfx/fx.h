@@ -314,7 +314,7 @@ FX_API fx_result fx_stack_timings_json(const fx_stack *s, char **out_json);
  * output): shared, not copied, when both frames have one context. */
 FX_API fx_result fx_frame_copy_passes(fx_frame *dst, const fx_frame *src);
 
-/* ---- Auxiliary views (issue 7: shadows and rain) --------------------------
+/* ---- Auxiliary views (shadows and rain) -----------------------------------
  * Extra depth renders of the scene from another viewpoint, each an EXR with a Depth
  * pass (planar depth along the view's -Z) plus its camera: "light:<light name>" (the
  * light's shadow view: orthographic for a sun, perspective for a spot) and "rain_map"

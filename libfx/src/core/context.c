@@ -165,7 +165,7 @@ static fx_thread_error *thread_slot(fx_context *c, int create)
     return e;
 }
 
-fx_result fx_failv(const fx_context *ctx, fx_result code, const char *fmt, va_list ap)
+static fx_result failv(const fx_context *ctx, fx_result code, const char *fmt, va_list ap)
 {
     if (!ctx)
         return code;
@@ -181,7 +181,7 @@ fx_result fx_fail(const fx_context *ctx, fx_result code, const char *fmt, ...)
 {
     va_list ap;
     va_start(ap, fmt);
-    fx_failv(ctx, code, fmt, ap);
+    failv(ctx, code, fmt, ap);
     va_end(ap);
     return code;
 }

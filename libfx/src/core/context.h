@@ -53,7 +53,6 @@ struct fx_context {
 
 /* Records the calling thread's error on ctx and returns code. ctx may be NULL. */
 fx_result fx_fail(const fx_context *ctx, fx_result code, const char *fmt, ...) FX_PRINTF(3, 4);
-fx_result fx_failv(const fx_context *ctx, fx_result code, const char *fmt, va_list ap);
 /* Re-records the calling thread's last message as "<prefix>: <message>". */
 void fx_fail_prefix(const fx_context *ctx, fx_result code, const char *prefix);
 void fx_warn(const fx_context *ctx, const char *fmt, ...) FX_PRINTF(2, 3);

@@ -1,3 +1,4 @@
+/* Output files written safely: through a temporary file renamed into place, never over the input (io/atomic_file.h). */
 #include "io/atomic_file.h"
 #include "core/context.h"
 #include "core/frame.h"

@@ -1,3 +1,4 @@
+/* EXR channel names -> libfx passes: splitting names, choosing the layer, planning the passes (io/exr_channels.h). */
 #include "io/exr_channels.h"
 #include "core/frame.h"
 #include "core/mem.h"

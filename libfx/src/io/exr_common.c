@@ -1,3 +1,4 @@
+/* Opening an EXR with OpenEXRCore and summarising its header for the reader and fx_exr_info_json (io/exr_common.h). */
 #include "io/exr_common.h"
 
 #include "io/cryptomatte_meta.h"

@@ -39,6 +39,8 @@ typedef struct out_chan {
 } out_chan;
 
 /* Attributes libfx writes itself or OpenEXR owns: metadata never overrides them. */
+static fx_result parse_compression(const fx_context *ctx, const char *text, fx_exr_write_params *out);
+
 static int reserved_attr(const char *key)
 {
     static const char *const names[] = {
@@ -453,7 +455,7 @@ fx_result fx_exr_write_with(const fx_frame *f, const char *path, const fx_write_
                        opts->size, sizeof(fx_write_options));
     fx_exr_write_params p = params ? *params : fx_exr_write_defaults();
     if (!params && opts && opts->size >= sizeof(fx_write_options) && opts->compression) {
-        fx_result pr = fx_exr_parse_compression(ctx, opts->compression, &p);
+        fx_result pr = parse_compression(ctx, opts->compression, &p);
         if (pr != FX_OK)
             return pr;
     }
@@ -495,7 +497,8 @@ fx_result fx_exr_write(const fx_frame *f, const char *path, const fx_write_optio
     return fx_exr_write_with(f, path, opts, params, FX_EXR_ZIP_AUTO);
 }
 
-fx_result fx_exr_parse_compression(const fx_context *ctx, const char *text, fx_exr_write_params *out)
+/* "zip", "zip:6", "zips", "piz", "rle", "none" -> params; FX_ERR_BAD_PARAM otherwise. */
+static fx_result parse_compression(const fx_context *ctx, const char *text, fx_exr_write_params *out)
 {
     static const struct {
         const char *name;

@@ -27,8 +27,6 @@ typedef struct fx_aux_map {
 fx_result fx_aux_map_acquire(const fx_frame *f, const char *name, int derivative_bias, int filter, float width,
                              const char *where, fx_aux_map *out);
 void fx_aux_map_release(fx_context *ctx, fx_aux_map *m);
-/* Frees every entry (fx_context_free calls it through the context's aux_cache_free). */
-void fx_aux_cache_free(fx_context *ctx);
 /* Counters since the context was made: maps built and maps reused (tests, benches). */
 void fx_aux_cache_stats(const fx_context *ctx, long *built, long *reused);
 

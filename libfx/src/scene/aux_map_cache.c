@@ -38,12 +38,14 @@ static void entry_free(aux_entry *e)
     memset(e, 0, sizeof *e);
 }
 
+static void aux_cache_free(fx_context *ctx);
+
 static struct fx_aux_cache *cache_of(fx_context *ctx)
 {
     if (!ctx->aux_cache) {
         ctx->aux_cache = fx_mem_calloc(1, sizeof *ctx->aux_cache);
         if (ctx->aux_cache)
-            ctx->aux_cache_free = fx_aux_cache_free;
+            ctx->aux_cache_free = aux_cache_free;
     }
     return ctx->aux_cache;
 }
@@ -98,7 +100,8 @@ fx_result fx_context_set_aux_cache(fx_context *ctx, uint64_t max_bytes)
     return FX_OK;
 }
 
-void fx_aux_cache_free(fx_context *ctx)
+/* Frees every entry; fx_context_free calls it through the context's aux_cache_free. */
+static void aux_cache_free(fx_context *ctx)
 {
     if (!ctx || !ctx->aux_cache)
         return;
