@@ -56,6 +56,31 @@ def run(root):
     return p.returncode, p.stderr
 
 
+def objects_case():
+    """A core object calling a function defined in scene/ fails the symbol check, with no
+    include to give it away; the same call the other way passes."""
+    with tempfile.TemporaryDirectory() as tmp:
+        make_tree(tmp)
+        objs = {}
+        for rel, text in [("src/core/low.c", "int fx_high(void);\nint fx_low(void) { return fx_high(); }\n"),
+                          ("src/scene/high.c", "int fx_high(void) { return 1; }\n"),
+                          ("src/scene/user.c", "int fx_low(void);\nint fx_user(void) { return fx_low(); }\n")]:
+            c = os.path.join(tmp, "obj", rel)
+            os.makedirs(os.path.dirname(c), exist_ok=True)
+            with open(c, "w") as fh:
+                fh.write(text)
+            objs[rel] = c + ".o"
+            subprocess.run(["cc", "-c", c, "-o", objs[rel]], check=True)
+        p = subprocess.run([sys.executable, CHECKER, tmp, "--objects"] + list(objs.values()),
+                           capture_output=True, text=True)
+        wanted = ["low.c.o: uses fx_high", "core may not use scene"]
+        missing = [w for w in wanted if w not in p.stderr]
+        if p.returncode != 1 or missing or "user.c.o" in p.stderr:
+            print("objects: exit %d, message lacks %s:\n%s" % (p.returncode, missing, p.stderr))
+            return 1
+    return 0
+
+
 def main():
     failures = 0
     with tempfile.TemporaryDirectory() as tmp:
@@ -72,6 +97,7 @@ def main():
             if code != 1 or missing:
                 print("%s: exit %d, message lacks %s:\n%s" % (rel, code, missing, err))
                 failures += 1
+    failures += objects_case()
     # The real tree passes (the ctest check_layers runs it too; here it guards the test itself).
     code, err = run(os.path.dirname(HERE))
     if code != 0:
