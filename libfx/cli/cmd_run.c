@@ -15,7 +15,7 @@
 #include <unistd.h>
 
 typedef struct run_opts {
-    const char *stack_path, *camera_path, *layer, *view, *quality, *png, *in, *out, *compression;
+    const char *stack_path, *sidecar_path, *layer, *view, *quality, *png, *in, *out, *compression;
     long threads;
     long proxy; /* --proxy N: run on a 1/N proxy (0: off) */
     double fps;
@@ -36,7 +36,7 @@ typedef struct run_job {
     const run_opts *o;
     fx_context *ctx;
     fx_stack *stack;
-    int has_camera; /* a scene sidecar (--camera) applies to every frame */
+    int has_sidecar; /* a scene sidecar (--sidecar) applies to every frame */
     int sequence;
     cli_progress progress;
 } run_job;
@@ -105,8 +105,8 @@ static int parse_options(int argc, char **argv, run_opts *o)
             VALUE(o->out);
         } else if (is(opt, "-s", "--stack")) {
             VALUE(o->stack_path);
-        } else if (is(opt, "--camera", NULL)) {
-            VALUE(o->camera_path);
+        } else if (is(opt, "--sidecar", "--camera")) {
+            VALUE(o->sidecar_path);
         } else if (is(opt, "--layer", NULL)) {
             VALUE(o->layer);
         } else if (is(opt, "--view", NULL)) {
@@ -362,8 +362,8 @@ static int run_frame(run_job *job, const run_item *it)
         rc = cli_fail(ctx, r, CLI_PHASE_INPUT, it->in);
         goto done;
     }
-    if (job->has_camera && (r = fx_frame_apply_sidecar_file(in, o->camera_path)) != FX_OK) {
-        rc = cli_fail(ctx, r, CLI_PHASE_INPUT, o->camera_path);
+    if (job->has_sidecar && (r = fx_frame_apply_sidecar_file(in, o->sidecar_path)) != FX_OK) {
+        rc = cli_fail(ctx, r, CLI_PHASE_INPUT, o->sidecar_path);
         goto done;
     }
     if (it->has_frame)
@@ -466,15 +466,15 @@ static int setup(run_job *job)
     if (o->quality && (r = fx_stack_set_quality(job->stack, fx_quality_from_name(o->quality))) != FX_OK)
         return cli_fail(job->ctx, r, CLI_PHASE_INPUT, o->stack_path);
     fx_stack_set_debug_outputs(job->stack, o->debug_outputs);
-    if (o->camera_path) {
+    if (o->sidecar_path) {
         /* Check the sidecar (camera, lights, time) once, before any frame is read. */
         fx_frame *probe = NULL;
         if ((r = fx_frame_new(job->ctx, 1, 1, &probe)) == FX_OK)
-            r = fx_frame_apply_sidecar_file(probe, o->camera_path);
+            r = fx_frame_apply_sidecar_file(probe, o->sidecar_path);
         fx_frame_free(probe);
         if (r != FX_OK)
-            return cli_fail(job->ctx, r, CLI_PHASE_INPUT, o->camera_path);
-        job->has_camera = 1;
+            return cli_fail(job->ctx, r, CLI_PHASE_INPUT, o->sidecar_path);
+        job->has_sidecar = 1;
     }
     cli_flush_warnings(job->ctx);
     return 0;

@@ -30,6 +30,8 @@ int cli_exit_code(fx_result r, cli_phase phase)
     case FX_ERR_BAD_PARAM:
     case FX_ERR_BAD_RECIPE:
     case FX_ERR_NO_CAMERA:
+    case FX_ERR_NO_AUX_VIEW:
+    case FX_ERR_NO_LIGHTS:
         return CLI_EXIT_INPUT;
     case FX_ERR_IO:
     case FX_ERR_BAD_FILE:

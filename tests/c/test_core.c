@@ -4,7 +4,7 @@
 #include "testutil.h"
 
 #include "core/effect.h"
-#include "core/lights.h"
+#include "scene/lights.h"
 #include "core/mask.h"
 #include "core/parallel.h"
 
@@ -23,6 +23,9 @@ static void test_context_and_errors(void)
     CHECK(strcmp(fx_context_error(ctx), "") == 0);
     CHECK(fx_abi_version() == FX_ABI_VERSION);
     CHECK(strcmp(fx_result_name(FX_ERR_BAD_PARAM), "FX_ERR_BAD_PARAM") == 0);
+    CHECK(strcmp(fx_result_name(FX_ERR_NO_AUX_VIEW), "FX_ERR_NO_AUX_VIEW") == 0);
+    CHECK(strcmp(fx_result_name(FX_ERR_NO_LIGHTS), "FX_ERR_NO_LIGHTS") == 0);
+    CHECK(FX_ERR_NO_CAMERA == 10 && FX_ERR_INTERNAL == 12 && FX_ERR_NO_AUX_VIEW == 13);
     fx_frame *f = NULL;
     CHECK_FAIL(ctx, fx_frame_new(ctx, -1, 4, &f), FX_ERR_INVALID_ARGUMENT, "negative");
     CHECK_FAIL(ctx, fx_context_set_limits(ctx, 0, 1, 1), FX_ERR_INVALID_ARGUMENT, "positive");
@@ -683,7 +686,7 @@ static void test_sidecar(void)
                "no light named 'Lamp' in the scene (lights: Sun)");
     fx_frame *bare = NULL;
     fx_frame_new(ctx, 1, 1, &bare);
-    CHECK_FAIL(ctx, fx_frame_find_light(bare, NULL, "effect 1 (vsm_shadows)", &light), FX_ERR_NO_CAMERA,
+    CHECK_FAIL(ctx, fx_frame_find_light(bare, NULL, "effect 1 (vsm_shadows)", &light), FX_ERR_NO_LIGHTS,
                "effect 1 (vsm_shadows) needs the scene's lights");
     fx_frame_free(bare);
     fx_frame_free(f);

@@ -75,6 +75,8 @@ static int clear_error(const char *effect, fx_result r, const char *msg)
         return 0;
     }
     case FX_ERR_NO_CAMERA:
+    case FX_ERR_NO_AUX_VIEW:
+    case FX_ERR_NO_LIGHTS:
     case FX_ERR_MISSING_PASS:
     case FX_ERR_LIMIT:
     case FX_ERR_INVALID_ARGUMENT:

@@ -4,7 +4,7 @@
  * pixels; finite output; clear errors without a rain map. */
 #include "fx_effect_test.h"
 
-#include "core/aux_view.h"
+#include "scene/aux_map.h"
 #include "core/mask.h"
 
 #include <math.h>
@@ -166,7 +166,7 @@ static void test_rain(fx_context *ctx)
     fx_stack *s = et_stack(ctx, "rain");
     fx_stack_set_string(s, 0, "cover_material", "");
     fx_frame *out = NULL;
-    CHECK_FAIL(ctx, fx_stack_run(s, bare, &out), FX_ERR_NO_CAMERA, "rain_map");
+    CHECK_FAIL(ctx, fx_stack_run(s, bare, &out), FX_ERR_NO_AUX_VIEW, "rain_map");
     char *req = NULL;
     CHECK_OK(ctx, fx_stack_required_aux_views(s, &req));
     CHECK(req && tu_contains(req, "rain_map"));
@@ -303,7 +303,7 @@ static void test_splashes_and_wet(fx_context *ctx)
     fx_frame_free(f);
 }
 
-/* The rain map goes through the context's cache (core/aux_view.h): a stack of wet_surfaces,
+/* The rain map goes through the context's cache (scene/aux_map.h): a stack of wet_surfaces,
  * rain_splashes and rain over frames 1..4 in one context builds the map once (plus the
  * filtered copy for the soft edges) and gives the same bits as a context without cache. */
 static void test_cache(void)

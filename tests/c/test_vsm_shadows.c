@@ -4,7 +4,7 @@
  * against the multi-occluder leak; aux views through the sidecar; threads; NaN input. */
 #include "fx_effect_test.h"
 
-#include "core/aux_view.h"
+#include "scene/aux_map.h"
 #include "math/sat.h"
 #include "math/shadow_map.h"
 
@@ -339,7 +339,7 @@ static void test_sidecar_threads_errors(fx_context *ctx)
     fx_stack *s = et_stack(ctx, "vsm_shadows");
     fx_stack_set_enum(s, 0, "apply", "combined");
     fx_frame *out = NULL;
-    CHECK_FAIL(ctx, fx_stack_run(s, none, &out), FX_ERR_NO_CAMERA, "light:");
+    CHECK_FAIL(ctx, fx_stack_run(s, none, &out), FX_ERR_NO_AUX_VIEW, "light:");
     /* required aux views */
     char *req = NULL;
     CHECK_OK(ctx, fx_stack_required_aux_views(s, &req));
@@ -439,7 +439,7 @@ static void test_sun_diffuse(fx_context *ctx)
     }
 }
 
-/* The per-context cache of built light maps (core/aux_view.h): frames 2..N reuse the map
+/* The per-context cache of built light maps (scene/aux_map.h): frames 2..N reuse the map
  * and give the same bits as an uncached context (1 and 2 threads, box and Gaussian); a
  * replaced view file, other filter parameters or a too small limit build again. */
 static void test_cache(void)

@@ -54,7 +54,12 @@ typedef enum fx_result {
     FX_ERR_BAD_RECIPE = 9,       /* malformed JSON, or JSON that is not a recipe/mask/camera */
     FX_ERR_NO_CAMERA = 10,       /* an effect needs camera matrices and the frame has none */
     FX_ERR_CANCELLED = 11,       /* the progress callback asked to stop */
-    FX_ERR_INTERNAL = 12
+    FX_ERR_INTERNAL = 12,
+    /* Appended after 0.1.0 (the values above never change): */
+    FX_ERR_NO_AUX_VIEW = 13,     /* an effect needs an auxiliary view (light depth view, rain map)
+                                    the frame does not list (fx_stack_required_aux_views) */
+    FX_ERR_NO_LIGHTS = 14        /* an effect needs the scene's lights and the frame has none
+                                    (they come with the scene sidecar) */
 } fx_result;
 
 typedef struct fx_context fx_context; /* threads, limits, per-thread last error, warnings */
@@ -148,10 +153,9 @@ typedef struct fx_camera {
     int orthographic;
 } fx_camera;
 
-/* Camera sidecar JSON: {"world_to_camera": [[4],[4],[4],[4]], "projection": [...],
- * "clip_start": f, "clip_end": f}. Matrices as rows. */
+/* A camera as JSON, as the scene sidecar holds it: {"world_to_camera": [[4],[4],[4],[4]],
+ * "projection": [...], "clip_start": f, "clip_end": f}. Matrices as rows. */
 FX_API fx_result fx_camera_from_json(fx_context *ctx, const char *json, fx_camera *out);
-FX_API fx_result fx_camera_load_file(fx_context *ctx, const char *path, fx_camera *out);
 
 /* ---- Frames ------------------------------------------------------------- */
 /* (fx_frame_apply_sidecar, below the frame functions, applies a whole scene sidecar.) */
@@ -310,7 +314,7 @@ FX_API fx_result fx_stack_timings_json(const fx_stack *s, char **out_json);
  * output): shared, not copied, when both frames have one context. */
 FX_API fx_result fx_frame_copy_passes(fx_frame *dst, const fx_frame *src);
 
-/* ---- Auxiliary views (issue 7: shadows and rain) --------------------------
+/* ---- Auxiliary views (shadows and rain) -----------------------------------
  * Extra depth renders of the scene from another viewpoint, each an EXR with a Depth
  * pass (planar depth along the view's -Z) plus its camera: "light:<light name>" (the
  * light's shadow view: orthographic for a sun, perspective for a spot) and "rain_map"

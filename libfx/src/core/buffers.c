@@ -1,5 +1,7 @@
-/* The per-context store of freed pixel buffers (see fx_buffer_get in internal.h). */
-#include "core/internal.h"
+/* The per-context store of freed pixel buffers (core/buffers.h). */
+#include "core/buffers.h"
+#include "core/context.h"
+#include "core/mem.h"
 
 #include <string.h>
 

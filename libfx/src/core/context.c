@@ -1,5 +1,7 @@
 /* Contexts: thread count, limits, progress callback, per-thread last error, warnings. */
-#include "core/internal.h"
+#include "core/buffers.h"
+#include "core/context.h"
+#include "core/mem.h"
 #include "core/parallel.h"
 
 #include <stdio.h>
@@ -41,6 +43,8 @@ const char *fx_result_name(fx_result r)
     case FX_ERR_NO_CAMERA: return "FX_ERR_NO_CAMERA";
     case FX_ERR_CANCELLED: return "FX_ERR_CANCELLED";
     case FX_ERR_INTERNAL: return "FX_ERR_INTERNAL";
+    case FX_ERR_NO_AUX_VIEW: return "FX_ERR_NO_AUX_VIEW";
+    case FX_ERR_NO_LIGHTS: return "FX_ERR_NO_LIGHTS";
     }
     return "FX_ERR_UNKNOWN";
 }
@@ -74,7 +78,8 @@ fx_result fx_context_new(fx_context **out, int threads)
 static void context_destroy(fx_context *ctx)
 {
     fx_pool_free(ctx->pool);
-    fx_aux_cache_free(ctx);
+    if (ctx->aux_cache_free)
+        ctx->aux_cache_free(ctx);
     fx_buffers_free(ctx);
     for (int i = 0; i < ctx->warning_count; i++)
         fx_mem_free(ctx->warnings[i]);
@@ -160,7 +165,7 @@ static fx_thread_error *thread_slot(fx_context *c, int create)
     return e;
 }
 
-fx_result fx_failv(const fx_context *ctx, fx_result code, const char *fmt, va_list ap)
+static fx_result failv(const fx_context *ctx, fx_result code, const char *fmt, va_list ap)
 {
     if (!ctx)
         return code;
@@ -176,7 +181,7 @@ fx_result fx_fail(const fx_context *ctx, fx_result code, const char *fmt, ...)
 {
     va_list ap;
     va_start(ap, fmt);
-    fx_failv(ctx, code, fmt, ap);
+    failv(ctx, code, fmt, ap);
     va_end(ap);
     return code;
 }
@@ -191,6 +196,13 @@ const char *fx_context_error(const fx_context *ctx)
     const char *m = e ? e->message : "";
     pthread_mutex_unlock(&c->lock);
     return m;
+}
+
+void fx_fail_prefix(const fx_context *ctx, fx_result code, const char *prefix)
+{
+    char msg[1024];
+    snprintf(msg, sizeof msg, "%s", fx_context_error(ctx));
+    fx_fail(ctx, code, "%s: %s", prefix, msg);
 }
 
 void fx_warn(const fx_context *ctx, const char *fmt, ...)

@@ -1,5 +1,9 @@
 /* Frames: named float passes, windows, camera, scene time and string metadata. */
-#include "core/internal.h"
+#include "core/buffers.h"
+#include "core/context.h"
+#include "core/frame.h"
+#include "core/mem.h"
+#include "core/passes.h"
 #include "core/parallel.h"
 
 #include <float.h>

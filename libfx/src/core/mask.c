@@ -1,6 +1,7 @@
 /* Masks: parse a mask spec from a recipe, and evaluate it on a frame into coverage. */
 #include "core/mask.h"
 #include "core/parallel.h"
+#include "core/mem.h"
 
 #include <cjson/cJSON.h>
 #include <limits.h>
@@ -227,17 +228,6 @@ cJSON *fx_mask_spec_to_json(const fx_mask_spec *s)
     if (s->invert)
         cJSON_AddBoolToObject(o, "invert", 1);
     return o;
-}
-
-fx_result fx_mask_spec_copy(fx_mask_spec *dst, const fx_mask_spec *src)
-{
-    memset(dst, 0, sizeof *dst);
-    cJSON *j = fx_mask_spec_to_json(src);
-    if (!j)
-        return FX_OK;
-    fx_result r = fx_mask_spec_parse(NULL, j, "", dst);
-    cJSON_Delete(j);
-    return r;
 }
 
 fx_pass_set fx_mask_spec_passes(const fx_mask_spec *s)

@@ -5,16 +5,17 @@
 #ifndef LIBFX_MASK_H
 #define LIBFX_MASK_H
 
-#include "core/internal.h"
+#include "core/context.h"
+#include "core/frame.h"
 #include "core/passes.h"
+#include "core/rect.h"
+
+#include <stddef.h>
+#include <stdint.h>
 
 #ifdef __cplusplus
 extern "C" {
 #endif
-
-typedef struct fx_rect {
-    int x0, y0, x1, y1; /* half-open: x0 <= x < x1, in frame pixels (data window) */
-} fx_rect;
 
 typedef struct fx_mask_spec {
     char **materials;
@@ -45,7 +46,6 @@ struct cJSON;
 fx_result fx_mask_spec_parse(fx_context *ctx, const struct cJSON *json, const char *where,
                              fx_mask_spec *out);
 struct cJSON *fx_mask_spec_to_json(const fx_mask_spec *spec); /* NULL if empty */
-fx_result fx_mask_spec_copy(fx_mask_spec *dst, const fx_mask_spec *src);
 void fx_mask_spec_clear(fx_mask_spec *spec);
 fx_pass_set fx_mask_spec_passes(const fx_mask_spec *spec);
 

@@ -1,7 +1,8 @@
 /* Every allocation of the library goes through these, so tests can make the Nth one
  * fail (allocation-failure injection) and check for clean errors without leaks. */
 #define _DEFAULT_SOURCE /* madvise(MADV_HUGEPAGE) */
-#include "core/internal.h"
+#include "libfx/fx.h"
+#include "core/mem.h"
 #include "core/mem_failures.h"
 
 #include <cjson/cJSON.h>

@@ -8,6 +8,7 @@
  * workers set it once; the caller's floating-point state is saved and restored, since
  * the caller may be Blender's own thread (through ctypes). */
 #include "core/parallel.h"
+#include "core/mem.h"
 
 #include <stdatomic.h>
 #include <stdlib.h>

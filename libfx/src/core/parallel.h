@@ -5,7 +5,7 @@
 #ifndef LIBFX_PARALLEL_H
 #define LIBFX_PARALLEL_H
 
-#include "core/internal.h"
+#include "core/context.h"
 
 #ifdef __cplusplus
 extern "C" {

@@ -1,3 +1,4 @@
+/* The canonical passes libfx knows, their channels, and how Blender names them (core/passes.h). */
 #include "core/passes.h"
 
 #include <ctype.h>

@@ -8,9 +8,12 @@
  * the same one for all of them, so IDs are never mixed and a proxy pixel's depth, normal
  * and IDs belong to one surface. The representative is the in-frame pixel nearest the
  * block's centre: offset (f - 1) / 2 in each axis, clamped to the frame. */
-#include "core/internal.h"
+#include "core/context.h"
+#include "core/frame.h"
+#include "core/mem.h"
+#include "core/passes.h"
 #include "core/parallel.h"
-#include "math/simd4.h"
+#include "core/simd4.h"
 
 #include <float.h>
 #include <math.h>

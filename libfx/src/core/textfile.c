@@ -1,5 +1,7 @@
 /* Reading small text files (recipes, sidecars) whole, with a size cap. */
-#include "core/internal.h"
+#include "core/textfile.h"
+#include "core/context.h"
+#include "core/mem.h"
 
 #include <errno.h>
 #include <stdio.h>
@@ -48,11 +50,4 @@ fx_result fx_read_text_file(const fx_context *ctx, const char *path, size_t max_
     buf[len] = '\0';
     *out = buf;
     return FX_OK;
-}
-
-void fx_fail_prefix(const fx_context *ctx, fx_result code, const char *prefix)
-{
-    char msg[1024];
-    snprintf(msg, sizeof msg, "%s", fx_context_error(ctx));
-    fx_fail(ctx, code, "%s: %s", prefix, msg);
 }

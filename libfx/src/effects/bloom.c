@@ -10,7 +10,7 @@
 #include "core/parallel.h"
 #include "math/blur.h"
 #include "math/color.h"
-#include "math/simd4.h"
+#include "core/simd4.h"
 
 #include <float.h>
 #include <math.h>

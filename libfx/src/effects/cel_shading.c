@@ -7,13 +7,13 @@
  * from the Normal pass and the sun (the scene sidecar's light, or a direction), and
  * Combined is scaled by (ambient + q(l)) / (ambient + l). docs/effects/cel_shading.md. */
 #include "core/effect.h"
-#include "core/lights.h"
+#include "scene/lights.h"
 #include "core/parallel.h"
 #include "math/color.h"
 #include "math/edge_ops.h"
 #include "math/vec.h"
-#include "math/simd4.h"
-#include "math/simd8.h"
+#include "core/simd4.h"
+#include "core/simd8.h"
 
 #include <float.h>
 #include <stdint.h>

@@ -5,7 +5,7 @@
 #include "core/effect.h"
 #include "core/parallel.h"
 #include "math/edge_ops.h"
-#include "math/simd4.h"
+#include "core/simd4.h"
 
 #include <float.h>
 #include <math.h>

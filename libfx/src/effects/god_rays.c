@@ -13,11 +13,11 @@
  * 3. Radial blur: naive (samples, jitter) or polar (exact in the limit, cost independent
  *    of samples); composite "add" (src + rays) or "screen" (src + rays (1 - sat(src))). */
 #include "core/effect.h"
-#include "core/lights.h"
+#include "scene/lights.h"
 #include "core/parallel.h"
 #include "math/camera.h"
 #include "math/radial_blur.h"
-#include "math/simd4.h"
+#include "core/simd4.h"
 #include "math/vec.h"
 
 #include <float.h>

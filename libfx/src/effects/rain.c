@@ -12,11 +12,11 @@
  * bits, consecutive frames move the same streaks. Cover quads (material cover_material,
  * found through Cryptomatte, coverage normalised by cover_opacity) get the nearest layer's
  * pattern, unclipped, when the camera is under cover (rain map at the camera). Additive. */
-#include "core/aux_view.h"
+#include "scene/aux_view.h"
 #include "core/effect.h"
 #include "core/parallel.h"
 #include "math/hash.h"
-#include "math/rain_map.h"
+#include "scene/rain_map.h"
 #include "math/surface.h"
 
 #include <math.h>

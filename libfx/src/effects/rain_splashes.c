@@ -11,11 +11,11 @@
  * pass or Depth + camera): it is drawn in perspective by construction. Only pixels whose
  * surface faces up (normal Z >= up_threshold) and is exposed in the rain map get splashes.
  * Additive. */
-#include "core/aux_view.h"
+#include "scene/aux_view.h"
 #include "core/effect.h"
 #include "core/parallel.h"
 #include "math/hash.h"
-#include "math/rain_map.h"
+#include "scene/rain_map.h"
 #include "math/surface.h"
 
 #include <math.h>

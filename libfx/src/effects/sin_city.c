@@ -8,7 +8,7 @@
 #include "core/parallel.h"
 #include "math/color.h"
 #include "math/levels.h"
-#include "math/simd8.h"
+#include "core/simd8.h"
 #include "math/vec.h"
 
 #include <float.h>

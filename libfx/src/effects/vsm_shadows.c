@@ -14,9 +14,9 @@
  *    factor for the Principled BSDF (param diffuse; lambert: none), times (1 - v):
  *    for renders where the light casts no ray-traced shadow (the atrium's Sun);
  *  - combined: scales Combined by 1 - strength (1 - v): for any render. */
-#include "core/aux_view.h"
+#include "scene/aux_map.h"
 #include "core/effect.h"
-#include "core/lights.h"
+#include "scene/lights.h"
 #include "core/parallel.h"
 #include "math/shadow_map.h"
 #include "math/surface.h"

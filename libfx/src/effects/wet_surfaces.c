@@ -18,10 +18,10 @@
  * is within about 25 degrees of theirs; every
  * other pixel (creases, silhouettes, thin objects, background) is computed exactly.
  * downsample 1 (final, reference) is the per-pixel loop, bits unchanged. */
-#include "core/aux_view.h"
+#include "scene/aux_view.h"
 #include "core/effect.h"
 #include "core/parallel.h"
-#include "math/rain_map.h"
+#include "scene/rain_map.h"
 #include "math/surface.h"
 
 #include <float.h>

@@ -1,4 +1,8 @@
+/* Output files written safely: through a temporary file renamed into place, never over the input (io/atomic_file.h). */
 #include "io/atomic_file.h"
+#include "core/context.h"
+#include "core/frame.h"
+#include "core/mem.h"
 
 #include <errno.h>
 #include <fcntl.h>

@@ -3,7 +3,7 @@
 #ifndef LIBFX_IO_ATOMIC_FILE_H
 #define LIBFX_IO_ATOMIC_FILE_H
 
-#include "core/internal.h"
+#include "libfx/fx.h"
 
 #ifdef __cplusplus
 extern "C" {

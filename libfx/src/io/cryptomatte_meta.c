@@ -1,6 +1,8 @@
+/* Cryptomatte header attributes <-> the frame's "cryptomatte/<Type>/manifest" metadata (io/cryptomatte_meta.h). */
 #include "io/cryptomatte_meta.h"
 
 #include "core/mask.h"
+#include "core/mem.h"
 
 #include <errno.h>
 #include <stdio.h>
@@ -10,7 +12,8 @@
 /* A sidecar manifest bigger than this is not a manifest. */
 #define FX_MAX_SIDECAR_BYTES ((long)64 << 20)
 
-void fx_cryptomatte_key(const char *name, char out[8])
+/* The 7-hex attribute key of a Cryptomatte name (Blender's and the specification's). */
+static void cryptomatte_key(const char *name, char out[8])
 {
     char hex[16];
     snprintf(hex, sizeof hex, "%08x", (unsigned)fx_murmur3_32(name, strlen(name), 0));
@@ -179,7 +182,7 @@ exr_result_t fx_exr_write_cryptos(exr_context_t exr, int part, const fx_frame *f
             continue;
         char name[FX_NAME_MAX], hk[8], attr[FX_NAME_MAX + 32];
         copy_n(name, sizeof name, type, (size_t)(slash - type));
-        fx_cryptomatte_key(name, hk);
+        cryptomatte_key(name, hk);
         static const char *const fields[] = {"name", "hash", "conversion", "manifest"};
         const char *values[] = {name, "MurmurHash3_32", "uint32_to_float32", frame->meta[i].value};
         for (int j = 0; j < 4; j++) {

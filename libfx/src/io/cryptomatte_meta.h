@@ -24,9 +24,6 @@ fx_result fx_exr_cryptos_to_meta(const fx_exr_file *f, const char *layer, fx_fra
  * "cryptomatte/<Type>/manifest" metadata entry of the frame. */
 exr_result_t fx_exr_write_cryptos(exr_context_t exr, int part, const fx_frame *frame);
 
-/* The 7-hex attribute key of a Cryptomatte name (Blender's and the specification's). */
-void fx_cryptomatte_key(const char *name, char out[8]);
-
 #ifdef __cplusplus
 }
 #endif

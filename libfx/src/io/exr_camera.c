@@ -1,3 +1,4 @@
+/* fx_camera <-> the EXR header's worldToCamera / worldToNDC attributes (io/exr_camera.h). */
 #include "io/exr_camera.h"
 
 #include <math.h>

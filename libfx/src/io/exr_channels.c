@@ -1,4 +1,7 @@
+/* EXR channel names -> libfx passes: splitting names, choosing the layer, planning the passes (io/exr_channels.h). */
 #include "io/exr_channels.h"
+#include "core/frame.h"
+#include "core/mem.h"
 
 #include <ctype.h>
 #include <stdio.h>
@@ -238,6 +241,179 @@ static int unknown_rank(const char *chan, int file_order)
     return 100 + file_order;
 }
 
+/* The frame pass a selected channel feeds: its name and id (-1: a pass libfx does not
+ * know, -2: a name too long to keep). */
+static int channel_pass(const fx_exr_chan *c, const fx_exr_crypto *cryptos, int crypto_count, char name[FX_NAME_MAX])
+{
+    if (c->pass[0])
+        return pass_name_for(c->pass, cryptos, crypto_count, name);
+    /* A bare channel: R, G, B, A, Y make Combined; Z is depth (OpenEXR's RGBAZ);
+     * anything else ("pscale") is a one-channel pass of its own. */
+    char letter[FX_EXR_NAME_MAX];
+    fx_exr_channel_letter(c->chan, letter);
+    if (strcmp(letter, "Z") == 0) {
+        strcpy(name, "Depth");
+        return FX_PASS_DEPTH;
+    }
+    if (strlen(letter) == 1 && strchr("RGBAY", letter[0])) {
+        strcpy(name, "Combined");
+        return FX_PASS_COMBINED;
+    }
+    return pass_name_for(c->chan, cryptos, crypto_count, name);
+}
+
+typedef struct planner {
+    fx_context *ctx;
+    const char *path;
+    const fx_exr_chan *chans;
+    group *groups;
+    member *members;
+    int ngroups, nmembers;
+} planner;
+
+/* Stage 1, select and group: the channels of the chosen layer and view (and layer-less
+ * ones) that the selection wants, grouped by the frame pass they feed, each with its
+ * priority. */
+static void group_channels(planner *pl, int count, const fx_exr_crypto *cryptos, int crypto_count,
+                           const fx_exr_select *sel)
+{
+    int warned_sampling = 0;
+    for (int i = 0; i < count; i++) {
+        const fx_exr_chan *c = &pl->chans[i];
+        if (c->view[0] && strcmp(c->view, sel->view) != 0)
+            continue;
+        int layer_match = strcmp(c->layer, sel->layer) == 0;
+        if (!layer_match && c->layer[0])
+            continue;
+        if (c->x_sampling != 1 || c->y_sampling != 1) {
+            if (!warned_sampling++)
+                fx_warn(pl->ctx, "'%s': channel '%s' is subsampled (%dx%d): skipped", pl->path, c->full,
+                        c->x_sampling, c->y_sampling);
+            continue;
+        }
+        /* Channels of the chosen layer beat layer-less ones; view-tagged beat untagged. */
+        int prio = (layer_match && sel->layer[0] ? 2 : 0) + (c->view[0] ? 1 : 0);
+        char name[FX_NAME_MAX];
+        int id = channel_pass(c, cryptos, crypto_count, name);
+        if (id == -2) {
+            fx_warn(pl->ctx, "'%s': channel '%s' has a pass name too long for libfx: skipped", pl->path, c->full);
+            continue;
+        }
+        if (!sel->all && id != FX_PASS_COMBINED && (id < 0 || !(sel->wanted & FX_PASS_BIT(id))))
+            continue;
+
+        group *groups = pl->groups;
+        int g = 0;
+        while (g < pl->ngroups && strcmp(groups[g].name, name) != 0)
+            g++;
+        if (g == pl->ngroups) {
+            strcpy(groups[g].name, name);
+            groups[g].id = id;
+            groups[g].best = prio;
+            pl->ngroups++;
+        } else if (prio > groups[g].best) {
+            groups[g].best = prio;
+        }
+        member *m = &pl->members[pl->nmembers++];
+        m->chan = i;
+        m->prio = prio;
+        m->group = g;
+    }
+}
+
+/* Stage 2a, a pass libfx knows: channels to slots by letter, then unexpected letters by
+ * position; Combined also turns one colour channel into gray and is opaque without alpha. */
+static void fill_known_pass(const planner *pl, fx_exr_plan_pass *p, const int *mine, int nm)
+{
+    const fx_pass_desc *d = fx_pass_describe((fx_pass_id)p->id);
+    p->channels = d->channels;
+    int unmatched[FX_EXR_NAME_MAX], nu = 0;
+    int gray = -1; /* a Y channel */
+    for (int k = 0; k < nm; k++) {
+        char letter[FX_EXR_NAME_MAX];
+        fx_exr_channel_letter(pl->chans[mine[k]].chan, letter);
+        int s = d->channels == 1 ? 0 : letter_slot(d->channel_names, letter);
+        if (p->id == FX_PASS_COMBINED && strcmp(letter, "Y") == 0) {
+            gray = mine[k];
+            continue;
+        }
+        if (s >= 0 && p->src[s] < 0)
+            p->src[s] = mine[k];
+        else if (s < 0 && strcmp(letter, "A") != 0) /* colour passes drop A */
+            unmatched[nu++] = mine[k];
+    }
+    /* Letters libfx does not expect (Normal written as R,G,B): by position. */
+    for (int k = 0, s = 0; k < nu; k++) {
+        while (s < d->channels && p->src[s] >= 0)
+            s++;
+        if (s == d->channels) {
+            fx_warn(pl->ctx, "'%s': channel '%s' does not fit pass %s: skipped", pl->path,
+                    pl->chans[unmatched[k]].full, p->name);
+            continue;
+        }
+        p->src[s] = unmatched[k];
+    }
+    if (p->id == FX_PASS_COMBINED) {
+        int have = (p->src[0] >= 0) + (p->src[1] >= 0) + (p->src[2] >= 0);
+        if (have == 0 && gray >= 0) {
+            p->src[0] = gray;
+            have = 1;
+        }
+        if (have == 1) {
+            /* One colour channel (Y, or a lone G): a gray image, not a tinted one. */
+            int s = p->src[0] >= 0 ? 0 : p->src[1] >= 0 ? 1 : 2;
+            for (int t = 0; t < 3; t++)
+                if (t != s)
+                    p->copy_from[t] = s;
+        }
+        if (p->src[3] < 0)
+            p->fill[3] = 1.0f; /* no alpha: opaque */
+    }
+}
+
+/* Stage 2b, a pass libfx does not know: its channels in the usual letter order, at most 4. */
+static void fill_unknown_pass(const planner *pl, fx_exr_plan_pass *p, int *mine, int nm)
+{
+    /* EXR sorts channels by name (G before R): restore the usual letter order. */
+    int rank[FX_EXR_NAME_MAX];
+    for (int k = 0; k < nm; k++)
+        rank[k] = unknown_rank(pl->chans[mine[k]].chan, k);
+    for (int k = 1; k < nm; k++)
+        for (int j = k; j > 0 && rank[j] < rank[j - 1]; j--) {
+            int t = rank[j];
+            rank[j] = rank[j - 1], rank[j - 1] = t;
+            t = mine[j];
+            mine[j] = mine[j - 1], mine[j - 1] = t;
+        }
+    if (nm > 4)
+        fx_warn(pl->ctx, "'%s': pass '%s' has %d channels, libfx keeps the first 4", pl->path, p->name, nm);
+    p->channels = nm > 4 ? 4 : nm;
+    for (int k = 0; k < p->channels; k++)
+        p->src[k] = mine[k];
+}
+
+/* Stage 2, one pass per group, fed only by the group's best source: never R from one
+ * layer and A from another. Returns 1 when the pass has channels. */
+static int plan_group(const planner *pl, int g, fx_exr_plan_pass *p)
+{
+    strcpy(p->name, pl->groups[g].name);
+    p->id = pl->groups[g].id;
+    for (int s = 0; s < 4; s++) {
+        p->src[s] = -1;
+        p->fill[s] = 0.0f;
+        p->copy_from[s] = -1;
+    }
+    int mine[FX_EXR_NAME_MAX], nm = 0;
+    for (int m = 0; m < pl->nmembers; m++)
+        if (pl->members[m].group == g && pl->members[m].prio == pl->groups[g].best && nm < FX_EXR_NAME_MAX)
+            mine[nm++] = pl->members[m].chan;
+    if (p->id >= 0)
+        fill_known_pass(pl, p, mine, nm);
+    else
+        fill_unknown_pass(pl, p, mine, nm);
+    return p->channels > 0;
+}
+
 fx_result fx_exr_plan(fx_context *ctx, const char *path, const fx_exr_chan *chans, int count,
                       const fx_exr_crypto *cryptos, int crypto_count, const fx_exr_select *sel,
                       fx_exr_plan_pass **out, int *out_count)
@@ -246,160 +422,22 @@ fx_result fx_exr_plan(fx_context *ctx, const char *path, const fx_exr_chan *chan
     *out_count = 0;
     if (count <= 0)
         return FX_OK;
-    group *groups = fx_mem_calloc((size_t)count, sizeof *groups);
-    member *members = fx_mem_calloc((size_t)count, sizeof *members);
+    planner pl = {ctx, path, chans, NULL, NULL, 0, 0};
+    pl.groups = fx_mem_calloc((size_t)count, sizeof *pl.groups);
+    pl.members = fx_mem_calloc((size_t)count, sizeof *pl.members);
     fx_exr_plan_pass *plan = fx_mem_calloc((size_t)count, sizeof *plan);
-    if (!groups || !members || !plan) {
-        fx_mem_free(groups);
-        fx_mem_free(members);
+    if (!pl.groups || !pl.members || !plan) {
+        fx_mem_free(pl.groups);
+        fx_mem_free(pl.members);
         fx_mem_free(plan);
         return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "out of memory planning the channels of '%s'", path);
     }
-    int ngroups = 0, nmembers = 0, warned_sampling = 0;
-
-    for (int i = 0; i < count; i++) {
-        const fx_exr_chan *c = &chans[i];
-        if (c->view[0] && strcmp(c->view, sel->view) != 0)
-            continue;
-        int layer_match = strcmp(c->layer, sel->layer) == 0;
-        if (!layer_match && c->layer[0])
-            continue;
-        if (c->x_sampling != 1 || c->y_sampling != 1) {
-            if (!warned_sampling++)
-                fx_warn(ctx, "'%s': channel '%s' is subsampled (%dx%d): skipped", path, c->full,
-                        c->x_sampling, c->y_sampling);
-            continue;
-        }
-        /* Channels of the chosen layer beat layer-less ones; view-tagged beat untagged. */
-        int prio = (layer_match && sel->layer[0] ? 2 : 0) + (c->view[0] ? 1 : 0);
-
-        char name[FX_NAME_MAX], letter[FX_EXR_NAME_MAX];
-        int id;
-        fx_exr_channel_letter(c->chan, letter);
-        if (!c->pass[0]) {
-            /* A bare channel: R, G, B, A, Y make Combined; Z is depth (OpenEXR's RGBAZ);
-             * anything else ("pscale") is a one-channel pass of its own. */
-            if (strcmp(letter, "Z") == 0) {
-                id = FX_PASS_DEPTH;
-                strcpy(name, "Depth");
-            } else if (strlen(letter) == 1 && strchr("RGBAY", letter[0])) {
-                id = FX_PASS_COMBINED;
-                strcpy(name, "Combined");
-            } else {
-                id = pass_name_for(c->chan, cryptos, crypto_count, name);
-            }
-        } else {
-            id = pass_name_for(c->pass, cryptos, crypto_count, name);
-        }
-        if (id == -2) {
-            fx_warn(ctx, "'%s': channel '%s' has a pass name too long for libfx: skipped", path, c->full);
-            continue;
-        }
-        if (!sel->all && id != FX_PASS_COMBINED && (id < 0 || !(sel->wanted & FX_PASS_BIT(id))))
-            continue;
-
-        int g = 0;
-        while (g < ngroups && strcmp(groups[g].name, name) != 0)
-            g++;
-        if (g == ngroups) {
-            strcpy(groups[g].name, name);
-            groups[g].id = id;
-            groups[g].best = prio;
-            ngroups++;
-        } else if (prio > groups[g].best) {
-            groups[g].best = prio;
-        }
-        members[nmembers].chan = i;
-        members[nmembers].prio = prio;
-        members[nmembers].group = g;
-        nmembers++;
-    }
-
+    group_channels(&pl, count, cryptos, crypto_count, sel);
     int np = 0;
-    for (int g = 0; g < ngroups; g++) {
-        fx_exr_plan_pass *p = &plan[np];
-        strcpy(p->name, groups[g].name);
-        p->id = groups[g].id;
-        for (int s = 0; s < 4; s++) {
-            p->src[s] = -1;
-            p->fill[s] = 0.0f;
-            p->copy_from[s] = -1;
-        }
-        /* Only the best source of a pass feeds it: never R from one layer and A from another. */
-        int mine[FX_EXR_NAME_MAX], nm = 0;
-        for (int m = 0; m < nmembers; m++)
-            if (members[m].group == g && members[m].prio == groups[g].best && nm < FX_EXR_NAME_MAX)
-                mine[nm++] = members[m].chan;
-
-        if (p->id >= 0) {
-            const fx_pass_desc *d = fx_pass_describe((fx_pass_id)p->id);
-            p->channels = d->channels;
-            int unmatched[FX_EXR_NAME_MAX], nu = 0;
-            int gray = -1; /* a Y channel */
-            for (int k = 0; k < nm; k++) {
-                char letter[FX_EXR_NAME_MAX];
-                fx_exr_channel_letter(chans[mine[k]].chan, letter);
-                int s = d->channels == 1 ? 0 : letter_slot(d->channel_names, letter);
-                if (p->id == FX_PASS_COMBINED && strcmp(letter, "Y") == 0) {
-                    gray = mine[k];
-                    continue;
-                }
-                if (s >= 0 && p->src[s] < 0)
-                    p->src[s] = mine[k];
-                else if (s < 0 && strcmp(letter, "A") != 0) /* colour passes drop A */
-                    unmatched[nu++] = mine[k];
-            }
-            /* Letters libfx does not expect (Normal written as R,G,B): by position. */
-            for (int k = 0, s = 0; k < nu; k++) {
-                while (s < d->channels && p->src[s] >= 0)
-                    s++;
-                if (s == d->channels) {
-                    fx_warn(ctx, "'%s': channel '%s' does not fit pass %s: skipped", path,
-                            chans[unmatched[k]].full, p->name);
-                    continue;
-                }
-                p->src[s] = unmatched[k];
-            }
-            if (p->id == FX_PASS_COMBINED) {
-                int have = (p->src[0] >= 0) + (p->src[1] >= 0) + (p->src[2] >= 0);
-                if (have == 0 && gray >= 0) {
-                    p->src[0] = gray;
-                    have = 1;
-                }
-                if (have == 1) {
-                    /* One colour channel (Y, or a lone G): a gray image, not a tinted one. */
-                    int s = p->src[0] >= 0 ? 0 : p->src[1] >= 0 ? 1 : 2;
-                    for (int t = 0; t < 3; t++)
-                        if (t != s)
-                            p->copy_from[t] = s;
-                }
-                if (p->src[3] < 0)
-                    p->fill[3] = 1.0f; /* no alpha: opaque */
-            }
-        } else {
-            /* EXR sorts channels by name (G before R): restore the usual letter order. */
-            int rank[FX_EXR_NAME_MAX];
-            for (int k = 0; k < nm; k++)
-                rank[k] = unknown_rank(chans[mine[k]].chan, k);
-            for (int k = 1; k < nm; k++)
-                for (int j = k; j > 0 && rank[j] < rank[j - 1]; j--) {
-                    int t = rank[j];
-                    rank[j] = rank[j - 1], rank[j - 1] = t;
-                    t = mine[j];
-                    mine[j] = mine[j - 1], mine[j - 1] = t;
-                }
-            if (nm > 4)
-                fx_warn(ctx, "'%s': pass '%s' has %d channels, libfx keeps the first 4", path,
-                        p->name, nm);
-            p->channels = nm > 4 ? 4 : nm;
-            for (int k = 0; k < p->channels; k++)
-                p->src[k] = mine[k];
-        }
-        if (p->channels > 0)
-            np++;
-    }
-    fx_mem_free(groups);
-    fx_mem_free(members);
+    for (int g = 0; g < pl.ngroups; g++)
+        np += plan_group(&pl, g, &plan[np]);
+    fx_mem_free(pl.groups);
+    fx_mem_free(pl.members);
     if (np == 0) {
         fx_mem_free(plan);
         plan = NULL;

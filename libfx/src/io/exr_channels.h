@@ -18,7 +18,9 @@
 #ifndef LIBFX_IO_EXR_CHANNELS_H
 #define LIBFX_IO_EXR_CHANNELS_H
 
-#include "core/internal.h"
+#include "core/context.h"
+#include "core/frame.h"
+#include "core/mem.h"
 #include "core/passes.h"
 
 #ifdef __cplusplus

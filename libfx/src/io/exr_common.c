@@ -1,6 +1,9 @@
+/* Opening an EXR with OpenEXRCore and summarising its header for the reader and fx_exr_info_json (io/exr_common.h). */
 #include "io/exr_common.h"
 
 #include "io/cryptomatte_meta.h"
+#include "core/frame.h"
+#include "core/mem.h"
 
 #include <errno.h>
 #include <limits.h>

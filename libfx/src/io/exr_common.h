@@ -3,7 +3,8 @@
 #ifndef LIBFX_IO_EXR_COMMON_H
 #define LIBFX_IO_EXR_COMMON_H
 
-#include "core/internal.h"
+#include "core/context.h"
+#include "core/frame.h"
 #include "io/exr_channels.h"
 
 #include <openexr.h>

@@ -1,5 +1,6 @@
 /* fx_exr_info_json: a header summary, decoding no pixels. */
-#include "core/internal.h"
+#include "core/context.h"
+#include "core/mem.h"
 #include "io/exr_common.h"
 
 #include <cjson/cJSON.h>

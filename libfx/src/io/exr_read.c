@@ -1,4 +1,4 @@
-/* fx_frame_read_exr: an EXR (Blender's multilayer output, a File Output node's file,
+/* fx_exr_read: an EXR (Blender's multilayer output, a File Output node's file,
  * or any other tool's) into a frame of float passes.
  *
  * Steps: open and summarise the header (exr_common.c), choose the layer and view,
@@ -7,14 +7,18 @@
  * DWAA/DWAB parts through OpenEXR's C++ reader, exr_dwa_fallback.cpp), then replace
  * non-finite values and attach camera, time and metadata. The frame is the union of
  * the used parts' data windows; pixels a part does not cover keep the fill value. */
-#include "core/internal.h"
+#include "io/exr_read.h"
+
+#include "core/context.h"
+#include "core/frame.h"
+#include "core/mem.h"
+#include "core/parallel.h"
 #include "core/passes.h"
 #include "io/cryptomatte_meta.h"
 #include "io/exr_camera.h"
 #include "io/exr_channels.h"
 #include "io/exr_common.h"
 #include "io/exr_dwa_fallback.h"
-#include "core/parallel.h"
 
 #include <errno.h>
 #include <fcntl.h>
@@ -24,8 +28,6 @@
 #include <stdlib.h>
 #include <string.h>
 #include <unistd.h>
-
-/* Provided by the stack (core/stack.c): the passes its enabled effects and masks need. */
 
 /* Where one planned channel lands. */
 typedef struct chan_dest {
@@ -512,155 +514,210 @@ static int pass_fully_decoded(const reader *rd, const fx_exr_plan_pass *pp)
     return 1;
 }
 
-static fx_result read_frame(fx_context *ctx, fx_exr_file *f, const fx_read_options *opts, fx_frame **out)
+/* Stage 1, resolve: the view and the layer the caller asked for, checked against the file. */
+static fx_result resolve_layer_view(fx_context *ctx, const fx_exr_file *f, const fx_exr_read_request *req,
+                                    const char **layer, const char **view)
 {
-    const char *layer = NULL, *view = NULL;
-    fx_result r = resolve_view(ctx, f, opts ? opts->view : NULL, &view);
+    fx_result r = resolve_view(ctx, f, req->view, view);
     if (r == FX_OK)
-        r = fx_exr_choose_layer(ctx, f->path, f->chans, f->chan_count, opts ? opts->layer : NULL, &layer);
+        r = fx_exr_choose_layer(ctx, f->path, f->chans, f->chan_count, req->layer, layer);
+    return r;
+}
+
+/* Stage 2, plan: which channels feed which pass slots; a selective read must find Combined. */
+static fx_result plan_passes(fx_context *ctx, const fx_exr_file *f, const fx_exr_select *sel,
+                             fx_exr_plan_pass **plan, int *np)
+{
+    fx_result r = fx_exr_plan(ctx, f->path, f->chans, f->chan_count, f->cryptos, f->crypto_count, sel, plan, np);
     if (r != FX_OK)
         return r;
-
-    fx_exr_select sel = {layer, view, 1, 0};
-    if (opts && opts->stack) {
-        sel.all = 0;
-        sel.wanted = fx_stack_pass_set(opts->stack) | FX_PASS_BIT(FX_PASS_COMBINED);
-    }
-    fx_exr_plan_pass *plan = NULL;
-    int np = 0;
-    if ((r = fx_exr_plan(ctx, f->path, f->chans, f->chan_count, f->cryptos, f->crypto_count, &sel,
-                         &plan, &np)) != FX_OK)
-        return r;
-    const char *where_layer = layer[0] ? layer : "(none)";
-    if (np == 0 || (!sel.all && plan[0].id != FX_PASS_COMBINED)) {
+    const char *where_layer = sel->layer[0] ? sel->layer : "(none)";
+    const char *view = sel->view;
+    if (*np == 0 || (!sel->all && (*plan)[0].id != FX_PASS_COMBINED)) {
         int has_combined = 0;
-        for (int i = 0; i < np; i++)
-            has_combined |= plan[i].id == FX_PASS_COMBINED;
-        if (!has_combined && !sel.all) {
-            fx_mem_free(plan);
+        for (int i = 0; i < *np; i++)
+            has_combined |= (*plan)[i].id == FX_PASS_COMBINED;
+        if (!has_combined && !sel->all) {
+            fx_mem_free(*plan);
+            *plan = NULL;
             return fx_fail(ctx, FX_ERR_MISSING_PASS, "'%s' has no Combined pass (layer %s%s%s)", f->path,
                            where_layer, view[0] ? ", view " : "", view);
         }
-        if (np == 0) {
+        if (*np == 0) {
             return fx_fail(ctx, FX_ERR_BAD_FILE, "'%s' has no readable channels (layer %s%s%s)", f->path,
                            where_layer, view[0] ? ", view " : "", view);
         }
     }
+    return FX_OK;
+}
 
-    /* The frame: the union of the data windows of the parts that feed it. */
-    reader rd = {ctx, f, NULL, {0, 0, -1, -1}, 0, 0, NULL};
-    int first = 1, any_dwa = 0;
+/* Stage 3, window: the frame is the union of the data windows of the parts that feed it,
+ * within the context's size limits. Sets rd's window and size; *any_dwa when a used part
+ * is DWA-compressed. */
+static fx_result frame_window(reader *rd, const fx_exr_plan_pass *plan, int np, int *any_dwa)
+{
+    const fx_exr_file *f = rd->f;
+    fx_context *ctx = rd->ctx;
+    int first = 1;
+    *any_dwa = 0;
     for (int i = 0; i < np; i++)
         for (int s = 0; s < plan[i].channels; s++) {
             if (plan[i].src[s] < 0)
                 continue;
             const fx_exr_part *pt = &f->parts[f->chans[plan[i].src[s]].part];
-            any_dwa |= part_is_dwa(pt);
+            *any_dwa |= part_is_dwa(pt);
             for (int k = 0; k < 4; k++)
-                if (first || (k < 2 ? pt->dw[k] < rd.dw[k] : pt->dw[k] > rd.dw[k]))
-                    rd.dw[k] = pt->dw[k];
+                if (first || (k < 2 ? pt->dw[k] < rd->dw[k] : pt->dw[k] > rd->dw[k]))
+                    rd->dw[k] = pt->dw[k];
             first = 0;
         }
     if (first) /* no channel in the file at all (fills only): part 0's window */
-        memcpy(rd.dw, f->parts[0].dw, sizeof rd.dw);
-    int64_t w64 = (int64_t)rd.dw[2] - rd.dw[0] + 1, h64 = (int64_t)rd.dw[3] - rd.dw[1] + 1;
-    if (w64 > ctx->max_width || h64 > ctx->max_height) {
-        fx_mem_free(plan);
+        memcpy(rd->dw, f->parts[0].dw, sizeof rd->dw);
+    int64_t w64 = (int64_t)rd->dw[2] - rd->dw[0] + 1, h64 = (int64_t)rd->dw[3] - rd->dw[1] + 1;
+    if (w64 > ctx->max_width || h64 > ctx->max_height)
         return fx_fail(ctx, FX_ERR_LIMIT, "'%s': data window %lld x %lld is over the limit of %d x %d",
                        f->path, (long long)w64, (long long)h64, ctx->max_width, ctx->max_height);
-    }
-    rd.width = (int)w64;
-    rd.height = (int)h64;
+    rd->width = (int)w64;
+    rd->height = (int)h64;
+    return FX_OK;
+}
 
-    /* Budget before any pixel allocation: the total and each pass, with overflow checks. */
+/* Stage 4, budget: the total of every pass, with overflow checks, before any pixel
+ * allocation. */
+static fx_result check_budget(const reader *rd, const fx_exr_plan_pass *plan, int np)
+{
     uint64_t total = 0;
     for (int i = 0; i < np; i++) {
         size_t bytes;
-        if (!fx_size_mul(&bytes, (size_t)rd.width, (size_t)rd.height, (size_t)plan[i].channels * sizeof(float))) {
-            fx_mem_free(plan);
-            return fx_fail(ctx, FX_ERR_LIMIT, "'%s': pass %s: size overflows", f->path, plan[i].name);
-        }
+        if (!fx_size_mul(&bytes, (size_t)rd->width, (size_t)rd->height, (size_t)plan[i].channels * sizeof(float)))
+            return fx_fail(rd->ctx, FX_ERR_LIMIT, "'%s': pass %s: size overflows", rd->f->path, plan[i].name);
         total += bytes;
     }
     char what[FX_NAME_MAX + 1100];
-    snprintf(what, sizeof what, "file '%s' (%d passes, %d x %d)", f->path, np, rd.width, rd.height);
-    if ((r = fx_check_budget(ctx, total, what)) != FX_OK) {
-        fx_mem_free(plan);
-        return r;
-    }
+    snprintf(what, sizeof what, "file '%s' (%d passes, %d x %d)", rd->f->path, np, rd->width, rd->height);
+    return fx_check_budget(rd->ctx, total, what);
+}
 
-    rd.dest = fx_mem_calloc((size_t)(f->chan_count ? f->chan_count : 1), sizeof *rd.dest);
-    if (!rd.dest) {
-        fx_mem_free(plan);
-        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "'%s': out of memory", f->path);
-    }
-    r = fx_frame_new(ctx, rd.width, rd.height, &rd.frame);
+/* Stage 5, allocate: the frame, its windows and source, and each planned pass filled
+ * with its fill values; records where each decoded channel lands (rd->dest). */
+static fx_result allocate_passes(reader *rd, const fx_exr_plan_pass *plan, int np)
+{
+    fx_context *ctx = rd->ctx;
+    const fx_exr_file *f = rd->f;
+    fx_result r = fx_frame_new(ctx, rd->width, rd->height, &rd->frame);
     if (r == FX_OK) {
         int disp[4];
         memcpy(disp, f->parts[0].disp, sizeof disp);
-        r = fx_frame_set_windows(rd.frame, rd.dw, disp);
+        r = fx_frame_set_windows(rd->frame, rd->dw, disp);
     }
     /* Messages about missing passes name the file (never written back: libfx:* is reserved). */
     if (r == FX_OK)
-        r = fx_frame_set_meta(rd.frame, "libfx:source", f->path);
+        r = fx_frame_set_meta(rd->frame, "libfx:source", f->path);
+    char what[FX_NAME_MAX + 1100];
     for (int i = 0; i < np && r == FX_OK; i++) {
-        fx_exr_plan_pass *pp = &plan[i];
+        const fx_exr_plan_pass *pp = &plan[i];
         snprintf(what, sizeof what, "file '%s' pass %s", f->path, pp->name);
-        size_t bytes = (size_t)rd.width * (size_t)rd.height * (size_t)pp->channels * sizeof(float);
+        size_t bytes = (size_t)rd->width * (size_t)rd->height * (size_t)pp->channels * sizeof(float);
         float *data = NULL;
         if ((r = fx_check_budget(ctx, bytes, what)) != FX_OK ||
-            (r = fx_frame_alloc_pass(rd.frame, pp->name, pp->channels, &data)) != FX_OK)
+            (r = fx_frame_alloc_pass(rd->frame, pp->name, pp->channels, &data)) != FX_OK)
             break;
-        size_t count = (size_t)rd.width * (size_t)rd.height;
+        size_t count = (size_t)rd->width * (size_t)rd->height;
         int nc = pp->channels;
         int from_half = 1;
-        if (!pass_fully_decoded(&rd, pp))
+        if (!pass_fully_decoded(rd, pp))
             for (size_t px = 0; px < count; px++)
                 for (int s = 0; s < nc; s++)
                     data[px * nc + s] = pp->src[s] >= 0 ? 0.0f : pp->fill[s];
         for (int s = 0; s < nc; s++) {
             if (pp->src[s] < 0)
                 continue;
-            rd.dest[pp->src[s]].base = data;
-            rd.dest[pp->src[s]].stride = nc;
-            rd.dest[pp->src[s]].slot = s;
+            rd->dest[pp->src[s]].base = data;
+            rd->dest[pp->src[s]].stride = nc;
+            rd->dest[pp->src[s]].slot = s;
             from_half &= f->chans[pp->src[s]].type == EXR_PIXEL_HALF;
         }
-        fx_pass *fp = fx_frame_find_pass(rd.frame, pp->name);
+        fx_pass *fp = fx_frame_find_pass(rd->frame, pp->name);
         if (fp)
             fp->from_half = from_half;
     }
+    return r;
+}
 
-    if (r == FX_OK && any_dwa)
-        fx_warn(ctx, "'%s' is DWA-compressed: lossy, data passes (Depth/Normal/Position) are approximate",
+/* Stage 6, decode: every part that feeds a planned channel. */
+static fx_result decode_parts(reader *rd, int any_dwa)
+{
+    const fx_exr_file *f = rd->f;
+    if (any_dwa)
+        fx_warn(rd->ctx, "'%s' is DWA-compressed: lossy, data passes (Depth/Normal/Position) are approximate",
                 f->path);
+    fx_result r = FX_OK;
     for (int p = 0; p < f->part_count && r == FX_OK; p++) {
         int used = 0;
         for (int c = 0; c < f->parts[p].channel_count; c++)
-            used |= rd.dest[f->parts[p].first_chan + c].base != NULL;
+            used |= rd->dest[f->parts[p].first_chan + c].base != NULL;
         if (!used)
             continue;
-        r = part_is_dwa(&f->parts[p]) ? decode_dwa_part(&rd, p) : decode_core_part(&rd, p);
+        r = part_is_dwa(&f->parts[p]) ? decode_dwa_part(rd, p) : decode_core_part(rd, p);
     }
+    return r;
+}
 
-    for (int i = 0; i < np && r == FX_OK; i++) {
-        fx_pass *pass = fx_frame_find_pass(rd.frame, plan[i].name);
-        if (!pass) {
-            r = fx_fail(ctx, FX_ERR_INTERNAL, "'%s': pass %s was planned but not made", f->path, plan[i].name);
-            break;
-        }
+/* Stage 7, fix-ups: gray channels copied to RGB slots, non-finite values replaced (and
+ * counted in a warning). */
+static fx_result fix_up_passes(reader *rd, const fx_exr_plan_pass *plan, int np)
+{
+    for (int i = 0; i < np; i++) {
+        fx_pass *pass = fx_frame_find_pass(rd->frame, plan[i].name);
+        if (!pass)
+            return fx_fail(rd->ctx, FX_ERR_INTERNAL, "'%s': pass %s was planned but not made", rd->f->path,
+                           plan[i].name);
         float *data = pass->data; /* our own new pass: written in place, still shareable */
         int nc = pass->channels;
-        size_t count = (size_t)rd.width * (size_t)rd.height;
+        size_t count = (size_t)rd->width * (size_t)rd->height;
         for (int s = 0; s < nc; s++)
             if (plan[i].copy_from[s] >= 0)
                 for (size_t px = 0; px < count; px++)
                     data[px * nc + s] = data[px * nc + plan[i].copy_from[s]];
-        size_t bad = fx_sanitize_floats(ctx, data, count * (size_t)nc);
+        size_t bad = fx_sanitize_floats(rd->ctx, data, count * (size_t)nc);
         if (bad)
-            fx_warn(ctx, "'%s': %zu NaN/Inf values in pass %s replaced", f->path, bad, plan[i].name);
+            fx_warn(rd->ctx, "'%s': %zu NaN/Inf values in pass %s replaced", rd->f->path, bad, plan[i].name);
     }
+    return FX_OK;
+}
 
+static fx_result read_frame(fx_context *ctx, fx_exr_file *f, const fx_exr_read_request *req, fx_frame **out)
+{
+    const char *layer = NULL, *view = NULL;
+    fx_result r = resolve_layer_view(ctx, f, req, &layer, &view);
+    if (r != FX_OK)
+        return r;
+    fx_exr_select sel = {layer, view, 1, 0};
+    if (!req->all) {
+        sel.all = 0;
+        sel.wanted = req->wanted | FX_PASS_BIT(FX_PASS_COMBINED);
+    }
+    fx_exr_plan_pass *plan = NULL;
+    int np = 0;
+    if ((r = plan_passes(ctx, f, &sel, &plan, &np)) != FX_OK)
+        return r;
+
+    reader rd = {ctx, f, NULL, {0, 0, -1, -1}, 0, 0, NULL};
+    int any_dwa = 0;
+    if ((r = frame_window(&rd, plan, np, &any_dwa)) != FX_OK || (r = check_budget(&rd, plan, np)) != FX_OK) {
+        fx_mem_free(plan);
+        return r;
+    }
+    rd.dest = fx_mem_calloc((size_t)(f->chan_count ? f->chan_count : 1), sizeof *rd.dest);
+    if (!rd.dest) {
+        fx_mem_free(plan);
+        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "'%s': out of memory", f->path);
+    }
+    r = allocate_passes(&rd, plan, np);
+    if (r == FX_OK)
+        r = decode_parts(&rd, any_dwa);
+    if (r == FX_OK)
+        r = fix_up_passes(&rd, plan, np);
     if (r == FX_OK)
         r = read_attributes(&rd, 0);
     if (r == FX_OK)
@@ -675,21 +732,14 @@ static fx_result read_frame(fx_context *ctx, fx_exr_file *f, const fx_read_optio
     return FX_OK;
 }
 
-fx_result fx_frame_read_exr(fx_context *ctx, const char *path, const fx_read_options *opts, fx_frame **out)
+fx_result fx_exr_read(fx_context *ctx, const char *path, const fx_exr_read_request *req, fx_frame **out)
 {
-    if (out)
-        *out = NULL;
-    if (!ctx || !path || !out)
-        return fx_fail(ctx, FX_ERR_INVALID_ARGUMENT, "fx_frame_read_exr: ctx, path and out must not be NULL");
-    if (opts && opts->size < sizeof(fx_read_options))
-        return fx_fail(ctx, FX_ERR_INVALID_ARGUMENT,
-                       "fx_frame_read_exr: opts->size is %zu, expected %zu (set it to sizeof(fx_read_options))",
-                       opts->size, sizeof(fx_read_options));
+    static const fx_exr_read_request every_pass = {NULL, NULL, 1, 0};
     fx_exr_file f;
     fx_result r = fx_exr_file_open(ctx, path, &f);
     if (r != FX_OK)
         return r;
-    r = read_frame(ctx, &f, opts, out);
+    r = read_frame(ctx, &f, req ? req : &every_pass, out);
     fx_exr_file_close(&f);
     return r;
 }

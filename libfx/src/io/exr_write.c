@@ -11,7 +11,9 @@
  * Atomic: the file is written as "<dir>/.<name>.tmp-<pid>-<n>" and renamed over the
  * destination only when complete; on any failure the temporary file is removed and
  * the destination (and the input) are untouched. */
-#include "core/internal.h"
+#include "core/context.h"
+#include "core/frame.h"
+#include "core/mem.h"
 #include "core/passes.h"
 #include "io/cryptomatte_meta.h"
 #include "io/exr_camera.h"
@@ -37,6 +39,8 @@ typedef struct out_chan {
 } out_chan;
 
 /* Attributes libfx writes itself or OpenEXR owns: metadata never overrides them. */
+static fx_result parse_compression(const fx_context *ctx, const char *text, fx_exr_write_params *out);
+
 static int reserved_attr(const char *key)
 {
     static const char *const names[] = {
@@ -451,7 +455,7 @@ fx_result fx_exr_write_with(const fx_frame *f, const char *path, const fx_write_
                        opts->size, sizeof(fx_write_options));
     fx_exr_write_params p = params ? *params : fx_exr_write_defaults();
     if (!params && opts && opts->size >= sizeof(fx_write_options) && opts->compression) {
-        fx_result pr = fx_exr_parse_compression(ctx, opts->compression, &p);
+        fx_result pr = parse_compression(ctx, opts->compression, &p);
         if (pr != FX_OK)
             return pr;
     }
@@ -493,7 +497,8 @@ fx_result fx_exr_write(const fx_frame *f, const char *path, const fx_write_optio
     return fx_exr_write_with(f, path, opts, params, FX_EXR_ZIP_AUTO);
 }
 
-fx_result fx_exr_parse_compression(const fx_context *ctx, const char *text, fx_exr_write_params *out)
+/* "zip", "zip:6", "zips", "piz", "rle", "none" -> params; FX_ERR_BAD_PARAM otherwise. */
+static fx_result parse_compression(const fx_context *ctx, const char *text, fx_exr_write_params *out)
 {
     static const struct {
         const char *name;

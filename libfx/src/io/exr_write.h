@@ -3,7 +3,8 @@
 #ifndef LIBFX_IO_EXR_WRITE_H
 #define LIBFX_IO_EXR_WRITE_H
 
-#include "core/internal.h"
+#include "core/context.h"
+#include "core/frame.h"
 
 #include <openexr.h>
 
@@ -28,9 +29,6 @@ typedef struct fx_exr_write_params {
 
 /* EXR_COMPRESSION_ZIP at FX_EXR_DEFAULT_ZIP_LEVEL. */
 fx_exr_write_params fx_exr_write_defaults(void);
-
-/* "zip", "zip:6", "zips", "piz", "rle", "none" -> params; FX_ERR_BAD_PARAM otherwise. */
-fx_result fx_exr_parse_compression(const fx_context *ctx, const char *text, fx_exr_write_params *out);
 
 /* fx_frame_write_exr with explicit encoding; params NULL: the defaults. */
 fx_result fx_exr_write(const fx_frame *f, const char *path, const fx_write_options *opts,

@@ -1,6 +1,6 @@
 /* EXR ZIP chunks through libdeflate: see io/exr_zip.h for the format. */
 #include "io/exr_zip.h"
-#include "core/internal.h"
+#include "core/mem.h"
 
 #include <string.h>
 
@@ -42,7 +42,8 @@ int fx_exr_zip_available(void)
     return 1;
 }
 
-int fx_exr_zip_deflate_level(int zip_level)
+/* libdeflate's level for the writer's ZIP level (1..9, zlib's scale). */
+static int deflate_level(int zip_level)
 {
     /* The same number: libdeflate's 1..9 are meant as zlib's, and on renders its
      * levels 1..6 differ by under 0.5% in size and little in time (docs/performance.md,
@@ -59,7 +60,7 @@ fx_exr_zip *fx_exr_zip_new(int zip_level)
     fx_exr_zip *z = fx_mem_calloc(1, sizeof *z);
     if (!z)
         return NULL;
-    z->c = libdeflate_alloc_compressor(fx_exr_zip_deflate_level(zip_level));
+    z->c = libdeflate_alloc_compressor(deflate_level(zip_level));
     if (!z->c) {
         fx_mem_free(z);
         return NULL;
@@ -109,11 +110,6 @@ int fx_exr_zip_compress(fx_exr_zip *z, const uint8_t *in, size_t n, uint8_t *out
 int fx_exr_zip_available(void)
 {
     return 0;
-}
-
-int fx_exr_zip_deflate_level(int zip_level)
-{
-    return zip_level;
 }
 
 fx_exr_zip *fx_exr_zip_new(int zip_level)

@@ -26,9 +26,6 @@ typedef struct fx_exr_zip fx_exr_zip; /* one per thread: a compressor and a scra
 /* 1 when libfx was built with libdeflate. */
 int fx_exr_zip_available(void);
 
-/* libdeflate's level for the writer's ZIP level (1..9, zlib's scale). */
-int fx_exr_zip_deflate_level(int zip_level);
-
 /* NULL when out of memory or without libdeflate. fx_exr_zip_free(NULL) is fine. */
 fx_exr_zip *fx_exr_zip_new(int zip_level);
 void fx_exr_zip_free(fx_exr_zip *z);

@@ -5,7 +5,9 @@
  * [0, 1] and encoded with the sRGB transfer function (IEC 61966-2-1), not a plain
  * gamma 2.2; alpha is linear and not exposed. 1-channel passes are gray, 4-channel
  * passes keep their alpha, 2- and 3-channel passes are RGB (missing blue = 0). */
-#include "core/internal.h"
+#include "core/context.h"
+#include "core/frame.h"
+#include "core/mem.h"
 #include "io/atomic_file.h"
 
 #include <errno.h>

@@ -11,7 +11,8 @@
 #include "math/blur.h"
 
 #include "core/parallel.h"
-#include "math/simd8.h"
+#include "core/simd8.h"
+#include "core/mem.h"
 
 #include <float.h>
 #include <math.h>

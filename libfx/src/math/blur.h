@@ -30,8 +30,8 @@
 #ifndef LIBFX_MATH_BLUR_H
 #define LIBFX_MATH_BLUR_H
 
-#include "core/internal.h"
-#include "core/mask.h"
+#include "core/context.h"
+#include "core/rect.h"
 
 #ifdef __cplusplus
 extern "C" {

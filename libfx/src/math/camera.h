@@ -8,7 +8,8 @@
 #ifndef LIBFX_MATH_CAMERA_H
 #define LIBFX_MATH_CAMERA_H
 
-#include "core/internal.h"
+#include "core/context.h"
+#include "core/frame.h"
 #include "math/vec.h"
 
 typedef struct fx_view {

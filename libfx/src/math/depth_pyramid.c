@@ -1,7 +1,9 @@
 /* Hi-Z min-depth pyramid: see depth_pyramid.h. */
 #include "math/depth_pyramid.h"
 
-#include "core/internal.h"
+#include "core/buffers.h"
+#include "core/context.h"
+#include "core/mem.h"
 #include "core/parallel.h"
 #include "math/ssr_trace.h"
 

@@ -10,11 +10,13 @@
 #include "core/parallel.h"
 #include "math/color.h"
 #include "math/srgb_lut.h"
-#include "math/simd8.h"
+#include "core/simd8.h"
 
 typedef uint32_t v8ui __attribute__((vector_size(32)));
 #define S8I(v) ((v8i){ (v), (v), (v), (v), (v), (v), (v), (v) })
 #include "math/vec.h"
+#include "core/frame.h"
+#include "core/mem.h"
 
 #include <float.h>
 #include <math.h>
@@ -254,7 +256,7 @@ static inline float lum_px(const float *p, const float *lut)
     return fx_srgb_encode_lut(lut, l); /* no powf: math/srgb_lut.h */
 }
 
-/* 8 pixels at a time in GCC vector types (the transpose of math/simd8.h, then lum_px's
+/* 8 pixels at a time in GCC vector types (the transpose of core/simd8.h, then lum_px's
  * operations lane by lane: the same bits), the table read per lane; the rest per pixel. */
 EDGE_VEC static void lum_row(const float *p, const float *lut, int x0, int x1, float *out)
 {

@@ -25,9 +25,9 @@
 #ifndef LIBFX_MATH_EDGE_OPS_H
 #define LIBFX_MATH_EDGE_OPS_H
 
-#include "core/internal.h"
-#include "core/mask.h"
+#include "core/context.h"
 #include "core/passes.h"
+#include "core/rect.h"
 
 #ifdef __cplusplus
 extern "C" {

@@ -2,7 +2,7 @@
 #include "math/levels.h"
 
 #include "math/color.h"
-#include "math/simd4.h"
+#include "core/simd4.h"
 
 #include <float.h>
 #include <string.h>

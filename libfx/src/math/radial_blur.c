@@ -4,7 +4,9 @@
 
 #include "core/parallel.h"
 #include "math/hash.h"
-#include "math/simd4.h"
+#include "core/simd4.h"
+#include "core/buffers.h"
+#include "core/mem.h"
 
 #include <float.h>
 #include <limits.h>

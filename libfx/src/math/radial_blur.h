@@ -32,8 +32,8 @@
 #ifndef LIBFX_MATH_RADIAL_BLUR_H
 #define LIBFX_MATH_RADIAL_BLUR_H
 
-#include "core/internal.h"
-#include "core/mask.h"
+#include "core/context.h"
+#include "core/rect.h"
 
 #include <stdint.h>
 

@@ -1,6 +1,7 @@
 /* Summed-area tables: see sat.h. */
 #include "math/sat.h"
 #include "core/parallel.h"
+#include "core/mem.h"
 
 #include <float.h>
 #include <math.h>

@@ -1,5 +1,5 @@
 /* Summed-area tables (Crow 1984) for box filters of any size at a cost independent of
- * the size. GUIDE §4: values are centred (the image's mean per channel is subtracted
+ * the size. Values are centred (the image's mean per channel is subtracted
  * before summing) and accumulated in double: a float32 SAT of a 4096^2 image errs ~1e-2
  * and gives VSM negative variances; centred doubles err ~1e-12 relative there
  * (tests/c/test_vsm_shadows.c measures it). Non-finite inputs are taken as the mean (one
@@ -8,8 +8,8 @@
 #ifndef LIBFX_MATH_SAT_H
 #define LIBFX_MATH_SAT_H
 
-#include "core/internal.h"
-#include "core/mask.h"
+#include "core/context.h"
+#include "core/rect.h"
 
 typedef struct fx_sat {
     int width, height, channels;

@@ -2,6 +2,8 @@
 #include "math/shadow_map.h"
 #include "core/parallel.h"
 #include "math/blur.h"
+#include "core/buffers.h"
+#include "core/mem.h"
 
 #include <math.h>
 #include <string.h>

@@ -2,7 +2,7 @@
  * straight down): variance shadow maps (Donnelly & Lauritzen 2006; GPU Gems 3 ch. 8),
  * percentage-closer filtering as the accuracy reference, and the hard test.
  *
- * Depth is normalised and centred (GUIDE §4): z = 2 (d - near) / (far - near) - 1 in
+ * Depth is normalised and centred: z = 2 (d - near) / (far - near) - 1 in
  * [-1, 1] (d beyond far, e.g. Cycles' 1e10 background, is 1: nothing occludes), so the
  * second moment keeps its precision in float (at raw depths ~1000 the variance of a few
  * centimetres vanishes in float32 cancellation). Moments may get the derivative bias
@@ -11,7 +11,8 @@
 #ifndef LIBFX_MATH_SHADOW_MAP_H
 #define LIBFX_MATH_SHADOW_MAP_H
 
-#include "core/internal.h"
+#include "core/context.h"
+#include "core/frame.h"
 #include "math/vec.h"
 
 typedef enum fx_shadow_filter {
@@ -23,7 +24,7 @@ typedef enum fx_shadow_filter {
 /* A filter value may carry a reduction level of the moments (bits 4..7): the moments are
  * averaged over 2^level x 2^level texel blocks (a mip of the moments, which are linear, so
  * the mean and variance of each block are exact) before the filter, whose width stays in
- * full-resolution texels. The aux-map cache (core/aux_view.h) keys on the whole value. */
+ * full-resolution texels. The aux-map cache (scene/aux_map.h) keys on the whole value. */
 #define FX_SHADOW_FILTER_KIND(f) ((f) & 15)
 #define FX_SHADOW_FILTER_LEVEL(f) (((f) >> 4) & 15)
 #define FX_SHADOW_FILTER_WITH_LEVEL(kind, level) ((kind) | ((level) << 4))

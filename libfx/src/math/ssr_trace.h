@@ -6,7 +6,7 @@
  * growing steps); a step whose depth interval meets the surface interval
  * [depth, depth + thickness] is refined by bisection (`refine` halvings).
  *
- * Robustness (GUIDE §4): every loop is bounded (max_steps, refine); rays towards the
+ * Robustness: every loop is bounded (max_steps, refine); rays towards the
  * camera end at the near plane; a 2-D line shorter than 0.01 px is nudged (so rays
  * along the view direction march in depth and still terminate); non-finite input is
  * a miss; background depth (Cycles 1e10/1e11, Eevee 65504, <= 0, NaN) is "infinitely

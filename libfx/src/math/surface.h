@@ -6,7 +6,8 @@
 #ifndef LIBFX_MATH_SURFACE_H
 #define LIBFX_MATH_SURFACE_H
 
-#include "core/internal.h"
+#include "core/context.h"
+#include "core/frame.h"
 #include "math/camera.h"
 
 typedef struct fx_surface_src {

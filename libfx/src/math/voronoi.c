@@ -1,7 +1,7 @@
 /* Periodic jittered-grid Voronoi: brute force and ring search (voronoi.h). */
 #include "math/voronoi.h"
 
-#include "core/internal.h"
+#include "core/mem.h"
 #include "math/hash.h"
 
 #include <math.h>

@@ -3,8 +3,8 @@
  * selects, and the transposes between 8 interleaved RGBA pixels and 4 channel vectors (two
  * shuffle stages each way). Only inside always-inline helpers and the loops that use them
  * (GCC's ABI note for 32-byte vectors then does not apply). */
-#ifndef LIBFX_MATH_SIMD8_H
-#define LIBFX_MATH_SIMD8_H
+#ifndef LIBFX_CORE_SIMD8_H
+#define LIBFX_CORE_SIMD8_H
 
 #include <stdint.h>
 #include <string.h>

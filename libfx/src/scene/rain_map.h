@@ -3,11 +3,12 @@
  * the sky when nothing in the map lies above it (the seed's height-camera test). Points
  * outside the map are exposed (open sky beyond the modelled area). Shared by rain,
  * wet_surfaces and rain_splashes. */
-#ifndef LIBFX_MATH_RAIN_MAP_H
-#define LIBFX_MATH_RAIN_MAP_H
+#ifndef LIBFX_SCENE_RAIN_MAP_H
+#define LIBFX_SCENE_RAIN_MAP_H
 
-#include "core/aux_view.h"
 #include "math/shadow_map.h"
+#include "scene/aux_map.h"
+#include "scene/aux_view.h"
 
 typedef struct fx_rain_map {
     const fx_aux_view *av;
@@ -17,7 +18,12 @@ typedef struct fx_rain_map {
     float texel_metres; /* world size of one texel (x) */
 } fx_rain_map;
 
-/* Loads the frame's rain map (through the context's cache, core/aux_view.h); soft_width
+/* The aux_views callback of every effect that reads the rain map: it asks for the view
+ * FX_AUX_RAIN_MAP. */
+struct fx_aux_need;
+int fx_aux_needs_rain_map(const void *params, struct fx_aux_need *out, int max);
+
+/* Loads the frame's rain map (through the context's cache, scene/aux_map.h); soft_width
  * metres > 0 also filters its moments (box, SAT) over that width for fx_rain_map_soft. */
 fx_result fx_rain_map_load(const fx_frame *f, float soft_width_metres, const char *where, fx_rain_map *out);
 void fx_rain_map_free(fx_context *ctx, fx_rain_map *rm);

@@ -1,8 +1,21 @@
 /* The rain map: see rain_map.h. */
-#include "math/rain_map.h"
+#include "scene/rain_map.h"
+#include "core/effect.h"
 
 #include <math.h>
+#include <stdio.h>
 #include <string.h>
+
+int fx_aux_needs_rain_map(const void *params, fx_aux_need *out, int max)
+{
+    (void)params;
+    if (max < 1)
+        return 0;
+    memset(out, 0, sizeof *out);
+    snprintf(out->name, sizeof out->name, "%s", FX_AUX_RAIN_MAP);
+    out->kind = "rain_map";
+    return 1;
+}
 
 static float texel_size(const fx_aux_view *av)
 {

@@ -1,7 +1,7 @@
 /* Four-lane float vectors (GCC/Clang vector extensions): one RGBA pixel per vector, or
  * four values at once. Branch-free lane selects, so loops stay vectorised. */
-#ifndef LIBFX_MATH_SIMD4_H
-#define LIBFX_MATH_SIMD4_H
+#ifndef LIBFX_CORE_SIMD4_H
+#define LIBFX_CORE_SIMD4_H
 
 #include <float.h>
 #include <stdint.h>

@@ -1,8 +1,8 @@
 /* The scene's lights, as the sidecar delivered them (frame metadata "libfx:lights"). */
-#ifndef LIBFX_LIGHTS_H
-#define LIBFX_LIGHTS_H
+#ifndef LIBFX_SCENE_LIGHTS_H
+#define LIBFX_SCENE_LIGHTS_H
 
-#include "core/internal.h"
+#include "core/frame.h"
 #include "math/vec.h"
 
 typedef enum fx_light_type { FX_LIGHT_SUN, FX_LIGHT_POINT, FX_LIGHT_SPOT, FX_LIGHT_AREA } fx_light_type;
@@ -18,9 +18,9 @@ typedef struct fx_light {
 } fx_light;
 
 /* Finds a light by name; an empty or NULL name picks the first sun (else the first
- * light). Fails with FX_ERR_MISSING_PASS-like clarity: FX_ERR_BAD_PARAM naming `where`
- * and the lights the frame has, or FX_ERR_NO_CAMERA when the frame carries no lights
- * (they come with the scene sidecar: --camera, or the add-on). */
+ * light). Fails with FX_ERR_BAD_PARAM naming `where` and the lights the frame has, or
+ * FX_ERR_NO_LIGHTS when the frame carries no lights (they come with the scene sidecar:
+ * the CLI's --sidecar, or the add-on). */
 fx_result fx_frame_find_light(const fx_frame *f, const char *name, const char *where, fx_light *out);
 
 #endif

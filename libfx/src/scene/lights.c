@@ -1,5 +1,6 @@
 /* Lights from the frame's "libfx:lights" metadata (checked when the sidecar was applied). */
-#include "core/lights.h"
+#include "scene/lights.h"
+#include "core/context.h"
 #include "core/mem_failures.h"
 
 #include <cjson/cJSON.h>
@@ -36,9 +37,9 @@ fx_result fx_frame_find_light(const fx_frame *f, const char *name, const char *w
 {
     const char *text = fx_frame_meta(f, "libfx:lights");
     if (!text)
-        return fx_fail(f->ctx, FX_ERR_NO_CAMERA,
+        return fx_fail(f->ctx, FX_ERR_NO_LIGHTS,
                        "%s needs the scene's lights, which the frame does not carry (give the scene "
-                       "sidecar with --camera; the Blender add-on writes it)",
+                       "sidecar with --sidecar; the Blender add-on writes it)",
                        where);
     unsigned long failures = fx_mem_failure_count();
     cJSON *lights = cJSON_Parse(text);

@@ -1,0 +1,33 @@
+/* The per-context cache of shadow maps built from aux views.
+ *
+ * A light view (or the rain map) used as a shadow map costs an EXR read plus the normalised
+ * depth, the moments and their filter (an SAT or a blur) every time an effect runs; in a
+ * batch the views do not change between frames. fx_aux_map_acquire returns that map built
+ * once per context and reused while the view's key is the same: its sidecar entry (name,
+ * path, matrices, clip range, signature), the file's size and modification time (ns), and
+ * the build parameters (derivative bias, filter, width). Entries are LRU, bounded by
+ * fx_context_set_aux_cache (bytes; 0: no caching, each acquire builds a private map) and
+ * freed with the context. The cache is touched only by the thread calling into the library
+ * with the context (never by its workers), which the context's one-thread-at-a-time rule
+ * makes safe; an entry in use (acquired and not released) is never evicted. */
+#ifndef LIBFX_SCENE_AUX_MAP_H
+#define LIBFX_SCENE_AUX_MAP_H
+
+#include "math/shadow_map.h"
+#include "scene/aux_view.h"
+
+typedef struct fx_aux_map {
+    const fx_aux_view *av;   /* its camera and name; av->depth is NULL (the raw depth is dropped) */
+    const fx_shadow_map *sm; /* normalised depth; moments only when a filter asked for them */
+    int cached;              /* 1: came from (or went into) the cache; 0: private */
+} fx_aux_map;
+
+/* filter < 0 or width <= 1: no moments are made (PCF and the hard test read only the
+ * depth; VSM asks for a width above 1). */
+fx_result fx_aux_map_acquire(const fx_frame *f, const char *name, int derivative_bias, int filter, float width,
+                             const char *where, fx_aux_map *out);
+void fx_aux_map_release(fx_context *ctx, fx_aux_map *m);
+/* Counters since the context was made: maps built and maps reused (tests, benches). */
+void fx_aux_cache_stats(const fx_context *ctx, long *built, long *reused);
+
+#endif

@@ -1,0 +1,238 @@
+/* The per-context LRU cache of shadow maps built from aux views (scene/aux_map.h). */
+#include "core/context.h"
+#include "core/frame.h"
+#include "core/mem.h"
+#include "scene/aux_map.h"
+
+#include <cjson/cJSON.h>
+#include <sys/stat.h>
+#include <stddef.h>
+#include <stdio.h>
+#include <string.h>
+
+#define AUX_CACHE_DEFAULT_BYTES ((uint64_t)768 << 20) /* a 4096^2 light map is 192 MiB */
+#define AUX_CACHE_MAX_ENTRIES 8
+
+typedef struct aux_entry {
+    char *key;
+    fx_aux_view *av;
+    fx_shadow_map sm;
+    uint64_t bytes, last_use;
+    int refs;
+} aux_entry;
+
+struct fx_aux_cache {
+    uint64_t limit;
+    int limit_set;
+    aux_entry e[AUX_CACHE_MAX_ENTRIES];
+    int n;
+    uint64_t clock;
+    long built, reused;
+};
+
+static void entry_free(aux_entry *e)
+{
+    fx_mem_free(e->key);
+    fx_aux_view_free(e->av);
+    fx_shadow_map_free(&e->sm);
+    memset(e, 0, sizeof *e);
+}
+
+static void aux_cache_free(fx_context *ctx);
+
+static struct fx_aux_cache *cache_of(fx_context *ctx)
+{
+    if (!ctx->aux_cache) {
+        ctx->aux_cache = fx_mem_calloc(1, sizeof *ctx->aux_cache);
+        if (ctx->aux_cache)
+            ctx->aux_cache_free = aux_cache_free;
+    }
+    return ctx->aux_cache;
+}
+
+static uint64_t cache_limit(const fx_context *ctx)
+{
+    uint64_t lim = ctx->aux_cache && ctx->aux_cache->limit_set ? ctx->aux_cache->limit : AUX_CACHE_DEFAULT_BYTES;
+    return lim < ctx->max_bytes ? lim : ctx->max_bytes;
+}
+
+/* Evicts unused entries, least recently used first, until `need` more bytes and one more
+ * entry fit; returns 0 when they cannot. */
+static int cache_make_room(fx_context *ctx, uint64_t need)
+{
+    struct fx_aux_cache *c = ctx->aux_cache;
+    uint64_t lim = cache_limit(ctx);
+    if (need > lim)
+        return 0;
+    for (;;) {
+        uint64_t used = 0;
+        int victim = -1;
+        for (int i = 0; i < c->n; i++) {
+            used += c->e[i].bytes;
+            if (!c->e[i].refs && (victim < 0 || c->e[i].last_use < c->e[victim].last_use))
+                victim = i;
+        }
+        if (used + need <= lim && c->n < AUX_CACHE_MAX_ENTRIES)
+            return 1;
+        if (victim < 0)
+            return 0;
+        entry_free(&c->e[victim]);
+        c->e[victim] = c->e[--c->n];
+        memset(&c->e[c->n], 0, sizeof c->e[c->n]);
+    }
+}
+
+fx_result fx_context_set_aux_cache(fx_context *ctx, uint64_t max_bytes)
+{
+    if (!ctx)
+        return FX_ERR_INVALID_ARGUMENT;
+    struct fx_aux_cache *c = cache_of(ctx);
+    if (!c)
+        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "fx_context_set_aux_cache: out of memory");
+    c->limit = max_bytes;
+    c->limit_set = 1;
+    for (int i = c->n - 1; i >= 0; i--)
+        if (!c->e[i].refs) {
+            entry_free(&c->e[i]);
+            c->e[i] = c->e[--c->n];
+            memset(&c->e[c->n], 0, sizeof c->e[c->n]);
+        }
+    return FX_OK;
+}
+
+/* Frees every entry; fx_context_free calls it through the context's aux_cache_free. */
+static void aux_cache_free(fx_context *ctx)
+{
+    if (!ctx || !ctx->aux_cache)
+        return;
+    for (int i = 0; i < ctx->aux_cache->n; i++)
+        entry_free(&ctx->aux_cache->e[i]);
+    fx_mem_free(ctx->aux_cache);
+    ctx->aux_cache = NULL;
+}
+
+void fx_aux_cache_stats(const fx_context *ctx, long *built, long *reused)
+{
+    *built = ctx && ctx->aux_cache ? ctx->aux_cache->built : 0;
+    *reused = ctx && ctx->aux_cache ? ctx->aux_cache->reused : 0;
+}
+
+/* Builds the map of entry e (key already set). */
+static fx_result entry_build(const fx_frame *f, const char *name, int bias, int filter, float width,
+                             const char *where, aux_entry *e)
+{
+    fx_result r = fx_aux_view_load(f, name, where, &e->av);
+    if (r)
+        return r;
+    fx_aux_view *av = e->av;
+    r = fx_shadow_map_build(f->ctx, av->depth, av->width, av->height, av->view.cam.clip_start,
+                            av->view.cam.clip_end, bias, &e->sm, where);
+    if (!r && filter >= 0 && width > 1.0f)
+        r = fx_shadow_map_filter(f->ctx, &e->sm, (fx_shadow_filter)filter, width, where);
+    if (r)
+        return r;
+    /* the raw depth is in the map now: drop the EXR */
+    fx_frame_free(av->frame);
+    av->frame = NULL;
+    av->depth = NULL;
+    e->bytes = (uint64_t)av->width * av->height * 3 * sizeof(float) + sizeof *av;
+    return FX_OK;
+}
+
+fx_result fx_aux_map_acquire(const fx_frame *f, const char *name, int derivative_bias, int filter, float width,
+                             const char *where, fx_aux_map *out)
+{
+    memset(out, 0, sizeof *out);
+    fx_context *ctx = f->ctx;
+    char path[1024];
+    fx_result r = FX_OK;
+    char *entry = fx_aux_view_entry(f, name, where, path, sizeof path, &r);
+    if (!entry)
+        return r;
+    struct stat st;
+    char *key = NULL;
+    struct fx_aux_cache *c = cache_of(ctx);
+    if (c && cache_limit(ctx) > 0 && stat(path, &st) == 0) {
+        char tail[160];
+        if (!(filter >= 0 && width > 1.0f)) {
+            filter = -1;
+            width = 0.0f;
+        }
+        /* device + inode too: writers replace the file (temp + rename), which gives it a new
+         * inode even when size and the coarse mtime clock are the same */
+        int n = snprintf(tail, sizeof tail, "|%llu:%llu|%lld|%lld.%09ld|%d|%d|%.9g", (unsigned long long)st.st_dev,
+                         (unsigned long long)st.st_ino, (long long)st.st_size, (long long)st.st_mtim.tv_sec,
+                         (long)st.st_mtim.tv_nsec, derivative_bias ? 1 : 0, filter, (double)width);
+        size_t len = strlen(entry);
+        key = fx_mem_alloc(len + (size_t)n + 1);
+        if (key) {
+            memcpy(key, entry, len);
+            memcpy(key + len, tail, (size_t)n + 1);
+        }
+    }
+    cJSON_free(entry);
+    if (key) {
+        for (int i = 0; i < c->n; i++)
+            if (strcmp(c->e[i].key, key) == 0) {
+                c->e[i].refs++;
+                c->e[i].last_use = ++c->clock;
+                c->reused++;
+                out->av = c->e[i].av;
+                out->sm = &c->e[i].sm;
+                out->cached = 1;
+                fx_mem_free(key);
+                return FX_OK;
+            }
+    }
+    aux_entry tmp;
+    memset(&tmp, 0, sizeof tmp);
+    r = entry_build(f, name, derivative_bias, filter, width, where, &tmp);
+    if (r) {
+        entry_free(&tmp);
+        fx_mem_free(key);
+        return r;
+    }
+    if (c)
+        c->built++;
+    if (key && cache_make_room(ctx, tmp.bytes)) {
+        aux_entry *e = &c->e[c->n++];
+        *e = tmp;
+        e->key = key;
+        e->refs = 1;
+        e->last_use = ++c->clock;
+        out->av = e->av;
+        out->sm = &e->sm;
+        out->cached = 1;
+        return FX_OK;
+    }
+    fx_mem_free(key);
+    /* private: owned by the caller until release */
+    aux_entry *e = fx_mem_alloc(sizeof *e);
+    if (!e) {
+        entry_free(&tmp);
+        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
+    }
+    *e = tmp;
+    out->av = e->av;
+    out->sm = &e->sm;
+    out->cached = 0;
+    return FX_OK;
+}
+
+void fx_aux_map_release(fx_context *ctx, fx_aux_map *m)
+{
+    if (!m || !m->sm)
+        return;
+    if (m->cached) {
+        struct fx_aux_cache *c = ctx ? ctx->aux_cache : NULL;
+        for (int i = 0; c && i < c->n; i++)
+            if (&c->e[i].sm == m->sm && c->e[i].refs > 0)
+                c->e[i].refs--;
+    } else {
+        /* the private entry: sm is its first field after key and av */
+        aux_entry *e = (aux_entry *)((char *)m->sm - offsetof(aux_entry, sm));
+        entry_free(e);
+        fx_mem_free(e);
+    }
+    memset(m, 0, sizeof *m);
+}

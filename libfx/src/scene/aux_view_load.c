@@ -1,0 +1,132 @@
+/* Loading an aux view for an effect: the frame's entry for it, its EXR's Depth pass and
+ * its camera (scene/aux_view.h). */
+#include "core/context.h"
+#include "core/frame.h"
+#include "core/mem.h"
+#include "core/mem_failures.h"
+#include "io/exr_read.h"
+#include "scene/aux_view.h"
+#include "scene/camera_json.h"
+
+#include <cjson/cJSON.h>
+#include <stdio.h>
+#include <string.h>
+
+void fx_aux_view_free(fx_aux_view *v)
+{
+    if (!v)
+        return;
+    fx_frame_free(v->frame);
+    fx_mem_free(v);
+}
+
+char *fx_aux_view_entry(const fx_frame *f, const char *name, const char *where, char *path, size_t path_size,
+                        fx_result *res)
+{
+    fx_context *ctx = f->ctx;
+    const char *text = fx_frame_meta(f, FX_AUX_META_KEY);
+    unsigned long failures = fx_mem_failure_count();
+    cJSON *list = text ? cJSON_Parse(text) : NULL;
+    if (text && !list && fx_mem_failure_count() != failures) {
+        *res = fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory reading the frame's aux views", where);
+        return NULL;
+    }
+    const cJSON *found = NULL, *v;
+    size_t nlen = strlen(name);
+    int prefix_only = nlen > 0 && name[nlen - 1] == ':';
+    cJSON_ArrayForEach(v, list) {
+        const cJSON *n = cJSON_GetObjectItemCaseSensitive(v, "name");
+        if (!found && cJSON_IsString(n) &&
+            (prefix_only ? strncmp(n->valuestring, name, nlen) == 0 : strcmp(n->valuestring, name) == 0))
+            found = v;
+    }
+    const cJSON *p = found ? cJSON_GetObjectItemCaseSensitive(found, "path") : NULL;
+    char *out = cJSON_IsString(p) ? cJSON_PrintUnformatted(found) : NULL;
+    if (out)
+        snprintf(path, path_size, "%s", p->valuestring);
+    cJSON_Delete(list);
+    if (!out && cJSON_IsString(p)) {
+        *res = fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory reading the frame's aux views", where);
+        return NULL;
+    }
+    if (!out) {
+        /* fx_aux_view_load words the error (missing view, malformed list) */
+        fx_aux_view *av = NULL;
+        *res = fx_aux_view_load(f, name, where, &av);
+        fx_aux_view_free(av);
+        if (!*res)
+            *res = fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
+    }
+    return out;
+}
+
+fx_result fx_aux_view_load(const fx_frame *f, const char *name, const char *where, fx_aux_view **out)
+{
+    *out = NULL;
+    fx_context *ctx = f->ctx;
+    const char *text = fx_frame_meta(f, FX_AUX_META_KEY);
+    unsigned long failures = fx_mem_failure_count();
+    cJSON *list = text ? cJSON_Parse(text) : NULL;
+    if (text && !list && fx_mem_failure_count() != failures)
+        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory reading the frame's aux views", where);
+    const cJSON *found = NULL, *v;
+    size_t nlen = strlen(name);
+    int prefix_only = nlen > 0 && name[nlen - 1] == ':';
+    char names[512] = "";
+    size_t len = 0;
+    cJSON_ArrayForEach(v, list) {
+        const cJSON *n = cJSON_GetObjectItemCaseSensitive(v, "name");
+        if (!cJSON_IsString(n))
+            continue;
+        if (len < sizeof names - 1)
+            len += (size_t)snprintf(names + len, sizeof names - len, "%s%s", len ? ", " : "", n->valuestring);
+        if (!found && (prefix_only ? strncmp(n->valuestring, name, nlen) == 0 : strcmp(n->valuestring, name) == 0))
+            found = v;
+    }
+    if (!found) {
+        cJSON_Delete(list);
+        return fx_fail(ctx, FX_ERR_NO_AUX_VIEW,
+                       "%s needs the auxiliary view '%s%s', which the frame does not carry (it has: %s); the "
+                       "Blender add-on renders it when the stack needs it (fx_stack_required_aux_views) and "
+                       "lists it in the scene sidecar's \"aux_views\"",
+                       where, name, prefix_only ? "*" : "", names[0] ? names : "none");
+    }
+    fx_camera cam;
+    char err[256];
+    if (fx_aux_views_check(ctx, list) || !fx_camera_parse(found, 1, &cam, err, sizeof err)) {
+        cJSON_Delete(list);
+        return fx_fail(ctx, FX_ERR_BAD_FILE, "%s: the frame's aux view list is malformed", where);
+    }
+    fx_aux_view *av = fx_mem_calloc(1, sizeof *av);
+    if (!av) {
+        cJSON_Delete(list);
+        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
+    }
+    snprintf(av->name, sizeof av->name, "%s", cJSON_GetObjectItemCaseSensitive(found, "name")->valuestring);
+    snprintf(av->path, sizeof av->path, "%s", cJSON_GetObjectItemCaseSensitive(found, "path")->valuestring);
+    cJSON_Delete(list);
+    fx_result r = fx_exr_read(ctx, av->path, NULL, &av->frame);
+    if (r) {
+        char msg[1024];
+        snprintf(msg, sizeof msg, "%s", fx_context_error(ctx));
+        fx_aux_view_free(av);
+        return fx_fail(ctx, r, "%s: aux view '%s': %s", where, name, msg);
+    }
+    fx_pass *d = fx_frame_find_pass(av->frame, "Depth");
+    if (!d) {
+        fx_result rr = fx_fail(ctx, FX_ERR_MISSING_PASS, "%s: aux view '%s' (%s) has no Depth pass", where,
+                               av->name, av->path);
+        fx_aux_view_free(av);
+        return rr;
+    }
+    av->depth = d->data;
+    av->width = av->frame->width;
+    av->height = av->frame->height;
+    if (fx_frame_set_camera(av->frame, &cam) || !fx_view_init(&av->view, av->frame)) {
+        fx_aux_view_free(av);
+        return fx_fail(ctx, FX_ERR_NO_CAMERA, "%s: aux view '%s' has a singular camera matrix", where, name);
+    }
+    *out = av;
+    return FX_OK;
+}
+
