@@ -188,6 +188,8 @@ fx_result fx_effect_pass_through(const fx_effect_run *run);
 /* The scene time of the frame in seconds (frame / fps; fps 24 when the frame has none),
  * for animated effects. */
 double fx_effect_scene_time(const fx_effect_run *run);
+/* The scene frame number of the frame (finite; 1 when the frame has none). */
+double fx_effect_scene_frame(const fx_effect_run *run);
 
 /* Parameter storage helpers (core/params.c). */
 void fx_params_set_defaults(const fx_effect_class *cls, void *params);

@@ -11,6 +11,7 @@
 #include <float.h>
 #include <limits.h>
 #include <math.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <string.h>
 #include <time.h>
@@ -846,7 +847,8 @@ fx_result fx_effect_pass_through(const fx_effect_run *run)
     const size_t n = (size_t)(roi->x1 - roi->x0) * 4;
     for (int y = roi->y0; y < roi->y1; y++) {
         float *d = run->dst + ((size_t)y * run->width + roi->x0) * 4;
-        memcpy(d, run->src + ((size_t)y * run->width + roi->x0) * 4, n * sizeof(float));
+        if (run->dst != run->src)
+            memcpy(d, run->src + ((size_t)y * run->width + roi->x0) * 4, n * sizeof(float));
         fx_effect_finish_row(run, d, n); /* for effects that keep their output finite themselves */
     }
     return FX_OK;
@@ -857,6 +859,13 @@ double fx_effect_scene_time(const fx_effect_run *run)
     double frame = 1, fps = 24;
     fx_frame_time(run->frame, &frame, &fps);
     return frame / (fps > 0 ? fps : 24.0);
+}
+
+double fx_effect_scene_frame(const fx_effect_run *run)
+{
+    double frame = 1;
+    fx_frame_time(run->frame, &frame, NULL);
+    return frame;
 }
 
 static fx_result check_passes(const fx_stack *s, const fx_frame *in, fx_pass_set set, const char *where)
@@ -1053,6 +1062,34 @@ static fx_result composite(fx_context *ctx, run_buffers *b, const fx_effect_run 
     return FX_OK;
 }
 
+/* Whether every value of the image is finite (a frame built through the API may hold
+ * NaN/Inf; the reader's are sanitised): read-only, in parallel. */
+typedef struct finite_job {
+    const float *image;
+    size_t row;
+    atomic_int bad;
+} finite_job;
+
+static void finite_rows(void *user, int y0, int y1)
+{
+    finite_job *j = user;
+    const uint32_t *u = (const uint32_t *)(const void *)(j->image + (size_t)y0 * j->row);
+    const size_t n = (size_t)(y1 - y0) * j->row;
+    uint32_t any = 0;
+    for (size_t i = 0; i < n; i++) /* exponent all ones: Inf or NaN */
+        any |= (uint32_t)((u[i] & 0x7f800000u) == 0x7f800000u);
+    if (any)
+        atomic_store(&j->bad, 1);
+}
+
+static int image_finite(fx_context *ctx, const float *image, int w, int h)
+{
+    finite_job j = {image, (size_t)w * 4, 0};
+    atomic_init(&j.bad, 0);
+    fx_parallel_for(ctx, h, fx_grain_for(ctx, h), finite_rows, &j);
+    return !atomic_load(&j.bad);
+}
+
 /* Runs one enabled effect on the current image. The stack does for every effect what
  * none repeats: inputs checked, identity and empty masks skipped, buffers picked, the
  * result blended by the mask and made finite. */
@@ -1067,12 +1104,17 @@ static fx_result run_entry(fx_stack *s, fx_entry *e, int i, const fx_frame *in, 
     fx_result r = run_params(ctx, e, in, where, &params, &scaled);
     if (!r)
         r = check_inputs(s, e, params, in, where);
-    if (r || (e->cls->identity && e->cls->identity(params)))
-        goto out; /* an identity: skipped, the image passes through */
+    /* An identity is skipped and the image passes through, unless it holds non-finite
+     * values: then it goes through the stack's guard (a copy, replaced and reported) as
+     * the output of any effect does. */
+    const int identity = !r && e->cls->identity && e->cls->identity(params);
+    if (r || (identity && image_finite(ctx, b->image, w, h)))
+        goto out;
     fx_mask_spec spec = proxy_mask_spec(&e->mask, in);
     if ((r = fx_mask_build(ctx, &spec, in, where, &mask)))
         goto out;
-    if (mask && mask->bounds.x1 <= mask->bounds.x0)
+    const fx_rect roi = mask ? mask->bounds : (fx_rect){0, 0, w, h};
+    if (roi.x1 <= roi.x0 || roi.y1 <= roi.y0)
         goto out; /* nothing selected: the effect is skipped and the image passes through */
     float *dst = NULL;
     if ((r = pick_dst(ctx, b, e->cls, params, mask, where, &dst)))
@@ -1085,7 +1127,7 @@ static fx_result run_entry(fx_stack *s, fx_entry *e, int i, const fx_frame *in, 
     run.dst = dst;
     run.width = w;
     run.height = h;
-    run.roi = mask ? mask->bounds : (fx_rect){0, 0, w, h};
+    run.roi = roi;
     run.mask = mask;
     run.params = params;
     run.quality = entry_quality(s, e);
@@ -1097,7 +1139,7 @@ static fx_result run_entry(fx_stack *s, fx_entry *e, int i, const fx_frame *in, 
     atomic_size_t own_bad;
     atomic_init(&own_bad, 0);
     run.nonfinite = &own_bad;
-    if (!(r = e->cls->process(&run)))
+    if (!(r = identity ? fx_effect_pass_through(&run) : e->cls->process(&run)))
         r = composite(ctx, b, &run, e->cls->flags, &own_bad);
 out:
     fx_mask_free(mask);

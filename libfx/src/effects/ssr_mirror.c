@@ -291,7 +291,6 @@ static int shading_normal(const ssr_job *j, int x, int y, fx_vec3 pos, fx_vec3 i
     return 1;
 }
 
-/* Traces the reflection of pixel (x, y) of this mirror; fills *h. */
 /* How much of a hit to keep: fades towards the screen border (edge_fade), and 0 for a
  * surface seen from behind (its normal along the ray), which is not what a mirror shows. */
 static float hit_fade(const ssr_job *j, const ssr_frame *F, const fx_ssr_hit *hit, fx_vec3 r)
@@ -308,6 +307,7 @@ static float hit_fade(const ssr_job *j, const ssr_frame *F, const fx_ssr_hit *hi
     return fade;
 }
 
+/* Traces the reflection of pixel (x, y) of this mirror; fills *h. */
 static void trace_pixel(const ssr_job *j, int x, int y, cell_hit *h)
 {
     const ssr_frame *F = j->F;
@@ -739,12 +739,6 @@ static fx_pass_set ssr_passes(const void *params)
     return set;
 }
 
-static int ssr_needs_camera(const void *params)
-{
-    (void)params;
-    return 1;
-}
-
 /* Rays reach anywhere on the frame. */
 static int ssr_halo(const void *params, int width, int height)
 {
@@ -782,8 +776,6 @@ static fx_result ssr_process(const fx_effect_run *run)
 {
     const ssr_params *p = run->params;
     const fx_rect *roi = &run->roi;
-    if (roi->x1 <= roi->x0 || roi->y1 <= roi->y0)
-        return FX_OK;
     const char *where = run->where;
     ssr_frame F;
     memset(&F, 0, sizeof F);
@@ -978,7 +970,7 @@ const fx_effect_class fx_effect_ssr_mirror = {
         "{\"max_steps\": 4096, \"stride\": 1, \"growth\": 1, \"refine\": 10, \"resolution_scale\": 1}",
     },
     .passes = ssr_passes,
-    .needs_camera = ssr_needs_camera,
+    .flags = FX_EFFECT_NEEDS_CAMERA,
     .halo = ssr_halo,
     .validate = ssr_validate,
     .process = ssr_process,
