@@ -75,8 +75,39 @@ static float *run_json(fx_context *ctx, const fx_frame *f, const char *json, con
     return out;
 }
 
-/* Every parameter of the class is in the recipe, and the loaded stack holds exactly
- * the recipe's values. */
+/* A value as the recipe wrote it and as the library gives it back (floats are stored as
+ * float). */
+static int same_value(const cJSON *want, const cJSON *got)
+{
+    if (!got)
+        return 0;
+    if (cJSON_Compare(want, got, 1))
+        return 1;
+    if (cJSON_IsNumber(want) && cJSON_IsNumber(got))
+        return (float)want->valuedouble == (float)got->valuedouble;
+    if (cJSON_IsArray(want) && cJSON_IsArray(got) && cJSON_GetArraySize(want) == cJSON_GetArraySize(got)) {
+        for (int i = 0; i < cJSON_GetArraySize(want); i++)
+            if ((float)cJSON_GetArrayItem(want, i)->valuedouble != (float)cJSON_GetArrayItem(got, i)->valuedouble)
+                return 0;
+        return 1;
+    }
+    return 0;
+}
+
+static void check_object(const char *effect, const cJSON *want, const cJSON *got, const char *what)
+{
+    const cJSON *item;
+    cJSON_ArrayForEach(item, want) {
+        int same = same_value(item, cJSON_GetObjectItem(got, item->string));
+        CHECK(same);
+        if (!same)
+            fprintf(stderr, "  %s: parameter %s changed (%s)\n", effect, item->string, what);
+    }
+}
+
+/* Every parameter of the class is in the recipe, and the loaded stack holds exactly the
+ * recipe's values, both as explicit values (saved back) and as the effective parameters
+ * the effect runs with. */
 static void check_params_kept(fx_context *ctx, const char *effect, const char *json)
 {
     cJSON *want = cJSON_Parse(json);
@@ -86,28 +117,20 @@ static void check_params_kept(fx_context *ctx, const char *effect, const char *j
     fx_stack *s = NULL;
     CHECK_OK(ctx, fx_stack_new(ctx, &s));
     CHECK_OK(ctx, fx_stack_load_json(s, json));
-    char *saved = NULL;
+    char *saved = NULL, *effective = NULL;
     CHECK_OK(ctx, fx_stack_to_json(s, &saved));
     cJSON *got = saved ? cJSON_Parse(saved) : NULL;
-    const cJSON *gp = cJSON_GetObjectItem(cJSON_GetArrayItem(cJSON_GetObjectItem(got, "effects"), 0), "params");
-    const cJSON *item;
-    cJSON_ArrayForEach(item, wp) {
-        const cJSON *g = cJSON_GetObjectItem(gp, item->string);
-        int same = g && cJSON_Compare(item, g, 1);
-        if (!same && g && cJSON_IsNumber(item) && cJSON_IsNumber(g))
-            same = (float)item->valuedouble == (float)g->valuedouble; /* floats are stored as float */
-        if (!same && g && cJSON_IsArray(item) && cJSON_GetArraySize(item) == cJSON_GetArraySize(g)) {
-            same = 1;
-            for (int i = 0; i < cJSON_GetArraySize(item); i++)
-                same &= (float)cJSON_GetArrayItem(item, i)->valuedouble ==
-                        (float)cJSON_GetArrayItem(g, i)->valuedouble;
-        }
-        CHECK(same);
-        if (!same)
-            fprintf(stderr, "  %s: parameter %s changed on load\n", effect, item->string);
-    }
+    check_object(effect, wp,
+                 cJSON_GetObjectItem(cJSON_GetArrayItem(cJSON_GetObjectItem(got, "effects"), 0), "params"),
+                 "saved recipe");
+    CHECK_OK(ctx, fx_stack_effective_params_json(s, 0, &effective));
+    cJSON *e = effective ? cJSON_Parse(effective) : NULL;
+    CHECK(cJSON_GetArraySize(e) == fx_effect_param_count(effect));
+    check_object(effect, wp, e, "effective parameters");
+    cJSON_Delete(e);
     cJSON_Delete(got);
     fx_free(saved);
+    fx_free(effective);
     fx_stack_free(s);
     cJSON_Delete(want);
 }

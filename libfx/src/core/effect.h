@@ -4,7 +4,46 @@
  * (name, type, default, hard and soft range, doc, offset into the struct). The
  * recipe parser, the C setters, `libfx describe`, the add-on's UI and the docs all
  * read that table. The stack hands process() the effective parameters (defaults,
- * then the quality preset, then the user's explicit values), already range-checked.
+ * then the quality preset, then the user's explicit values), already checked.
+ *
+ * ---- Adding an effect: the checklist ----
+ * Files to add:
+ *  - libfx/src/effects/foo.c defining `const fx_effect_class fx_effect_foo` (the registry
+ *    is generated from the file names: nothing to list anywhere; every .c file there is
+ *    an effect, so shared code goes in math/ or a header-only helper);
+ *  - docs/effects/foo.md (its generated blocks: scripts/gen_effect_docs.py), a C test
+ *    tests/c/test_foo.c, and tests/data/recipes_v1/foo.json with every parameter set to
+ *    a non-default value (test_recipes_v1 then needs its checksum lines, written once
+ *    with LIBFX_WRITE_CHECKSUMS and checked in).
+ * In foo.c:
+ *  - a params struct and its table (FX_P_FLOAT, FX_P_INT, FX_P_BOOL, FX_P_ENUM,
+ *    FX_P_FLOATS, FX_P_STRING below); hint "pixels" for frame-pixel lengths (the stack
+ *    divides them on proxies); presets as JSON objects for effects with a cost knob;
+ *  - `passes(params)` for every pass beyond Combined; FX_EFFECT_NEEDS_CAMERA, or
+ *    `needs_camera(params)` when it depends on them; `aux_views` for light or rain views;
+ *  - `identity(params)` when parameters can make it a no-op (zero strength);
+ *  - `validate` for checks between parameters (each one's range is checked already);
+ *  - `process(run)`: read run->src, run->frame's passes and run->params; write every
+ *    pixel of run->dst inside run->roi and nothing outside it;
+ *  - FX_EFFECT_OWN_FINITE / FX_EFFECT_IN_PLACE when they are true (read their notes);
+ *  - params_version 1 (0 means 1). Never rename or re-range a parameter without bumping
+ *    it and adding a `migrations` step: saved recipes and .blend files must keep loading.
+ * What process() may touch: the fx_effect_run fields, fx_frame_find_pass for passes, the
+ *  accessors here (fx_effect_scene_time/frame, fx_effect_debug_pass,
+ *  fx_effect_finish_row, fx_effect_pass_through), math/ helpers, fx_mask_build for masks
+ *  of its own, fx_parallel_for for rows; errors through fx_fail(run->ctx, ..., "%s: ...",
+ *  run->where). Never a frame's or the stack's fields directly, never a global.
+ * What the stack does for every effect, so no effect repeats it:
+ *  - effective parameters: defaults, preset, explicit values, validated once when they
+ *    change (load, setter, quality) and handed to every call (passes, run, aux views);
+ *  - the passes and the camera checked present, with a message naming what to enable;
+ *  - an identity or an empty region (mask selecting nothing) skipped: no call, no copy;
+ *  - the mask: built, its bounds as run->roi, outside pixels kept bit for bit, edges
+ *    blended by coverage;
+ *  - the NaN/Inf guard on the output (replaced and counted in a warning);
+ *  - buffers (ping-pong, in place, consumed inputs), progress, cancel and timings;
+ *  - proxies: "pixels" parameters and mask rectangles scaled; run->proxy_factor for the
+ *    effect's own fixed pixel distances.
  */
 #ifndef LIBFX_EFFECT_H
 #define LIBFX_EFFECT_H
