@@ -11,12 +11,12 @@ cd "$(dirname "$0")/.."
 build=${1:-build}
 out=${2:-$build}
 blender=${BLENDER:-blender}
-[ -e "$build/libfx/libfx.so.1" ] || { echo "build_extension: no $build/libfx/libfx.so.1 (build libfx first)" >&2; exit 2; }
+[ -e "$build/libfx/libfx.so.2" ] || { echo "build_extension: no $build/libfx/libfx.so.2 (build libfx first)" >&2; exit 2; }
 stage=$build/extension_stage/libfx
 rm -rf "$build/extension_stage"
 mkdir -p "$stage/lib" "$out"
 cp addon/libfx/*.py addon/libfx/blender_manifest.toml "$stage/"
-cp -L "$build/libfx/libfx.so.1" "$stage/lib/libfx.so.1"
+cp -L "$build/libfx/libfx.so.2" "$stage/lib/libfx.so.2"
 "$blender" --factory-startup --command extension validate "$stage"
 version=$(sed -n 's/^version = "\(.*\)"/\1/p' addon/libfx/blender_manifest.toml)
 rm -f "$out/libfx-$version.zip"

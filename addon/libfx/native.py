@@ -17,7 +17,7 @@ import os
 import threading
 
 #: The ABI this module was written for (FX_ABI_VERSION in fx.h).
-ABI_VERSION = 1
+ABI_VERSION = 2
 
 _HERE = os.path.dirname(os.path.abspath(__file__))
 
@@ -103,7 +103,7 @@ _OPTIONAL = {
     "fx_frame_read_pixels": (c_int, [c_void_p, c_char_p, c_int, c_int, c_int, P(c_float)]),
     "fx_stack_required_aux_views": (c_int, [c_void_p, _PSTR]),
     "fx_stack_run_consume": (c_int, [c_void_p, c_void_p, c_int, _PP]),
-    "fx_effect_params_version": (c_int, [c_char_p, P(c_int)]),
+    "fx_effect_params_version": (c_int, [c_void_p, c_char_p, P(c_int)]),
 }
 
 #: feature -> (what it does, for the message; the optional functions it needs).
@@ -135,11 +135,11 @@ def candidate_paths():
     env = os.environ.get("LIBFX_LIBRARY")
     if env:
         return [env]  # an explicit choice is never second-guessed
-    out.append(os.path.join(_HERE, "lib", "libfx.so.1"))       # installed zip
+    out.append(os.path.join(_HERE, "lib", "libfx.so.2"))       # installed zip
     out.append(os.path.join(_HERE, "lib", "libfx.so"))
     root = os.path.dirname(os.path.dirname(_HERE))              # source tree
     for build in ("build", "build-addon"):
-        out.append(os.path.join(root, build, "libfx", "libfx.so.1"))
+        out.append(os.path.join(root, build, "libfx", "libfx.so.2"))
         out.append(os.path.join(root, build, "libfx", "libfx.so"))
     return out
 
@@ -201,7 +201,7 @@ def load():
             _lib, _lib_path = lib, path
             return lib
         _load_error = ("libfx library not found (set LIBFX_LIBRARY or install the add-on zip "
-                       "that contains lib/libfx.so.1); looked in: " + ", ".join(tried))
+                       "that contains lib/libfx.so.2); looked in: " + ", ".join(tried))
         return None
 
 
@@ -356,10 +356,14 @@ def effect_params_version(effect):
     versions, and for an effect it does not know)."""
     if not has("params_version"):
         return 1
-    v = c_int(1)
-    if lib().fx_effect_params_version(effect.encode("utf-8"), ctypes.byref(v)) != 0:
-        return 1
-    return max(1, v.value)
+    ctx = Context(1)
+    try:
+        v = c_int(1)
+        if lib().fx_effect_params_version(ctx.ptr, effect.encode("utf-8"), ctypes.byref(v)) != 0:
+            return 1
+        return max(1, v.value)
+    finally:
+        ctx.close()
 
 
 class Stack:

@@ -451,16 +451,30 @@ static fx_frame *resample(fx_context *ctx, const fx_frame *src, int W, int H, co
 
 /* ---- one effect ----------------------------------------------------------- */
 
-static void bench_effect(const char *effect, const cJSON *entries, const fx_frame *f, fx_context **ctxs)
+/* One effect's benchmark: what its stages share. */
+typedef struct effect_bench {
+    const char *effect;
+    const cJSON *entries;
+    const fx_frame *f;
+    fx_context **ctxs;
+    int w, h;
+    size_t npx;
+    int presets;
+    float *mask; /* the union of the entries' masks, or NULL */
+    long mask_px;
+    char base_note[160];
+    setting st[4 + MAX_KNOBS * MAX_LIST];
+    int ns;
+} effect_bench;
+
+/* The note every row of this effect carries: entries, aux views, presets. */
+static void bench_note(effect_bench *b)
 {
-    const int w = fx_frame_width(f), h = fx_frame_height(f);
-    const size_t npx = (size_t)w * h;
-    fx_context *c0 = ctxs[0];
-    int halo = 0;
-    int presets = effect_has_presets(c0, effect, &halo);
-    int nentries = cJSON_GetArraySize(entries);
-    long mask_px = 0;
-    float *mask = union_mask(c0, entries, f, &mask_px);
+    const char *effect = b->effect;
+    const cJSON *entries = b->entries;
+    fx_context *c0 = b->ctxs[0];
+    char *base_note = b->base_note;
+    const int nentries = cJSON_GetArraySize(entries), presets = b->presets;
     int has_aux = 0;
     {
         char *r = make_recipe(entries, FX_QUALITY_FINAL, NULL, NULL, NULL), *aux = NULL;
@@ -474,18 +488,22 @@ static void bench_effect(const char *effect, const cJSON *entries, const fx_fram
         fx_stack_free(s);
         free(r);
     }
-    char base_note[160] = "";
     if (nentries > 1)
-        snprintf(base_note, sizeof base_note, "%d recipe entries", nentries);
+        snprintf(base_note, sizeof b->base_note, "%d recipe entries", nentries);
     if (has_aux)
-        snprintf(base_note + strlen(base_note), sizeof base_note - strlen(base_note), "%saux views read and built every run",
+        snprintf(base_note + strlen(base_note), sizeof b->base_note - strlen(base_note), "%saux views read and built every run",
                  base_note[0] ? "; " : "");
     if (!presets)
-        snprintf(base_note + strlen(base_note), sizeof base_note - strlen(base_note), "%sno quality presets",
+        snprintf(base_note + strlen(base_note), sizeof b->base_note - strlen(base_note), "%sno quality presets",
                  base_note[0] ? "; " : "");
+}
 
-    /* the settings: reference first (its output is what the others are measured against) */
-    setting st[4 + MAX_KNOBS * MAX_LIST];
+/* The settings: reference first (its output is what the others are measured against),
+ * the asked-for qualities, then each knob value. */
+static void bench_settings(effect_bench *b)
+{
+    const char *effect = b->effect;
+    setting *st = b->st;
     int ns = 0;
     int qorder[4] = {FX_QUALITY_REFERENCE, FX_QUALITY_DRAFT, FX_QUALITY_PREVIEW, FX_QUALITY_FINAL};
     for (int qi = 0; qi < 4; qi++) {
@@ -519,7 +537,107 @@ static void bench_effect(const char *effect, const cJSON *entries, const fx_fram
             s->value = v;
         }
     }
+    b->ns = ns;
+}
 
+/* One setting at one thread count: timed, its error against the reference (first
+ * thread count), its row. */
+static void bench_setting(effect_bench *b, int ti, setting *s, float **refp)
+{
+    const char *effect = b->effect;
+    const cJSON *entries = b->entries;
+    const fx_frame *f = b->f;
+    const int w = b->w, h = b->h;
+    const size_t npx = b->npx;
+    const float *mask = b->mask;
+    const long mask_px = b->mask_px;
+    const int presets = b->presets;
+    const char *base_note = b->base_note;
+    fx_context **ctxs = b->ctxs;
+    fx_context *ctx = ctxs[ti];
+    const setting *st = b->st;
+    const int th = fx_context_threads(ctx);
+    if (ti > 0 && s->k && A.knobs_first_only)
+        return; /* knob sweeps at the first thread count only */
+    char *json = make_recipe(entries, s->quality, s->k, s->k ? s->k->values[s->value] : NULL, NULL);
+    float *out = NULL;
+    uint64_t hsh = 0;
+    int runs = 0;
+    int first = ti == 0;
+    if (!first && s->kind[0] == 'r' && A.ref_max_ms > 0 && s->first_ms > A.ref_max_ms) {
+        /* a slow reference (god_rays' 2000-sample loop) is timed at the first thread count only */
+        char note[320];
+        snprintf(note, sizeof note, "%s%snot timed: one run took %.1f s with %d threads (over --ref-max-ms)",
+                 base_note, base_note[0] ? "; " : "", s->first_ms / 1e3, fx_context_threads(ctxs[0]));
+        csv_row(s->kind, effect, s->label, w, h, th, 0, NAN, NAN, NAN, NAN, mask_px, note);
+        free(json);
+        return;
+    }
+    int want_ref = first && s->kind[0] == 'r';
+    double ms = time_recipe(ctx, json, f, A.runs, first ? (want_ref ? refp : &out) : NULL, &hsh, &runs);
+    free(json);
+    char note[320];
+    snprintf(note, sizeof note, "%s", base_note);
+    if (first) {
+        s->hash = hsh;
+        s->first_ms = ms;
+        if (want_ref) {
+            s->have_err = 0; /* it is the reference */
+        } else if (s->k && s->k->look) {
+            if (presets) {
+                /* the reference preset at the same knob value */
+                char *rj = make_recipe(entries, FX_QUALITY_REFERENCE, s->k, s->k->values[s->value], NULL);
+                float *r2 = NULL;
+                uint64_t h2;
+                int rr;
+                double save = A.budget_ms;
+                A.budget_ms = 0; /* one run: the output only */
+                time_recipe(ctx, rj, f, 1, &r2, &h2, &rr);
+                A.budget_ms = save;
+                free(rj);
+                errors(out, r2, mask, npx, &s->mae, &s->maxe, &s->psnr);
+                s->have_err = 1;
+                s->identical = h2 == hsh;
+                free(r2);
+            }
+        } else if (*refp) {
+            errors(out, *refp, mask, npx, &s->mae, &s->maxe, &s->psnr);
+            s->have_err = 1;
+            s->identical = hsh == st[0].hash;
+        }
+        free(out);
+    } else if (hsh != s->hash) {
+        size_t l = strlen(note);
+        snprintf(note + l, sizeof note - l, "%sOUTPUT DIFFERS FROM %d THREADS", l ? "; " : "",
+                 fx_context_threads(ctxs[0]));
+    }
+    if (s->k && s->k->look) {
+        size_t l = strlen(note);
+        snprintf(note + l, sizeof note - l, "%slook knob at final: error vs reference preset at the same value",
+                 l ? "; " : "");
+        if (!presets)
+            snprintf(note + strlen(note), sizeof note - strlen(note), " (no presets: none)");
+    } else if (s->k) {
+        size_t l = strlen(note);
+        snprintf(note + l, sizeof note - l, "%sknob at final", l ? "; " : "");
+    }
+    if (s->have_err && s->identical && s->kind[0] != 'r') {
+        size_t l = strlen(note);
+        snprintf(note + l, sizeof note - l, "%sbit-identical to reference", l ? "; " : "");
+    }
+    csv_row(s->kind, effect, s->label, w, h, th, runs, ms, s->have_err ? s->mae : NAN,
+            s->have_err ? s->maxe : NAN, s->have_err ? s->psnr : NAN, mask_px, note);
+    fprintf(stderr, "bench_presets: [%s %dx%d] %s %s, %d thread%s: %.2f ms (%d run%s)\n", A.scene, w, h,
+            effect, s->label, th, th == 1 ? "" : "s", ms, runs, runs == 1 ? "" : "s");
+}
+
+/* Every setting at every thread count, between two samples of the memcpy floor. */
+static void bench_threads(effect_bench *b)
+{
+    const char *effect = b->effect;
+    const int w = b->w, h = b->h;
+    const size_t npx = b->npx;
+    fx_context **ctxs = b->ctxs;
     floor_samples fl[4];
     memset(fl, 0, sizeof fl);
     float *ref = NULL;
@@ -527,109 +645,37 @@ static void bench_effect(const char *effect, const cJSON *entries, const fx_fram
         fx_context *ctx = ctxs[ti];
         int th = fx_context_threads(ctx);
         {
-            float *a = malloc(npx * 16), *b = malloc(npx * 16);
-            memset(a, 0, npx * 16);
-            floor_sample(ctx, a, b, w, h, &fl[ti], A.runs);
-            free(a);
-            free(b);
+            float *fa = malloc(npx * 16), *fb = malloc(npx * 16);
+            memset(fa, 0, npx * 16);
+            floor_sample(ctx, fa, fb, w, h, &fl[ti], A.runs);
+            free(fa);
+            free(fb);
         }
-        for (int si = 0; si < ns; si++) {
-            setting *s = &st[si];
-            if (ti > 0 && s->k && A.knobs_first_only)
-                continue; /* knob sweeps at the first thread count only */
-            char *json = make_recipe(entries, s->quality, s->k, s->k ? s->k->values[s->value] : NULL, NULL);
-            float *out = NULL;
-            uint64_t hsh = 0;
-            int runs = 0;
-            int first = ti == 0;
-            if (!first && s->kind[0] == 'r' && A.ref_max_ms > 0 && s->first_ms > A.ref_max_ms) {
-                /* a slow reference (god_rays' 2000-sample loop) is timed at the first thread count only */
-                char note[320];
-                snprintf(note, sizeof note, "%s%snot timed: one run took %.1f s with %d threads (over --ref-max-ms)",
-                         base_note, base_note[0] ? "; " : "", s->first_ms / 1e3, fx_context_threads(ctxs[0]));
-                csv_row(s->kind, effect, s->label, w, h, th, 0, NAN, NAN, NAN, NAN, mask_px, note);
-                free(json);
-                continue;
-            }
-            int want_ref = first && s->kind[0] == 'r';
-            double ms = time_recipe(ctx, json, f, A.runs, first ? (want_ref ? &ref : &out) : NULL, &hsh, &runs);
-            free(json);
-            char note[320];
-            snprintf(note, sizeof note, "%s", base_note);
-            if (first) {
-                s->hash = hsh;
-                s->first_ms = ms;
-                if (want_ref) {
-                    s->have_err = 0; /* it is the reference */
-                } else if (s->k && s->k->look) {
-                    if (presets) {
-                        /* the reference preset at the same knob value */
-                        char *rj = make_recipe(entries, FX_QUALITY_REFERENCE, s->k, s->k->values[s->value], NULL);
-                        float *r2 = NULL;
-                        uint64_t h2;
-                        int rr;
-                        double save = A.budget_ms;
-                        A.budget_ms = 0; /* one run: the output only */
-                        time_recipe(ctx, rj, f, 1, &r2, &h2, &rr);
-                        A.budget_ms = save;
-                        free(rj);
-                        errors(out, r2, mask, npx, &s->mae, &s->maxe, &s->psnr);
-                        s->have_err = 1;
-                        s->identical = h2 == hsh;
-                        free(r2);
-                    }
-                } else if (ref) {
-                    errors(out, ref, mask, npx, &s->mae, &s->maxe, &s->psnr);
-                    s->have_err = 1;
-                    s->identical = hsh == st[0].hash;
-                }
-                free(out);
-            } else if (hsh != s->hash) {
-                size_t l = strlen(note);
-                snprintf(note + l, sizeof note - l, "%sOUTPUT DIFFERS FROM %d THREADS", l ? "; " : "",
-                         fx_context_threads(ctxs[0]));
-            }
-            if (s->k && s->k->look) {
-                size_t l = strlen(note);
-                snprintf(note + l, sizeof note - l, "%slook knob at final: error vs reference preset at the same value",
-                         l ? "; " : "");
-                if (!presets)
-                    snprintf(note + strlen(note), sizeof note - strlen(note), " (no presets: none)");
-            } else if (s->k) {
-                size_t l = strlen(note);
-                snprintf(note + l, sizeof note - l, "%sknob at final", l ? "; " : "");
-            }
-            if (s->have_err && s->identical && s->kind[0] != 'r') {
-                size_t l = strlen(note);
-                snprintf(note + l, sizeof note - l, "%sbit-identical to reference", l ? "; " : "");
-            }
-            csv_row(s->kind, effect, s->label, w, h, th, runs, ms, s->have_err ? s->mae : NAN,
-                    s->have_err ? s->maxe : NAN, s->have_err ? s->psnr : NAN, mask_px, note);
-            fprintf(stderr, "bench_presets: [%s %dx%d] %s %s, %d thread%s: %.2f ms (%d run%s)\n", A.scene, w, h,
-                    effect, s->label, th, th == 1 ? "" : "s", ms, runs, runs == 1 ? "" : "s");
-        }
+        for (int si = 0; si < b->ns; si++)
+            bench_setting(b, ti, &b->st[si], &ref);
         /* a second floor sample after the effect's timings */
-        float *a = malloc(npx * 16), *b = malloc(npx * 16);
-        memset(a, 0, npx * 16);
-        floor_sample(ctx, a, b, w, h, &fl[ti], A.runs);
-        free(a);
-        free(b);
+        float *fa = malloc(npx * 16), *fb = malloc(npx * 16);
+        memset(fa, 0, npx * 16);
+        floor_sample(ctx, fa, fb, w, h, &fl[ti], A.runs);
+        free(fa);
+        free(fb);
         char note[128];
         snprintf(note, sizeof note, "parallel copy of %dx%d RGBA float; same run as %s", w, h, effect);
         csv_row("floor", effect, "memcpy", w, h, th, fl[ti].n, median_d(fl[ti].ms, fl[ti].n), NAN,
                 NAN, NAN, -1, note);
     }
     free(ref);
+}
 
-    /* scaling rows at `final` */
-    fx_context *sc = NULL;
-    for (int ti = 0; ti < A.nthreads; ti++)
-        if (fx_context_threads(ctxs[ti]) == A.scaling_threads)
-            sc = ctxs[ti];
-    if (!sc)
-        sc = ctxs[A.nthreads - 1];
-    int sth = fx_context_threads(sc);
-    char *final_json = make_recipe(entries, FX_QUALITY_FINAL, NULL, NULL, NULL);
+/* Scaling rows at `final`: the frame resampled to each size. */
+static void bench_scaling_res(effect_bench *b, fx_context *sc, const char *final_json)
+{
+    const char *effect = b->effect;
+    const cJSON *entries = b->entries;
+    const fx_frame *f = b->f;
+    const int w = b->w, h = b->h;
+    const char *base_note = b->base_note;
+    const int sth = fx_context_threads(sc);
     for (int ri = 0; ri < A.nres; ri++) {
         double mp = A.res_mp[ri];
         double aspect = (double)w / h;
@@ -656,36 +702,78 @@ static void bench_effect(const char *effect, const cJSON *entries, const fx_fram
                 W * (double)H / 1e6, ms);
         fx_frame_free(g);
     }
-    if (A.nmask > 0) {
-        /* columns holding the masked pixels, cumulative */
-        long *cum = calloc((size_t)w + 1, sizeof(long));
-        for (int y = 0; y < h; y++)
-            for (int x = 0; x < w; x++)
-                cum[x + 1] += (!mask || mask[(size_t)y * w + x] > 0.0f);
+}
+
+/* Scaling rows at `final`: the masks cut to a share of their pixels. */
+static void bench_scaling_mask(effect_bench *b, fx_context *sc)
+{
+    const char *effect = b->effect;
+    const cJSON *entries = b->entries;
+    const fx_frame *f = b->f;
+    const int w = b->w, h = b->h;
+    const float *mask = b->mask;
+    const char *base_note = b->base_note;
+    const int sth = fx_context_threads(sc);
+    /* columns holding the masked pixels, cumulative */
+    long *cum = calloc((size_t)w + 1, sizeof(long));
+    for (int y = 0; y < h; y++)
         for (int x = 0; x < w; x++)
-            cum[x + 1] += cum[x];
-        for (int mi = 0; mi < A.nmask; mi++) {
-            double pct = A.mask_pct[mi];
-            long want = (long)ceil(pct / 100.0 * cum[w]);
-            int x = 0;
-            while (x < w && cum[x] < want)
-                x++;
-            int rect[4] = {0, 0, x, h};
-            char *json = make_recipe(entries, FX_QUALITY_FINAL, NULL, NULL, rect);
-            int runs = 0;
-            double ms = time_recipe(sc, json, f, A.runs, NULL, NULL, &runs);
-            free(json);
-            char setting_s[32], note[256];
-            snprintf(setting_s, sizeof setting_s, "mask=%g%%", pct);
-            snprintf(note, sizeof note, "quality=final; masks cut by rect [0 0 %d %d]%s%s", x, h,
-                     base_note[0] ? "; " : "", base_note);
-            csv_row("scaling_mask", effect, setting_s, w, h, sth, runs, ms, NAN, NAN, NAN, cum[x], note);
-            fprintf(stderr, "bench_presets: [%s] %s mask %g%% (%ld px): %.2f ms\n", A.scene, effect, pct, cum[x], ms);
-        }
-        free(cum);
+            cum[x + 1] += (!mask || mask[(size_t)y * w + x] > 0.0f);
+    for (int x = 0; x < w; x++)
+        cum[x + 1] += cum[x];
+    for (int mi = 0; mi < A.nmask; mi++) {
+        double pct = A.mask_pct[mi];
+        long want = (long)ceil(pct / 100.0 * cum[w]);
+        int x = 0;
+        while (x < w && cum[x] < want)
+            x++;
+        int rect[4] = {0, 0, x, h};
+        char *json = make_recipe(entries, FX_QUALITY_FINAL, NULL, NULL, rect);
+        int runs = 0;
+        double ms = time_recipe(sc, json, f, A.runs, NULL, NULL, &runs);
+        free(json);
+        char setting_s[32], note[256];
+        snprintf(setting_s, sizeof setting_s, "mask=%g%%", pct);
+        snprintf(note, sizeof note, "quality=final; masks cut by rect [0 0 %d %d]%s%s", x, h,
+                 base_note[0] ? "; " : "", base_note);
+        csv_row("scaling_mask", effect, setting_s, w, h, sth, runs, ms, NAN, NAN, NAN, cum[x], note);
+        fprintf(stderr, "bench_presets: [%s] %s mask %g%% (%ld px): %.2f ms\n", A.scene, effect, pct, cum[x], ms);
     }
+    free(cum);
+}
+
+static void bench_effect(const char *effect, const cJSON *entries, const fx_frame *f, fx_context **ctxs)
+{
+    effect_bench *b = calloc(1, sizeof *b);
+    if (!b)
+        die(effect, ctxs[0]);
+    b->effect = effect;
+    b->entries = entries;
+    b->f = f;
+    b->ctxs = ctxs;
+    b->w = fx_frame_width(f);
+    b->h = fx_frame_height(f);
+    b->npx = (size_t)b->w * b->h;
+    int halo = 0;
+    b->presets = effect_has_presets(ctxs[0], effect, &halo);
+    b->mask = union_mask(ctxs[0], entries, f, &b->mask_px);
+    bench_note(b);
+    bench_settings(b);
+    bench_threads(b);
+    /* scaling rows at `final` */
+    fx_context *sc = NULL;
+    for (int ti = 0; ti < A.nthreads; ti++)
+        if (fx_context_threads(ctxs[ti]) == A.scaling_threads)
+            sc = ctxs[ti];
+    if (!sc)
+        sc = ctxs[A.nthreads - 1];
+    char *final_json = make_recipe(entries, FX_QUALITY_FINAL, NULL, NULL, NULL);
+    bench_scaling_res(b, sc, final_json);
+    if (A.nmask > 0)
+        bench_scaling_mask(b, sc);
     free(final_json);
-    free(mask);
+    free(b->mask);
+    free(b);
 }
 
 /* ---- main ------------------------------------------------------------------ */

@@ -3,11 +3,12 @@
 Errors are in test_cli_errors.py, sequences and Ctrl-C in test_cli_sequences.py.
 """
 import json
+import re
 
 import numpy as np
 import pytest
 
-from conftest import (EXIT_OK, EXIT_USAGE, combined, make_frame, read_exr, write_exr,
+from conftest import (REPO, EXIT_OK, EXIT_USAGE, combined, make_frame, read_exr, write_exr,
                       write_recipe)
 
 EFFECTS = ("gaussian_blur", "color_matrix", "pixelate")
@@ -29,7 +30,9 @@ def param_names(desc):
 def test_version(run):
     r = run("--version")
     assert r.returncode == EXIT_OK
-    assert r.stdout.startswith("libfx ") and "ABI 1" in r.stdout
+    header = (REPO / "libfx" / "include" / "libfx" / "fx.h").read_text()
+    abi = re.search(r"#define\s+FX_ABI_VERSION\s+(\d+)", header).group(1)
+    assert r.stdout.startswith("libfx ") and "ABI %s" % abi in r.stdout
 
 
 def test_help_lists_commands_and_exit_codes(run):

@@ -3,7 +3,7 @@
 
     /usr/bin/python3 -m pytest tests/python/test_exr_interop.py
 
-The library is $LIBFX_LIBRARY, else build*/libfx/libfx.so.1 under the repository root.
+The library is $LIBFX_LIBRARY, else build*/libfx/libfx.so.2 under the repository root.
 Only the public C API is used (through a few ctypes declarations here).
 """
 import ctypes
@@ -35,10 +35,10 @@ def _library_path():
     if env:
         return pathlib.Path(env)
     for build in ("build", "build-h", "build-io", "build-addon"):
-        p = REPO / build / "libfx" / "libfx.so.1"
+        p = REPO / build / "libfx" / "libfx.so.2"
         if p.is_file():
             return p
-    return REPO / "build" / "libfx" / "libfx.so.1"
+    return REPO / "build" / "libfx" / "libfx.so.2"
 
 
 @pytest.fixture(scope="module")

@@ -6,7 +6,7 @@ chunks of noise that are stored raw because they do not shrink.
 
     /usr/bin/python3 -m pytest tests/python/test_exr_zip.py
 
-The library is $LIBFX_LIBRARY, else build*/libfx/libfx.so.1 under the repository root.
+The library is $LIBFX_LIBRARY, else build*/libfx/libfx.so.2 under the repository root.
 """
 import ctypes
 import pathlib

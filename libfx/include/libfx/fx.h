@@ -39,7 +39,7 @@ extern "C" {
 #endif
 
 /* Bumped on every ABI break, together with the library's SOVERSION. */
-#define FX_ABI_VERSION 1
+#define FX_ABI_VERSION 2
 
 typedef enum fx_result {
     FX_OK = 0,
@@ -278,7 +278,11 @@ FX_API const char *fx_stack_effect(const fx_stack *s, int index); /* effect name
 FX_API fx_result fx_stack_append(fx_stack *s, const char *effect, int *out_index);
 FX_API fx_result fx_stack_remove(fx_stack *s, int index);
 FX_API fx_result fx_stack_set_enabled(fx_stack *s, int index, int enabled);
-/* Setting a parameter marks it explicit: quality presets no longer change it. */
+/* Setting a parameter marks it explicit: quality presets no longer change it. Each
+ * setter checks the value's type and range and then the whole effect with it (defaults,
+ * preset and explicit values, the effect's checks between parameters): a bad value is
+ * refused with a message naming the effect and the parameter, and the stack is left
+ * unchanged. A stack that was built without an error runs without a parameter error. */
 FX_API fx_result fx_stack_set_float(fx_stack *s, int index, const char *param, double value);
 FX_API fx_result fx_stack_set_int(fx_stack *s, int index, const char *param, int value);
 FX_API fx_result fx_stack_set_enum(fx_stack *s, int index, const char *param, const char *item);
@@ -288,8 +292,9 @@ FX_API fx_result fx_stack_set_string(fx_stack *s, int index, const char *param, 
  * "object_index": ..., "rect": [x, y, w, h] (pixels), "rect_relative": [x, y, w, h] (fractions
  * of the display window), "invert": bool}; "{}" or NULL: everything. */
 FX_API fx_result fx_stack_set_mask_json(fx_stack *s, int index, const char *mask_json);
-/* Per-effect quality (-1: the stack's); the stack's quality (default final). */
-FX_API fx_result fx_stack_set_effect_quality(fx_stack *s, int index, int quality);
+/* The stack's quality (default final); an effect's own comes from its recipe entry.
+ * Every effect that follows the stack's quality is checked with the new preset: on a
+ * clash with an explicit value the call fails and the stack is unchanged. */
 FX_API fx_result fx_stack_set_quality(fx_stack *s, int quality);
 /* What the enabled effects and their masks need: {"passes": ["Combined", "CryptoObject",
  * ...], "camera": bool}. Cryptomatte is named by type (CryptoObject/CryptoMaterial/CryptoAsset). */
@@ -336,6 +341,25 @@ FX_API fx_result fx_stack_required_aux_views(const fx_stack *s, char **out_json)
  * rebuild them. max_bytes bounds the cache (default 768 MiB, never above the context's
  * memory limit); 0 turns it off. Results are bit-identical either way. */
 FX_API fx_result fx_context_set_aux_cache(fx_context *c, uint64_t max_bytes);
+
+/* ---- Effect parameter versions ---------------------------------------------
+ * Each effect's parameter table has a version (1 until a parameter is renamed or
+ * re-ranged). A recipe entry may say which version its "params" were written at:
+ * {"effect": "pixelate", "params_version": 1, "params": {...}} (absent: 1). Loading an
+ * older version migrates it (renamed parameters moved to their new names, re-ranged
+ * values converted) with one context warning per migrated parameter; nothing is dropped
+ * (a parameter the migration does not know stays and fails as unknown). A version newer
+ * than the library's is refused. fx_stack_to_json writes every entry's current version. */
+/* The current params_version of an effect (1 for an effect that never changed). */
+FX_API fx_result fx_effect_params_version(fx_context *ctx, const char *effect, int *out);
+/* Migrates a JSON object of one effect's parameters written at from_version to the
+ * current version; *out_json is a new JSON object (fx_free). from_version equal to the
+ * current one returns the object unchanged; newer is FX_ERR_BAD_RECIPE. */
+FX_API fx_result fx_effect_migrate_params(fx_context *ctx, const char *effect, int from_version,
+                                          const char *params_json, char **out_json);
+/* The parameters the effect at `index` runs with (defaults, then its quality preset, then
+ * the explicit values), every parameter of its table, as a JSON object (fx_free). */
+FX_API fx_result fx_stack_effective_params_json(const fx_stack *s, int index, char **out_json);
 
 #ifdef __cplusplus
 }

@@ -4,7 +4,46 @@
  * (name, type, default, hard and soft range, doc, offset into the struct). The
  * recipe parser, the C setters, `libfx describe`, the add-on's UI and the docs all
  * read that table. The stack hands process() the effective parameters (defaults,
- * then the quality preset, then the user's explicit values), already range-checked.
+ * then the quality preset, then the user's explicit values), already checked.
+ *
+ * ---- Adding an effect: the checklist ----
+ * Files to add:
+ *  - libfx/src/effects/foo.c defining `const fx_effect_class fx_effect_foo` (the registry
+ *    is generated from the file names: nothing to list anywhere; every .c file there is
+ *    an effect, so shared code goes in math/ or a header-only helper);
+ *  - docs/effects/foo.md (its generated blocks: scripts/gen_effect_docs.py), a C test
+ *    tests/c/test_foo.c, and tests/data/recipes_v1/foo.json with every parameter set to
+ *    a non-default value (test_recipes_v1 then needs its checksum lines, written once
+ *    with LIBFX_WRITE_CHECKSUMS and checked in).
+ * In foo.c:
+ *  - a params struct and its table (FX_P_FLOAT, FX_P_INT, FX_P_BOOL, FX_P_ENUM,
+ *    FX_P_FLOATS, FX_P_STRING below); hint "pixels" for frame-pixel lengths (the stack
+ *    divides them on proxies); presets as JSON objects for effects with a cost knob;
+ *  - `passes(params)` for every pass beyond Combined; FX_EFFECT_NEEDS_CAMERA, or
+ *    `needs_camera(params)` when it depends on them; `aux_views` for light or rain views;
+ *  - `identity(params)` when parameters can make it a no-op (zero strength);
+ *  - `validate` for checks between parameters (each one's range is checked already);
+ *  - `process(run)`: read run->src, run->frame's passes and run->params; write every
+ *    pixel of run->dst inside run->roi and nothing outside it;
+ *  - FX_EFFECT_OWN_FINITE / FX_EFFECT_IN_PLACE when they are true (read their notes);
+ *  - params_version 1 (0 means 1). Never rename or re-range a parameter without bumping
+ *    it and adding a `migrations` step: saved recipes and .blend files must keep loading.
+ * What process() may touch: the fx_effect_run fields, fx_frame_find_pass for passes, the
+ *  accessors here (fx_effect_scene_time/frame, fx_effect_debug_pass,
+ *  fx_effect_finish_row, fx_effect_pass_through), math/ helpers, fx_mask_build for masks
+ *  of its own, fx_parallel_for for rows; errors through fx_fail(run->ctx, ..., "%s: ...",
+ *  run->where). Never a frame's or the stack's fields directly, never a global.
+ * What the stack does for every effect, so no effect repeats it:
+ *  - effective parameters: defaults, preset, explicit values, validated once when they
+ *    change (load, setter, quality) and handed to every call (passes, run, aux views);
+ *  - the passes and the camera checked present, with a message naming what to enable;
+ *  - an identity or an empty region (mask selecting nothing) skipped: no call, no copy;
+ *  - the mask: built, its bounds as run->roi, outside pixels kept bit for bit, edges
+ *    blended by coverage;
+ *  - the NaN/Inf guard on the output (replaced and counted in a warning);
+ *  - buffers (ping-pong, in place, consumed inputs), progress, cancel and timings;
+ *  - proxies: "pixels" parameters and mask rectangles scaled; run->proxy_factor for the
+ *    effect's own fixed pixel distances.
  */
 #ifndef LIBFX_EFFECT_H
 #define LIBFX_EFFECT_H
@@ -96,6 +135,21 @@ typedef struct fx_effect_run {
  * pixel and nothing else. The stack then writes over a buffer it owns instead of filling
  * a second one: a third less memory traffic, and no fresh pages on a consumed input. */
 #define FX_EFFECT_IN_PLACE 2u
+/* process() always needs the camera matrices (for a need that depends on the params, use
+ * the needs_camera callback instead). */
+#define FX_EFFECT_NEEDS_CAMERA 4u
+
+/* One step of a parameter migration (see fx_effect_class.migrations): in a recipe entry
+ * written at params_version `from_version`, parameter `old_name` becomes `new_name` (NULL
+ * or the same name: kept), its number multiplied by `scale` and `offset` added (scale 0:
+ * unchanged; numbers and number arrays only). `note` says why, for the warning. */
+typedef struct fx_param_migration {
+    int from_version;
+    const char *old_name;
+    const char *new_name;
+    double scale, offset;
+    const char *note;
+} fx_param_migration;
 
 typedef struct fx_effect_class {
     const char *name;            /* recipe name: "gaussian_blur" */
@@ -109,20 +163,36 @@ typedef struct fx_effect_class {
     unsigned flags;              /* FX_EFFECT_* */
     /* Passes needed beyond Combined for these params (and the mask's, added by the stack). */
     fx_pass_set (*passes)(const void *params);
-    /* Non-zero if these params need camera matrices. NULL: never. */
+    /* Non-zero if these params need camera matrices. NULL: FX_EFFECT_NEEDS_CAMERA decides. */
     int (*needs_camera)(const void *params);
+    /* Non-zero if these params make process() the identity (zero strength, zero sigma):
+     * the stack then skips the effect as if it were disabled (no copy, no buffer; the
+     * image passes through bit for bit). NULL: never. */
+    int (*identity)(const void *params);
     /* Auxiliary views these params read: fills up to `max` entries, returns how many.
      * NULL: none. */
     int (*aux_views)(const void *params, fx_aux_need *out, int max);
     /* Non-zero if these params let process() run with dst == src (see FX_EFFECT_IN_PLACE,
      * for effects where it depends on the params). NULL: the flag decides. */
     int (*in_place)(const void *params);
-    /* Border pixels read around each output pixel (for tiling and ROI growth). NULL: 0. */
+    /* Border pixels read around each output pixel, for a w x h frame. NULL: 0. The stack
+     * does not tile and hands process() the whole source image, so no run needs it: it is
+     * what `describe` reports (docs, the add-on, bench_all's "local effect" tables), at
+     * 1920x1080 because some halos grow with the frame (bloom's pyramid). Keep it exact. */
     int (*halo)(const void *params, int width, int height);
     /* Checks between parameters (each one's range is checked already). NULL: none.
      * On failure, writes a message naming the parameter into err. */
     fx_result (*validate)(const void *params, char *err, size_t err_size);
     fx_result (*process)(const fx_effect_run *run);
+    /* The version of the parameter table; 0 means 1. Bump it when a parameter is renamed
+     * or its meaning or range changes, and add the steps from the previous version to
+     * `migrations` (applied in table order, version after version, each with a warning);
+     * `migrate` may handle what a table cannot (from_version -> from_version + 1, on the
+     * entry's "params" object; write why into note). Recipes carry "params_version". */
+    int params_version;
+    const fx_param_migration *migrations;
+    int migration_count;
+    fx_result (*migrate)(int from_version, struct cJSON *params, char *note, size_t note_size);
 } fx_effect_class;
 
 /* The registry, generated by CMake from the files in libfx/src/effects/: a file foo.c must
@@ -131,6 +201,13 @@ extern const fx_effect_class *const fx_effect_classes[];
 extern const int fx_effect_class_count;
 const fx_effect_class *fx_effect_find(const char *name);
 const fx_param_def *fx_effect_find_param(const fx_effect_class *cls, const char *name);
+/* The class's params_version (1 when it declares none). */
+int fx_effect_version(const fx_effect_class *cls);
+/* Whether these params need the camera (FX_EFFECT_NEEDS_CAMERA or needs_camera()). */
+int fx_effect_needs_camera(const fx_effect_class *cls, const void *params);
+/* For tests: one extra class fx_effect_find also finds (not listed by fx_effect_count);
+ * NULL removes it. Not thread-safe: set it before any stack uses it. */
+void fx_effect_register_test_class(const fx_effect_class *cls);
 
 /* Adds a debug output pass "fx<index>_<effect>_<name>" to run->debug (no dots: a dot
  * would read back as a layer separator) and returns its
@@ -142,9 +219,16 @@ float *fx_effect_debug_pass(const fx_effect_run *run, const char *name, int chan
  * does for every effect, and counts them for the stack's warning. */
 void fx_effect_finish_row(const fx_effect_run *run, float *row, size_t n);
 
-/* Copies src to dst inside the ROI and returns FX_OK: what an effect does when its
- * parameters make it the identity (zero strength), per the "early return" rule. */
+/* Copies src to dst inside the ROI and returns FX_OK: what an effect does when what it
+ * finds at run time (a light behind the camera) makes it the identity. An identity that
+ * the parameters alone decide belongs in the class's `identity` predicate instead. */
 fx_result fx_effect_pass_through(const fx_effect_run *run);
+
+/* The scene time of the frame in seconds (frame / fps; fps 24 when the frame has none),
+ * for animated effects. */
+double fx_effect_scene_time(const fx_effect_run *run);
+/* The scene frame number of the frame (finite; 1 when the frame has none). */
+double fx_effect_scene_frame(const fx_effect_run *run);
 
 /* Parameter storage helpers (core/params.c). */
 void fx_params_set_defaults(const fx_effect_class *cls, void *params);

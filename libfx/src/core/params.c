@@ -1,6 +1,7 @@
 /* Parameters are declared once per effect (core/effect.h); this file turns JSON into
  * the effect's params struct and back, checks types and ranges with messages that
- * name the effect, the parameter and the allowed values, and serves introspection. */
+ * name the effect, the parameter and the allowed values, and describes a parameter as
+ * JSON. What the public API tells about effects is the registry's (core/registry.c). */
 #include "core/params.h"
 
 #include <math.h>
@@ -346,89 +347,4 @@ cJSON *fx_param_info_json(const fx_param_def *d)
         break;
     }
     return o;
-}
-
-/* ---- public introspection ---- */
-
-int fx_effect_count(void)
-{
-    return fx_effect_class_count;
-}
-
-const char *fx_effect_name(int index)
-{
-    if (index < 0 || index >= fx_effect_class_count)
-        return NULL;
-    return fx_effect_classes[index]->name;
-}
-
-const char *fx_effect_doc(const char *effect)
-{
-    const fx_effect_class *c = fx_effect_find(effect);
-    return c ? c->doc : NULL;
-}
-
-int fx_effect_param_count(const char *effect)
-{
-    const fx_effect_class *c = fx_effect_find(effect);
-    return c ? c->param_count : -1;
-}
-
-const fx_param_info *fx_effect_param(const char *effect, int index)
-{
-    const fx_effect_class *c = fx_effect_find(effect);
-    if (!c || index < 0 || index >= c->param_count)
-        return NULL;
-    return &c->params[index].info;
-}
-
-static void add_pass_names(cJSON *arr, fx_pass_set set)
-{
-    for (int i = 0; i < FX_PASS_COUNT; i++)
-        if (set & FX_PASS_BIT(i))
-            cJSON_AddItemToArray(arr, cJSON_CreateString(fx_pass_describe((fx_pass_id)i)->name));
-}
-
-fx_result fx_effect_describe_json(fx_context *ctx, const char *effect, char **out_json)
-{
-    if (!out_json)
-        return fx_fail(ctx, FX_ERR_INVALID_ARGUMENT, "fx_effect_describe_json: out_json is NULL");
-    *out_json = NULL;
-    const fx_effect_class *c = fx_effect_find(effect);
-    if (!c)
-        return fx_fail(ctx, FX_ERR_UNKNOWN_EFFECT, "unknown effect '%s' (see `libfx list`)",
-                       effect ? effect : "(null)");
-    void *defaults = fx_mem_alloc(c->params_size);
-    cJSON *o = cJSON_CreateObject();
-    if (!defaults || !o) {
-        fx_mem_free(defaults);
-        cJSON_Delete(o);
-        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "out of memory describing '%s'", effect);
-    }
-    fx_params_set_defaults(c, defaults);
-    cJSON_AddStringToObject(o, "name", c->name);
-    cJSON_AddStringToObject(o, "doc", c->doc);
-    cJSON *params = cJSON_AddArrayToObject(o, "params");
-    for (int i = 0; i < c->param_count; i++)
-        cJSON_AddItemToArray(params, fx_param_info_json(&c->params[i]));
-    cJSON *presets = cJSON_AddObjectToObject(o, "presets");
-    for (int q = 0; q < 4; q++) {
-        if (!c->presets[q])
-            continue;
-        cJSON *p = cJSON_Parse(c->presets[q]);
-        if (p)
-            cJSON_AddItemToObject(presets, quality_names[q], p);
-    }
-    cJSON *passes = cJSON_AddArrayToObject(o, "passes");
-    add_pass_names(passes, FX_PASS_BIT(FX_PASS_COMBINED) | (c->passes ? c->passes(defaults) : 0));
-    cJSON_AddBoolToObject(o, "needs_camera", c->needs_camera && c->needs_camera(defaults));
-    cJSON_AddNumberToObject(o, "halo", c->halo ? c->halo(defaults, 1920, 1080) : 0);
-    fx_mem_free(defaults);
-    char *s = cJSON_PrintUnformatted(o);
-    cJSON_Delete(o);
-    if (!s)
-        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "out of memory describing '%s'", effect);
-    *out_json = fx_json_strdup(s);
-    cJSON_free(s);
-    return *out_json ? FX_OK : fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "out of memory describing '%s'", effect);
 }

@@ -1,4 +1,5 @@
-/* Parameters: values in an effect's params struct, set and read through its table. */
+/* Parameters: values in an effect's params struct, set and read through its table
+ * (core/params.c); their migration from older versions (core/registry.c). */
 #ifndef LIBFX_PARAMS_H
 #define LIBFX_PARAMS_H
 
@@ -23,5 +24,10 @@ void fx_param_copy(const fx_param_def *def, void *dst, const void *src);
 void fx_params_scale_pixels(const fx_effect_class *cls, void *params, int factor);
 /* Parameter info and defaults as JSON (used by describe). */
 cJSON *fx_param_info_json(const fx_param_def *def);
+/* Brings a "params" object written at from_version up to the class's params_version
+ * (core/registry.c), in place, with a warning per migrated parameter. A version newer
+ * than the class's is an error. */
+fx_result fx_params_migrate(fx_context *ctx, const fx_effect_class *cls, int from_version, cJSON *params,
+                            const char *where);
 
 #endif

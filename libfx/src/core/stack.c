@@ -11,6 +11,7 @@
 #include <float.h>
 #include <limits.h>
 #include <math.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <string.h>
 #include <time.h>
@@ -22,6 +23,8 @@ typedef struct fx_entry {
     const fx_effect_class *cls;
     void *user_params;           /* values set explicitly (valid where explicit_set[i]) */
     unsigned char *explicit_set; /* one flag per parameter of the class */
+    void *effective;             /* defaults, then the preset, then the explicit values: made
+                                    and validated by entry_commit whenever one of them changes */
     int enabled;
     int quality;                 /* -1: the stack's */
     char label[LABEL_MAX];
@@ -40,6 +43,7 @@ struct fx_stack {
 static void entry_clear(fx_entry *e)
 {
     fx_mem_free(e->user_params);
+    fx_mem_free(e->effective);
     fx_mem_free(e->explicit_set);
     fx_mask_spec_clear(&e->mask);
     memset(e, 0, sizeof *e);
@@ -122,7 +126,7 @@ static fx_entry *entry_at(const fx_stack *s, int index, const char *fn)
 }
 
 /* Effective parameters: defaults, then the quality preset, then explicit values. */
-static fx_result effective_params(const fx_stack *s, const fx_entry *e, int index, int quality, void *out)
+static fx_result effective_params(fx_context *ctx, const fx_entry *e, int index, int quality, void *out)
 {
     const fx_effect_class *c = e->cls;
     char where[128];
@@ -133,12 +137,12 @@ static fx_result effective_params(const fx_stack *s, const fx_entry *e, int inde
         unsigned long failures = fx_mem_failure_count();
         cJSON *p = cJSON_Parse(preset);
         if (!p && fx_mem_failure_count() != failures)
-            return fx_fail(s->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory reading the '%s' preset", where,
+            return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory reading the '%s' preset", where,
                            fx_quality_name(quality));
         if (!p)
-            return fx_fail(s->ctx, FX_ERR_INTERNAL, "%s: preset '%s' is not valid JSON", where,
+            return fx_fail(ctx, FX_ERR_INTERNAL, "%s: preset '%s' is not valid JSON", where,
                            fx_quality_name(quality));
-        fx_result r = fx_params_set_object(s->ctx, c, out, p, NULL, where);
+        fx_result r = fx_params_set_object(ctx, c, out, p, NULL, where);
         cJSON_Delete(p);
         if (r)
             return r;
@@ -150,7 +154,7 @@ static fx_result effective_params(const fx_stack *s, const fx_entry *e, int inde
         char err[512] = "";
         fx_result r = c->validate(out, err, sizeof err);
         if (r)
-            return fx_fail(s->ctx, r, "%s: %s", where, err[0] ? err : "invalid parameters");
+            return fx_fail(ctx, r, "%s: %s", where, err[0] ? err : "invalid parameters");
     }
     return FX_OK;
 }
@@ -158,6 +162,24 @@ static fx_result effective_params(const fx_stack *s, const fx_entry *e, int inde
 static int entry_quality(const fx_stack *s, const fx_entry *e)
 {
     return e->quality >= 0 ? e->quality : s->quality;
+}
+
+/* The commit step (as Open Image Denoise commits a filter before it runs): the entry's
+ * effective parameters at `quality`, validated as a whole. On failure the entry keeps
+ * its previous ones and the message names the effect and the parameter. */
+static fx_result entry_commit(fx_context *ctx, fx_entry *e, int index, int quality)
+{
+    void *p = fx_mem_alloc(e->cls->params_size);
+    if (!p)
+        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "out of memory checking effect %d (%s)", index, e->cls->name);
+    fx_result r = effective_params(ctx, e, index, quality, p);
+    if (r) {
+        fx_mem_free(p);
+        return r;
+    }
+    fx_mem_free(e->effective);
+    e->effective = p;
+    return FX_OK;
 }
 
 /* ---- recipes ---- */
@@ -170,6 +192,22 @@ static fx_result parse_quality(fx_context *ctx, const cJSON *v, const char *wher
                        "%s: \"quality\" must be one of draft, preview, final, reference", where);
     *out = q;
     return FX_OK;
+}
+
+/* An entry's "params", migrated first when they were written at an older version. */
+static fx_result parse_params(fx_context *ctx, const fx_effect_class *cls, int version, const cJSON *params,
+                              fx_entry *e, const char *where)
+{
+    if (version == fx_effect_version(cls) || !cJSON_IsObject(params))
+        return fx_params_set_object(ctx, cls, e->user_params, params, e->explicit_set, where);
+    cJSON *copy = cJSON_Duplicate(params, 1);
+    if (!copy)
+        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory migrating the parameters", where);
+    fx_result r = fx_params_migrate(ctx, cls, version, copy, where);
+    if (!r)
+        r = fx_params_set_object(ctx, cls, e->user_params, copy, e->explicit_set, where);
+    cJSON_Delete(copy);
+    return r;
 }
 
 static fx_result parse_entry(fx_stack *s, const cJSON *j, int index, fx_entry *e)
@@ -189,10 +227,21 @@ static fx_result parse_entry(fx_stack *s, const cJSON *j, int index, fx_entry *e
     if (r)
         return r;
     where_of(where, sizeof where, index, cls);
+    int version = 1; /* recipes from before parameter versions are version 1 */
+    const cJSON *pv = cJSON_GetObjectItemCaseSensitive(j, "params_version");
+    if (pv && (!cJSON_IsNumber(pv) || pv->valuedouble != floor(pv->valuedouble) || pv->valuedouble < 1 ||
+               pv->valuedouble > INT_MAX))
+        r = fx_fail(s->ctx, FX_ERR_BAD_RECIPE, "%s: \"params_version\" must be a whole number from 1", where);
+    else if (pv)
+        version = (int)pv->valuedouble;
+    if (!r && version > fx_effect_version(cls))
+        r = fx_params_migrate(s->ctx, cls, version, NULL, where); /* the "newer than known" error */
     const cJSON *item;
     cJSON_ArrayForEach(item, j) {
+        if (r)
+            break;
         const char *k = item->string;
-        if (strcmp(k, "effect") == 0)
+        if (strcmp(k, "effect") == 0 || strcmp(k, "params_version") == 0)
             continue;
         if (strcmp(k, "enabled") == 0) {
             if (!cJSON_IsBool(item))
@@ -208,12 +257,13 @@ static fx_result parse_entry(fx_stack *s, const cJSON *j, int index, fx_entry *e
             else
                 snprintf(e->label, LABEL_MAX, "%s", item->valuestring);
         } else if (strcmp(k, "params") == 0) {
-            r = fx_params_set_object(s->ctx, cls, e->user_params, item, e->explicit_set, where);
+            r = parse_params(s->ctx, cls, version, item, e, where);
         } else if (strcmp(k, "mask") == 0) {
             r = fx_mask_spec_parse(s->ctx, item, where, &e->mask);
         } else {
             r = fx_fail(s->ctx, FX_ERR_BAD_RECIPE,
-                        "%s: unknown key \"%s\" (known: effect, enabled, quality, label, params, mask)",
+                        "%s: unknown key \"%s\" (known: effect, params_version, enabled, quality, label, "
+                        "params, mask)",
                         where, k);
         }
         if (r)
@@ -286,15 +336,8 @@ fx_result fx_stack_load_json(fx_stack *s, const char *json)
         }
     }
     /* Cross-parameter checks at load, so a bad recipe fails before any render. */
-    for (int i = 0; !r && i < tmp.count; i++) {
-        fx_entry *e = &tmp.entries[i];
-        void *p = fx_mem_alloc(e->cls->params_size);
-        if (!p)
-            r = fx_fail(s->ctx, FX_ERR_OUT_OF_MEMORY, "out of memory checking a recipe");
-        else
-            r = effective_params(&tmp, e, i, entry_quality(&tmp, e), p);
-        fx_mem_free(p);
-    }
+    for (int i = 0; !r && i < tmp.count; i++)
+        r = entry_commit(s->ctx, &tmp.entries[i], i, entry_quality(&tmp, &tmp.entries[i]));
     cJSON_Delete(root);
     if (r) {
         stack_clear(&tmp);
@@ -336,6 +379,7 @@ fx_result fx_stack_to_json(const fx_stack *s, char **out_json)
         const fx_entry *e = &s->entries[i];
         cJSON *o = cJSON_CreateObject();
         cJSON_AddStringToObject(o, "effect", e->cls->name);
+        cJSON_AddNumberToObject(o, "params_version", fx_effect_version(e->cls));
         cJSON_AddBoolToObject(o, "enabled", e->enabled);
         if (e->quality >= 0)
             cJSON_AddStringToObject(o, "quality", fx_quality_name(e->quality));
@@ -357,6 +401,30 @@ fx_result fx_stack_to_json(const fx_stack *s, char **out_json)
         *out_json = fx_json_strdup(str);
     cJSON_free(str);
     return *out_json ? FX_OK : fx_fail(s->ctx, FX_ERR_OUT_OF_MEMORY, "out of memory writing a recipe");
+}
+
+fx_result fx_stack_effective_params_json(const fx_stack *s, int index, char **out_json)
+{
+    if (!out_json)
+        return fx_fail(s ? s->ctx : NULL, FX_ERR_INVALID_ARGUMENT, "fx_stack_effective_params_json: NULL argument");
+    *out_json = NULL;
+    fx_entry *e = entry_at(s, index, "fx_stack_effective_params_json");
+    if (!e)
+        return FX_ERR_INVALID_ARGUMENT;
+    cJSON *o = cJSON_CreateObject();
+    for (int k = 0; o && k < e->cls->param_count; k++) {
+        cJSON *v = fx_param_to_json(&e->cls->params[k], e->effective);
+        if (!v || !cJSON_AddItemToObject(o, e->cls->params[k].info.name, v)) {
+            cJSON_Delete(v);
+            cJSON_Delete(o);
+            o = NULL;
+        }
+    }
+    char *str = o ? cJSON_PrintUnformatted(o) : NULL;
+    cJSON_Delete(o);
+    *out_json = str ? fx_json_strdup(str) : NULL;
+    cJSON_free(str);
+    return *out_json ? FX_OK : fx_fail(s->ctx, FX_ERR_OUT_OF_MEMORY, "out of memory");
 }
 
 /* ---- editing ---- */
@@ -387,6 +455,10 @@ fx_result fx_stack_append(fx_stack *s, const char *effect, int *out_index)
     r = entry_init(s->ctx, &s->entries[s->count], cls);
     if (r)
         return r;
+    if ((r = entry_commit(s->ctx, &s->entries[s->count], s->count, s->quality))) {
+        entry_clear(&s->entries[s->count]);
+        return r;
+    }
     if (out_index)
         *out_index = s->count;
     s->count++;
@@ -431,7 +503,25 @@ static fx_result set_param(fx_stack *s, int index, const char *param, cJSON *val
         return fx_fail(s->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
     }
     cJSON_AddItemToObject(obj, param ? param : "", value);
-    fx_result r = fx_params_set_object(s->ctx, e->cls, e->user_params, obj, e->explicit_set, where);
+    /* Set on copies and commit the whole effect: a value that passes its own range but
+     * not the effect's cross-parameter checks is refused now, and the stack is unchanged. */
+    const size_t flags = (size_t)(e->cls->param_count ? e->cls->param_count : 1);
+    void *user = fx_mem_alloc(e->cls->params_size);
+    unsigned char *set = fx_mem_alloc(flags);
+    fx_result r = user && set ? FX_OK : fx_fail(s->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
+    if (!r) {
+        memcpy(user, e->user_params, e->cls->params_size);
+        memcpy(set, e->explicit_set, flags);
+        r = fx_params_set_object(s->ctx, e->cls, e->user_params, obj, e->explicit_set, where);
+        if (!r)
+            r = entry_commit(s->ctx, e, index, entry_quality(s, e));
+        if (r) {
+            memcpy(e->user_params, user, e->cls->params_size);
+            memcpy(e->explicit_set, set, flags);
+        }
+    }
+    fx_mem_free(user);
+    fx_mem_free(set);
     cJSON_Delete(obj);
     return r;
 }
@@ -492,25 +582,42 @@ fx_result fx_stack_set_mask_json(fx_stack *s, int index, const char *mask_json)
     return FX_OK;
 }
 
-fx_result fx_stack_set_effect_quality(fx_stack *s, int index, int quality)
-{
-    fx_entry *e = entry_at(s, index, "fx_stack_set_effect_quality");
-    if (!e)
-        return FX_ERR_INVALID_ARGUMENT;
-    if (quality < -1 || quality > FX_QUALITY_REFERENCE)
-        return fx_fail(s->ctx, FX_ERR_BAD_PARAM, "quality %d is not -1 (the stack's) or 0..3", quality);
-    e->quality = quality;
-    return FX_OK;
-}
-
 fx_result fx_stack_set_quality(fx_stack *s, int quality)
 {
     if (!s)
         return FX_ERR_INVALID_ARGUMENT;
     if (quality < 0 || quality > FX_QUALITY_REFERENCE)
         return fx_fail(s->ctx, FX_ERR_BAD_PARAM, "quality %d is not 0..3 (draft..reference)", quality);
-    s->quality = quality;
-    return FX_OK;
+    /* every entry that follows the stack's quality commits its new preset; on a failure
+     * (a preset that clashes with an explicit value) the stack keeps the old quality */
+    void **fresh = fx_mem_calloc((size_t)(s->count ? s->count : 1), sizeof *fresh);
+    if (!fresh)
+        return fx_fail(s->ctx, FX_ERR_OUT_OF_MEMORY, "out of memory changing the quality");
+    fx_result r = FX_OK;
+    for (int i = 0; i < s->count && !r; i++) {
+        fx_entry *e = &s->entries[i];
+        if (e->quality >= 0)
+            continue;
+        void *old = e->effective;
+        e->effective = NULL;
+        r = entry_commit(s->ctx, e, i, quality);
+        fresh[i] = e->effective;
+        e->effective = old;
+    }
+    for (int i = 0; i < s->count; i++) {
+        if (!fresh[i])
+            continue;
+        if (r) {
+            fx_mem_free(fresh[i]);
+        } else {
+            fx_mem_free(s->entries[i].effective);
+            s->entries[i].effective = fresh[i];
+        }
+    }
+    fx_mem_free(fresh);
+    if (!r)
+        s->quality = quality;
+    return r;
 }
 
 void fx_stack_set_debug_outputs(fx_stack *s, int enabled)
@@ -521,20 +628,13 @@ void fx_stack_set_debug_outputs(fx_stack *s, int enabled)
 
 /* ---- what a stack needs ---- */
 
-static fx_pass_set entry_passes(const fx_stack *s, const fx_entry *e, int index, int *needs_camera)
+static fx_pass_set entry_passes(const fx_entry *e, int *needs_camera)
 {
     fx_pass_set set = fx_mask_spec_passes(&e->mask);
-    void *p = fx_mem_alloc(e->cls->params_size);
-    if (!p)
-        return set;
-    /* Parameters were validated at load; if they fail now the run reports it. */
-    if (effective_params(s, e, index, entry_quality(s, e), p) == FX_OK) {
-        if (e->cls->passes)
-            set |= e->cls->passes(p);
-        if (needs_camera && e->cls->needs_camera && e->cls->needs_camera(p))
-            *needs_camera = 1;
-    }
-    fx_mem_free(p);
+    if (e->cls->passes)
+        set |= e->cls->passes(e->effective);
+    if (needs_camera && fx_effect_needs_camera(e->cls, e->effective))
+        *needs_camera = 1;
     return set;
 }
 
@@ -543,7 +643,7 @@ fx_pass_set fx_stack_pass_set(const fx_stack *s)
     fx_pass_set set = FX_PASS_BIT(FX_PASS_COMBINED);
     for (int i = 0; s && i < s->count; i++)
         if (s->entries[i].enabled)
-            set |= entry_passes(s, &s->entries[i], i, NULL);
+            set |= entry_passes(&s->entries[i], NULL);
     return set;
 }
 
@@ -556,7 +656,7 @@ fx_result fx_stack_required_passes(const fx_stack *s, char **out_json)
     fx_pass_set set = FX_PASS_BIT(FX_PASS_COMBINED);
     for (int i = 0; i < s->count; i++)
         if (s->entries[i].enabled)
-            set |= entry_passes(s, &s->entries[i], i, &camera);
+            set |= entry_passes(&s->entries[i], &camera);
     cJSON *o = cJSON_CreateObject();
     cJSON *passes = cJSON_AddArrayToObject(o, "passes");
     cJSON *settings = cJSON_AddArrayToObject(o, "blender_settings");
@@ -591,14 +691,8 @@ fx_result fx_stack_required_aux_views(const fx_stack *s, char **out_json)
         const fx_entry *e = &s->entries[i];
         if (!e->enabled || !e->cls->aux_views)
             continue;
-        void *p = fx_mem_alloc(e->cls->params_size);
-        if (!p) {
-            r = fx_fail(s->ctx, FX_ERR_OUT_OF_MEMORY, "out of memory listing aux views");
-            break;
-        }
         fx_aux_need need[4];
-        int n = (r = effective_params(s, e, i, entry_quality(s, e), p)) ? 0 : e->cls->aux_views(p, need, 4);
-        fx_mem_free(p);
+        int n = e->cls->aux_views(e->effective, need, 4);
         for (int k = 0; k < n && !r; k++) {
             int seen = 0;
             const cJSON *v;
@@ -753,10 +847,25 @@ fx_result fx_effect_pass_through(const fx_effect_run *run)
     const size_t n = (size_t)(roi->x1 - roi->x0) * 4;
     for (int y = roi->y0; y < roi->y1; y++) {
         float *d = run->dst + ((size_t)y * run->width + roi->x0) * 4;
-        memcpy(d, run->src + ((size_t)y * run->width + roi->x0) * 4, n * sizeof(float));
+        if (run->dst != run->src)
+            memcpy(d, run->src + ((size_t)y * run->width + roi->x0) * 4, n * sizeof(float));
         fx_effect_finish_row(run, d, n); /* for effects that keep their output finite themselves */
     }
     return FX_OK;
+}
+
+double fx_effect_scene_time(const fx_effect_run *run)
+{
+    double frame = 1, fps = 24;
+    fx_frame_time(run->frame, &frame, &fps);
+    return frame / (fps > 0 ? fps : 24.0);
+}
+
+double fx_effect_scene_frame(const fx_effect_run *run)
+{
+    double frame = 1;
+    fx_frame_time(run->frame, &frame, NULL);
+    return frame;
 }
 
 static fx_result check_passes(const fx_stack *s, const fx_frame *in, fx_pass_set set, const char *where)
@@ -900,37 +1009,115 @@ static fx_mask_spec proxy_mask_spec(const fx_mask_spec *m, const fx_frame *in)
     return s;
 }
 
-/* Runs one enabled effect on the current image. */
+/* The parameters an entry runs with: its committed ones, or on a proxy a copy with the
+ * pixel-sized ones scaled (the proxy looks like the frame). *owned is the copy to free. */
+static fx_result run_params(fx_context *ctx, const fx_entry *e, const fx_frame *in, const char *where,
+                            const void **params, void **owned)
+{
+    *owned = NULL;
+    *params = e->effective;
+    if (in->proxy_factor <= 1)
+        return FX_OK;
+    if (!(*owned = fx_mem_alloc(e->cls->params_size)))
+        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
+    memcpy(*owned, e->effective, e->cls->params_size);
+    fx_params_scale_pixels(e->cls, *owned, in->proxy_factor);
+    *params = *owned;
+    return FX_OK;
+}
+
+/* What the effect needs from the frame: its passes and, if it needs one, the camera. */
+static fx_result check_inputs(const fx_stack *s, const fx_entry *e, const void *params, const fx_frame *in,
+                              const char *where)
+{
+    fx_result r = check_passes(s, in, e->cls->passes ? e->cls->passes(e->effective) : 0, where);
+    if (!r && fx_effect_needs_camera(e->cls, params) && !in->has_camera)
+        r = fx_fail(s->ctx, FX_ERR_NO_CAMERA,
+                    "%s needs the camera matrices: the file has no worldToCamera/worldToNDC "
+                    "attributes (give a camera sidecar with --camera)",
+                    where);
+    return r;
+}
+
+/* Blends the effect's output into the image by the mask, replaces non-finite values
+ * (warning with their count) and makes dst the image. */
+static fx_result composite(fx_context *ctx, run_buffers *b, const fx_effect_run *run, unsigned flags,
+                           atomic_size_t *own_bad)
+{
+    const int w = run->width, h = run->height;
+    size_t *bad = fx_mem_calloc((size_t)(h ? h : 1), sizeof *bad);
+    if (!bad)
+        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", run->where);
+    float *dst = run->dst;
+    fx_rect stale = dst == b->cur ? b->stale_cur : dst == b->spare ? b->stale_spare : (fx_rect){0, 0, 0, 0};
+    composite_job job = {b->image, dst, run->mask, run->roi, stale, w, (flags & FX_EFFECT_OWN_FINITE) != 0, bad};
+    fx_parallel_for(ctx, h, fx_grain_for(ctx, h), composite_rows, &job);
+    image_moved(b, dst, run->roi);
+    size_t total = atomic_load(own_bad);
+    for (int y = 0; y < h; y++)
+        total += bad[y];
+    fx_mem_free(bad);
+    if (total)
+        fx_warn(ctx, "%s produced %zu non-finite values; they were replaced", run->where, total);
+    return FX_OK;
+}
+
+/* Whether every value of the image is finite (a frame built through the API may hold
+ * NaN/Inf; the reader's are sanitised): read-only, in parallel. */
+typedef struct finite_job {
+    const float *image;
+    size_t row;
+    atomic_int bad;
+} finite_job;
+
+static void finite_rows(void *user, int y0, int y1)
+{
+    finite_job *j = user;
+    const uint32_t *u = (const uint32_t *)(const void *)(j->image + (size_t)y0 * j->row);
+    const size_t n = (size_t)(y1 - y0) * j->row;
+    uint32_t any = 0;
+    for (size_t i = 0; i < n; i++) /* exponent all ones: Inf or NaN */
+        any |= (uint32_t)((u[i] & 0x7f800000u) == 0x7f800000u);
+    if (any)
+        atomic_store(&j->bad, 1);
+}
+
+static int image_finite(fx_context *ctx, const float *image, int w, int h)
+{
+    finite_job j = {image, (size_t)w * 4, 0};
+    atomic_init(&j.bad, 0);
+    fx_parallel_for(ctx, h, fx_grain_for(ctx, h), finite_rows, &j);
+    return !atomic_load(&j.bad);
+}
+
+/* Runs one enabled effect on the current image. The stack does for every effect what
+ * none repeats: inputs checked, identity and empty masks skipped, buffers picked, the
+ * result blended by the mask and made finite. */
 static fx_result run_entry(fx_stack *s, fx_entry *e, int i, const fx_frame *in, fx_frame *o, run_buffers *b,
                            const char *where)
 {
     fx_context *ctx = s->ctx;
     const int w = in->width, h = in->height;
-    int quality = entry_quality(s, e);
-    void *params = fx_mem_alloc(e->cls->params_size);
-    if (!params)
-        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
+    const void *params = NULL;
+    void *scaled = NULL;
     fx_mask *mask = NULL;
-    fx_result r = effective_params(s, e, i, quality, params);
+    fx_result r = run_params(ctx, e, in, where, &params, &scaled);
     if (!r)
-        r = check_passes(s, in, e->cls->passes ? e->cls->passes(params) : 0, where);
-    if (!r && in->proxy_factor > 1)
-        fx_params_scale_pixels(e->cls, params, in->proxy_factor); /* the proxy looks like the frame */
-    if (!r && e->cls->needs_camera && e->cls->needs_camera(params) && !in->has_camera)
-        r = fx_fail(ctx, FX_ERR_NO_CAMERA,
-                    "%s needs the camera matrices: the file has no worldToCamera/worldToNDC "
-                    "attributes (give a camera sidecar with --camera)",
-                    where);
-    if (!r) {
-        fx_mask_spec spec = proxy_mask_spec(&e->mask, in);
-        r = fx_mask_build(ctx, &spec, in, where, &mask);
-    }
-    if (!r && mask && mask->bounds.x1 <= mask->bounds.x0)
+        r = check_inputs(s, e, params, in, where);
+    /* An identity is skipped and the image passes through, unless it holds non-finite
+     * values: then it goes through the stack's guard (a copy, replaced and reported) as
+     * the output of any effect does. */
+    const int identity = !r && e->cls->identity && e->cls->identity(params);
+    if (r || (identity && image_finite(ctx, b->image, w, h)))
+        goto out;
+    fx_mask_spec spec = proxy_mask_spec(&e->mask, in);
+    if ((r = fx_mask_build(ctx, &spec, in, where, &mask)))
+        goto out;
+    const fx_rect roi = mask ? mask->bounds : (fx_rect){0, 0, w, h};
+    if (roi.x1 <= roi.x0 || roi.y1 <= roi.y0)
         goto out; /* nothing selected: the effect is skipped and the image passes through */
     float *dst = NULL;
-    if (!r)
-        r = pick_dst(ctx, b, e->cls, params, mask, where, &dst);
-    if (r)
+    if ((r = pick_dst(ctx, b, e->cls, params, mask, where, &dst)))
         goto out;
     fx_effect_run run;
     memset(&run, 0, sizeof run);
@@ -940,10 +1127,10 @@ static fx_result run_entry(fx_stack *s, fx_entry *e, int i, const fx_frame *in, 
     run.dst = dst;
     run.width = w;
     run.height = h;
-    run.roi = mask ? mask->bounds : (fx_rect){0, 0, w, h};
+    run.roi = roi;
     run.mask = mask;
     run.params = params;
-    run.quality = quality;
+    run.quality = entry_quality(s, e);
     run.index = i;
     run.effect_name = e->cls->name;
     run.where = where;
@@ -952,26 +1139,11 @@ static fx_result run_entry(fx_stack *s, fx_entry *e, int i, const fx_frame *in, 
     atomic_size_t own_bad;
     atomic_init(&own_bad, 0);
     run.nonfinite = &own_bad;
-    if ((r = e->cls->process(&run)))
-        goto out;
-    size_t *bad = fx_mem_calloc((size_t)(h ? h : 1), sizeof *bad);
-    if (!bad) {
-        r = fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
-        goto out;
-    }
-    fx_rect stale = dst == b->cur ? b->stale_cur : dst == b->spare ? b->stale_spare : (fx_rect){0, 0, 0, 0};
-    composite_job job = {b->image, dst, mask, run.roi, stale, w, (e->cls->flags & FX_EFFECT_OWN_FINITE) != 0, bad};
-    fx_parallel_for(ctx, h, fx_grain_for(ctx, h), composite_rows, &job);
-    image_moved(b, dst, run.roi);
-    size_t total = atomic_load(&own_bad);
-    for (int y = 0; y < h; y++)
-        total += bad[y];
-    fx_mem_free(bad);
-    if (total)
-        fx_warn(ctx, "%s produced %zu non-finite values; they were replaced", where, total);
+    if (!(r = identity ? fx_effect_pass_through(&run) : e->cls->process(&run)))
+        r = composite(ctx, b, &run, e->cls->flags, &own_bad);
 out:
     fx_mask_free(mask);
-    fx_mem_free(params);
+    fx_mem_free(scaled);
     return r;
 }
 
@@ -992,33 +1164,39 @@ static fx_result take_result(fx_frame *o, const fx_frame *in, const fx_pass *com
     return r;
 }
 
-static fx_result stack_run(fx_stack *s, const fx_frame *in, int consume, fx_frame **out)
+/* Run stage 1, prepare: the input's Combined and an output frame like the input. */
+static fx_result run_prepare(fx_stack *s, const fx_frame *in, const fx_pass **combined, fx_frame **o)
 {
-    if (!s || !in || !out)
-        return fx_fail(s ? s->ctx : NULL, FX_ERR_INVALID_ARGUMENT, "fx_stack_run: NULL argument");
-    *out = NULL;
-    fx_context *ctx = s->ctx;
-    const fx_pass *combined = fx_frame_find_pass(in, "Combined");
-    if (!combined || combined->channels != 4) {
+    *combined = fx_frame_find_pass(in, "Combined");
+    if (!*combined || (*combined)->channels != 4) {
         const char *src = fx_frame_meta(in, "libfx:source");
-        return fx_fail(ctx, FX_ERR_MISSING_PASS, "%s%s%s has no RGBA Combined pass to process",
+        return fx_fail(s->ctx, FX_ERR_MISSING_PASS, "%s%s%s has no RGBA Combined pass to process",
                        src ? "'" : "", src ? src : "the frame", src ? "'" : "");
     }
+    return fx_frame_new_like(in, o);
+}
+
+/* Run stage 2, pick buffers: the image starts as the input's Combined; it is ours to
+ * write when the caller gave the frame up and no other frame holds those pixels. */
+static run_buffers run_buffers_for(const fx_stack *s, const fx_frame *in, const fx_pass *combined, int consume)
+{
     const int w = in->width, h = in->height;
-    fx_frame *o = NULL;
-    fx_result r = fx_frame_new_like(in, &o);
-    if (r)
-        return r;
     const fx_rect full = {0, 0, w, h};
     run_buffers b = {combined->data, NULL, NULL, NULL, full, full, (size_t)w * h * 4 * sizeof(float)};
-    /* the input's Combined is ours to write when the caller gave the frame up and no other
-     * frame holds those pixels */
-    if (consume && in->ctx == ctx && combined->pixels && fx_frame_pixels_holders(combined) == 1)
+    if (consume && in->ctx == s->ctx && combined->pixels && fx_frame_pixels_holders(combined) == 1)
         b.owned = combined->data;
+    return b;
+}
+
+/* Run stage 3, run and composite: the enabled effects in order, with progress (which
+ * may cancel) and per-effect timings. */
+static fx_result run_effects(fx_stack *s, const fx_frame *in, fx_frame *o, run_buffers *b)
+{
     int enabled = 0;
     for (int i = 0; i < s->count; i++)
         enabled += s->entries[i].enabled;
     int done = 0;
+    fx_result r = FX_OK;
     for (int i = 0; i < s->count && !r; i++) {
         fx_entry *e = &s->entries[i];
         e->last_ms = 0;
@@ -1029,12 +1207,29 @@ static fx_result stack_run(fx_stack *s, const fx_frame *in, int consume, fx_fram
         where_of(where, sizeof where, i, e->cls);
         char stage[160];
         snprintf(stage, sizeof stage, "%s (%d of %d)", where, done + 1, enabled);
-        if ((r = fx_progress(ctx, stage, (double)done / (enabled ? enabled : 1))))
+        if ((r = fx_progress(s->ctx, stage, (double)done / (enabled ? enabled : 1))))
             break;
-        r = run_entry(s, e, i, in, o, &b, where);
+        r = run_entry(s, e, i, in, o, b, where);
         e->last_ms = now_ms() - t0;
         done++;
     }
+    return r;
+}
+
+static fx_result stack_run(fx_stack *s, const fx_frame *in, int consume, fx_frame **out)
+{
+    if (!s || !in || !out)
+        return fx_fail(s ? s->ctx : NULL, FX_ERR_INVALID_ARGUMENT, "fx_stack_run: NULL argument");
+    *out = NULL;
+    fx_context *ctx = s->ctx;
+    const fx_pass *combined = NULL;
+    fx_frame *o = NULL;
+    fx_result r = run_prepare(s, in, &combined, &o);
+    if (r)
+        return r;
+    run_buffers b = run_buffers_for(s, in, combined, consume);
+    r = run_effects(s, in, o, &b);
+    /* stage 4, finish: the result, the last progress call, the buffers back to the pool */
     if (!r)
         r = take_result(o, in, combined, &b);
     if (!r && ctx->progress)

@@ -404,15 +404,18 @@ static int bloom_halo(const void *params, int width, int height)
     return reach < m ? (int)reach : m;
 }
 
+/* Zero intensity is the identity: the stack skips the effect. */
+static int bloom_identity(const void *params)
+{
+    const bloom_params *p = params;
+    return !(p->intensity > 0.0f);
+}
+
 static fx_result bloom_process(const fx_effect_run *run)
 {
     const bloom_params *p = run->params;
     const fx_rect *roi = &run->roi;
-    if (roi->x1 <= roi->x0 || roi->y1 <= roi->y0)
-        return FX_OK;
     const int w = run->width, h = run->height;
-    if (!(p->intensity > 0.0f))
-        return fx_effect_pass_through(run); /* zero intensity: the identity */
     const char *where = run->where;
     bloom_job j;
     memset(&j, 0, sizeof j);
@@ -542,6 +545,7 @@ const fx_effect_class fx_effect_bloom = {
     .halo = bloom_halo,
     .validate = NULL,
     .process = bloom_process,
+    .identity = bloom_identity,
     /* the composite writes finite4() of every pixel. (Not FX_EFFECT_IN_PLACE, though it
      * could be: tests/python/test_cli_no_data_loss.py's out-of-memory case counts on bloom
      * needing a second frame-sized buffer.) */

@@ -359,14 +359,17 @@ static void cel_rows(void *user, int begin, int end)
         cel_row(user, y, NULL);
 }
 
+/* Zero strength is the identity: the stack skips the effect. */
+static int cel_identity(const void *params)
+{
+    const cel_params *p = params;
+    return !(p->mix > 0.0f);
+}
+
 static fx_result cel_process(const fx_effect_run *run)
 {
     const cel_params *p = run->params;
     const fx_rect *roi = &run->roi;
-    if (roi->x1 <= roi->x0 || roi->y1 <= roi->y0)
-        return FX_OK;
-    if (!(p->mix > 0.0f))
-        return fx_effect_pass_through(run); /* zero strength: the identity */
     const char *where = run->where;
     cel_job j;
     memset(&j, 0, sizeof j);
@@ -460,4 +463,5 @@ const fx_effect_class fx_effect_cel_shading = {
     .halo = cel_halo,
     .validate = cel_validate,
     .process = cel_process,
+    .identity = cel_identity,
 };

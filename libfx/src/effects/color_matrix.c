@@ -136,14 +136,17 @@ static void cm_rows(void *user, int begin, int end)
     }
 }
 
+/* Zero strength is the identity: the stack skips the effect. */
+static int color_matrix_identity(const void *params)
+{
+    const color_matrix_params *p = params;
+    return p->mix <= 0.0f;
+}
+
 static fx_result color_matrix_process(const fx_effect_run *run)
 {
     const color_matrix_params *p = run->params;
     const fx_rect *roi = &run->roi;
-    if (roi->x1 <= roi->x0 || roi->y1 <= roi->y0)
-        return FX_OK;
-    if (p->mix <= 0.0f)
-        return fx_effect_pass_through(run); /* zero strength: the identity */
     cm_job j;
     j.run = run;
     j.src = run->src;
@@ -182,4 +185,5 @@ const fx_effect_class fx_effect_color_matrix = {
     .halo = NULL,
     .validate = color_matrix_validate,
     .process = color_matrix_process,
+    .identity = color_matrix_identity,
 };

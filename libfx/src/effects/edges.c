@@ -199,22 +199,17 @@ static void draw_row(void *user, int y, const float *matte)
     }
 }
 
+/* Zero opacity or no edge source is the identity: the stack skips the effect. */
+static int edges_identity(const void *params)
+{
+    const edges_params *p = params;
+    return !(p->opacity > 0.0f) || !(p->luminance || p->depth || p->normal || p->object_id || p->material_id);
+}
+
 static fx_result edges_process(const fx_effect_run *run)
 {
     const edges_params *p = run->params;
     const fx_rect *roi = &run->roi;
-    if (roi->x1 <= roi->x0 || roi->y1 <= roi->y0)
-        return FX_OK;
-    if (!(p->opacity > 0.0f) ||
-        !(p->luminance || p->depth || p->normal || p->object_id || p->material_id))
-    {
-        if (run->dst != run->src)
-            return fx_effect_pass_through(run); /* zero strength: the identity */
-        for (int y = roi->y0; y < roi->y1; y++) /* in place: only the finiteness we promise */
-            fx_effect_finish_row(run, run->dst + ((size_t)y * run->width + roi->x0) * 4,
-                                 (size_t)(roi->x1 - roi->x0) * 4);
-        return FX_OK;
-    }
     const char *where = run->where;
     fx_edge_settings s;
     settings_of(p, &s);
@@ -270,4 +265,5 @@ const fx_effect_class fx_effect_edges = {
     .halo = edges_halo,
     .validate = edges_validate,
     .process = edges_process,
+    .identity = edges_identity,
 };

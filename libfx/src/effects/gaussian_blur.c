@@ -79,6 +79,14 @@ static void finish_rows(void *user, int begin, int end)
                              (size_t)(roi->x1 - roi->x0) * 4);
 }
 
+/* A sigma below FX_BLUR_MIN_SIGMA is the identity (libvips' no-op path for tiny sigma):
+ * the stack skips the effect. */
+static int gaussian_blur_identity(const void *params)
+{
+    const gaussian_blur_params *p = params;
+    return p->sigma < FX_BLUR_MIN_SIGMA;
+}
+
 static fx_result gaussian_blur_process(const fx_effect_run *run)
 {
     const gaussian_blur_params *p = run->params;
@@ -87,12 +95,7 @@ static fx_result gaussian_blur_process(const fx_effect_run *run)
     const fx_rect *roi = &run->roi;
     fx_result r;
     int finite = 0;
-    if (p->sigma < FX_BLUR_MIN_SIGMA) {
-        if (run->dst != run->src)
-            for (int y = roi->y0; y < roi->y1; y++)
-                memcpy(run->dst + ((size_t)y * w + roi->x0) * 4, run->src + ((size_t)y * w + roi->x0) * 4,
-                       (size_t)(roi->x1 - roi->x0) * 4 * sizeof(float));
-    } else if (p->kernel == KERNEL_PAPER_5X5) {
+    if (p->kernel == KERNEL_PAPER_5X5) {
         r = fx_convolve_2d(run->ctx, run->src, run->dst, w, run->height, 4, paper_5x5, 5, roi, where);
         if (r != FX_OK)
             return r;
@@ -145,4 +148,5 @@ const fx_effect_class fx_effect_gaussian_blur = {
     .halo = gaussian_blur_halo,
     .validate = NULL,
     .process = gaussian_blur_process,
+    .identity = gaussian_blur_identity,
 };

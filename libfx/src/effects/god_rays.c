@@ -136,8 +136,10 @@ static int god_rays_halo(const void *params, int width, int height)
     return width > height ? width : height; /* rays come from anywhere in the frame */
 }
 
-static int identity_params(const god_rays_params *p)
+/* Zero weight or exposure is the identity: the stack skips the effect. */
+static int god_rays_identity(const void *params)
 {
+    const god_rays_params *p = params;
     return p->weight == 0.0f || p->exposure == 0.0f;
 }
 
@@ -354,14 +356,6 @@ static void comp_rows(void *user, int begin, int end)
     }
 }
 
-static void copy_roi(const fx_effect_run *run)
-{
-    for (int y = run->roi.y0; y < run->roi.y1; y++)
-        memcpy(run->dst + ((size_t)y * run->width + run->roi.x0) * 4,
-               run->src + ((size_t)y * run->width + run->roi.x0) * 4,
-               (size_t)(run->roi.x1 - run->roi.x0) * 4 * sizeof(float));
-}
-
 /* RGB of n four-lane pixels into a 3-channel pass */
 static void copy_rgb(float *dst, const float *src4, size_t n)
 {
@@ -373,21 +367,13 @@ static fx_result god_rays_process(const fx_effect_run *run)
 {
     const god_rays_params *p = run->params;
     const int w = run->width, h = run->height;
-    if (run->roi.x1 <= run->roi.x0 || run->roi.y1 <= run->roi.y0)
-        return FX_OK;
     const char *where = run->where;
-    if (identity_params(p)) {
-        copy_roi(run);
-        return FX_OK;
-    }
     double lx = 0, ly = 0, fade = 0;
     fx_result r = find_light(run, p, where, &lx, &ly, &fade);
     if (r != FX_OK)
         return r;
-    if (!(fade > 0.0)) {
-        copy_roi(run);
-        return FX_OK;
-    }
+    if (!(fade > 0.0))
+        return fx_effect_pass_through(run); /* the light is behind the camera */
     fx_radial_blur_bound_light(&lx, &ly, w, h);
 
     occ_job oj;
@@ -426,7 +412,7 @@ static fx_result god_rays_process(const fx_effect_run *run)
     rb.scale = (double)FX_RAYS_REFERENCE_SAMPLES * p->weight * p->exposure;
     rb.jitter = p->jitter;
     rb.seed = (uint32_t)p->seed;
-    double frame_no = run->frame->frame_number;
+    double frame_no = fx_effect_scene_frame(run);
     rb.frame = isfinite(frame_no) && fabs(frame_no) < 2e9 ? (int)floor(frame_no) : 0;
     rb.angular = 1.0 / p->polar_resolution;
     rb.levels = p->polar_levels;
@@ -534,4 +520,5 @@ const fx_effect_class fx_effect_god_rays = {
     .halo = god_rays_halo,
     .validate = NULL,
     .process = god_rays_process,
+    .identity = god_rays_identity,
 };

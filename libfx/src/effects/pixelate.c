@@ -298,8 +298,6 @@ static fx_result pixelate_process(const fx_effect_run *run)
 {
     const pixelate_params *p = run->params;
     const fx_rect *roi = &run->roi;
-    if (roi->x1 <= roi->x0 || roi->y1 <= roi->y0)
-        return FX_OK;
     const char *where = run->where;
     int ox = 0, oy = 0, have_origin = 0;
     if (p->anchor == ANCHOR_WORLD && p->mode != MODE_SLICES) {

@@ -61,14 +61,17 @@ static void post_rows(void *user, int begin, int end)
                            run->roi.x0, run->roi.x1, y, gray, j->p->mix);
 }
 
+/* Zero strength is the identity: the stack skips the effect. */
+static int posterize_identity(const void *params)
+{
+    const posterize_params *p = params;
+    return !(p->mix > 0.0f);
+}
+
 static fx_result posterize_process(const fx_effect_run *run)
 {
     const posterize_params *p = run->params;
     const fx_rect *roi = &run->roi;
-    if (roi->x1 <= roi->x0 || roi->y1 <= roi->y0)
-        return FX_OK;
-    if (!(p->mix > 0.0f))
-        return fx_effect_pass_through(run); /* zero strength: the identity */
     post_job *j = fx_mem_alloc(sizeof *j);
     if (!j)
         return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", run->where);
@@ -94,4 +97,5 @@ const fx_effect_class fx_effect_posterize = {
     .halo = NULL,
     .validate = NULL,
     .process = posterize_process,
+    .identity = posterize_identity,
 };

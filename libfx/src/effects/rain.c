@@ -15,6 +15,7 @@
 #include "scene/aux_view.h"
 #include "core/effect.h"
 #include "core/parallel.h"
+#include "effects/rain_common.h"
 #include "math/hash.h"
 #include "scene/rain_map.h"
 #include "math/surface.h"
@@ -85,12 +86,6 @@ static fx_pass_set rain_passes(const void *params)
     if (p->cover_material[0])
         s |= FX_PASS_BIT(FX_PASS_CRYPTO_MATERIAL);
     return s;
-}
-
-static int rain_needs_camera(const void *params)
-{
-    (void)params;
-    return 1;
 }
 
 static fx_result rain_validate(const void *params, char *err, size_t n)
@@ -469,21 +464,15 @@ static fx_result rain_process(const fx_effect_run *run)
 {
     const rain_params *p = run->params;
     const fx_rect *roi = &run->roi;
-    if (roi->x1 <= roi->x0 || roi->y1 <= roi->y0)
-        return FX_OK;
     const char *where = run->where;
     rain_job j;
     memset(&j, 0, sizeof j);
     j.run = run;
     j.p = p;
-    if (!fx_surface_src_init(&j.surf, run->frame))
-        return fx_fail(run->ctx, FX_ERR_NO_CAMERA, "%s needs the camera and the Depth pass", where);
-    fx_result r = fx_rain_map_load(run->frame, 0.0f, where, &j.rm);
+    fx_result r = fx_rain_effect_begin(run, 0, 0.0f, "streaks", &j.surf, &j.rm, &j.dbg);
     if (r)
         return r;
-    double frame = 1, fps = 24;
-    fx_frame_time(run->frame, &frame, &fps);
-    j.t = (float)(frame / (fps > 0 ? fps : 24.0));
+    j.t = (float)fx_effect_scene_time(run);
     j.res = (float)run->height / 720.0f;
     float a = p->wind * 0.017453293f;
     j.cs = cosf(a);
@@ -518,18 +507,10 @@ static fx_result rain_process(const fx_effect_run *run)
             j.cover_id = fx_cryptomatte_id(p->cover_material);
         else
             r = fx_mask_build(run->ctx, &spec, run->frame, where, &cover);
-        if (r) {
-            fx_rain_map_free(run->ctx, &j.rm);
-            return r;
-        }
+        if (r)
+            return fx_rain_effect_end(run, &j.rm, r);
         j.cover = cover;
         j.camera_covered = 1;
-    }
-    j.dbg = fx_effect_debug_pass(run, "streaks", 1, &r);
-    if (!j.dbg && r) {
-        fx_mask_free(cover);
-        fx_rain_map_free(run->ctx, &j.rm);
-        return r;
     }
     int rows = roi->y1 - roi->y0;
     if (p->downsample > 1 && rows > 2) {
@@ -558,15 +539,13 @@ static fx_result rain_process(const fx_effect_run *run)
         fx_mem_free(j.bcov);
         if (!ok) {
             fx_mask_free(cover);
-            fx_rain_map_free(run->ctx, &j.rm);
-            return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
+            return fx_rain_effect_end(run, &j.rm, fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where));
         }
     } else {
         fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), rain_rows, &j);
     }
     fx_mask_free(cover);
-    fx_rain_map_free(run->ctx, &j.rm);
-    return FX_OK;
+    return fx_rain_effect_end(run, &j.rm, FX_OK);
 }
 
 const fx_effect_class fx_effect_rain = {
@@ -579,7 +558,7 @@ const fx_effect_class fx_effect_rain = {
     .presets = {"{\"layers\": 3, \"downsample\": 16}", "{\"layers\": 3, \"downsample\": 4}",
                 "{\"layers\": 3, \"downsample\": 1}", "{\"layers\": 3, \"downsample\": 1}"},
     .passes = rain_passes,
-    .needs_camera = rain_needs_camera,
+    .flags = FX_EFFECT_NEEDS_CAMERA,
     .aux_views = fx_aux_needs_rain_map, /* what is under cover */
     .halo = NULL,
     .validate = rain_validate,

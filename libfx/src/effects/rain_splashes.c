@@ -14,6 +14,7 @@
 #include "scene/aux_view.h"
 #include "core/effect.h"
 #include "core/parallel.h"
+#include "effects/rain_common.h"
 #include "math/hash.h"
 #include "scene/rain_map.h"
 #include "math/surface.h"
@@ -55,12 +56,6 @@ static fx_pass_set splash_passes(const void *params)
 {
     (void)params;
     return FX_PASS_BIT(FX_PASS_DEPTH) | FX_PASS_BIT(FX_PASS_NORMAL);
-}
-
-static int splash_needs_camera(const void *params)
-{
-    (void)params;
-    return 1;
 }
 
 static fx_result splash_validate(const void *params, char *err, size_t n)
@@ -190,30 +185,17 @@ static fx_result splash_process(const fx_effect_run *run)
 {
     const splash_params *p = run->params;
     const fx_rect *roi = &run->roi;
-    if (roi->x1 <= roi->x0 || roi->y1 <= roi->y0)
-        return FX_OK;
-    const char *where = run->where;
     splash_job j;
     memset(&j, 0, sizeof j);
     j.run = run;
     j.p = p;
-    if (!fx_surface_src_init(&j.surf, run->frame) || !j.surf.normal)
-        return fx_fail(run->ctx, FX_ERR_NO_CAMERA, "%s needs the camera and the Depth and Normal passes", where);
-    fx_result r = fx_rain_map_load(run->frame, 0.0f, where, &j.rm);
+    fx_result r = fx_rain_effect_begin(run, 1, 0.0f, "splashes", &j.surf, &j.rm, &j.dbg);
     if (r)
         return r;
-    double frame = 1, fps = 24;
-    fx_frame_time(run->frame, &frame, &fps);
-    j.t = frame / (fps > 0 ? fps : 24.0);
-    j.dbg = fx_effect_debug_pass(run, "splashes", 1, &r);
-    if (!j.dbg && r) {
-        fx_rain_map_free(run->ctx, &j.rm);
-        return r;
-    }
+    j.t = fx_effect_scene_time(run);
     int rows = roi->y1 - roi->y0;
     fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), splash_rows, &j);
-    fx_rain_map_free(run->ctx, &j.rm);
-    return FX_OK;
+    return fx_rain_effect_end(run, &j.rm, FX_OK);
 }
 
 const fx_effect_class fx_effect_rain_splashes = {
@@ -224,7 +206,7 @@ const fx_effect_class fx_effect_rain_splashes = {
     .param_count = FX_COUNT_OF(splash_param_defs),
     .presets = {NULL, NULL, NULL, NULL},
     .passes = splash_passes,
-    .needs_camera = splash_needs_camera,
+    .flags = FX_EFFECT_NEEDS_CAMERA,
     .aux_views = fx_aux_needs_rain_map, /* what is under cover */
     .halo = NULL,
     .validate = splash_validate,

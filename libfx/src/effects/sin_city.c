@@ -432,14 +432,17 @@ SC_VEC static void sc_rows(void *user, int begin, int end)
     }
 }
 
+/* Zero strength is the identity: the stack skips the effect. */
+static int sin_city_identity(const void *params)
+{
+    const sin_city_params *p = params;
+    return !(p->mix > 0.0f);
+}
+
 static fx_result sin_city_process(const fx_effect_run *run)
 {
     const sin_city_params *p = run->params;
     const fx_rect *roi = &run->roi;
-    if (roi->x1 <= roi->x0 || roi->y1 <= roi->y0)
-        return FX_OK;
-    if (!(p->mix > 0.0f))
-        return fx_effect_pass_through(run); /* zero strength: the identity */
     char where[96];
     snprintf(where, sizeof where, "%s keep mask", run->where);
     sc_job *j = fx_mem_alloc(sizeof *j);
@@ -509,4 +512,5 @@ const fx_effect_class fx_effect_sin_city = {
     .halo = NULL,
     .validate = sin_city_validate,
     .process = sin_city_process,
+    .identity = sin_city_identity,
 };

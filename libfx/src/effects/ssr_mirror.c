@@ -291,7 +291,6 @@ static int shading_normal(const ssr_job *j, int x, int y, fx_vec3 pos, fx_vec3 i
     return 1;
 }
 
-/* Traces the reflection of pixel (x, y) of this mirror; fills *h. */
 /* How much of a hit to keep: fades towards the screen border (edge_fade), and 0 for a
  * surface seen from behind (its normal along the ray), which is not what a mirror shows. */
 static float hit_fade(const ssr_job *j, const ssr_frame *F, const fx_ssr_hit *hit, fx_vec3 r)
@@ -308,6 +307,7 @@ static float hit_fade(const ssr_job *j, const ssr_frame *F, const fx_ssr_hit *hi
     return fade;
 }
 
+/* Traces the reflection of pixel (x, y) of this mirror; fills *h. */
 static void trace_pixel(const ssr_job *j, int x, int y, cell_hit *h)
 {
     const ssr_frame *F = j->F;
@@ -739,12 +739,6 @@ static fx_pass_set ssr_passes(const void *params)
     return set;
 }
 
-static int ssr_needs_camera(const void *params)
-{
-    (void)params;
-    return 1;
-}
-
 /* Rays reach anywhere on the frame. */
 static int ssr_halo(const void *params, int width, int height)
 {
@@ -778,18 +772,15 @@ static fx_result ssr_validate(const void *params, char *err, size_t err_size)
     return FX_OK;
 }
 
-static fx_result ssr_process(const fx_effect_run *run)
+/* Process stage 1: the frame's camera, Depth and Normal as the tracer's scene. F must
+ * not move afterwards (its scene points at F->view). */
+static fx_result ssr_frame_init(const fx_effect_run *run, ssr_frame *F)
 {
-    const ssr_params *p = run->params;
-    const fx_rect *roi = &run->roi;
-    if (roi->x1 <= roi->x0 || roi->y1 <= roi->y0)
-        return FX_OK;
     const char *where = run->where;
-    ssr_frame F;
-    memset(&F, 0, sizeof F);
-    F.w = run->width;
-    F.h = run->height;
-    if (!fx_view_init(&F.view, run->frame))
+    memset(F, 0, sizeof *F);
+    F->w = run->width;
+    F->h = run->height;
+    if (!fx_view_init(&F->view, run->frame))
         return fx_fail(run->ctx, FX_ERR_NO_CAMERA, "%s: the frame has no usable camera (missing or singular matrices)",
                        where);
     fx_pass *dp = fx_frame_find_pass(run->frame, "Depth");
@@ -799,12 +790,155 @@ static fx_result ssr_process(const fx_effect_run *run)
     if (np->channels < 3)
         return fx_fail(run->ctx, FX_ERR_MISSING_PASS, "%s: the Normal pass has %d channels, 3 needed", where,
                        np->channels);
-    F.depth = dp->data;
-    F.normal = np->data;
-    F.nch = np->channels;
-    F.scene = (fx_ssr_scene){ &F.view, F.depth, F.w, F.h, front_facing, surface_plane, &F, NULL };
-    /* the fx_ssr_scene points at F.view: F must not move from here on */
+    F->depth = dp->data;
+    F->normal = np->data;
+    F->nch = np->channels;
+    F->scene = (fx_ssr_scene){ &F->view, F->depth, F->w, F->h, front_facing, surface_plane, F, NULL };
+    return FX_OK;
+}
 
+/* Process stage 2: the rays, one per cell of resolution_scale (through the depth
+ * pyramid when hiz), resolved to one hit per ROI pixel in j->hits. */
+static fx_result ssr_trace_hits(const fx_effect_run *run, ssr_job *j, ssr_frame *F, fx_depth_pyramid *pyr,
+                                size_t hits_bytes)
+{
+    const ssr_params *p = run->params;
+    const fx_rect *roi = &run->roi;
+    fx_result r;
+    int cell = 1;
+    while (cell < 16 && (float)(cell * 2) <= 1.0f / p->resolution_scale + 1e-4f)
+        cell *= 2;
+    j->cell = cell;
+    j->cx0 = roi->x0 / cell;
+    j->cy0 = roi->y0 / cell;
+    j->ncx = (roi->x1 - 1) / cell - j->cx0 + 1;
+    j->ncy = (roi->y1 - 1) / cell - j->cy0 + 1;
+    /* scratch buffers come from the context's store in frame-sized units, so the ten
+     * entries of a mirror room reuse memory already mapped instead of page-faulting
+     * fresh buffers (every byte read below is written first) */
+    if ((r = fx_check_budget(run->ctx, 2 * hits_bytes, "the ray hits")))
+        return r;
+    /* one scratch for the cells and the resolved hits (each at most one per frame pixel) */
+    j->cells = fx_buffer_get(run->ctx, 2 * hits_bytes);
+    if (!j->cells)
+        return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for %d x %d ray cells", run->where, j->ncx,
+                       j->ncy);
+    if (p->hiz) {
+        if ((r = fx_check_budget(run->ctx, (size_t)F->w * F->h / 3 * sizeof(float) + 64, "the depth pyramid")) ||
+            (r = fx_depth_pyramid_build(run->ctx, F->depth, F->w, F->h, 12, run->where, pyr)))
+            return r;
+        F->scene.hiz = pyr;
+    }
+    fx_parallel_for(run->ctx, j->ncy, 1, trace_cells, j);
+    const int rows = roi->y1 - roi->y0;
+    if (cell == 1) {
+        j->hits = j->cells; /* one cell per roi pixel, same layout */
+    } else {
+        j->hits = j->cells + (size_t)F->w * F->h;
+        fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), resolve_rows, j);
+    }
+    return FX_OK;
+}
+
+/* Process stage 3: the image reflections are looked up in; for glossiness, src blurred
+ * over the hits' bounding box only (*blurred, frame-sized). */
+static fx_result ssr_glossy_lookup(const fx_effect_run *run, ssr_job *j, float **blurred, size_t frame_bytes)
+{
+    const ssr_params *p = run->params;
+    const fx_rect *roi = &run->roi;
+    const ssr_frame *F = j->F;
+    const int cell = j->cell, rows = roi->y1 - roi->y0;
+    const size_t rw = (size_t)(roi->x1 - roi->x0);
+    j->lookup = run->src;
+    j->lookup_box = (fx_rect){ 0, 0, F->w, F->h };
+    fx_blur_spec bs = { p->glossiness, FX_BLUR_RECURSIVE, 3 };
+    if (fx_blur_is_identity(&bs))
+        return FX_OK;
+    /* blur only the hits' bounding box (+1 px for the bilinear lookup) */
+    float bx0 = 1e30f, by0 = 1e30f, bx1 = -1e30f, by1 = -1e30f;
+    for (size_t k = 0; k < rw * rows; k++) {
+        const cell_hit *c = &j->hits[k];
+        if (c->state == 1 && c->conf > 0.0f) {
+            bx0 = fminf(bx0, c->px), by0 = fminf(by0, c->py);
+            bx1 = fmaxf(bx1, c->px), by1 = fmaxf(by1, c->py);
+        }
+    }
+    if (!(bx1 >= bx0))
+        return FX_OK;
+    fx_rect br = { (int)floorf(bx0) - 2 - cell, (int)floorf(by0) - 2 - cell, (int)ceilf(bx1) + 2 + cell,
+                   (int)ceilf(by1) + 2 + cell };
+    br.x0 = br.x0 < 0 ? 0 : br.x0;
+    br.y0 = br.y0 < 0 ? 0 : br.y0;
+    br.x1 = br.x1 > F->w ? F->w : br.x1;
+    br.y1 = br.y1 > F->h ? F->h : br.y1;
+    fx_result r = fx_check_budget(run->ctx, frame_bytes, "the glossy reflection lookup");
+    if (r)
+        return r;
+    *blurred = fx_buffer_get(run->ctx, frame_bytes);
+    if (!*blurred)
+        return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the glossy lookup", run->where);
+    /* outside br the lookup is never read (hits lie inside, bilinear reads +1) */
+    for (int y = br.y0; y < br.y1; y++)
+        memcpy(*blurred + ((size_t)y * F->w + br.x0) * 4, run->src + ((size_t)y * F->w + br.x0) * 4,
+               (size_t)(br.x1 - br.x0) * 4 * sizeof(float));
+    if ((r = fx_blur_image(run->ctx, run->src, *blurred, F->w, F->h, 4, &bs, &br, run->where)))
+        return r;
+    j->lookup = *blurred;
+    j->lookup_box = br;
+    return FX_OK;
+}
+
+/* Process stage 4 (bounces > 1 under a mask): the finished one-bounce image of this
+ * mirror, Jacobi-iterated on the first-bounce hits (a ray landing on this mirror sees its
+ * previous iterate): the estimate where the traced bounces run out. Two buffers over the
+ * mask's bounds + 2 px (lookup elsewhere), from one frame-sized pair in fin[0]. */
+static fx_result ssr_multi_bounce(const fx_effect_run *run, ssr_job *j, float *fin[2], size_t frame_bytes)
+{
+    const fx_rect *roi = &run->roi;
+    const ssr_frame *F = j->F;
+    const int rows = roi->y1 - roi->y0;
+    fx_rect fb = { roi->x0 - 2, roi->y0 - 2, roi->x1 + 2, roi->y1 + 2 };
+    fb.x0 = fb.x0 < 0 ? 0 : fb.x0;
+    fb.y0 = fb.y0 < 0 ? 0 : fb.y0;
+    fb.x1 = fb.x1 > F->w ? F->w : fb.x1;
+    fb.y1 = fb.y1 > F->h ? F->h : fb.y1;
+    j->fin_box = fb;
+    size_t bw = (size_t)(fb.x1 - fb.x0);
+    fx_result r = fx_check_budget(run->ctx, 2 * frame_bytes, "the mirror's multi-bounce estimate");
+    if (r)
+        return r;
+    fin[0] = fx_buffer_get(run->ctx, 2 * frame_bytes);
+    fin[1] = fin[0] ? fin[0] + (size_t)F->w * F->h * 4 : NULL;
+    if (!fin[0])
+        return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the multi-bounce estimate", run->where);
+    for (int y = fb.y0; y < fb.y1; y++)
+        for (int x = fb.x0; x < fb.x1; x++) {
+            const fx_rect *lb = &j->lookup_box;
+            int in = x >= lb->x0 && x < lb->x1 && y >= lb->y0 && y < lb->y1;
+            const float *sp = (in ? j->lookup : run->src) + ((size_t)y * F->w + x) * 4;
+            size_t o = ((size_t)(y - fb.y0) * bw + (x - fb.x0)) * 4;
+            memcpy(fin[0] + o, sp, 4 * sizeof(float));
+            memcpy(fin[1] + o, sp, 4 * sizeof(float));
+        }
+    j->last_bounce = 0;
+    j->fin = NULL;
+    for (int it = 0; it < FIN_ITERATIONS; it++) {
+        j->out = fin[it & 1];
+        fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), shade_rows, j);
+        j->fin = j->out;
+    }
+    return FX_OK;
+}
+
+static fx_result ssr_process(const fx_effect_run *run)
+{
+    const ssr_params *p = run->params;
+    const fx_rect *roi = &run->roi;
+    const char *where = run->where;
+    ssr_frame F;
+    fx_result r = ssr_frame_init(run, &F);
+    if (r)
+        return r;
     ssr_job j;
     memset(&j, 0, sizeof j);
     j.run = run;
@@ -815,7 +949,6 @@ static fx_result ssr_process(const fx_effect_run *run)
     if (p->bend != 0.0f)
         fit_face(&j);
 
-    fx_result r = FX_OK;
     fx_mask *surfaces = NULL;
     float *blurred = NULL, *fin[2] = { NULL, NULL };
     const size_t frame_bytes = (size_t)F.w * F.h * 4 * sizeof(float);
@@ -833,123 +966,17 @@ static fx_result ssr_process(const fx_effect_run *run)
             return r;
         j.surfaces = surfaces;
     }
-
-    int cell = 1;
-    while (cell < 16 && (float)(cell * 2) <= 1.0f / p->resolution_scale + 1e-4f)
-        cell *= 2;
-    j.cell = cell;
-    j.cx0 = roi->x0 / cell;
-    j.cy0 = roi->y0 / cell;
-    j.ncx = (roi->x1 - 1) / cell - j.cx0 + 1;
-    j.ncy = (roi->y1 - 1) / cell - j.cy0 + 1;
-    /* scratch buffers come from the context's store in frame-sized units, so the ten
-     * entries of a mirror room reuse memory already mapped instead of page-faulting
-     * fresh buffers (every byte read below is written first) */
-    if ((r = fx_check_budget(run->ctx, 2 * hits_bytes, "the ray hits")))
+    if ((r = ssr_trace_hits(run, &j, &F, &pyr, hits_bytes)) || (r = ssr_glossy_lookup(run, &j, &blurred, frame_bytes)))
         goto out;
-    /* one scratch for the cells and the resolved hits (each at most one per frame pixel) */
-    j.cells = fx_buffer_get(run->ctx, 2 * hits_bytes);
-    if (!j.cells) {
-        r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for %d x %d ray cells", where, j.ncx, j.ncy);
-        goto out;
-    }
-    if (p->hiz) {
-        if ((r = fx_check_budget(run->ctx, (size_t)F.w * F.h / 3 * sizeof(float) + 64, "the depth pyramid")) ||
-            (r = fx_depth_pyramid_build(run->ctx, F.depth, F.w, F.h, 12, where, &pyr)))
-            goto out;
-        F.scene.hiz = &pyr;
-    }
-    fx_parallel_for(run->ctx, j.ncy, 1, trace_cells, &j);
-    const int rows = roi->y1 - roi->y0;
-    const size_t rw = (size_t)(roi->x1 - roi->x0);
-    if (cell == 1) {
-        j.hits = j.cells; /* one cell per roi pixel, same layout */
-    } else {
-        j.hits = j.cells + (size_t)F.w * F.h;
-        fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), resolve_rows, &j);
-    }
-
-    j.lookup = run->src;
-    j.lookup_box = (fx_rect){ 0, 0, F.w, F.h };
-    fx_blur_spec bs = { p->glossiness, FX_BLUR_RECURSIVE, 3 };
-    if (!fx_blur_is_identity(&bs)) {
-        /* blur only the hits' bounding box (+1 px for the bilinear lookup) */
-        float bx0 = 1e30f, by0 = 1e30f, bx1 = -1e30f, by1 = -1e30f;
-        for (size_t k = 0; k < rw * rows; k++) {
-            const cell_hit *c = &j.hits[k];
-            if (c->state == 1 && c->conf > 0.0f) {
-                bx0 = fminf(bx0, c->px), by0 = fminf(by0, c->py);
-                bx1 = fmaxf(bx1, c->px), by1 = fmaxf(by1, c->py);
-            }
-        }
-        if (bx1 >= bx0) {
-            fx_rect br = { (int)floorf(bx0) - 2 - cell, (int)floorf(by0) - 2 - cell, (int)ceilf(bx1) + 2 + cell,
-                           (int)ceilf(by1) + 2 + cell };
-            br.x0 = br.x0 < 0 ? 0 : br.x0;
-            br.y0 = br.y0 < 0 ? 0 : br.y0;
-            br.x1 = br.x1 > F.w ? F.w : br.x1;
-            br.y1 = br.y1 > F.h ? F.h : br.y1;
-            if ((r = fx_check_budget(run->ctx, frame_bytes, "the glossy reflection lookup")))
-                goto out;
-            blurred = fx_buffer_get(run->ctx, frame_bytes);
-            if (!blurred) {
-                r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the glossy lookup", where);
-                goto out;
-            }
-            /* outside br the lookup is never read (hits lie inside, bilinear reads +1) */
-            for (int y = br.y0; y < br.y1; y++)
-                memcpy(blurred + ((size_t)y * F.w + br.x0) * 4, run->src + ((size_t)y * F.w + br.x0) * 4,
-                       (size_t)(br.x1 - br.x0) * 4 * sizeof(float));
-            if ((r = fx_blur_image(run->ctx, run->src, blurred, F.w, F.h, 4, &bs, &br, where)))
-                goto out;
-            j.lookup = blurred;
-            j.lookup_box = br;
-        }
-    }
-
     j.dbg_hit = fx_effect_debug_pass(run, "hit", 1, &r);
     if (!r)
         j.dbg_xy = fx_effect_debug_pass(run, "hit_xy", 3, &r);
     if (!r)
         j.dbg_len = fx_effect_debug_pass(run, "ray_length", 1, &r);
-    if (r)
+    if (r || (p->bounces > 1 && run->mask && (r = ssr_multi_bounce(run, &j, fin, frame_bytes))))
         goto out;
-    if (p->bounces > 1 && run->mask) {
-        /* the finished one-bounce image of this mirror, Jacobi-iterated on the first-bounce
-         * hits (a ray landing on this mirror sees its previous iterate): the estimate
-         * where the traced bounces run out. Two buffers over the mask's bounds + 2 px (lookup elsewhere). */
-        fx_rect fb = { roi->x0 - 2, roi->y0 - 2, roi->x1 + 2, roi->y1 + 2 };
-        fb.x0 = fb.x0 < 0 ? 0 : fb.x0;
-        fb.y0 = fb.y0 < 0 ? 0 : fb.y0;
-        fb.x1 = fb.x1 > F.w ? F.w : fb.x1;
-        fb.y1 = fb.y1 > F.h ? F.h : fb.y1;
-        j.fin_box = fb;
-        size_t bw = (size_t)(fb.x1 - fb.x0);
-        if ((r = fx_check_budget(run->ctx, 2 * frame_bytes, "the mirror's multi-bounce estimate")))
-            goto out;
-        fin[0] = fx_buffer_get(run->ctx, 2 * frame_bytes);
-        fin[1] = fin[0] ? fin[0] + (size_t)F.w * F.h * 4 : NULL;
-        if (!fin[0]) {
-            r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the multi-bounce estimate", where);
-            goto out;
-        }
-        for (int y = fb.y0; y < fb.y1; y++)
-            for (int x = fb.x0; x < fb.x1; x++) {
-                const fx_rect *lb = &j.lookup_box;
-                int in = x >= lb->x0 && x < lb->x1 && y >= lb->y0 && y < lb->y1;
-                const float *sp = (in ? j.lookup : run->src) + ((size_t)y * F.w + x) * 4;
-                size_t o = ((size_t)(y - fb.y0) * bw + (x - fb.x0)) * 4;
-                memcpy(fin[0] + o, sp, 4 * sizeof(float));
-                memcpy(fin[1] + o, sp, 4 * sizeof(float));
-            }
-        j.last_bounce = 0;
-        j.fin = NULL;
-        for (int it = 0; it < FIN_ITERATIONS; it++) {
-            j.out = fin[it & 1];
-            fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), shade_rows, &j);
-            j.fin = j.out;
-        }
-    }
+    /* stage 5: the mirror shaded into dst */
+    const int rows = roi->y1 - roi->y0;
     j.out = run->dst;
     j.last_bounce = p->bounces - 1;
     fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), shade_rows, &j);
@@ -978,7 +1005,7 @@ const fx_effect_class fx_effect_ssr_mirror = {
         "{\"max_steps\": 4096, \"stride\": 1, \"growth\": 1, \"refine\": 10, \"resolution_scale\": 1}",
     },
     .passes = ssr_passes,
-    .needs_camera = ssr_needs_camera,
+    .flags = FX_EFFECT_NEEDS_CAMERA,
     .halo = ssr_halo,
     .validate = ssr_validate,
     .process = ssr_process,

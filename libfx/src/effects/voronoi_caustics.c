@@ -596,16 +596,13 @@ static fx_result caustics_process(const fx_effect_run *run)
 {
     const caustics_params *p = run->params;
     const char *where = run->where;
-    if (run->roi.x1 <= run->roi.x0 || run->roi.y1 <= run->roi.y0)
-        return FX_OK;
     caustics_job j;
     memset(&j, 0, sizeof j);
     j.run = run;
     j.p = p;
     j.vor.grid = fx_voronoi_grid_for_points(p->points);
     j.vor.seed = (uint32_t)p->seed;
-    double frame_no = run->frame->frame_number, fps = run->frame->fps > 0 ? run->frame->fps : 24.0;
-    j.time = isfinite(frame_no) ? frame_no / fps : 0.0;
+    j.time = fx_effect_scene_time(run);
     j.vor.time = j.time;
     j.vor.speed = p->speed;
     j.vor.p = exponent_of(p);

@@ -111,12 +111,6 @@ static fx_pass_set vsm_passes(const void *params)
     return s;
 }
 
-static int vsm_needs_camera(const void *params)
-{
-    (void)params;
-    return 1;
-}
-
 typedef struct vsm_job {
     const fx_effect_run *run;
     const vsm_params *p;
@@ -380,8 +374,6 @@ static fx_result vsm_process(const fx_effect_run *run)
 {
     const vsm_params *p = run->params;
     const fx_rect *roi = &run->roi;
-    if (roi->x1 <= roi->x0 || roi->y1 <= roi->y0)
-        return FX_OK;
     const char *where = run->where;
     vsm_job j;
     memset(&j, 0, sizeof j);
@@ -484,7 +476,7 @@ const fx_effect_class fx_effect_vsm_shadows = {
     .param_count = FX_COUNT_OF(vsm_param_defs),
     .presets = {"{\"map_level\": 2, \"screen_downsample\": 4}", "{\"map_level\": 1, \"screen_downsample\": 2}", "{\"map_level\": 0}", "{\"method\": \"pcf\"}"},
     .passes = vsm_passes,
-    .needs_camera = vsm_needs_camera,
+    .flags = FX_EFFECT_NEEDS_CAMERA,
     .aux_views = vsm_aux_views,
     .halo = NULL,
     .validate = NULL,

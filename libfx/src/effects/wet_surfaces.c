@@ -21,6 +21,7 @@
 #include "scene/aux_view.h"
 #include "core/effect.h"
 #include "core/parallel.h"
+#include "effects/rain_common.h"
 #include "scene/rain_map.h"
 #include "math/surface.h"
 
@@ -73,12 +74,6 @@ static fx_pass_set wet_passes(const void *params)
 {
     (void)params;
     return FX_PASS_BIT(FX_PASS_DEPTH) | FX_PASS_BIT(FX_PASS_NORMAL);
-}
-
-static int wet_needs_camera(const void *params)
-{
-    (void)params;
-    return 1;
 }
 
 typedef struct wet_job {
@@ -292,28 +287,19 @@ static fx_result wet_process(const fx_effect_run *run)
 {
     const wet_params *p = run->params;
     const fx_rect *roi = &run->roi;
-    if (roi->x1 <= roi->x0 || roi->y1 <= roi->y0)
-        return FX_OK;
     const char *where = run->where;
     wet_job j;
     memset(&j, 0, sizeof j);
     j.run = run;
     j.p = p;
-    if (!fx_surface_src_init(&j.surf, run->frame) || !j.surf.normal)
-        return fx_fail(run->ctx, FX_ERR_NO_CAMERA, "%s needs the camera and the Depth and Normal passes", where);
     /* the rain map's moments box-filtered over `softness` metres (cached per context) */
-    fx_result r = fx_rain_map_load(run->frame, p->softness, where, &j.rm);
+    fx_result r = fx_rain_effect_begin(run, 1, p->softness, "wetness", &j.surf, &j.rm, &j.dbg);
     if (r)
         return r;
     fx_pass *gd = fx_frame_find_pass(run->frame, "GlossDir"), *gc = fx_frame_find_pass(run->frame, "GlossCol");
     if (gd && gc && gd->channels >= 3 && gc->channels >= 3 && gd->channels == gc->channels && gd->channels == 3) {
         j.gdir = gd->data;
         j.gcol = gc->data;
-    }
-    j.dbg = fx_effect_debug_pass(run, "wetness", 1, &r);
-    if (!j.dbg && r) {
-        fx_rain_map_free(run->ctx, &j.rm);
-        return r;
     }
     int rows = roi->y1 - roi->y0, cols = roi->x1 - roi->x0;
     if (p->downsample > 1 && rows > 2 && cols > 2) {
@@ -344,15 +330,12 @@ static fx_result wet_process(const fx_effect_run *run)
         fx_mem_free(j.col_t);
         fx_mem_free(j.nodes);
         fx_mem_free(j.smooth);
-        if (!ok) {
-            fx_rain_map_free(run->ctx, &j.rm);
-            return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
-        }
+        if (!ok)
+            return fx_rain_effect_end(run, &j.rm, fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where));
     } else {
         fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), wet_rows, &j);
     }
-    fx_rain_map_free(run->ctx, &j.rm);
-    return FX_OK;
+    return fx_rain_effect_end(run, &j.rm, FX_OK);
 }
 
 const fx_effect_class fx_effect_wet_surfaces = {
@@ -364,7 +347,7 @@ const fx_effect_class fx_effect_wet_surfaces = {
     /* draft >= 3x faster than final (issue 16) */
     .presets = {"{\"downsample\": 3}", "{\"downsample\": 2}", "{\"downsample\": 1}", "{\"downsample\": 1}"},
     .passes = wet_passes,
-    .needs_camera = wet_needs_camera,
+    .flags = FX_EFFECT_NEEDS_CAMERA,
     .aux_views = fx_aux_needs_rain_map, /* what is under cover */
     .halo = NULL,
     .validate = NULL,

@@ -441,6 +441,272 @@ static void polar_back(void *user, int begin, int end)
     }
 }
 
+/* Polar stage 1, geometry: the lines through the light (angles, spacing, count) so that
+ * neighbouring lines are at most one radial bin apart at the farthest pixel. Returns the
+ * distance to the farthest corner; *inside: the light is on the frame (a full circle). */
+static double polar_geometry(polar_job *j, int *inside_out)
+{
+    const fx_radial_blur *rb = j->rb;
+    j->lx = rb->light_x;
+    j->ly = rb->light_y;
+    const double W = j->w + 0.5, H = j->h + 0.5, X0 = -0.5, Y0 = -0.5;
+    const double cx[4] = {X0, W, W, X0}, cy[4] = {Y0, Y0, H, H};
+    double r_far = 0.0;
+    for (int i = 0; i < 4; i++)
+        r_far = fmax(r_far, hypot(cx[i] - j->lx, cy[i] - j->ly));
+    j->hr = rb->angular > 0.0 ? rb->angular : 1.0;
+    double dphi_target = j->hr / fmax(r_far, 1.0);
+    int inside = j->lx >= X0 - 1.0 && j->lx <= W + 1.0 && j->ly >= Y0 - 1.0 && j->ly <= H + 1.0;
+    if (inside) {
+        j->full_circle = 1;
+        j->theta_c = 0.0;
+        double n = ceil(2 * M_PI / dphi_target);
+        j->lines = n < 8 ? 8 : n > 4e6 ? 4000000 : (int)n;
+        j->dphi = 2 * M_PI / j->lines;
+        j->phi0 = -M_PI;
+    } else {
+        j->theta_c = atan2(0.5 * j->h - j->ly, 0.5 * j->w - j->lx);
+        double lo = M_PI, hi = -M_PI;
+        for (int i = 0; i < 4; i++) {
+            double t = atan2(cy[i] - j->ly, cx[i] - j->lx) - j->theta_c;
+            while (t > M_PI) t -= 2 * M_PI;
+            while (t <= -M_PI) t += 2 * M_PI;
+            lo = fmin(lo, t);
+            hi = fmax(hi, t);
+        }
+        j->dphi = dphi_target;
+        double n = ceil((hi - lo) / j->dphi) + 5.0;
+        if (n > 4e6) {
+            n = 4e6;
+            j->dphi = (hi - lo) / (n - 5.0);
+        }
+        j->lines = (int)n;
+        j->phi0 = lo - 2.0 * j->dphi;
+    }
+    *inside_out = inside;
+    return r_far;
+}
+
+/* Polar stage 2, bands: how many, the line count rounded to their coarsest step, and
+ * each line's bins (from its innermost band out). *total: bins over all lines. */
+static fx_result polar_bands(fx_context *ctx, polar_job *j, double r_far, int inside, const char *where,
+                             size_t *total_out, int *max_count_out)
+{
+    const double W = j->w + 0.5, H = j->h + 0.5, X0 = -0.5, Y0 = -0.5;
+    /* bands (see polar_line): as many as leave >= 16 lines (full circle; 4 in a sector) in
+     * the innermost one and reach the nearest pixel; the line count rounded up to a
+     * multiple of the coarsest step */
+    double r_near = 0.0;
+    if (!inside) {
+        double ex = j->lx < X0 ? X0 - j->lx : j->lx > W ? j->lx - W : 0.0;
+        double ey = j->ly < Y0 ? Y0 - j->ly : j->ly > H ? j->ly - H : 0.0;
+        r_near = hypot(ex, ey);
+    }
+    int top = 0;
+    while (top + 1 < POLAR_MAX_BANDS && (j->lines >> (top + 1)) >= (j->full_circle ? 16 : 4) &&
+           r_far / (double)(1 << (top + 1)) > r_near)
+        top++;
+    j->bands = top + 1;
+    const int step_max = 1 << top;
+    if (j->full_circle) {
+        j->lines = (j->lines + step_max - 1) / step_max * step_max;
+        j->dphi = 2 * M_PI / j->lines;
+    } else {
+        j->lines = (j->lines - 1 + step_max - 1) / step_max * step_max + 1;
+    }
+    for (int k = 0; k < j->bands; k++)
+        j->band_lo[k] = k == top ? 0.0 : r_far / j->hr / (double)(2 << k);
+    j->line = fx_mem_calloc((size_t)j->lines, sizeof *j->line);
+    if (!j->line)
+        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for %d polar lines", where, j->lines);
+    size_t total = 0;
+    int max_count = 1;
+    for (int a = 0; a < j->lines; a++) {
+        double th = j->theta_c + j->phi0 + a * j->dphi;
+        double r_in, r_out;
+        polar_line *ln = &j->line[a];
+        ln->offset = total;
+        if (!clip_ray(j->lx, j->ly, cos(th), sin(th), j->w, j->h, &r_in, &r_out))
+            continue;
+        double b0 = floor(r_in / j->hr);
+        ln->b0 = (int)b0;
+        ln->count = (int)(floor(r_out / j->hr) - b0) + 2; /* one bin past the end for interpolation */
+        /* results from the line's innermost band on (one bin below it for interpolation) */
+        int band = a == 0 ? top : __builtin_ctz((unsigned)a);
+        band = band < top ? band : top;
+        double lo = floor(j->band_lo[band]) - 1.0;
+        ln->out0 = lo > ln->b0 ? (int)lo : ln->b0;
+        if (ln->out0 > ln->b0 + ln->count - 2)
+            ln->out0 = ln->b0 + ln->count - 2;
+        ln->out_count = ln->b0 + ln->count - ln->out0;
+        total += (size_t)ln->out_count;
+        if (ln->count > max_count)
+            max_count = ln->count;
+    }
+    *total_out = total;
+    *max_count_out = max_count;
+    return FX_OK;
+}
+
+/* One radius's output constants (rho_coef). */
+static void polar_rho_coef(const polar_job *j, int use_levels, int i)
+{
+    const fx_radial_blur *rb = j->rb;
+    const int rho_lo = j->rho_lo;
+    const int rho = rho_lo + i;
+    rho_coef *rc = &j->rc[i];
+    double b_lo = (1.0 - rb->density) * rho, sf = ceil(b_lo);
+    double f = sf - b_lo;
+    int n = rho - (int)sf + 1; /* whole bins of the path, 1 .. rho + 1 */
+    rc->start = (int)sf;
+    rc->f = V4((float)f);
+    rc->ident = n <= 1 && f < 1e-9;
+    double kappa = j->kap[i];
+    int kb = (int)floor(kappa);
+    double t = kappa - kb;
+    rc->cr[0] = V4((float)(0.5 * t * (-1.0 + t * (2.0 - t))));
+    rc->cr[1] = V4((float)(1.0 + t * t * (-2.5 + 1.5 * t)));
+    rc->cr[2] = V4((float)(0.5 * t * (1.0 + t * (4.0 - 3.0 * t))));
+    rc->cr[3] = V4((float)(0.5 * t * t * (t - 1.0)));
+    for (int q = 0; q < 4 && !rc->ident; q++) {
+        int g = kb - 1 + q - j->k_min;
+        g = g < 0 ? 0 : g > j->n_levels - 1 ? j->n_levels - 1 : g;
+        rc->g[q] = g;
+        /* the path [start - f, rho] under the kernel exp(-lambda (rho - x)), trapezoid
+         * rule over whole bins and the fractional end (kernel linear across it) */
+        double lam = use_levels ? exp((j->k_min + g) * j->hstep) : 0.0;
+        double em1 = expm1(-lam);
+        double e1n = exp(-lam * (n - 1)), en = exp(-lam * n);
+        double ef = e1n * (1.0 + f * em1);
+        double t1 = em1 == 0.0 ? (double)n : expm1(-lam * n) / em1; /* sum_{i<n} e^-lam i */
+        double den = t1 - 0.5 - 0.5 * e1n + 0.5 * f * (e1n + ef);
+        if (!(den > 1e-300)) {
+            rc->ident = 1;
+            break;
+        }
+        double inv = 1.0 / den;
+        rc->ci[q] = V4((float)inv);
+        rc->cl[q] = V4((float)(inv * en));
+        rc->cc[q] = V4((float)(-0.5 * inv));
+        rc->ca[q] = V4((float)(inv * 0.5 * (f - 1.0) * e1n));
+        rc->cb[q] = V4((float)(inv * 0.5 * f * ef));
+    }
+}
+
+/* Polar stage 3, tables: the decay's rate levels, the radii the lines reach, the
+ * buffers (within the context's budget) and the per-level and per-radius constants. */
+static fx_result polar_tables(fx_context *ctx, polar_job *j, size_t total, int max_count, const char *where,
+                              size_t *res_bytes_out)
+{
+    const fx_radial_blur *rb = j->rb;
+    j->a = rb->decay >= 1.0 ? 0.0 : rb->decay <= 0.0 ? 0.0 : -(double)FX_RAYS_REFERENCE_SAMPLES * log(rb->decay);
+    int levels = rb->levels < 1 ? 1 : rb->levels;
+    j->hstep = log(2.0) / levels;
+    /* the radii of the lines' bins: rho_lo .. max_rho (rho >= 1; the light's own bin is
+     * the identity). A far light has them all far out: the tables span only these. */
+    int rho_lo = INT_MAX, max_rho = 1;
+    for (int a = 0; a < j->lines; a++)
+        if (j->line[a].count > 0) {
+            int lo = j->line[a].out0 < 1 ? 1 : j->line[a].out0, hi = j->line[a].b0 + j->line[a].count - 1;
+            rho_lo = lo < rho_lo ? lo : rho_lo;
+            max_rho = hi > max_rho ? hi : max_rho;
+        }
+    if (rho_lo > max_rho)
+        rho_lo = max_rho;
+    j->rho_lo = rho_lo;
+    j->max_rho = max_rho;
+    const int n_rho = max_rho - rho_lo + 1;
+    int use_levels = j->a > 0.0 && rb->density > 0.0 && rb->decay > 0.0;
+    if (use_levels) {
+        j->k_min = (int)floor(level_of(j, (double)max_rho)) - 2;
+        j->n_levels = (int)floor(level_of(j, (double)rho_lo)) + 3 - j->k_min + 1;
+    } else {
+        j->k_min = 0;
+        j->n_levels = 1;
+    }
+    /* a line reads at most every level (its bins' rates with the cubic's neighbours) */
+    j->max_count = max_count;
+    j->scratch_per_worker = (size_t)max_count * (1 + (size_t)j->n_levels);
+    int workers = fx_parallel_workers(ctx);
+    uint64_t table_doubles = 2 * (uint64_t)j->n_levels + (uint64_t)n_rho;
+    uint64_t bytes = (uint64_t)total * 4 * sizeof(float) + (uint64_t)n_rho * sizeof(rho_coef) +
+                     (uint64_t)workers * j->scratch_per_worker * sizeof(v4f) + table_doubles * sizeof(double);
+    fx_result r = fx_check_budget(ctx, bytes, where);
+    if (r != FX_OK) {
+        fx_mem_free(j->line);
+        return r;
+    }
+    const size_t res_bytes = (total ? total : 1) * 4 * sizeof(float);
+    j->res = fx_buffer_get(ctx, res_bytes); /* the same size frame after frame: reused */
+    j->scratch = fx_mem_alloc((size_t)workers * j->scratch_per_worker * sizeof(v4f));
+    double *tables = fx_mem_alloc((size_t)table_doubles * sizeof(double));
+    j->rc = fx_mem_calloc((size_t)n_rho, sizeof *j->rc);
+    if (!j->res || !j->scratch || !tables || !j->rc) {
+        fx_mem_free(j->rc);
+        fx_buffer_put(ctx, j->res, res_bytes);
+        fx_mem_free(j->scratch);
+        fx_mem_free(tables);
+        fx_mem_free(j->line);
+        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the polar grid (%zu bins)", where, total);
+    }
+    j->e1 = tables;
+    j->last = j->e1 + j->n_levels;
+    j->kap = j->last + j->n_levels;
+    for (int g = 0; g < j->n_levels; g++) {
+        double lam = use_levels ? exp((j->k_min + g) * j->hstep) : 0.0;
+        j->e1[g] = exp(-lam);
+        /* level g is read by radii whose level is >= g - 2: rho <= a / (d lambda_{g-2}) */
+        j->last[g] = use_levels ? j->a / (rb->density * exp((j->k_min + g - 2) * j->hstep)) : 1e300;
+    }
+    for (int i = 0; i < n_rho; i++)
+        j->kap[i] = use_levels ? level_of(j, (double)(rho_lo + i)) : 0.0;
+    /* decay 1 (no levels): kap = 0 gives the Catmull-Rom weights (0, 1, 0, 0) on the one
+     * level of rate 0, i.e. prefix sums */
+    for (int i = 0; i < n_rho; i++)
+        polar_rho_coef(j, use_levels, i);
+    *res_bytes_out = res_bytes;
+    return FX_OK;
+}
+
+/* Polar stage 4, sweep: each line's sums from the light outwards, then every ROI pixel
+ * interpolated between the lines around it. */
+static fx_result polar_sweep(fx_context *ctx, polar_job *j, const char *where)
+{
+    fx_parallel_for_worker(ctx, j->lines, 16, polar_lines, j);
+    const int n_bl = j->lines + (1 << (j->bands - 1)) + 1;
+    back_line *bl = fx_mem_alloc((size_t)n_bl * sizeof *bl);
+    if (!bl)
+        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for %d polar lines", where, j->lines);
+    static const float zero_line[8] = {0};
+    for (int a = 0; a < n_bl; a++) {
+        /* past the last line: the circle wraps (lines is a multiple of every step) */
+        const polar_line *ln = a < j->lines ? &j->line[a] : j->full_circle ? &j->line[a - j->lines] : NULL;
+        if (ln && ln->count >= 2) {
+            bl[a].bins = j->res + ln->offset * 4;
+            bl[a].b0 = ln->out0;
+            bl[a].last = ln->out_count - 2;
+        } else {
+            bl[a].bins = zero_line;
+            bl[a].b0 = 0.0;
+            bl[a].last = 0.0;
+        }
+    }
+    back_job bj = {j, bl};
+    int rows = j->roi.y1 - j->roi.y0;
+    fx_parallel_for(ctx, rows, fx_grain_for(ctx, rows), polar_back, &bj);
+    fx_mem_free(bl);
+    return FX_OK;
+}
+
+static void polar_free(fx_context *ctx, polar_job *j, size_t res_bytes)
+{
+    fx_buffer_put(ctx, j->res, res_bytes);
+    fx_mem_free(j->scratch);
+    fx_mem_free(j->e1); /* the tables' block */
+    fx_mem_free(j->rc);
+    fx_mem_free(j->line);
+}
+
 static fx_result polar_full(fx_context *ctx, const float *occ, float *rays, int width, int height,
                             const fx_radial_blur *rb, const fx_rect *roi, const char *where)
 {
@@ -454,195 +720,14 @@ static fx_result polar_full(fx_context *ctx, const float *occ, float *rays, int 
     j.rays = rays;
     if (j.roi.x1 <= j.roi.x0 || j.roi.y1 <= j.roi.y0)
         return FX_OK;
-    j.lx = rb->light_x;
-    j.ly = rb->light_y;
-    const double W = width + 0.5, H = height + 0.5, X0 = -0.5, Y0 = -0.5;
-    const double cx[4] = {X0, W, W, X0}, cy[4] = {Y0, Y0, H, H};
-    double r_far = 0.0;
-    for (int i = 0; i < 4; i++)
-        r_far = fmax(r_far, hypot(cx[i] - j.lx, cy[i] - j.ly));
-    j.hr = rb->angular > 0.0 ? rb->angular : 1.0;
-    double dphi_target = j.hr / fmax(r_far, 1.0);
-    int inside = j.lx >= X0 - 1.0 && j.lx <= W + 1.0 && j.ly >= Y0 - 1.0 && j.ly <= H + 1.0;
-    if (inside) {
-        j.full_circle = 1;
-        j.theta_c = 0.0;
-        double n = ceil(2 * M_PI / dphi_target);
-        j.lines = n < 8 ? 8 : n > 4e6 ? 4000000 : (int)n;
-        j.dphi = 2 * M_PI / j.lines;
-        j.phi0 = -M_PI;
-    } else {
-        j.theta_c = atan2(0.5 * height - j.ly, 0.5 * width - j.lx);
-        double lo = M_PI, hi = -M_PI;
-        for (int i = 0; i < 4; i++) {
-            double t = atan2(cy[i] - j.ly, cx[i] - j.lx) - j.theta_c;
-            while (t > M_PI) t -= 2 * M_PI;
-            while (t <= -M_PI) t += 2 * M_PI;
-            lo = fmin(lo, t);
-            hi = fmax(hi, t);
-        }
-        j.dphi = dphi_target;
-        double n = ceil((hi - lo) / j.dphi) + 5.0;
-        if (n > 4e6) {
-            n = 4e6;
-            j.dphi = (hi - lo) / (n - 5.0);
-        }
-        j.lines = (int)n;
-        j.phi0 = lo - 2.0 * j.dphi;
-    }
-    /* bands (see polar_line): as many as leave >= 16 lines (full circle; 4 in a sector) in
-     * the innermost one and reach the nearest pixel; the line count rounded up to a
-     * multiple of the coarsest step */
-    double r_near = 0.0;
-    if (!inside) {
-        double ex = j.lx < X0 ? X0 - j.lx : j.lx > W ? j.lx - W : 0.0;
-        double ey = j.ly < Y0 ? Y0 - j.ly : j.ly > H ? j.ly - H : 0.0;
-        r_near = hypot(ex, ey);
-    }
-    int top = 0;
-    while (top + 1 < POLAR_MAX_BANDS && (j.lines >> (top + 1)) >= (j.full_circle ? 16 : 4) &&
-           r_far / (double)(1 << (top + 1)) > r_near)
-        top++;
-    j.bands = top + 1;
-    const int step_max = 1 << top;
-    if (j.full_circle) {
-        j.lines = (j.lines + step_max - 1) / step_max * step_max;
-        j.dphi = 2 * M_PI / j.lines;
-    } else {
-        j.lines = (j.lines - 1 + step_max - 1) / step_max * step_max + 1;
-    }
-    for (int k = 0; k < j.bands; k++)
-        j.band_lo[k] = k == top ? 0.0 : r_far / j.hr / (double)(2 << k);
-    j.line = fx_mem_calloc((size_t)j.lines, sizeof *j.line);
-    if (!j.line)
-        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for %d polar lines", where, j.lines);
-    size_t total = 0;
-    int max_count = 1;
-    for (int a = 0; a < j.lines; a++) {
-        double th = j.theta_c + j.phi0 + a * j.dphi;
-        double r_in, r_out;
-        polar_line *ln = &j.line[a];
-        ln->offset = total;
-        if (!clip_ray(j.lx, j.ly, cos(th), sin(th), width, height, &r_in, &r_out))
-            continue;
-        double b0 = floor(r_in / j.hr);
-        ln->b0 = (int)b0;
-        ln->count = (int)(floor(r_out / j.hr) - b0) + 2; /* one bin past the end for interpolation */
-        /* results from the line's innermost band on (one bin below it for interpolation) */
-        int band = a == 0 ? top : __builtin_ctz((unsigned)a);
-        band = band < top ? band : top;
-        double lo = floor(j.band_lo[band]) - 1.0;
-        ln->out0 = lo > ln->b0 ? (int)lo : ln->b0;
-        if (ln->out0 > ln->b0 + ln->count - 2)
-            ln->out0 = ln->b0 + ln->count - 2;
-        ln->out_count = ln->b0 + ln->count - ln->out0;
-        total += (size_t)ln->out_count;
-        if (ln->count > max_count)
-            max_count = ln->count;
-    }
-    j.a = rb->decay >= 1.0 ? 0.0 : rb->decay <= 0.0 ? 0.0 : -(double)FX_RAYS_REFERENCE_SAMPLES * log(rb->decay);
-    int levels = rb->levels < 1 ? 1 : rb->levels;
-    j.hstep = log(2.0) / levels;
-    /* the radii of the lines' bins: rho_lo .. max_rho (rho >= 1; the light's own bin is
-     * the identity). A far light has them all far out: the tables span only these. */
-    int rho_lo = INT_MAX, max_rho = 1;
-    for (int a = 0; a < j.lines; a++)
-        if (j.line[a].count > 0) {
-            int lo = j.line[a].out0 < 1 ? 1 : j.line[a].out0, hi = j.line[a].b0 + j.line[a].count - 1;
-            rho_lo = lo < rho_lo ? lo : rho_lo;
-            max_rho = hi > max_rho ? hi : max_rho;
-        }
-    if (rho_lo > max_rho)
-        rho_lo = max_rho;
-    j.rho_lo = rho_lo;
-    j.max_rho = max_rho;
-    const int n_rho = max_rho - rho_lo + 1;
-    int use_levels = j.a > 0.0 && rb->density > 0.0 && rb->decay > 0.0;
-    if (use_levels) {
-        j.k_min = (int)floor(level_of(&j, (double)max_rho)) - 2;
-        j.n_levels = (int)floor(level_of(&j, (double)rho_lo)) + 3 - j.k_min + 1;
-    } else {
-        j.k_min = 0;
-        j.n_levels = 1;
-    }
-    /* a line reads at most every level (its bins' rates with the cubic's neighbours) */
-    j.max_count = max_count;
-    j.scratch_per_worker = (size_t)max_count * (1 + (size_t)j.n_levels);
-    int workers = fx_parallel_workers(ctx);
-    uint64_t table_doubles = 2 * (uint64_t)j.n_levels + (uint64_t)n_rho;
-    uint64_t bytes = (uint64_t)total * 4 * sizeof(float) + (uint64_t)n_rho * sizeof(rho_coef) +
-                     (uint64_t)workers * j.scratch_per_worker * sizeof(v4f) + table_doubles * sizeof(double);
-    fx_result r = fx_check_budget(ctx, bytes, where);
-    if (r != FX_OK) {
-        fx_mem_free(j.line);
+    int inside = 0, max_count = 1;
+    size_t total = 0, res_bytes = 0;
+    double r_far = polar_geometry(&j, &inside);
+    fx_result r = polar_bands(ctx, &j, r_far, inside, where, &total, &max_count);
+    if (r)
         return r;
-    }
-    const size_t res_bytes = (total ? total : 1) * 4 * sizeof(float);
-    j.res = fx_buffer_get(ctx, res_bytes); /* the same size frame after frame: reused */
-    j.scratch = fx_mem_alloc((size_t)workers * j.scratch_per_worker * sizeof(v4f));
-    double *tables = fx_mem_alloc((size_t)table_doubles * sizeof(double));
-    j.rc = fx_mem_calloc((size_t)n_rho, sizeof *j.rc);
-    if (!j.res || !j.scratch || !tables || !j.rc) {
-        fx_mem_free(j.rc);
-        fx_buffer_put(ctx, j.res, res_bytes);
-        fx_mem_free(j.scratch);
-        fx_mem_free(tables);
-        fx_mem_free(j.line);
-        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the polar grid (%zu bins)", where, total);
-    }
-    j.e1 = tables;
-    j.last = j.e1 + j.n_levels;
-    j.kap = j.last + j.n_levels;
-    for (int g = 0; g < j.n_levels; g++) {
-        double lam = use_levels ? exp((j.k_min + g) * j.hstep) : 0.0;
-        j.e1[g] = exp(-lam);
-        /* level g is read by radii whose level is >= g - 2: rho <= a / (d lambda_{g-2}) */
-        j.last[g] = use_levels ? j.a / (rb->density * exp((j.k_min + g - 2) * j.hstep)) : 1e300;
-    }
-    for (int i = 0; i < n_rho; i++)
-        j.kap[i] = use_levels ? level_of(&j, (double)(rho_lo + i)) : 0.0;
-    /* decay 1 (no levels): kap = 0 gives the Catmull-Rom weights (0, 1, 0, 0) on the one
-     * level of rate 0, i.e. prefix sums */
-    for (int i = 0; i < n_rho; i++) {
-        const int rho = rho_lo + i;
-        rho_coef *rc = &j.rc[i];
-        double b_lo = (1.0 - rb->density) * rho, sf = ceil(b_lo);
-        double f = sf - b_lo;
-        int n = rho - (int)sf + 1; /* whole bins of the path, 1 .. rho + 1 */
-        rc->start = (int)sf;
-        rc->f = V4((float)f);
-        rc->ident = n <= 1 && f < 1e-9;
-        double kappa = j.kap[i];
-        int kb = (int)floor(kappa);
-        double t = kappa - kb;
-        rc->cr[0] = V4((float)(0.5 * t * (-1.0 + t * (2.0 - t))));
-        rc->cr[1] = V4((float)(1.0 + t * t * (-2.5 + 1.5 * t)));
-        rc->cr[2] = V4((float)(0.5 * t * (1.0 + t * (4.0 - 3.0 * t))));
-        rc->cr[3] = V4((float)(0.5 * t * t * (t - 1.0)));
-        for (int q = 0; q < 4 && !rc->ident; q++) {
-            int g = kb - 1 + q - j.k_min;
-            g = g < 0 ? 0 : g > j.n_levels - 1 ? j.n_levels - 1 : g;
-            rc->g[q] = g;
-            /* the path [start - f, rho] under the kernel exp(-lambda (rho - x)), trapezoid
-             * rule over whole bins and the fractional end (kernel linear across it) */
-            double lam = use_levels ? exp((j.k_min + g) * j.hstep) : 0.0;
-            double em1 = expm1(-lam);
-            double e1n = exp(-lam * (n - 1)), en = exp(-lam * n);
-            double ef = e1n * (1.0 + f * em1);
-            double t1 = em1 == 0.0 ? (double)n : expm1(-lam * n) / em1; /* sum_{i<n} e^-lam i */
-            double den = t1 - 0.5 - 0.5 * e1n + 0.5 * f * (e1n + ef);
-            if (!(den > 1e-300)) {
-                rc->ident = 1;
-                break;
-            }
-            double inv = 1.0 / den;
-            rc->ci[q] = V4((float)inv);
-            rc->cl[q] = V4((float)(inv * en));
-            rc->cc[q] = V4((float)(-0.5 * inv));
-            rc->ca[q] = V4((float)(inv * 0.5 * (f - 1.0) * e1n));
-            rc->cb[q] = V4((float)(inv * 0.5 * f * ef));
-        }
-    }
+    if ((r = polar_tables(ctx, &j, total, max_count, where, &res_bytes)))
+        return r;
     if (rb->decay <= 0.0 || rb->density <= 0.0) {
         /* decay 0: the kernel has no mass (the limit of the naive sum). density 0: every
          * sample is the pixel itself. Both are plain per-pixel products. */
@@ -654,42 +739,10 @@ static fx_result polar_full(fx_context *ctx, const float *occ, float *rays, int 
                     rays[i] = ch < 3 ? to_float(k * occ[i]) : 0.0f;
                 }
     } else {
-        fx_parallel_for_worker(ctx, j.lines, 16, polar_lines, &j);
-        const int n_bl = j.lines + (1 << (j.bands - 1)) + 1;
-        back_line *bl = fx_mem_alloc((size_t)n_bl * sizeof *bl);
-        if (!bl) {
-            fx_buffer_put(ctx, j.res, res_bytes);
-            fx_mem_free(j.scratch);
-            fx_mem_free(tables);
-            fx_mem_free(j.rc);
-            fx_mem_free(j.line);
-            return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for %d polar lines", where, j.lines);
-        }
-        static const float zero_line[8] = {0};
-        for (int a = 0; a < n_bl; a++) {
-            /* past the last line: the circle wraps (lines is a multiple of every step) */
-            const polar_line *ln = a < j.lines ? &j.line[a] : j.full_circle ? &j.line[a - j.lines] : NULL;
-            if (ln && ln->count >= 2) {
-                bl[a].bins = j.res + ln->offset * 4;
-                bl[a].b0 = ln->out0;
-                bl[a].last = ln->out_count - 2;
-            } else {
-                bl[a].bins = zero_line;
-                bl[a].b0 = 0.0;
-                bl[a].last = 0.0;
-            }
-        }
-        back_job bj = {&j, bl};
-        int rows = j.roi.y1 - j.roi.y0;
-        fx_parallel_for(ctx, rows, fx_grain_for(ctx, rows), polar_back, &bj);
-        fx_mem_free(bl);
+        r = polar_sweep(ctx, &j, where);
     }
-    fx_buffer_put(ctx, j.res, res_bytes);
-    fx_mem_free(j.scratch);
-    fx_mem_free(tables);
-    fx_mem_free(j.rc);
-    fx_mem_free(j.line);
-    return FX_OK;
+    polar_free(ctx, &j, res_bytes);
+    return r;
 }
 
 /* ---- reduced resolution: the occlusion map box-averaged by f x f, the polar method on

@@ -170,16 +170,13 @@ static int test_span(const fx_ssr_scene *s, const line_state *L, fx_vec3 dir, co
     return 1;
 }
 
-int fx_ssr_trace(const fx_ssr_scene *s, const fx_ssr_settings *st, fx_vec3 origin, fx_vec3 dir,
-                 fx_ssr_hit *out)
+/* Trace stage 1, the line: the ray clipped to the near plane and its length, projected
+ * to a 2-D line over the frame (clipped to it; *clipped: it leaves the frame) with the
+ * homogeneous view position and 1/w per pixel of its major axis. 0: nothing to march. */
+static int trace_line(const fx_ssr_scene *s, const fx_ssr_settings *st, fx_vec3 origin, fx_vec3 dir,
+                      line_state *L, double o[3], double *s_end, int *clipped)
 {
-    memset(out, 0, sizeof *out);
     const fx_view *v = s->view;
-    if (!finite3(origin) || !finite3(dir) || s->width <= 0 || s->height <= 0)
-        return 0;
-    dir = fx_v3_normalize_or(dir, fx_v3(0.0f, 0.0f, 0.0f));
-    if (dir.x == 0.0f && dir.y == 0.0f && dir.z == 0.0f)
-        return 0;
     double near = v->cam.clip_start > 0.0f && isfinite(v->cam.clip_start) ? v->cam.clip_start : 1e-3;
     double len = st->max_distance > 0.0f && isfinite(st->max_distance) ? st->max_distance : 1e3;
     /* near-plane clipping: view z must stay <= -near */
@@ -191,7 +188,9 @@ int fx_ssr_trace(const fx_ssr_scene *s, const fx_ssr_settings *st, fx_vec3 origi
         return 0;
     double e[3] = {origin.x + dir.x * len, origin.y + dir.y * len, origin.z + dir.z * len};
     const float *P = v->cam.projection;
-    double o[3] = {origin.x, origin.y, origin.z};
+    o[0] = origin.x;
+    o[1] = origin.y;
+    o[2] = origin.z;
     double h0[4], h1[4];
     for (int r = 0; r < 4; r++) {
         h0[r] = P[r * 4] * o[0] + P[r * 4 + 1] * o[1] + P[r * 4 + 2] * o[2] + P[r * 4 + 3];
@@ -216,120 +215,131 @@ int fx_ssr_trace(const fx_ssr_scene *s, const fx_ssr_settings *st, fx_vec3 origi
         return 0;
     if (t0 > 1e-9) /* the origin itself is off the frame */
         return 0;
-    int clipped = t1 < 1.0;
-    if (clipped) {
+    *clipped = t1 < 1.0;
+    if (*clipped) {
         for (int i = 0; i < 2; i++)
             a1[i] = a0[i] + (a1[i] - a0[i]) * t1;
         for (int i = 0; i < 3; i++)
             q1[i] = q0[i] + (q1[i] - q0[i]) * t1;
         k1 = k0 + (k1 - k0) * t1;
     }
-    line_state L;
-    L.w = s->width;
-    L.h = s->height;
+    L->w = s->width;
+    L->h = s->height;
     double dx = a1[0] - a0[0], dy = a1[1] - a0[1];
-    L.swap = fabs(dx) < fabs(dy);
-    if (L.swap) {
+    L->swap = fabs(dx) < fabs(dy);
+    if (L->swap) {
         double t = dx;
         dx = dy;
         dy = t;
-        L.p0[0] = a0[1];
-        L.p0[1] = a0[0];
+        L->p0[0] = a0[1];
+        L->p0[1] = a0[0];
     } else {
-        L.p0[0] = a0[0];
-        L.p0[1] = a0[1];
+        L->p0[0] = a0[0];
+        L->p0[1] = a0[1];
     }
-    double s_end = fabs(dx);
-    if (!(s_end > 1e-12))
+    *s_end = fabs(dx);
+    if (!(*s_end > 1e-12))
         return 0;
     double sgn = dx > 0 ? 1.0 : -1.0, inv = sgn / dx;
-    L.dp[0] = sgn;
-    L.dp[1] = dy * inv;
+    L->dp[0] = sgn;
+    L->dp[1] = dy * inv;
     for (int i = 0; i < 3; i++) {
-        L.q0[i] = q0[i];
-        L.dq[i] = (q1[i] - q0[i]) * inv;
+        L->q0[i] = q0[i];
+        L->dq[i] = (q1[i] - q0[i]) * inv;
     }
-    L.k0 = k0;
-    L.dk = (k1 - k0) * inv;
+    L->k0 = k0;
+    L->dk = (k1 - k0) * inv;
+    return 1;
+}
 
+/* Trace stage 2a, the Hi-Z walk over the depth pyramid. 1: a hit in *out. */
+static int march_hiz(const fx_ssr_scene *s, const fx_ssr_settings *st, const line_state *L, fx_vec3 dir,
+                     const double o[3], double s_end, fx_ssr_hit *out)
+{
     const double thick = st->thickness > 0.0f ? st->thickness : 0.0;
     const int max_steps = st->max_steps > 0 ? st->max_steps : 1;
     const int refine = st->refine < 0 ? 0 : st->refine > 30 ? 30 : st->refine;
     const fx_depth_pyramid *hz = s->hiz;
-    if (hz && hz->levels > 1 && hz->w[0] == s->width && hz->h[0] == s->height) {
-        /* Hi-Z: at level l the line crosses one 2^l cell per step; a cell whose nearest
-         * surface lies behind the ray's depths across it holds no candidate and is
-         * skipped whole (level up); otherwise level down, and at level 0 the pixel's span
-         * of the line gets the linear march's exact test. */
-        const int top = hz->levels - 1;
-        int level = 0;
-        /* the walk starts one pixel out, as the linear march's first test: the origin's
-         * own pixel is the surface the ray leaves */
-        double s_prev = 0.0;
-        for (int i = 0; i < max_steps && s_prev < s_end; i++) {
-            out->steps = i + 1;
-            double cell = (double)(1 << level);
-            /* the cell the line enters just after s_prev (a point on a boundary belongs
-             * to the cell ahead) */
-            double ahead = s_prev + 1e-6 < s_end ? s_prev + 1e-6 : s_prev;
-            double a = L.p0[0] + L.dp[0] * ahead, b = L.p0[1] + L.dp[1] * ahead;
-            double ca = floor(a / cell), cb = floor(b / cell);
-            a = L.p0[0] + L.dp[0] * s_prev;
-            b = L.p0[1] + L.dp[1] * s_prev;
-            double bound_a = L.dp[0] > 0 ? (ca + 1.0) * cell : ca * cell;
-            double s_next = s_prev + fabs(bound_a - a); /* |dp[0]| = 1 */
-            if (fabs(L.dp[1]) > 1e-12) {
-                double bound_b = L.dp[1] > 0 ? (cb + 1.0) * cell : cb * cell;
-                double sb = s_prev + (bound_b - b) / L.dp[1];
-                if (sb < s_next)
-                    s_next = sb;
-            }
-            if (!(s_next > s_prev)) /* rounding at a boundary: move on by a hair */
-                s_next = s_prev + 1e-6;
-            if (s_next > s_end)
-                s_next = s_end;
-            double d_prev = depth_at(&L, s_prev), d_cur = depth_at(&L, s_next);
-            int cx = (int)(L.swap ? cb : ca), cy = (int)(L.swap ? ca : cb);
-            cx = cx < 0 ? 0 : cx >= hz->w[level] ? hz->w[level] - 1 : cx;
-            cy = cy < 0 ? 0 : cy >= hz->h[level] ? hz->h[level] - 1 : cy;
-            if (level > 0) {
-                const float *z = hz->level[level] + ((size_t)cy * hz->w[level] + cx) * 2;
-                double dmax = d_prev > d_cur ? d_prev : d_cur, dmin = d_prev > d_cur ? d_cur : d_prev;
-                /* no candidate in the cell: the ray passes in front of every sample, or
-                 * behind all of them by more than the thickness and the tangent planes'
-                 * reach (twice the sample); a cell of background only holds (+inf, -inf) */
-                double back = (double)z[1] + thick;
-                if (dmax < (double)z[0] || dmin > back) {
-                    s_prev = s_next;
-                    if (level < top)
-                        level++;
-                } else {
-                    level--;
-                }
-                continue;
-            }
-            if (test_span(s, &L, dir, o, thick, refine, s_prev, s_next, d_prev, d_cur, cx, cy, out))
-                return 1;
-            s_prev = s_next;
-            if (top >= 1)
-                level = 1;
+    /* Hi-Z: at level l the line crosses one 2^l cell per step; a cell whose nearest
+     * surface lies behind the ray's depths across it holds no candidate and is
+     * skipped whole (level up); otherwise level down, and at level 0 the pixel's span
+     * of the line gets the linear march's exact test. */
+    const int top = hz->levels - 1;
+    int level = 0;
+    /* the walk starts one pixel out, as the linear march's first test: the origin's
+     * own pixel is the surface the ray leaves */
+    double s_prev = 0.0;
+    for (int i = 0; i < max_steps && s_prev < s_end; i++) {
+        out->steps = i + 1;
+        double cell = (double)(1 << level);
+        /* the cell the line enters just after s_prev (a point on a boundary belongs
+         * to the cell ahead) */
+        double ahead = s_prev + 1e-6 < s_end ? s_prev + 1e-6 : s_prev;
+        double a = L->p0[0] + L->dp[0] * ahead, b = L->p0[1] + L->dp[1] * ahead;
+        double ca = floor(a / cell), cb = floor(b / cell);
+        a = L->p0[0] + L->dp[0] * s_prev;
+        b = L->p0[1] + L->dp[1] * s_prev;
+        double bound_a = L->dp[0] > 0 ? (ca + 1.0) * cell : ca * cell;
+        double s_next = s_prev + fabs(bound_a - a); /* |dp[0]| = 1 */
+        if (fabs(L->dp[1]) > 1e-12) {
+            double bound_b = L->dp[1] > 0 ? (cb + 1.0) * cell : cb * cell;
+            double sb = s_prev + (bound_b - b) / L->dp[1];
+            if (sb < s_next)
+                s_next = sb;
         }
-        out->left_screen = clipped;
-        return 0;
+        if (!(s_next > s_prev)) /* rounding at a boundary: move on by a hair */
+            s_next = s_prev + 1e-6;
+        if (s_next > s_end)
+            s_next = s_end;
+        double d_prev = depth_at(L, s_prev), d_cur = depth_at(L, s_next);
+        int cx = (int)(L->swap ? cb : ca), cy = (int)(L->swap ? ca : cb);
+        cx = cx < 0 ? 0 : cx >= hz->w[level] ? hz->w[level] - 1 : cx;
+        cy = cy < 0 ? 0 : cy >= hz->h[level] ? hz->h[level] - 1 : cy;
+        if (level > 0) {
+            const float *z = hz->level[level] + ((size_t)cy * hz->w[level] + cx) * 2;
+            double dmax = d_prev > d_cur ? d_prev : d_cur, dmin = d_prev > d_cur ? d_cur : d_prev;
+            /* no candidate in the cell: the ray passes in front of every sample, or
+             * behind all of them by more than the thickness and the tangent planes'
+             * reach (twice the sample); a cell of background only holds (+inf, -inf) */
+            double back = (double)z[1] + thick;
+            if (dmax < (double)z[0] || dmin > back) {
+                s_prev = s_next;
+                if (level < top)
+                    level++;
+            } else {
+                level--;
+            }
+            continue;
+        }
+        if (test_span(s, L, dir, o, thick, refine, s_prev, s_next, d_prev, d_cur, cx, cy, out))
+            return 1;
+        s_prev = s_next;
+        if (top >= 1)
+            level = 1;
     }
+    return 0;
+}
+
+/* Trace stage 2b, the linear march: strides growing by `growth`, each span tested. */
+static int march_linear(const fx_ssr_scene *s, const fx_ssr_settings *st, const line_state *L, fx_vec3 dir,
+                        const double o[3], double s_end, double origin_depth, fx_ssr_hit *out)
+{
+    const double thick = st->thickness > 0.0f ? st->thickness : 0.0;
+    const int max_steps = st->max_steps > 0 ? st->max_steps : 1;
+    const int refine = st->refine < 0 ? 0 : st->refine > 30 ? 30 : st->refine;
     double stride = st->stride > 0.5f ? st->stride : 0.5;
     const double growth = st->growth >= 1.0f && isfinite(st->growth) ? st->growth : 1.0;
-    double s_prev = 0.0, d_prev = -(double)origin.z;
+    double s_prev = 0.0, d_prev = origin_depth;
     for (int i = 0; i < max_steps; i++) {
         double s_cur = s_prev + stride;
         if (s_cur > s_end)
             s_cur = s_end;
         out->steps = i + 1;
-        double d_cur = depth_at(&L, s_cur);
+        double d_cur = depth_at(L, s_cur);
         int ix, iy;
-        if (!pixel_index(&L, s_cur, &ix, &iy))
+        if (!pixel_index(L, s_cur, &ix, &iy))
             break;
-        if (test_span(s, &L, dir, o, thick, refine, s_prev, s_cur, d_prev, d_cur, ix, iy, out))
+        if (test_span(s, L, dir, o, thick, refine, s_prev, s_cur, d_prev, d_cur, ix, iy, out))
             return 1;
         if (s_cur >= s_end)
             break;
@@ -339,6 +349,28 @@ int fx_ssr_trace(const fx_ssr_scene *s, const fx_ssr_settings *st, fx_vec3 origi
         if (stride > 1e7)
             stride = 1e7;
     }
-    out->left_screen = clipped;
     return 0;
+}
+
+int fx_ssr_trace(const fx_ssr_scene *s, const fx_ssr_settings *st, fx_vec3 origin, fx_vec3 dir,
+                 fx_ssr_hit *out)
+{
+    memset(out, 0, sizeof *out);
+    if (!finite3(origin) || !finite3(dir) || s->width <= 0 || s->height <= 0)
+        return 0;
+    dir = fx_v3_normalize_or(dir, fx_v3(0.0f, 0.0f, 0.0f));
+    if (dir.x == 0.0f && dir.y == 0.0f && dir.z == 0.0f)
+        return 0;
+    line_state L;
+    double o[3], s_end = 0.0;
+    int clipped = 0;
+    if (!trace_line(s, st, origin, dir, &L, o, &s_end, &clipped))
+        return 0;
+    const fx_depth_pyramid *hz = s->hiz;
+    int hit = hz && hz->levels > 1 && hz->w[0] == s->width && hz->h[0] == s->height
+                  ? march_hiz(s, st, &L, dir, o, s_end, out)
+                  : march_linear(s, st, &L, dir, o, s_end, -(double)origin.z, out);
+    if (!hit)
+        out->left_screen = clipped;
+    return hit;
 }
