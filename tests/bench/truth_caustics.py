@@ -17,7 +17,6 @@ noise inflates its full-resolution contrast), and the dominant spatial frequency
 of the radially averaged power spectrum (Hann window, DC and the first bin excluded), as
 a period in metres (the orthographic camera's width / pixels, from the sidecar).
 """
-import argparse
 import json
 import os
 import sys
@@ -50,22 +49,13 @@ def stats(img, m_per_px):
 
 
 def main():
-    ap = argparse.ArgumentParser()
-    ap.add_argument("out")
-    ap.add_argument("--res", default="480x270")
-    ap.add_argument("--spp", type=int, default=32)
-    ap.add_argument("--runs", type=int, default=3)
-    ap.add_argument("--docs")
-    a = ap.parse_args()
-    os.makedirs(a.out, exist_ok=True)
+    a = C.parse_args(res="480x270", spp=32)
     d = C.scene_dir("caustics")
     blend = d / "truth_caustics_pool.blend"
     recipe = json.load(open(d / "recipe.json"))
     noop = C.noop_recipe(C.pathlib.Path(a.out))
     p = os.path.join(a.out, "c_")
-    passes, side, _ = C.batch(blend, p + "in_", a.res, a.spp)
-    tpass, _, _ = C.batch(blend, p + "truth_", a.res, a.spp, expr=C.truth_expr("caustics"), recipe=noop)
-    t2pass, _, _ = C.batch(blend, p + "truth2_", a.res, a.spp, expr=C.truth_expr("caustics"), recipe=noop, seed=17)
+    passes, side, tpass, t2pass = C.render_three("caustics", blend, p, a, noop)
     truth, truth2, plain = C.rgb(tpass), C.rgb(t2pass), C.rgb(passes)
     # the orthographic camera's width in metres is 2 / projection[0][0] (the sidecar)
     m_per_px = 2.0 / json.load(open(side))["projection"][0][0] / plain.shape[1]

@@ -10,6 +10,7 @@ kept in the output directory and reused by a re-run (delete them to re-render).
 Run with Debian's /usr/bin/python3; LIBFX_LIBRARY / LIBFX_CLI name the build
 (default build/).
 """
+import argparse
 import json
 import os
 import pathlib
@@ -70,6 +71,31 @@ def batch(blend, prefix, res, spp, expr=None, recipe=None, seed=None):
         sys.exit("render of %s failed:\n%s\n%s" % (blend, p.stdout[-3000:], p.stderr[-3000:]))
     print("rendered %s (%s, %d spp) in %.0f s" % (os.path.basename(prefix), res, spp, dt), flush=True)
     return passes, side, dt
+
+
+def parse_args(res="480x270", spp=16, variants=None):
+    """The command line every truth script takes: OUT, --res, --spp, --runs, --docs (and
+    --variants when the scene has several)."""
+    ap = argparse.ArgumentParser()
+    ap.add_argument("out")
+    ap.add_argument("--res", default=res)
+    ap.add_argument("--spp", type=int, default=spp)
+    ap.add_argument("--runs", type=int, default=3)
+    if variants:
+        ap.add_argument("--variants", default=",".join(variants))
+    ap.add_argument("--docs")
+    a = ap.parse_args()
+    os.makedirs(a.out, exist_ok=True)
+    return a
+
+
+def render_three(name, blend, prefix, a, noop):
+    """libfx's input, the truth and the truth at another seed (the noise floor) of one scene,
+    through the add-on's batch path: (passes, sidecar, truth, truth at seed 17)."""
+    passes, side, _ = batch(blend, prefix + "in_", a.res, a.spp)
+    tpass, _, _ = batch(blend, prefix + "truth_", a.res, a.spp, expr=truth_expr(name), recipe=noop)
+    t2pass, _, _ = batch(blend, prefix + "truth2_", a.res, a.spp, expr=truth_expr(name), recipe=noop, seed=17)
+    return passes, side, tpass, t2pass
 
 
 def rgb(path):

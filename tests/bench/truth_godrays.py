@@ -21,7 +21,6 @@ A_fx = lum(output) - lum(input), both box-filtered 9x9 (the truth is noisy):
     9x9 box-filtered images (the truth's volume noise at these samples is as large as
     the error per pixel: the filtered MAE measures the structure).
 """
-import argparse
 import json
 import os
 import sys
@@ -49,22 +48,13 @@ def centroid(a):
 
 
 def main():
-    ap = argparse.ArgumentParser()
-    ap.add_argument("out")
-    ap.add_argument("--res", default="320x180")
-    ap.add_argument("--spp", type=int, default=32)
-    ap.add_argument("--runs", type=int, default=3)
-    ap.add_argument("--docs")
-    a = ap.parse_args()
-    os.makedirs(a.out, exist_ok=True)
+    a = C.parse_args(res="320x180", spp=32)
     d = C.scene_dir("godrays")
     blend = d / "truth_godrays_window.blend"
     recipe = json.load(open(d / "recipe.json"))
     noop = C.noop_recipe(C.pathlib.Path(a.out))
     p = os.path.join(a.out, "g_")
-    passes, side, _ = C.batch(blend, p + "in_", a.res, a.spp)
-    tpass, _, _ = C.batch(blend, p + "truth_", a.res, a.spp, expr=C.truth_expr("godrays"), recipe=noop)
-    t2pass, _, _ = C.batch(blend, p + "truth2_", a.res, a.spp, expr=C.truth_expr("godrays"), recipe=noop, seed=17)
+    passes, side, tpass, t2pass = C.render_three("godrays", blend, p, a, noop)
     truth, truth2, plain = C.rgb(tpass), C.rgb(t2pass), C.rgb(passes)
     lp = C.lum(np.clip(plain, 0, 1))
     add_t = box(C.lum(np.clip(truth, 0, 1)) - lp)

@@ -11,7 +11,6 @@ the add-on's batch path, a second truth with seed 17 (the noise floor); `libfx r
 each preset. Region: the Mirror material's pixels (Cryptomatte of the input). Writes
 OUT_DIR/truth_mirrors.md and .json; with --docs the images and plot into DOCS/images/.
 """
-import argparse
 import json
 import os
 import sys
@@ -25,15 +24,7 @@ VARIANTS = ("facing", "grazing", "pair", "curved")
 
 
 def main():
-    ap = argparse.ArgumentParser()
-    ap.add_argument("out")
-    ap.add_argument("--res", default="480x270")
-    ap.add_argument("--spp", type=int, default=16)
-    ap.add_argument("--runs", type=int, default=3)
-    ap.add_argument("--variants", default=",".join(VARIANTS))
-    ap.add_argument("--docs")
-    a = ap.parse_args()
-    os.makedirs(a.out, exist_ok=True)
+    a = C.parse_args(res="480x270", spp=16, variants=VARIANTS)
     d = C.scene_dir("mirrors")
     recipe = json.load(open(d / "recipe.json"))
     noop = C.noop_recipe(C.pathlib.Path(a.out))
@@ -41,10 +32,7 @@ def main():
     for v in a.variants.split(","):
         blend = d / ("truth_mirrors_%s.blend" % v)
         p = os.path.join(a.out, "m_%s_" % v)
-        passes, side, _ = C.batch(blend, p + "in_", a.res, a.spp)
-        tpass, _, _ = C.batch(blend, p + "truth_", a.res, a.spp, expr=C.truth_expr("mirrors"), recipe=noop)
-        t2pass, _, _ = C.batch(blend, p + "truth2_", a.res, a.spp, expr=C.truth_expr("mirrors"), recipe=noop,
-                               seed=17)
+        passes, side, tpass, t2pass = C.render_three("mirrors", blend, p, a, noop)
         region = C.T.crypto_support(C.T.Exr(passes), "CryptoMaterial", ["Mirror"])
         truth, truth2, plain = C.rgb(tpass), C.rgb(t2pass), C.rgb(passes)
         outs = C.run_presets(recipe, passes, side, a.out, "m_%s" % v, runs=a.runs)

@@ -13,7 +13,6 @@ shadow changes (|input - truth| luminance above 2 % of the truth's 99th percenti
 bench_atrium.py). Noise: the mean |Laplacian| of the luminance over flat geometry
 (truth_common.flat_mask), libfx beside Cycles' own.
 """
-import argparse
 import json
 import os
 import sys
@@ -32,15 +31,7 @@ def shadow_region(plain, truth):
 
 
 def main():
-    ap = argparse.ArgumentParser()
-    ap.add_argument("out")
-    ap.add_argument("--res", default="480x270")
-    ap.add_argument("--spp", type=int, default=16)
-    ap.add_argument("--runs", type=int, default=3)
-    ap.add_argument("--variants", default=",".join(VARIANTS))
-    ap.add_argument("--docs")
-    a = ap.parse_args()
-    os.makedirs(a.out, exist_ok=True)
+    a = C.parse_args(res="480x270", spp=16, variants=VARIANTS)
     d = C.scene_dir("shadows")
     recipe = json.load(open(d / "recipe.json"))
     noop = C.noop_recipe(C.pathlib.Path(a.out))
@@ -48,10 +39,7 @@ def main():
     for v in a.variants.split(","):
         blend = d / ("truth_shadows_%s.blend" % v)
         p = os.path.join(a.out, "s_%s_" % v)
-        passes, side, _ = C.batch(blend, p + "in_", a.res, a.spp)
-        tpass, _, _ = C.batch(blend, p + "truth_", a.res, a.spp, expr=C.truth_expr("shadows"), recipe=noop)
-        t2pass, _, _ = C.batch(blend, p + "truth2_", a.res, a.spp, expr=C.truth_expr("shadows"), recipe=noop,
-                               seed=17)
+        passes, side, tpass, t2pass = C.render_three("shadows", blend, p, a, noop)
         truth, truth2, plain = C.rgb(tpass), C.rgb(t2pass), C.rgb(passes)
         region = shadow_region(plain, truth)
         flat = C.flat_mask(passes)
