@@ -1034,7 +1034,7 @@ static fx_result check_inputs(const fx_stack *s, const fx_entry *e, const void *
     if (!r && fx_effect_needs_camera(e->cls, params) && !in->has_camera)
         r = fx_fail(s->ctx, FX_ERR_NO_CAMERA,
                     "%s needs the camera matrices: the file has no worldToCamera/worldToNDC "
-                    "attributes (give a camera sidecar with --camera)",
+                    "attributes (give a camera sidecar with --sidecar)",
                     where);
     return r;
 }

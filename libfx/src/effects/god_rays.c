@@ -59,7 +59,7 @@ static const float default_position[2] = {0.5f, 0.3f};
 static const fx_param_def god_rays_param_defs[] = {
     FX_P_STRING(god_rays_params, light, "light", "", "",
                 "Scene light the rays come from (by object name; empty: the first sun). The "
-                "lights come with the scene sidecar (the add-on writes it; CLI --camera)"),
+                "lights come with the scene sidecar (the add-on writes it; CLI --sidecar)"),
     FX_P_ENUM(god_rays_params, light_source, "light_source", SRC_SCENE, source_items,
               "scene: project the light with the frame's camera; screen: light_position"),
     FX_P_FLOATS(god_rays_params, light_position, "light_position", 2, default_position, -1000.0, 1000.0,
@@ -160,7 +160,7 @@ static fx_result find_light(const fx_effect_run *run, const god_rays_params *p, 
     if (!fx_view_init(&v, f))
         return fx_fail(run->ctx, FX_ERR_NO_CAMERA,
                        "%s needs the frame's camera (light_source scene); give the scene sidecar with "
-                       "--camera, or set light_source to screen",
+                       "--sidecar, or set light_source to screen",
                        where);
     fx_light L;
     fx_result r = fx_frame_find_light(f, p->light, where, &L);

@@ -86,7 +86,7 @@ static fx_result world_origin(const fx_effect_run *run, const pixelate_params *p
     fx_view v;
     if (!fx_view_init(&v, run->frame))
         return fx_fail(run->ctx, FX_ERR_NO_CAMERA,
-                       "%s: anchor world needs the frame's camera (give the scene sidecar with --camera)", where);
+                       "%s: anchor world needs the frame's camera (give the scene sidecar with --sidecar)", where);
     fx_vec3 P = fx_v3(p->world_point[0], p->world_point[1], p->world_point[2]);
     if (p->world_point_auto) {
         const fx_pass *pp = fx_frame_find_pass(run->frame, "Position");

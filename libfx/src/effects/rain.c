@@ -554,7 +554,7 @@ const fx_effect_class fx_effect_rain = {
     .params_size = sizeof(rain_params),
     .params = rain_param_defs,
     .param_count = FX_COUNT_OF(rain_param_defs),
-    /* draft >= 3x faster than final (issue 16): the streaks on every 16th row, interpolated */
+    /* draft at least 3x faster than final: the streaks on every 16th row, interpolated */
     .presets = {"{\"layers\": 3, \"downsample\": 16}", "{\"layers\": 3, \"downsample\": 4}",
                 "{\"layers\": 3, \"downsample\": 1}", "{\"layers\": 3, \"downsample\": 1}"},
     .passes = rain_passes,

@@ -17,7 +17,7 @@
  * environment (a lat-long EXR in Blender's equirectangular mapping, or world_color) in the
  * reflected view direction, from the Normal pass; added with environment_strength.
  *
- * Cost (issue 16). The pattern's two smooth inputs, physical's F2 - F1 (seed's F1) and the
+ * Cost. The pattern's two smooth inputs, physical's F2 - F1 (seed's F1) and the
  * noise, are evaluated on a lattice of every `downsample`-th pixel of the ROI (at real
  * pixels: their own world positions, no position is ever interpolated across an edge) and
  * bilinearly interpolated; g = exp(-gap / line_width) is applied per pixel, after the
@@ -617,7 +617,7 @@ static fx_result caustics_process(const fx_effect_run *run)
     if (caustics_needs_camera(p) && !j.has_view)
         return fx_fail(run->ctx, FX_ERR_NO_CAMERA,
                        "%s needs the frame's camera (position_source depth or environment_strength > 0); "
-                       "give the scene sidecar with --camera",
+                       "give the scene sidecar with --sidecar",
                        where);
     if (p->position_source == POS_POSITION) {
         const fx_pass *pp = fx_frame_find_pass(run->frame, "Position");
@@ -726,7 +726,7 @@ const fx_effect_class fx_effect_voronoi_caustics = {
     .params = caustics_param_defs,
     .param_count = FX_COUNT_OF(caustics_param_defs),
     .presets = {
-        /* draft >= 3x faster than final (issue 16); reference: every pixel, double pow */
+        /* draft at least 3x faster than final; reference: every pixel, double pow */
         "{\"downsample\": 4, \"distance\": \"fast\", \"refine\": false, \"lattice_shading\": true}",
         "{\"downsample\": 2, \"distance\": \"fast\", \"refine\": false, \"lattice_shading\": false}",
         "{\"downsample\": 2, \"distance\": \"fast\", \"refine\": true, \"lattice_shading\": false}",

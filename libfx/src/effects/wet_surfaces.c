@@ -11,7 +11,7 @@
  * smoothly between, 0 facing down. Output: src (1 - darken w) + w specular F(N.V) sky_color
  * + w gloss_boost GlossDir GlossCol, F Schlick's with F0 = 0.02 (water), N.V clamped.
  *
- * Cost (issue 16): with downsample N > 1 the look (a gain 1 - darken w and an offset per
+ * Cost: with downsample N > 1 the look (a gain 1 - darken w and an offset per
  * channel) is computed on a lattice of every N-th pixel (at real pixels) and interpolated
  * inside lattice cells whose four corners have a surface with normals within about 25
  * degrees, at pixels whose depth is within 2 % of the corners' interpolated depth and whose normal
@@ -344,7 +344,7 @@ const fx_effect_class fx_effect_wet_surfaces = {
     .params_size = sizeof(wet_params),
     .params = wet_param_defs,
     .param_count = FX_COUNT_OF(wet_param_defs),
-    /* draft >= 3x faster than final (issue 16) */
+    /* draft at least 3x faster than final */
     .presets = {"{\"downsample\": 3}", "{\"downsample\": 2}", "{\"downsample\": 1}", "{\"downsample\": 1}"},
     .passes = wet_passes,
     .flags = FX_EFFECT_NEEDS_CAMERA,

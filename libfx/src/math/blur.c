@@ -1460,6 +1460,38 @@ fx_result fx_blur_image(fx_context *ctx, const float *src, float *dst, int width
     return fx_blur_image_finite(ctx, src, dst, width, height, channels, spec, roi, where, NULL);
 }
 
+/* Scratch bytes per worker, enough for both passes and for the double fallback of the
+ * float kernels (rounded up to whole cache lines). */
+static size_t scratch_per_worker(const blur_job *j, const fx_rect *r)
+{
+    const blur_plan *plan = j->plan;
+    const int channels = j->channels;
+    const size_t d = sizeof(double);
+    size_t nv = (size_t)(j->sy1 - j->sy0), nh = (size_t)(j->sx1 - j->sx0), ext = (size_t)plan->ext;
+    size_t sv, sh;
+    if (j->fast_v && plan->alg == FX_BLUR_BOX)
+        sv = box_scratch_v4d(plan, BOX_V_NV) * sizeof(v4d);
+    else if (j->fast_v)
+        sv = (5 + (size_t)(r->y1 - r->y0)) * j->strip_lanes * d + (nv + 7) * j->strip_lanes * sizeof(float);
+    else
+        sv = (2 * (nv + 2 * ext) * (size_t)j->strip_lanes + lane_state_doubles(plan, j->strip_lanes)) * d;
+    size_t Lh = (size_t)j->block_rows * channels;
+    if (j->fast_h && plan->alg == FX_BLUR_BOX)
+        sh = box_scratch_v4d(plan, H_ROWS) * sizeof(v4d);
+    else if (j->fast_h)
+        sh = (size_t)(r->x1 - r->x0) * H_ROWS * sizeof(v4d);
+    else
+        sh = (2 * (nh + 2 * ext) * Lh + lane_state_doubles(plan, (int)Lh)) * d;
+    if (j->use_float) { /* the float kernels' buffers (the double ones stay for the fallback) */
+        size_t fv = ((nv + 3) + (size_t)(r->y1 - r->y0)) * j->strip_lanes * sizeof(float);
+        size_t fh = j->fast_h ? (size_t)(r->x1 - r->x0) * 4 * HF_ROWS * sizeof(float)
+                              : ((nh + 2) + nh + 8) * Lh * sizeof(float);
+        sv = sv > fv ? sv : fv;
+        sh = sh > fh ? sh : fh;
+    }
+    return round_up64(sv > sh ? sv : sh);
+}
+
 fx_result fx_blur_image_finite(fx_context *ctx, const float *src, float *dst, int width, int height,
                                int channels, const fx_blur_spec *spec, const fx_rect *roi,
                                const char *where, int *finite)
@@ -1509,32 +1541,9 @@ fx_result fx_blur_image_finite(fx_context *ctx, const float *src, float *dst, in
     j->strip_lanes = j->fast_v && plan.alg == FX_BLUR_RECURSIVE ? (j->use_float ? V_LANES_F : V_LANES_REC) : V_LANES;
     j->block_rows = j->fast_h ? H_ROWS : (H_LANES / channels < 1 ? 1 : H_LANES / channels);
 
-    /* Scratch per worker, sized for both passes. */
     const int workers = fx_parallel_workers(ctx);
-    const size_t d = sizeof(double);
-    size_t nv = (size_t)(j->sy1 - j->sy0), nh = (size_t)(j->sx1 - j->sx0), ext = (size_t)plan.ext;
-    size_t sv, sh;
-    if (j->fast_v && plan.alg == FX_BLUR_BOX)
-        sv = box_scratch_v4d(&plan, BOX_V_NV) * sizeof(v4d);
-    else if (j->fast_v)
-        sv = (5 + (size_t)(r.y1 - r.y0)) * j->strip_lanes * d + (nv + 7) * j->strip_lanes * sizeof(float);
-    else
-        sv = (2 * (nv + 2 * ext) * (size_t)j->strip_lanes + lane_state_doubles(&plan, j->strip_lanes)) * d;
-    size_t Lh = (size_t)j->block_rows * channels;
-    if (j->fast_h && plan.alg == FX_BLUR_BOX)
-        sh = box_scratch_v4d(&plan, H_ROWS) * sizeof(v4d);
-    else if (j->fast_h)
-        sh = (size_t)(r.x1 - r.x0) * H_ROWS * sizeof(v4d);
-    else
-        sh = (2 * (nh + 2 * ext) * Lh + lane_state_doubles(&plan, (int)Lh)) * d;
-    if (j->use_float) { /* the float kernels' buffers (the double ones stay for the fallback) */
-        size_t fv = ((nv + 3) + (size_t)(r.y1 - r.y0)) * j->strip_lanes * sizeof(float);
-        size_t fh = j->fast_h ? (size_t)(r.x1 - r.x0) * 4 * HF_ROWS * sizeof(float)
-                              : ((nh + 2) + nh + 8) * Lh * sizeof(float);
-        sv = sv > fv ? sv : fv;
-        sh = sh > fh ? sh : fh;
-    }
-    j->scratch_bytes = round_up64(sv > sh ? sv : sh);
+    j->scratch_bytes = scratch_per_worker(j, &r);
+    size_t nh = (size_t)(j->sx1 - j->sx0);
 
     /* The vertical result goes straight to dst when the computed columns are the written
      * ones (a full-width roi: the usual case), else to a buffer of the roi's rows. */

@@ -23,7 +23,7 @@ typedef uint32_t v8ui __attribute__((vector_size(32)));
 #include <stdio.h>
 #include <string.h>
 
-int fx_edge_operator_radius(fx_edge_operator op)
+static int fx_edge_operator_radius(fx_edge_operator op)
 {
     return op == FX_EDGE_SPARSE7 ? 3 : 1;
 }
@@ -1001,18 +1001,3 @@ typedef struct matte_copy {
     int w, x0, x1;
 } matte_copy;
 
-static void copy_matte_row(void *user, int y, const float *row)
-{
-    const matte_copy *c = user;
-    memcpy(c->matte + (size_t)y * c->w + c->x0, row + c->x0, (size_t)(c->x1 - c->x0) * sizeof(float));
-}
-
-fx_result fx_edge_matte(fx_context *ctx, const fx_edge_sources *src, const fx_edge_settings *s,
-                        const fx_rect *roi, float *matte, float *strengths, const char *where)
-{
-    const int w = src->width, h = src->height;
-    fx_rect rr = roi ? *roi : (fx_rect){ 0, 0, w, h };
-    rr = grow(&rr, 0, w, h);
-    matte_copy c = { matte, w, rr.x0, rr.x1 };
-    return fx_edge_matte_rows(ctx, src, s, &rr, strengths, copy_matte_row, &c, where);
-}

@@ -52,8 +52,6 @@ typedef enum fx_edge_operator {
 #define FX_EDGE_MAX_RANKS 8        /* Cryptomatte ranks read per type (16 IDs) */
 #define FX_EDGE_MAX_WIDTH 64.0f    /* widest line, pixels */
 
-/* Kernel reach of an operator: 1 (3x3) or 3 (sparse 7x7). */
-int fx_edge_operator_radius(fx_edge_operator op);
 /* The operator at (x, y) of a 1-channel field (`stride` floats between pixels), replicate
  * borders, unit-step normalised (see the enum). */
 float fx_edge_response_at(const float *field, int stride, int width, int height, int x, int y,
@@ -110,12 +108,6 @@ typedef struct fx_edge_sources {
  * naming `where` and the pass when the settings need a pass the frame lacks. */
 fx_result fx_edge_sources_from_frame(const fx_frame *f, const float *rgba, const fx_edge_settings *s,
                                      fx_edge_sources *out, const char *where);
-
-/* Edge matte in [0, 1] written into matte (width*height floats) inside roi only (NULL: all).
- * strengths (optional, width*height*4 floats): the raw strengths inside roi before the
- * threshold and the line width: (luminance, depth, normal degrees, ID difference). */
-fx_result fx_edge_matte(fx_context *ctx, const fx_edge_sources *src, const fx_edge_settings *s,
-                        const fx_rect *roi, float *matte, float *strengths, const char *where);
 
 /* The same matte, streamed: emit(user, y, row) for each row y of roi (row[x] valid for x in
  * roi's columns; borrowed until emit returns), called from the worker threads in any order,

@@ -35,7 +35,7 @@ void fx_radial_blur_bound_light(double *lx, double *ly, int width, int height)
     }
 }
 
-double fx_radial_blur_mass(double decay)
+static double fx_radial_blur_mass(double decay)
 {
     if (!(decay > 0.0))
         return 0.0;

@@ -66,9 +66,6 @@ typedef struct fx_radial_blur {
  * FX_RAYS_MAX_LIGHT_DISTANCE of it; non-finite positions become the centre. */
 void fx_radial_blur_bound_light(double *lx, double *ly, int width, int height);
 
-/* integral_0^1 decay^(100 t) dt: the kernel's mass (1 for decay 1, 0 for decay 0). */
-double fx_radial_blur_mass(double decay);
-
 /* rays over roi (NULL: all) from occ, both width x height pixels of 4 floats (RGB and a
  * lane that occ holds at 0 and rays gets 0: four-lane vectors). Outside roi, rays is
  * untouched. Finite for finite occ. */

@@ -31,7 +31,7 @@ int fx_voronoi_grid_for_points(int points)
     return g < 1 ? 1 : g;
 }
 
-void fx_voronoi_point(const fx_voronoi *v, int index, double *x, double *y)
+static void fx_voronoi_point(const fx_voronoi *v, int index, double *x, double *y)
 {
     int G = v->grid;
     int cx = index % G, cy = index / G;
@@ -477,33 +477,6 @@ void fx_voronoi_table_brute(const fx_voronoi_table *t, double x, double y, fx_vo
     exact_brute(&s, x, y, out);
 }
 
-void fx_voronoi_table_among(const fx_voronoi_table *t, double x, double y, const int *cand, int n,
-                            fx_voronoi_hit *out)
-{
-    const int G = t->grid;
-    if (t->kind) {
-        float qx, qy;
-        fast_query(t, x, y, &qx, &qy);
-        const float half = 0.5f * (float)G;
-        fast_hit h = {INFINITY, INFINITY, -1, -1};
-        for (int c = 0; c < n; c++) {
-            int k = cand[c];
-            float dx = qx - t->fx[k * 3 + 1], dy = qy - t->fy[k * 3 + 1];
-            int sx = dx > half ? 1 : dx < -half ? -1 : 0, sy = dy > half ? 1 : dy < -half ? -1 : 0;
-            consider_fast(t, qx, qy, k, sx, sy, &h);
-        }
-        fast_out(t, &h, out);
-        return;
-    }
-    point_source s = {NULL, t->x, t->y, G, t->p};
-    double qx = wrap_tile(x, G), qy = wrap_tile(y, G);
-    fx_voronoi_hit h = {-1, -1, INFINITY, INFINITY};
-    for (int c = 0; c < n; c++)
-        consider(&s, qx, qy, cand[c], &h);
-    finish(G, &h);
-    *out = h;
-}
-
 static inline float bound_key(int kind, float b)
 {
     return kind == 2 ? b * sqrtf(b) : kind == 3 ? b * b : b;
@@ -627,14 +600,6 @@ static inline double noise_blend(double tx, double ty, double a, double b, doubl
     tx = tx * tx * (3.0 - 2.0 * tx);
     ty = ty * ty * (3.0 - 2.0 * ty);
     return (a + (b - a) * tx) * (1.0 - ty) + (c + (d - c) * tx) * ty;
-}
-
-double fx_value_noise2(double x, double y, uint32_t seed)
-{
-    double fx = floor_fast(x), fy = floor_fast(y);
-    double a, b, c, d;
-    noise_corners(fx, fy, seed, &a, &b, &c, &d);
-    return noise_blend(x - fx, y - fy, a, b, c, d);
 }
 
 double fx_value_noise2_cached(double x, double y, uint32_t seed, fx_noise_cache *cache)

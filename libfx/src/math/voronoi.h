@@ -39,8 +39,6 @@ typedef struct fx_voronoi_hit {
 } fx_voronoi_hit;
 
 double fx_minkowski2(double dx, double dy, double p);
-/* Point `index` at the voronoi's time, in tile coordinates [0, G). */
-void fx_voronoi_point(const fx_voronoi *v, int index, double *x, double *y);
 /* Nearest two points of (x, y) (cell units, any real: the tile repeats). */
 void fx_voronoi_brute(const fx_voronoi *v, double x, double y, fx_voronoi_hit *out);
 void fx_voronoi_grid(const fx_voronoi *v, double x, double y, fx_voronoi_hit *out);
@@ -97,18 +95,10 @@ void fx_voronoi_table_build_lists(fx_voronoi_table *t, int row0, int row1);
 void fx_voronoi_table_free(fx_voronoi_table *t);
 void fx_voronoi_table_brute(const fx_voronoi_table *t, double x, double y, fx_voronoi_hit *out);
 void fx_voronoi_table_grid(const fx_voronoi_table *t, double x, double y, fx_voronoi_hit *out);
-/* The nearest two among n >= 2 distinct candidate points only (each at its image nearest
- * the query), computed as brute force computes them: equal to it when the true nearest
- * two are among the candidates. For interpolating between searches (the candidates of
- * nearby queries). */
-void fx_voronoi_table_among(const fx_voronoi_table *t, double x, double y, const int *cand, int n,
-                            fx_voronoi_hit *out);
 
-/* Smooth value noise in [0, 1] (bilinear over hashed lattice values, smoothstep weights). */
-double fx_value_noise2(double x, double y, uint32_t seed);
-
-/* The same bits, keeping the last lattice cell's four hashed values: nearby queries (a
- * row of pixels inside one noise cell) hash nothing. Initialise with valid = 0. */
+/* Smooth value noise in [0, 1] (bilinear over hashed lattice values, smoothstep weights),
+ * keeping the last lattice cell's four hashed values: nearby queries (a row of pixels
+ * inside one noise cell) hash nothing. Initialise the cache with valid = 0. */
 typedef struct fx_noise_cache {
     int valid;
     double fx, fy;
