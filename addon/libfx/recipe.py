@@ -287,6 +287,16 @@ def migrate_item(item, n=0, migrate=library_migrate):
     entry = item_to_json(item, resolve_paths=False)
     migrated, warnings = migrate(entry)
     new_params = migrated.get("params") or {}
+    # Only what lands in this table is written back: a library that stops short of the
+    # table's version, or returns names the table lacks, would otherwise drop values.
+    got = int(migrated.get("params_version", 1))
+    if got != eff.params_version:
+        raise RecipeError("the library migrates to parameter version %d, the panel's table is version %d"
+                          % (got, eff.params_version))
+    unknown = sorted(k for k in new_params if eff.param(k) is None)
+    if unknown:
+        raise RecipeError("the migrated parameters include %s, which the panel's table does not have"
+                          % ", ".join(unknown))
     group = props.effect_group(item)
     with props.suspended():
         known = {p.prop for p in eff.params}
