@@ -27,7 +27,8 @@ class Camera(ctypes.Structure):
 
 class WriteOptions(ctypes.Structure):
     _fields_ = [("size", ctypes.c_size_t), ("half_color", ctypes.c_int),
-                ("only_combined", ctypes.c_int), ("input_path", ctypes.c_char_p)]
+                ("only_combined", ctypes.c_int), ("input_path", ctypes.c_char_p),
+                ("compression", ctypes.c_char_p)]
 
 
 def _library_path():
@@ -41,8 +42,9 @@ def _library_path():
     return REPO / "build" / "libfx" / "libfx.so.2"
 
 
-@pytest.fixture(scope="module")
-def fx():
+def load_fx(threads):
+    """The library with the functions these tests call bound, and a context of `threads`
+    as lib.ctx (free it with lib.fx_context_free(lib.ctx))."""
     path = _library_path()
     if not path.is_file():
         pytest.fail(f"libfx is not built at {path} (build it, or set LIBFX_LIBRARY)")
@@ -67,10 +69,16 @@ def fx():
         fn = getattr(lib, name)
         fn.restype, fn.argtypes = res, args
     ctx = ctypes.c_void_p()
-    assert lib.fx_context_new(ctypes.byref(ctx), 1) == 0
+    assert lib.fx_context_new(ctypes.byref(ctx), threads) == 0
     lib.ctx = ctx
+    return lib
+
+
+@pytest.fixture(scope="module")
+def fx():
+    lib = load_fx(1)
     yield lib
-    lib.fx_context_free(ctx)
+    lib.fx_context_free(lib.ctx)
 
 
 def _floats(a):

@@ -9,7 +9,6 @@ chunks of noise that are stored raw because they do not shrink.
 The library is $LIBFX_LIBRARY, else build*/libfx/libfx.so.2 under the repository root.
 """
 import ctypes
-import pathlib
 import subprocess
 
 import numpy as np
@@ -17,44 +16,17 @@ import pytest
 
 oiio = pytest.importorskip("OpenImageIO")
 
-REPO = pathlib.Path(__file__).resolve().parents[2]
 
 
-class WriteOptions(ctypes.Structure):
-    _fields_ = [("size", ctypes.c_size_t), ("half_color", ctypes.c_int),
-                ("only_combined", ctypes.c_int), ("input_path", ctypes.c_char_p),
-                ("compression", ctypes.c_char_p)]
-
-
-# the library this directory's tests load (one lookup for both ctypes test files)
-from test_exr_interop import _library_path  # noqa: E402
+# one binding of the library for both ctypes test files
+from test_exr_interop import WriteOptions, load_fx  # noqa: E402
 
 
 @pytest.fixture(scope="module")
 def fx():
-    path = _library_path()
-    if not path.is_file():
-        pytest.fail(f"libfx is not built at {path} (build it, or set LIBFX_LIBRARY)")
-    lib = ctypes.CDLL(str(path))
-    vp, cp, i = ctypes.c_void_p, ctypes.c_char_p, ctypes.c_int
-    fp = ctypes.POINTER(ctypes.c_float)
-    sig = {
-        "fx_context_new": (i, [ctypes.POINTER(vp), i]),
-        "fx_context_free": (None, [vp]),
-        "fx_context_error": (cp, [vp]),
-        "fx_frame_new": (i, [vp, i, i, ctypes.POINTER(vp)]),
-        "fx_frame_free": (None, [vp]),
-        "fx_frame_add_pass": (i, [vp, cp, i, fp]),
-        "fx_frame_write_exr": (i, [vp, cp, ctypes.POINTER(WriteOptions)]),
-    }
-    for name, (res, args) in sig.items():
-        fn = getattr(lib, name)
-        fn.restype, fn.argtypes = res, args
-    ctx = ctypes.c_void_p()
-    assert lib.fx_context_new(ctypes.byref(ctx), 2) == 0
-    lib.ctx = ctx
+    lib = load_fx(2)
     yield lib
-    lib.fx_context_free(ctx)
+    lib.fx_context_free(lib.ctx)
 
 
 def _planes(w, h, seed):
