@@ -151,7 +151,9 @@ def blender_cmd(which):
             "PYTHONDONTWRITEBYTECODE=1", "blender"]
 
 
-def render_if_missing(scene, d, which):
+def render_if_missing(scene, d, which, resolution="1920x1080", samples=4):
+    """Frame 1 of a demo scene through the add-on's batch path into d (r_ prefix), with its
+    passes file kept, unless d holds it already. Also used by bench_live_change.py."""
     passes = os.path.join(d, "r_libfx_passes.0001.exr")
     if os.path.exists(passes):
         return
@@ -160,7 +162,7 @@ def render_if_missing(scene, d, which):
                                 "--python", os.path.join(ROOT, "addon", "libfx", "batch.py"), "--",
                                 "--keep-passes", "--passes-codec", "NONE", "--frames", "1",
                                 "--output", os.path.join(d, "r_"),
-                                "--resolution", "1920x1080", "--samples", "4"]
+                                "--resolution", resolution, "--samples", str(samples)]
     subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
 
 

@@ -28,6 +28,8 @@ import sys
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 SCENES = ["greek_bath", "atrium", "mirror_room"]
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from bench_live import blender_cmd, render_if_missing  # noqa: E402  one copy of each
 
 SCRIPT = r'''
 import bpy, json, sys, threading, time
@@ -101,30 +103,9 @@ print("RESULT " + json.dumps(rows))
 '''
 
 
-def blender_cmd(which):
-    if which == "host":
-        return ["blender"]
-    lib = os.environ.get("LIBFX_LIBRARY_" + which.upper(),
-                         os.path.join(ROOT, "build-" + which, "libfx", "libfx.so"))
-    return ["bash", os.path.join(ROOT, "scripts", "in_root.sh"), which, "env", "LIBFX_LIBRARY=" + lib,
-            "PYTHONDONTWRITEBYTECODE=1", "blender"]
-
-
-def render_if_missing(scene, d, which, resolution):
-    passes = os.path.join(d, "r_libfx_passes.0001.exr")
-    if os.path.exists(passes):
-        return
-    os.makedirs(d, exist_ok=True)
-    cmd = blender_cmd(which) + ["-b", os.path.join(ROOT, "blend_scenes", scene, scene + ".blend"),
-                                "--python", os.path.join(ROOT, "addon", "libfx", "batch.py"), "--",
-                                "--keep-passes", "--frames", "1", "--output", os.path.join(d, "r_"),
-                                "--resolution", resolution, "--samples", "2"]
-    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
-
-
 def run_scene(a, scene):
     d = os.path.join(a.out, "renders", "%s_%s" % (scene, a.resolution))
-    render_if_missing(scene, d, a.blender, a.resolution)
+    render_if_missing(scene, d, a.blender, a.resolution, samples=2)
     args = {"addon": os.path.join(ROOT, "addon"), "prefix": os.path.join(a.out, scene + "_"),
             "passes": os.path.join(d, "r_libfx_passes.0001.exr"),
             "sidecar": os.path.join(d, "r_libfx.0001.camera.json"), "runs": a.runs, "busy": a.busy,
