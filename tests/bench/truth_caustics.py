@@ -74,11 +74,8 @@ def main():
           C.md_table(head, [[r[0], "" if r[1] is None else "%.1f" % r[1], "%.4f" % r[2], "%.3f" % r[3],
                              "%.3f" % r[4], "%.3f" % r[5], "%.3f" % r[6], "%.4f" % r[7]] for r in rows]) + "\n"]
     print("\n".join(md))
-    with open(os.path.join(a.out, "truth_caustics.md"), "w") as f:
-        f.write("\n".join(md))
-    with open(os.path.join(a.out, "truth_caustics.json"), "w") as f:
-        json.dump({"m_per_px": m_per_px, "rows": rows,
-                   "spectra": {k: [float(x) for x in v] for k, v in spectra.items()}}, f, indent=1)
+    C.write_report(a.out, "caustics", md, {"m_per_px": m_per_px, "rows": rows,
+                                              "spectra": {k: [float(x) for x in v] for k, v in spectra.items()}})
     if a.docs:
         os.makedirs(os.path.join(a.docs, "images"), exist_ok=True)
         C.save_strip(os.path.join(a.docs, "images", "truth_caustics.png"), [truth, outs["final"][0], plain])

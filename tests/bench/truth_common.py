@@ -98,6 +98,14 @@ def render_three(name, blend, prefix, a, noop):
     return passes, side, tpass, t2pass
 
 
+def write_report(out, name, md, report):
+    """OUT/truth_<name>.md (the tables) and OUT/truth_<name>.json (the numbers)."""
+    with open(os.path.join(out, "truth_%s.md" % name), "w") as f:
+        f.write("\n".join(md))
+    with open(os.path.join(out, "truth_%s.json" % name), "w") as f:
+        json.dump(report, f, indent=1)
+
+
 def rgb(path):
     return T.Exr(path).get("Combined", "RGB")
 

@@ -80,10 +80,7 @@ def main():
           C.md_table(head, [[r[0], "" if r[1] is None else "%.1f" % r[1]] + ["%.4f" % x for x in r[2:6]]
                             + ["%.3f" % r[6], "%.2f" % r[7], "%.1f" % r[8], "%.2f" % r[9]] for r in rows]) + "\n"]
     print("\n".join(md))
-    with open(os.path.join(a.out, "truth_godrays.md"), "w") as f:
-        f.write("\n".join(md))
-    with open(os.path.join(a.out, "truth_godrays.json"), "w") as f:
-        json.dump({"region_px": int(region.sum()), "rows": rows}, f, indent=1)
+    C.write_report(a.out, "godrays", md, {"region_px": int(region.sum()), "rows": rows})
     if a.docs:
         os.makedirs(os.path.join(a.docs, "images"), exist_ok=True)
         C.save_strip(os.path.join(a.docs, "images", "truth_godrays.png"), [truth, outs["final"][0], plain])

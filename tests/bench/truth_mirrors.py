@@ -61,10 +61,7 @@ def main():
     md.append(C.md_table(["preset", "mean"] + list(series), summ) + "\n")
     print(md[-1])
     report["fall"] = summ
-    with open(os.path.join(a.out, "truth_mirrors.md"), "w") as f:
-        f.write("\n".join(md))
-    with open(os.path.join(a.out, "truth_mirrors.json"), "w") as f:
-        json.dump(report, f, indent=1)
+    C.write_report(a.out, "mirrors", md, report)
     if a.docs:
         C.plot_time_error(os.path.join(a.docs, "images", "truth_mirrors_time_error.png"), series,
                           "ssr_mirror vs Cycles mirrors (%s): time vs mirror-region MAE" % a.res)

@@ -60,10 +60,7 @@ def main():
                 crop = (slice(int(0.22 * h), int(0.74 * h)), slice(int(0.21 * w), int(0.71 * w)))
                 C.save_strip(os.path.join(a.docs, "images", "truth_shadows_pcf_acne.png"),
                              [truth[crop], outs["reference"][0][crop], outs["final"][0][crop]])
-    with open(os.path.join(a.out, "truth_shadows.md"), "w") as f:
-        f.write("\n".join(md))
-    with open(os.path.join(a.out, "truth_shadows.json"), "w") as f:
-        json.dump(report, f, indent=1)
+    C.write_report(a.out, "shadows", md, report)
     if a.docs:
         C.plot_time_error(os.path.join(a.docs, "images", "truth_shadows_time_error.png"), series,
                           "vsm_shadows vs Cycles' sun shadows (%s): time vs shadow-region MAE" % a.res)
