@@ -154,8 +154,10 @@ class Catalog:
             with native.Context(1) as ctx:
                 for name in native.effect_names():
                     try:
-                        cat.effects[name] = normalise(name, ctx.describe(name))
-                        cat.effects[name].params_version = native.effect_params_version(name)
+                        desc = ctx.describe(name)
+                        cat.effects[name] = normalise(name, desc)
+                        # in the description since ABI 2 (no second query, no context per effect)
+                        cat.effects[name].params_version = max(1, int(desc.get("params_version", 1)))
                         cat.order.append(name)
                     except (native.LibfxError, ValueError, KeyError) as e:
                         cat.warnings.append("effect %s cannot be described: %s" % (name, e))
