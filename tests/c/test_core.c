@@ -134,6 +134,15 @@ static void test_recipes(void)
                FX_ERR_BAD_RECIPE, "unknown mask key \"colour\"");
     CHECK_FAIL(ctx, fx_stack_load_json(s, "{\"version\": 1, \"effects\": [{\"effect\": \"pixelate\", \"speed\": 1}]}"),
                FX_ERR_BAD_RECIPE, "unknown key \"speed\"");
+    /* a repeated key is refused at any depth (it used to replace, and leak, a mask list) */
+    CHECK_FAIL(ctx, fx_stack_load_json(s, "{\"version\": 1, \"effects\": [{\"effect\": \"pixelate\", \"mask\": {\"material\": [\"a\"], \"material\": [\"b\"]}}]}"),
+               FX_ERR_BAD_RECIPE, "key \"material\" appears twice in \"mask\"");
+    CHECK_FAIL(ctx, fx_stack_load_json(s, "{\"version\": 1, \"effects\": [{\"effect\": \"pixelate\", \"params\": {\"cell_size\": 8, \"cell_size\": 9}}]}"),
+               FX_ERR_BAD_RECIPE, "key \"cell_size\" appears twice in \"params\"");
+    CHECK_FAIL(ctx, fx_stack_load_json(s, "{\"version\": 1, \"version\": 1, \"effects\": []}"), FX_ERR_BAD_RECIPE,
+               "key \"version\" appears twice");
+    CHECK_FAIL(ctx, fx_stack_set_mask_json(s, 0, "{\"object\": \"a\", \"object\": \"b\"}"), FX_ERR_BAD_RECIPE,
+               "appears twice");
     CHECK_FAIL(ctx, fx_stack_load_json(s, "{\"version\": 2, \"effects\": []}"), FX_ERR_BAD_RECIPE, "newer");
     CHECK_FAIL(ctx, fx_stack_load_json(s, "{\"effects\": []}"), FX_ERR_BAD_RECIPE, "\"version\" is missing");
     CHECK_FAIL(ctx, fx_stack_load_json(s, "{\"version\": 1, \"quality\": \"ultra\"}"), FX_ERR_BAD_RECIPE, "quality");
@@ -674,6 +683,8 @@ static void test_sidecar(void)
     CHECK_FAIL(ctx, fx_frame_apply_sidecar(f, "{\"lights\": [{\"name\": \"L\", \"type\": \"POINT\", \"position\": [1, 2]}]}"),
                FX_ERR_BAD_RECIPE, "lights[0].position");
     CHECK_FAIL(ctx, fx_frame_apply_sidecar(f, "{\"camera_pos\": 1}"), FX_ERR_BAD_RECIPE, "unknown key \"camera_pos\"");
+    CHECK_FAIL(ctx, fx_frame_apply_sidecar(f, "{\"frame\": 3, \"frame\": 4}"), FX_ERR_BAD_RECIPE,
+               "sidecar: key \"frame\" appears twice");
     CHECK_FAIL(ctx, fx_frame_apply_sidecar(f, "{\"world_to_camera\": [1, 2]}"), FX_ERR_BAD_RECIPE, "world_to_camera");
     CHECK_FAIL(ctx, fx_frame_apply_sidecar_file(f, "/nonexistent/cam.json"), FX_ERR_IO, "/nonexistent/cam.json");
     fx_frame_time(f, &frame, &fps);

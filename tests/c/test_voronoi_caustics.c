@@ -250,10 +250,12 @@ static fx_frame *plane_frame(fx_context *ctx, const cam *c)
 static float *run_caustics(fx_context *ctx, fx_frame *f, const char *source, const char *extra_json)
 {
     char recipe[1024];
+    /* extra_json may set "points" itself: a recipe names each key once */
+    int own_points = extra_json && strstr(extra_json, "\"points\"");
     snprintf(recipe, sizeof recipe,
              "{\"version\": 1, \"effects\": [{\"effect\": \"voronoi_caustics\", \"params\": {\"position_source\": "
-             "\"%s\", \"points\": 100, \"line_width\": 0.3%s%s}}]}",
-             source, extra_json ? ", " : "", extra_json ? extra_json : "");
+             "\"%s\", %s\"line_width\": 0.3%s%s}}]}",
+             source, own_points ? "" : "\"points\": 100, ", extra_json ? ", " : "", extra_json ? extra_json : "");
     fx_stack *s = NULL;
     float *o = NULL;
     if (fx_stack_new(ctx, &s) == FX_OK && fx_stack_load_json(s, recipe) == FX_OK)

@@ -1,5 +1,6 @@
 /* Masks: parse a mask spec from a recipe, and evaluate it on a frame into coverage. */
 #include "core/mask.h"
+#include "core/json_keys.h"
 #include "core/parallel.h"
 #include "core/mem.h"
 
@@ -144,7 +145,10 @@ fx_result fx_mask_spec_parse(fx_context *ctx, const cJSON *json, const char *whe
         return FX_OK;
     if (!cJSON_IsObject(json))
         return fx_fail(ctx, FX_ERR_BAD_RECIPE, "%s: \"mask\" must be an object", where);
-    fx_result r = FX_OK;
+    /* a repeated key would replace (and leak) the first list */
+    fx_result r = fx_json_check_unique_keys(ctx, json, where);
+    if (r)
+        return r;
     const cJSON *item;
     cJSON_ArrayForEach(item, json) {
         const char *k = item->string;

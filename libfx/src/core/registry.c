@@ -7,6 +7,7 @@
  * adding the file is all it takes (see effects/effect_registry.c.in and
  * libfx/CMakeLists.txt). */
 #include "core/effect.h"
+#include "core/json_keys.h"
 #include "core/mem_failures.h"
 #include "core/params.h"
 
@@ -244,7 +245,9 @@ fx_result fx_effect_migrate_params(fx_context *ctx, const char *effect, int from
     }
     char where[128];
     snprintf(where, sizeof where, "%s", c->name);
-    fx_result r = fx_params_migrate(ctx, c, from_version, p, where);
+    fx_result r = fx_json_check_unique_keys(ctx, p, where);
+    if (!r)
+        r = fx_params_migrate(ctx, c, from_version, p, where);
     if (!r) {
         char *s = cJSON_PrintUnformatted(p);
         *out_json = s ? fx_json_strdup(s) : NULL;

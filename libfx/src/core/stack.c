@@ -2,6 +2,7 @@
  * and out; and the run loop that chains effects over a frame's Combined pass. */
 #include "core/effect.h"
 #include "core/mask.h"
+#include "core/json_keys.h"
 #include "core/mem_failures.h"
 #include "core/parallel.h"
 #include "core/params.h"
@@ -291,8 +292,8 @@ fx_result fx_stack_load_json(fx_stack *s, const char *json)
                        at ? at : "");
     }
     fx_stack tmp = {s->ctx, NULL, 0, 0, FX_QUALITY_FINAL, s->debug};
-    fx_result r = FX_OK;
-    if (!cJSON_IsObject(root))
+    fx_result r = fx_json_check_unique_keys(s->ctx, root, "recipe");
+    if (!r && !cJSON_IsObject(root))
         r = fx_fail(s->ctx, FX_ERR_BAD_RECIPE, "recipe: the top level must be an object");
     const cJSON *effects = NULL;
     if (!r) {

@@ -3,6 +3,7 @@
  * to a frame. */
 #include "core/context.h"
 #include "core/frame.h"
+#include "core/json_keys.h"
 #include "core/mem.h"
 #include "core/mem_failures.h"
 #include "core/textfile.h"
@@ -65,9 +66,11 @@ fx_result fx_frame_apply_sidecar(fx_frame *f, const char *json)
         cJSON_Delete(root);
         return fx_fail(ctx, FX_ERR_BAD_RECIPE, "sidecar: not a JSON object");
     }
-    fx_result r = FX_OK;
+    fx_result r = fx_json_check_unique_keys(ctx, root, "sidecar");
     const cJSON *item;
     cJSON_ArrayForEach(item, root) {
+        if (r)
+            break;
         int known = 0;
         for (size_t k = 0; k < sizeof sidecar_keys / sizeof sidecar_keys[0]; k++)
             known |= strcmp(item->string, sidecar_keys[k]) == 0;
