@@ -104,6 +104,8 @@ def type_cell(p):
         else:
             s = f"{n} floats"
         return s
+    if t == "string" and hint == "mask":
+        return "mask (JSON text, as an entry's `mask`)"
     return f"{t}, {hint}" if hint else t
 
 

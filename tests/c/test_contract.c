@@ -250,10 +250,137 @@ static void test_identity_skip(void)
     fx_context_free(ctx);
 }
 
+/* ---- a test-only effect with a mask parameter: R = the mask's coverage ---- */
+
+typedef struct sel_params {
+    fx_mask_param sel;
+} sel_params;
+
+static const fx_param_def sel_table[] = {
+    FX_P_MASK(sel_params, sel, "sel", "Pixels to mark"),
+};
+
+static fx_pass_set sel_passes(const void *params)
+{
+    const sel_params *p = params;
+    return p->sel.spec ? fx_mask_spec_passes(p->sel.spec) : 0;
+}
+
+static fx_result sel_process(const fx_effect_run *run)
+{
+    const sel_params *p = run->params;
+    fx_mask *m = NULL;
+    if (p->sel.spec) {
+        fx_result r = fx_mask_build(run->ctx, p->sel.spec, run->frame, run->where, &m);
+        if (r)
+            return r;
+    }
+    for (int y = run->roi.y0; y < run->roi.y1; y++)
+        for (int x = run->roi.x0; x < run->roi.x1; x++) {
+            size_t i = (size_t)y * run->width + x;
+            run->dst[i * 4] = m ? m->coverage[i] : -1.0f;
+            run->dst[i * 4 + 1] = run->dst[i * 4 + 2] = 0.0f;
+            run->dst[i * 4 + 3] = 1.0f;
+        }
+    fx_mask_free(m);
+    return FX_OK;
+}
+
+static const fx_effect_class sel_class = {
+    .name = "test_mask_param",
+    .doc = "test only",
+    .params_size = sizeof(sel_params),
+    .params = sel_table,
+    .param_count = FX_COUNT_OF(sel_table),
+    .passes = sel_passes,
+    .process = sel_process,
+};
+
+/* Count of pixels whose R is 1, and their bounds. */
+static int marked(const float *rgba, int w, int h, int box[4])
+{
+    int n = 0;
+    box[0] = w, box[1] = h, box[2] = -1, box[3] = -1;
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++)
+            if (rgba[((size_t)y * w + x) * 4] == 1.0f) {
+                n++;
+                box[0] = x < box[0] ? x : box[0];
+                box[1] = y < box[1] ? y : box[1];
+                box[2] = x > box[2] ? x : box[2];
+                box[3] = y > box[3] ? y : box[3];
+            }
+    return n;
+}
+
+/* A mask parameter is parsed once per commit: a bad one is refused when set, naming the
+ * parameter; its passes reach the stack's needs; its rectangle scales on a proxy as the
+ * stack's own mask does. */
+static void test_mask_param(void)
+{
+    fx_context *ctx = NULL;
+    CHECK_OK(ctx, fx_context_new(&ctx, 2));
+    fx_effect_register_test_class(&sel_class);
+    fx_stack *s = NULL;
+    CHECK_OK(ctx, fx_stack_new(ctx, &s));
+    int idx = -1;
+    CHECK_OK(ctx, fx_stack_append(s, "test_mask_param", &idx));
+    CHECK_FAIL(ctx, fx_stack_set_string(s, idx, "sel", "{\"colour\": 1}"), FX_ERR_BAD_PARAM,
+               "parameter 'sel': unknown mask key \"colour\"");
+    CHECK_FAIL(ctx, fx_stack_set_string(s, idx, "sel", "[1, 2"), FX_ERR_BAD_PARAM, "parameter 'sel'");
+    CHECK_FAIL(ctx, fx_stack_load_json(s, "{\"version\": 1, \"effects\": [{\"effect\": \"test_mask_param\", "
+                                          "\"params\": {\"sel\": \"{\\\"rect\\\": [1, 2]}\"}}]}"),
+               FX_ERR_BAD_PARAM, "rect");
+    CHECK(fx_stack_count(s) == 1);
+    char *eff = NULL;
+    CHECK_OK(ctx, fx_stack_effective_params_json(s, idx, &eff));
+    CHECK(eff && tu_contains(eff, "\"sel\":\"\""));
+    fx_free(eff);
+
+    /* passes: a material selection needs the material Cryptomatte */
+    char *passes = NULL;
+    CHECK_OK(ctx, fx_stack_set_string(s, idx, "sel", "{\"material\": \"Mirror\"}"));
+    CHECK_OK(ctx, fx_stack_required_passes(s, &passes));
+    CHECK(passes && tu_contains(passes, "CryptoMaterial"));
+    fx_free(passes);
+
+    /* a rectangle: exact on the frame, the proxy pixels it touches on a 1/2 proxy */
+    enum { W = 24, H = 16 };
+    fx_frame *f = tu_pattern_frame(ctx, W, H, 5);
+    CHECK_OK(ctx, fx_stack_set_string(s, idx, "sel", "{\"rect\": [5, 3, 6, 5]}"));
+    fx_frame *o = NULL;
+    const float *rgba = NULL;
+    int ch = 0, box[4];
+    CHECK_OK(ctx, fx_stack_run(s, f, &o));
+    CHECK_OK(ctx, fx_frame_pass_read(o, "Combined", &rgba, &ch));
+    CHECK(rgba && marked(rgba, W, H, box) == 30 && box[0] == 5 && box[1] == 3 && box[2] == 10 && box[3] == 7);
+    fx_frame_free(o);
+    fx_frame *proxy = NULL;
+    CHECK_OK(ctx, fx_frame_reduce(f, 2, &proxy));
+    CHECK_OK(ctx, fx_stack_run(s, proxy, &o));
+    CHECK_OK(ctx, fx_frame_pass_read(o, "Combined", &rgba, &ch));
+    /* full pixels 5..10 x 3..7 touch proxy pixels 2..5 x 1..3 */
+    CHECK(rgba && marked(rgba, W / 2, H / 2, box) == 12 && box[0] == 2 && box[1] == 1 && box[2] == 5 &&
+          box[3] == 3);
+    fx_frame_free(o);
+    /* "{}" selects nothing given: the effect sees no spec */
+    CHECK_OK(ctx, fx_stack_set_string(s, idx, "sel", "{}"));
+    CHECK_OK(ctx, fx_stack_run(s, f, &o));
+    CHECK_OK(ctx, fx_frame_pass_read(o, "Combined", &rgba, &ch));
+    CHECK(rgba && rgba[0] == -1.0f);
+    fx_frame_free(o);
+    fx_frame_free(proxy);
+    fx_frame_free(f);
+    fx_stack_free(s);
+    fx_effect_register_test_class(NULL);
+    fx_context_free(ctx);
+}
+
 int main(void)
 {
     test_migration();
     test_setters_commit();
     test_identity_skip();
+    test_mask_param();
     return tu_finish("test_contract");
 }

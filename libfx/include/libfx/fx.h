@@ -113,7 +113,9 @@ typedef struct fx_param_info {
                                   "texels". "pixels": a length in frame pixels, divided by the proxy
                                   factor when the stack runs on a proxy (fx_frame_reduce); "texels":
                                   a length in pixels of another raster (a light map, a pyramid
-                                  level, a 720-line reference image), never scaled */
+                                  level, a 720-line reference image), never scaled; "mask" (a
+                                  STRING): a mask JSON object as a recipe entry's "mask" takes,
+                                  checked when set, its rectangle scaled on proxies */
     double default_value;      /* FLOAT, INT, BOOL, ENUM (index) */
     double min, max;           /* hard range: values outside are errors */
     double soft_min, soft_max; /* the useful range, for sliders */

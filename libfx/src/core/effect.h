@@ -17,8 +17,10 @@
  *    with LIBFX_WRITE_CHECKSUMS and checked in).
  * In foo.c:
  *  - a params struct and its table (FX_P_FLOAT, FX_P_INT, FX_P_BOOL, FX_P_ENUM,
- *    FX_P_FLOATS, FX_P_STRING below); hint "pixels" for frame-pixel lengths (the stack
- *    divides them on proxies); presets as JSON objects for effects with a cost knob;
+ *    FX_P_FLOATS, FX_P_STRING, FX_P_MASK below); hint "pixels" for frame-pixel lengths
+ *    (the stack divides them on proxies); presets as JSON objects for effects with a
+ *    cost knob; a mask parameter arrives parsed (fx_mask_param.spec: build it with
+ *    fx_mask_build, add fx_mask_spec_passes to `passes`);
  *  - `passes(params)` for every pass beyond Combined; FX_EFFECT_NEEDS_CAMERA, or
  *    `needs_camera(params)` when it depends on them; `aux_views` for light or rain views;
  *  - `identity(params)` when parameters can make it a no-op (zero strength);
@@ -64,8 +66,18 @@ extern "C" {
 typedef struct fx_param_def {
     fx_param_info info;
     size_t offset; /* FLOAT: float, INT/BOOL/ENUM: int, FLOATS: float[count],
-                      STRING: char[FX_STRING_PARAM_MAX] */
+                      STRING: char[FX_STRING_PARAM_MAX], a mask (FX_P_MASK): fx_mask_param */
 } fx_param_def;
+
+/* A parameter that selects pixels as a mask does (materials, objects, indices, a
+ * rectangle): a string holding a mask JSON object, hint "mask". The stack parses it once
+ * per commit (a bad mask is refused at set time, naming the parameter), scales its
+ * rectangle on proxies, and hands process() the result as `spec`. */
+typedef struct fx_mask_param {
+    char json[FX_STRING_PARAM_MAX]; /* first: the string parameter's storage */
+    const fx_mask_spec *spec;       /* in effective params: NULL when nothing is given
+                                       ("" or {}); owned by the stack */
+} fx_mask_param;
 
 /* Table-building macros: FX_P_FLOAT(struct, field, "name", default, min, max, soft_min, soft_max, hint, doc) */
 #define FX_P_FLOAT(st, field, nm, def, lo, hi, slo, shi, hint_, doc_)                                      \
@@ -90,6 +102,13 @@ typedef struct fx_param_def {
 #define FX_P_STRING(st, field, nm, def, hint_, doc_)                                                        \
     { { sizeof(fx_param_info), nm, doc_, FX_PARAM_STRING, hint_, 0, 0, 0, 0, 0, 1, NULL, NULL, 0, def },      \
       offsetof(st, field) }
+/* field: an fx_mask_param; its default selects nothing */
+#define FX_P_MASK(st, field, nm, doc_)                                                                      \
+    { { sizeof(fx_param_info), nm, doc_, FX_PARAM_STRING, FX_HINT_MASK, 0, 0, 0, 0, 0, 1, NULL, NULL, 0, "" }, \
+      offsetof(st, field.json) }
+#define FX_HINT_MASK "mask"
+/* Whether a table entry is a mask parameter (FX_P_MASK). */
+int fx_param_is_mask(const fx_param_def *def);
 
 #define FX_COUNT_OF(a) ((int)(sizeof(a) / sizeof((a)[0])))
 

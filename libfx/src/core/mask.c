@@ -1,8 +1,9 @@
 /* Masks: parse a mask spec from a recipe, and evaluate it on a frame into coverage. */
 #include "core/mask.h"
 #include "core/json_keys.h"
-#include "core/parallel.h"
 #include "core/mem.h"
+#include "core/mem_failures.h"
+#include "core/parallel.h"
 
 #include <cjson/cJSON.h>
 #include <limits.h>
@@ -206,6 +207,23 @@ fx_result fx_mask_spec_parse(fx_context *ctx, const cJSON *json, const char *whe
     }
     if (r)
         fx_mask_spec_clear(out);
+    return r;
+}
+
+fx_result fx_mask_spec_parse_text(fx_context *ctx, const char *json, const char *where, const char *what,
+                                  fx_mask_spec *out)
+{
+    memset(out, 0, sizeof *out);
+    unsigned long failures = fx_mem_failure_count();
+    cJSON *j = cJSON_Parse(json);
+    if (!j && fx_mem_failure_count() != failures)
+        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory reading %s", where, what);
+    if (!j)
+        return fx_fail(ctx, FX_ERR_BAD_RECIPE,
+                       "%s: %s is not valid JSON (a mask object, e.g. {\"material\": [\"Mirror\"]})", where,
+                       what);
+    fx_result r = fx_mask_spec_parse(ctx, j, where, out);
+    cJSON_Delete(j);
     return r;
 }
 

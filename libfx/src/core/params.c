@@ -48,6 +48,11 @@ static size_t field_size(const fx_param_def *def)
     return 0;
 }
 
+int fx_param_is_mask(const fx_param_def *def)
+{
+    return def->info.type == FX_PARAM_STRING && def->info.hint && strcmp(def->info.hint, FX_HINT_MASK) == 0;
+}
+
 void fx_param_copy(const fx_param_def *def, void *dst, const void *src)
 {
     memcpy(field(dst, def), cfield(src, def), field_size(def));

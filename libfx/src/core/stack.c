@@ -25,7 +25,8 @@ typedef struct fx_entry {
     void *user_params;           /* values set explicitly (valid where explicit_set[i]) */
     unsigned char *explicit_set; /* one flag per parameter of the class */
     void *effective;             /* defaults, then the preset, then the explicit values: made
-                                    and validated by entry_commit whenever one of them changes */
+                                    and validated by entry_commit whenever one of them changes;
+                                    its mask parameters' specs follow it (effective_alloc) */
     int enabled;
     int quality;                 /* -1: the stack's */
     char label[LABEL_MAX];
@@ -41,10 +42,75 @@ struct fx_stack {
     int debug;
 };
 
+/* ---- effective parameters and their parsed mask parameters ----
+ * One block: the params struct, then one fx_mask_spec per mask parameter of the class,
+ * which the struct's fx_mask_param.spec fields point into. */
+
+static size_t specs_offset(const fx_effect_class *c)
+{
+    const size_t a = _Alignof(fx_mask_spec);
+    return (c->params_size + a - 1) / a * a;
+}
+
+static int mask_param_count(const fx_effect_class *c)
+{
+    int n = 0;
+    for (int i = 0; i < c->param_count; i++)
+        n += fx_param_is_mask(&c->params[i]);
+    return n;
+}
+
+static void *effective_alloc(const fx_effect_class *c)
+{
+    return fx_mem_calloc(1, specs_offset(c) + (size_t)mask_param_count(c) * sizeof(fx_mask_spec));
+}
+
+static fx_mask_spec *effective_specs(const fx_effect_class *c, void *p)
+{
+    return (fx_mask_spec *)((char *)p + specs_offset(c));
+}
+
+static void effective_free(const fx_effect_class *c, void *p)
+{
+    if (!p)
+        return;
+    fx_mask_spec *specs = effective_specs(c, p);
+    for (int k = 0, n = mask_param_count(c); k < n; k++)
+        fx_mask_spec_clear(&specs[k]);
+    fx_mem_free(p);
+}
+
+/* Parses each mask parameter's text into the block's specs and points the field at it. */
+static fx_result parse_mask_params(fx_context *ctx, const fx_effect_class *c, void *p, const char *where)
+{
+    fx_mask_spec *specs = effective_specs(c, p);
+    for (int i = 0, k = 0; i < c->param_count; i++) {
+        const fx_param_def *d = &c->params[i];
+        if (!fx_param_is_mask(d))
+            continue;
+        fx_mask_param *mp = (fx_mask_param *)((char *)p + d->offset);
+        mp->spec = NULL;
+        if (!mp->json[0]) {
+            k++;
+            continue;
+        }
+        char what[96];
+        snprintf(what, sizeof what, "parameter '%s'", d->info.name);
+        char at[256];
+        snprintf(at, sizeof at, "%s: %s", where, what);
+        fx_result r = fx_mask_spec_parse_text(ctx, mp->json, at, "its text", &specs[k]);
+        if (r)
+            return r == FX_ERR_BAD_RECIPE ? FX_ERR_BAD_PARAM : r;
+        mp->spec = fx_mask_spec_is_empty(&specs[k]) ? NULL : &specs[k];
+        k++;
+    }
+    return FX_OK;
+}
+
 static void entry_clear(fx_entry *e)
 {
     fx_mem_free(e->user_params);
-    fx_mem_free(e->effective);
+    effective_free(e->cls, e->effective);
     fx_mem_free(e->explicit_set);
     fx_mask_spec_clear(&e->mask);
     memset(e, 0, sizeof *e);
@@ -170,15 +236,20 @@ static int entry_quality(const fx_stack *s, const fx_entry *e)
  * its previous ones and the message names the effect and the parameter. */
 static fx_result entry_commit(fx_context *ctx, fx_entry *e, int index, int quality)
 {
-    void *p = fx_mem_alloc(e->cls->params_size);
+    void *p = effective_alloc(e->cls);
     if (!p)
         return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "out of memory checking effect %d (%s)", index, e->cls->name);
     fx_result r = effective_params(ctx, e, index, quality, p);
+    if (!r) {
+        char where[128];
+        where_of(where, sizeof where, index, e->cls);
+        r = parse_mask_params(ctx, e->cls, p, where);
+    }
     if (r) {
-        fx_mem_free(p);
+        effective_free(e->cls, p);
         return r;
     }
-    fx_mem_free(e->effective);
+    effective_free(e->cls, e->effective);
     e->effective = p;
     return FX_OK;
 }
@@ -567,14 +638,7 @@ fx_result fx_stack_set_mask_json(fx_stack *s, int index, const char *mask_json)
     fx_mask_spec spec;
     memset(&spec, 0, sizeof spec);
     if (mask_json && mask_json[0]) {
-        unsigned long failures = fx_mem_failure_count();
-        cJSON *j = cJSON_Parse(mask_json);
-        if (!j && fx_mem_failure_count() != failures)
-            return fx_fail(s->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory reading the mask", where);
-        if (!j)
-            return fx_fail(s->ctx, FX_ERR_BAD_RECIPE, "%s: the mask is not valid JSON", where);
-        fx_result r = fx_mask_spec_parse(s->ctx, j, where, &spec);
-        cJSON_Delete(j);
+        fx_result r = fx_mask_spec_parse_text(s->ctx, mask_json, where, "the mask", &spec);
         if (r)
             return r;
     }
@@ -609,9 +673,9 @@ fx_result fx_stack_set_quality(fx_stack *s, int quality)
         if (!fresh[i])
             continue;
         if (r) {
-            fx_mem_free(fresh[i]);
+            effective_free(s->entries[i].cls, fresh[i]);
         } else {
-            fx_mem_free(s->entries[i].effective);
+            effective_free(s->entries[i].cls, s->entries[i].effective);
             s->entries[i].effective = fresh[i];
         }
     }
@@ -1011,7 +1075,8 @@ static fx_mask_spec proxy_mask_spec(const fx_mask_spec *m, const fx_frame *in)
 }
 
 /* The parameters an entry runs with: its committed ones, or on a proxy a copy with the
- * pixel-sized ones scaled (the proxy looks like the frame). *owned is the copy to free. */
+ * pixel-sized ones and the mask parameters' rectangles scaled (the proxy looks like the
+ * frame). *owned is the copy to free with fx_mem_free: its specs are shallow copies. */
 static fx_result run_params(fx_context *ctx, const fx_entry *e, const fx_frame *in, const char *where,
                             const void **params, void **owned)
 {
@@ -1019,10 +1084,22 @@ static fx_result run_params(fx_context *ctx, const fx_entry *e, const fx_frame *
     *params = e->effective;
     if (in->proxy_factor <= 1)
         return FX_OK;
-    if (!(*owned = fx_mem_alloc(e->cls->params_size)))
+    const fx_effect_class *c = e->cls;
+    if (!(*owned = effective_alloc(c)))
         return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
-    memcpy(*owned, e->effective, e->cls->params_size);
-    fx_params_scale_pixels(e->cls, *owned, in->proxy_factor);
+    memcpy(*owned, e->effective, c->params_size);
+    fx_params_scale_pixels(c, *owned, in->proxy_factor);
+    fx_mask_spec *specs = effective_specs(c, *owned);
+    for (int i = 0, k = 0; i < c->param_count; i++) {
+        if (!fx_param_is_mask(&c->params[i]))
+            continue;
+        fx_mask_param *mp = (fx_mask_param *)((char *)*owned + c->params[i].offset);
+        if (mp->spec) {
+            specs[k] = proxy_mask_spec(mp->spec, in);
+            mp->spec = &specs[k];
+        }
+        k++;
+    }
     *params = *owned;
     return FX_OK;
 }

@@ -30,7 +30,6 @@
  * them). hiz (opt-in) traces through a min/max depth pyramid (math/depth_pyramid.h). Output is bit-identical for any thread count (per-pixel
  * work, serial double-precision reductions) and finite for any input. */
 #include "core/effect.h"
-#include "core/mem_failures.h"
 #include "core/parallel.h"
 #include "math/blur.h"
 #include "math/camera.h"
@@ -39,7 +38,6 @@
 #include "math/edge_ops.h"
 #include "math/ssr_trace.h"
 
-#include <cjson/cJSON.h>
 #include <float.h>
 #include <math.h>
 #include <stdatomic.h>
@@ -60,7 +58,7 @@ typedef struct ssr_params {
     float environment[3];
     float edge_fade;
     float bias;
-    char mirror_surfaces[FX_STRING_PARAM_MAX];
+    fx_mask_param mirror_surfaces;
     int bounces;
     /* quality */
     int max_steps;
@@ -113,7 +111,7 @@ static const fx_param_def ssr_param_defs[] = {
                "Hits closer to the frame border than this fraction of the frame fade smoothly to the fallback"),
     FX_P_FLOAT(ssr_params, bias, "bias", 0.5, 0.0, 64.0, 0.0, 4.0, "pixels",
                "Ray origin pushed off the surface along the normal, in pixel footprints at its depth"),
-    FX_P_STRING(ssr_params, mirror_surfaces, "mirror_surfaces", "", "",
+    FX_P_MASK(ssr_params, mirror_surfaces, "mirror_surfaces",
                 "Mask JSON naming every mirror of the scene (as a stack mask: {\"material\": [...]}); "
                 "hits on these pixels bounce again (bounces > 1). Empty: no second bounce"),
     FX_P_INT(ssr_params, bounces, "bounces", 4, 1, 8, 1, 8, "",
@@ -705,37 +703,12 @@ static void fit_face(ssr_job *j)
     j->face = (face_frame){ 1, c, t, b, (float)et, (float)eb };
 }
 
-static fx_result parse_surfaces(fx_context *ctx, const char *json, const char *where, fx_mask_spec *spec,
-                                int *has)
-{
-    *has = 0;
-    memset(spec, 0, sizeof *spec);
-    if (!json || !json[0])
-        return FX_OK;
-    unsigned long failures = fx_mem_failure_count();
-    cJSON *j = cJSON_Parse(json);
-    if (!j && fx_mem_failure_count() != failures)
-        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory reading mirror_surfaces", where);
-    if (!j)
-        return fx_fail(ctx, FX_ERR_BAD_PARAM, "%s: mirror_surfaces is not valid JSON (a mask object)", where);
-    fx_result r = fx_mask_spec_parse(ctx, j, where, spec);
-    cJSON_Delete(j);
-    if (!r)
-        *has = !fx_mask_spec_is_empty(spec);
-    return r;
-}
-
 static fx_pass_set ssr_passes(const void *params)
 {
     const ssr_params *p = params;
     fx_pass_set set = FX_PASS_BIT(FX_PASS_DEPTH) | FX_PASS_BIT(FX_PASS_NORMAL);
-    fx_mask_spec spec;
-    int has = 0;
-    if (p->mirror_surfaces[0] && parse_surfaces(NULL, p->mirror_surfaces, "", &spec, &has) == FX_OK) {
-        if (has)
-            set |= fx_mask_spec_passes(&spec);
-        fx_mask_spec_clear(&spec);
-    }
+    if (p->bounces > 1 && p->mirror_surfaces.spec) /* read only for second bounces */
+        set |= fx_mask_spec_passes(p->mirror_surfaces.spec);
     return set;
 }
 
@@ -754,21 +727,6 @@ static fx_result ssr_validate(const void *params, char *err, size_t err_size)
             snprintf(err, err_size, "environment_color[%d] is not finite", k);
             return FX_ERR_BAD_PARAM;
         }
-    if (p->mirror_surfaces[0]) {
-        unsigned long failures = fx_mem_failure_count();
-        cJSON *j = cJSON_Parse(p->mirror_surfaces);
-        int ok = j && cJSON_IsObject(j);
-        cJSON_Delete(j);
-        if (!j && fx_mem_failure_count() != failures) {
-            snprintf(err, err_size, "out of memory reading mirror_surfaces");
-            return FX_ERR_OUT_OF_MEMORY;
-        }
-        if (!ok) {
-            snprintf(err, err_size, "mirror_surfaces must be a mask JSON object, e.g. "
-                                    "{\"material\": [\"Mirror_A\", \"Mirror_B\"]}");
-            return FX_ERR_BAD_PARAM;
-        }
-    }
     return FX_OK;
 }
 
@@ -953,15 +911,10 @@ static fx_result ssr_process(const fx_effect_run *run)
     float *blurred = NULL, *fin[2] = { NULL, NULL };
     const size_t frame_bytes = (size_t)F.w * F.h * 4 * sizeof(float);
     const size_t hits_bytes = (size_t)F.w * F.h * sizeof(cell_hit);
-    fx_mask_spec spec;
     fx_depth_pyramid pyr;
     memset(&pyr, 0, sizeof pyr);
-    int has_surfaces = 0;
-    if (p->bounces > 1 && (r = parse_surfaces(run->ctx, p->mirror_surfaces, where, &spec, &has_surfaces)))
-        return r;
-    if (has_surfaces) {
-        r = fx_mask_build(run->ctx, &spec, run->frame, where, &surfaces);
-        fx_mask_spec_clear(&spec);
+    if (p->bounces > 1 && p->mirror_surfaces.spec) {
+        r = fx_mask_build(run->ctx, p->mirror_surfaces.spec, run->frame, where, &surfaces);
         if (r)
             return r;
         j.surfaces = surfaces;
