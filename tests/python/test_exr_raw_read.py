@@ -100,3 +100,21 @@ def test_truncated_uncompressed_file_is_refused(run, tmp_path):
     assert "cut.exr" in r.stderr
     assert not out.exists()
     assert not list(pathlib.Path(tmp_path).glob("*.tmp-*"))
+
+
+@pytest.mark.parametrize("compression", ["none", "zip", "piz", "pxr24"])
+@pytest.mark.parametrize("names", [("R", "G", "B", "X"), ("A", "B", "G", "R", "X"), ("B", "G", "R")])
+def test_small_half_part_with_a_skipped_channel(run, tmp_path, compression, names):
+    """OpenEXRCore's 3- and 4-channel half routines write every channel of the part: a
+    part of 3 or 4 half channels of which the stack skips one crashed the reader (found
+    by the fuzzer). Combined must come out as the halves the file holds."""
+    rng = np.random.RandomState(3)
+    chans = {n: (rng.rand(19, 27) * 4 - 1).astype(np.float16).astype(np.float32) for n in names}
+    src = _write(tmp_path / "in.exr", chans, compression, half=set(names))
+    out = tmp_path / "out.exr"
+    r = run("run", "--quiet", "--stack", write_recipe(tmp_path / "r.json", []), src, "-o", out)
+    assert r.returncode == 0, r.stderr
+    got = read_exr(out)
+    for c in "RGB":
+        match = [k for k in got if k.endswith("." + c) or k == c]
+        assert match and np.array_equal(got[match[0]], chans[c]), (c, sorted(got))

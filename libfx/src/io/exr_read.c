@@ -92,6 +92,8 @@ typedef struct decode_job {
     int nx, chunks;
     int64_t cw, chh;               /* the largest chunk */
     size_t scratch_floats;         /* per worker */
+    int decode_skipped;            /* skipped channels decoded too, as halves into scratch
+                                      (see part_needs_all_channels) */
     float *scratch;                /* workers * scratch_floats */
     exr_decode_pipeline_t *dec;    /* per worker */
     unsigned char *have_dec;       /* per worker */
@@ -240,6 +242,14 @@ static void decode_chunk(decode_job *j, int k, int worker)
     for (int c = 0; c < dec->channel_count; c++) {
         exr_coding_channel_info_t *ch = &dec->channels[c];
         const chan_dest *d = c < pt->channel_count ? &rd->dest[pt->first_chan + c] : NULL;
+        if (d && !d->base && j->decode_skipped) {
+            ch->decode_to_ptr = (uint8_t *)(scratch + (size_t)planes++ * plane);
+            ch->user_pixel_stride = 2;
+            ch->user_line_stride = ci.width * 2;
+            ch->user_data_type = EXR_PIXEL_HALF;
+            ch->user_bytes_per_element = 2;
+            continue;
+        }
         if (!d || !d->base) {
             ch->decode_to_ptr = NULL; /* skipped: not decoded at all */
             continue;
@@ -261,8 +271,10 @@ static void decode_chunk(decode_job *j, int k, int worker)
     planes = 0;
     for (int c = 0; c < dec->channel_count && c < pt->channel_count; c++) {
         const chan_dest *d = &rd->dest[pt->first_chan + c];
-        if (!d->base)
+        if (!d->base) {
+            planes += j->decode_skipped;
             continue;
+        }
         const float *src = scratch + (size_t)planes++ * plane;
         for (int y = 0; y < ci.height; y++) {
             float *dst = d->base +
@@ -328,6 +340,14 @@ static fx_result decode_core_part(reader *rd, int p)
     int used = 0;
     for (int c = 0; c < pt->channel_count; c++)
         used += rd->dest[pt->first_chan + c].base != NULL;
+    /* OpenEXRCore (3.1 to 3.4) picks its 3- and 4-channel half-to-float routines by the
+     * part's channel count alone: they write every channel, so with one skipped (its
+     * pointer NULL) they crash, and they ignore subsampling. In such a part the skipped
+     * channels are decoded too, as halves: mixed output types take the generic routine. */
+    if (used > 0 && used < pt->channel_count && pt->channel_count <= 4) {
+        j.decode_skipped = 1;
+        used = pt->channel_count;
+    }
     j.cw = j.tiled ? (int64_t)j.tile_w : pw, j.chh = j.tiled ? (int64_t)j.tile_h : j.lines;
     if (j.cw > pw)
         j.cw = pw;
