@@ -197,7 +197,7 @@ def params_block(d):
                    "every preset gives the defaults).")
     out.append("")
     passes = ", ".join(f"`{x}`" for x in d.get("passes", []))
-    cam = ("yes (the scene sidecar: `--camera`, written by the add-on)"
+    cam = ("yes (the scene sidecar: `--sidecar`, written by the add-on)"
            if d.get("needs_camera") else "no")
     out.append(f"**Passes** with the defaults: {passes}; camera needed: {cam}. "
                f"Other parameter values may need other passes (`libfx passes --stack "

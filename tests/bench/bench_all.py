@@ -272,7 +272,7 @@ def first_frame_rows(cli, scene, passes, side, recipe_path, effects, w, h, runs,
         for _ in range(runs):
             for o in tmp.glob("out.*.exr"):
                 o.unlink()
-            out = run([cli, "run", "-v", "-j", "2", "--compression", "none", "--camera", side, "--stack", rp,
+            out = run([cli, "run", "-v", "-j", "2", "--compression", "none", "--sidecar", side, "--stack", rp,
                        tmp / "in.####.exr", "-o", tmp / "out.####.exr"]).stdout
             per_frame = [sum(t["ms"] for t in json.loads(l[len("timings:"):]))
                          for l in out.splitlines() if l.startswith("timings:")]
@@ -283,7 +283,7 @@ def first_frame_rows(cli, scene, passes, side, recipe_path, effects, w, h, runs,
             warm += per_frame[1:]
             if eff is None:  # the whole process on one frame: read, empty stack, write
                 t0 = time.perf_counter()
-                run([cli, "run", "-j", "2", "--quiet", "--force", "--compression", "none", "--camera", side,
+                run([cli, "run", "-j", "2", "--quiet", "--force", "--compression", "none", "--sidecar", side,
                      "--stack", rp, tmp / "in.0001.exr", "-o", tmp / "one.exr"])
                 one.append((time.perf_counter() - t0) * 1e3)
         f, wm = statistics.median(first), statistics.median(warm)
