@@ -165,8 +165,10 @@ static int read_floats(const cJSON *value, float *out, int max, int *count)
     return 1;
 }
 
-fx_result fx_param_set_json(fx_context *ctx, const fx_param_def *d, void *params,
-                            const cJSON *value, const char *where)
+/* Sets one parameter from JSON after checking type and range. `where` names the effect
+ * in messages ("effect 2 (pixelate)"). */
+static fx_result param_set_json(fx_context *ctx, const fx_param_def *d, void *params, const cJSON *value,
+                                const char *where)
 {
     const fx_param_info *in = &d->info;
     void *p = field(params, d);
@@ -268,7 +270,7 @@ fx_result fx_params_set_object(fx_context *ctx, const fx_effect_class *cls, void
             return fx_fail(ctx, FX_ERR_BAD_PARAM, "%s: unknown parameter '%s' (parameters: %s)", where,
                            item->string, names);
         }
-        fx_result r = fx_param_set_json(ctx, d, params, item, where);
+        fx_result r = param_set_json(ctx, d, params, item, where);
         if (r)
             return r;
         if (explicit_set)

@@ -7,10 +7,6 @@
 
 #include <cjson/cJSON.h>
 
-/* Sets one parameter from JSON after checking type and range. `where` names the effect
- * in messages ("effect 2 (pixelate)"). */
-fx_result fx_param_set_json(fx_context *ctx, const fx_param_def *def, void *params,
-                            const cJSON *value, const char *where);
 /* Sets every member of a JSON object; marks each set parameter in `explicit_set`
  * (indexed like the table) when non-NULL. Unknown names are errors. */
 fx_result fx_params_set_object(fx_context *ctx, const fx_effect_class *cls, void *params,

@@ -94,7 +94,11 @@ void fx_extended_box(double var, int *r_out, double *alpha_out)
     *alpha_out = alpha;
 }
 
-void fx_deriche_coefficients(double sigma, double n[4], double m[4], double d[4])
+/* Deriche 4th-order coefficients, normalised to unit DC gain:
+ * causal      y+[i] = n0 x[i] + n1 x[i-1] + n2 x[i-2] + n3 x[i-3] - sum_k d[k-1] y+[i-k]
+ * anticausal  y-[i] = m0 x[i+1] + m1 x[i+2] + m2 x[i+3] + m3 x[i+4] - sum_k d[k-1] y-[i+k]
+ * (k = 1..4), output y+ + y-. */
+static void fx_deriche_coefficients(double sigma, double n[4], double m[4], double d[4])
 {
     /* Deriche (1993), zero order, the optimised constants as tabulated in ITK's
      * RecursiveGaussianImageFilter; normalised to unit DC gain (causal + anticausal). */
@@ -123,7 +127,16 @@ void fx_deriche_coefficients(double sigma, double n[4], double m[4], double d[4]
     m[3] = -d4 * n0;
 }
 
-void fx_deriche_sections(double sigma, fx_deriche_sec *o)
+/* The same filter as two second-order sections in float (the form the float kernels run):
+ * per section k, on d = x - c (c: the line's first sample, so constant lines are exact),
+ *   causal      u[i] = (b0 d[i] + b1 d[i-1]) - (p1 u[i-1] + p2 u[i-2])
+ *   anticausal  v[i] = (m1 d[i+1] + m2 d[i+2]) - (p1 v[i+1] + p2 v[i+2])
+ * output (u0 + u1) + (v0 + v1) + c. ga: the anticausal steady state for a unit constant. */
+typedef struct fx_deriche_sec {
+    float b0[2], b1[2], m1[2], m2[2], p1[2], p2[2], ga[2];
+} fx_deriche_sec;
+
+static void fx_deriche_sections(double sigma, fx_deriche_sec *o)
 {
     /* Deriche's impulse response is a sum of two damped cosine/sine terms,
      *   h(n) = e_k^n (a_k cos(w_k n / sigma) + b_k sin(w_k n / sigma)),  e_k = exp(l_k / sigma),

@@ -101,22 +101,6 @@ int fx_gaussian_radius(double sigma);
 /* Extended box of variance var: integer radius r and end-tap weight alpha in [0, 1). */
 void fx_extended_box(double var, int *r, double *alpha);
 
-/* Deriche 4th-order coefficients, normalised to unit DC gain:
- * causal      y+[i] = n0 x[i] + n1 x[i-1] + n2 x[i-2] + n3 x[i-3] - sum_k d[k-1] y+[i-k]
- * anticausal  y-[i] = m0 x[i+1] + m1 x[i+2] + m2 x[i+3] + m3 x[i+4] - sum_k d[k-1] y-[i+k]
- * (k = 1..4), output y+ + y-. */
-void fx_deriche_coefficients(double sigma, double n[4], double m[4], double d[4]);
-
-/* The same filter as two second-order sections in float (the form the float kernels run):
- * per section k, on d = x - c (c: the line's first sample, so constant lines are exact),
- *   causal      u[i] = (b0 d[i] + b1 d[i-1]) - (p1 u[i-1] + p2 u[i-2])
- *   anticausal  v[i] = (m1 d[i+1] + m2 d[i+2]) - (p1 v[i+1] + p2 v[i+2])
- * output (u0 + u1) + (v0 + v1) + c. ga: the anticausal steady state for a unit constant. */
-typedef struct fx_deriche_sec {
-    float b0[2], b1[2], m1[2], m2[2], p1[2], p2[2], ga[2];
-} fx_deriche_sec;
-void fx_deriche_sections(double sigma, fx_deriche_sec *out);
-
 /* General small 2-D convolution (odd ksize <= 15, kernel row-major, used as given: the
  * caller normalises), replicate borders, double accumulation, over roi (NULL: all).
  * dst must not alias src. */
