@@ -51,6 +51,12 @@ def cases(renders, only):
     return [c for c in out if not only or c[2][0]["effect"] in only]
 
 
+def sidecar_option(cli):
+    """--sidecar, or --camera for builds from before that name (the alias stays)."""
+    r = subprocess.run([cli, "help", "run"], capture_output=True, text=True)
+    return "--sidecar" if "--sidecar" in r.stdout + r.stderr else "--camera"
+
+
 def instructions(cli, scene_dir, effects, quality, tmp):
     recipe = pathlib.Path(tmp) / "recipe.json"
     recipe.write_text(json.dumps({"version": 1, "quality": quality, "effects": effects}))
@@ -58,7 +64,7 @@ def instructions(cli, scene_dir, effects, quality, tmp):
     cmd = ["valgrind", "--tool=callgrind", "--callgrind-out-file=%s" % outfile,
            "--collect-atstart=no", "--toggle-collect=fx_stack_run_consume",
            cli, "run", "-j", "1", "--quiet", "--force", "--compression", "none",
-           "--sidecar", str(scene_dir / "r_libfx.0001.camera.json"), "--stack", str(recipe),
+           sidecar_option(cli), str(scene_dir / "r_libfx.0001.camera.json"), "--stack", str(recipe),
            str(scene_dir / "r_libfx_passes.0001.exr"), "-o", str(pathlib.Path(tmp) / "o.exr")]
     r = subprocess.run(cmd, capture_output=True, text=True)
     if r.returncode != 0:
