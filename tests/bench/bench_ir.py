@@ -5,7 +5,8 @@ This VM's wall times vary 2x between runs minutes apart, so a claim such as "no 
 got more than 3% slower" cannot rest on them alone. Valgrind's callgrind counts the
 instructions of the stack run (fx_stack_run_consume and what it calls: no file read or
 write), one thread, for every effect of the three scenes' recipes (with the scene's
-parameters) and for the other effects at their defaults on the Greek bath, at `final`.
+parameters) and for the other effects at their defaults on the Greek bath (--others: a
+render keeping every pass, as bench_all.py makes), at `final`.
 
     /usr/bin/python3 tests/bench/bench_ir.py OLD_CLI NEW_CLI [--renders DIR] [--only a,b]
                                              [--quality final] [-o out.csv]
@@ -29,7 +30,7 @@ SCENES = ("greek_bath", "atrium", "mirror_room")
 OTHERS = ("gaussian_blur", "bloom", "edges", "cel_shading", "color_matrix", "posterize", "sin_city")
 
 
-def cases(renders, only):
+def cases(renders, others, only):
     """(label, scene dir, recipe effects) for each effect of each scene, then the others."""
     out = []
     for scene in SCENES:
@@ -45,9 +46,8 @@ def cases(renders, only):
         for n in names:  # every entry of one effect together (the mirror room's ten)
             out.append(("%s (%s)" % (n, scene), d, [e for e in effects if e["effect"] == n
                                                    and e.get("enabled", True)]))
-    bath = next(iter(sorted(pathlib.Path(renders).glob("greek_bath_1920x1080"))))
     for n in OTHERS:
-        out.append(("%s (defaults, greek_bath)" % n, bath, [{"effect": n}]))
+        out.append(("%s (defaults, greek_bath)" % n, pathlib.Path(others), [{"effect": n}]))
     return [c for c in out if not only or c[2][0]["effect"] in only]
 
 
@@ -80,6 +80,8 @@ def main():
     ap.add_argument("old_cli")
     ap.add_argument("new_cli")
     ap.add_argument("--renders", default="out/bench_live/renders")
+    ap.add_argument("--others", default="out/r1080/renders/greek_bath_1920x1080",
+                    help="the Greek bath with every pass (cel_shading reads light passes)")
     ap.add_argument("--only", default="", help="effect names, comma-separated")
     ap.add_argument("--quality", default="final")
     ap.add_argument("-o", "--out", help="CSV of the rows")
@@ -87,7 +89,7 @@ def main():
     only = set(filter(None, a.only.split(",")))
     rows = []
     with tempfile.TemporaryDirectory(dir="/dev/shm" if os.access("/dev/shm", os.W_OK) else None) as tmp:
-        for label, d, effects in cases(a.renders, only):
+        for label, d, effects in cases(a.renders, a.others, only):
             old = instructions(a.old_cli, d, effects, a.quality, tmp)
             new = instructions(a.new_cli, d, effects, a.quality, tmp)
             rows.append((label, old, new, new / old if old else float("nan")))

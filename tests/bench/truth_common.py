@@ -73,9 +73,9 @@ def batch(blend, prefix, res, spp, expr=None, recipe=None, seed=None):
     return passes, side, dt
 
 
-def parse_args(res="480x270", spp=16, variants=None):
+def parse_args(res="480x270", spp=16, variants=None, eevee=False):
     """The command line every truth script takes: OUT, --res, --spp, --runs, --docs (and
-    --variants when the scene has several)."""
+    --variants when the scene has several, --no-eevee where Eevee is a peer)."""
     ap = argparse.ArgumentParser()
     ap.add_argument("out")
     ap.add_argument("--res", default=res)
@@ -84,7 +84,11 @@ def parse_args(res="480x270", spp=16, variants=None):
     if variants:
         ap.add_argument("--variants", default=",".join(variants))
     ap.add_argument("--docs")
+    if eevee:
+        ap.add_argument("--no-eevee", dest="eevee", action="store_false", help="skip the Eevee peer renders")
     a = ap.parse_args()
+    if not eevee:
+        a.eevee = False
     os.makedirs(a.out, exist_ok=True)
     return a
 
@@ -96,6 +100,55 @@ def render_three(name, blend, prefix, a, noop):
     tpass, _, _ = batch(blend, prefix + "truth_", a.res, a.spp, expr=truth_expr(name), recipe=noop)
     t2pass, _, _ = batch(blend, prefix + "truth2_", a.res, a.spp, expr=truth_expr(name), recipe=noop, seed=17)
     return passes, side, tpass, t2pass
+
+
+# Runs inside Blender after apply_truth(): Eevee Legacy (Blender 3.x) with its screen-space
+# reflections at full quality renders one EXR and prints the render time. (Its probes are
+# not measured: a baked reflection cubemap changed no pixel, and a planar probe built
+# from the mirror's plane lost the wall behind it; Eevee Next, 4.2+, has other probes.)
+EEVEE_CODE = r"""
+import bpy, json, time
+sc = bpy.context.scene
+if "BLENDER_EEVEE" not in {i.identifier for i in sc.render.bl_rna.properties["engine"].enum_items}:
+    raise SystemExit("truth: Eevee Legacy is not in this Blender")
+sc.render.engine = "BLENDER_EEVEE"
+w, h = %(res)r
+sc.render.resolution_x, sc.render.resolution_y, sc.render.resolution_percentage = w, h, 100
+sc.render.use_compositing = False
+sc.eevee.taa_render_samples = %(spp)d
+sc.eevee.use_ssr = True
+sc.eevee.use_ssr_halfres = False
+sc.eevee.ssr_quality = 1.0
+sc.eevee.ssr_max_roughness = 0.5
+is_ = sc.render.image_settings
+is_.file_format, is_.color_depth, is_.color_mode = "OPEN_EXR", "32", "RGBA"
+sc.render.filepath = %(out)r
+t0 = time.perf_counter()
+bpy.ops.render.render(write_still=True)
+t_render = time.perf_counter() - t0
+print("LIBFX_EEVEE " + json.dumps({"render_s": t_render}))
+"""
+
+
+def eevee(name, blend, out, res, spp):
+    """The truth scene (apply_truth) rendered by Eevee Legacy with SSR: (linear RGB,
+    render seconds); kept and reused like the Cycles renders (OUT.json holds the time)."""
+    times = out + ".json"
+    if not (os.path.exists(out) and os.path.exists(times)):
+        w, h = (int(x) for x in res.split("x"))
+        code = EEVEE_CODE % {"res": (w, h), "spp": spp, "out": out}
+        p = subprocess.run([BLENDER, "-b", str(blend), "--python-expr", truth_expr(name, code)],
+                           capture_output=True, text=True)
+        line = [x for x in p.stdout.splitlines() if x.startswith("LIBFX_EEVEE ")]
+        if p.returncode or not line or not os.path.exists(out):
+            sys.exit("Eevee render of %s failed:\n%s\n%s" % (blend, p.stdout[-3000:], p.stderr[-3000:]))
+        with open(times, "w") as f:
+            f.write(line[-1][len("LIBFX_EEVEE "):])
+        print("rendered %s with Eevee" % os.path.basename(out), flush=True)
+    t = json.load(open(times))
+    e = T.Exr(out)
+    img = np.stack([e.channels[c] for c in ("R", "G", "B")], axis=-1)
+    return img, t["render_s"]
 
 
 def write_report(out, name, md, report):
@@ -193,14 +246,19 @@ def run_cli_frame(recipe, passes, side, out, quality, frame, debug):
     return float(m.group(1)) * 1e3 if m else float("nan")
 
 
+def error_row(name, img, ms, truth, region, flat=None):
+    """(method, ms, region MAE, whole MAE, mean ratio [, noise]) of one image."""
+    r = [name, ms, mae(img, truth, region), mae(img, truth), mean_ratio(img, truth)]
+    if flat is not None:
+        r.append(laplacian_noise(img, flat))
+    return r
+
+
 def rows_for(truth, truth2, plain, outs, region, flat=None):
-    """Table rows: (method, ms, region MAE, whole MAE, mean ratio [, noise]) for the
-    no-effect input, Cycles with another seed (the floor) and each preset."""
+    """Table rows (error_row) for the no-effect input, Cycles with another seed (the
+    floor) and each preset."""
     def row(name, img, ms):
-        r = [name, ms, mae(img, truth, region), mae(img, truth), mean_ratio(img, truth)]
-        if flat is not None:
-            r.append(laplacian_noise(img, flat))
-        return r
+        return error_row(name, img, ms, truth, region, flat)
     rows = [row("no effect (input)", plain, None), row("Cycles, other seed (floor)", truth2, None)]
     if flat is not None:
         rows.insert(0, row("Cycles truth", truth, None))
