@@ -363,100 +363,103 @@ static void copy_rgb(float *dst, const float *src4, size_t n)
         memcpy(dst + i * 3, src4 + i * 4, 3 * sizeof(float));
 }
 
-static fx_result god_rays_process(const fx_effect_run *run)
+/* Process stage 1: what occludes the light. With occlusion sky, the Depth pass (and the
+ * light material's mask when one is named; *material is the caller's to free). */
+static fx_result occlusion_setup(const fx_effect_run *run, const god_rays_params *p, double lx, double ly,
+                                 occ_job *oj, fx_mask **material)
 {
-    const god_rays_params *p = run->params;
+    memset(oj, 0, sizeof *oj);
+    *material = NULL;
+    oj->run = run;
+    oj->p = p;
+    oj->lx = lx;
+    oj->ly = ly;
+    oj->radius = p->source_radius * hypot(run->width, run->height);
+    if (p->occlusion != OCC_SKY)
+        return FX_OK;
+    const fx_pass *dp = fx_frame_find_pass(run->frame, "Depth");
+    if (!dp)
+        return fx_fail(run->ctx, FX_ERR_MISSING_PASS,
+                       "%s: occlusion sky needs the Depth pass (or set occlusion to luminance)", run->where);
+    oj->depth = dp->data;
+    if (!p->light_material[0])
+        return FX_OK;
+    char *names[1] = {(char *)p->light_material};
+    fx_mask_spec spec;
+    memset(&spec, 0, sizeof spec);
+    spec.materials = names;
+    spec.material_count = 1;
+    fx_result r = fx_mask_build(run->ctx, &spec, run->frame, run->where, material);
+    oj->material = *material;
+    return r;
+}
+
+/* Process stage 2: the radial blur's settings from the parameters. */
+static void blur_setup(const fx_effect_run *run, const god_rays_params *p, double lx, double ly,
+                       fx_radial_blur *rb)
+{
+    memset(rb, 0, sizeof *rb);
+    rb->light_x = lx;
+    rb->light_y = ly;
+    rb->samples = p->samples;
+    rb->decay = p->decay;
+    rb->density = p->density;
+    rb->scale = (double)FX_RAYS_REFERENCE_SAMPLES * p->weight * p->exposure;
+    rb->jitter = p->jitter;
+    rb->seed = (uint32_t)p->seed;
+    double frame_no = fx_effect_scene_frame(run);
+    rb->frame = isfinite(frame_no) && fabs(frame_no) < 2e9 ? (int)floor(frame_no) : 0;
+    rb->angular = 1.0 / p->polar_resolution;
+    rb->levels = p->polar_levels;
+    rb->downsample = p->polar_downsample;
+}
+
+/* Process stage 3a, reduced: the map built reduced, the rays interpolated in the
+ * composite; no frame-sized temporary (the same bits as through full-size buffers). */
+static fx_result run_reduced(const fx_effect_run *run, const god_rays_params *p, occ_job *oj,
+                             const fx_radial_blur *rb, int lw, int lh, double fade)
+{
+    const char *where = run->where;
+    const size_t lbytes = (size_t)lw * lh * 4 * sizeof(float);
+    fx_result r = fx_check_budget(run->ctx, (uint64_t)lbytes * 2, where);
+    float *lo = r == FX_OK ? fx_buffer_get(run->ctx, lbytes) : NULL;
+    float *lrays = r == FX_OK ? fx_buffer_get(run->ctx, lbytes) : NULL;
+    if (r == FX_OK && (!lo || !lrays))
+        r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the reduced occlusion map", where);
+    if (r == FX_OK) {
+        memset(lrays, 0, lbytes);
+        occ_lo_job lj = {oj, lo, lw, rb->downsample};
+        fx_parallel_for(run->ctx, lh, fx_grain_for(run->ctx, lh), occ_lo_rows, &lj);
+        r = fx_radial_blur_polar_reduced(run->ctx, lo, lrays, run->width, run->height, rb, &run->roi, where);
+    }
+    int cols = run->roi.x1 - run->roi.x0;
+    int *cx = r == FX_OK ? fx_mem_alloc((size_t)cols * sizeof(int)) : NULL;
+    float *ctx = r == FX_OK ? fx_mem_alloc((size_t)cols * sizeof(float)) : NULL;
+    if (r == FX_OK && (!cx || !ctx))
+        r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
+    if (r == FX_OK) {
+        comp_columns(run->roi.x0, run->roi.x1, lw, rb->downsample, cx, ctx);
+        comp_job cj = {run, NULL, lrays, lw, lh, rb->downsample, fade, p->composite == COMP_SCREEN, cx, ctx};
+        int rows = run->roi.y1 - run->roi.y0;
+        fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), comp_rows, &cj);
+    }
+    fx_mem_free(cx);
+    fx_mem_free(ctx);
+    fx_buffer_put(run->ctx, lo, lbytes);
+    fx_buffer_put(run->ctx, lrays, lbytes);
+    return r;
+}
+
+/* Process stage 3b, full size: occlusion and rays as RGB + a zero lane per pixel
+ * (four-lane vectors), the rays in dst unless the debug passes want them whole. */
+static fx_result run_full(const fx_effect_run *run, const god_rays_params *p, occ_job *oj,
+                          const fx_radial_blur *rb, double fade)
+{
     const int w = run->width, h = run->height;
     const char *where = run->where;
-    double lx = 0, ly = 0, fade = 0;
-    fx_result r = find_light(run, p, where, &lx, &ly, &fade);
-    if (r != FX_OK)
-        return r;
-    if (!(fade > 0.0))
-        return fx_effect_pass_through(run); /* the light is behind the camera */
-    fx_radial_blur_bound_light(&lx, &ly, w, h);
-
-    occ_job oj;
-    memset(&oj, 0, sizeof oj);
-    oj.run = run;
-    oj.p = p;
-    oj.lx = lx;
-    oj.ly = ly;
-    oj.radius = p->source_radius * hypot(w, h);
-    fx_mask *material = NULL;
-    if (p->occlusion == OCC_SKY) {
-        const fx_pass *dp = fx_frame_find_pass(run->frame, "Depth");
-        if (!dp)
-            return fx_fail(run->ctx, FX_ERR_MISSING_PASS,
-                           "%s: occlusion sky needs the Depth pass (or set occlusion to luminance)", where);
-        oj.depth = dp->data;
-        if (p->light_material[0]) {
-            char *names[1] = {(char *)p->light_material};
-            fx_mask_spec spec;
-            memset(&spec, 0, sizeof spec);
-            spec.materials = names;
-            spec.material_count = 1;
-            r = fx_mask_build(run->ctx, &spec, run->frame, where, &material);
-            if (r != FX_OK)
-                return r;
-            oj.material = material;
-        }
-    }
-    fx_radial_blur rb;
-    memset(&rb, 0, sizeof rb);
-    rb.light_x = lx;
-    rb.light_y = ly;
-    rb.samples = p->samples;
-    rb.decay = p->decay;
-    rb.density = p->density;
-    rb.scale = (double)FX_RAYS_REFERENCE_SAMPLES * p->weight * p->exposure;
-    rb.jitter = p->jitter;
-    rb.seed = (uint32_t)p->seed;
-    double frame_no = fx_effect_scene_frame(run);
-    rb.frame = isfinite(frame_no) && fabs(frame_no) < 2e9 ? (int)floor(frame_no) : 0;
-    rb.angular = 1.0 / p->polar_resolution;
-    rb.levels = p->polar_levels;
-    rb.downsample = p->polar_downsample;
-    int lw = 0, lh = 0;
-    if (p->method == METHOD_POLAR && !run->debug && fx_radial_blur_reduced_size(&rb, w, h, &lw, &lh)) {
-        /* reduced: the map built reduced, the rays interpolated in the composite; no
-         * frame-sized temporary (the same bits as through full-size buffers) */
-        const size_t lbytes = (size_t)lw * lh * 4 * sizeof(float);
-        r = fx_check_budget(run->ctx, (uint64_t)lbytes * 2, where);
-        float *lo = r == FX_OK ? fx_buffer_get(run->ctx, lbytes) : NULL;
-        float *lrays = r == FX_OK ? fx_buffer_get(run->ctx, lbytes) : NULL;
-        if (r == FX_OK && (!lo || !lrays))
-            r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the reduced occlusion map", where);
-        if (r == FX_OK) {
-            memset(lrays, 0, lbytes);
-            occ_lo_job lj = {&oj, lo, lw, rb.downsample};
-            fx_parallel_for(run->ctx, lh, fx_grain_for(run->ctx, lh), occ_lo_rows, &lj);
-            r = fx_radial_blur_polar_reduced(run->ctx, lo, lrays, w, h, &rb, &run->roi, where);
-        }
-        int cols = run->roi.x1 - run->roi.x0;
-        int *cx = r == FX_OK ? fx_mem_alloc((size_t)cols * sizeof(int)) : NULL;
-        float *ctx = r == FX_OK ? fx_mem_alloc((size_t)cols * sizeof(float)) : NULL;
-        if (r == FX_OK && (!cx || !ctx))
-            r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
-        if (r == FX_OK) {
-            comp_columns(run->roi.x0, run->roi.x1, lw, rb.downsample, cx, ctx);
-            comp_job cj = {run, NULL, lrays, lw, lh, rb.downsample, fade, p->composite == COMP_SCREEN, cx, ctx};
-            int rows = run->roi.y1 - run->roi.y0;
-            fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), comp_rows, &cj);
-        }
-        fx_mem_free(cx);
-        fx_mem_free(ctx);
-        fx_buffer_put(run->ctx, lo, lbytes);
-        fx_buffer_put(run->ctx, lrays, lbytes);
-        fx_mask_free(material);
-        return r;
-    }
-    /* occlusion and rays: RGB + a zero lane per pixel (four-lane vectors) */
     size_t n4 = 0;
-    if (!fx_size_mul(&n4, (size_t)w, (size_t)h, 4)) {
-        fx_mask_free(material);
+    if (!fx_size_mul(&n4, (size_t)w, (size_t)h, 4))
         return fx_fail(run->ctx, FX_ERR_LIMIT, "%s: frame too large", where);
-    }
     /* frame-sized: from the context's buffer store (no page faults frame after frame);
      * occ is written whole, rays inside the ROI (the debug pass wants it whole) */
     const size_t bytes = n4 * sizeof(float);
@@ -470,17 +473,16 @@ static fx_result god_rays_process(const fx_effect_run *run)
         fx_buffer_put(run->ctx, occ, bytes);
         if (run->debug)
             fx_buffer_put(run->ctx, rays, bytes);
-        fx_mask_free(material);
         return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the occlusion map", where);
     }
-    oj.occ = occ;
-    fx_parallel_for(run->ctx, h, fx_grain_for(run->ctx, h), occ_rows, &oj);
-    fx_mask_free(material);
+    oj->occ = occ;
+    fx_parallel_for(run->ctx, h, fx_grain_for(run->ctx, h), occ_rows, oj);
 
+    fx_result r;
     if (p->method == METHOD_NAIVE)
-        r = fx_radial_blur_naive(run->ctx, occ, rays, w, h, &rb, &run->roi, where);
+        r = fx_radial_blur_naive(run->ctx, occ, rays, w, h, rb, &run->roi, where);
     else
-        r = fx_radial_blur_polar(run->ctx, occ, rays, w, h, &rb, &run->roi, where);
+        r = fx_radial_blur_polar(run->ctx, occ, rays, w, h, rb, &run->roi, where);
     if (r == FX_OK) {
         comp_job cj = {run, rays, NULL, 0, 0, 1, fade, p->composite == COMP_SCREEN, NULL, NULL};
         int rows = run->roi.y1 - run->roi.y0;
@@ -497,6 +499,33 @@ static fx_result god_rays_process(const fx_effect_run *run)
     fx_buffer_put(run->ctx, occ, bytes);
     if (run->debug)
         fx_buffer_put(run->ctx, rays, bytes);
+    return r;
+}
+
+static fx_result god_rays_process(const fx_effect_run *run)
+{
+    const god_rays_params *p = run->params;
+    const int w = run->width, h = run->height;
+    double lx = 0, ly = 0, fade = 0;
+    fx_result r = find_light(run, p, run->where, &lx, &ly, &fade);
+    if (r != FX_OK)
+        return r;
+    if (!(fade > 0.0))
+        return fx_effect_pass_through(run); /* the light is behind the camera */
+    fx_radial_blur_bound_light(&lx, &ly, w, h);
+    occ_job oj;
+    fx_mask *material = NULL;
+    r = occlusion_setup(run, p, lx, ly, &oj, &material);
+    if (r == FX_OK) {
+        fx_radial_blur rb;
+        blur_setup(run, p, lx, ly, &rb);
+        int lw = 0, lh = 0;
+        if (p->method == METHOD_POLAR && !run->debug && fx_radial_blur_reduced_size(&rb, w, h, &lw, &lh))
+            r = run_reduced(run, p, &oj, &rb, lw, lh, fade);
+        else
+            r = run_full(run, p, &oj, &rb, fade);
+    }
+    fx_mask_free(material);
     return r;
 }
 
