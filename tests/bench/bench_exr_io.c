@@ -83,6 +83,8 @@ static void die(fx_context *ctx, const char *what)
 }
 
 /* One combined-only stack: a recipe with no effects needs only Combined. */
+static const int bench_threads[2] = {1, 2};
+
 static fx_stack *combined_stack(fx_context *ctx)
 {
     fx_stack *s = NULL;
@@ -92,129 +94,103 @@ static fx_stack *combined_stack(fx_context *ctx)
     return s;
 }
 
-int main(int argc, char **argv)
-{
-    if (argc < 2) {
-        fprintf(stderr, "usage: bench_exr_io IN.exr [reps] [--levels]\n");
-        return 2;
-    }
-    const char *in = argv[1];
-    int reps = 7, levels = 0, zip = 0;
-    for (int i = 2; i < argc; i++) {
-        if (strcmp(argv[i], "--levels") == 0)
-            levels = 1;
-        else if (strcmp(argv[i], "--zip") == 0)
-            zip = 1;
-        else
-            reps = atoi(argv[i]);
-    }
-    if (reps < 1 || reps > MAX_REPS)
-        reps = 7;
-    char out[256];
-    snprintf(out, sizeof out, "/tmp/bench_exr_io_%ld.exr", (long)getpid());
-
-    static const int threads[2] = {1, 2};
-    fx_context *ctx[2];
-    fx_stack *stack[2];
-    for (int t = 0; t < 2; t++) {
-        if (fx_context_new(&ctx[t], threads[t]) != FX_OK)
-            return 1;
-        stack[t] = combined_stack(ctx[t]);
-    }
 #ifndef BENCH_PUBLIC_ONLY
-    if (zip) {
-        /* [threads][stock, libdeflate][all, Combined][run] */
-        static double tz[2][2][2][MAX_REPS];
-        long sz[2][2] = {{0, 0}, {0, 0}};
-        static const fx_exr_zip_impl impl[2] = {FX_EXR_ZIP_STOCK, FX_EXR_ZIP_LIBDEFLATE};
-        char out2[300];
-        snprintf(out2, sizeof out2, "%s.libdeflate.exr", out);
-        fx_frame *f[2] = {NULL, NULL};
+/* --zip: OpenEXR's zlib against libfx's libdeflate writer, per thread count, every pass
+ * and Combined only (and with --levels, the ZIP levels); 0 when both decode the same. */
+static int bench_zip(fx_context *const ctx[2], const char *in, const char *out, int reps, int levels)
+{
+    /* [threads][stock, libdeflate][all, Combined][run] */
+    static double tz[2][2][2][MAX_REPS];
+    long sz[2][2] = {{0, 0}, {0, 0}};
+    static const fx_exr_zip_impl impl[2] = {FX_EXR_ZIP_STOCK, FX_EXR_ZIP_LIBDEFLATE};
+    char out2[300];
+    snprintf(out2, sizeof out2, "%s.libdeflate.exr", out);
+    fx_frame *f[2] = {NULL, NULL};
+    for (int t = 0; t < 2; t++)
+        if (fx_frame_read_exr(ctx[t], in, NULL, &f[t]) != FX_OK)
+            die(ctx[t], "read");
+    fx_exr_write_params p = fx_exr_write_defaults();
+    for (int r = 0; r < reps; r++)
         for (int t = 0; t < 2; t++)
-            if (fx_frame_read_exr(ctx[t], in, NULL, &f[t]) != FX_OK)
-                die(ctx[t], "read");
-        fx_exr_write_params p = fx_exr_write_defaults();
-        for (int r = 0; r < reps; r++)
-            for (int t = 0; t < 2; t++)
-                for (int k = 0; k < 2; k++)
-                    for (int c = 0; c < 2; c++) {
-                        fx_write_options wo = {sizeof wo, 0, c, NULL, NULL};
-                        const char *path = k ? out2 : out;
-                        double t0 = now();
-                        if (fx_exr_write_with(f[t], path, &wo, &p, impl[k]) != FX_OK)
-                            die(ctx[t], "write");
-                        tz[t][k][c][r] = now() - t0;
-                        sz[k][c] = file_size(path);
-                    }
-        /* the last files written are Combined only; check every pass too */
-        int same = 1;
-        for (int c = 1; c >= 0; c--) {
-            fx_write_options wo = {sizeof wo, 0, c, NULL, NULL};
-            fx_frame *a = NULL, *b = NULL;
-            if (fx_exr_write_with(f[1], out, &wo, &p, FX_EXR_ZIP_STOCK) != FX_OK ||
-                fx_exr_write_with(f[1], out2, &wo, &p, FX_EXR_ZIP_LIBDEFLATE) != FX_OK ||
-                fx_frame_read_exr(ctx[1], out, NULL, &a) != FX_OK || fx_frame_read_exr(ctx[1], out2, NULL, &b) != FX_OK)
-                die(ctx[1], "check");
-            same = same && frames_same(a, b);
-            fx_frame_free(a);
-            fx_frame_free(b);
-        }
-        printf("# %s: %dx%d, %d passes; ZIP level %d, write only, median of %d runs (ms)\n", in,
-               fx_frame_width(f[0]), fx_frame_height(f[0]), fx_frame_pass_count(f[0]), p.zip_level, reps);
-        printf("| write | threads | OpenEXR | libfx+libdeflate | OpenEXR / libfx | OpenEXR MB | libfx MB |\n"
-               "|---|---:|---:|---:|---:|---:|---:|\n");
-        for (int c = 0; c < 2; c++)
-            for (int t = 0; t < 2; t++) {
-                double ratio[MAX_REPS];
-                for (int r = 0; r < reps; r++)
-                    ratio[r] = tz[t][0][c][r] / tz[t][1][c][r];
-                double m0 = median(tz[t][0][c], reps), m1 = median(tz[t][1][c], reps);
-                printf("| %s | %d | %.1f | %.1f | %.2f | %.2f | %.2f |\n", c ? "Combined" : "all passes", threads[t],
-                       m0 * 1e3, m1 * 1e3, median(ratio, reps), sz[0][c] / 1e6, sz[1][c] / 1e6);
-            }
-        printf("decoded pixels of the two: %s\n", same ? "identical" : "DIFFERENT");
-        if (levels) {
-            /* libdeflate levels 1..9 beside zlib 1, interleaved per run, 2 threads */
-            static double tl[10][2][MAX_REPS];
-            long szl[10][2];
-            for (int r = 0; r < reps; r++)
-                for (int l = 0; l <= 9; l++)
-                    for (int c = 0; c < 2; c++) {
-                        fx_exr_write_params q = fx_exr_write_defaults();
-                        q.zip_level = l ? l : 1;
-                        fx_write_options wo = {sizeof wo, 0, c, NULL, NULL};
-                        double t0 = now();
-                        if (fx_exr_write_with(f[1], out, &wo, &q, l ? FX_EXR_ZIP_LIBDEFLATE : FX_EXR_ZIP_STOCK) != FX_OK)
-                            die(ctx[1], "write");
-                        tl[l][c][r] = now() - t0;
-                        szl[l][c] = file_size(out);
-                    }
-            printf("\n# ZIP levels, 2 threads, median of %d runs (ms; time relative to zlib level 1 from the "
-                   "same runs)\n| deflater | level | all passes ms | rel. | MB | Combined ms | rel. | MB |\n"
-                   "|---|---:|---:|---:|---:|---:|---:|---:|\n", reps);
-            for (int l = 0; l <= 9; l++) {
-                double rel[2][MAX_REPS];
-                for (int c = 0; c < 2; c++)
-                    for (int r = 0; r < reps; r++)
-                        rel[c][r] = tl[l][c][r] / tl[0][c][r];
-                double m0 = median(tl[l][0], reps), m1 = median(tl[l][1], reps);
-                printf("| %s | %d | %.1f | %.2f | %.2f | %.1f | %.2f | %.2f |\n", l ? "libfx+libdeflate" : "OpenEXR",
-                       l ? l : 1, m0 * 1e3, median(rel[0], reps), szl[l][0] / 1e6, m1 * 1e3, median(rel[1], reps),
-                       szl[l][1] / 1e6);
-            }
-        }
-        unlink(out2);
-        unlink(out);
-        for (int t = 0; t < 2; t++) {
-            fx_frame_free(f[t]);
-            fx_stack_free(stack[t]);
-            fx_context_free(ctx[t]);
-        }
-        return same ? 0 : 1;
+            for (int k = 0; k < 2; k++)
+                for (int c = 0; c < 2; c++) {
+                    fx_write_options wo = {sizeof wo, 0, c, NULL, NULL};
+                    const char *path = k ? out2 : out;
+                    double t0 = now();
+                    if (fx_exr_write_with(f[t], path, &wo, &p, impl[k]) != FX_OK)
+                        die(ctx[t], "write");
+                    tz[t][k][c][r] = now() - t0;
+                    sz[k][c] = file_size(path);
+                }
+    /* the last files written are Combined only; check every pass too */
+    int same = 1;
+    for (int c = 1; c >= 0; c--) {
+        fx_write_options wo = {sizeof wo, 0, c, NULL, NULL};
+        fx_frame *a = NULL, *b = NULL;
+        if (fx_exr_write_with(f[1], out, &wo, &p, FX_EXR_ZIP_STOCK) != FX_OK ||
+            fx_exr_write_with(f[1], out2, &wo, &p, FX_EXR_ZIP_LIBDEFLATE) != FX_OK ||
+            fx_frame_read_exr(ctx[1], out, NULL, &a) != FX_OK || fx_frame_read_exr(ctx[1], out2, NULL, &b) != FX_OK)
+            die(ctx[1], "check");
+        same = same && frames_same(a, b);
+        fx_frame_free(a);
+        fx_frame_free(b);
     }
-#else
-    (void)zip;
+    printf("# %s: %dx%d, %d passes; ZIP level %d, write only, median of %d runs (ms)\n", in,
+           fx_frame_width(f[0]), fx_frame_height(f[0]), fx_frame_pass_count(f[0]), p.zip_level, reps);
+    printf("| write | threads | OpenEXR | libfx+libdeflate | OpenEXR / libfx | OpenEXR MB | libfx MB |\n"
+           "|---|---:|---:|---:|---:|---:|---:|\n");
+    for (int c = 0; c < 2; c++)
+        for (int t = 0; t < 2; t++) {
+            double ratio[MAX_REPS];
+            for (int r = 0; r < reps; r++)
+                ratio[r] = tz[t][0][c][r] / tz[t][1][c][r];
+            double m0 = median(tz[t][0][c], reps), m1 = median(tz[t][1][c], reps);
+            printf("| %s | %d | %.1f | %.1f | %.2f | %.2f | %.2f |\n", c ? "Combined" : "all passes", bench_threads[t],
+                   m0 * 1e3, m1 * 1e3, median(ratio, reps), sz[0][c] / 1e6, sz[1][c] / 1e6);
+        }
+    printf("decoded pixels of the two: %s\n", same ? "identical" : "DIFFERENT");
+    if (levels) {
+        /* libdeflate levels 1..9 beside zlib 1, interleaved per run, 2 threads */
+        static double tl[10][2][MAX_REPS];
+        long szl[10][2];
+        for (int r = 0; r < reps; r++)
+            for (int l = 0; l <= 9; l++)
+                for (int c = 0; c < 2; c++) {
+                    fx_exr_write_params q = fx_exr_write_defaults();
+                    q.zip_level = l ? l : 1;
+                    fx_write_options wo = {sizeof wo, 0, c, NULL, NULL};
+                    double t0 = now();
+                    if (fx_exr_write_with(f[1], out, &wo, &q, l ? FX_EXR_ZIP_LIBDEFLATE : FX_EXR_ZIP_STOCK) != FX_OK)
+                        die(ctx[1], "write");
+                    tl[l][c][r] = now() - t0;
+                    szl[l][c] = file_size(out);
+                }
+        printf("\n# ZIP levels, 2 threads, median of %d runs (ms; time relative to zlib level 1 from the "
+               "same runs)\n| deflater | level | all passes ms | rel. | MB | Combined ms | rel. | MB |\n"
+               "|---|---:|---:|---:|---:|---:|---:|---:|\n", reps);
+        for (int l = 0; l <= 9; l++) {
+            double rel[2][MAX_REPS];
+            for (int c = 0; c < 2; c++)
+                for (int r = 0; r < reps; r++)
+                    rel[c][r] = tl[l][c][r] / tl[0][c][r];
+            double m0 = median(tl[l][0], reps), m1 = median(tl[l][1], reps);
+            printf("| %s | %d | %.1f | %.2f | %.2f | %.1f | %.2f | %.2f |\n", l ? "libfx+libdeflate" : "OpenEXR",
+                   l ? l : 1, m0 * 1e3, median(rel[0], reps), szl[l][0] / 1e6, m1 * 1e3, median(rel[1], reps),
+                   szl[l][1] / 1e6);
+        }
+    }
+    unlink(out2);
+    unlink(out);
+    for (int t = 0; t < 2; t++)
+        fx_frame_free(f[t]);
+    return same ? 0 : 1;
+}
 #endif
+
+/* Read (every pass, Combined only) and write (the same) at 1 and 2 threads. */
+static void bench_read_write(fx_context *const ctx[2], fx_stack *const stack[2], const char *in, const char *out,
+                             int reps)
+{
     double rd_all[2][MAX_REPS], rd_comb[2][MAX_REPS], wr_all[2][MAX_REPS], wr_comb[2][MAX_REPS];
     int w = 0, h = 0, passes = 0;
     long size_all = 0, size_comb = 0;
@@ -263,39 +239,88 @@ int main(int argc, char **argv)
     }
     printf("output sizes: all passes %.2f MB, Combined %.2f MB (input %.2f MB)\n", size_all / 1e6,
            size_comb / 1e6, file_size(in) / 1e6);
+}
 
 #ifndef BENCH_PUBLIC_ONLY
-    if (levels) {
-        fx_frame *f = NULL;
-        if (fx_frame_read_exr(ctx[1], in, NULL, &f) != FX_OK)
-            die(ctx[1], "read");
-        printf("\n# ZIP level sweep (%s), every pass, 2 threads, median of %d runs\n",
-               fx_exr_zip_available() ? "libdeflate" : "OpenEXR's zlib", reps);
-        printf("| level | write ms | MB | MB Combined only | write ms Combined only |\n|---:|---:|---:|---:|---:|\n");
-        for (int level = 1; level <= 9; level++) {
-            double tv[MAX_REPS], tc[MAX_REPS];
-            long sz = 0, szc = 0;
-            for (int r = 0; r < reps; r++) {
-                fx_exr_write_params p = fx_exr_write_defaults();
-                p.zip_level = level;
-                fx_write_options wo = {sizeof wo, 0, 0, NULL, NULL};
-                double t0 = now();
-                if (fx_exr_write(f, out, &wo, &p) != FX_OK)
-                    die(ctx[1], "write");
-                double t1 = now();
-                sz = file_size(out);
-                wo.only_combined = 1;
-                if (fx_exr_write(f, out, &wo, &p) != FX_OK)
-                    die(ctx[1], "write");
-                tc[r] = now() - t1;
-                szc = file_size(out);
-                tv[r] = t1 - t0;
-            }
-            printf("| %d | %.1f | %.2f | %.2f | %.1f |\n", level, median(tv, reps) * 1e3, sz / 1e6, szc / 1e6,
-                   median(tc, reps) * 1e3);
+/* --levels: the ZIP level sweep of the library's writer, every pass, 2 threads. */
+static void bench_levels(fx_context *ctx, const char *in, const char *out, int reps)
+{
+    fx_frame *f = NULL;
+    if (fx_frame_read_exr(ctx, in, NULL, &f) != FX_OK)
+        die(ctx, "read");
+    printf("\n# ZIP level sweep (%s), every pass, 2 threads, median of %d runs\n",
+           fx_exr_zip_available() ? "libdeflate" : "OpenEXR's zlib", reps);
+    printf("| level | write ms | MB | MB Combined only | write ms Combined only |\n|---:|---:|---:|---:|---:|\n");
+    for (int level = 1; level <= 9; level++) {
+        double tv[MAX_REPS], tc[MAX_REPS];
+        long sz = 0, szc = 0;
+        for (int r = 0; r < reps; r++) {
+            fx_exr_write_params p = fx_exr_write_defaults();
+            p.zip_level = level;
+            fx_write_options wo = {sizeof wo, 0, 0, NULL, NULL};
+            double t0 = now();
+            if (fx_exr_write(f, out, &wo, &p) != FX_OK)
+                die(ctx, "write");
+            double t1 = now();
+            sz = file_size(out);
+            wo.only_combined = 1;
+            if (fx_exr_write(f, out, &wo, &p) != FX_OK)
+                die(ctx, "write");
+            tc[r] = now() - t1;
+            szc = file_size(out);
+            tv[r] = t1 - t0;
         }
-        fx_frame_free(f);
+        printf("| %d | %.1f | %.2f | %.2f | %.1f |\n", level, median(tv, reps) * 1e3, sz / 1e6, szc / 1e6,
+               median(tc, reps) * 1e3);
     }
+    fx_frame_free(f);
+}
+#endif
+
+int main(int argc, char **argv)
+{
+    if (argc < 2) {
+        fprintf(stderr, "usage: bench_exr_io IN.exr [reps] [--levels]\n");
+        return 2;
+    }
+    const char *in = argv[1];
+    int reps = 7, levels = 0, zip = 0;
+    for (int i = 2; i < argc; i++) {
+        if (strcmp(argv[i], "--levels") == 0)
+            levels = 1;
+        else if (strcmp(argv[i], "--zip") == 0)
+            zip = 1;
+        else
+            reps = atoi(argv[i]);
+    }
+    if (reps < 1 || reps > MAX_REPS)
+        reps = 7;
+    char out[256];
+    snprintf(out, sizeof out, "/tmp/bench_exr_io_%ld.exr", (long)getpid());
+
+    fx_context *ctx[2];
+    fx_stack *stack[2];
+    for (int t = 0; t < 2; t++) {
+        if (fx_context_new(&ctx[t], bench_threads[t]) != FX_OK)
+            return 1;
+        stack[t] = combined_stack(ctx[t]);
+    }
+#ifndef BENCH_PUBLIC_ONLY
+    if (zip) {
+        int rc = bench_zip(ctx, in, out, reps, levels);
+        for (int t = 0; t < 2; t++) {
+            fx_stack_free(stack[t]);
+            fx_context_free(ctx[t]);
+        }
+        return rc;
+    }
+#else
+    (void)zip;
+#endif
+    bench_read_write(ctx, stack, in, out, reps);
+#ifndef BENCH_PUBLIC_ONLY
+    if (levels)
+        bench_levels(ctx[1], in, out, reps);
 #else
     (void)levels;
 #endif
