@@ -232,10 +232,52 @@ static void lo_rows(void *user, int y0, int y1)
     }
 }
 
+/* shade_lo's per-row and per-cell values: the lo row pair (Y0, Y1, ty) of the row, and for
+ * the lo cell column X0 last used, its four texels' indices, whether they are alike in
+ * value (uniform), and their depths and normals */
+typedef struct lo_cell {
+    int y, X0; /* the row and cell these are for (X0 -1: none yet) */
+    int Y0, Y1;
+    float ty;
+    size_t id[4];
+    int uniform;
+    float v0, a0;
+} lo_cell;
+
+static void lo_cell_row(const vsm_job *j, int y, lo_cell *c)
+{
+    const fx_rect *roi = &j->run->roi;
+    const float inv_f = 1.0f / (float)j->f;
+    const int o = j->f / 2;
+    float v = (float)(y - roi->y0 - o) * inv_f;
+    v = v > 0.0f ? (v < (float)(j->lh - 1) ? v : (float)(j->lh - 1)) : 0.0f;
+    c->y = y;
+    c->X0 = -1;
+    c->Y0 = (int)v;
+    c->Y1 = c->Y0 + 1 < j->lh ? c->Y0 + 1 : c->Y0;
+    c->ty = v - (float)c->Y0;
+}
+
+static void lo_cell_at(const vsm_job *j, int X0, lo_cell *c)
+{
+    const int X1 = X0 + 1 < j->lw ? X0 + 1 : X0;
+    const int xs[4] = {X0, X1, X0, X1}, ys[4] = {c->Y0, c->Y0, c->Y1, c->Y1};
+    for (int k = 0; k < 4; k++)
+        c->id[k] = (size_t)ys[k] * j->lw + xs[k];
+    c->v0 = j->lo_v[c->id[0]];
+    c->a0 = j->lo_a[c->id[0]];
+    int uniform = 1;
+    for (int k = 1; k < 4; k++)
+        uniform &= j->lo_v[c->id[k]] == c->v0 && j->lo_a[c->id[k]] == c->a0;
+    c->uniform = uniform;
+    c->X0 = X0;
+}
+
 /* shade_at for pixel (x, y) from the lo texels around it: bilinear weights times a depth
  * likeness (relative difference under tol, falling linearly to 0) and a normal likeness
- * (cosine above 0.8); the pixel's own shade_at when no neighbour is alike. */
-static float shade_lo(const vsm_job *j, int x, int y, int *has_surface, float *a)
+ * (cosine above 0.8); the pixel's own shade_at when no neighbour is alike. `cell` carries
+ * the row's and the last cell's values (lo_cell_row for each row first). */
+static float shade_lo(const vsm_job *j, int x, int y, lo_cell *cell, int *has_surface, float *a)
 {
     const fx_surface_src *sf = &j->surf;
     const float d = sf->depth[(size_t)y * sf->width + x];
@@ -247,48 +289,54 @@ static float shade_lo(const vsm_job *j, int x, int y, int *has_surface, float *a
     const fx_rect *roi = &j->run->roi;
     const float inv_f = 1.0f / (float)j->f;
     const int o = j->f / 2;
-    float u = (float)(x - roi->x0 - o) * inv_f, v = (float)(y - roi->y0 - o) * inv_f;
+    float u = (float)(x - roi->x0 - o) * inv_f;
     u = u > 0.0f ? (u < (float)(j->lw - 1) ? u : (float)(j->lw - 1)) : 0.0f;
-    v = v > 0.0f ? (v < (float)(j->lh - 1) ? v : (float)(j->lh - 1)) : 0.0f;
-    const int X0 = (int)u, Y0 = (int)v;
-    const int X1 = X0 + 1 < j->lw ? X0 + 1 : X0, Y1 = Y0 + 1 < j->lh ? Y0 + 1 : Y0;
-    const float tx = u - (float)X0, ty = v - (float)Y0;
+    const int X0 = (int)u;
+    if (X0 != cell->X0)
+        lo_cell_at(j, X0, cell);
+    const float tx = u - (float)X0, ty = cell->ty;
     /* the pixel's normal as stored (unnormalised: the likeness test compares squares) */
     const float *pn = sf->normal ? sf->normal + 3 * ((size_t)y * sf->width + x) : NULL;
     const float nn = pn ? pn[0] * pn[0] + pn[1] * pn[1] + pn[2] * pn[2] : 0.0f;
     const int has_n = nn > 1e-8f;
     /* |d - ds| / d < tol, weight 1 - |d - ds| / (tol d) */
-    const float tol = 0.015f * (float)j->f, lim = tol * d, inv_lim = 1.0f / lim;
-    const int xs[4] = {X0, X1, X0, X1}, ys[4] = {Y0, Y0, Y1, Y1};
-    const float bw[4] = {(1.0f - tx) * (1.0f - ty), tx * (1.0f - ty), (1.0f - tx) * ty, tx * ty};
-    float acc = 0.0f, acc_a = 0.0f, wsum = 0.0f;
+    const float tol = 0.015f * (float)j->f, lim = tol * d;
     /* the four texels alike in value (a lit or evenly shadowed area: most pixels): the
      * first one on the pixel's surface gives the answer */
-    size_t id[4];
-    for (int k = 0; k < 4; k++)
-        id[k] = (size_t)ys[k] * j->lw + xs[k];
-    const float v0 = j->lo_v[id[0]], a0 = j->lo_a[id[0]];
-    int uniform = 1;
-    for (int k = 1; k < 4; k++)
-        uniform &= j->lo_v[id[k]] == v0 && j->lo_a[id[k]] == a0;
+    if (cell->uniform) {
+        for (int k = 0; k < 4; k++) {
+            const size_t i = cell->id[k];
+            const float ds = j->lo_d[i];
+            if (!(ds > 0.0f) || !(fabsf(d - ds) < lim))
+                continue;
+            if (has_n) { /* cosine above 0.8 (the lo normals are unit or 0) */
+                const float *m = j->lo_n + 3 * i;
+                const float c = pn[0] * m[0] + pn[1] * m[1] + pn[2] * m[2];
+                if (!(c > 0.0f && c * c > 0.64f * nn))
+                    continue;
+            }
+            *has_surface = 1;
+            *a = fx_saturate(cell->a0);
+            return fx_saturate(cell->v0);
+        }
+        return shade_at(j, x, y, has_surface, a);
+    }
+    const float inv_lim = 1.0f / lim;
+    const float bw[4] = {(1.0f - tx) * (1.0f - ty), tx * (1.0f - ty), (1.0f - tx) * ty, tx * ty};
+    float acc = 0.0f, acc_a = 0.0f, wsum = 0.0f;
     for (int k = 0; k < 4; k++) {
-        const size_t i = id[k];
+        const size_t i = cell->id[k];
         const float ds = j->lo_d[i];
         if (!(ds > 0.0f))
             continue;
         const float dd = fabsf(d - ds);
         if (!(dd < lim))
             continue;
-        if (has_n) { /* cosine above 0.8 (the lo normals are unit or 0) */
+        if (has_n) {
             const float *m = j->lo_n + 3 * i;
             const float c = pn[0] * m[0] + pn[1] * m[1] + pn[2] * m[2];
             if (!(c > 0.0f && c * c > 0.64f * nn))
                 continue;
-        }
-        if (uniform) {
-            *has_surface = 1;
-            *a = fx_saturate(a0);
-            return fx_saturate(v0);
         }
         const float w = (bw[k] + 1e-3f) * (1.0f - dd * inv_lim);
         acc += w * j->lo_v[i];
@@ -309,7 +357,11 @@ static void vsm_rows(void *user, int y0, int y1)
     vsm_job *j = user;
     const fx_effect_run *run = j->run;
     const fx_rect *roi = &run->roi;
+    lo_cell cell;
+    memset(&cell, 0, sizeof cell);
     for (int y = roi->y0 + y0; y < roi->y0 + y1; y++) {
+        if (j->f > 1)
+            lo_cell_row(j, y, &cell);
         for (int x = roi->x0; x < roi->x1; x++) {
             size_t i = (size_t)y * run->width + x;
             const float *s = run->src + 4 * i;
@@ -318,7 +370,7 @@ static void vsm_rows(void *user, int y0, int y1)
             if (j->f > 1) {
                 /* reduced: the lost fraction interpolated too */
                 float a;
-                float v = shade_lo(j, x, y, &has, &a);
+                float v = shade_lo(j, x, y, &cell, &has, &a);
                 if (j->vis_out)
                     j->vis_out[i] = v;
                 if (a == 0.0f) {
