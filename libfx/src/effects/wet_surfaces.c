@@ -67,7 +67,8 @@ static const fx_param_def wet_param_defs[] = {
     FX_P_FLOAT(wet_params, gloss_boost, "gloss_boost", 1.0, 0.0, 10.0, 0.0, 3.0, "",
                "Extra glossy direct light (GlossDir x GlossCol, when the frame has them)"),
     FX_P_INT(wet_params, downsample, "downsample", 1, 1, 8, 1, 4, "",
-             "Quality: the wet look (a gain and an offset per channel) is computed every N-th pixel and "
+             "Quality: the wet look (a gain and an offset per channel) is computed every N-th pixel (of the "
+             "full-resolution frame: N / k on a 1/k proxy) and "
              "interpolated where the lattice cell lies on one smooth surface (its corners' normals "
              "agree, the pixel's depth matches); at edges, creases and silhouettes a pixel takes the "
              "corners on its own surface (depth and normal alike), and is computed exactly when none "
@@ -448,8 +449,12 @@ static fx_result wet_process(const fx_effect_run *run)
         j.gcol = gc->data;
     }
     int rows = roi->y1 - roi->y0, cols = roi->x1 - roi->x0;
-    if (p->downsample > 1 && rows > 2 && cols > 2) {
-        j.f = p->downsample;
+    /* the lattice spacing is in full-resolution pixels: a 1/k proxy's is N / k (rounded,
+     * at least 1: then every pixel) */
+    const int pf = run->proxy_factor > 1 ? run->proxy_factor : 1;
+    const int ds = (p->downsample + pf / 2) / pf;
+    if (ds > 1 && rows > 2 && cols > 2) {
+        j.f = ds;
         j.node_x = wet_lattice_axis(roi->x0, roi->x1, j.f, &j.nx);
         j.node_y = wet_lattice_axis(roi->y0, roi->y1, j.f, &j.ny);
         j.col_i0 = fx_mem_alloc((size_t)cols * sizeof(int));
