@@ -111,6 +111,15 @@ static void test_properties(fx_context *c1, fx_context *c2)
         for (int y = 5; inside && y < 35; y++)
             inside &= memcmp(m + ((size_t)y * w + 10) * 4, a + ((size_t)y * w + 10) * 4, 40 * 16) == 0;
         CHECK(inside); /* the glow comes from the whole frame */
+        /* a rectangle starting and ending between coarse's 4-pixel spans (its generic
+         * per-pixel ends and its span loop give the same bits as the whole frame's) */
+        float *m2 = run_px(c1, px, w, h, ps[k], "{\"rect\":[11,3,37,29]}");
+        CHECK(m2 && et_outside_equal(m2, px, w, h, 11, 3, 37, 29));
+        inside = m2 && a;
+        for (int y = 3; inside && y < 32; y++)
+            inside &= memcmp(m2 + ((size_t)y * w + 11) * 4, a + ((size_t)y * w + 11) * 4, 37 * 16) == 0;
+        CHECK(inside);
+        free(m2);
         free(a);
         free(b);
         free(m);

@@ -527,9 +527,9 @@ static void test_rain_downsample(fx_context *ctx)
 }
 
 /* wet_surfaces' downsample: the lattice cells on one smooth surface interpolate, the
- * others (across the wall band's creases) are computed exactly: the wall's edge columns
- * have final's bits, the rest is close to it (the cover edge's soft wetness interpolated
- * over 3 pixels), 1 and 2 threads agree. */
+ * others (across the wall band's creases) take the corners on each pixel's own surface:
+ * the wall's edge columns and the rest are close to final (the cover edge's soft wetness
+ * interpolated over 3 pixels), 1 and 2 threads agree. */
 static void test_wet_downsample(fx_context *ctx)
 {
     fx_camera mc;
@@ -538,20 +538,23 @@ static void test_wet_downsample(fx_context *ctx)
     float *full = et_run_effect(ctx, "wet_surfaces", f, "\"edge_softness\": 1.0, \"downsample\": 1", NULL);
     float *ds = et_run_effect(ctx, "wet_surfaces", f, "\"edge_softness\": 1.0, \"downsample\": 3", NULL);
     CHECK(full && ds && tu_all_finite(ds, N * N * 4));
-    float maxd = 0.0f;
-    int wall_diff = 0, changed = 0;
+    float maxd = 0.0f, wall_d = 0.0f;
+    int changed = 0;
     const float *src = et_combined(f);
     for (int i = 0; full && ds && i < N * N; i++) {
         int x = i % N;
         for (int c = 0; c < 4; c++) {
             float d = fabsf(ds[4 * i + c] - full[4 * i + c]);
             maxd = d > maxd ? d : maxd;
-            if (x == 40 || x == 47) /* the crease columns: in cells with floor and wall corners */
-                wall_diff += d != 0.0f;
+            if (x == 40 || x == 47) { /* the crease columns: in cells with floor and wall corners */
+                wall_d = d > wall_d ? d : wall_d;
+            }
             changed += ds[4 * i + c] != src[4 * i + c];
         }
     }
-    CHECK(maxd < 0.05f && wall_diff == 0 && changed > 0);
+    /* the crease columns take the corners on their own surface (the wall's or the floor's),
+     * never the other one's look: as close to final as the rest (measured 0.027) */
+    CHECK(maxd < 0.05f && wall_d < 0.035f && changed > 0);
     fx_context *c1 = NULL;
     fx_context_new(&c1, 1);
     fx_frame *f1 = ground_frame(c1, map, &mc, 1);

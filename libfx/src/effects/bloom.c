@@ -11,6 +11,8 @@
 #include "math/blur.h"
 #include "math/color.h"
 #include "core/simd4.h"
+#include "core/simd8.h"
+#include "math/clones.h"
 
 #include <float.h>
 #include <math.h>
@@ -20,6 +22,18 @@
 
 /* GCC vector extensions: one RGBA pixel per v4f (SSE2 in the baseline build), only inside
  * inline helpers and the row loops. */
+
+static inline __attribute__((always_inline)) v8f ld8(const float *p)
+{
+    v8f v;
+    memcpy(&v, p, sizeof v);
+    return v;
+}
+
+static inline __attribute__((always_inline)) void st8(float *p, v8f v)
+{
+    memcpy(p, &v, sizeof v);
+}
 
 typedef struct bloom_params {
     int mode;
@@ -176,7 +190,32 @@ static inline v4f fast_texel(const bloom_job *j, const float *r0, const float *r
 
 /* fine_level coarse: level 2 straight from the source: the bright pass of each 4x4 block's
  * mean (inputs clamped first: NaN -> 0; rows and columns past the edge replicated, as the
- * 2x2 steps do). One bright pass per 16 pixels: the frame is read once, at memory speed. */
+ * 2x2 steps do). One bright pass per 16 pixels: the frame is read once, at memory speed.
+ * Blocks inside the frame take two pixels per 8-lane vector (down2_inner, cloned). */
+static inline __attribute__((always_inline)) v8f clamp8_pos(v8f v, v8f hi)
+{
+    v = (v8f)((v8i)v & (v > S8(0.0f))); /* NaN, <= 0 -> +0 */
+    return SEL8(v < hi, v, hi);
+}
+
+/* The 4x4 block sums of texels [0, n) of one level-2 row (n blocks fully inside the
+ * frame's columns), rows r[0..3], into sum (RGBA per texel). */
+FX_CLONES
+static void down2_inner(const float *const r[4], int n, float cv, float *restrict sum)
+{
+    const v8f hi = S8(cv);
+    for (int x = 0; x < n; x++) {
+        const size_t o = 16 * (size_t)x;
+        v8f acc = S8(0.0f);
+        for (int k = 0; k < 4; k++)
+            acc += clamp8_pos(ld8(r[k] + o), hi) + clamp8_pos(ld8(r[k] + o + 8), hi);
+        float t[8];
+        memcpy(t, &acc, sizeof t);
+        for (int c = 0; c < 4; c++)
+            sum[4 * (size_t)x + c] = t[c] + t[4 + c];
+    }
+}
+
 static void down2_rows(void *user, int begin, int end)
 {
     const bloom_job *j = user;
@@ -184,6 +223,7 @@ static void down2_rows(void *user, int begin, int end)
     const int sw = run->width, sh = run->height;
     const level *d = &j->lv[2];
     const float cv = j->p->clamp_value;
+    const int inner = sw / 4 < d->w ? sw / 4 : d->w; /* blocks with all four columns inside */
     for (int y = begin; y < end; y++) {
         const float *r[4];
         for (int k = 0; k < 4; k++) {
@@ -191,20 +231,28 @@ static void down2_rows(void *user, int begin, int end)
             r[k] = run->src + (size_t)sy * sw * 4;
         }
         float *o = d->px + (size_t)y * d->w * 4;
+        down2_inner(r, inner, cv, o); /* block sums, then their bright pass in place */
         for (int x = 0; x < d->w; x++) {
-            int c[4];
-            for (int k = 0; k < 4; k++)
-                c[k] = 4 * (4 * x + k < sw ? 4 * x + k : sw - 1);
-            v4f acc = V4(0.0f);
-            for (int k = 0; k < 4; k++) {
-                v4f a0 = ld4(r[k] + c[0]), a1 = ld4(r[k] + c[1]), a2 = ld4(r[k] + c[2]), a3 = ld4(r[k] + c[3]);
+            v4f acc;
+            if (x < inner) {
+                acc = ld4(o + 4 * (size_t)x);
+            } else {
+                int c[4];
+                for (int k = 0; k < 4; k++)
+                    c[k] = 4 * (4 * x + k < sw ? 4 * x + k : sw - 1);
+                v4f lo = V4(0.0f), hi = V4(0.0f); /* as down2_inner's two halves */
+                for (int k = 0; k < 4; k++) {
+                    v4f a0 = ld4(r[k] + c[0]), a1 = ld4(r[k] + c[1]), a2 = ld4(r[k] + c[2]), a3 = ld4(r[k] + c[3]);
 #define CL(v) v = clamp4_pos(v, V4(cv))
-                CL(a0);
-                CL(a1);
-                CL(a2);
-                CL(a3);
+                    CL(a0);
+                    CL(a1);
+                    CL(a2);
+                    CL(a3);
 #undef CL
-                acc += (a0 + a1) + (a2 + a3);
+                    lo += a0 + a2;
+                    hi += a1 + a3;
+                }
+                acc = lo + hi;
             }
             float m[4];
             st4(m, acc * V4(1.0f / 16.0f));
@@ -335,12 +383,85 @@ static void composite_rows(void *user, int begin, int end)
 }
 
 /* fine_level coarse: the glow is level 2 interpolated bilinearly (4x, texel centres
- * aligned); each row first blends its two level-2 rows (per-worker scratch), then each
- * pixel blends two texels of that row. */
+ * aligned). Per row: its two level-2 rows blended (and scaled) into `row2`, each texel
+ * stored twice (8 floats); then the composite walks the row four pixels per texel span,
+ * two pixels per 8-lane vector (math/clones.h: one AVX2 register in the AVX2 clone): the
+ * span's texels a and d = b - a, the glow a + w d with the fixed weights 1/8, 3/8 | 5/8,
+ * 7/8 (the same values as the per-pixel formula, which the borders and the ROI's ends
+ * use). Every value is the same bits in either clone and for any thread count. */
 typedef struct coarse_comp {
     const bloom_job *j;
-    float **scratch; /* per worker: level 2's width of RGBA */
+    float **scratch; /* per worker: level 2's width x 8 floats */
 } coarse_comp;
+
+static inline __attribute__((always_inline)) v8f finite8(v8f v)
+{
+    v = (v8f)((v8i)v & (v == v)); /* NaN -> +0 */
+    v = SEL8(v < S8(FLT_MAX), v, S8(FLT_MAX));
+    return SEL8(v > S8(-FLT_MAX), v, S8(-FLT_MAX));
+}
+
+/* dst = finite(finite(src) + glow), screen: glow x (1 - clamp(src, 0, 1)) */
+static inline __attribute__((always_inline)) v8f comp8(v8f s, v8f g, int screen)
+{
+    s = finite8(s);
+    if (screen) {
+        v8f s01 = SEL8(s > S8(0.0f), s, S8(0.0f));
+        s01 = SEL8(s01 < S8(1.0f), s01, S8(1.0f));
+        g *= S8(1.0f) - s01;
+    }
+    return finite8(s + g);
+}
+
+static inline __attribute__((always_inline)) v4f comp4(v4f s, v4f g, int screen)
+{
+    s = finite4(s);
+    if (screen) {
+        v4f s01 = sel4(s > V4(0.0f), s, V4(0.0f));
+        s01 = sel4(s01 < V4(1.0f), s01, V4(1.0f));
+        g *= V4(1.0f) - s01;
+    }
+    return finite4(s + g);
+}
+
+/* Pixels [xa, xb) of one row: src, dst point at pixel 0 of the row; row2 holds cw texels,
+ * each twice. */
+FX_CLONES
+static void coarse_row(const int *restrict cx, const float *restrict wt, const float *restrict row2, int cw,
+                       const float *restrict src, float *restrict dst, int xa, int xb, int screen)
+{
+    const int last = cw - 1;
+    int x = xa;
+#define GENERIC(x)                                                                                             \
+    do {                                                                                                       \
+        const int x0_ = cx[x], x1_ = x0_ < last ? x0_ + 1 : x0_;                                               \
+        const v4f a_ = ld4(row2 + 8 * (size_t)x0_);                                                            \
+        const v4f g_ = a_ + V4(wt[x]) * (ld4(row2 + 8 * (size_t)x1_) - a_);                                    \
+        st4(dst + 4 * (size_t)(x), comp4(ld4(src + 4 * (size_t)(x)), g_, screen));                             \
+    } while (0)
+    for (; x < xb && (x < 2 || ((x - 2) & 3)); x++)
+        GENERIC(x);
+    const v8f w01 = { 0.125f, 0.125f, 0.125f, 0.125f, 0.375f, 0.375f, 0.375f, 0.375f };
+    const v8f w23 = { 0.625f, 0.625f, 0.625f, 0.625f, 0.875f, 0.875f, 0.875f, 0.875f };
+    if (screen) {
+        for (int k = (x - 2) >> 2; k < last && x + 4 <= xb; k++, x += 4) {
+            const v8f a = ld8(row2 + 8 * (size_t)k), d = ld8(row2 + 8 * (size_t)k + 8) - a;
+            const size_t o = 4 * (size_t)x;
+            st8(dst + o, comp8(ld8(src + o), a + w01 * d, 1));
+            st8(dst + o + 8, comp8(ld8(src + o + 8), a + w23 * d, 1));
+        }
+    } else {
+        for (int k = (x - 2) >> 2; k < last && x + 4 <= xb; k++, x += 4) {
+            const v8f a = ld8(row2 + 8 * (size_t)k), d = ld8(row2 + 8 * (size_t)k + 8) - a;
+            const size_t o = 4 * (size_t)x;
+            st8(dst + o, comp8(ld8(src + o), a + w01 * d, 0));
+            st8(dst + o + 8, comp8(ld8(src + o + 8), a + w23 * d, 0));
+        }
+    }
+    for (; x < xb; x++)
+        GENERIC(x);
+#undef GENERIC
+}
 
 static void composite_coarse_rows(void *user, int begin, int end, int worker)
 {
@@ -351,7 +472,7 @@ static void composite_coarse_rows(void *user, int begin, int end, int worker)
     const level *c = &j->lv[2];
     const float scale = p->intensity / (float)j->nlev;
     const v4f sc = { scale, scale, scale, 0.0f }; /* alpha passes */
-    float *row = cc->scratch[worker];
+    float *row2 = cc->scratch[worker];
     for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++) {
         float v = ((float)y + 0.5f) * 0.25f - 0.5f;
         v = v > 0.0f ? (v < (float)(c->h - 1) ? v : (float)(c->h - 1)) : 0.0f;
@@ -360,25 +481,13 @@ static void composite_coarse_rows(void *user, int begin, int end, int worker)
         const float *ra = c->px + (size_t)y0 * c->w * 4, *rb = c->px + (size_t)y1 * c->w * 4;
         for (int x = 0; x < c->w; x++) {
             const v4f a = ld4(ra + 4 * (size_t)x);
-            st4(row + 4 * (size_t)x, (a + ty * (ld4(rb + 4 * (size_t)x) - a)) * sc);
+            const v4f t = (a + ty * (ld4(rb + 4 * (size_t)x) - a)) * sc;
+            st4(row2 + 8 * (size_t)x, t);
+            st4(row2 + 8 * (size_t)x + 4, t);
         }
-        const float *srow = run->src + (size_t)y * run->width * 4;
-        float *drow = run->dst + (size_t)y * run->width * 4;
-        const int screen = p->composite == COMP_SCREEN;
-        const int *restrict cx = j->cx, last = c->w - 1;
-        const float *restrict cw = j->cw;
-        for (int x = run->roi.x0; x < run->roi.x1; x++) {
-            const v4f s = finite4(ld4(srow + 4 * (size_t)x));
-            const int x0 = cx[x], x1 = x0 < last ? x0 + 1 : x0;
-            const v4f a = ld4(row + 4 * (size_t)x0);
-            v4f g = a + V4(cw[x]) * (ld4(row + 4 * (size_t)x1) - a);
-            if (screen) {
-                v4f s01 = sel4(s > V4(0.0f), s, V4(0.0f));
-                s01 = sel4(s01 < V4(1.0f), s01, V4(1.0f));
-                g *= V4(1.0f) - s01;
-            }
-            st4(drow + 4 * (size_t)x, finite4(s + g));
-        }
+        const size_t o = (size_t)y * run->width * 4;
+        coarse_row(j->cx, j->cw, row2, c->w, run->src + o, run->dst + o, run->roi.x0, run->roi.x1,
+                   p->composite == COMP_SCREEN);
     }
 }
 
@@ -500,7 +609,7 @@ static fx_result bloom_process(const fx_effect_run *run)
             memset(cc.scratch, 0, (size_t)workers * sizeof(float *));
         int ok = cc.scratch && j.cx && j.cw;
         for (int k = 0; ok && k < workers; k++)
-            ok = (cc.scratch[k] = fx_mem_alloc((size_t)j.lv[2].w * 4 * sizeof(float))) != NULL;
+            ok = (cc.scratch[k] = fx_mem_alloc((size_t)j.lv[2].w * 8 * sizeof(float))) != NULL;
         if (ok) {
             for (int x = 0; x < w; x++) {
                 float u = ((float)x + 0.5f) * 0.25f - 0.5f;

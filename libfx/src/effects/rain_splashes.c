@@ -165,8 +165,12 @@ static void splash_rows(void *user, int y0, int y1)
             memcpy(o, s, 4 * sizeof(float));
             fx_vec3 w, n;
             float d, v = 0.0f;
-            if (fx_surface_world(&j->surf, x, y, &w, &d) && fx_surface_normal(&j->surf, x, y, &n) &&
-                n.z >= p->up_threshold) {
+            /* the cheap tests first (depth, an up-facing normal): most pixels are walls, sky
+             * or objects, and never need their world position (the same answers as testing
+             * the world position first: each test is pure) */
+            const float dp = j->surf.depth[i];
+            if (dp > 0.0f && dp < j->surf.far_limit && fx_surface_normal(&j->surf, x, y, &n) &&
+                n.z >= p->up_threshold && fx_surface_world(&j->surf, x, y, &w, &d)) {
                 v = splash_at(j, w, &sc);
                 /* the rain map only where there is a splash to hide */
                 if (v > 0.0f && !(fx_rain_map_exposed(&j->rm, fx_v3_add(w, fx_v3_scale(n, 0.05f))) > 0.0f))

@@ -20,6 +20,7 @@
 #include "core/parallel.h"
 #include "math/shadow_map.h"
 #include "math/surface.h"
+#include "core/simd4.h"
 
 #include <float.h>
 #include <math.h>
@@ -128,6 +129,9 @@ typedef struct vsm_job {
      * normal (0 0 0: none) */
     int f, lw, lh;
     float *lo_v, *lo_a, *lo_d, *lo_n;
+    unsigned char *lo_flags; /* per lo cell: lo_flag_rows */
+    int *col_X0;   /* per ROI column: its lo texel column (left) ... */
+    float *col_tx; /* ... and the weight of the right one */
 } vsm_job;
 
 static float visibility_at(const vsm_job *j, int x, int y, int *has_surface)
@@ -232,10 +236,96 @@ static void lo_rows(void *user, int y0, int y1)
     }
 }
 
+/* Per lo cell (texels X, X + 1 of rows Y, Y + 1, clamped to the grid): bit 0, its four
+ * texels alike in value (visibility and lost fraction); bit 1, coherent (see lo_cell). */
+static void lo_flag_rows(void *user, int y0, int y1)
+{
+    vsm_job *j = user;
+    for (int Y = y0; Y < y1; Y++)
+        for (int X = 0; X < j->lw; X++) {
+            const int X1 = X + 1 < j->lw ? X + 1 : X, Y1 = Y + 1 < j->lh ? Y + 1 : Y;
+            const size_t id[4] = {(size_t)Y * j->lw + X, (size_t)Y * j->lw + X1, (size_t)Y1 * j->lw + X,
+                                  (size_t)Y1 * j->lw + X1};
+            const float v0 = j->lo_v[id[0]], a0 = j->lo_a[id[0]];
+            int uniform = 1;
+            for (int k = 1; k < 4; k++)
+                uniform &= j->lo_v[id[k]] == v0 && j->lo_a[id[k]] == a0;
+            const float d0 = j->lo_d[id[0]], *n0 = j->lo_n + 3 * id[0];
+            int coh = d0 > 0.0f;
+            for (int k = 1; k < 4 && coh; k++) {
+                const float dk = j->lo_d[id[k]], *nk = j->lo_n + 3 * id[k];
+                coh = dk > 0.0f && fabsf(dk - d0) < 0.015f * (float)j->f * d0 &&
+                      n0[0] * nk[0] + n0[1] * nk[1] + n0[2] * nk[2] >= 0.9f;
+            }
+            j->lo_flags[(size_t)Y * j->lw + X] = (unsigned char)(uniform | coh << 1);
+        }
+}
+
+/* shade_lo's per-row and per-cell values: the lo row pair (Y0, Y1, ty) of the row, and for
+ * the lo cell column X0 last used, its four texels' indices, whether they are alike in
+ * value (uniform), and their depths and normals */
+typedef struct lo_cell {
+    int y, X0; /* the row and cell these are for (X0 -1: none yet) */
+    int Y0, Y1;
+    float ty;
+    size_t id[4];
+    int uniform;
+    float v0, a0; /* the first texel's visibility and lost fraction, in [0, 1] */
+    /* coherent: the four texels have a surface, normals within ~25 degrees of the first's
+     * and depths within 1.5 % x f of it: the row's bilinear values at the cell's left edge
+     * (l) and their change to its right edge (r - l): visibility, lost fraction, depth */
+    int coherent;
+    float vl, vd, al, ad, dl, dd;
+} lo_cell;
+
+static void lo_cell_row(const vsm_job *j, int y, lo_cell *c)
+{
+    const fx_rect *roi = &j->run->roi;
+    const float inv_f = 1.0f / (float)j->f;
+    const int o = j->f / 2;
+    float v = (float)(y - roi->y0 - o) * inv_f;
+    v = v > 0.0f ? (v < (float)(j->lh - 1) ? v : (float)(j->lh - 1)) : 0.0f;
+    c->y = y;
+    c->X0 = -1;
+    c->Y0 = (int)v;
+    c->Y1 = c->Y0 + 1 < j->lh ? c->Y0 + 1 : c->Y0;
+    c->ty = v - (float)c->Y0;
+}
+
+static void lo_cell_at(const vsm_job *j, int X0, lo_cell *c)
+{
+    const int X1 = X0 + 1 < j->lw ? X0 + 1 : X0;
+    const int xs[4] = {X0, X1, X0, X1}, ys[4] = {c->Y0, c->Y0, c->Y1, c->Y1};
+    for (int k = 0; k < 4; k++)
+        c->id[k] = (size_t)ys[k] * j->lw + xs[k];
+    c->v0 = fx_saturate(j->lo_v[c->id[0]]);
+    c->a0 = fx_saturate(j->lo_a[c->id[0]]);
+    const unsigned char fl = j->lo_flags[(size_t)c->Y0 * j->lw + X0];
+    c->uniform = fl & 1;
+    c->coherent = (fl >> 1) & 1;
+    c->X0 = X0;
+    if (c->coherent) {
+        const float ty = c->ty;
+#define ROWL(arr, k0, k1) (arr[c->id[k0]] + ty * (arr[c->id[k1]] - arr[c->id[k0]]))
+        const float vl = ROWL(j->lo_v, 0, 2), vr = ROWL(j->lo_v, 1, 3);
+        const float al = ROWL(j->lo_a, 0, 2), ar = ROWL(j->lo_a, 1, 3);
+        const float dl = ROWL(j->lo_d, 0, 2), dr = ROWL(j->lo_d, 1, 3);
+#undef ROWL
+        c->vl = vl;
+        c->vd = vr - vl;
+        c->al = al;
+        c->ad = ar - al;
+        c->dl = dl;
+        c->dd = dr - dl;
+    }
+}
+
 /* shade_at for pixel (x, y) from the lo texels around it: bilinear weights times a depth
  * likeness (relative difference under tol, falling linearly to 0) and a normal likeness
- * (cosine above 0.8); the pixel's own shade_at when no neighbour is alike. */
-static float shade_lo(const vsm_job *j, int x, int y, int *has_surface, float *a)
+ * (cosine above 0.8); the pixel's own shade_at when no neighbour is alike. `cell` carries
+ * the row's and the last cell's values (lo_cell_row for each row first). */
+static inline __attribute__((always_inline)) float shade_lo(const vsm_job *j, int x, int y, lo_cell *cell,
+                                                            int *has_surface, float *a)
 {
     const fx_surface_src *sf = &j->surf;
     const float d = sf->depth[(size_t)y * sf->width + x];
@@ -244,51 +334,68 @@ static float shade_lo(const vsm_job *j, int x, int y, int *has_surface, float *a
         *a = 0.0f;
         return 1.0f; /* as visibility_at */
     }
-    const fx_rect *roi = &j->run->roi;
-    const float inv_f = 1.0f / (float)j->f;
-    const int o = j->f / 2;
-    float u = (float)(x - roi->x0 - o) * inv_f, v = (float)(y - roi->y0 - o) * inv_f;
-    u = u > 0.0f ? (u < (float)(j->lw - 1) ? u : (float)(j->lw - 1)) : 0.0f;
-    v = v > 0.0f ? (v < (float)(j->lh - 1) ? v : (float)(j->lh - 1)) : 0.0f;
-    const int X0 = (int)u, Y0 = (int)v;
-    const int X1 = X0 + 1 < j->lw ? X0 + 1 : X0, Y1 = Y0 + 1 < j->lh ? Y0 + 1 : Y0;
-    const float tx = u - (float)X0, ty = v - (float)Y0;
+    const int col = x - j->run->roi.x0, X0 = j->col_X0[col];
+    if (X0 != cell->X0)
+        lo_cell_at(j, X0, cell);
+    const float tx = j->col_tx[col], ty = cell->ty;
     /* the pixel's normal as stored (unnormalised: the likeness test compares squares) */
     const float *pn = sf->normal ? sf->normal + 3 * ((size_t)y * sf->width + x) : NULL;
     const float nn = pn ? pn[0] * pn[0] + pn[1] * pn[1] + pn[2] * pn[2] : 0.0f;
     const int has_n = nn > 1e-8f;
     /* |d - ds| / d < tol, weight 1 - |d - ds| / (tol d) */
-    const float tol = 0.015f * (float)j->f, lim = tol * d, inv_lim = 1.0f / lim;
-    const int xs[4] = {X0, X1, X0, X1}, ys[4] = {Y0, Y0, Y1, Y1};
-    const float bw[4] = {(1.0f - tx) * (1.0f - ty), tx * (1.0f - ty), (1.0f - tx) * ty, tx * ty};
-    float acc = 0.0f, acc_a = 0.0f, wsum = 0.0f;
+    const float tol = 0.015f * (float)j->f, lim = tol * d;
     /* the four texels alike in value (a lit or evenly shadowed area: most pixels): the
      * first one on the pixel's surface gives the answer */
-    size_t id[4];
-    for (int k = 0; k < 4; k++)
-        id[k] = (size_t)ys[k] * j->lw + xs[k];
-    const float v0 = j->lo_v[id[0]], a0 = j->lo_a[id[0]];
-    int uniform = 1;
-    for (int k = 1; k < 4; k++)
-        uniform &= j->lo_v[id[k]] == v0 && j->lo_a[id[k]] == a0;
+    if (cell->uniform) {
+        for (int k = 0; k < 4; k++) {
+            const size_t i = cell->id[k];
+            const float ds = j->lo_d[i];
+            if (!(ds > 0.0f) || !(fabsf(d - ds) < lim))
+                continue;
+            if (has_n) { /* cosine above 0.8 (the lo normals are unit or 0) */
+                const float *m = j->lo_n + 3 * i;
+                const float c = pn[0] * m[0] + pn[1] * m[1] + pn[2] * m[2];
+                if (!(c > 0.0f && c * c > 0.64f * nn))
+                    continue;
+            }
+            *has_surface = 1;
+            *a = cell->a0; /* saturated already */
+            return cell->v0;
+        }
+        return shade_at(j, x, y, has_surface, a);
+    }
+    if (cell->coherent) {
+        /* one smooth surface: the pixel on it (depth within tol of the interpolated depth,
+         * normal within ~37 degrees of the first texel's) takes the bilinear values */
+        const float dz = cell->dl + tx * cell->dd;
+        int on = fabsf(d - dz) < lim;
+        if (on && has_n) {
+            const float *m = j->lo_n + 3 * cell->id[0];
+            const float c = pn[0] * m[0] + pn[1] * m[1] + pn[2] * m[2];
+            on = c > 0.0f && c * c > 0.64f * nn;
+        }
+        if (on) {
+            *has_surface = 1;
+            *a = fx_saturate(cell->al + tx * cell->ad);
+            return fx_saturate(cell->vl + tx * cell->vd);
+        }
+    }
+    const float inv_lim = 1.0f / lim;
+    const float bw[4] = {(1.0f - tx) * (1.0f - ty), tx * (1.0f - ty), (1.0f - tx) * ty, tx * ty};
+    float acc = 0.0f, acc_a = 0.0f, wsum = 0.0f;
     for (int k = 0; k < 4; k++) {
-        const size_t i = id[k];
+        const size_t i = cell->id[k];
         const float ds = j->lo_d[i];
         if (!(ds > 0.0f))
             continue;
         const float dd = fabsf(d - ds);
         if (!(dd < lim))
             continue;
-        if (has_n) { /* cosine above 0.8 (the lo normals are unit or 0) */
+        if (has_n) {
             const float *m = j->lo_n + 3 * i;
             const float c = pn[0] * m[0] + pn[1] * m[1] + pn[2] * m[2];
             if (!(c > 0.0f && c * c > 0.64f * nn))
                 continue;
-        }
-        if (uniform) {
-            *has_surface = 1;
-            *a = fx_saturate(a0);
-            return fx_saturate(v0);
         }
         const float w = (bw[k] + 1e-3f) * (1.0f - dd * inv_lim);
         acc += w * j->lo_v[i];
@@ -304,47 +411,83 @@ static float shade_lo(const vsm_job *j, int x, int y, int *has_surface, float *a
     return shade_at(j, x, y, has_surface, a);
 }
 
+/* vsm_rows for screen_downsample > 1: shade_lo per pixel, the lost fraction applied (the
+ * sun_diffuse subtraction on one RGBA vector: the same products, lane by lane, as the
+ * per-channel loop it falls back to when a channel overflows) */
+static void vsm_rows_lo(vsm_job *j, int y0, int y1)
+{
+    const fx_effect_run *run = j->run;
+    const fx_rect *roi = &run->roi;
+    const int combined = j->p->apply == APPLY_COMBINED;
+    const v4f rad = {j->sun_rad.x, j->sun_rad.y, j->sun_rad.z, 0.0f};
+    lo_cell cell;
+    memset(&cell, 0, sizeof cell);
+    for (int y = roi->y0 + y0; y < roi->y0 + y1; y++) {
+        lo_cell_row(j, y, &cell);
+        const float *srow = run->src + (size_t)y * run->width * 4;
+        float *drow = run->dst + (size_t)y * run->width * 4;
+        const float *dcrow = combined ? NULL : j->diffcol + (size_t)y * run->width * 3;
+        float *vrow = j->vis_out ? j->vis_out + (size_t)y * run->width : NULL;
+        for (int x = roi->x0; x < roi->x1; x++) {
+            const float *s = srow + 4 * (size_t)x;
+            float *o = drow + 4 * (size_t)x;
+            int has;
+            float a;
+            const float v = shade_lo(j, x, y, &cell, &has, &a);
+            if (vrow)
+                vrow[x] = v;
+            if (a == 0.0f) {
+                /* nothing lost (most lit pixels): both formulas below give s itself */
+                if (o != s)
+                    memcpy(o, s, 4 * sizeof(float));
+                continue;
+            }
+            if (combined) {
+                for (int c = 0; c < 3; c++)
+                    o[c] = s[c] * (1.0f - a);
+                o[3] = s[3];
+                continue;
+            }
+            const float *dc = dcrow + 3 * (size_t)x;
+            const v4f sv = ld4(s), dcv = {dc[0], dc[1], dc[2], 0.0f};
+            v4f r = sv - V4(a) * dcv * rad;
+            const v4f ar = (v4f)((v4i)r & (v4i){0x7fffffff, 0x7fffffff, 0x7fffffff, 0x7fffffff});
+            const v4i fin = ar <= V4(FLT_MAX);
+            if (fin[0] & fin[1] & fin[2]) {
+                r = sel4((sv >= V4(0.0f)) & (r < V4(0.0f)), V4(0.0f), r);
+                r[3] = s[3];
+                st4(o, r);
+                continue;
+            }
+            const float rd[3] = {j->sun_rad.x, j->sun_rad.y, j->sun_rad.z};
+            for (int c = 0; c < 3; c++) {
+                float rc = s[c] - a * dc[c] * rd[c];
+                if (!(fabsf(rc) <= FLT_MAX)) {
+                    double t = (double)s[c] - (double)a * dc[c] * rd[c];
+                    rc = (float)(t > FLT_MAX ? FLT_MAX : t < -FLT_MAX ? -FLT_MAX : t);
+                }
+                o[c] = s[c] >= 0.0f && rc < 0.0f ? 0.0f : rc;
+            }
+            o[3] = s[3];
+        }
+    }
+}
+
 static void vsm_rows(void *user, int y0, int y1)
 {
     vsm_job *j = user;
     const fx_effect_run *run = j->run;
     const fx_rect *roi = &run->roi;
+    if (j->f > 1) {
+        vsm_rows_lo(j, y0, y1);
+        return;
+    }
     for (int y = roi->y0 + y0; y < roi->y0 + y1; y++) {
         for (int x = roi->x0; x < roi->x1; x++) {
             size_t i = (size_t)y * run->width + x;
             const float *s = run->src + 4 * i;
             float *o = run->dst + 4 * i;
             int has;
-            if (j->f > 1) {
-                /* reduced: the lost fraction interpolated too */
-                float a;
-                float v = shade_lo(j, x, y, &has, &a);
-                if (j->vis_out)
-                    j->vis_out[i] = v;
-                if (a == 0.0f) {
-                    /* nothing lost (most lit pixels): both formulas below give s itself */
-                    if (o != s)
-                        memcpy(o, s, 4 * sizeof(float));
-                    continue;
-                }
-                if (j->p->apply == APPLY_COMBINED) {
-                    for (int c = 0; c < 3; c++)
-                        o[c] = s[c] * (1.0f - a);
-                } else {
-                    const float *dc = j->diffcol + 3 * i;
-                    float rad[3] = {j->sun_rad.x, j->sun_rad.y, j->sun_rad.z};
-                    for (int c = 0; c < 3; c++) {
-                        float r = s[c] - a * dc[c] * rad[c];
-                        if (!(fabsf(r) <= FLT_MAX)) {
-                            double t = (double)s[c] - (double)a * dc[c] * rad[c];
-                            r = (float)(t > FLT_MAX ? FLT_MAX : t < -FLT_MAX ? -FLT_MAX : t);
-                        }
-                        o[c] = s[c] >= 0.0f && r < 0.0f ? 0.0f : r;
-                    }
-                }
-                o[3] = s[3];
-                continue;
-            }
             float v = visibility_at(j, x, y, &has);
             if (j->vis_out)
                 j->vis_out[i] = v;
@@ -438,7 +581,7 @@ static fx_result vsm_process(const fx_effect_run *run)
         j.lh = rows / j.f + (rows % j.f ? 1 : 0);
         /* one block from the context's buffer store (no fresh pages frame after frame) */
         lo_n = (size_t)j.lw * j.lh;
-        lo_bytes = lo_n * 6 * sizeof(float);
+        lo_bytes = lo_n * 6 * sizeof(float) + (size_t)(roi->x1 - roi->x0) * 2 * sizeof(float) + lo_n;
         lo = fx_buffer_get(run->ctx, lo_bytes);
         if (!lo) {
             fx_aux_map_release(run->ctx, &map);
@@ -448,7 +591,18 @@ static fx_result vsm_process(const fx_effect_run *run)
         j.lo_a = lo + lo_n;
         j.lo_d = lo + 2 * lo_n;
         j.lo_n = lo + 3 * lo_n;
+        j.col_tx = lo + 6 * lo_n;
+        j.col_X0 = (int *)(j.col_tx + (roi->x1 - roi->x0));
+        j.lo_flags = (unsigned char *)(j.col_X0 + (roi->x1 - roi->x0));
+        for (int x = roi->x0; x < roi->x1; x++) {
+            /* the lo texel coordinate of column x (lo texel X sits at pixel f X + f / 2) */
+            float u = (float)(x - roi->x0 - j.f / 2) * (1.0f / (float)j.f);
+            u = u > 0.0f ? (u < (float)(j.lw - 1) ? u : (float)(j.lw - 1)) : 0.0f;
+            j.col_X0[x - roi->x0] = (int)u;
+            j.col_tx[x - roi->x0] = u - (float)(int)u;
+        }
         fx_parallel_for(run->ctx, j.lh, fx_grain_for(run->ctx, j.lh), lo_rows, &j);
+        fx_parallel_for(run->ctx, j.lh, fx_grain_for(run->ctx, j.lh), lo_flag_rows, &j);
     }
     fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), vsm_rows, &j);
     fx_buffer_put(run->ctx, lo, lo_bytes);
@@ -474,7 +628,7 @@ const fx_effect_class fx_effect_vsm_shadows = {
     .params_size = sizeof(vsm_params),
     .params = vsm_param_defs,
     .param_count = FX_COUNT_OF(vsm_param_defs),
-    .presets = {"{\"map_level\": 2, \"screen_downsample\": 4}", "{\"map_level\": 1, \"screen_downsample\": 2}", "{\"map_level\": 0}", "{\"method\": \"pcf\"}"},
+    .presets = {"{\"map_level\": 2, \"screen_downsample\": 5}", "{\"map_level\": 1, \"screen_downsample\": 2}", "{\"map_level\": 0}", "{\"method\": \"pcf\"}"},
     .passes = vsm_passes,
     .flags = FX_EFFECT_NEEDS_CAMERA,
     .aux_views = vsm_aux_views,

@@ -15,8 +15,10 @@
  * channel) is computed on a lattice of every N-th pixel (at real pixels) and interpolated
  * inside lattice cells whose four corners have a surface with normals within about 25
  * degrees, at pixels whose depth is within 2 % of the corners' interpolated depth and whose normal
- * is within about 25 degrees of theirs; every
- * other pixel (creases, silhouettes, thin objects, background) is computed exactly.
+ * is within about 25 degrees of theirs (four such pixels at a time). Any other pixel
+ * (creases, silhouettes, thin objects) takes the corners on its own surface (depth within
+ * 1.5 % x N of its own, normal within about 25 degrees) by their bilinear weights, and is
+ * computed exactly when none is; background pixels are the source.
  * downsample 1 (final, reference) is the per-pixel loop, bits unchanged. */
 #include "scene/aux_view.h"
 #include "core/effect.h"
@@ -24,6 +26,7 @@
 #include "effects/rain_common.h"
 #include "scene/rain_map.h"
 #include "math/surface.h"
+#include "core/simd4.h"
 
 #include <float.h>
 #include <math.h>
@@ -64,10 +67,12 @@ static const fx_param_def wet_param_defs[] = {
     FX_P_FLOAT(wet_params, gloss_boost, "gloss_boost", 1.0, 0.0, 10.0, 0.0, 3.0, "",
                "Extra glossy direct light (GlossDir x GlossCol, when the frame has them)"),
     FX_P_INT(wet_params, downsample, "downsample", 1, 1, 8, 1, 4, "",
-             "Quality: the wet look (a gain and an offset per channel) is computed every N-th pixel and "
+             "Quality: the wet look (a gain and an offset per channel) is computed every N-th pixel (of the "
+             "full-resolution frame: N / k on a 1/k proxy) and "
              "interpolated where the lattice cell lies on one smooth surface (its corners' normals "
-             "agree, the pixel's depth matches); other pixels (edges, creases, silhouettes) are "
-             "computed exactly; 1: every pixel"),
+             "agree, the pixel's depth matches); at edges, creases and silhouettes a pixel takes the "
+             "corners on its own surface (depth and normal alike), and is computed exactly when none "
+             "is; 1: every pixel"),
 };
 
 static fx_pass_set wet_passes(const void *params)
@@ -90,9 +95,13 @@ typedef struct wet_job {
     float *col_t;         /* ... and the weight of the right one */
     float *nodes;         /* nx * ny * 8: gain, offset[3], depth (NaN: no surface), normal[3] */
     unsigned char *smooth;/* per lattice cell: its four corners on one smooth surface */
+    struct wet_span *spans; /* per worker: nx spans of the row being written */
 } wet_job;
 
-#define WET_NODE 9 /* gain, offset[3], depth (NaN: no surface), normal[3], wetness */
+/* A lattice node: G = (gain, gain, gain, 1), O = (offset[3], 0), then wetness, depth (NaN:
+ * no surface, or a non-finite look), unit normal, padding */
+#define WET_NODE 16
+enum { N_G = 0, N_O = 4, N_WET = 8, N_DEPTH = 9, N_NX = 10 };
 
 /* The wet look of pixel i = (x, y) as out = src gain + offset: 0 without a surface (the
  * source then), wet returned for the debug pass. wet_rows (every pixel) and the lattice nodes both use it. */
@@ -147,7 +156,7 @@ static inline void wet_apply(const float *s, float *o, float gain, const float o
     o[3] = s[3];
 }
 
-/* The lattice nodes' values: gain, offset, depth, unit normal (NaN depth: no surface) */
+/* The lattice nodes' values (see WET_NODE) */
 static void wet_node_rows(void *user, int k0, int k1)
 {
     wet_job *j = user;
@@ -157,24 +166,29 @@ static void wet_node_rows(void *user, int k0, int k1)
             int x = j->node_x[i], y = j->node_y[k];
             size_t pi = (size_t)y * run->width + x;
             float *q = j->nodes + ((size_t)k * j->nx + i) * WET_NODE;
-            float wet;
+            float wet, gain, off[3];
             fx_vec3 n;
-            if (wet_pixel(j, x, y, pi, &q[0], q + 1, &wet) && fx_surface_normal(&j->surf, x, y, &n) &&
-                isfinite(q[0]) && isfinite(q[1]) && isfinite(q[2]) && isfinite(q[3])) {
-                q[4] = j->surf.depth[pi];
-                q[5] = n.x;
-                q[6] = n.y;
-                q[7] = n.z;
-                q[8] = wet;
+            memset(q, 0, WET_NODE * sizeof(float));
+            if (wet_pixel(j, x, y, pi, &gain, off, &wet) && fx_surface_normal(&j->surf, x, y, &n) &&
+                isfinite(gain) && isfinite(off[0]) && isfinite(off[1]) && isfinite(off[2])) {
+                q[N_G] = q[N_G + 1] = q[N_G + 2] = gain;
+                q[N_G + 3] = 1.0f;
+                q[N_O] = off[0];
+                q[N_O + 1] = off[1];
+                q[N_O + 2] = off[2];
+                q[N_WET] = wet;
+                q[N_DEPTH] = j->surf.depth[pi];
+                q[N_NX] = n.x;
+                q[N_NX + 1] = n.y;
+                q[N_NX + 2] = n.z;
             } else {
-                for (int c = 0; c < WET_NODE; c++)
-                    q[c] = NAN;
+                q[N_DEPTH] = NAN;
             }
         }
 }
 
 /* A lattice cell is smooth when its four corners have a surface and their normals agree
- * (within about 8 degrees of the first): a crease or a silhouette between is not. */
+ * (within about 25 degrees of the first): a crease or a silhouette between is not. */
 static void wet_cell_rows(void *user, int k0, int k1)
 {
     wet_job *j = user;
@@ -188,18 +202,73 @@ static void wet_cell_rows(void *user, int k0, int k1)
                                  j->nodes + ((size_t)kb * j->nx + i1) * WET_NODE};
             int ok = 1;
             for (int m = 0; m < 4 && ok; m++) {
-                float dot = c[0][5] * c[m][5] + c[0][6] * c[m][6] + c[0][7] * c[m][7];
-                ok = c[m][4] == c[m][4] && dot >= 0.9f;
+                float dot = c[0][N_NX] * c[m][N_NX] + c[0][N_NX + 1] * c[m][N_NX + 1] + c[0][N_NX + 2] * c[m][N_NX + 2];
+                ok = c[m][N_DEPTH] == c[m][N_DEPTH] && dot >= 0.9f;
             }
             j->smooth[(size_t)k * j->nx + i] = (unsigned char)ok;
         }
 }
 
-static void wet_lattice_rows(void *user, int y0, int y1)
+/* out = src G + O (alpha kept); a NaN channel keeps the source's, an overflow clamps */
+static inline void wet_apply4(const float *s, float *o, v4f g, v4f off)
+{
+    const v4f sv = ld4(s);
+    v4f r = sv * g + off;
+    r = sel4(r == r, r, sv);
+    r = sel4(r < V4(FLT_MAX), r, V4(FLT_MAX));
+    r = sel4(r > V4(-FLT_MAX), r, V4(-FLT_MAX));
+    r[3] = s[3];
+    st4(o, r);
+}
+
+/* Per row and lattice cell: the look at the cell's left edge (L) and its change to the
+ * right edge (D), interpolated between the cell's two node rows: G, O, then wetness and
+ * depth (lanes 0, 1 of W). */
+typedef struct wet_span {
+    v4f gl, gd, ol, od, wl, wd;
+} wet_span;
+
+/* A pixel of a cell that is not smooth (or that failed the smooth test): the corners on
+ * its own surface (depth within 1.5 % x N of its own, normal within about 25 degrees),
+ * by their bilinear weights; 0 when none is (then it is computed exactly). */
+static int wet_partial(const wet_job *j, const float *const c[4], const float bw[4], float d, const float *nq,
+                       v4f *g, v4f *off, float *wet)
+{
+    const float nn = nq[0] * nq[0] + nq[1] * nq[1] + nq[2] * nq[2];
+    const float lim = 0.015f * (float)j->f * d;
+    v4f ag = V4(0.0f), ao = V4(0.0f);
+    float aw = 0.0f, ws = 0.0f;
+    for (int m = 0; m < 4; m++) {
+        const float *q = c[m];
+        const float dd = fabsf(d - q[N_DEPTH]);
+        if (!(dd <= lim))
+            continue; /* also no surface (NaN) */
+        const float nd = nq[0] * q[N_NX] + nq[1] * q[N_NX + 1] + nq[2] * q[N_NX + 2];
+        if (!(nd > 0.0f && nd * nd >= 0.81f * nn))
+            continue;
+        const float w = bw[m] + 1e-3f;
+        ag += V4(w) * ld4(q + N_G);
+        ao += V4(w) * ld4(q + N_O);
+        aw += w * q[N_WET];
+        ws += w;
+    }
+    if (!(ws > 0.0f))
+        return 0;
+    const float inv = 1.0f / ws;
+    *g = ag * V4(inv);
+    *off = ao * V4(inv);
+    *wet = aw * inv;
+    return 1;
+}
+
+static void wet_lattice_rows(void *user, int y0, int y1, int worker)
 {
     wet_job *j = user;
     const fx_effect_run *run = j->run;
     const fx_rect *roi = &run->roi;
+    wet_span *sp = j->spans + (size_t)worker * j->nx;
+    const int ncx = j->nx > 1 ? j->nx - 1 : 1;
+    const float far = j->surf.far_limit;
     for (int y = roi->y0 + y0; y < roi->y0 + y1; y++) {
         int k = (y - roi->y0) / j->f;
         if (k > j->ny - 2)
@@ -210,44 +279,122 @@ static void wet_lattice_rows(void *user, int y0, int y1)
         int span = j->node_y[k1] - j->node_y[k];
         float ty = span > 0 ? (float)(y - j->node_y[k]) / (float)span : 0.0f;
         ty = ty > 1.0f ? 1.0f : ty;
-        for (int x = roi->x0; x < roi->x1; x++) {
-            size_t i = (size_t)y * run->width + x;
-            const float *s = run->src + 4 * i;
-            float *o = run->dst + 4 * i;
-            int col = x - roi->x0, c0 = j->col_i0[col], c1 = j->nx > 1 ? c0 + 1 : c0;
-            float gain = 1.0f, off[3] = {0.0f, 0.0f, 0.0f}, wet = 0.0f;
-            int done = 0;
-            if (j->smooth[(size_t)k * j->nx + c0]) {
-                const float *a = j->nodes + ((size_t)k * j->nx + c0) * WET_NODE;
-                const float *b = j->nodes + ((size_t)k * j->nx + c1) * WET_NODE;
-                const float *c = j->nodes + ((size_t)k1 * j->nx + c0) * WET_NODE;
-                const float *e = j->nodes + ((size_t)k1 * j->nx + c1) * WET_NODE;
-                float tx = j->col_t[col];
-                float w00 = (1.0f - tx) * (1.0f - ty), w10 = tx * (1.0f - ty), w01 = (1.0f - tx) * ty, w11 = tx * ty;
-                float dz = w00 * a[4] + w10 * b[4] + w01 * c[4] + w11 * e[4];
-                float d = j->surf.depth[i];
-                /* the pixel on the corners' surface: its depth within 2 % of theirs and its
-                 * normal within about 25 degrees of the first corner's (a ledge's edge) */
-                const float *nq = j->surf.normal + 3 * i;
-                float nd = nq[0] * a[5] + nq[1] * a[6] + nq[2] * a[7];
-                float nn = nq[0] * nq[0] + nq[1] * nq[1] + nq[2] * nq[2];
-                if (d > 0.0f && d < j->surf.far_limit && fabsf(d - dz) <= 0.02f * d && nd > 0.0f &&
-                    nd * nd >= 0.81f * nn) {
-                    gain = w00 * a[0] + w10 * b[0] + w01 * c[0] + w11 * e[0];
-                    for (int ch = 0; ch < 3; ch++)
-                        off[ch] = w00 * a[1 + ch] + w10 * b[1 + ch] + w01 * c[1 + ch] + w11 * e[1 + ch];
-                    wet = w00 * a[8] + w10 * b[8] + w01 * c[8] + w11 * e[8];
-                    done = 1;
+        const v4f vty = V4(ty);
+        /* the smooth cells' spans of this row */
+        for (int i = 0; i < ncx; i++) {
+            if (!j->smooth[(size_t)k * j->nx + i])
+                continue;
+            const int i1 = j->nx > 1 ? i + 1 : i;
+            const float *a = j->nodes + ((size_t)k * j->nx + i) * WET_NODE;
+            const float *b = j->nodes + ((size_t)k * j->nx + i1) * WET_NODE;
+            const float *c = j->nodes + ((size_t)k1 * j->nx + i) * WET_NODE;
+            const float *e = j->nodes + ((size_t)k1 * j->nx + i1) * WET_NODE;
+            wet_span *s = &sp[i];
+#define LERP(p, q) (ld4(p) + vty * (ld4(q) - ld4(p)))
+            const v4f gl = LERP(a + N_G, c + N_G), gr = LERP(b + N_G, e + N_G);
+            const v4f ol = LERP(a + N_O, c + N_O), orr = LERP(b + N_O, e + N_O);
+            const v4f wl = LERP(a + N_WET, c + N_WET), wr = LERP(b + N_WET, e + N_WET);
+#undef LERP
+            s->gl = gl;
+            s->gd = gr - gl;
+            s->ol = ol;
+            s->od = orr - ol;
+            s->wl = wl;
+            s->wd = wr - wl;
+        }
+        const float *restrict depth = j->surf.depth + (size_t)y * run->width;
+        const float *restrict normal = j->surf.normal + (size_t)y * run->width * 3;
+        const float *restrict src = run->src + (size_t)y * run->width * 4;
+        float *restrict dst = run->dst + (size_t)y * run->width * 4;
+        float *restrict dbg = j->dbg ? j->dbg + (size_t)y * run->width : NULL;
+        const unsigned char *srow = j->smooth + (size_t)k * j->nx;
+        const float *nrow0 = j->nodes + (size_t)k * j->nx * WET_NODE, *nrow1 = j->nodes + (size_t)k1 * j->nx * WET_NODE;
+        const float *restrict col_t = j->col_t - roi->x0;
+        for (int cc = 0; cc < ncx; cc++) {
+            /* the pixels of this cell's columns (the last cell takes the ROI's rest) */
+            const int xs = roi->x0 + cc * j->f, xe = cc == ncx - 1 ? roi->x1 : xs + j->f;
+            const int smooth = srow[cc], c1 = j->nx > 1 ? cc + 1 : cc;
+            const wet_span sc = smooth ? sp[cc] : (wet_span){0};
+            const float *an = nrow0 + (size_t)cc * WET_NODE + N_NX;
+            const float an0 = an[0], an1 = an[1], an2 = an[2];
+            const float *c[4] = {nrow0 + (size_t)cc * WET_NODE, nrow0 + (size_t)c1 * WET_NODE,
+                                 nrow1 + (size_t)cc * WET_NODE, nrow1 + (size_t)c1 * WET_NODE};
+            int x = xs;
+            if (smooth) {
+                /* four pixels at a time while all four lie on the cell's surface (the same
+                 * tests, lane by lane, as the one-pixel loop below: the same bits) */
+                const v4f wl0 = V4(sc.wl[0]), wd0 = V4(sc.wd[0]), wl1 = V4(sc.wl[1]), wd1 = V4(sc.wd[1]);
+                for (; x + 4 <= xe; x += 4) {
+                    const v4f d4 = ld4(depth + x), tx4 = ld4(col_t + x);
+                    const float *q = normal + 3 * (size_t)x;
+                    const v4f nx = {q[0], q[3], q[6], q[9]}, ny = {q[1], q[4], q[7], q[10]},
+                              nz = {q[2], q[5], q[8], q[11]};
+                    const v4f dz = wl1 + tx4 * wd1;
+                    const v4f nd = nx * V4(an0) + ny * V4(an1) + nz * V4(an2);
+                    const v4f nn = nx * nx + ny * ny + nz * nz;
+                    const v4f dd = (v4f)((v4i)(d4 - dz) & (v4i){0x7fffffff, 0x7fffffff, 0x7fffffff, 0x7fffffff}); /* |d - dz| */
+                    const v4i ok = (d4 > V4(0.0f)) & (d4 < V4(far)) & (dd <= V4(0.02f) * d4) & (nd > V4(0.0f)) &
+                                   (nd * nd >= V4(0.81f) * nn);
+                    if (!(ok[0] & ok[1] & ok[2] & ok[3]))
+                        break;
+                    const v4f wet4 = wl0 + tx4 * wd0;
+                    for (int m = 0; m < 4; m++) {
+                        const float *s = src + 4 * (size_t)(x + m);
+                        float *o = dst + 4 * (size_t)(x + m);
+                        if (wet4[m] > 0.0f)
+                            wet_apply4(s, o, sc.gl + V4(tx4[m]) * sc.gd, sc.ol + V4(tx4[m]) * sc.od);
+                        else
+                            memcpy(o, s, 4 * sizeof(float)); /* dry: the source */
+                        if (dbg)
+                            dbg[x + m] = wet4[m];
+                    }
                 }
             }
-            if (!done)
-                wet_pixel(j, x, y, i, &gain, off, &wet);
-            if (wet > 0.0f)
-                wet_apply(s, o, gain, off);
-            else
-                memcpy(o, s, 4 * sizeof(float)); /* dry, or no surface: the source */
-            if (j->dbg)
-                j->dbg[i] = wet;
+            for (; x < xe; x++) {
+                const float *s = src + 4 * (size_t)x;
+                float *o = dst + 4 * (size_t)x;
+                const float d = depth[x];
+                if (!(d > 0.0f && d < far)) { /* no surface: the source */
+                    memcpy(o, s, 4 * sizeof(float));
+                    if (dbg)
+                        dbg[x] = 0.0f;
+                    continue;
+                }
+                const float tx = col_t[x];
+                const float *nq = normal + 3 * (size_t)x;
+                v4f g, off;
+                float wet = 0.0f;
+                int done = 0;
+                if (smooth) {
+                    const v4f w = sc.wl + V4(tx) * sc.wd; /* wetness, depth */
+                    /* the pixel on the corners' surface: its depth within 2 % of theirs and
+                     * its normal within about 25 degrees of the first corner's */
+                    const float nd = nq[0] * an0 + nq[1] * an1 + nq[2] * an2;
+                    const float nn = nq[0] * nq[0] + nq[1] * nq[1] + nq[2] * nq[2];
+                    if (fabsf(d - w[1]) <= 0.02f * d && nd > 0.0f && nd * nd >= 0.81f * nn) {
+                        g = sc.gl + V4(tx) * sc.gd;
+                        off = sc.ol + V4(tx) * sc.od;
+                        wet = w[0];
+                        done = 1;
+                    }
+                }
+                if (!done) {
+                    const float bw[4] = {(1.0f - tx) * (1.0f - ty), tx * (1.0f - ty), (1.0f - tx) * ty, tx * ty};
+                    done = wet_partial(j, c, bw, d, nq, &g, &off, &wet);
+                }
+                if (!done) {
+                    float gain, o3[3];
+                    wet_pixel(j, x, y, (size_t)y * run->width + x, &gain, o3, &wet);
+                    g = (v4f){gain, gain, gain, 1.0f};
+                    off = (v4f){o3[0], o3[1], o3[2], 0.0f};
+                }
+                if (wet > 0.0f)
+                    wet_apply4(s, o, g, off);
+                else
+                    memcpy(o, s, 4 * sizeof(float)); /* dry: the source */
+                if (dbg)
+                    dbg[x] = wet;
+            }
         }
     }
 }
@@ -302,15 +449,21 @@ static fx_result wet_process(const fx_effect_run *run)
         j.gcol = gc->data;
     }
     int rows = roi->y1 - roi->y0, cols = roi->x1 - roi->x0;
-    if (p->downsample > 1 && rows > 2 && cols > 2) {
-        j.f = p->downsample;
+    /* the lattice spacing is in full-resolution pixels: a 1/k proxy's is N / k (rounded,
+     * at least 1: then every pixel) */
+    const int pf = run->proxy_factor > 1 ? run->proxy_factor : 1;
+    const int ds = (p->downsample + pf / 2) / pf;
+    if (ds > 1 && rows > 2 && cols > 2) {
+        j.f = ds;
         j.node_x = wet_lattice_axis(roi->x0, roi->x1, j.f, &j.nx);
         j.node_y = wet_lattice_axis(roi->y0, roi->y1, j.f, &j.ny);
         j.col_i0 = fx_mem_alloc((size_t)cols * sizeof(int));
         j.col_t = fx_mem_alloc((size_t)cols * sizeof(float));
         j.nodes = j.node_x && j.node_y ? fx_mem_alloc((size_t)j.nx * j.ny * WET_NODE * sizeof(float)) : NULL;
         j.smooth = j.node_x && j.node_y ? fx_mem_alloc((size_t)j.nx * j.ny) : NULL;
-        int ok = j.node_x && j.node_y && j.col_i0 && j.col_t && j.nodes && j.smooth;
+        const int workers = fx_parallel_workers(run->ctx) > 0 ? fx_parallel_workers(run->ctx) : 1;
+        j.spans = j.node_x && j.node_y ? fx_mem_alloc((size_t)workers * j.nx * sizeof(wet_span)) : NULL;
+        int ok = j.node_x && j.node_y && j.col_i0 && j.col_t && j.nodes && j.smooth && j.spans;
         if (ok) {
             for (int c = 0; c < cols; c++) {
                 int i0 = c / j.f;
@@ -322,7 +475,7 @@ static fx_result wet_process(const fx_effect_run *run)
             }
             fx_parallel_for(run->ctx, j.ny, 1, wet_node_rows, &j);
             fx_parallel_for(run->ctx, j.ny - 1, 1, wet_cell_rows, &j);
-            fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), wet_lattice_rows, &j);
+            fx_parallel_for_worker(run->ctx, rows, fx_grain_for(run->ctx, rows), wet_lattice_rows, &j);
         }
         fx_mem_free(j.node_x);
         fx_mem_free(j.node_y);
@@ -330,6 +483,7 @@ static fx_result wet_process(const fx_effect_run *run)
         fx_mem_free(j.col_t);
         fx_mem_free(j.nodes);
         fx_mem_free(j.smooth);
+        fx_mem_free(j.spans);
         if (!ok)
             return fx_rain_effect_end(run, &j.rm, fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where));
     } else {
@@ -344,8 +498,8 @@ const fx_effect_class fx_effect_wet_surfaces = {
     .params_size = sizeof(wet_params),
     .params = wet_param_defs,
     .param_count = FX_COUNT_OF(wet_param_defs),
-    /* draft at least 3x faster than final */
-    .presets = {"{\"downsample\": 3}", "{\"downsample\": 2}", "{\"downsample\": 1}", "{\"downsample\": 1}"},
+    /* draft at least 3x faster than final (docs/effects/wet_surfaces.md) */
+    .presets = {"{\"downsample\": 8}", "{\"downsample\": 3}", "{\"downsample\": 1}", "{\"downsample\": 1}"},
     .passes = wet_passes,
     .flags = FX_EFFECT_NEEDS_CAMERA,
     .aux_views = fx_aux_needs_rain_map, /* what is under cover */
