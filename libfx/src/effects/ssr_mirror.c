@@ -888,6 +888,29 @@ static fx_result ssr_glossy_lookup(const fx_effect_run *run, ssr_job *j, float *
     return FX_OK;
 }
 
+/* Whether the shading reads the finished one-bounce image: only a ray that lands on this
+ * entry's own mirror reads it, and without mirror_surfaces only first hits can (the
+ * recursion starts only on own pixels). A flat mirror never sees itself: its three
+ * estimate iterations would be computed and never read. Serial, O(ROI). */
+static int ssr_needs_estimate(const ssr_job *j)
+{
+    if (j->surfaces)
+        return 1;
+    const fx_rect *roi = &j->run->roi;
+    const size_t n = (size_t)(roi->x1 - roi->x0) * (size_t)(roi->y1 - roi->y0);
+    for (size_t k = 0; k < n; k++) {
+        const cell_hit *h = &j->hits[k];
+        if (h->state != 1 || !(h->conf > 0.0f))
+            continue;
+        /* the hit pixel as ray_colour finds it */
+        int hx = (int)fx_clampf(floorf(h->px), 0.0f, (float)(j->F->w - 1));
+        int hy = (int)fx_clampf(floorf(h->py), 0.0f, (float)(j->F->h - 1));
+        if (own_at(j, hx, hy))
+            return 1;
+    }
+    return 0;
+}
+
 /* Process stage 4 (bounces > 1 under a mask): the finished one-bounce image of this
  * mirror, Jacobi-iterated on the first-bounce hits (a ray landing on this mirror sees its
  * previous iterate): the estimate where the traced bounces run out. Two buffers over the
@@ -973,7 +996,7 @@ static fx_result ssr_process(const fx_effect_run *run)
         j.dbg_xy = fx_effect_debug_pass(run, "hit_xy", 3, &r);
     if (!r)
         j.dbg_len = fx_effect_debug_pass(run, "ray_length", 1, &r);
-    if (r || (p->bounces > 1 && run->mask && (r = ssr_multi_bounce(run, &j, fin, frame_bytes))))
+    if (r || (p->bounces > 1 && run->mask && ssr_needs_estimate(&j) && (r = ssr_multi_bounce(run, &j, fin, frame_bytes))))
         goto out;
     /* stage 5: the mirror shaded into dst */
     const int rows = roi->y1 - roi->y0;
