@@ -267,6 +267,8 @@ typedef struct ssr_job {
     int last_bounce;           /* bounces left after the first: 0 while iterating fin */
     int own_only;              /* iterating fin after the first iteration: only the pixels whose
                                   first hit lands on this mirror change */
+    int reuse_fin;             /* final shading after the estimate, no debug layers: pixels whose
+                                  first hit bounces no further copy their estimate */
     float opm[16];
     float *dbg_hit, *dbg_xy, *dbg_len;
 } ssr_job;
@@ -458,6 +460,17 @@ static inline int hit_on_own(const ssr_job *j, const cell_hit *h)
     return own_at(j, hx, hy);
 }
 
+/* Whether ray_colour would reflect a first hit again (it lands on this mirror or on a
+ * mirror_surfaces pixel); a miss (conf 0) does not. */
+static inline int hit_bounces(const ssr_job *j, const cell_hit *h)
+{
+    if (h->state != 1 || !(h->conf > 0.0f))
+        return 0;
+    int hx = (int)fx_clampf(floorf(h->px), 0.0f, (float)(j->F->w - 1));
+    int hy = (int)fx_clampf(floorf(h->py), 0.0f, (float)(j->F->h - 1));
+    return own_at(j, hx, hy) || (j->surfaces && j->surfaces->coverage[(size_t)hy * j->F->w + hx] > 0.5f);
+}
+
 /* Weight of the reflection on a pixel of this mirror seen along `incident`. */
 static inline float mirror_weight(const ssr_params *p, fx_vec3 n, fx_vec3 incident)
 {
@@ -627,6 +640,13 @@ static void shade_rows(void *user, int begin, int end)
             cell_hit h = pixel_hit(j, x, y);
             if (j->own_only && !hit_on_own(j, &h))
                 continue; /* reads no estimate: the previous iterate's value stands */
+            if (j->reuse_fin && !hit_bounces(j, &h)) {
+                /* a first hit that bounces no further: the final shading equals the
+                 * estimate's (same lookup, same mix), which holds it */
+                memcpy(o, j->fin + ((size_t)(y - j->fin_box.y0) * (j->fin_box.x1 - j->fin_box.x0) +
+                                    (x - j->fin_box.x0)) * 4, 4 * sizeof(float));
+                continue;
+            }
             if (j->out != run->dst)
                 memcpy(o, s, 4 * sizeof(float));
             float d;
@@ -1016,6 +1036,7 @@ static fx_result ssr_process(const fx_effect_run *run)
     const int rows = roi->y1 - roi->y0;
     j.out = run->dst;
     j.last_bounce = p->bounces - 1;
+    j.reuse_fin = j.fin && !j.dbg_hit && !j.dbg_xy && !j.dbg_len;
     fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), shade_rows, &j);
 out:
     fx_buffer_put(run->ctx, fin[0], 2 * frame_bytes);
