@@ -263,6 +263,10 @@ typedef struct ssr_job {
     fx_rect fin_box;           /* the mask's bounds + 2 px (every bilinear tap of an own pixel) */
     float *out;                /* where shade_rows writes: run->dst, or a fin buffer (fin_box) */
     int last_bounce;           /* bounces left after the first: 0 while iterating fin */
+    int own_only;              /* iterating fin after the first iteration: only the pixels whose
+                                  first hit lands on this mirror change */
+    int reuse_fin;             /* final shading after the estimate, no debug layers: pixels whose
+                                  first hit bounces no further copy their estimate */
     float opm[16];
     float *dbg_hit, *dbg_xy, *dbg_len;
 } ssr_job;
@@ -444,6 +448,27 @@ static inline int own_at(const ssr_job *j, int x, int y)
     return j->run->mask && j->run->mask->coverage[(size_t)y * j->F->w + x] > 0.5f;
 }
 
+/* Whether a first hit lands on this entry's own mirror (the pixel ray_colour finds). */
+static inline int hit_on_own(const ssr_job *j, const cell_hit *h)
+{
+    if (h->state != 1 || !(h->conf > 0.0f))
+        return 0;
+    int hx = (int)fx_clampf(floorf(h->px), 0.0f, (float)(j->F->w - 1));
+    int hy = (int)fx_clampf(floorf(h->py), 0.0f, (float)(j->F->h - 1));
+    return own_at(j, hx, hy);
+}
+
+/* Whether ray_colour would reflect a first hit again (it lands on this mirror or on a
+ * mirror_surfaces pixel); a miss (conf 0) does not. */
+static inline int hit_bounces(const ssr_job *j, const cell_hit *h)
+{
+    if (h->state != 1 || !(h->conf > 0.0f))
+        return 0;
+    int hx = (int)fx_clampf(floorf(h->px), 0.0f, (float)(j->F->w - 1));
+    int hy = (int)fx_clampf(floorf(h->py), 0.0f, (float)(j->F->h - 1));
+    return own_at(j, hx, hy) || (j->surfaces && j->surfaces->coverage[(size_t)hy * j->F->w + hx] > 0.5f);
+}
+
 /* Weight of the reflection on a pixel of this mirror seen along `incident`. */
 static inline float mirror_weight(const ssr_params *p, fx_vec3 n, fx_vec3 incident)
 {
@@ -610,9 +635,18 @@ static void shade_rows(void *user, int begin, int end)
                 memcpy(o, s, 4 * sizeof(float));
             if (!in_mask(m, w, x, y))
                 continue;
+            cell_hit h = pixel_hit(j, x, y);
+            if (j->own_only && !hit_on_own(j, &h))
+                continue; /* reads no estimate: the previous iterate's value stands */
+            if (j->reuse_fin && !hit_bounces(j, &h)) {
+                /* a first hit that bounces no further: the final shading equals the
+                 * estimate's (same lookup, same mix), which holds it */
+                memcpy(o, j->fin + ((size_t)(y - j->fin_box.y0) * (j->fin_box.x1 - j->fin_box.x0) +
+                                    (x - j->fin_box.x0)) * 4, 4 * sizeof(float));
+                continue;
+            }
             if (j->out != run->dst)
                 memcpy(o, s, 4 * sizeof(float));
-            cell_hit h = pixel_hit(j, x, y);
             float d;
             fx_vec3 pos = view_pos_at(F, x, y, &d);
             fx_vec3 inc = F->view.orthographic ? fx_v3(0, 0, -1) : fx_v3_normalize_or(pos, fx_v3(0, 0, -1));
@@ -846,6 +880,22 @@ static fx_result ssr_glossy_lookup(const fx_effect_run *run, ssr_job *j, float *
     return FX_OK;
 }
 
+/* Whether the shading reads the finished one-bounce image: only a ray that lands on this
+ * entry's own mirror reads it, and without mirror_surfaces only first hits can (the
+ * recursion starts only on own pixels). A flat mirror never sees itself: its three
+ * estimate iterations would be computed and never read. Serial, O(ROI). */
+static int ssr_needs_estimate(const ssr_job *j)
+{
+    if (j->surfaces)
+        return 1;
+    const fx_rect *roi = &j->run->roi;
+    const size_t n = (size_t)(roi->x1 - roi->x0) * (size_t)(roi->y1 - roi->y0);
+    for (size_t k = 0; k < n; k++)
+        if (hit_on_own(j, &j->hits[k]))
+            return 1;
+    return 0;
+}
+
 /* Process stage 4 (bounces > 1 under a mask): the finished one-bounce image of this
  * mirror, Jacobi-iterated on the first-bounce hits (a ray landing on this mirror sees its
  * previous iterate): the estimate where the traced bounces run out. Two buffers over the
@@ -875,16 +925,23 @@ static fx_result ssr_multi_bounce(const fx_effect_run *run, ssr_job *j, float *f
             int in = x >= lb->x0 && x < lb->x1 && y >= lb->y0 && y < lb->y1;
             const float *sp = (in ? j->lookup : run->src) + ((size_t)y * F->w + x) * 4;
             size_t o = ((size_t)(y - fb.y0) * bw + (x - fb.x0)) * 4;
-            memcpy(fin[0] + o, sp, 4 * sizeof(float));
-            memcpy(fin[1] + o, sp, 4 * sizeof(float));
+            memcpy(fin[0] + o, sp, 4 * sizeof(float)); /* fin[1]: a copy after the first iteration */
         }
     j->last_bounce = 0;
     j->fin = NULL;
+    /* Jacobi iterations: a pixel whose first hit misses this mirror reads no estimate, so
+     * it has the same value in every iterate. The first iteration shades every pixel and
+     * is copied to the other buffer; the later ones redo only the pixels seeing this
+     * mirror (the same bits as shading all of them). */
     for (int it = 0; it < FIN_ITERATIONS; it++) {
         j->out = fin[it & 1];
+        j->own_only = it > 0;
         fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), shade_rows, j);
         j->fin = j->out;
+        if (it == 0)
+            memcpy(fin[1], fin[0], (size_t)(fb.y1 - fb.y0) * bw * 4 * sizeof(float));
     }
+    j->own_only = 0;
     return FX_OK;
 }
 
@@ -926,12 +983,13 @@ static fx_result ssr_process(const fx_effect_run *run)
         j.dbg_xy = fx_effect_debug_pass(run, "hit_xy", 3, &r);
     if (!r)
         j.dbg_len = fx_effect_debug_pass(run, "ray_length", 1, &r);
-    if (r || (p->bounces > 1 && run->mask && (r = ssr_multi_bounce(run, &j, fin, frame_bytes))))
+    if (r || (p->bounces > 1 && run->mask && ssr_needs_estimate(&j) && (r = ssr_multi_bounce(run, &j, fin, frame_bytes))))
         goto out;
     /* stage 5: the mirror shaded into dst */
     const int rows = roi->y1 - roi->y0;
     j.out = run->dst;
     j.last_bounce = p->bounces - 1;
+    j.reuse_fin = j.fin && !j.dbg_hit && !j.dbg_xy && !j.dbg_len;
     fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), shade_rows, &j);
 out:
     fx_buffer_put(run->ctx, fin[0], 2 * frame_bytes);

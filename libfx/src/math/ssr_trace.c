@@ -23,14 +23,14 @@ typedef struct line_state {
     int w, h;
 } line_state;
 
-static void pixel_at(const line_state *L, double s, double *x, double *y)
+static inline void pixel_at(const line_state *L, double s, double *x, double *y)
 {
     double a = L->p0[0] + L->dp[0] * s, b = L->p0[1] + L->dp[1] * s;
     *x = L->swap ? b : a;
     *y = L->swap ? a : b;
 }
 
-static double depth_at(const line_state *L, double s)
+static inline double depth_at(const line_state *L, double s)
 {
     double k = L->k0 + L->dk * s;
     double z = L->q0[2] + L->dq[2] * s;
@@ -69,20 +69,33 @@ static double surface_depth_at(const surface *sf, const line_state *L, double s)
     return isfinite(t) && t > 0.5 * sf->depth && t < 2.0 * sf->depth ? t : sf->depth;
 }
 
-static double surface_at(const fx_ssr_scene *sc, const line_state *L, double s, int ix, int iy)
-{
+/* A one-pixel memo of surface_get: the refinement's points mostly fall on the pixel of
+ * the previous one (the plane comes from the scene's callback: normal, position). */
+typedef struct surface_memo {
+    int x, y; /* -1: empty */
     surface sf;
-    surface_get(sc, ix, iy, &sf);
-    return surface_depth_at(&sf, L, s);
+} surface_memo;
+
+static double surface_at(const fx_ssr_scene *sc, const line_state *L, double s, int ix, int iy,
+                         surface_memo *memo)
+{
+    if (memo->x != ix || memo->y != iy) {
+        surface_get(sc, ix, iy, &memo->sf);
+        memo->x = ix;
+        memo->y = iy;
+    }
+    return surface_depth_at(&memo->sf, L, s);
 }
 
-static int pixel_index(const line_state *L, double s, int *ix, int *iy)
+static inline int pixel_index(const line_state *L, double s, int *ix, int *iy)
 {
     double x, y;
     pixel_at(L, s, &x, &y);
     if (!(x > -1.0 && x < L->w + 1.0 && y > -1.0 && y < L->h + 1.0))
         return 0;
-    int i = (int)floor(x), j = (int)floor(y);
+    /* truncation, not floor (a libm call or a long sequence without SSE4.1): the same
+     * pixel after the clamp, as x, y > -1 here */
+    int i = (int)x, j = (int)y;
     *ix = i < 0 ? 0 : i >= L->w ? L->w - 1 : i;
     *iy = j < 0 ? 0 : j >= L->h ? L->h - 1 : j;
     return 1;
@@ -127,10 +140,9 @@ static int test_span(const fx_ssr_scene *s, const line_state *L, fx_vec3 dir, co
      * slab (the plane's depth is within 2 x the sample: a ray already that far behind
      * has not crossed it). With one-pixel spans (Hi-Z) a crossing that ends in front of
      * the sample is missed: the linear march's longer spans catch more of them. */
+    surface_memo memo = { -1, -1, { 0.0, { 0.0, 0.0, 0.0, 0.0 }, 0 } };
     if (!cand && s->surface_plane && d_cur >= sd && d_prev <= 2.0 * sd) {
-        surface sf;
-        surface_get(s, ix, iy, &sf);
-        double pp = surface_depth_at(&sf, L, s_prev), pc = surface_depth_at(&sf, L, s_cur);
+        double pp = surface_at(s, L, s_prev, ix, iy, &memo), pc = surface_at(s, L, s_cur, ix, iy, &memo);
         cand = d_prev <= pp && d_cur >= pc;
     }
     if (!cand)
@@ -141,7 +153,7 @@ static int test_span(const fx_ssr_scene *s, const line_state *L, fx_vec3 dir, co
         int mx, my;
         if (!pixel_index(L, mid, &mx, &my))
             break;
-        double smid = surface_at(s, L, mid, mx, my);
+        double smid = surface_at(s, L, mid, mx, my, &memo);
         if (isfinite(smid) && depth_at(L, mid) >= smid)
             hi = mid;
         else
@@ -151,7 +163,7 @@ static int test_span(const fx_ssr_scene *s, const line_state *L, fx_vec3 dir, co
     double slop = fabs(d_cur - d_prev) / (double)(1u << refine);
     if (!pixel_index(L, hi, &hx, &hy))
         return 0;
-    double sh = surface_at(s, L, hi, hx, hy), dh = depth_at(L, hi);
+    double sh = surface_at(s, L, hi, hx, hy, &memo), dh = depth_at(L, hi);
     if (!(isfinite(sh) && dh >= sh - slop && dh <= sh + thick + slop && (!s->accept || s->accept(s->user, hx, hy, dir))))
         return 0;
     double x, y;
@@ -320,7 +332,10 @@ static int march_hiz(const fx_ssr_scene *s, const fx_ssr_settings *st, const lin
     return 0;
 }
 
-/* Trace stage 2b, the linear march: strides growing by `growth`, each span tested. */
+/* Trace stage 2b, the linear march: strides growing by `growth`, each span tested. The
+ * per-step work is test_span's first test, inline, on the line's coordinates unpermuted
+ * once per ray (the same arithmetic as pixel_index and depth_at, so the same pixels and
+ * depths): most steps are no candidate and never reach test_span. */
 static int march_linear(const fx_ssr_scene *s, const fx_ssr_settings *st, const line_state *L, fx_vec3 dir,
                         const double o[3], double s_end, double origin_depth, fx_ssr_hit *out)
 {
@@ -329,18 +344,37 @@ static int march_linear(const fx_ssr_scene *s, const fx_ssr_settings *st, const 
     const int refine = st->refine < 0 ? 0 : st->refine > 30 ? 30 : st->refine;
     double stride = st->stride > 0.5f ? st->stride : 0.5;
     const double growth = st->growth >= 1.0f && isfinite(st->growth) ? st->growth : 1.0;
+    const int planes = s->surface_plane != NULL;
+    const double x0 = L->p0[L->swap], dx = L->dp[L->swap], y0 = L->p0[!L->swap], dy = L->dp[!L->swap];
+    const double k0 = L->k0, dk = L->dk, z0 = L->q0[2], dz = L->dq[2];
+    const double xlim = L->w + 1.0, ylim = L->h + 1.0;
+    const int w = L->w, h = L->h;
+    const float *depth = s->depth;
     double s_prev = 0.0, d_prev = origin_depth;
-    for (int i = 0; i < max_steps; i++) {
+    int i = 0;
+    while (i < max_steps) {
         double s_cur = s_prev + stride;
         if (s_cur > s_end)
             s_cur = s_end;
-        out->steps = i + 1;
-        double d_cur = depth_at(L, s_cur);
-        int ix, iy;
-        if (!pixel_index(L, s_cur, &ix, &iy))
+        i++;
+        double k = k0 + dk * s_cur, z = z0 + dz * s_cur;
+        double d_cur = k > 0.0 ? -z / k : INFINITY;
+        double x = x0 + dx * s_cur, y = y0 + dy * s_cur;
+        if (!(x > -1.0 && x < xlim && y > -1.0 && y < ylim))
             break;
-        if (test_span(s, L, dir, o, thick, refine, s_prev, s_cur, d_prev, d_cur, ix, iy, out))
-            return 1;
+        int ix = (int)x, iy = (int)y; /* as pixel_index */
+        ix = ix < 0 ? 0 : ix >= w ? w - 1 : ix;
+        iy = iy < 0 ? 0 : iy >= h ? h - 1 : iy;
+        float sdf = depth[(size_t)iy * w + ix];
+        if (!fx_ssr_is_background(sdf)) {
+            double sd = sdf;
+            double dmin = d_prev < d_cur ? d_prev : d_cur, dmax = d_prev < d_cur ? d_cur : d_prev;
+            int maybe = (dmax >= sd && dmin <= sd + thick) || (planes && d_cur >= sd && d_prev <= 2.0 * sd);
+            if (maybe && test_span(s, L, dir, o, thick, refine, s_prev, s_cur, d_prev, d_cur, ix, iy, out)) {
+                out->steps = i;
+                return 1;
+            }
+        }
         if (s_cur >= s_end)
             break;
         s_prev = s_cur;
@@ -349,6 +383,7 @@ static int march_linear(const fx_ssr_scene *s, const fx_ssr_settings *st, const 
         if (stride > 1e7)
             stride = 1e7;
     }
+    out->steps = i;
     return 0;
 }
 
