@@ -256,11 +256,50 @@ static inline float lum_px(const float *p, const float *lut)
     return fx_srgb_encode_lut(lut, l); /* no powf: math/srgb_lut.h */
 }
 
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && !defined(FX_NO_CLONES)
+#  include <immintrin.h>
+#  define EDGE_LUM_AVX2 1
+/* lum_row's vector loop with the two table reads as AVX2 gathers (the scalar reads through
+ * lane arrays stall store forwarding): the same operations, the same table values, the same
+ * bits. Returns where it stopped. Called only when the CPU has AVX2. */
+__attribute__((target("avx2"), noinline)) static int lum_row_avx2(const float *p, const float *lut, int x0,
+                                                                 int x1, float *out)
+{
+    int x = x0;
+    const v8f lo = S8(0.001953125f); /* 2^-9 */
+    for (; x + 8 <= x1; x += 8) {
+        v8f c[4];
+        fx_load8x4(p + 4 * (size_t)x, c);
+        v8f l = S8(FX_LUMA_R) * c[0] + S8(FX_LUMA_G) * c[1] + S8(FX_LUMA_B) * c[2];
+        const v8i pos = l > S8(0.0f); /* false for NaN: 0, as lum_px */
+        l = SEL8(pos, SEL8(l < S8(1e6f), l, S8(1e6f)), S8(0.0f));
+        const v8i small = l < lo;
+        v8i b;
+        memcpy(&b, &l, sizeof b);
+        v8i i = (v8i)(((v8ui)b >> (23 - FX_SRGB_LUT_BITS)) -
+                      (v8ui)S8I((int32_t)((uint32_t)(127 + FX_SRGB_LUT_MIN_EXP) << FX_SRGB_LUT_BITS)));
+        i = i & ~small;
+        const v8f t = __builtin_convertvector(b & S8I((1 << (23 - FX_SRGB_LUT_BITS)) - 1), v8f) *
+                      S8(1.0f / (float)(1u << (23 - FX_SRGB_LUT_BITS)));
+        const v8f l0 = (v8f)_mm256_i32gather_ps(lut, (__m256i)i, 4);
+        const v8f l1 = (v8f)_mm256_i32gather_ps(lut + 1, (__m256i)i, 4);
+        const v8f e = l0 + t * (l1 - l0);
+        const v8f v = SEL8(small, S8(12.92f) * l, e);
+        memcpy(out + x, &v, sizeof v);
+    }
+    return x;
+}
+#endif
+
 /* 8 pixels at a time in GCC vector types (the transpose of core/simd8.h, then lum_px's
  * operations lane by lane: the same bits), the table read per lane; the rest per pixel. */
 EDGE_VEC static void lum_row(const float *p, const float *lut, int x0, int x1, float *out)
 {
     int x = x0;
+#ifdef EDGE_LUM_AVX2
+    if (__builtin_cpu_supports("avx2"))
+        x = lum_row_avx2(p, lut, x0, x1, out);
+#endif
     const v8f lo = S8(0.001953125f); /* 2^-9 */
     const v8i imask = { 0, 0, 0, 0, 0, 0, 0, 0 };
     for (; x + 8 <= x1; x += 8) {
@@ -560,6 +599,51 @@ __attribute__((target("avx2"), noinline)) static int sobel_row_avx2(const float 
     }
     return x;
 }
+
+/* Sobel magnitude and the threshold ramp in one pass (luminance edges without the debug
+ * strengths: the strengths are not kept), 8 interior columns at a time from xa; returns
+ * where it stopped. sobel_row_avx2's operations, then ramp()'s: the same bits. Where all
+ * four squared magnitudes of a half are below qskip the ramp is 0 whatever the square root
+ * gives (qskip is (4 t)^2 less a margin far above the roundings: v <= t there), so the
+ * square root is skipped: most pixels are not on an edge. */
+__attribute__((target("avx2"), noinline)) static int sobel_ramp_row_avx2(const float *A, const float *B,
+                                                                        const float *C, int xa, int xb,
+                                                                        float t, float inv, float *out)
+{
+    const __m256d two = _mm256_set1_pd(2.0), quarter = _mm256_set1_pd(0.25);
+    const __m256 big = _mm256_set1_ps(FLT_MAX), tv = _mm256_set1_ps(t), iv = _mm256_set1_ps(inv);
+    const __m256 one = _mm256_set1_ps(1.0f), zero = _mm256_setzero_ps();
+    const __m256d qskip = _mm256_set1_pd(16.0 * (double)t * (double)t * (1.0 - 1.0 / 524288.0));
+    int x = xa;
+    for (; x + 8 <= xb; x += 8) {
+        const __m256 c = _mm256_loadu_ps(B + x);
+        const __m256 n = _mm256_sub_ps(_mm256_loadu_ps(A + x), c), s = _mm256_sub_ps(_mm256_loadu_ps(C + x), c);
+        const __m256 we = _mm256_sub_ps(_mm256_loadu_ps(B + x - 1), c), ea = _mm256_sub_ps(_mm256_loadu_ps(B + x + 1), c);
+        const __m256 nw = _mm256_sub_ps(_mm256_loadu_ps(A + x - 1), c), ne = _mm256_sub_ps(_mm256_loadu_ps(A + x + 1), c);
+        const __m256 sw = _mm256_sub_ps(_mm256_loadu_ps(C + x - 1), c), se = _mm256_sub_ps(_mm256_loadu_ps(C + x + 1), c);
+        const __m256 gx1 = _mm256_sub_ps(ne, nw), gx2 = _mm256_sub_ps(ea, we), gx3 = _mm256_sub_ps(se, sw);
+        const __m256 gy1 = _mm256_sub_ps(sw, nw), gy2 = _mm256_sub_ps(s, n), gy3 = _mm256_sub_ps(se, ne);
+        __m128 half[2];
+        for (int k = 0; k < 2; k++) {
+#define LANES(v) _mm256_cvtps_pd(k == 0 ? _mm256_castps256_ps128(v) : _mm256_extractf128_ps((v), 1))
+            const __m256d gx = _mm256_add_pd(_mm256_add_pd(LANES(gx1), _mm256_mul_pd(two, LANES(gx2))), LANES(gx3));
+            const __m256d gy = _mm256_add_pd(_mm256_add_pd(LANES(gy1), _mm256_mul_pd(two, LANES(gy2))), LANES(gy3));
+#undef LANES
+            const __m256d q = _mm256_add_pd(_mm256_mul_pd(gx, gx), _mm256_mul_pd(gy, gy));
+            if (_mm256_movemask_pd(_mm256_cmp_pd(q, qskip, _CMP_LT_OQ)) == 15)
+                half[k] = _mm_setzero_ps(); /* ramps to 0 */
+            else
+                half[k] = _mm256_cvtpd_ps(_mm256_mul_pd(_mm256_sqrt_pd(q), quarter));
+        }
+        __m256 v = _mm256_set_m128(half[1], half[0]);
+        v = _mm256_min_ps(v, big); /* v <= FLT_MAX ? v : FLT_MAX (v is never NaN) */
+        /* ramp: e > 0 ? (e < 1 ? e : 1) : 0 is max(min(e, 1), +0) (maxps gives its second
+         * operand, +0, for e = -0) */
+        const __m256 e = _mm256_mul_ps(_mm256_sub_ps(v, tv), iv);
+        _mm256_storeu_ps(out + x, _mm256_max_ps(_mm256_min_ps(e, one), zero));
+    }
+    return x;
+}
 #  endif
 #endif
 
@@ -722,9 +806,26 @@ static void strength_row(const edge_job *j, const band_rings *b, int y, float *o
     const float cos_skip = cosf(fx_clampf(s->normal_threshold, 0.0f, 180.0f) * (float)(3.14159265358979323846 / 180.0)) + 1e-5f;
     const int r = fx_edge_operator_radius(s->op);
     float *sl_row = b->sl, *sd_row = b->sd;
+    const int dbg = write_dbg && j->strengths;
     if (s->use_luminance) {
         const float *A = ring_row(b->lum, rf, ws, clampi(y - r, 0, h - 1));
         const float *B = ring_row(b->lum, rf, ws, y), *C = ring_row(b->lum, rf, ws, clampi(y + r, 0, h - 1));
+#ifdef EDGE_AVX2
+        if (s->op == FX_EDGE_SOBEL && !s->use_depth && !s->use_normal && !s->use_object && !s->use_material &&
+            !dbg && __builtin_cpu_supports("avx2")) {
+            /* the common case (the defaults): the Sobel magnitude and its ramp in one pass */
+            int xa = sr->x0 > 1 ? sr->x0 : 1, xb = sr->x1 < w - 1 ? sr->x1 : w - 1;
+            if (xb < xa)
+                xa = xb = sr->x1;
+            int x = sr->x0;
+            for (; x < xa && x < sr->x1; x++)
+                out[x] = ramp(rl, response_at_rows(A, B, C, w, x, 1, s->op));
+            x = sobel_ramp_row_avx2(A, B, C, x, xb, rl.t, rl.inv, out);
+            for (; x < sr->x1; x++)
+                out[x] = ramp(rl, response_at_rows(A, B, C, w, x, 1, s->op));
+            return;
+        }
+#endif
         response_row(A, B, C, w, sr->x0, sr->x1, s->op, sl_row);
     }
     if (s->use_depth) {
@@ -740,7 +841,6 @@ static void strength_row(const edge_job *j, const band_rings *b, int y, float *o
             response_row(A, B, C, w, sr->x0, sr->x1, s->op, sd_row);
         }
     }
-    const int dbg = write_dbg && j->strengths;
     if (s->use_luminance && s->use_depth && !s->use_normal && !s->use_object && !s->use_material && !dbg) {
         for (int x = sr->x0; x < sr->x1; x++) { /* the common cases: simple loops */
             float a = ramp(rl, sl_row[x]), c = ramp(rd, sd_row[x]);
