@@ -223,22 +223,29 @@ DRAW_VEC static void draw_row(void *user, int y, const float *matte)
             s[k] = ld8f(sp + 8 * k);
             inf[k] = ((v8i)s[k] & expo) == expo;
         }
-        const v8i nz = ld8f(matte + x) != S8(0.0f);
-        if (!any8(nz | inf[0] | inf[1] | inf[2] | inf[3])) {
+        const v8f mt = ld8f(matte + x);
+        const v8i nz = mt != S8(0.0f);
+        const v8i infs = inf[0] | inf[1] | inf[2] | inf[3];
+        if (!any8(nz | infs)) {
             /* no line and finite values (the usual case): as they are */
             if (!in_place)
                 memcpy(drow + 4 * (size_t)x, sp, 32 * sizeof(float));
             continue;
         }
+        const v8f a8 = mt * S8(op); /* the products draw_px takes, lane by lane */
+        const int finite = !any8(infs);
         for (int k = 0; k < 4; k++) {
-            const float a0 = matte[x + 2 * k] * op, a1 = matte[x + 2 * k + 1] * op;
-            const v8f a = { a0, a0, a0, a0, a1, a1, a1, a1 };
+            const v8f a = FX_SHUF8(a8, a8, 2 * k, 2 * k, 2 * k, 2 * k, 2 * k + 1, 2 * k + 1, 2 * k + 1, 2 * k + 1);
             const v8f t = finite8(s[k] + a * (lc8 - s[k]));
             /* a pixel stays as it is where a is 0 and its four values are finite */
-            v8i bad = inf[k];
-            bad |= SHUF8I(bad, 1, 0, 3, 2, 5, 4, 7, 6);
-            bad |= SHUF8I(bad, 2, 3, 0, 1, 6, 7, 4, 5);
-            const v8f o = SEL8((a == S8(0.0f)) & ~bad, s[k], t);
+            v8i keep = a == S8(0.0f);
+            if (!finite) {
+                v8i bad = inf[k];
+                bad |= SHUF8I(bad, 1, 0, 3, 2, 5, 4, 7, 6);
+                bad |= SHUF8I(bad, 2, 3, 0, 1, 6, 7, 4, 5);
+                keep &= ~bad;
+            }
+            const v8f o = SEL8(keep, s[k], t);
             memcpy(drow + 4 * (size_t)x + 8 * k, &o, sizeof o);
         }
     }

@@ -256,50 +256,11 @@ static inline float lum_px(const float *p, const float *lut)
     return fx_srgb_encode_lut(lut, l); /* no powf: math/srgb_lut.h */
 }
 
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && !defined(FX_NO_CLONES)
-#  include <immintrin.h>
-#  define EDGE_LUM_AVX2 1
-/* lum_row's vector loop with the two table reads as AVX2 gathers (the scalar reads through
- * lane arrays stall store forwarding): the same operations, the same table values, the same
- * bits. Returns where it stopped. Called only when the CPU has AVX2. */
-__attribute__((target("avx2"), noinline)) static int lum_row_avx2(const float *p, const float *lut, int x0,
-                                                                 int x1, float *out)
-{
-    int x = x0;
-    const v8f lo = S8(0.001953125f); /* 2^-9 */
-    for (; x + 8 <= x1; x += 8) {
-        v8f c[4];
-        fx_load8x4(p + 4 * (size_t)x, c);
-        v8f l = S8(FX_LUMA_R) * c[0] + S8(FX_LUMA_G) * c[1] + S8(FX_LUMA_B) * c[2];
-        const v8i pos = l > S8(0.0f); /* false for NaN: 0, as lum_px */
-        l = SEL8(pos, SEL8(l < S8(1e6f), l, S8(1e6f)), S8(0.0f));
-        const v8i small = l < lo;
-        v8i b;
-        memcpy(&b, &l, sizeof b);
-        v8i i = (v8i)(((v8ui)b >> (23 - FX_SRGB_LUT_BITS)) -
-                      (v8ui)S8I((int32_t)((uint32_t)(127 + FX_SRGB_LUT_MIN_EXP) << FX_SRGB_LUT_BITS)));
-        i = i & ~small;
-        const v8f t = __builtin_convertvector(b & S8I((1 << (23 - FX_SRGB_LUT_BITS)) - 1), v8f) *
-                      S8(1.0f / (float)(1u << (23 - FX_SRGB_LUT_BITS)));
-        const v8f l0 = (v8f)_mm256_i32gather_ps(lut, (__m256i)i, 4);
-        const v8f l1 = (v8f)_mm256_i32gather_ps(lut + 1, (__m256i)i, 4);
-        const v8f e = l0 + t * (l1 - l0);
-        const v8f v = SEL8(small, S8(12.92f) * l, e);
-        memcpy(out + x, &v, sizeof v);
-    }
-    return x;
-}
-#endif
-
 /* 8 pixels at a time in GCC vector types (the transpose of core/simd8.h, then lum_px's
  * operations lane by lane: the same bits), the table read per lane; the rest per pixel. */
 EDGE_VEC static void lum_row(const float *p, const float *lut, int x0, int x1, float *out)
 {
     int x = x0;
-#ifdef EDGE_LUM_AVX2
-    if (__builtin_cpu_supports("avx2"))
-        x = lum_row_avx2(p, lut, x0, x1, out);
-#endif
     const v8f lo = S8(0.001953125f); /* 2^-9 */
     const v8i imask = { 0, 0, 0, 0, 0, 0, 0, 0 };
     for (; x + 8 <= x1; x += 8) {
@@ -613,7 +574,10 @@ __attribute__((target("avx2"), noinline)) static int sobel_ramp_row_avx2(const f
     const __m256d two = _mm256_set1_pd(2.0), quarter = _mm256_set1_pd(0.25);
     const __m256 big = _mm256_set1_ps(FLT_MAX), tv = _mm256_set1_ps(t), iv = _mm256_set1_ps(inv);
     const __m256 one = _mm256_set1_ps(1.0f), zero = _mm256_setzero_ps();
-    const __m256d qskip = _mm256_set1_pd(16.0 * (double)t * (double)t * (1.0 - 1.0 / 524288.0));
+    const double qs = 16.0 * (double)t * (double)t * (1.0 - 1.0 / 524288.0);
+    const __m256d qskip = _mm256_set1_pd(qs);
+    const __m256 qskipf = _mm256_set1_ps((float)(qs * (1.0 - 1.0 / 4096.0))), margin = _mm256_set1_ps(1.0f / 16384.0f);
+    const __m256 absm = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fffffff));
     int x = xa;
     for (; x + 8 <= xb; x += 8) {
         const __m256 c = _mm256_loadu_ps(B + x);
@@ -623,6 +587,24 @@ __attribute__((target("avx2"), noinline)) static int sobel_ramp_row_avx2(const f
         const __m256 sw = _mm256_sub_ps(_mm256_loadu_ps(C + x - 1), c), se = _mm256_sub_ps(_mm256_loadu_ps(C + x + 1), c);
         const __m256 gx1 = _mm256_sub_ps(ne, nw), gx2 = _mm256_sub_ps(ea, we), gx3 = _mm256_sub_ps(se, sw);
         const __m256 gy1 = _mm256_sub_ps(sw, nw), gy2 = _mm256_sub_ps(s, n), gy3 = _mm256_sub_ps(se, ne);
+        {
+            /* First a bound in float: |gx - gxf| <= 2^-22 (|gx1| + 2 |gx2| + |gx3|), far below
+             * the 2^-14 taken here (likewise gy), and qskipf is below qskip: when every lane's
+             * bound is under it, every ramp is 0 (most chunks: no double work at all). */
+            const __m256 gxf = _mm256_add_ps(_mm256_add_ps(gx1, _mm256_add_ps(gx2, gx2)), gx3);
+            const __m256 gyf = _mm256_add_ps(_mm256_add_ps(gy1, _mm256_add_ps(gy2, gy2)), gy3);
+            const __m256 sx = _mm256_add_ps(_mm256_add_ps(_mm256_and_ps(gx1, absm), _mm256_and_ps(gx2, absm)),
+                                            _mm256_add_ps(_mm256_and_ps(gx2, absm), _mm256_and_ps(gx3, absm)));
+            const __m256 sy = _mm256_add_ps(_mm256_add_ps(_mm256_and_ps(gy1, absm), _mm256_and_ps(gy2, absm)),
+                                            _mm256_add_ps(_mm256_and_ps(gy2, absm), _mm256_and_ps(gy3, absm)));
+            const __m256 bx = _mm256_add_ps(_mm256_and_ps(gxf, absm), _mm256_mul_ps(sx, margin));
+            const __m256 by = _mm256_add_ps(_mm256_and_ps(gyf, absm), _mm256_mul_ps(sy, margin));
+            const __m256 qf = _mm256_add_ps(_mm256_mul_ps(bx, bx), _mm256_mul_ps(by, by));
+            if (_mm256_movemask_ps(_mm256_cmp_ps(qf, qskipf, _CMP_LT_OQ)) == 255) {
+                _mm256_storeu_ps(out + x, zero);
+                continue;
+            }
+        }
         __m128 half[2];
         for (int k = 0; k < 2; k++) {
 #define LANES(v) _mm256_cvtps_pd(k == 0 ? _mm256_castps256_ps128(v) : _mm256_extractf128_ps((v), 1))
