@@ -562,11 +562,12 @@ __attribute__((target("avx2"), noinline)) static int sobel_row_avx2(const float 
 }
 
 /* Sobel magnitude and the threshold ramp in one pass (luminance edges without the debug
- * strengths: the strengths are not kept), 8 interior columns at a time from xa; returns
- * where it stopped. sobel_row_avx2's operations, then ramp()'s: the same bits. Where all
- * four squared magnitudes of a half are below qskip the ramp is 0 whatever the square root
- * gives (qskip is (4 t)^2 less a margin far above the roundings: v <= t there), so the
- * square root is skipped: most pixels are not on an edge. */
+ * strengths: the strengths are not kept), 8 interior columns at a time from xa; returns where
+ * it stopped. Most pixels are far from the threshold: float bounds on |gx| and |gy| (above and
+ * below, with margins far above their roundings) tell the lanes whose ramp is surely 0 (v <= t)
+ * or surely 1 (v >= (t + W)(1 + 1e-5)); only a half (4 lanes) with a lane in between takes
+ * sobel_row_avx2's double path (the same operations, then ramp()'s), so the sure lanes get
+ * exactly what the exact path would give them: the same bits. */
 __attribute__((target("avx2"), noinline)) static int sobel_ramp_row_avx2(const float *A, const float *B,
                                                                         const float *C, int xa, int xb,
                                                                         float t, float inv, float *out)
@@ -575,9 +576,14 @@ __attribute__((target("avx2"), noinline)) static int sobel_ramp_row_avx2(const f
     const __m256 big = _mm256_set1_ps(FLT_MAX), tv = _mm256_set1_ps(t), iv = _mm256_set1_ps(inv);
     const __m256 one = _mm256_set1_ps(1.0f), zero = _mm256_setzero_ps();
     const double qs = 16.0 * (double)t * (double)t * (1.0 - 1.0 / 524288.0);
-    const __m256d qskip = _mm256_set1_pd(qs);
     const __m256 qskipf = _mm256_set1_ps((float)(qs * (1.0 - 1.0 / 4096.0))), margin = _mm256_set1_ps(1.0f / 16384.0f);
     const __m256 absm = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fffffff));
+    /* ramp 1 for sure: v >= (t + W)(1 + 1e-5), W = 1 / inv, then (v - t) inv >= 1 after its two
+     * roundings; v = sqrt(q) / 4 rounded: q >= 16 (t + W)^2 (1 + 2e-5)^2 is enough, and the float
+     * bound takes a further 2^-10 (an infinite bound when that overflows float: never taken) */
+    const double wq = (double)t + 1.0 / (double)inv;
+    const double qh = 16.0 * wq * wq * (1.0 + 2e-5) * (1.0 + 2e-5) * (1.0 + 1.0 / 1024.0);
+    const __m256 qhighf = _mm256_set1_ps(qh < 1e38 ? (float)qh : INFINITY);
     int x = xa;
     for (; x + 8 <= xb; x += 8) {
         const __m256 c = _mm256_loadu_ps(B + x);
@@ -587,6 +593,7 @@ __attribute__((target("avx2"), noinline)) static int sobel_ramp_row_avx2(const f
         const __m256 sw = _mm256_sub_ps(_mm256_loadu_ps(C + x - 1), c), se = _mm256_sub_ps(_mm256_loadu_ps(C + x + 1), c);
         const __m256 gx1 = _mm256_sub_ps(ne, nw), gx2 = _mm256_sub_ps(ea, we), gx3 = _mm256_sub_ps(se, sw);
         const __m256 gy1 = _mm256_sub_ps(sw, nw), gy2 = _mm256_sub_ps(s, n), gy3 = _mm256_sub_ps(se, ne);
+        __m256 sure, sure_one; /* lanes whose ramp is surely 0 or 1, and those values */
         {
             /* First a bound in float: |gx - gxf| <= 2^-22 (|gx1| + 2 |gx2| + |gx3|), far below
              * the 2^-14 taken here (likewise gy), and qskipf is below qskip: when every lane's
@@ -600,29 +607,45 @@ __attribute__((target("avx2"), noinline)) static int sobel_ramp_row_avx2(const f
             const __m256 bx = _mm256_add_ps(_mm256_and_ps(gxf, absm), _mm256_mul_ps(sx, margin));
             const __m256 by = _mm256_add_ps(_mm256_and_ps(gyf, absm), _mm256_mul_ps(sy, margin));
             const __m256 qf = _mm256_add_ps(_mm256_mul_ps(bx, bx), _mm256_mul_ps(by, by));
-            if (_mm256_movemask_ps(_mm256_cmp_ps(qf, qskipf, _CMP_LT_OQ)) == 255) {
+            const __m256 lo = _mm256_cmp_ps(qf, qskipf, _CMP_LT_OQ);
+            if (_mm256_movemask_ps(lo) == 255) {
                 _mm256_storeu_ps(out + x, zero);
                 continue;
             }
+            /* lower bounds: lanes whose ramp is surely 1 (strong edges) */
+            const __m256 lx = _mm256_max_ps(_mm256_sub_ps(_mm256_and_ps(gxf, absm), _mm256_mul_ps(sx, margin)), zero);
+            const __m256 ly = _mm256_max_ps(_mm256_sub_ps(_mm256_and_ps(gyf, absm), _mm256_mul_ps(sy, margin)), zero);
+            const __m256 qlo = _mm256_add_ps(_mm256_mul_ps(lx, lx), _mm256_mul_ps(ly, ly));
+            const __m256 hi = _mm256_cmp_ps(qlo, qhighf, _CMP_GT_OQ);
+            sure = _mm256_or_ps(lo, hi);
+            if (_mm256_movemask_ps(sure) == 255) {
+                _mm256_storeu_ps(out + x, _mm256_and_ps(hi, one));
+                continue;
+            }
+            sure_one = _mm256_and_ps(hi, one);
         }
+        /* the double path only for the halves with a lane in between */
+        const int amb = ~_mm256_movemask_ps(sure) & 255;
         __m128 half[2];
         for (int k = 0; k < 2; k++) {
+            if (!(amb & (k == 0 ? 15 : 240))) {
+                half[k] = _mm_setzero_ps(); /* every lane sure: replaced below */
+                continue;
+            }
 #define LANES(v) _mm256_cvtps_pd(k == 0 ? _mm256_castps256_ps128(v) : _mm256_extractf128_ps((v), 1))
             const __m256d gx = _mm256_add_pd(_mm256_add_pd(LANES(gx1), _mm256_mul_pd(two, LANES(gx2))), LANES(gx3));
             const __m256d gy = _mm256_add_pd(_mm256_add_pd(LANES(gy1), _mm256_mul_pd(two, LANES(gy2))), LANES(gy3));
 #undef LANES
             const __m256d q = _mm256_add_pd(_mm256_mul_pd(gx, gx), _mm256_mul_pd(gy, gy));
-            if (_mm256_movemask_pd(_mm256_cmp_pd(q, qskip, _CMP_LT_OQ)) == 15)
-                half[k] = _mm_setzero_ps(); /* ramps to 0 */
-            else
-                half[k] = _mm256_cvtpd_ps(_mm256_mul_pd(_mm256_sqrt_pd(q), quarter));
+            half[k] = _mm256_cvtpd_ps(_mm256_mul_pd(_mm256_sqrt_pd(q), quarter));
         }
         __m256 v = _mm256_set_m128(half[1], half[0]);
         v = _mm256_min_ps(v, big); /* v <= FLT_MAX ? v : FLT_MAX (v is never NaN) */
         /* ramp: e > 0 ? (e < 1 ? e : 1) : 0 is max(min(e, 1), +0) (maxps gives its second
-         * operand, +0, for e = -0) */
+         * operand, +0, for e = -0); the sure lanes take their 0 or 1 */
         const __m256 e = _mm256_mul_ps(_mm256_sub_ps(v, tv), iv);
-        _mm256_storeu_ps(out + x, _mm256_max_ps(_mm256_min_ps(e, one), zero));
+        const __m256 r = _mm256_max_ps(_mm256_min_ps(e, one), zero);
+        _mm256_storeu_ps(out + x, _mm256_blendv_ps(r, sure_one, sure));
     }
     return x;
 }
