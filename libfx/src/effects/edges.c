@@ -188,7 +188,8 @@ static inline __attribute__((always_inline)) int any8(v8i m)
  * finite (most pixels) d = s: eight such pixels in a row are not written at all in place (the
  * cache lines stay clean: no write back). Eight pixels at a time as four vectors of two
  * pixels each, draw_px's operations lane by lane (the same bits), the rest per pixel. Called
- * by the edge engine with each finished matte row (math/edge_ops.h). */
+ * by the edge engine with each finished matte row (math/edge_ops.h). The source is read again
+ * after the copy of a row not in place: src and dst are different buffers then. */
 DRAW_VEC static void draw_row(void *user, int y, const float *matte)
 {
     const draw_job *j = user;
@@ -214,39 +215,51 @@ DRAW_VEC static void draw_row(void *user, int y, const float *matte)
     }
     const v8f lc8 = { lc[0], lc[1], lc[2], lc[3], lc[0], lc[1], lc[2], lc[3] };
     const v8i expo = S8I(0x7f800000);
+    /* Not in place: the row as it is first; the chunks with a line or a non-finite value are
+     * then redone. Pass 1 lists those chunks without a branch (lines cross chunks at random:
+     * a branch per chunk mispredicted); pass 2 blends them. */
+    const int xe = roi->x0 + ((roi->x1 - roi->x0) & ~7);
+    if (!in_place)
+        memcpy(drow + 4 * (size_t)roi->x0, srow + 4 * (size_t)roi->x0, (size_t)(xe - roi->x0) * 4 * sizeof(float));
+    enum { SEG = 256 }; /* chunks per list */
+    int list[SEG];
     int x = roi->x0;
-    for (; x + 8 <= roi->x1; x += 8) {
-        const float *sp = srow + 4 * (size_t)x;
-        v8f s[4];
-        v8i inf[4]; /* lanes that are Inf or NaN (exponent all ones) */
-        for (int k = 0; k < 4; k++) {
-            s[k] = ld8f(sp + 8 * k);
-            inf[k] = ((v8i)s[k] & expo) == expo;
+    while (x < xe) {
+        int nl = 0;
+        const int x_end = x + 8 * SEG <= xe ? x + 8 * SEG : xe;
+        for (; x < x_end; x += 8) {
+            const float *sp = srow + 4 * (size_t)x;
+            v8i any = ld8f(matte + x) != S8(0.0f);
+            for (int k = 0; k < 4; k++)
+                any |= ((v8i)ld8f(sp + 8 * k) & expo) == expo; /* Inf or NaN */
+            list[nl] = x;
+            nl += any8(any);
         }
-        const v8f mt = ld8f(matte + x);
-        const v8i nz = mt != S8(0.0f);
-        const v8i infs = inf[0] | inf[1] | inf[2] | inf[3];
-        if (!any8(nz | infs)) {
-            /* no line and finite values (the usual case): as they are */
-            if (!in_place)
-                memcpy(drow + 4 * (size_t)x, sp, 32 * sizeof(float));
-            continue;
-        }
-        const v8f a8 = mt * S8(op); /* the products draw_px takes, lane by lane */
-        const int finite = !any8(infs);
-        for (int k = 0; k < 4; k++) {
-            const v8f a = FX_SHUF8(a8, a8, 2 * k, 2 * k, 2 * k, 2 * k, 2 * k + 1, 2 * k + 1, 2 * k + 1, 2 * k + 1);
-            const v8f t = finite8(s[k] + a * (lc8 - s[k]));
-            /* a pixel stays as it is where a is 0 and its four values are finite */
-            v8i keep = a == S8(0.0f);
-            if (!finite) {
-                v8i bad = inf[k];
-                bad |= SHUF8I(bad, 1, 0, 3, 2, 5, 4, 7, 6);
-                bad |= SHUF8I(bad, 2, 3, 0, 1, 6, 7, 4, 5);
-                keep &= ~bad;
+        for (int i = 0; i < nl; i++) {
+            const int xc = list[i];
+            const float *sp = srow + 4 * (size_t)xc;
+            v8f s[4];
+            v8i inf[4];
+            for (int k = 0; k < 4; k++) {
+                s[k] = ld8f(sp + 8 * k);
+                inf[k] = ((v8i)s[k] & expo) == expo;
             }
-            const v8f o = SEL8(keep, s[k], t);
-            memcpy(drow + 4 * (size_t)x + 8 * k, &o, sizeof o);
+            const v8f a8 = ld8f(matte + xc) * S8(op); /* the products draw_px takes, lane by lane */
+            const int finite = !any8(inf[0] | inf[1] | inf[2] | inf[3]);
+            for (int k = 0; k < 4; k++) {
+                const v8f a = FX_SHUF8(a8, a8, 2 * k, 2 * k, 2 * k, 2 * k, 2 * k + 1, 2 * k + 1, 2 * k + 1, 2 * k + 1);
+                const v8f t = finite8(s[k] + a * (lc8 - s[k]));
+                /* a pixel stays as it is where a is 0 and its four values are finite */
+                v8i keep = a == S8(0.0f);
+                if (!finite) {
+                    v8i bad = inf[k];
+                    bad |= SHUF8I(bad, 1, 0, 3, 2, 5, 4, 7, 6);
+                    bad |= SHUF8I(bad, 2, 3, 0, 1, 6, 7, 4, 5);
+                    keep &= ~bad;
+                }
+                const v8f o = SEL8(keep, s[k], t);
+                memcpy(drow + 4 * (size_t)xc + 8 * k, &o, sizeof o);
+            }
         }
     }
     for (; x < roi->x1; x++)

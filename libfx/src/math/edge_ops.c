@@ -563,11 +563,10 @@ __attribute__((target("avx2"), noinline)) static int sobel_row_avx2(const float 
 
 /* Sobel magnitude and the threshold ramp in one pass (luminance edges without the debug
  * strengths: the strengths are not kept), 8 interior columns at a time from xa; returns where
- * it stopped. Most pixels are far from the threshold: float bounds on |gx| and |gy| (above and
- * below, with margins far above their roundings) tell the lanes whose ramp is surely 0 (v <= t)
- * or surely 1 (v >= (t + W)(1 + 1e-5)); only a half (4 lanes) with a lane in between takes
- * sobel_row_avx2's double path (the same operations, then ramp()'s), so the sure lanes get
- * exactly what the exact path would give them: the same bits. */
+ * it stopped. Most pixels are far from the threshold: float bounds on |gx| and |gy| tell the
+ * lanes whose ramp is surely 0 or surely 1; only chunks with a lane in between take
+ * sobel_row_avx2's double path (the same operations, then ramp()'s), so every lane gets
+ * exactly what the exact path gives it: the same bits. */
 __attribute__((target("avx2"), noinline)) static int sobel_ramp_row_avx2(const float *A, const float *B,
                                                                         const float *C, int xa, int xb,
                                                                         float t, float inv, float *out)
@@ -584,69 +583,70 @@ __attribute__((target("avx2"), noinline)) static int sobel_ramp_row_avx2(const f
     const double wq = (double)t + 1.0 / (double)inv;
     const double qh = 16.0 * wq * wq * (1.0 + 2e-5) * (1.0 + 2e-5) * (1.0 + 1.0 / 1024.0);
     const __m256 qhighf = _mm256_set1_ps(qh < 1e38 ? (float)qh : INFINITY);
+#define SOBEL_TERMS(x)                                                                                          \
+    const __m256 c = _mm256_loadu_ps(B + (x));                                                                  \
+    const __m256 n = _mm256_sub_ps(_mm256_loadu_ps(A + (x)), c), s = _mm256_sub_ps(_mm256_loadu_ps(C + (x)), c); \
+    const __m256 we = _mm256_sub_ps(_mm256_loadu_ps(B + (x) - 1), c);                                           \
+    const __m256 ea = _mm256_sub_ps(_mm256_loadu_ps(B + (x) + 1), c);                                           \
+    const __m256 nw = _mm256_sub_ps(_mm256_loadu_ps(A + (x) - 1), c);                                           \
+    const __m256 ne = _mm256_sub_ps(_mm256_loadu_ps(A + (x) + 1), c);                                           \
+    const __m256 sw = _mm256_sub_ps(_mm256_loadu_ps(C + (x) - 1), c);                                           \
+    const __m256 se = _mm256_sub_ps(_mm256_loadu_ps(C + (x) + 1), c);                                           \
+    const __m256 gx1 = _mm256_sub_ps(ne, nw), gx2 = _mm256_sub_ps(ea, we), gx3 = _mm256_sub_ps(se, sw);         \
+    const __m256 gy1 = _mm256_sub_ps(sw, nw), gy2 = _mm256_sub_ps(s, n), gy3 = _mm256_sub_ps(se, ne)
+    /* Pass 1, branch-free: float bounds on |gx| and |gy| from above and below. |gx - gxf| <=
+     * 2^-22 (|gx1| + 2 |gx2| + |gx3|), far below the 2^-14 taken here (likewise gy); qskipf is
+     * below qs and qhighf above qh's exact bound, so a lane under qskipf has ramp 0 (v <= t)
+     * and one over qhighf ramp 1. Those values are stored; a chunk with any other lane goes on
+     * a list (no branch: edges cut across chunks at random and mispredicted). */
+    enum { SEG = 256 }; /* chunks per list */
+    int list[SEG];
     int x = xa;
-    for (; x + 8 <= xb; x += 8) {
-        const __m256 c = _mm256_loadu_ps(B + x);
-        const __m256 n = _mm256_sub_ps(_mm256_loadu_ps(A + x), c), s = _mm256_sub_ps(_mm256_loadu_ps(C + x), c);
-        const __m256 we = _mm256_sub_ps(_mm256_loadu_ps(B + x - 1), c), ea = _mm256_sub_ps(_mm256_loadu_ps(B + x + 1), c);
-        const __m256 nw = _mm256_sub_ps(_mm256_loadu_ps(A + x - 1), c), ne = _mm256_sub_ps(_mm256_loadu_ps(A + x + 1), c);
-        const __m256 sw = _mm256_sub_ps(_mm256_loadu_ps(C + x - 1), c), se = _mm256_sub_ps(_mm256_loadu_ps(C + x + 1), c);
-        const __m256 gx1 = _mm256_sub_ps(ne, nw), gx2 = _mm256_sub_ps(ea, we), gx3 = _mm256_sub_ps(se, sw);
-        const __m256 gy1 = _mm256_sub_ps(sw, nw), gy2 = _mm256_sub_ps(s, n), gy3 = _mm256_sub_ps(se, ne);
-        __m256 sure, sure_one; /* lanes whose ramp is surely 0 or 1, and those values */
-        {
-            /* First a bound in float: |gx - gxf| <= 2^-22 (|gx1| + 2 |gx2| + |gx3|), far below
-             * the 2^-14 taken here (likewise gy), and qskipf is below qskip: when every lane's
-             * bound is under it, every ramp is 0 (most chunks: no double work at all). */
+    while (x + 8 <= xb) {
+        int nl = 0;
+        const int x_end = x + 8 * SEG <= xb ? x + 8 * SEG : xb;
+        for (; x + 8 <= x_end; x += 8) {
+            SOBEL_TERMS(x);
             const __m256 gxf = _mm256_add_ps(_mm256_add_ps(gx1, _mm256_add_ps(gx2, gx2)), gx3);
             const __m256 gyf = _mm256_add_ps(_mm256_add_ps(gy1, _mm256_add_ps(gy2, gy2)), gy3);
             const __m256 sx = _mm256_add_ps(_mm256_add_ps(_mm256_and_ps(gx1, absm), _mm256_and_ps(gx2, absm)),
                                             _mm256_add_ps(_mm256_and_ps(gx2, absm), _mm256_and_ps(gx3, absm)));
             const __m256 sy = _mm256_add_ps(_mm256_add_ps(_mm256_and_ps(gy1, absm), _mm256_and_ps(gy2, absm)),
                                             _mm256_add_ps(_mm256_and_ps(gy2, absm), _mm256_and_ps(gy3, absm)));
-            const __m256 bx = _mm256_add_ps(_mm256_and_ps(gxf, absm), _mm256_mul_ps(sx, margin));
-            const __m256 by = _mm256_add_ps(_mm256_and_ps(gyf, absm), _mm256_mul_ps(sy, margin));
+            const __m256 ax = _mm256_and_ps(gxf, absm), ay = _mm256_and_ps(gyf, absm);
+            const __m256 mx = _mm256_mul_ps(sx, margin), my = _mm256_mul_ps(sy, margin);
+            const __m256 bx = _mm256_add_ps(ax, mx), by = _mm256_add_ps(ay, my);
+            const __m256 lx = _mm256_max_ps(_mm256_sub_ps(ax, mx), zero), ly = _mm256_max_ps(_mm256_sub_ps(ay, my), zero);
             const __m256 qf = _mm256_add_ps(_mm256_mul_ps(bx, bx), _mm256_mul_ps(by, by));
-            const __m256 lo = _mm256_cmp_ps(qf, qskipf, _CMP_LT_OQ);
-            if (_mm256_movemask_ps(lo) == 255) {
-                _mm256_storeu_ps(out + x, zero);
-                continue;
-            }
-            /* lower bounds: lanes whose ramp is surely 1 (strong edges) */
-            const __m256 lx = _mm256_max_ps(_mm256_sub_ps(_mm256_and_ps(gxf, absm), _mm256_mul_ps(sx, margin)), zero);
-            const __m256 ly = _mm256_max_ps(_mm256_sub_ps(_mm256_and_ps(gyf, absm), _mm256_mul_ps(sy, margin)), zero);
             const __m256 qlo = _mm256_add_ps(_mm256_mul_ps(lx, lx), _mm256_mul_ps(ly, ly));
-            const __m256 hi = _mm256_cmp_ps(qlo, qhighf, _CMP_GT_OQ);
-            sure = _mm256_or_ps(lo, hi);
-            if (_mm256_movemask_ps(sure) == 255) {
-                _mm256_storeu_ps(out + x, _mm256_and_ps(hi, one));
-                continue;
-            }
-            sure_one = _mm256_and_ps(hi, one);
+            const __m256 lo = _mm256_cmp_ps(qf, qskipf, _CMP_LT_OQ), hi = _mm256_cmp_ps(qlo, qhighf, _CMP_GT_OQ);
+            _mm256_storeu_ps(out + x, _mm256_and_ps(hi, one));
+            list[nl] = x;
+            nl += _mm256_movemask_ps(_mm256_or_ps(lo, hi)) != 255;
         }
-        /* the double path only for the halves with a lane in between */
-        const int amb = ~_mm256_movemask_ps(sure) & 255;
-        __m128 half[2];
-        for (int k = 0; k < 2; k++) {
-            if (!(amb & (k == 0 ? 15 : 240))) {
-                half[k] = _mm_setzero_ps(); /* every lane sure: replaced below */
-                continue;
-            }
+        /* Pass 2: the listed chunks exactly: sobel_row_avx2's double path (the same
+         * operations), then ramp()'s; the sure lanes get what this path would give them. */
+        for (int i = 0; i < nl; i++) {
+            const int xc = list[i];
+            SOBEL_TERMS(xc);
+            __m128 half[2];
+            for (int k = 0; k < 2; k++) {
 #define LANES(v) _mm256_cvtps_pd(k == 0 ? _mm256_castps256_ps128(v) : _mm256_extractf128_ps((v), 1))
-            const __m256d gx = _mm256_add_pd(_mm256_add_pd(LANES(gx1), _mm256_mul_pd(two, LANES(gx2))), LANES(gx3));
-            const __m256d gy = _mm256_add_pd(_mm256_add_pd(LANES(gy1), _mm256_mul_pd(two, LANES(gy2))), LANES(gy3));
+                const __m256d gx = _mm256_add_pd(_mm256_add_pd(LANES(gx1), _mm256_mul_pd(two, LANES(gx2))), LANES(gx3));
+                const __m256d gy = _mm256_add_pd(_mm256_add_pd(LANES(gy1), _mm256_mul_pd(two, LANES(gy2))), LANES(gy3));
 #undef LANES
-            const __m256d q = _mm256_add_pd(_mm256_mul_pd(gx, gx), _mm256_mul_pd(gy, gy));
-            half[k] = _mm256_cvtpd_ps(_mm256_mul_pd(_mm256_sqrt_pd(q), quarter));
+                const __m256d q = _mm256_add_pd(_mm256_mul_pd(gx, gx), _mm256_mul_pd(gy, gy));
+                half[k] = _mm256_cvtpd_ps(_mm256_mul_pd(_mm256_sqrt_pd(q), quarter));
+            }
+            __m256 v = _mm256_set_m128(half[1], half[0]);
+            v = _mm256_min_ps(v, big); /* v <= FLT_MAX ? v : FLT_MAX (v is never NaN) */
+            /* ramp: e > 0 ? (e < 1 ? e : 1) : 0 is max(min(e, 1), +0) (maxps gives its second
+             * operand, +0, for e = -0) */
+            const __m256 e = _mm256_mul_ps(_mm256_sub_ps(v, tv), iv);
+            _mm256_storeu_ps(out + xc, _mm256_max_ps(_mm256_min_ps(e, one), zero));
         }
-        __m256 v = _mm256_set_m128(half[1], half[0]);
-        v = _mm256_min_ps(v, big); /* v <= FLT_MAX ? v : FLT_MAX (v is never NaN) */
-        /* ramp: e > 0 ? (e < 1 ? e : 1) : 0 is max(min(e, 1), +0) (maxps gives its second
-         * operand, +0, for e = -0); the sure lanes take their 0 or 1 */
-        const __m256 e = _mm256_mul_ps(_mm256_sub_ps(v, tv), iv);
-        const __m256 r = _mm256_max_ps(_mm256_min_ps(e, one), zero);
-        _mm256_storeu_ps(out + x, _mm256_blendv_ps(r, sure_one, sure));
     }
+#undef SOBEL_TERMS
     return x;
 }
 #  endif
