@@ -246,8 +246,10 @@ DRAW_VEC static void draw_row(void *user, int y, const float *matte)
             }
             const v8f a8 = ld8f(matte + xc) * S8(op); /* the products draw_px takes, lane by lane */
             const int finite = !any8(inf[0] | inf[1] | inf[2] | inf[3]);
+            const v8f pair[4] = { FX_SHUF8(a8, a8, 0, 0, 0, 0, 1, 1, 1, 1), FX_SHUF8(a8, a8, 2, 2, 2, 2, 3, 3, 3, 3),
+                                  FX_SHUF8(a8, a8, 4, 4, 4, 4, 5, 5, 5, 5), FX_SHUF8(a8, a8, 6, 6, 6, 6, 7, 7, 7, 7) };
             for (int k = 0; k < 4; k++) {
-                const v8f a = FX_SHUF8(a8, a8, 2 * k, 2 * k, 2 * k, 2 * k, 2 * k + 1, 2 * k + 1, 2 * k + 1, 2 * k + 1);
+                const v8f a = pair[k]; /* pixels 2k and 2k + 1's opacities, four lanes each */
                 const v8f t = finite8(s[k] + a * (lc8 - s[k]));
                 /* a pixel stays as it is where a is 0 and its four values are finite */
                 v8i keep = a == S8(0.0f);
