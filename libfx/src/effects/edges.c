@@ -6,9 +6,11 @@
 #include "core/parallel.h"
 #include "math/edge_ops.h"
 #include "core/simd4.h"
+#include "core/simd8.h"
 
 #include <float.h>
 #include <math.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <string.h>
 
@@ -145,11 +147,50 @@ static inline void draw_px(const float *srow, float *drow, const float *matte, i
     st4(drow + 4 * (size_t)x, finite4(s + V4(a) * (lc - s)));
 }
 
-/* d = s + a (t - s) per pixel, one RGBA vector at a time; NaN -> 0, +-Inf -> +-FLT_MAX.
- * Where a is 0 (no line: most pixels) d = s, not written at all in place (the cache line
- * stays clean: no write back). Called by the edge engine with each finished matte row
- * (math/edge_ops.h). */
-static void draw_row(void *user, int y, const float *matte)
+/* Eight-lane helpers for draw_row (core/simd8.h's types), in the clones below. */
+static inline __attribute__((always_inline)) v8f ld8f(const float *p)
+{
+    v8f v;
+    memcpy(&v, p, sizeof v);
+    return v;
+}
+
+/* finite4's operations on 8 lanes: NaN -> +0, then clamped to +-FLT_MAX (the same bits) */
+static inline __attribute__((always_inline)) v8f finite8(v8f v)
+{
+    v = (v8f)((v8i)v & (v == v));
+    v = SEL8(v < S8(FLT_MAX), v, S8(FLT_MAX));
+    return SEL8(v > S8(-FLT_MAX), v, S8(-FLT_MAX));
+}
+
+static inline __attribute__((always_inline)) int any8(v8i m)
+{
+    uint64_t u[4];
+    memcpy(u, &m, sizeof u);
+    return (u[0] | u[1] | u[2] | u[3]) != 0;
+}
+
+#define S8I(v) ((v8i){ (v), (v), (v), (v), (v), (v), (v), (v) })
+#if defined(__clang__)
+#  define SHUF8I(a, i0, i1, i2, i3, i4, i5, i6, i7) __builtin_shufflevector(a, a, i0, i1, i2, i3, i4, i5, i6, i7)
+#else
+#  define SHUF8I(a, i0, i1, i2, i3, i4, i5, i6, i7) __builtin_shuffle(a, (v8i){ i0, i1, i2, i3, i4, i5, i6, i7 })
+#endif
+
+#if defined(__GNUC__) && !defined(__clang__) && (defined(__x86_64__) || defined(__i386__)) && \
+    !defined(FX_NO_CLONES)
+#  define DRAW_VEC __attribute__((target_clones("avx2", "default")))
+#else
+#  define DRAW_VEC
+#endif
+
+/* d = s + a (t - s) per pixel; NaN -> 0, +-Inf -> +-FLT_MAX. Where a is 0 and the pixel is
+ * finite (most pixels) d = s: eight such pixels in a row are not written at all in place (the
+ * cache lines stay clean: no write back). Eight pixels at a time as four vectors of two
+ * pixels each, draw_px's operations lane by lane (the same bits), the rest per pixel. Called
+ * by the edge engine with each finished matte row (math/edge_ops.h). The source is read again
+ * after the copy of a row not in place: src and dst are different buffers then. */
+DRAW_VEC static void draw_row(void *user, int y, const float *matte)
 {
     const draw_job *j = user;
     const fx_effect_run *run = j->run;
@@ -172,31 +213,59 @@ static void draw_row(void *user, int y, const float *matte)
         }
         return;
     }
+    const v8f lc8 = { lc[0], lc[1], lc[2], lc[3], lc[0], lc[1], lc[2], lc[3] };
+    const v8i expo = S8I(0x7f800000);
+    /* Not in place: the row as it is first; the chunks with a line or a non-finite value are
+     * then redone. Pass 1 lists those chunks without a branch (lines cross chunks at random:
+     * a branch per chunk mispredicted); pass 2 blends them. */
+    const int xe = roi->x0 + ((roi->x1 - roi->x0) & ~7);
+    if (!in_place)
+        memcpy(drow + 4 * (size_t)roi->x0, srow + 4 * (size_t)roi->x0, (size_t)(xe - roi->x0) * 4 * sizeof(float));
+    enum { SEG = 256 }; /* chunks per list */
+    int list[SEG];
     int x = roi->x0;
-    while (x < roi->x1) {
-        /* 8 pixels without a line and with finite values (the usual case): as they are */
-        if (x + 8 <= roi->x1) {
-            v4f m0 = ld4(matte + x), m1 = ld4(matte + x + 4);
-            v4i nz = (m0 != V4(0.0f)) | (m1 != V4(0.0f));
-            if (!(nz[0] | nz[1] | nz[2] | nz[3])) {
-                v4i bad = { 0, 0, 0, 0 };
-                for (int k = 0; k < 32; k += 4) {
-                    v4i b;
-                    memcpy(&b, srow + 4 * (size_t)x + k, sizeof b);
-                    bad |= (b & 0x7f800000) == 0x7f800000; /* Inf or NaN */
+    while (x < xe) {
+        int nl = 0;
+        const int x_end = x + 8 * SEG <= xe ? x + 8 * SEG : xe;
+        for (; x < x_end; x += 8) {
+            const float *sp = srow + 4 * (size_t)x;
+            v8i any = ld8f(matte + x) != S8(0.0f);
+            for (int k = 0; k < 4; k++)
+                any |= ((v8i)ld8f(sp + 8 * k) & expo) == expo; /* Inf or NaN */
+            list[nl] = x;
+            nl += any8(any);
+        }
+        for (int i = 0; i < nl; i++) {
+            const int xc = list[i];
+            const float *sp = srow + 4 * (size_t)xc;
+            v8f s[4];
+            v8i inf[4];
+            for (int k = 0; k < 4; k++) {
+                s[k] = ld8f(sp + 8 * k);
+                inf[k] = ((v8i)s[k] & expo) == expo;
+            }
+            const v8f a8 = ld8f(matte + xc) * S8(op); /* the products draw_px takes, lane by lane */
+            const int finite = !any8(inf[0] | inf[1] | inf[2] | inf[3]);
+            const v8f pair[4] = { FX_SHUF8(a8, a8, 0, 0, 0, 0, 1, 1, 1, 1), FX_SHUF8(a8, a8, 2, 2, 2, 2, 3, 3, 3, 3),
+                                  FX_SHUF8(a8, a8, 4, 4, 4, 4, 5, 5, 5, 5), FX_SHUF8(a8, a8, 6, 6, 6, 6, 7, 7, 7, 7) };
+            for (int k = 0; k < 4; k++) {
+                const v8f a = pair[k]; /* pixels 2k and 2k + 1's opacities, four lanes each */
+                const v8f t = finite8(s[k] + a * (lc8 - s[k]));
+                /* a pixel stays as it is where a is 0 and its four values are finite */
+                v8i keep = a == S8(0.0f);
+                if (!finite) {
+                    v8i bad = inf[k];
+                    bad |= SHUF8I(bad, 1, 0, 3, 2, 5, 4, 7, 6);
+                    bad |= SHUF8I(bad, 2, 3, 0, 1, 6, 7, 4, 5);
+                    keep &= ~bad;
                 }
-                if (!(bad[0] | bad[1] | bad[2] | bad[3])) {
-                    if (!in_place)
-                        memcpy(drow + 4 * (size_t)x, srow + 4 * (size_t)x, 32 * sizeof(float));
-                    x += 8;
-                    continue;
-                }
+                const v8f o = SEL8(keep, s[k], t);
+                memcpy(drow + 4 * (size_t)xc + 8 * k, &o, sizeof o);
             }
         }
-        const int xe = x + 8 < roi->x1 ? x + 8 : roi->x1;
-        for (; x < xe; x++)
-            draw_px(srow, drow, matte, x, op, lc, in_place);
     }
+    for (; x < roi->x1; x++)
+        draw_px(srow, drow, matte, x, op, lc, in_place);
 }
 
 /* Zero opacity or no edge source is the identity: the stack skips the effect. */

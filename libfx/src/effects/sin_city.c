@@ -202,27 +202,16 @@ static inline __attribute__((always_inline)) float clampf_finite(float v) /* NaN
     return v > -FLT_MAX ? v : -FLT_MAX;
 }
 
-static inline __attribute__((always_inline)) void keep_lanes(const sc_job *j, const float *R, const float *G, const float *B, float *K)
+/* The hue window's weights of 8 lanes (finite colours), in vector registers throughout. */
+static inline __attribute__((always_inline)) v8f keep_hue8(const sc_job *j, v8f r, v8f g, v8f b)
 {
     const sin_city_params *p = j->p;
-    if (p->keep == KEEP_DOT) {
-        for (int i = 0; i < SC_LANES; i++)
-            K[i] = keep_weight(j, R[i], G[i], B[i]);
-        return;
-    }
-    /* GCC vector types: 8 lanes (one AVX register, two SSE ones in the baseline clone) */
-    typedef float v8f __attribute__((vector_size(32)));
-    typedef int32_t v8i __attribute__((vector_size(32)));
-#define SEL(m, a, b) ((v8f)(((v8i)(a) & (m)) | ((v8i)(b) & ~(m))))
-#define SPLAT(v) ((v8f){ (v), (v), (v), (v), (v), (v), (v), (v) })
+#define SEL(m, a, b) SEL8(m, a, b)
+#define SPLAT(v) S8(v)
     const v8f zero = SPLAT(0.0f), one = SPLAT(1.0f);
     const v8f ms = SPLAT(p->min_saturation), iss = SPLAT(j->inv_sat_soft);
     const v8f hc = SPLAT(j->hue_c), hh = SPLAT(j->hue_half), ihs = SPLAT(j->inv_hue_soft);
     const int soft_sat = p->saturation_softness > 0.0f, soft_hue = j->hue_soft > 0.0f;
-    v8f r, g, b;
-    memcpy(&r, R, sizeof r);
-    memcpy(&g, G, sizeof g);
-    memcpy(&b, B, sizeof b);
     r = SEL(r > zero, r, zero);
     g = SEL(g > zero, g, zero);
     b = SEL(b > zero, b, zero);
@@ -256,10 +245,25 @@ static inline __attribute__((always_inline)) void keep_lanes(const sc_job *j, co
         ws = one - t * t * (SPLAT(3.0f) - SPLAT(2.0f) * t);
     }
     const v8f w = SEL(dist <= hh, one, ws);
-    const v8f k = SEL(ok, w * gate, zero);
-    memcpy(K, &k, sizeof k);
+    return SEL(ok, w * gate, zero);
 #undef SEL
 #undef SPLAT
+}
+
+static inline __attribute__((always_inline)) void keep_lanes(const sc_job *j, const float *R, const float *G, const float *B, float *K)
+{
+    const sin_city_params *p = j->p;
+    if (p->keep == KEEP_DOT) {
+        for (int i = 0; i < SC_LANES; i++)
+            K[i] = keep_weight(j, R[i], G[i], B[i]);
+        return;
+    }
+    v8f r, g, b;
+    memcpy(&r, R, sizeof r);
+    memcpy(&g, G, sizeof g);
+    memcpy(&b, B, sizeof b);
+    const v8f k = keep_hue8(j, r, g, b);
+    memcpy(K, &k, sizeof k);
 }
 
 SC_VEC static void sc_rows(void *user, int begin, int end)
@@ -268,7 +272,7 @@ SC_VEC static void sc_rows(void *user, int begin, int end)
     const fx_effect_run *run = j->run;
     const sin_city_params *p = j->p;
     const float mix = p->mix, ks = p->keep_strength;
-    const int lum = p->gray == GRAY_LUMINANCE, keep = p->keep != KEEP_NONE;
+    const int lum = p->gray == GRAY_LUMINANCE, keep = p->keep != KEEP_NONE, dot = p->keep == KEEP_DOT;
     const fx_levels *q = &j->q;
     const int nt = j->quantise ? q->n - 1 : 0;
     const int vec = nt < FX_LEVELS_VEC;
@@ -290,6 +294,8 @@ SC_VEC static void sc_rows(void *user, int begin, int end)
              * op (the same bits), without the round trips through lane arrays */
 #define FIN8(v) (v = SEL8(v == v, v, S8(0.0f)), v = SEL8(v < S8(FLT_MAX), v, S8(FLT_MAX)), \
                  v = SEL8(v > S8(-FLT_MAX), v, S8(-FLT_MAX)))
+            const v8i abs8 = { 0x7fffffff, 0x7fffffff, 0x7fffffff, 0x7fffffff,
+                               0x7fffffff, 0x7fffffff, 0x7fffffff, 0x7fffffff };
             v8f T8[FX_LEVELS_VEC];
             for (int t = 0; t < nt; t++)
                 memcpy(&T8[t], T[t], sizeof T8[t]);
@@ -298,10 +304,19 @@ SC_VEC static void sc_rows(void *user, int begin, int end)
                 v8f px[4]; /* 8 RGBA pixels to channel vectors (math/simd8.h) */
                 fx_load8x4(sp, px);
                 v8f r = px[0], g = px[1], b = px[2], a = px[3];
-                FIN8(r);
-                FIN8(g);
-                FIN8(b);
-                FIN8(a);
+                /* Inputs within +-1e30 (NaN fails the test) keep every value below finite:
+                 * the clamps are then identities and are skipped (the same bits). */
+                const v8i bounded = ((v8f)((v8i)r & abs8) <= S8(1e30f)) & ((v8f)((v8i)g & abs8) <= S8(1e30f)) &
+                                    ((v8f)((v8i)b & abs8) <= S8(1e30f)) & ((v8f)((v8i)a & abs8) <= S8(1e30f));
+                uint64_t bw[4];
+                memcpy(bw, &bounded, sizeof bw);
+                const int guard = (bw[0] & bw[1] & bw[2] & bw[3]) != ~(uint64_t)0;
+                if (guard) {
+                    FIN8(r);
+                    FIN8(g);
+                    FIN8(b);
+                    FIN8(a);
+                }
                 v8f yv = lum ? S8(FX_LUMA_R) * r + S8(FX_LUMA_G) * g + S8(FX_LUMA_B) * b
                              : r * S8(1.0f / 3.0f) + g * S8(1.0f / 3.0f) + b * S8(1.0f / 3.0f);
                 if (j->quantise) {
@@ -314,12 +329,16 @@ SC_VEC static void sc_rows(void *user, int begin, int end)
                 }
                 v8f k = S8(0.0f);
                 if (keep) {
-                    float R[SC_LANES], G[SC_LANES], B[SC_LANES], K[SC_LANES];
-                    memcpy(R, &r, sizeof R);
-                    memcpy(G, &g, sizeof G);
-                    memcpy(B, &b, sizeof B);
-                    keep_lanes(j, R, G, B, K);
-                    memcpy(&k, K, sizeof k);
+                    if (dot) {
+                        float R[SC_LANES], G[SC_LANES], B[SC_LANES], K[SC_LANES];
+                        memcpy(R, &r, sizeof R);
+                        memcpy(G, &g, sizeof G);
+                        memcpy(B, &b, sizeof B);
+                        keep_lanes(j, R, G, B, K);
+                        memcpy(&k, K, sizeof k);
+                    } else {
+                        k = keep_hue8(j, r, g, b); /* no round trip through lane arrays */
+                    }
                     v8f c = S8(1.0f);
                     if (cov)
                         memcpy(&c, cov + x, sizeof c);
@@ -332,9 +351,11 @@ SC_VEC static void sc_rows(void *user, int begin, int end)
                     p1 = g + S8(mix) * (p1 - g);
                     p2 = b + S8(mix) * (p2 - b);
                 }
-                FIN8(p0);
-                FIN8(p1);
-                FIN8(p2);
+                if (guard) {
+                    FIN8(p0);
+                    FIN8(p1);
+                    FIN8(p2);
+                }
                 const v8f po[4] = { p0, p1, p2, a };
                 fx_store8x4(d + 4 * (size_t)x, po);
             }

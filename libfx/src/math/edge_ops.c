@@ -560,6 +560,95 @@ __attribute__((target("avx2"), noinline)) static int sobel_row_avx2(const float 
     }
     return x;
 }
+
+/* Sobel magnitude and the threshold ramp in one pass (luminance edges without the debug
+ * strengths: the strengths are not kept), 8 interior columns at a time from xa; returns where
+ * it stopped. Most pixels are far from the threshold: float bounds on |gx| and |gy| tell the
+ * lanes whose ramp is surely 0 or surely 1; only chunks with a lane in between take
+ * sobel_row_avx2's double path (the same operations, then ramp()'s), so every lane gets
+ * exactly what the exact path gives it: the same bits. */
+__attribute__((target("avx2"), noinline)) static int sobel_ramp_row_avx2(const float *A, const float *B,
+                                                                        const float *C, int xa, int xb,
+                                                                        float t, float inv, float *out)
+{
+    const __m256d two = _mm256_set1_pd(2.0), quarter = _mm256_set1_pd(0.25);
+    const __m256 big = _mm256_set1_ps(FLT_MAX), tv = _mm256_set1_ps(t), iv = _mm256_set1_ps(inv);
+    const __m256 one = _mm256_set1_ps(1.0f), zero = _mm256_setzero_ps();
+    const double qs = 16.0 * (double)t * (double)t * (1.0 - 1.0 / 524288.0);
+    const __m256 qskipf = _mm256_set1_ps((float)(qs * (1.0 - 1.0 / 4096.0))), margin = _mm256_set1_ps(1.0f / 16384.0f);
+    const __m256 absm = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fffffff));
+    /* ramp 1 for sure: v >= (t + W)(1 + 1e-5), W = 1 / inv, then (v - t) inv >= 1 after its two
+     * roundings; v = sqrt(q) / 4 rounded: q >= 16 (t + W)^2 (1 + 2e-5)^2 is enough, and the float
+     * bound takes a further 2^-10 (an infinite bound when that overflows float: never taken) */
+    const double wq = (double)t + 1.0 / (double)inv;
+    const double qh = 16.0 * wq * wq * (1.0 + 2e-5) * (1.0 + 2e-5) * (1.0 + 1.0 / 1024.0);
+    const __m256 qhighf = _mm256_set1_ps(qh < 1e38 ? (float)qh : INFINITY);
+#define SOBEL_TERMS(x)                                                                                          \
+    const __m256 c = _mm256_loadu_ps(B + (x));                                                                  \
+    const __m256 n = _mm256_sub_ps(_mm256_loadu_ps(A + (x)), c), s = _mm256_sub_ps(_mm256_loadu_ps(C + (x)), c); \
+    const __m256 we = _mm256_sub_ps(_mm256_loadu_ps(B + (x) - 1), c);                                           \
+    const __m256 ea = _mm256_sub_ps(_mm256_loadu_ps(B + (x) + 1), c);                                           \
+    const __m256 nw = _mm256_sub_ps(_mm256_loadu_ps(A + (x) - 1), c);                                           \
+    const __m256 ne = _mm256_sub_ps(_mm256_loadu_ps(A + (x) + 1), c);                                           \
+    const __m256 sw = _mm256_sub_ps(_mm256_loadu_ps(C + (x) - 1), c);                                           \
+    const __m256 se = _mm256_sub_ps(_mm256_loadu_ps(C + (x) + 1), c);                                           \
+    const __m256 gx1 = _mm256_sub_ps(ne, nw), gx2 = _mm256_sub_ps(ea, we), gx3 = _mm256_sub_ps(se, sw);         \
+    const __m256 gy1 = _mm256_sub_ps(sw, nw), gy2 = _mm256_sub_ps(s, n), gy3 = _mm256_sub_ps(se, ne)
+    /* Pass 1, branch-free: float bounds on |gx| and |gy| from above and below. |gx - gxf| <=
+     * 2^-22 (|gx1| + 2 |gx2| + |gx3|), far below the 2^-14 taken here (likewise gy); qskipf is
+     * below qs and qhighf above qh's exact bound, so a lane under qskipf has ramp 0 (v <= t)
+     * and one over qhighf ramp 1. Those values are stored; a chunk with any other lane goes on
+     * a list (no branch: edges cut across chunks at random and mispredicted). */
+    enum { SEG = 256 }; /* chunks per list */
+    int list[SEG];
+    int x = xa;
+    while (x + 8 <= xb) {
+        int nl = 0;
+        const int x_end = x + 8 * SEG <= xb ? x + 8 * SEG : xb;
+        for (; x + 8 <= x_end; x += 8) {
+            SOBEL_TERMS(x);
+            const __m256 gxf = _mm256_add_ps(_mm256_add_ps(gx1, _mm256_add_ps(gx2, gx2)), gx3);
+            const __m256 gyf = _mm256_add_ps(_mm256_add_ps(gy1, _mm256_add_ps(gy2, gy2)), gy3);
+            const __m256 sx = _mm256_add_ps(_mm256_add_ps(_mm256_and_ps(gx1, absm), _mm256_and_ps(gx2, absm)),
+                                            _mm256_add_ps(_mm256_and_ps(gx2, absm), _mm256_and_ps(gx3, absm)));
+            const __m256 sy = _mm256_add_ps(_mm256_add_ps(_mm256_and_ps(gy1, absm), _mm256_and_ps(gy2, absm)),
+                                            _mm256_add_ps(_mm256_and_ps(gy2, absm), _mm256_and_ps(gy3, absm)));
+            const __m256 ax = _mm256_and_ps(gxf, absm), ay = _mm256_and_ps(gyf, absm);
+            const __m256 mx = _mm256_mul_ps(sx, margin), my = _mm256_mul_ps(sy, margin);
+            const __m256 bx = _mm256_add_ps(ax, mx), by = _mm256_add_ps(ay, my);
+            const __m256 lx = _mm256_max_ps(_mm256_sub_ps(ax, mx), zero), ly = _mm256_max_ps(_mm256_sub_ps(ay, my), zero);
+            const __m256 qf = _mm256_add_ps(_mm256_mul_ps(bx, bx), _mm256_mul_ps(by, by));
+            const __m256 qlo = _mm256_add_ps(_mm256_mul_ps(lx, lx), _mm256_mul_ps(ly, ly));
+            const __m256 lo = _mm256_cmp_ps(qf, qskipf, _CMP_LT_OQ), hi = _mm256_cmp_ps(qlo, qhighf, _CMP_GT_OQ);
+            _mm256_storeu_ps(out + x, _mm256_and_ps(hi, one));
+            list[nl] = x;
+            nl += _mm256_movemask_ps(_mm256_or_ps(lo, hi)) != 255;
+        }
+        /* Pass 2: the listed chunks exactly: sobel_row_avx2's double path (the same
+         * operations), then ramp()'s; the sure lanes get what this path would give them. */
+        for (int i = 0; i < nl; i++) {
+            const int xc = list[i];
+            SOBEL_TERMS(xc);
+            __m128 half[2];
+            for (int k = 0; k < 2; k++) {
+#define LANES(v) _mm256_cvtps_pd(k == 0 ? _mm256_castps256_ps128(v) : _mm256_extractf128_ps((v), 1))
+                const __m256d gx = _mm256_add_pd(_mm256_add_pd(LANES(gx1), _mm256_mul_pd(two, LANES(gx2))), LANES(gx3));
+                const __m256d gy = _mm256_add_pd(_mm256_add_pd(LANES(gy1), _mm256_mul_pd(two, LANES(gy2))), LANES(gy3));
+#undef LANES
+                const __m256d q = _mm256_add_pd(_mm256_mul_pd(gx, gx), _mm256_mul_pd(gy, gy));
+                half[k] = _mm256_cvtpd_ps(_mm256_mul_pd(_mm256_sqrt_pd(q), quarter));
+            }
+            __m256 v = _mm256_set_m128(half[1], half[0]);
+            v = _mm256_min_ps(v, big); /* v <= FLT_MAX ? v : FLT_MAX (v is never NaN) */
+            /* ramp: e > 0 ? (e < 1 ? e : 1) : 0 is max(min(e, 1), +0) (maxps gives its second
+             * operand, +0, for e = -0) */
+            const __m256 e = _mm256_mul_ps(_mm256_sub_ps(v, tv), iv);
+            _mm256_storeu_ps(out + xc, _mm256_max_ps(_mm256_min_ps(e, one), zero));
+        }
+    }
+#undef SOBEL_TERMS
+    return x;
+}
 #  endif
 #endif
 
@@ -722,9 +811,26 @@ static void strength_row(const edge_job *j, const band_rings *b, int y, float *o
     const float cos_skip = cosf(fx_clampf(s->normal_threshold, 0.0f, 180.0f) * (float)(3.14159265358979323846 / 180.0)) + 1e-5f;
     const int r = fx_edge_operator_radius(s->op);
     float *sl_row = b->sl, *sd_row = b->sd;
+    const int dbg = write_dbg && j->strengths;
     if (s->use_luminance) {
         const float *A = ring_row(b->lum, rf, ws, clampi(y - r, 0, h - 1));
         const float *B = ring_row(b->lum, rf, ws, y), *C = ring_row(b->lum, rf, ws, clampi(y + r, 0, h - 1));
+#ifdef EDGE_AVX2
+        if (s->op == FX_EDGE_SOBEL && !s->use_depth && !s->use_normal && !s->use_object && !s->use_material &&
+            !dbg && __builtin_cpu_supports("avx2")) {
+            /* the common case (the defaults): the Sobel magnitude and its ramp in one pass */
+            int xa = sr->x0 > 1 ? sr->x0 : 1, xb = sr->x1 < w - 1 ? sr->x1 : w - 1;
+            if (xb < xa)
+                xa = xb = sr->x1;
+            int x = sr->x0;
+            for (; x < xa && x < sr->x1; x++)
+                out[x] = ramp(rl, response_at_rows(A, B, C, w, x, 1, s->op));
+            x = sobel_ramp_row_avx2(A, B, C, x, xb, rl.t, rl.inv, out);
+            for (; x < sr->x1; x++)
+                out[x] = ramp(rl, response_at_rows(A, B, C, w, x, 1, s->op));
+            return;
+        }
+#endif
         response_row(A, B, C, w, sr->x0, sr->x1, s->op, sl_row);
     }
     if (s->use_depth) {
@@ -740,7 +846,6 @@ static void strength_row(const edge_job *j, const band_rings *b, int y, float *o
             response_row(A, B, C, w, sr->x0, sr->x1, s->op, sd_row);
         }
     }
-    const int dbg = write_dbg && j->strengths;
     if (s->use_luminance && s->use_depth && !s->use_normal && !s->use_object && !s->use_material && !dbg) {
         for (int x = sr->x0; x < sr->x1; x++) { /* the common cases: simple loops */
             float a = ramp(rl, sl_row[x]), c = ramp(rd, sd_row[x]);

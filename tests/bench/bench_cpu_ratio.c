@@ -1,0 +1,144 @@
+/* bench_cpu_ratio: one-effect recipes against a parallel copy of the frame's RGBA floats on the
+ * same pool, interleaved run by run, in wall time and in process CPU time.
+ *
+ *   bench_cpu_ratio PASSES.exr RUNS THREADS RECIPE.json [RECIPE.json ...]
+ *
+ * Each run times the copy, then fx_stack_run of each recipe (not in place: the stack writes a
+ * pooled buffer, as bench_presets does). Per recipe: the median and minimum wall ms, the median
+ * and minimum CPU ms (CLOCK_PROCESS_CPUTIME_ID: all threads' time, which other processes on a shared
+ * machine disturb far less than wall time) and both medians' ratios to the copy's. The CPU
+ * ratio is the load-independent one when the machine is busy (issue 16: per-pixel effects
+ * within 2x of a copy). Two warm-up runs first. */
+#include "core/parallel.h"
+#include "libfx/fx.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#define MAX_RECIPES 16
+
+static double clock_ms(clockid_t id)
+{
+    struct timespec t;
+    clock_gettime(id, &t);
+    return t.tv_sec * 1e3 + t.tv_nsec / 1e6;
+}
+
+typedef struct copy_job {
+    const float *src;
+    float *dst;
+    int w;
+} copy_job;
+
+static void copy_rows(void *user, int y0, int y1)
+{
+    copy_job *j = user;
+    size_t row = (size_t)j->w * 4;
+    memcpy(j->dst + (size_t)y0 * row, j->src + (size_t)y0 * row, (size_t)(y1 - y0) * row * sizeof(float));
+}
+
+static int cmp_d(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return x < y ? -1 : x > y;
+}
+
+static double median(double *v, int n)
+{
+    qsort(v, (size_t)n, sizeof *v, cmp_d);
+    return v[n / 2];
+}
+
+static char *slurp(const char *path)
+{
+    FILE *f = fopen(path, "rb");
+    if (!f)
+        return NULL;
+    fseek(f, 0, SEEK_END);
+    long n = ftell(f);
+    rewind(f);
+    char *b = malloc((size_t)n + 1);
+    if (b && fread(b, 1, (size_t)n, f) != (size_t)n) {
+        free(b);
+        b = NULL;
+    }
+    if (b)
+        b[n] = 0;
+    fclose(f);
+    return b;
+}
+
+int main(int argc, char **argv)
+{
+    if (argc < 5) {
+        fprintf(stderr, "usage: bench_cpu_ratio PASSES.exr RUNS THREADS RECIPE.json [RECIPE.json ...]\n");
+        return 2;
+    }
+    const int runs = atoi(argv[2]) > 0 ? atoi(argv[2]) : 9, threads = atoi(argv[3]);
+    const int ne = argc - 4 < MAX_RECIPES ? argc - 4 : MAX_RECIPES;
+    fx_context *ctx = NULL;
+    fx_frame *f = NULL;
+    if (fx_context_new(&ctx, threads) || fx_frame_read_exr(ctx, argv[1], NULL, &f)) {
+        fprintf(stderr, "bench_cpu_ratio: %s\n", ctx ? fx_context_error(ctx) : "no context");
+        return 1;
+    }
+    fx_stack *st[MAX_RECIPES] = { 0 };
+    for (int e = 0; e < ne; e++) {
+        char *json = slurp(argv[4 + e]);
+        if (!json || fx_stack_new(ctx, &st[e]) || fx_stack_load_json(st[e], json)) {
+            fprintf(stderr, "bench_cpu_ratio: %s: %s\n", argv[4 + e], json ? fx_context_error(ctx) : "unreadable");
+            return 1;
+        }
+        free(json);
+    }
+    const int w = fx_frame_width(f), h = fx_frame_height(f);
+    const size_t n = (size_t)w * h * 4;
+    float *a = malloc(n * sizeof(float)), *b = malloc(n * sizeof(float));
+    double *wall = calloc((size_t)(ne + 1) * runs, sizeof(double)), *cpu = calloc((size_t)(ne + 1) * runs, sizeof(double));
+    if (!a || !b || !wall || !cpu)
+        return 1;
+    memset(a, 0, n * sizeof(float));
+    memset(b, 0, n * sizeof(float));
+    copy_job cj = { a, b, w };
+    for (int r = -2; r < runs; r++) {
+        for (int e = -1; e < ne; e++) {
+            double t0 = clock_ms(CLOCK_MONOTONIC), c0 = clock_ms(CLOCK_PROCESS_CPUTIME_ID);
+            fx_frame *o = NULL;
+            if (e < 0)
+                fx_parallel_for(ctx, h, fx_grain_for(ctx, h), copy_rows, &cj);
+            else if (fx_stack_run(st[e], f, &o)) {
+                fprintf(stderr, "bench_cpu_ratio: %s: %s\n", argv[4 + e], fx_context_error(ctx));
+                return 1;
+            }
+            double t1 = clock_ms(CLOCK_MONOTONIC), c1 = clock_ms(CLOCK_PROCESS_CPUTIME_ID);
+            fx_frame_free(o);
+            if (r >= 0) {
+                wall[(size_t)(e + 1) * runs + r] = t1 - t0;
+                cpu[(size_t)(e + 1) * runs + r] = c1 - c0;
+            }
+        }
+    }
+    printf("recipe,width,height,threads,runs,wall_ms_median,wall_ms_min,cpu_ms_median,cpu_ms_min,wall_ratio,cpu_ratio\n");
+    double copy_wall = 0, copy_cpu = 0;
+    for (int e = -1; e < ne; e++) {
+        double *wv = wall + (size_t)(e + 1) * runs, *cv = cpu + (size_t)(e + 1) * runs;
+        double wm = median(wv, runs), wmin = wv[0], cm = median(cv, runs), cmin = cv[0];
+        if (e < 0) {
+            copy_wall = wm;
+            copy_cpu = cm;
+        }
+        printf("%s,%d,%d,%d,%d,%.3f,%.3f,%.3f,%.3f,%.2f,%.2f\n", e < 0 ? "copy" : argv[4 + e], w, h, threads, runs,
+               wm, wmin, cm, cmin, wm / copy_wall, cm / copy_cpu);
+    }
+    for (int e = 0; e < ne; e++)
+        fx_stack_free(st[e]);
+    fx_frame_free(f);
+    fx_context_free(ctx);
+    free(a);
+    free(b);
+    free(wall);
+    free(cpu);
+    return 0;
+}
