@@ -218,7 +218,7 @@ typedef struct caustics_job {
     int node_size;           /* floats per node: 4, or NODE_MAX with lattice_shading */
     float *nodes;            /* nx * ny * node_size: a (gap or F1), noise, world x, world y (NaN:
                                 none), s, add[3] (lattice_shading: factors) */
-    int has_add;             /* lattice_shading: add is not always 0 (seed mode, environment) */
+    int has_add;             /* add is not always 0 (seed mode, environment) */
     int *node_id;            /* nx * ny * 2: the node's nearest two points */
 } caustics_job;
 
@@ -253,7 +253,7 @@ static inline int world_at(const caustics_job *j, int x, int y, fx_vec3 *P)
         fx_vec2 ndc = fx_view_pixel_to_ndc(&j->view, x + 0.5f, y + 0.5f);
         *P = fx_view_to_world(&j->view, fx_view_position(&j->view, ndc, j->depth[i]));
     }
-    return isfinite(P->x) && isfinite(P->y) && isfinite(P->z) && fabsf(P->x) <= 1e15f && fabsf(P->y) <= 1e15f;
+    return fabsf(P->x) <= 1e15f && fabsf(P->y) <= 1e15f && isfinite(P->z); /* NaN fails <= */
 }
 
 /* The noise at a world point (cache: the same bits, fewer hashes along a row) */
@@ -463,13 +463,57 @@ static void cell_view_at(const caustics_job *j, int j0, int j1, int i0, int i1, 
     c->smooth = same || !j->p->refine;
 }
 
+#define SEG 256 /* pixels per row segment: the shading pass's buffers */
+
+/* A segment pixel's state after the pattern pass */
+enum { PX_COPY = 0, PX_PATTERN, PX_GAIN, PX_DONE };
+
+/* physical mode without an additive term (no environment): out = src (1 + s tint) per
+ * pixel of a segment, s from the pattern (a, noise) or given (lattice_shading), or src
+ * copied. The same arithmetic as factors/gain_of/apply, in two loops: the first computes
+ * s, the second (no calls, no branches) applies it and auto-vectorises. */
+static void shade_segment(const caustics_job *j, const float *restrict src, float *restrict dst, int n,
+                          const unsigned char *restrict st, const float *restrict av, const float *restrict nz,
+                          float *restrict sv)
+{
+    const float inv_lw = j->inv_lw, inv_mean = j->inv_mean, strength = j->p->strength;
+    const float t0 = j->p->tint[0], t1 = j->p->tint[1], t2 = j->p->tint[2];
+    for (int c = 0; c < n; c++) {
+        if (st[c] != PX_PATTERN)
+            continue;
+        float g = expf(-av[c] * inv_lw) * inv_mean;
+        g = (g < (float)FOCUS_MAX ? g : (float)FOCUS_MAX) - 1.0f;
+        float amp = strength * (0.4f + 1.2f * nz[c]);
+        sv[c] = amp * g;
+    }
+    for (int c = 0; c < n; c++) {
+        const float *s = src + (size_t)c * 4;
+        float *d = dst + (size_t)c * 4;
+        const float sc = sv[c];
+        const int keep = st[c] == PX_COPY;
+        float v0 = s[0] * (1.0f + sc * t0), v1 = s[1] * (1.0f + sc * t1), v2 = s[2] * (1.0f + sc * t2);
+        v0 = !(v0 > 0.0f) ? 0.0f : v0 > FLT_MAX ? FLT_MAX : v0;
+        v1 = !(v1 > 0.0f) ? 0.0f : v1 > FLT_MAX ? FLT_MAX : v1;
+        v2 = !(v2 > 0.0f) ? 0.0f : v2 > FLT_MAX ? FLT_MAX : v2;
+        d[0] = keep ? s[0] : v0;
+        d[1] = keep ? s[1] : v1;
+        d[2] = keep ? s[2] : v2;
+        d[3] = s[3];
+    }
+}
+
 static void caustics_rows(void *user, int begin, int end)
 {
     const caustics_job *j = user;
     const fx_effect_run *run = j->run;
     const int w = run->width;
     const float tol = (float)(0.1 * j->cell); /* world units: a tenth of a cell */
+    const int lattice_shading = j->p->lattice_shading;
+    /* the segment shading: physical mode, no additive term; else each pixel is shaded at once */
+    const int seg_shade = j->p->mode == MODE_PHYSICAL && !j->has_add;
     fx_noise_cache cache = {0};
+    unsigned char st[SEG];
+    float av[SEG], nz[SEG], sv[SEG];
     for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++) {
         int j0 = 0, j1 = 0;
         float ty = 0.0f;
@@ -478,63 +522,93 @@ static void caustics_rows(void *user, int begin, int end)
         const int node_row = j->nodes && y == j->node_y[j0];
         cell_view cv = {NULL, NULL, NULL, NULL, 0};
         int cv_col = -1;
-        for (int x = run->roi.x0; x < run->roi.x1; x++) {
-            size_t i = (size_t)y * w + x;
-            const float *s = run->src + i * 4;
-            float *d = run->dst + i * 4;
-            fx_vec3 P;
-            if (!covered(run, i) || !world_at(j, x, y, &P)) {
-                memcpy(d, s, 4 * sizeof(float));
-                continue;
-            }
-            float a, noise;
-            if (j->nodes) {
-                int col = x - run->roi.x0, i0 = j->col_i0[col];
-                if (i0 != cv_col) {
-                    cell_view_at(j, j0, j1, i0, j->col_i1[col], &cv);
-                    cv_col = i0;
-                }
-                if (node_row && x == j->node_x[i0] && !isnan(cv.q00[2])) {
-                    /* a lattice node: its own values (what interpolation would give) */
-                    if (j->p->lattice_shading)
-                        apply_s(j, i, cv.q00 + 4);
+        for (int xs = run->roi.x0; xs < run->roi.x1; xs += SEG) {
+            const int n = run->roi.x1 - xs < SEG ? run->roi.x1 - xs : SEG;
+            for (int c = 0; c < n; c++) {
+                const int x = xs + c;
+                size_t i = (size_t)y * w + x;
+                st[c] = PX_DONE;
+                av[c] = nz[c] = sv[c] = 0.0f;
+                fx_vec3 P;
+                if (!covered(run, i) || !world_at(j, x, y, &P)) {
+                    if (seg_shade)
+                        st[c] = PX_COPY;
                     else
-                        shade(j, i, P, cv.q00[0], cv.q00[1]);
+                        memcpy(run->dst + i * 4, run->src + i * 4, 4 * sizeof(float));
                     continue;
                 }
-                float tx = j->col_t[col];
-                float w00 = (1.0f - tx) * (1.0f - ty), w10 = tx * (1.0f - ty), w01 = (1.0f - tx) * ty, w11 = tx * ty;
-#define LERP4(ch) (w00 * cv.q00[ch] + w10 * cv.q10[ch] + w01 * cv.q01[ch] + w11 * cv.q11[ch])
-                float v[NODE_MAX];
-                v[2] = LERP4(2);
-                v[3] = LERP4(3);
-                /* a pixel whose corners are not on its surface (NaN corners fail too): exact */
-                if (fabsf(v[2] - P.x) <= tol && fabsf(v[3] - P.y) <= tol) {
-                    if (j->p->lattice_shading) { /* s, and add (0 without seed mode or environment) */
-                        v[4] = LERP4(4);
-                        v[5] = v[6] = v[7] = 0.0f;
-                        if (j->has_add) {
-                            v[5] = LERP4(5);
-                            v[6] = LERP4(6);
-                            v[7] = LERP4(7);
-                        }
-                        apply_s(j, i, v + 4);
-                        continue;
+                float a, noise;
+                if (j->nodes) {
+                    int col = x - run->roi.x0, i0 = j->col_i0[col];
+                    if (i0 != cv_col) {
+                        cell_view_at(j, j0, j1, i0, j->col_i1[col], &cv);
+                        cv_col = i0;
                     }
-                    v[0] = LERP4(0);
-                    v[1] = LERP4(1);
+                    if (node_row && x == j->node_x[i0] && !isnan(cv.q00[2])) {
+                        /* a lattice node: its own values (what interpolation would give) */
+                        if (lattice_shading) {
+                            if (seg_shade) {
+                                st[c] = PX_GAIN;
+                                sv[c] = cv.q00[4];
+                            } else {
+                                apply_s(j, i, cv.q00 + 4);
+                            }
+                            continue;
+                        }
+                        a = cv.q00[0];
+                        noise = cv.q00[1];
+                        goto emit;
+                    }
+                    float tx = j->col_t[col];
+                    float w00 = (1.0f - tx) * (1.0f - ty), w10 = tx * (1.0f - ty), w01 = (1.0f - tx) * ty,
+                          w11 = tx * ty;
+#define LERP4(ch) (w00 * cv.q00[ch] + w10 * cv.q10[ch] + w01 * cv.q01[ch] + w11 * cv.q11[ch])
+                    float v[NODE_MAX];
+                    v[2] = LERP4(2);
+                    v[3] = LERP4(3);
+                    /* a pixel whose corners are not on its surface (NaN corners fail too): exact */
+                    if (fabsf(v[2] - P.x) <= tol && fabsf(v[3] - P.y) <= tol) {
+                        if (lattice_shading) { /* s, and add (0 without seed mode or environment) */
+                            v[4] = LERP4(4);
+                            if (seg_shade) {
+                                st[c] = PX_GAIN;
+                                sv[c] = v[4];
+                                continue;
+                            }
+                            v[5] = v[6] = v[7] = 0.0f;
+                            if (j->has_add) {
+                                v[5] = LERP4(5);
+                                v[6] = LERP4(6);
+                                v[7] = LERP4(7);
+                            }
+                            apply_s(j, i, v + 4);
+                            continue;
+                        }
+                        v[0] = LERP4(0);
+                        v[1] = LERP4(1);
 #undef LERP4
-                    noise = v[1];
-                    /* the same points all round: F1, F2 smooth in between; else a cell border
-                     * (the bright line's kink) may cross: the pixel's own search */
-                    a = cv.smooth ? v[0] : value_at(j, P.x, P.y, NULL);
+                        noise = v[1];
+                        /* the same points all round: F1, F2 smooth in between; else a cell border
+                         * (the bright line's kink) may cross: the pixel's own search */
+                        a = cv.smooth ? v[0] : value_at(j, P.x, P.y, NULL);
+                        goto emit;
+                    }
+                }
+                a = value_at(j, P.x, P.y, NULL);
+                noise = noise_at(j, P.x, P.y, &cache);
+            emit:
+                if (seg_shade) {
+                    st[c] = PX_PATTERN;
+                    av[c] = a;
+                    nz[c] = noise;
+                } else {
                     shade(j, i, P, a, noise);
-                    continue;
                 }
             }
-            a = value_at(j, P.x, P.y, NULL);
-            noise = noise_at(j, P.x, P.y, &cache);
-            shade(j, i, P, a, noise);
+            if (seg_shade) {
+                size_t i = (size_t)y * w + xs;
+                shade_segment(j, run->src + i * 4, run->dst + i * 4, n, st, av, nz, sv);
+            }
         }
     }
 }
@@ -681,6 +755,7 @@ static fx_result caustics_process(const fx_effect_run *run)
             j.mean_g = 1e-12;
     }
     j.inv_mean = (float)fmin(1.0 / j.mean_g, 1e30);
+    j.has_add = p->mode == MODE_SEED || (p->environment_strength > 0.0f && j.normal);
     if (p->downsample > 1) {
         j.f = p->downsample;
         j.node_x = lattice_axis(run->roi.x0, run->roi.x1, j.f, &j.nx);
@@ -695,7 +770,6 @@ static fx_result caustics_process(const fx_effect_run *run)
             lattice_pos(j.node_x, j.nx, j.f, run->roi.x0, run->roi.x0 + c, &j.col_i0[c], &j.col_i1[c], &j.col_t[c]);
         size_t count = (size_t)j.nx * j.ny;
         j.node_size = p->lattice_shading ? NODE_MAX : 4;
-        j.has_add = p->mode == MODE_SEED || (p->environment_strength > 0.0f && j.normal);
         j.nodes = fx_mem_alloc(count * j.node_size * sizeof(float));
         j.node_id = fx_mem_alloc(count * 2 * sizeof(int));
         if (!j.nodes || !j.node_id)
