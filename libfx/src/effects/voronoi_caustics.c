@@ -221,7 +221,7 @@ typedef struct caustics_job {
     int has_add;             /* add is not always 0 (seed mode, environment) */
     int *node_id;            /* nx * ny * 2: the node's nearest two points */
     int cx, cy;              /* lattice cells per row (nx - 1, at least 1) and rows */
-    unsigned char *smooth;   /* cx * cy (refine): cell_smooth of each lattice cell */
+    unsigned char *smooth;   /* cx * cy (refine): smooth_rows' flags of each lattice cell */
 } caustics_job;
 
 static void evaluate(const caustics_job *j, double wx, double wy, fx_voronoi_hit *h)
@@ -432,46 +432,52 @@ static void node_rows(void *user, int begin, int end)
         }
 }
 
-/* Whether lattice cell (i0..i1, j0..j1) is smooth: the same nearest points at its four
- * corners (physical: both; seed: the nearest), or no line can reach it: its pixels
- * interpolate; else (refine) a cell border (the bright line's kink) may cross: each pixel
- * gets its own search. */
-static int cell_smooth(const caustics_job *j, int j0, int j1, int i0, int i1)
+/* Whether the pattern may be interpolated between some lattice nodes (n = 4: a cell's
+ * corners, for its inner pixels; n = 2: an edge's ends, for the pixels on a node row or
+ * column, which interpolate between those two only): the same nearest points at all of
+ * them (physical: both; seed: the nearest), or no line can reach them; else (refine) a cell
+ * border (the bright line's kink) may cross: each pixel gets its own search. */
+static int nodes_smooth(const caustics_job *j, const size_t *at, int n)
 {
-    if (!j->p->refine)
-        return 1;
-    const int ns = j->node_size;
-    const int *d00 = j->node_id + ((size_t)j0 * j->nx + i0) * 2;
-    const int *d10 = j->node_id + ((size_t)j0 * j->nx + i1) * 2;
-    const int *d01 = j->node_id + ((size_t)j1 * j->nx + i0) * 2;
-    const int *d11 = j->node_id + ((size_t)j1 * j->nx + i1) * 2;
-    int same = d00[0] == d10[0] && d00[0] == d01[0] && d00[0] == d11[0];
-    if (j->p->mode == MODE_PHYSICAL)
-        same = same && d00[1] == d10[1] && d00[1] == d01[1] && d00[1] == d11[1];
+    const int *d0 = j->node_id + at[0] * 2;
+    int same = 1;
+    for (int k = 1; k < n; k++) {
+        const int *d = j->node_id + at[k] * 2;
+        same = same && d[0] == d0[0] && (j->p->mode != MODE_PHYSICAL || d[1] == d0[1]);
+    }
     if (!same && j->far_gap > 0.0f) {
-        /* no line can reach the cell: gap is 2-Lipschitz (p >= 1) over the corners'
-         * footprint (its L1 extent), so gap >= min corner gap - 2 ext (NaN: not far) */
-        const float *q00 = j->nodes + ((size_t)j0 * j->nx + i0) * ns;
-        const float *q10 = j->nodes + ((size_t)j0 * j->nx + i1) * ns;
-        const float *q01 = j->nodes + ((size_t)j1 * j->nx + i0) * ns;
-        const float *q11 = j->nodes + ((size_t)j1 * j->nx + i1) * ns;
-        float ext = fabsf(q00[2] - q11[2]) + fabsf(q00[3] - q11[3]) + fabsf(q10[2] - q01[2]) + fabsf(q10[3] - q01[3]);
-        float lo = q00[0] < q10[0] ? q00[0] : q10[0];
-        lo = lo < q01[0] ? lo : q01[0];
-        lo = lo < q11[0] ? lo : q11[0];
+        /* no line can reach: gap is 2-Lipschitz (p >= 1) over the nodes' footprint (its L1
+         * extent: both diagonals for a cell), so gap >= min node gap - 2 ext (NaN: not far) */
+        const int ns = j->node_size;
+        const float *q0 = j->nodes + at[0] * ns, *q1 = j->nodes + at[1] * ns;
+        float ext = fabsf(q0[2] - q1[2]) + fabsf(q0[3] - q1[3]);
+        float lo = q0[0] < q1[0] ? q0[0] : q1[0];
+        if (n == 4) {
+            const float *q2 = j->nodes + at[2] * ns, *q3 = j->nodes + at[3] * ns;
+            ext += fabsf(q2[2] - q3[2]) + fabsf(q2[3] - q3[3]);
+            lo = lo < q2[0] ? lo : q2[0];
+            lo = lo < q3[0] ? lo : q3[0];
+        }
         same = lo - 2.0f * ext * j->inv_cell > j->far_gap;
     }
     return same;
 }
 
-/* The smooth flags of the lattice cells whose top row is cj (one row per call item) */
+/* The smooth flags of the lattice cells whose top row is cj (one row per call item): bit 0
+ * the cell (its inner pixels), bit 1 its top edge, bit 2 its left edge */
 static void smooth_rows(void *user, int begin, int end)
 {
     caustics_job *j = user;
+    const size_t nx = j->nx;
     for (int cj = begin; cj < end; cj++) {
-        int j1 = j->ny > 1 ? cj + 1 : 0;
-        for (int ci = 0; ci < j->cx; ci++)
-            j->smooth[(size_t)cj * j->cx + ci] = (unsigned char)cell_smooth(j, cj, j1, ci, j->nx > 1 ? ci + 1 : 0);
+        const size_t j1 = j->ny > 1 ? cj + 1 : 0;
+        for (int ci = 0; ci < j->cx; ci++) {
+            const size_t i1 = nx > 1 ? ci + 1 : 0;
+            const size_t q00 = cj * nx + ci, q10 = cj * nx + i1, q01 = j1 * nx + ci, q11 = j1 * nx + i1;
+            const size_t cell[4] = {q00, q11, q10, q01}, top[2] = {q00, q10}, left[2] = {q00, q01};
+            j->smooth[(size_t)cj * j->cx + ci] =
+                (unsigned char)(nodes_smooth(j, cell, 4) | nodes_smooth(j, top, 2) << 1 | nodes_smooth(j, left, 2) << 2);
+        }
     }
 }
 
@@ -529,38 +535,52 @@ static inline float exp_neg(float x)
  * copied; loops without calls or branches (auto-vectorised). */
 static void shade_segment(const caustics_job *j, const float *restrict src, float *restrict dst, int n,
                           const unsigned char *restrict st, const float *restrict av, const float *restrict nz,
-                          float *restrict sv)
+                          float *restrict sv, int patterns)
 {
     const float inv_lw = j->inv_lw, inv_mean = j->inv_mean, strength = j->p->strength;
     const float t0 = j->p->tint[0], t1 = j->p->tint[1], t2 = j->p->tint[2];
-    float xs[SEG];
-    for (int c = 0; c < n; c++) { /* a >= 0: the argument in [-87, 0] (a separate loop: both vectorise) */
-        float x = -av[c] * inv_lw;
-        x = x > -87.0f ? x : -87.0f;
-        xs[c] = x < 0.0f ? x : 0.0f;
+    if (patterns) {
+        float xs[SEG];
+        for (int c = 0; c < n; c++) { /* a >= 0: the argument in [-87, 0] (a separate loop: both vectorise) */
+            float x = -av[c] * inv_lw;
+            x = x > -87.0f ? x : -87.0f;
+            xs[c] = x < 0.0f ? x : 0.0f;
+        }
+        for (int c = 0; c < n; c++)
+            xs[c] = exp_neg(xs[c]);
+        for (int c = 0; c < n; c++) {
+            float g = xs[c] * inv_mean;
+            g = (g < (float)FOCUS_MAX ? g : (float)FOCUS_MAX) - 1.0f;
+            float amp = strength * (0.4f + 1.2f * nz[c]);
+            sv[c] = st[c] == PX_PATTERN ? amp * g : sv[c];
+        }
     }
-    for (int c = 0; c < n; c++)
-        xs[c] = exp_neg(xs[c]);
+    /* per channel: the gain, and whether the input is kept (copied pixels, alpha) */
+    float gain[4 * SEG];
+    int32_t keep[4 * SEG];
     for (int c = 0; c < n; c++) {
-        float g = xs[c] * inv_mean;
-        g = (g < (float)FOCUS_MAX ? g : (float)FOCUS_MAX) - 1.0f;
-        float amp = strength * (0.4f + 1.2f * nz[c]);
-        sv[c] = st[c] == PX_PATTERN ? amp * g : sv[c];
-    }
-    for (int c = 0; c < n; c++) {
-        const float *s = src + (size_t)c * 4;
-        float *d = dst + (size_t)c * 4;
         const float sc = sv[c];
-        const int keep = st[c] == PX_COPY;
-        float v0 = s[0] * (1.0f + sc * t0), v1 = s[1] * (1.0f + sc * t1), v2 = s[2] * (1.0f + sc * t2);
-        v0 = !(v0 > 0.0f) ? 0.0f : v0 > FLT_MAX ? FLT_MAX : v0;
-        v1 = !(v1 > 0.0f) ? 0.0f : v1 > FLT_MAX ? FLT_MAX : v1;
-        v2 = !(v2 > 0.0f) ? 0.0f : v2 > FLT_MAX ? FLT_MAX : v2;
-        d[0] = keep ? s[0] : v0;
-        d[1] = keep ? s[1] : v1;
-        d[2] = keep ? s[2] : v2;
-        d[3] = s[3];
+        const int32_t k = st[c] == PX_COPY;
+        gain[4 * c] = 1.0f + sc * t0;
+        gain[4 * c + 1] = 1.0f + sc * t1;
+        gain[4 * c + 2] = 1.0f + sc * t2;
+        gain[4 * c + 3] = 1.0f;
+        keep[4 * c] = keep[4 * c + 1] = keep[4 * c + 2] = k;
+        keep[4 * c + 3] = 1;
     }
+    for (int e = 0; e < 4 * n; e++) {
+        float v = src[e] * gain[e];
+        v = !(v > 0.0f) ? 0.0f : v > FLT_MAX ? FLT_MAX : v;
+        dst[e] = keep[e] ? src[e] : v;
+    }
+}
+
+/* lattice_shading (draft's trade): a lattice cell whose four corners have positions gives its
+ * pixels the interpolated shading without their own surface test (a silhouette or step
+ * between two lattice nodes is not seen; a pixel without a position is still left as is) */
+static inline int cell_coherent(const float *q00, const float *q10, const float *q01, const float *q11)
+{
+    return !isnan(q00[2]) && !isnan(q10[2]) && !isnan(q01[2]) && !isnan(q11[2]);
 }
 
 static void caustics_rows(void *user, int begin, int end)
@@ -572,26 +592,65 @@ static void caustics_rows(void *user, int begin, int end)
     const int lattice_shading = j->p->lattice_shading;
     /* the segment shading: physical mode, no additive term; else each pixel is shaded at once */
     const int seg_shade = j->p->mode == MODE_PHYSICAL && !j->has_add;
+    const float *cov = run->mask ? run->mask->coverage : NULL;
+    const float *nodes = j->nodes, *position = j->position;
+    const int ns = j->node_size, nx = j->nx, pc = j->pos_channels;
+    const int *col_i0 = j->col_i0, *col_i1 = j->col_i1;
+    const float *col_t = j->col_t;
     fx_noise_cache cache = {0};
     unsigned char st[SEG];
     float av[SEG], nz[SEG], sv[SEG];
     for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++) {
         int j0 = 0, j1 = 0;
         float ty = 0.0f;
-        if (j->nodes)
+        if (nodes)
             lattice_pos(j->node_y, j->ny, j->f, run->roi.y0, y, &j0, &j1, &ty);
-        const int node_row = j->nodes && y == j->node_y[j0];
-        /* the current lattice cell: its columns interpolated to this row, its smooth flag */
+        const int node_row = nodes && y == j->node_y[j0];
+        /* the current lattice cell: its columns interpolated to this row, its node pixel's
+         * column (-1: none on this row), its smooth and coherent flags */
         float c0[NODE_MAX], c1[NODE_MAX];
-        int cur = -1, smooth = 1;
+        const float *q00 = NULL;
+        int cur = -1, smooth = 7, node_col = -1, node_x0 = -1, coherent = 0;
+        /* which smooth flag a pixel of this row reads: a node row's pixels lie on top edges */
+        const int row_bit = node_row ? 2 : 1;
         for (int xs = run->roi.x0; xs < run->roi.x1; xs += SEG) {
             const int n = run->roi.x1 - xs < SEG ? run->roi.x1 - xs : SEG;
+            int patterns = 0;
             for (int c = 0; c < n; c++) {
                 const int x = xs + c;
-                size_t i = (size_t)y * w + x;
+                const size_t i = (size_t)y * w + x;
+                const int col = x - run->roi.x0;
                 st[c] = PX_DONE;
+                if (nodes) {
+                    const int i0 = col_i0[col];
+                    if (i0 != cur) {
+                        const int i1 = col_i1[col];
+                        if (i0 == cur + 1 && i0 != 0)
+                            memcpy(c0, c1, sizeof c0);
+                        else
+                            column_at(j, j0, j1, ty, i0, c0);
+                        column_at(j, j0, j1, ty, i1, c1);
+                        smooth = j->smooth ? j->smooth[(size_t)j0 * j->cx + i0] : 7;
+                        node_x0 = j->node_x[i0];
+                        q00 = nodes + ((size_t)j0 * nx + i0) * ns;
+                        node_col = node_row && !isnan(q00[2]) ? j->node_x[i0] : -1;
+                        coherent = lattice_shading &&
+                                   cell_coherent(q00, nodes + ((size_t)j0 * nx + i1) * ns,
+                                                 nodes + ((size_t)j1 * nx + i0) * ns,
+                                                 nodes + ((size_t)j1 * nx + i1) * ns);
+                        cur = i0;
+                    }
+                }
                 fx_vec3 P;
-                if (!covered(run, i) || !world_at(j, x, y, &P)) {
+                int ok;
+                if (position) {
+                    const float *pq = position + i * pc;
+                    P = fx_v3(pq[0], pq[1], pq[2]);
+                    ok = fabsf(P.x) <= 1e15f && fabsf(P.y) <= 1e15f && isfinite(P.z);
+                } else {
+                    ok = world_at(j, x, y, &P);
+                }
+                if ((cov && !(cov[i] > 0.0f)) || !ok) {
                     if (seg_shade) {
                         st[c] = PX_COPY;
                         sv[c] = av[c] = nz[c] = 0.0f;
@@ -600,21 +659,24 @@ static void caustics_rows(void *user, int begin, int end)
                     }
                     continue;
                 }
-                float a, noise;
-                if (j->nodes) {
-                    int col = x - run->roi.x0, i0 = j->col_i0[col];
-                    if (i0 != cur) {
-                        const int i1 = j->col_i1[col];
-                        if (i0 == cur + 1 && i0 != 0)
-                            memcpy(c0, c1, sizeof c0);
-                        else
-                            column_at(j, j0, j1, ty, i0, c0);
-                        column_at(j, j0, j1, ty, i1, c1);
-                        smooth = j->smooth ? j->smooth[(size_t)j0 * j->cx + i0] : 1;
-                        cur = i0;
+                if (coherent) { /* lattice_shading: no surface test */
+                    const float tx = col_t[col], ux = 1.0f - tx;
+                    float v[4] = {c0[4] * ux + c1[4] * tx, 0.0f, 0.0f, 0.0f};
+                    if (seg_shade) {
+                        st[c] = PX_GAIN;
+                        sv[c] = v[0];
+                        av[c] = nz[c] = 0.0f;
+                        continue;
                     }
-                    const float *q00 = j->nodes + ((size_t)j0 * j->nx + i0) * j->node_size;
-                    if (node_row && x == j->node_x[i0] && !isnan(q00[2])) {
+                    if (j->has_add)
+                        for (int k = 1; k < 4; k++)
+                            v[k] = c0[4 + k] * ux + c1[4 + k] * tx;
+                    apply_s(j, i, v);
+                    continue;
+                }
+                float a, noise;
+                if (nodes) {
+                    if (x == node_col) {
                         /* a lattice node: its own values (what interpolation would give) */
                         if (lattice_shading) {
                             if (seg_shade) {
@@ -630,7 +692,7 @@ static void caustics_rows(void *user, int begin, int end)
                         noise = q00[1];
                         goto emit;
                     }
-                    const float tx = j->col_t[col], ux = 1.0f - tx;
+                    const float tx = col_t[col], ux = 1.0f - tx;
 #define LERP2(ch) (c0[ch] * ux + c1[ch] * tx)
                     /* a pixel whose corners are not on its surface (NaN corners fail too): exact */
                     if (fabsf(LERP2(2) - P.x) <= tol && fabsf(LERP2(3) - P.y) <= tol) {
@@ -651,7 +713,9 @@ static void caustics_rows(void *user, int begin, int end)
                             continue;
                         }
                         noise = LERP2(1);
-                        a = smooth ? LERP2(0) : value_at(j, P.x, P.y, NULL);
+                        /* a node column's pixels lie on left edges (tx = 0) */
+                        const int bit = x == node_x0 ? (node_row ? 7 : 4) : row_bit;
+                        a = smooth & bit ? LERP2(0) : value_at(j, P.x, P.y, NULL);
 #undef LERP2
                         goto emit;
                     }
@@ -661,6 +725,7 @@ static void caustics_rows(void *user, int begin, int end)
             emit:
                 if (seg_shade) {
                     st[c] = PX_PATTERN;
+                    patterns = 1;
                     av[c] = a;
                     nz[c] = noise;
                 } else {
@@ -669,7 +734,7 @@ static void caustics_rows(void *user, int begin, int end)
             }
             if (seg_shade) {
                 size_t i = (size_t)y * w + xs;
-                shade_segment(j, run->src + i * 4, run->dst + i * 4, n, st, av, nz, sv);
+                shade_segment(j, run->src + i * 4, run->dst + i * 4, n, st, av, nz, sv, patterns);
             }
         }
     }
