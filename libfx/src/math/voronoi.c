@@ -448,7 +448,7 @@ static inline void fast_query(const fx_voronoi_table *t, double x, double y, flo
     *qy = (float)wrap_tile_inv(y, G, t->inv_grid);
 }
 
-static void fast_out(const fx_voronoi_table *t, const fast_hit *h, fx_voronoi_hit *out)
+static inline void fast_out(const fx_voronoi_table *t, const fast_hit *h, fx_voronoi_hit *out)
 {
     out->i1 = h->i1;
     out->i2 = h->i2;
