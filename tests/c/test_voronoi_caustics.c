@@ -479,7 +479,8 @@ static void test_lattice(fx_context *ctx)
 {
     fx_context *c1 = NULL;
     CHECK(fx_context_new(&c1, 1) == FX_OK);
-    const int sizes[][2] = {{1, 1}, {1, 9}, {9, 1}, {2, 2}, {7, 5}, {13, 11}, {64, 37}};
+    /* 300 x 7: rows longer than the shading's 256-pixel segments */
+    const int sizes[][2] = {{1, 1}, {1, 9}, {9, 1}, {2, 2}, {7, 5}, {13, 11}, {64, 37}, {300, 7}};
     const char *settings[] = {
         "\"quality\": \"draft\"", "\"quality\": \"preview\"", "\"quality\": \"final\"",
         "\"downsample\": 3", "\"downsample\": 16", "\"downsample\": 5, \"mode\": \"seed\"",
@@ -487,7 +488,9 @@ static void test_lattice(fx_context *ctx)
         "\"downsample\": 2, \"method\": \"brute\"", "\"downsample\": 2, \"distance\": \"exact\""};
     const int ns = (int)(sizeof settings / sizeof settings[0]);
     int bad_finite = 0, bad_threads = 0, bad_pass = 0;
-    for (int si = 0; si < 7; si++)
+    /* environment 0.3: per-pixel shading; 0: the segment shading (physical, no additive term) */
+    for (int env = 0; env <= 1; env++)
+    for (int si = 0; si < 8; si++)
         for (int nan = 0; nan <= 1; nan++) {
             int w = sizes[si][0], h = sizes[si][1];
             fx_frame *f = small_frame(ctx, w, h, nan ? 5 : 0), *f1 = small_frame(c1, w, h, nan ? 5 : 0);
@@ -503,8 +506,9 @@ static void test_lattice(fx_context *ctx)
                 int is_q = strncmp(settings[k], "\"quality\"", 9) == 0;
                 snprintf(params, sizeof params,
                          "{\"version\": 1, %s%s\"effects\": [{\"effect\": \"voronoi_caustics\", \"params\": "
-                         "{\"points\": 100, \"tile_size\": 2, \"line_width\": 0.2, \"environment_strength\": 0.3%s%s}}]}",
-                         is_q ? settings[k] : "", is_q ? ", " : "", is_q ? "" : ", ", is_q ? "" : settings[k]);
+                         "{\"points\": 100, \"tile_size\": 2, \"line_width\": 0.2, \"environment_strength\": %s%s%s}}]}",
+                         is_q ? settings[k] : "", is_q ? ", " : "", env ? "0" : "0.3", is_q ? "" : ", ",
+                         is_q ? "" : settings[k]);
                 fx_stack *s = NULL, *s1 = NULL;
                 float *o = NULL, *o1 = NULL;
                 if (fx_stack_new(ctx, &s) == FX_OK && fx_stack_load_json(s, params) == FX_OK)
@@ -535,6 +539,25 @@ static void test_lattice(fx_context *ctx)
     CHECK(bad_finite == 0);
     CHECK(bad_threads == 0);
     CHECK(bad_pass == 0);
+
+    /* the segment shading (no environment) across segment boundaries: grid == brute force at
+     * final for d = 1.5 and 2, and finite (the default quality: final) */
+    {
+        fx_frame *fs = small_frame(ctx, 300, 7, 5);
+        const char *exps[] = {"1.5", "2"};
+        for (int e = 0; fs && e < 2; e++) {
+            char pg[256], pb[256];
+            snprintf(pg, sizeof pg, "\"points\": 100, \"tile_size\": 2, \"exponent\": %s, \"method\": \"grid\"", exps[e]);
+            snprintf(pb, sizeof pb, "\"points\": 100, \"tile_size\": 2, \"exponent\": %s, \"method\": \"brute\"", exps[e]);
+            float *og = et_run_effect(ctx, "voronoi_caustics", fs, pg, NULL);
+            float *ob = et_run_effect(ctx, "voronoi_caustics", fs, pb, NULL);
+            CHECK(og && ob && memcmp(og, ob, (size_t)300 * 7 * 4 * sizeof(float)) == 0);
+            CHECK(all_finite_bounded(og, (size_t)300 * 7 * 4));
+            free(og);
+            free(ob);
+        }
+        fx_frame_free(fs);
+    }
 
     /* a mask smaller than a lattice step (1 x 1, 2 x 2 at odd places): the lattice shrinks
      * to the ROI (its first and last pixels are nodes), so these pixels are lattice nodes:

@@ -255,6 +255,12 @@ static void cell_lists(fx_voronoi_table *t, int cx, int cy)
                 t->ly[base + at] = t->fy[e[n][1]];
             }
             t->list_n[sq] = cnt;
+            /* dummies up to a multiple of 4 (the vectorised key loop reads them; the selection
+             * does not): far away, finite keys for every kind */
+            for (int c = cnt < 0 ? 0 : cnt; c < FX_VORONOI_LIST_MAX && (c & 3); c++) {
+                t->lx[base + c] = t->ly[base + c] = 1e9f;
+                t->lk[base + c] = -1;
+            }
         }
 }
 
@@ -442,7 +448,7 @@ static inline void fast_query(const fx_voronoi_table *t, double x, double y, flo
     *qy = (float)wrap_tile_inv(y, G, t->inv_grid);
 }
 
-static void fast_out(const fx_voronoi_table *t, const fast_hit *h, fx_voronoi_hit *out)
+static inline void fast_out(const fx_voronoi_table *t, const fast_hit *h, fx_voronoi_hit *out)
 {
     out->i1 = h->i1;
     out->i2 = h->i2;
@@ -482,9 +488,18 @@ static inline float bound_key(int kind, float b)
     return kind == 2 ? b * sqrtf(b) : kind == 3 ? b * b : b;
 }
 
-/* A square's list. Each candidate as one integer, key bits (a float >= 0: its bits order as
- * its value) above the point index: the brute force's (key, index) order exactly, and the
- * nearest two kept by min/max without branches. One loop per kind. */
+/* The keys of a list's candidates, four at a time (lists are padded to a multiple of 4 with
+ * far dummies, cell_lists): a loop without branches or calls that the compiler vectorises
+ * (sqrt is correctly rounded in its scalar and vector forms alike: the same bits). Then the
+ * real candidates' selection, each as one integer, key bits (a float >= 0: its bits order
+ * as its value) above the point index: the brute force's (key, index) order exactly, the
+ * nearest two kept by min/max without branches. */
+#define KEY_LOOP(KEY)                                                                                     \
+    for (int c = 0; c < n4; c++) {                                                                       \
+        float ax = fabsf(qx - lx[c]), ay = fabsf(qy - ly[c]);                                            \
+        key[c] = KEY;                                                                                    \
+    }
+
 static inline uint64_t packed(float key, int k)
 {
     uint32_t b;
@@ -492,33 +507,32 @@ static inline uint64_t packed(float key, int k)
     return (uint64_t)b << 32 | (uint32_t)k;
 }
 
-#define LIST_LOOP(KEY)                                                                                    \
-    for (int c = 0; c < n; c++) {                                                                        \
-        float ax = fabsf(qx - lx[c]), ay = fabsf(qy - ly[c]);                                            \
-        uint64_t v = packed(KEY, lk[c]);                                                                 \
-        uint64_t hi = v > m1 ? v : m1;                                                                   \
-        m1 = v < m1 ? v : m1;                                                                            \
-        m2 = hi < m2 ? hi : m2;                                                                          \
-    }
-
 static void list_search(const fx_voronoi_table *t, float qx, float qy, int n, size_t base, fast_hit *h)
 {
-    const float *lx = t->lx + base, *ly = t->ly + base;
+    const float *restrict lx = t->lx + base, *restrict ly = t->ly + base;
     const int *lk = t->lk + base;
-    uint64_t m1 = UINT64_MAX, m2 = UINT64_MAX;
+    float key[FX_VORONOI_LIST_MAX];
+    const int n4 = (n + 3) & ~3;
     switch (t->kind) {
     case 1:
-        LIST_LOOP(ax + ay)
+        KEY_LOOP(ax + ay)
         break;
     case 2:
-        LIST_LOOP(ax * sqrtf(ax) + ay * sqrtf(ay))
+        KEY_LOOP(ax * sqrtf(ax) + ay * sqrtf(ay))
         break;
     case 3:
-        LIST_LOOP(ax * ax + ay * ay)
+        KEY_LOOP(ax * ax + ay * ay)
         break;
     default:
-        LIST_LOOP(ax > ay ? ax : ay)
+        KEY_LOOP(ax > ay ? ax : ay)
         break;
+    }
+    uint64_t m1 = UINT64_MAX, m2 = UINT64_MAX;
+    for (int c = 0; c < n; c++) {
+        uint64_t v = packed(key[c], lk[c]);
+        uint64_t hi = v > m1 ? v : m1;
+        m1 = v < m1 ? v : m1;
+        m2 = hi < m2 ? hi : m2;
     }
     uint32_t b1 = (uint32_t)(m1 >> 32), b2 = (uint32_t)(m2 >> 32);
     memcpy(&h->k1, &b1, sizeof b1);

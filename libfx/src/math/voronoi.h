@@ -72,7 +72,9 @@ typedef struct fx_voronoi_table {
      * square exceeds, by a margin far above float rounding, the second smallest distance
      * upper bound among the 3 x 3 cells' points), at the image the brute force uses, in
      * increasing point index: a query visits about 4 points (G = 14, sub 4) instead of 9
-     * to 25, and gets the brute force's bits. */
+     * to 25, and gets the brute force's bits. Each list is padded to a multiple of 4
+     * entries with far dummies (index -1): its keys are computed in a vectorised loop, the
+     * selection reads the real entries only. */
     int sub;           /* squares per cell side; 0: no lists (ring search) */
     int *list_n;       /* per square (row-major over G * sub columns): count; -1: ring search */
     float *lx, *ly;    /* FX_VORONOI_LIST_MAX per square: the candidate's coordinates (its image) */
