@@ -14,6 +14,7 @@
 #include "math/vec.h"
 #include "core/simd4.h"
 #include "core/simd8.h"
+#include "math/clones.h"
 
 #include <float.h>
 #include <stdint.h>
@@ -202,13 +203,6 @@ static inline __attribute__((always_inline)) v8f ramp_q8(const cel_job *j, v8f t
     return v;
 }
 
-#if defined(__GNUC__) && !defined(__clang__) && (defined(__x86_64__) || defined(__i386__)) && \
-    !defined(FX_NO_CLONES)
-#  define CEL_VEC __attribute__((target_clones("avx2", "default")))
-#else
-#  define CEL_VEC
-#endif
-
 /* 8 pixels of ch >= 3 channels: the first 3 into out[0..2] (out[3] = 0). */
 static inline __attribute__((always_inline)) void gather8x3(const float *p, int ch, v8f out[4])
 {
@@ -252,7 +246,7 @@ static inline void cel_row_diffuse_px(const cel_job *j, int y, int x, const floa
 }
 
 /* diffuse_passes: matte: the row's outline matte (indexed by x), or NULL. */
-CEL_VEC static void cel_row_diffuse(const cel_job *j, int y, const float *matte)
+FX_CLONES static void cel_row_diffuse(const cel_job *j, int y, const float *matte)
 {
     const fx_effect_run *run = j->run;
     const cel_params *p = j->p;

@@ -8,6 +8,7 @@
 #include "math/color.h"
 #include "math/color_ops.h"
 #include "core/simd8.h"
+#include "math/clones.h"
 
 #include <float.h>
 #include <math.h>
@@ -128,16 +129,10 @@ static inline __attribute__((always_inline)) int cm_pixel(const cm_job *j, const
  * m[r][0] R + m[r][1] G + m[r][2] B + m[r][3] A summed left to right, as cm_pixel's lanes
  * are, so both give the same bits. The finite check is one test per chunk; a chunk that
  * overflowed is redone pixel by pixel from the values still in registers. */
-#if defined(__GNUC__) && !defined(__clang__) && (defined(__x86_64__) || defined(__i386__)) && \
-    !defined(FX_NO_CLONES)
-#  define CM_VEC __attribute__((target_clones("avx2", "default")))
-#else
-#  define CM_VEC
-#endif
 
 /* src and dst may be the same buffer (FX_EFFECT_IN_PLACE): each chunk is read, then
  * written, and the overflow path works from the pixels it read. */
-CM_VEC static void cm_rows(void *user, int begin, int end)
+FX_CLONES static void cm_rows(void *user, int begin, int end)
 {
     const cm_job *j = user;
     const float *m = j->m;

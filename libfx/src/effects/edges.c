@@ -7,6 +7,7 @@
 #include "math/edge_ops.h"
 #include "core/simd4.h"
 #include "core/simd8.h"
+#include "math/clones.h"
 
 #include <float.h>
 #include <math.h>
@@ -177,20 +178,13 @@ static inline __attribute__((always_inline)) int any8(v8i m)
 #  define SHUF8I(a, i0, i1, i2, i3, i4, i5, i6, i7) __builtin_shuffle(a, (v8i){ i0, i1, i2, i3, i4, i5, i6, i7 })
 #endif
 
-#if defined(__GNUC__) && !defined(__clang__) && (defined(__x86_64__) || defined(__i386__)) && \
-    !defined(FX_NO_CLONES)
-#  define DRAW_VEC __attribute__((target_clones("avx2", "default")))
-#else
-#  define DRAW_VEC
-#endif
-
 /* d = s + a (t - s) per pixel; NaN -> 0, +-Inf -> +-FLT_MAX. Where a is 0 and the pixel is
  * finite (most pixels) d = s: eight such pixels in a row are not written at all in place (the
  * cache lines stay clean: no write back). Eight pixels at a time as four vectors of two
  * pixels each, draw_px's operations lane by lane (the same bits), the rest per pixel. Called
  * by the edge engine with each finished matte row (math/edge_ops.h). The source is read again
  * after the copy of a row not in place: src and dst are different buffers then. */
-DRAW_VEC static void draw_row(void *user, int y, const float *matte)
+FX_CLONES static void draw_row(void *user, int y, const float *matte)
 {
     const draw_job *j = user;
     const fx_effect_run *run = j->run;

@@ -10,6 +10,7 @@
 #include "math/levels.h"
 #include "core/simd8.h"
 #include "math/vec.h"
+#include "math/clones.h"
 
 #include <float.h>
 #include <math.h>
@@ -188,12 +189,6 @@ static inline __attribute__((always_inline)) float keep_weight(const sc_job *j, 
 #if defined(__GNUC__) && !defined(__clang__)
 #  pragma GCC diagnostic ignored "-Wpsabi"
 #endif
-#if defined(__GNUC__) && !defined(__clang__) && (defined(__x86_64__) || defined(__i386__)) && \
-    !defined(FX_NO_CLONES)
-#  define SC_VEC __attribute__((optimize("tree-vectorize", "vect-cost-model=dynamic"), target_clones("avx2", "default")))
-#else
-#  define SC_VEC
-#endif
 
 static inline __attribute__((always_inline)) float clampf_finite(float v) /* NaN -> 0, +-Inf -> +-FLT_MAX, branch-free */
 {
@@ -266,7 +261,7 @@ static inline __attribute__((always_inline)) void keep_lanes(const sc_job *j, co
     memcpy(K, &k, sizeof k);
 }
 
-SC_VEC static void sc_rows(void *user, int begin, int end)
+FX_CLONES_VECTORIZE static void sc_rows(void *user, int begin, int end)
 {
     const sc_job *j = user;
     const fx_effect_run *run = j->run;

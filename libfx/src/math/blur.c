@@ -13,21 +13,13 @@
 #include "core/parallel.h"
 #include "core/simd8.h"
 #include "core/mem.h"
+#include "math/clones.h"
 
 #include <float.h>
 #include <math.h>
 #include <stdatomic.h>
 #include <stdint.h>
 #include <string.h>
-
-/* Runtime dispatch: an AVX2 clone of the lane kernels next to the baseline x86-64 one.
- * No FMA (not in the "avx2" target), so both produce the same bits. */
-#if defined(__GNUC__) && !defined(__clang__) && (defined(__x86_64__) || defined(__i386__)) && \
-    !defined(FX_NO_CLONES)
-#  define FX_CLONES __attribute__((target_clones("avx2", "default")))
-#else
-#  define FX_CLONES
-#endif
 
 #ifndef FX_BLUR_FLOAT
 #  define FX_BLUR_FLOAT 1 /* 0: recursive always in double (for comparisons) */

@@ -17,6 +17,7 @@ typedef uint32_t v8ui __attribute__((vector_size(32)));
 #include "math/vec.h"
 #include "core/frame.h"
 #include "core/mem.h"
+#include "math/clones.h"
 
 #include <float.h>
 #include <math.h>
@@ -200,12 +201,6 @@ fx_result fx_edge_sources_from_frame(const fx_frame *f, const float *rgba, const
 #if defined(__GNUC__) && !defined(__clang__)
 #  pragma GCC diagnostic ignored "-Wpsabi"
 #endif
-#if defined(__GNUC__) && !defined(__clang__) && (defined(__x86_64__) || defined(__i386__)) && \
-    !defined(FX_NO_CLONES)
-#  define EDGE_VEC __attribute__((target_clones("avx2", "default")))
-#else
-#  define EDGE_VEC
-#endif
 
 typedef struct edge_job {
     const fx_edge_sources *src;
@@ -258,7 +253,7 @@ static inline float lum_px(const float *p, const float *lut)
 
 /* 8 pixels at a time in GCC vector types (the transpose of core/simd8.h, then lum_px's
  * operations lane by lane: the same bits), the table read per lane; the rest per pixel. */
-EDGE_VEC static void lum_row(const float *p, const float *lut, int x0, int x1, float *out)
+FX_CLONES static void lum_row(const float *p, const float *lut, int x0, int x1, float *out)
 {
     int x = x0;
     const v8f lo = S8(0.001953125f); /* 2^-9 */
@@ -306,7 +301,7 @@ static void depth_row(const float *d, int planar, int x0, int x1, float *out)
 }
 
 /* Unit normals of a row into three planes (x, y, z components: out, out + w, out + 2 w). */
-EDGE_VEC static void normal_row(const float *n, int w, int x0, int x1, float *out)
+FX_CLONES static void normal_row(const float *n, int w, int x0, int x1, float *out)
 {
     for (int x = x0; x < x1; x++) {
         float u[3];
@@ -354,7 +349,7 @@ static inline __attribute__((always_inline)) v8f ld8(const float *p)
     return v;
 }
 
-EDGE_VEC static void normal_min_dot_row(const float *um, const float *u0, const float *up, int w, int x0, int x1,
+FX_CLONES static void normal_min_dot_row(const float *um, const float *u0, const float *up, int w, int x0, int x1,
                                         float *md, int32_t *mixed)
 {
     const size_t W = (size_t)w;
@@ -654,7 +649,7 @@ __attribute__((target("avx2"), noinline)) static int sobel_ramp_row_avx2(const f
 
 /* The operator on one row for x in [x0, x1) into out[x]: the interior without any clamping
  * (the same expressions, so the same bits), the borders through response_at_rows. */
-EDGE_VEC static void response_row(const float *A, const float *B, const float *C, int w, int x0, int x1,
+FX_CLONES static void response_row(const float *A, const float *B, const float *C, int w, int x0, int x1,
                                   fx_edge_operator op, float *out)
 {
     const int r = fx_edge_operator_radius(op);
@@ -923,7 +918,7 @@ static void strength_row(const edge_job *j, const band_rings *b, int y, float *o
 }
 
 /* m[x] = max(m[x], row[x + dx]) for |dx| <= hw, x + dx inside the image, x in [x0, x1). */
-EDGE_VEC static void max_span(float *m, const float *row, int w, int x0, int x1, int hw)
+FX_CLONES static void max_span(float *m, const float *row, int w, int x0, int x1, int hw)
 {
     for (int dx = -hw; dx <= hw; dx++) {
         int a = x0, b = x1;

@@ -3,18 +3,10 @@
 
 #include "math/color.h"
 #include "core/simd4.h"
+#include "math/clones.h"
 
 #include <float.h>
 #include <string.h>
-
-/* Runtime dispatch as in math/blur.c: an AVX2 clone beside the baseline x86-64 one; no FMA
- * in either, so both give the same bits. */
-#if defined(__GNUC__) && !defined(__clang__) && (defined(__x86_64__) || defined(__i386__)) && \
-    !defined(FX_NO_CLONES)
-#  define FX_CLONES __attribute__((target_clones("avx2", "default")))
-#else
-#  define FX_CLONES
-#endif
 
 static double dec(double e, int srgb)
 {
@@ -105,7 +97,6 @@ float fx_levels_apply_reference(const fx_levels *q, float v, int x, int y)
 #if defined(__GNUC__) && !defined(__clang__)
 #  pragma GCC diagnostic ignored "-Wpsabi"
 #endif
-
 
 typedef float v8f __attribute__((vector_size(32)));
 typedef int32_t v8i __attribute__((vector_size(32)));
