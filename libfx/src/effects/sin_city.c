@@ -261,19 +261,193 @@ static inline __attribute__((always_inline)) void keep_lanes(const sc_job *j, co
     memcpy(K, &k, sizeof k);
 }
 
-FX_CLONES_VECTORIZE static void sc_rows(void *user, int begin, int end)
+#define FIN8(v) (v = SEL8(v == v, v, S8(0.0f)), v = SEL8(v < S8(FLT_MAX), v, S8(FLT_MAX)), \
+                 v = SEL8(v > S8(-FLT_MAX), v, S8(-FLT_MAX)))
+
+/* Eight whole pixels at x of row s -> d with every value in vector registers: the lane
+ * loops of sc_lanes_chunk op for op (the same bits), without the round trips through lane
+ * arrays. T8: the row's dither thresholds per level, per lane. */
+static inline __attribute__((always_inline)) void sc_vec_chunk(const sc_job *j, const float *s, float *d,
+                                                               const float *cov, int x, const v8f *T8)
 {
-    const sc_job *j = user;
-    const fx_effect_run *run = j->run;
     const sin_city_params *p = j->p;
     const float mix = p->mix, ks = p->keep_strength;
     const int lum = p->gray == GRAY_LUMINANCE, keep = p->keep != KEEP_NONE, dot = p->keep == KEEP_DOT;
     const fx_levels *q = &j->q;
     const int nt = j->quantise ? q->n - 1 : 0;
+    const v8i abs8 = { 0x7fffffff, 0x7fffffff, 0x7fffffff, 0x7fffffff,
+                       0x7fffffff, 0x7fffffff, 0x7fffffff, 0x7fffffff };
+    const float *sp = s + 4 * (size_t)x;
+    v8f px[4]; /* 8 RGBA pixels to channel vectors (math/simd8.h) */
+    fx_load8x4(sp, px);
+    v8f r = px[0], g = px[1], b = px[2], a = px[3];
+    /* Inputs within +-1e30 (NaN fails the test) keep every value below finite:
+     * the clamps are then identities and are skipped (the same bits). */
+    const v8i bounded = ((v8f)((v8i)r & abs8) <= S8(1e30f)) & ((v8f)((v8i)g & abs8) <= S8(1e30f)) &
+                        ((v8f)((v8i)b & abs8) <= S8(1e30f)) & ((v8f)((v8i)a & abs8) <= S8(1e30f));
+    uint64_t bw[4];
+    memcpy(bw, &bounded, sizeof bw);
+    const int guard = (bw[0] & bw[1] & bw[2] & bw[3]) != ~(uint64_t)0;
+    if (guard) {
+        FIN8(r);
+        FIN8(g);
+        FIN8(b);
+        FIN8(a);
+    }
+    v8f yv = lum ? S8(FX_LUMA_R) * r + S8(FX_LUMA_G) * g + S8(FX_LUMA_B) * b
+                 : r * S8(1.0f / 3.0f) + g * S8(1.0f / 3.0f) + b * S8(1.0f / 3.0f);
+    if (j->quantise) {
+        const v8f u = yv * S8(q->inv_white);
+        v8f o = S8(0.0f);
+        for (int t = 0; t < nt; t++)
+            o = SEL8(u >= T8[t], S8(q->value[t + 1]), o);
+        const v8f yc = SEL8(yv < S8(3.4e38f), yv, S8(3.4e38f));
+        yv = SEL8(u >= S8(1.0f), yc, o);
+    }
+    v8f k = S8(0.0f);
+    if (keep) {
+        if (dot) {
+            float R[SC_LANES], G[SC_LANES], B[SC_LANES], K[SC_LANES];
+            memcpy(R, &r, sizeof R);
+            memcpy(G, &g, sizeof G);
+            memcpy(B, &b, sizeof B);
+            keep_lanes(j, R, G, B, K);
+            memcpy(&k, K, sizeof k);
+        } else {
+            k = keep_hue8(j, r, g, b); /* no round trip through lane arrays */
+        }
+        v8f c = S8(1.0f);
+        if (cov)
+            memcpy(&c, cov + x, sizeof c);
+        k = SEL8(c > S8(0.0f), k * S8(ks) * c, S8(0.0f));
+    }
+    const v8f k1 = S8(1.0f) - k;
+    v8f p0 = k * r + k1 * yv, p1 = k * g + k1 * yv, p2 = k * b + k1 * yv;
+    if (mix < 1.0f) {
+        p0 = r + S8(mix) * (p0 - r);
+        p1 = g + S8(mix) * (p1 - g);
+        p2 = b + S8(mix) * (p2 - b);
+    }
+    if (guard) {
+        FIN8(p0);
+        FIN8(p1);
+        FIN8(p2);
+    }
+    const v8f po[4] = { p0, p1, p2, a };
+    fx_store8x4(d + 4 * (size_t)x, po);
+}
+#undef FIN8
+
+/* Up to eight pixels at x (n of them; a tail is padded) through lane arrays: the statement
+ * of the arithmetic, for tails and for quantising with more levels than vectors hold. */
+static inline __attribute__((always_inline)) void sc_lanes_chunk(const sc_job *j, const float *s, float *d,
+                                                                 const float *cov, int x, int y,
+                                                                 float T[FX_LEVELS_VEC][SC_LANES])
+{
+    const fx_effect_run *run = j->run;
+    const sin_city_params *p = j->p;
+    const float mix = p->mix, ks = p->keep_strength;
+    const int lum = p->gray == GRAY_LUMINANCE, keep = p->keep != KEEP_NONE;
+    const fx_levels *q = &j->q;
+    const int nt = j->quantise ? q->n - 1 : 0;
     const int vec = nt < FX_LEVELS_VEC;
-    float T[FX_LEVELS_VEC][SC_LANES], V[FX_LEVELS_VEC];
-    for (int k = 0; k < FX_LEVELS_VEC; k++)
-        V[k] = j->quantise ? q->value[k] : 0.0f;
+    const int n = run->roi.x1 - x < SC_LANES ? run->roi.x1 - x : SC_LANES;
+    float R[SC_LANES], G[SC_LANES], B[SC_LANES], A[SC_LANES], Y[SC_LANES], K[SC_LANES];
+    float tail[SC_LANES * 4], tcov[SC_LANES];
+    const float *sp = s + 4 * (size_t)x, *cp = cov ? cov + x : NULL;
+    if (n < SC_LANES) { /* the tail: a padded copy (zeros) */
+        memset(tail, 0, sizeof tail);
+        memset(tcov, 0, sizeof tcov);
+        memcpy(tail, sp, (size_t)n * 4 * sizeof(float));
+        if (cp)
+            memcpy(tcov, cp, (size_t)n * sizeof(float));
+        sp = tail;
+        cp = cp ? tcov : NULL;
+    }
+    for (int i = 0; i < SC_LANES; i++) {
+        R[i] = clampf_finite(sp[4 * i]);
+        G[i] = clampf_finite(sp[4 * i + 1]);
+        B[i] = clampf_finite(sp[4 * i + 2]);
+        A[i] = clampf_finite(sp[4 * i + 3]);
+    }
+    for (int i = 0; i < SC_LANES; i++)
+        Y[i] = lum ? fx_luminance(R[i], G[i], B[i])
+                   : R[i] * (1.0f / 3.0f) + G[i] * (1.0f / 3.0f) + B[i] * (1.0f / 3.0f);
+    if (j->quantise) {
+        if (vec) {
+            /* GCC vector types: compares that may raise FE_INVALID are not if-converted
+             * by the auto-vectoriser, and branches on real images mispredict */
+            typedef float v8f __attribute__((vector_size(32)));
+            typedef int32_t v8i __attribute__((vector_size(32)));
+            const float iw = q->inv_white;
+            v8f y8, t8, big = { 3.4e38f, 3.4e38f, 3.4e38f, 3.4e38f, 3.4e38f, 3.4e38f, 3.4e38f, 3.4e38f };
+            memcpy(&y8, Y, sizeof y8);
+            const v8f u = y8 * (v8f){ iw, iw, iw, iw, iw, iw, iw, iw };
+            v8f o = { 0 };
+            for (int t = 0; t < nt; t++) {
+                const float vt = q->value[t + 1];
+                const v8f v8 = { vt, vt, vt, vt, vt, vt, vt, vt };
+                memcpy(&t8, T[t], sizeof t8);
+                const v8i m = u >= t8;
+                o = (v8f)(((v8i)v8 & m) | ((v8i)o & ~m));
+            }
+            /* HDR kept (keep_hdr is on here), clamped to 3.4e38 */
+            const v8i hb = y8 < big;
+            const v8f yc = (v8f)(((v8i)y8 & hb) | ((v8i)big & ~hb));
+            const v8i hm = u >= (v8f){ 1, 1, 1, 1, 1, 1, 1, 1 };
+            o = (v8f)(((v8i)yc & hm) | ((v8i)o & ~hm));
+            memcpy(Y, &o, sizeof o);
+        } else {
+            for (int i = 0; i < n; i++)
+                Y[i] = fx_levels_apply(q, Y[i], x + i, y);
+        }
+    }
+    if (keep) {
+        keep_lanes(j, R, G, B, K);
+        for (int i = 0; i < SC_LANES; i++) {
+            float c = cp ? cp[i] : 1.0f;
+            K[i] = c > 0.0f ? K[i] * ks * c : 0.0f;
+        }
+    } else {
+        for (int i = 0; i < SC_LANES; i++)
+            K[i] = 0.0f;
+    }
+    float P0[SC_LANES], P1[SC_LANES], P2[SC_LANES];
+    for (int i = 0; i < SC_LANES; i++) {
+        const float k = K[i], k1 = 1.0f - k; /* k = 1 gives the colour exactly, k = 0 the gray */
+        P0[i] = k * R[i] + k1 * Y[i];
+        P1[i] = k * G[i] + k1 * Y[i];
+        P2[i] = k * B[i] + k1 * Y[i];
+    }
+    if (mix < 1.0f)
+        for (int i = 0; i < SC_LANES; i++) {
+            P0[i] = R[i] + mix * (P0[i] - R[i]);
+            P1[i] = G[i] + mix * (P1[i] - G[i]);
+            P2[i] = B[i] + mix * (P2[i] - B[i]);
+        }
+    for (int i = 0; i < SC_LANES; i++) {
+        P0[i] = clampf_finite(P0[i]);
+        P1[i] = clampf_finite(P1[i]);
+        P2[i] = clampf_finite(P2[i]);
+    }
+    /* direct stores (a staging buffer read back wider than written stalls store forwarding) */
+    float *dp = d + 4 * (size_t)x;
+    for (int i = 0; i < n; i++) {
+        dp[4 * i] = P0[i];
+        dp[4 * i + 1] = P1[i];
+        dp[4 * i + 2] = P2[i];
+        dp[4 * i + 3] = A[i];
+    }
+}
+
+FX_CLONES_VECTORIZE static void sc_rows(void *user, int begin, int end)
+{
+    const sc_job *j = user;
+    const fx_effect_run *run = j->run;
+    const fx_levels *q = &j->q;
+    const int nt = j->quantise ? q->n - 1 : 0;
+    const int vec = nt < FX_LEVELS_VEC;
+    float T[FX_LEVELS_VEC][SC_LANES];
     for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++) {
         const float *s = run->src + (size_t)y * run->width * 4;
         float *d = run->dst + (size_t)y * run->width * 4;
@@ -285,166 +459,14 @@ FX_CLONES_VECTORIZE static void sc_rows(void *user, int begin, int end)
                     T[t][i] = q->thr[(((y & 7) << 3) | ((run->roi.x0 + i) & 7)) & q->phase_mask][t];
         int x = run->roi.x0;
         if (!j->quantise || vec) {
-            /* whole chunks with every value in vector registers: the lane loops below, op for
-             * op (the same bits), without the round trips through lane arrays */
-#define FIN8(v) (v = SEL8(v == v, v, S8(0.0f)), v = SEL8(v < S8(FLT_MAX), v, S8(FLT_MAX)), \
-                 v = SEL8(v > S8(-FLT_MAX), v, S8(-FLT_MAX)))
-            const v8i abs8 = { 0x7fffffff, 0x7fffffff, 0x7fffffff, 0x7fffffff,
-                               0x7fffffff, 0x7fffffff, 0x7fffffff, 0x7fffffff };
             v8f T8[FX_LEVELS_VEC];
             for (int t = 0; t < nt; t++)
                 memcpy(&T8[t], T[t], sizeof T8[t]);
-            for (; x + SC_LANES <= run->roi.x1; x += SC_LANES) {
-                const float *sp = s + 4 * (size_t)x;
-                v8f px[4]; /* 8 RGBA pixels to channel vectors (math/simd8.h) */
-                fx_load8x4(sp, px);
-                v8f r = px[0], g = px[1], b = px[2], a = px[3];
-                /* Inputs within +-1e30 (NaN fails the test) keep every value below finite:
-                 * the clamps are then identities and are skipped (the same bits). */
-                const v8i bounded = ((v8f)((v8i)r & abs8) <= S8(1e30f)) & ((v8f)((v8i)g & abs8) <= S8(1e30f)) &
-                                    ((v8f)((v8i)b & abs8) <= S8(1e30f)) & ((v8f)((v8i)a & abs8) <= S8(1e30f));
-                uint64_t bw[4];
-                memcpy(bw, &bounded, sizeof bw);
-                const int guard = (bw[0] & bw[1] & bw[2] & bw[3]) != ~(uint64_t)0;
-                if (guard) {
-                    FIN8(r);
-                    FIN8(g);
-                    FIN8(b);
-                    FIN8(a);
-                }
-                v8f yv = lum ? S8(FX_LUMA_R) * r + S8(FX_LUMA_G) * g + S8(FX_LUMA_B) * b
-                             : r * S8(1.0f / 3.0f) + g * S8(1.0f / 3.0f) + b * S8(1.0f / 3.0f);
-                if (j->quantise) {
-                    const v8f u = yv * S8(q->inv_white);
-                    v8f o = S8(0.0f);
-                    for (int t = 0; t < nt; t++)
-                        o = SEL8(u >= T8[t], S8(V[t + 1]), o);
-                    const v8f yc = SEL8(yv < S8(3.4e38f), yv, S8(3.4e38f));
-                    yv = SEL8(u >= S8(1.0f), yc, o);
-                }
-                v8f k = S8(0.0f);
-                if (keep) {
-                    if (dot) {
-                        float R[SC_LANES], G[SC_LANES], B[SC_LANES], K[SC_LANES];
-                        memcpy(R, &r, sizeof R);
-                        memcpy(G, &g, sizeof G);
-                        memcpy(B, &b, sizeof B);
-                        keep_lanes(j, R, G, B, K);
-                        memcpy(&k, K, sizeof k);
-                    } else {
-                        k = keep_hue8(j, r, g, b); /* no round trip through lane arrays */
-                    }
-                    v8f c = S8(1.0f);
-                    if (cov)
-                        memcpy(&c, cov + x, sizeof c);
-                    k = SEL8(c > S8(0.0f), k * S8(ks) * c, S8(0.0f));
-                }
-                const v8f k1 = S8(1.0f) - k;
-                v8f p0 = k * r + k1 * yv, p1 = k * g + k1 * yv, p2 = k * b + k1 * yv;
-                if (mix < 1.0f) {
-                    p0 = r + S8(mix) * (p0 - r);
-                    p1 = g + S8(mix) * (p1 - g);
-                    p2 = b + S8(mix) * (p2 - b);
-                }
-                if (guard) {
-                    FIN8(p0);
-                    FIN8(p1);
-                    FIN8(p2);
-                }
-                const v8f po[4] = { p0, p1, p2, a };
-                fx_store8x4(d + 4 * (size_t)x, po);
-            }
-#undef FIN8
+            for (; x + SC_LANES <= run->roi.x1; x += SC_LANES)
+                sc_vec_chunk(j, s, d, cov, x, T8);
         }
-        for (; x < run->roi.x1; x += SC_LANES) {
-            const int n = run->roi.x1 - x < SC_LANES ? run->roi.x1 - x : SC_LANES;
-            float R[SC_LANES], G[SC_LANES], B[SC_LANES], A[SC_LANES], Y[SC_LANES], K[SC_LANES];
-            float tail[SC_LANES * 4], tcov[SC_LANES];
-            const float *sp = s + 4 * (size_t)x, *cp = cov ? cov + x : NULL;
-            if (n < SC_LANES) { /* the tail: a padded copy (zeros) */
-                memset(tail, 0, sizeof tail);
-                memset(tcov, 0, sizeof tcov);
-                memcpy(tail, sp, (size_t)n * 4 * sizeof(float));
-                if (cp)
-                    memcpy(tcov, cp, (size_t)n * sizeof(float));
-                sp = tail;
-                cp = cp ? tcov : NULL;
-            }
-            for (int i = 0; i < SC_LANES; i++) {
-                R[i] = clampf_finite(sp[4 * i]);
-                G[i] = clampf_finite(sp[4 * i + 1]);
-                B[i] = clampf_finite(sp[4 * i + 2]);
-                A[i] = clampf_finite(sp[4 * i + 3]);
-            }
-            for (int i = 0; i < SC_LANES; i++)
-                Y[i] = lum ? fx_luminance(R[i], G[i], B[i])
-                           : R[i] * (1.0f / 3.0f) + G[i] * (1.0f / 3.0f) + B[i] * (1.0f / 3.0f);
-            if (j->quantise) {
-                if (vec) {
-                    /* GCC vector types: compares that may raise FE_INVALID are not if-converted
-                     * by the auto-vectoriser, and branches on real images mispredict */
-                    typedef float v8f __attribute__((vector_size(32)));
-                    typedef int32_t v8i __attribute__((vector_size(32)));
-                    const float iw = q->inv_white;
-                    v8f y8, t8, big = { 3.4e38f, 3.4e38f, 3.4e38f, 3.4e38f, 3.4e38f, 3.4e38f, 3.4e38f, 3.4e38f };
-                    memcpy(&y8, Y, sizeof y8);
-                    const v8f u = y8 * (v8f){ iw, iw, iw, iw, iw, iw, iw, iw };
-                    v8f o = { 0 };
-                    for (int t = 0; t < nt; t++) {
-                        const float vt = V[t + 1];
-                        const v8f v8 = { vt, vt, vt, vt, vt, vt, vt, vt };
-                        memcpy(&t8, T[t], sizeof t8);
-                        const v8i m = u >= t8;
-                        o = (v8f)(((v8i)v8 & m) | ((v8i)o & ~m));
-                    }
-                    /* HDR kept (keep_hdr is on here), clamped to 3.4e38 */
-                    const v8i hb = y8 < big;
-                    const v8f yc = (v8f)(((v8i)y8 & hb) | ((v8i)big & ~hb));
-                    const v8i hm = u >= (v8f){ 1, 1, 1, 1, 1, 1, 1, 1 };
-                    o = (v8f)(((v8i)yc & hm) | ((v8i)o & ~hm));
-                    memcpy(Y, &o, sizeof o);
-                } else {
-                    for (int i = 0; i < n; i++)
-                        Y[i] = fx_levels_apply(q, Y[i], x + i, y);
-                }
-            }
-            if (keep) {
-                keep_lanes(j, R, G, B, K);
-                for (int i = 0; i < SC_LANES; i++) {
-                    float c = cp ? cp[i] : 1.0f;
-                    K[i] = c > 0.0f ? K[i] * ks * c : 0.0f;
-                }
-            } else {
-                for (int i = 0; i < SC_LANES; i++)
-                    K[i] = 0.0f;
-            }
-            float P0[SC_LANES], P1[SC_LANES], P2[SC_LANES];
-            for (int i = 0; i < SC_LANES; i++) {
-                const float k = K[i], k1 = 1.0f - k; /* k = 1 gives the colour exactly, k = 0 the gray */
-                P0[i] = k * R[i] + k1 * Y[i];
-                P1[i] = k * G[i] + k1 * Y[i];
-                P2[i] = k * B[i] + k1 * Y[i];
-            }
-            if (mix < 1.0f)
-                for (int i = 0; i < SC_LANES; i++) {
-                    P0[i] = R[i] + mix * (P0[i] - R[i]);
-                    P1[i] = G[i] + mix * (P1[i] - G[i]);
-                    P2[i] = B[i] + mix * (P2[i] - B[i]);
-                }
-            for (int i = 0; i < SC_LANES; i++) {
-                P0[i] = clampf_finite(P0[i]);
-                P1[i] = clampf_finite(P1[i]);
-                P2[i] = clampf_finite(P2[i]);
-            }
-            /* direct stores (a staging buffer read back wider than written stalls store forwarding) */
-            float *dp = d + 4 * (size_t)x;
-            for (int i = 0; i < n; i++) {
-                dp[4 * i] = P0[i];
-                dp[4 * i + 1] = P1[i];
-                dp[4 * i + 2] = P2[i];
-                dp[4 * i + 3] = A[i];
-            }
-        }
+        for (; x < run->roi.x1; x += SC_LANES)
+            sc_lanes_chunk(j, s, d, cov, x, y, T);
     }
 }
 
