@@ -786,29 +786,34 @@ static int *lattice_axis(int a, int b, int f, int *n)
     return v;
 }
 
-static fx_result caustics_process(const fx_effect_run *run)
+/* Process stage 1: the job's constants from the parameters and the frame's time. */
+static void job_init(const fx_effect_run *run, const caustics_params *p, caustics_job *j)
 {
-    const caustics_params *p = run->params;
-    const char *where = run->where;
-    caustics_job j;
-    memset(&j, 0, sizeof j);
-    j.run = run;
-    j.p = p;
-    j.vor.grid = fx_voronoi_grid_for_points(p->points);
-    j.vor.seed = (uint32_t)p->seed;
-    j.time = fx_effect_scene_time(run);
-    j.vor.time = j.time;
-    j.vor.speed = p->speed;
-    j.vor.p = exponent_of(p);
-    j.cell = (double)p->tile_size / j.vor.grid;
-    j.inv_lw = (float)(1.0 / p->line_width);
-    j.inv_cell = (float)(1.0 / j.cell);
-    j.inv_cell_d = 1.0 / j.cell;
+    memset(j, 0, sizeof *j);
+    j->run = run;
+    j->p = p;
+    j->vor.grid = fx_voronoi_grid_for_points(p->points);
+    j->vor.seed = (uint32_t)p->seed;
+    j->time = fx_effect_scene_time(run);
+    j->vor.time = j->time;
+    j->vor.speed = p->speed;
+    j->vor.p = exponent_of(p);
+    j->cell = (double)p->tile_size / j->vor.grid;
+    j->inv_lw = (float)(1.0 / p->line_width);
+    j->inv_cell = (float)(1.0 / j->cell);
+    j->inv_cell_d = 1.0 / j->cell;
     /* exp(-10) = 5e-5: below any visible change of the focus ratio */
-    j.far_gap = p->mode == MODE_PHYSICAL && exponent_of(p) >= 1.0 ? (float)(10.0 * p->line_width) : 0.0f;
-    j.wave = (float)sin(2.0 * j.time);
-    j.has_view = fx_view_init(&j.view, run->frame);
-    if (caustics_needs_camera(p) && !j.has_view)
+    j->far_gap = p->mode == MODE_PHYSICAL && exponent_of(p) >= 1.0 ? (float)(10.0 * p->line_width) : 0.0f;
+    j->wave = (float)sin(2.0 * j->time);
+    j->has_view = fx_view_init(&j->view, run->frame);
+}
+
+/* Process stage 2: the passes the parameters read (Position or Depth, Normal) and the
+ * environment image; *envf is the caller's to free. */
+static fx_result job_inputs(const fx_effect_run *run, const caustics_params *p, caustics_job *j, fx_frame **envf)
+{
+    const char *where = run->where;
+    if (caustics_needs_camera(p) && !j->has_view)
         return fx_fail(run->ctx, FX_ERR_NO_CAMERA,
                        "%s needs the frame's camera (position_source depth or environment_strength > 0); "
                        "give the scene sidecar with --sidecar",
@@ -818,107 +823,139 @@ static fx_result caustics_process(const fx_effect_run *run)
         if (!pp || pp->channels < 3)
             return fx_fail(run->ctx, FX_ERR_MISSING_PASS,
                            "%s: needs the Position pass (or set position_source to depth)", where);
-        j.position = pp->data;
-        j.pos_channels = pp->channels;
+        j->position = pp->data;
+        j->pos_channels = pp->channels;
     } else {
         const fx_pass *dp = fx_frame_find_pass(run->frame, "Depth");
         if (!dp)
             return fx_fail(run->ctx, FX_ERR_MISSING_PASS, "%s: position_source depth needs the Depth pass", where);
-        j.depth = dp->data;
+        j->depth = dp->data;
     }
-    fx_frame *envf = NULL;
     if (p->environment_strength > 0.0f) {
         const fx_pass *np = fx_frame_find_pass(run->frame, "Normal");
         if (!np || np->channels < 3)
             return fx_fail(run->ctx, FX_ERR_MISSING_PASS, "%s: environment_strength > 0 needs the Normal pass", where);
-        j.normal = np->data;
-        j.eye = fx_v3(j.view.camera_to_world[3], j.view.camera_to_world[7], j.view.camera_to_world[11]);
+        j->normal = np->data;
+        j->eye = fx_v3(j->view.camera_to_world[3], j->view.camera_to_world[7], j->view.camera_to_world[11]);
         if (p->environment[0]) {
-            fx_result r = fx_frame_read_exr(run->ctx, p->environment, NULL, &envf);
+            fx_result r = fx_frame_read_exr(run->ctx, p->environment, NULL, envf);
             if (r != FX_OK)
                 return r;
-            const fx_pass *ep = fx_frame_find_pass(envf, "Combined");
+            const fx_pass *ep = fx_frame_find_pass(*envf, "Combined");
             if (!ep || ep->channels != 4) {
-                fx_frame_free(envf);
+                fx_frame_free(*envf);
+                *envf = NULL;
                 return fx_fail(run->ctx, FX_ERR_MISSING_PASS, "%s: environment '%s' has no RGBA image", where,
                                p->environment);
             }
-            j.env.rgba = ep->data;
-            j.env.w = envf->width;
-            j.env.h = envf->height;
+            j->env.rgba = ep->data;
+            j->env.w = (*envf)->width;
+            j->env.h = (*envf)->height;
         }
     }
-    {
-        /* the square lists cost about two ring searches per square: built (in parallel)
-         * only when the ROI has many more pixels than squares; same bits either way */
-        double area = (double)(run->roi.x1 - run->roi.x0) * (run->roi.y1 - run->roi.y0);
-        double squares = 16.0 * j.vor.grid * j.vor.grid;
-        int fast = p->distance != DIST_FAST ? 0 : area >= 16.0 * squares ? 2 : 3;
-        if (fx_voronoi_table_init(&j.table, &j.vor, fast) != 0)
-            goto oom;
-        if (j.table.sub)
-            fx_parallel_for(run->ctx, j.vor.grid, 1, list_rows, &j.table);
-    }
-    j.mean_g = 1.0;
+    return FX_OK;
+}
+
+/* Process stage 3: the Voronoi table; the square lists cost about two ring searches per
+ * square: built (in parallel) only when the ROI has many more pixels than squares (same
+ * bits either way). -1: out of memory. */
+static int job_table(const fx_effect_run *run, const caustics_params *p, caustics_job *j)
+{
+    double area = (double)(run->roi.x1 - run->roi.x0) * (run->roi.y1 - run->roi.y0);
+    double squares = 16.0 * j->vor.grid * j->vor.grid;
+    int fast = p->distance != DIST_FAST ? 0 : area >= 16.0 * squares ? 2 : 3;
+    if (fx_voronoi_table_init(&j->table, &j->vor, fast) != 0)
+        return -1;
+    if (j->table.sub)
+        fx_parallel_for(run->ctx, j->vor.grid, 1, list_rows, &j->table);
+    return 0;
+}
+
+/* Process stage 4 (physical mode): the pattern's mean focus, the normalisation. */
+static int job_mean(const fx_effect_run *run, const caustics_params *p, caustics_job *j)
+{
+    j->mean_g = 1.0;
     if (p->mode == MODE_PHYSICAL) {
-        mean_job m = {&j, NULL, 64};
+        mean_job m = {j, NULL, 64};
         m.partial = fx_mem_alloc((size_t)m.n * sizeof(double));
         if (!m.partial)
-            goto oom;
+            return -1;
         fx_parallel_for(run->ctx, m.n, 1, mean_rows, &m);
         double acc = 0.0;
         for (int r = 0; r < m.n; r++)
             acc += m.partial[r];
         fx_mem_free(m.partial);
-        j.mean_g = acc / ((double)m.n * m.n);
-        if (!(j.mean_g > 1e-12))
-            j.mean_g = 1e-12;
+        j->mean_g = acc / ((double)m.n * m.n);
+        if (!(j->mean_g > 1e-12))
+            j->mean_g = 1e-12;
     }
-    j.inv_mean = (float)fmin(1.0 / j.mean_g, 1e30);
-    j.has_add = p->mode == MODE_SEED || (p->environment_strength > 0.0f && j.normal);
-    if (p->downsample > 1) {
-        j.f = p->downsample;
-        j.node_x = lattice_axis(run->roi.x0, run->roi.x1, j.f, &j.nx);
-        j.node_y = lattice_axis(run->roi.y0, run->roi.y1, j.f, &j.ny);
-        int roi_w = run->roi.x1 - run->roi.x0;
-        j.col_i0 = fx_mem_alloc((size_t)roi_w * sizeof(int));
-        j.col_i1 = fx_mem_alloc((size_t)roi_w * sizeof(int));
-        j.col_t = fx_mem_alloc((size_t)roi_w * sizeof(float));
-        if (!j.node_x || !j.node_y || !j.col_i0 || !j.col_i1 || !j.col_t)
-            goto oom;
-        for (int c = 0; c < roi_w; c++)
-            lattice_pos(j.node_x, j.nx, j.f, run->roi.x0, run->roi.x0 + c, &j.col_i0[c], &j.col_i1[c], &j.col_t[c]);
-        size_t count = (size_t)j.nx * j.ny;
-        j.node_size = p->lattice_shading ? NODE_MAX : 4;
-        j.nodes = fx_mem_alloc(count * j.node_size * sizeof(float));
-        j.node_id = fx_mem_alloc(count * 2 * sizeof(int));
-        if (!j.nodes || !j.node_id)
-            goto oom;
-        if (run->mask) {
-            j.cell_any = fx_mem_alloc(count);
-            if (!j.cell_any)
-                goto oom;
-            fx_parallel_for(run->ctx, j.ny, 1, cell_rows, &j);
-        }
-        fx_parallel_for(run->ctx, j.ny, 1, node_rows, &j);
-        if (p->refine && !p->lattice_shading) {
-            j.cx = j.nx > 1 ? j.nx - 1 : 1;
-            j.cy = j.ny > 1 ? j.ny - 1 : 1;
-            j.smooth = fx_mem_alloc((size_t)j.cx * j.cy);
-            if (!j.smooth)
-                goto oom;
-            fx_parallel_for(run->ctx, j.cy, 1, smooth_rows, &j);
+    j->inv_mean = (float)fmin(1.0 / j->mean_g, 1e30);
+    return 0;
+}
+
+/* Process stage 5 (downsample > 1): the lattice's axes, nodes and smooth-cell flags. */
+static int job_lattice(const fx_effect_run *run, const caustics_params *p, caustics_job *j)
+{
+    if (p->downsample <= 1)
+        return 0;
+    j->f = p->downsample;
+    j->node_x = lattice_axis(run->roi.x0, run->roi.x1, j->f, &j->nx);
+    j->node_y = lattice_axis(run->roi.y0, run->roi.y1, j->f, &j->ny);
+    int roi_w = run->roi.x1 - run->roi.x0;
+    j->col_i0 = fx_mem_alloc((size_t)roi_w * sizeof(int));
+    j->col_i1 = fx_mem_alloc((size_t)roi_w * sizeof(int));
+    j->col_t = fx_mem_alloc((size_t)roi_w * sizeof(float));
+    if (!j->node_x || !j->node_y || !j->col_i0 || !j->col_i1 || !j->col_t)
+        return -1;
+    for (int c = 0; c < roi_w; c++)
+        lattice_pos(j->node_x, j->nx, j->f, run->roi.x0, run->roi.x0 + c, &j->col_i0[c], &j->col_i1[c], &j->col_t[c]);
+    size_t count = (size_t)j->nx * j->ny;
+    j->node_size = p->lattice_shading ? NODE_MAX : 4;
+    j->nodes = fx_mem_alloc(count * j->node_size * sizeof(float));
+    j->node_id = fx_mem_alloc(count * 2 * sizeof(int));
+    if (!j->nodes || !j->node_id)
+        return -1;
+    if (run->mask) {
+        j->cell_any = fx_mem_alloc(count);
+        if (!j->cell_any)
+            return -1;
+        fx_parallel_for(run->ctx, j->ny, 1, cell_rows, j);
+    }
+    fx_parallel_for(run->ctx, j->ny, 1, node_rows, j);
+    if (p->refine && !p->lattice_shading) {
+        j->cx = j->nx > 1 ? j->nx - 1 : 1;
+        j->cy = j->ny > 1 ? j->ny - 1 : 1;
+        j->smooth = fx_mem_alloc((size_t)j->cx * j->cy);
+        if (!j->smooth)
+            return -1;
+        fx_parallel_for(run->ctx, j->cy, 1, smooth_rows, j);
+    }
+    return 0;
+}
+
+static fx_result caustics_process(const fx_effect_run *run)
+{
+    const caustics_params *p = run->params;
+    caustics_job j;
+    job_init(run, p, &j);
+    fx_frame *envf = NULL;
+    fx_result r = job_inputs(run, p, &j, &envf);
+    if (r != FX_OK)
+        return r;
+    if (job_table(run, p, &j) || job_mean(run, p, &j)) {
+        r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", run->where);
+    } else {
+        j.has_add = p->mode == MODE_SEED || (p->environment_strength > 0.0f && j.normal);
+        if (job_lattice(run, p, &j)) {
+            r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", run->where);
+        } else {
+            int rows = run->roi.y1 - run->roi.y0;
+            fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), caustics_rows, &j);
         }
     }
-    int rows = run->roi.y1 - run->roi.y0;
-    fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), caustics_rows, &j);
     job_free(&j);
     fx_frame_free(envf);
-    return FX_OK;
-oom:
-    job_free(&j);
-    fx_frame_free(envf);
-    return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
+    return r;
 }
 
 const fx_effect_class fx_effect_voronoi_caustics = {
