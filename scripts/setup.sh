@@ -17,6 +17,7 @@ packages=(
   clang libclang-rt-14-dev                  # the fuzz target (libFuzzer is in libclang-rt)
   nodejs                                    # runs the Flamenco job type (farm/flamenco) in its test
   mmdebstrap                                # makes the Debian 13 / unstable roots holding Blender 4.3 / 5.x
+  valgrind                                  # callgrind: instruction counts (bench_ir.py, bench_trade)
 )
 missing=()
 for p in "${packages[@]}"; do

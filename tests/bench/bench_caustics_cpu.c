@@ -2,9 +2,7 @@
  * (the sum over threads: less sensitive to other processes on a shared machine than the
  * wall clock). The first run (the first frame of the process) is reported apart.
  *   bench_caustics_cpu PASSES.exr SIDECAR.json RECIPE.json QUALITY THREADS RUNS
- * Build by hand against the library (not a CMake target):
- *   cc -O2 -std=c11 -Ilibfx/include tests/bench/bench_caustics_cpu.c -Lbuild-h/libfx -lfx \
- *      -Wl,-rpath,$PWD/build-h/libfx -o /tmp/bench_caustics_cpu */
+ * Built with the other bench tools: build/tests/bench/bench_caustics_cpu. */
 #define _POSIX_C_SOURCE 200809L
 #include "libfx/fx.h"
 

@@ -9,6 +9,7 @@
  * machine disturb far less than wall time) and both medians' ratios to the copy's. The CPU
  * ratio is the load-independent one when the machine is busy (issue 16: per-pixel effects
  * within 2x of a copy). Two warm-up runs first. */
+#include "bench_util.h"
 #include "core/parallel.h"
 #include "libfx/fx.h"
 
@@ -24,50 +25,6 @@ static double clock_ms(clockid_t id)
     struct timespec t;
     clock_gettime(id, &t);
     return t.tv_sec * 1e3 + t.tv_nsec / 1e6;
-}
-
-typedef struct copy_job {
-    const float *src;
-    float *dst;
-    int w;
-} copy_job;
-
-static void copy_rows(void *user, int y0, int y1)
-{
-    copy_job *j = user;
-    size_t row = (size_t)j->w * 4;
-    memcpy(j->dst + (size_t)y0 * row, j->src + (size_t)y0 * row, (size_t)(y1 - y0) * row * sizeof(float));
-}
-
-static int cmp_d(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return x < y ? -1 : x > y;
-}
-
-static double median(double *v, int n)
-{
-    qsort(v, (size_t)n, sizeof *v, cmp_d);
-    return v[n / 2];
-}
-
-static char *slurp(const char *path)
-{
-    FILE *f = fopen(path, "rb");
-    if (!f)
-        return NULL;
-    fseek(f, 0, SEEK_END);
-    long n = ftell(f);
-    rewind(f);
-    char *b = malloc((size_t)n + 1);
-    if (b && fread(b, 1, (size_t)n, f) != (size_t)n) {
-        free(b);
-        b = NULL;
-    }
-    if (b)
-        b[n] = 0;
-    fclose(f);
-    return b;
 }
 
 int main(int argc, char **argv)
@@ -86,7 +43,7 @@ int main(int argc, char **argv)
     }
     fx_stack *st[MAX_RECIPES] = { 0 };
     for (int e = 0; e < ne; e++) {
-        char *json = slurp(argv[4 + e]);
+        char *json = bench_slurp(argv[4 + e]);
         if (!json || fx_stack_new(ctx, &st[e]) || fx_stack_load_json(st[e], json)) {
             fprintf(stderr, "bench_cpu_ratio: %s: %s\n", argv[4 + e], json ? fx_context_error(ctx) : "unreadable");
             return 1;
@@ -101,13 +58,13 @@ int main(int argc, char **argv)
         return 1;
     memset(a, 0, n * sizeof(float));
     memset(b, 0, n * sizeof(float));
-    copy_job cj = { a, b, w };
+    bench_copy_job cj = { a, b, w };
     for (int r = -2; r < runs; r++) {
         for (int e = -1; e < ne; e++) {
             double t0 = clock_ms(CLOCK_MONOTONIC), c0 = clock_ms(CLOCK_PROCESS_CPUTIME_ID);
             fx_frame *o = NULL;
             if (e < 0)
-                fx_parallel_for(ctx, h, fx_grain_for(ctx, h), copy_rows, &cj);
+                fx_parallel_for(ctx, h, fx_grain_for(ctx, h), bench_copy_rows, &cj);
             else if (fx_stack_run(st[e], f, &o)) {
                 fprintf(stderr, "bench_cpu_ratio: %s: %s\n", argv[4 + e], fx_context_error(ctx));
                 return 1;
@@ -124,7 +81,7 @@ int main(int argc, char **argv)
     double copy_wall = 0, copy_cpu = 0;
     for (int e = -1; e < ne; e++) {
         double *wv = wall + (size_t)(e + 1) * runs, *cv = cpu + (size_t)(e + 1) * runs;
-        double wm = median(wv, runs), wmin = wv[0], cm = median(cv, runs), cmin = cv[0];
+        double wm = median_d(wv, runs), wmin = wv[0], cm = median_d(cv, runs), cmin = cv[0];
         if (e < 0) {
             copy_wall = wm;
             copy_cpu = cm;

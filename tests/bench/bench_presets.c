@@ -159,19 +159,6 @@ static void csv_row(const char *kind, const char *effect, const char *setting, i
 
 /* ---- the memory-bandwidth floor: a copy on libfx's own pool ---------------- */
 
-typedef struct copy_job {
-    const float *src;
-    float *dst;
-    int w;
-} copy_job;
-
-static void copy_rows(void *user, int y0, int y1)
-{
-    copy_job *j = user;
-    size_t row = (size_t)j->w * 4;
-    memcpy(j->dst + (size_t)y0 * row, j->src + (size_t)y0 * row, (size_t)(y1 - y0) * row * sizeof(float));
-}
-
 typedef struct floor_samples {
     double ms[MAX_RUNS * 4];
     int n;
@@ -179,11 +166,11 @@ typedef struct floor_samples {
 
 static void floor_sample(fx_context *ctx, const float *src, float *dst, int w, int h, floor_samples *fs, int k)
 {
-    copy_job j = {src, dst, w};
-    fx_parallel_for(ctx, h, fx_grain_for(ctx, h), copy_rows, &j); /* warm */
+    bench_copy_job j = {src, dst, w};
+    fx_parallel_for(ctx, h, fx_grain_for(ctx, h), bench_copy_rows, &j); /* warm */
     for (int i = 0; i < k && fs->n < MAX_RUNS * 4; i++) {
         double t0 = now_ms();
-        fx_parallel_for(ctx, h, fx_grain_for(ctx, h), copy_rows, &j);
+        fx_parallel_for(ctx, h, fx_grain_for(ctx, h), bench_copy_rows, &j);
         fs->ms[fs->n++] = now_ms() - t0;
     }
 }

@@ -39,22 +39,6 @@ static void die(const char *what, fx_context *ctx)
     exit(1);
 }
 
-static char *slurp(const char *path)
-{
-    FILE *f = fopen(path, "rb");
-    if (!f)
-        return NULL;
-    fseek(f, 0, SEEK_END);
-    long n = ftell(f);
-    fseek(f, 0, SEEK_SET);
-    char *s = malloc((size_t)n + 1);
-    if (fread(s, 1, (size_t)n, f) != (size_t)n)
-        n = 0;
-    s[n] = 0;
-    fclose(f);
-    return s;
-}
-
 /* The recipe with only the enabled entries named `effect` (NULL: all; "": none), at quality q. */
 static char *recipe_for(const cJSON *root, const char *effect, int q)
 {
@@ -139,7 +123,7 @@ int main(int argc, char **argv)
     fx_context *ctx = NULL;
     if (fx_context_new(&ctx, threads))
         die("context", NULL);
-    char *rtext = slurp(recipe);
+    char *rtext = bench_slurp(recipe);
     cJSON *root = rtext ? cJSON_Parse(rtext) : NULL;
     if (!root)
         die("recipe", NULL);

@@ -1,9 +1,7 @@
 /* bench_trade: presets of a one-effect recipe timed interleaved (wall and process CPU per
- * fx_stack_run), with callgrind marks around each run. Not built by CMake (it needs
- * valgrind's header); build and run it by hand against a build tree:
+ * fx_stack_run), with callgrind marks around each run (valgrind's header: scripts/setup.sh
+ * installs it). Built with the other bench tools (build/tests/bench/bench_trade):
  *
- *   gcc -O2 -I libfx/include tests/bench/bench_trade.c -o bench_trade -L build-h/libfx -lfx \
- *       -Wl,-rpath,$PWD/build-h/libfx
  *   bench_trade PASSES.exr SIDECAR.json RECIPE.json THREADS ROUNDS CACHE OUTDIR q1 [q2 ...]
  *
  * CACHE 0: the context's aux cache off (light views / rain map read and built every run,

@@ -1,8 +1,11 @@
-/* What every benchmark program needs: a monotonic clock and a comparator for medians. */
+/* What the benchmark programs share: a monotonic clock, medians, a whole file read, and the
+ * rows of the memory-bandwidth floor (a copy on libfx's pool). */
 #ifndef LIBFX_BENCH_UTIL_H
 #define LIBFX_BENCH_UTIL_H
 
+#include <stdio.h>
 #include <stdlib.h>
+#include <string.h>
 #include <time.h>
 
 static inline double now_ms(void)
@@ -24,6 +27,40 @@ static inline double median_d(double *v, int n)
 {
     qsort(v, (size_t)n, sizeof *v, cmp_d);
     return n > 0 ? v[n / 2] : 0.0;
+}
+
+/* A whole file as a NUL-terminated string (free it), or NULL. */
+static inline char *bench_slurp(const char *path)
+{
+    FILE *f = fopen(path, "rb");
+    if (!f)
+        return NULL;
+    fseek(f, 0, SEEK_END);
+    long n = ftell(f);
+    rewind(f);
+    char *b = n >= 0 ? malloc((size_t)n + 1) : NULL;
+    if (b && fread(b, 1, (size_t)n, f) != (size_t)n) {
+        free(b);
+        b = NULL;
+    }
+    if (b)
+        b[n] = 0;
+    fclose(f);
+    return b;
+}
+
+/* The floor: rows [y0, y1) of a w-wide RGBA float frame copied (an fx_parallel_for body). */
+typedef struct bench_copy_job {
+    const float *src;
+    float *dst;
+    int w;
+} bench_copy_job;
+
+static inline void bench_copy_rows(void *user, int y0, int y1)
+{
+    bench_copy_job *j = user;
+    size_t row = (size_t)j->w * 4;
+    memcpy(j->dst + (size_t)y0 * row, j->src + (size_t)y0 * row, (size_t)(y1 - y0) * row * sizeof(float));
 }
 
 #endif

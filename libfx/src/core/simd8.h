@@ -28,6 +28,19 @@ typedef int32_t v8i __attribute__((vector_size(32)));
 #  define FX_SHUF8(a, b, i0, i1, i2, i3, i4, i5, i6, i7) __builtin_shuffle(a, b, (v8i){ i0, i1, i2, i3, i4, i5, i6, i7 })
 #endif
 
+/* 8 floats at p (any alignment) to a vector, and back. */
+static inline __attribute__((always_inline)) v8f fx_load8(const float *p)
+{
+    v8f v;
+    memcpy(&v, p, sizeof v);
+    return v;
+}
+
+static inline __attribute__((always_inline)) void fx_store8(float *p, v8f v)
+{
+    memcpy(p, &v, sizeof v);
+}
+
 /* 8 pixels of 4 interleaved channels (32 floats at p) to 4 channel vectors. */
 static inline __attribute__((always_inline)) void fx_load8x4(const float *p, v8f out[4])
 {

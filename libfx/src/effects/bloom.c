@@ -23,18 +23,6 @@
 /* GCC vector extensions: one RGBA pixel per v4f (SSE2 in the baseline build), only inside
  * inline helpers and the row loops. */
 
-static inline __attribute__((always_inline)) v8f ld8(const float *p)
-{
-    v8f v;
-    memcpy(&v, p, sizeof v);
-    return v;
-}
-
-static inline __attribute__((always_inline)) void st8(float *p, v8f v)
-{
-    memcpy(p, &v, sizeof v);
-}
-
 typedef struct bloom_params {
     int mode;
     float threshold, knee, clamp_value;
@@ -208,7 +196,7 @@ static void down2_inner(const float *const r[4], int n, float cv, float *restric
         const size_t o = 16 * (size_t)x;
         v8f acc = S8(0.0f);
         for (int k = 0; k < 4; k++)
-            acc += clamp8_pos(ld8(r[k] + o), hi) + clamp8_pos(ld8(r[k] + o + 8), hi);
+            acc += clamp8_pos(fx_load8(r[k] + o), hi) + clamp8_pos(fx_load8(r[k] + o + 8), hi);
         float t[8];
         memcpy(t, &acc, sizeof t);
         for (int c = 0; c < 4; c++)
@@ -445,17 +433,17 @@ static void coarse_row(const int *restrict cx, const float *restrict wt, const f
     const v8f w23 = { 0.625f, 0.625f, 0.625f, 0.625f, 0.875f, 0.875f, 0.875f, 0.875f };
     if (screen) {
         for (int k = (x - 2) >> 2; k < last && x + 4 <= xb; k++, x += 4) {
-            const v8f a = ld8(row2 + 8 * (size_t)k), d = ld8(row2 + 8 * (size_t)k + 8) - a;
+            const v8f a = fx_load8(row2 + 8 * (size_t)k), d = fx_load8(row2 + 8 * (size_t)k + 8) - a;
             const size_t o = 4 * (size_t)x;
-            st8(dst + o, comp8(ld8(src + o), a + w01 * d, 1));
-            st8(dst + o + 8, comp8(ld8(src + o + 8), a + w23 * d, 1));
+            fx_store8(dst + o, comp8(fx_load8(src + o), a + w01 * d, 1));
+            fx_store8(dst + o + 8, comp8(fx_load8(src + o + 8), a + w23 * d, 1));
         }
     } else {
         for (int k = (x - 2) >> 2; k < last && x + 4 <= xb; k++, x += 4) {
-            const v8f a = ld8(row2 + 8 * (size_t)k), d = ld8(row2 + 8 * (size_t)k + 8) - a;
+            const v8f a = fx_load8(row2 + 8 * (size_t)k), d = fx_load8(row2 + 8 * (size_t)k + 8) - a;
             const size_t o = 4 * (size_t)x;
-            st8(dst + o, comp8(ld8(src + o), a + w01 * d, 0));
-            st8(dst + o + 8, comp8(ld8(src + o + 8), a + w23 * d, 0));
+            fx_store8(dst + o, comp8(fx_load8(src + o), a + w01 * d, 0));
+            fx_store8(dst + o + 8, comp8(fx_load8(src + o + 8), a + w23 * d, 0));
         }
     }
     for (; x < xb; x++)

@@ -690,18 +690,6 @@ static void deriche_rows4(const blur_plan *p, const float *const *in, float *con
 #define VF_PREFETCH 32 /* rows ahead the float vertical pass prefetches */
 #define HF_ROWS 4   /* rows per block of the float RGBA horizontal pass (two per v8f) */
 
-static inline __attribute__((always_inline)) v8f ld8(const float *p)
-{
-    v8f v;
-    memcpy(&v, p, sizeof v);
-    return v;
-}
-
-static inline __attribute__((always_inline)) void st8(float *p, v8f v)
-{
-    memcpy(p, &v, sizeof v);
-}
-
 /* all 8 lanes finite and |x| < FX_BLUR_FLOAT_MAX_VALUE: -1 per lane, else 0 */
 static inline __attribute__((always_inline)) v8i small8(v8f x)
 {
@@ -744,7 +732,7 @@ static int derf_vertical(const fx_deriche_sec *p, const float *in, size_t stride
     if (L < L8)
         memset(x0 + L, 0, (size_t)(L8 - L) * sizeof(float));
     for (int g = 0; g < G; g++) {
-        c[g] = ld8(x0 + 8 * g);
+        c[g] = fx_load8(x0 + 8 * g);
         s0a[g] = s0b[g] = s1a[g] = s1b[g] = S8(0.0f);
     }
     for (int i = 0; i < n; i++) {
@@ -758,16 +746,16 @@ static int derf_vertical(const fx_deriche_sec *p, const float *in, size_t stride
             memset(x + L, 0, (size_t)(L8 - L) * sizeof(float));
         float *cr = i >= o0 && i < o1 ? cb + (size_t)(i - o0) * L8 : NULL;
         for (int g = 0; g < G; g++) {
-            const v8f xv = ld8(x + 8 * g), dp = ld8(x - L8 + 8 * g);
+            const v8f xv = fx_load8(x + 8 * g), dp = fx_load8(x - L8 + 8 * g);
             ok &= small8(xv);
             const v8f d = xv - c[g];
-            st8(x + 8 * g, d);
+            fx_store8(x + 8 * g, d);
             const v8f u0 = (b00 * d + b10 * dp) - (p10 * n0[g] + p20 * o0s[g]);
             const v8f u1 = (b01 * d + b11 * dp) - (p11 * n1[g] + p21 * o1s[g]);
             o0s[g] = u0;
             o1s[g] = u1;
             if (cr)
-                st8(cr + 8 * g, u0 + u1);
+                fx_store8(cr + 8 * g, u0 + u1);
         }
         v8f *t = n0;
         n0 = o0s, o0s = t;
@@ -780,7 +768,7 @@ static int derf_vertical(const fx_deriche_sec *p, const float *in, size_t stride
     memcpy(x0 + (size_t)n * L8, xl, (size_t)L8 * sizeof(float));
     memcpy(x0 + (size_t)(n + 1) * L8, xl, (size_t)L8 * sizeof(float));
     for (int g = 0; g < G; g++) {
-        const v8f dl = ld8(xl + 8 * g);
+        const v8f dl = fx_load8(xl + 8 * g);
         n0[g] = o0s[g] = S8(p->ga[0]) * dl;
         n1[g] = o1s[g] = S8(p->ga[1]) * dl;
     }
@@ -790,23 +778,23 @@ static int derf_vertical(const fx_deriche_sec *p, const float *in, size_t stride
             float *o = out + (size_t)(i - o0) * ostride;
             const float *cr = cb + (size_t)(i - o0) * L8;
             for (int g = 0; g < G; g++) {
-                const v8f e1 = ld8(e1p + 8 * g), e2 = ld8(e2p + 8 * g);
+                const v8f e1 = fx_load8(e1p + 8 * g), e2 = fx_load8(e2p + 8 * g);
                 const v8f v0 = (m10 * e1 + m20 * e2) - (p10 * n0[g] + p20 * o0s[g]);
                 const v8f v1 = (m11 * e1 + m21 * e2) - (p11 * n1[g] + p21 * o1s[g]);
                 o0s[g] = v0;
                 o1s[g] = v1;
-                const v8f r = (ld8(cr + 8 * g) + (v0 + v1)) + c[g];
+                const v8f r = (fx_load8(cr + 8 * g) + (v0 + v1)) + c[g];
                 if (8 * g + 8 <= L) {
-                    st8(o + 8 * g, r);
+                    fx_store8(o + 8 * g, r);
                 } else {
                     float tl[8];
-                    st8(tl, r);
+                    fx_store8(tl, r);
                     memcpy(o + 8 * g, tl, (size_t)(L - 8 * g) * sizeof(float));
                 }
             }
         } else {
             for (int g = 0; g < G; g++) {
-                const v8f e1 = ld8(e1p + 8 * g), e2 = ld8(e2p + 8 * g);
+                const v8f e1 = fx_load8(e1p + 8 * g), e2 = fx_load8(e2p + 8 * g);
                 o0s[g] = (m10 * e1 + m20 * e2) - (p10 * n0[g] + p20 * o0s[g]);
                 o1s[g] = (m11 * e1 + m21 * e2) - (p11 * n1[g] + p21 * o1s[g]);
             }
@@ -865,7 +853,7 @@ static void derf_rows4(const fx_deriche_sec *p, const float *const *in, float *c
             ud[q] = uc[q], uc[q] = u1;
             d1[q] = d;
             if (cr)
-                st8(cr + 8 * q, u0 + u1);
+                fx_store8(cr + 8 * q, u0 + u1);
         }
     }
     v8f e1[Q], e2[Q];
@@ -886,7 +874,7 @@ static void derf_rows4(const fx_deriche_sec *p, const float *const *in, float *c
             const v8f d = ld2px(in[2 * q] + (size_t)i * 4, in[2 * q + 1] + (size_t)i * 4) - c[q]; /* before out is written */
             e2[q] = e1[q], e1[q] = d;
             if (cr) {
-                const v8f r = (ld8(cr + 8 * q) + (v0 + v1)) + c[q];
+                const v8f r = (fx_load8(cr + 8 * q) + (v0 + v1)) + c[q];
                 st2px(out[2 * q] ? out[2 * q] + (size_t)i * 4 : NULL,
                       out[2 * q + 1] ? out[2 * q + 1] + (size_t)i * 4 : NULL, r);
             }

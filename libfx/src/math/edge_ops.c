@@ -341,14 +341,6 @@ static inline float normal_min_dot(const float *um, const float *u0, const float
 /* normal_min_dot over a row's columns [x0, x1) into md[x] and mixed[x] (0 or -1): the
  * interior 8 columns at a time in GCC vector types (compares that may raise FE_INVALID are
  * not if-converted by the auto-vectoriser), the rest per pixel; the same values. */
-
-static inline __attribute__((always_inline)) v8f ld8(const float *p)
-{
-    v8f v;
-    memcpy(&v, p, sizeof v);
-    return v;
-}
-
 FX_CLONES static void normal_min_dot_row(const float *um, const float *u0, const float *up, int w, int x0, int x1,
                                         float *md, int32_t *mixed)
 {
@@ -364,13 +356,13 @@ FX_CLONES static void normal_min_dot_row(const float *um, const float *u0, const
     }
     const v8f zero = { 0 }, one = { 1, 1, 1, 1, 1, 1, 1, 1 };
     for (; x + 8 <= xb; x += 8) {
-        const v8f c0 = ld8(u0 + x), c1 = ld8(u0 + W + x), c2 = ld8(u0 + 2 * W + x);
+        const v8f c0 = fx_load8(u0 + x), c1 = fx_load8(u0 + W + x), c2 = fx_load8(u0 + 2 * W + x);
         const v8i hc = (c0 != zero) | (c1 != zero) | (c2 != zero);
         v8f mn = one;
         v8i mx = { 0 };
 #define NB(p)                                                                                   \
     do {                                                                                        \
-        const v8f q0 = ld8(p), q1 = ld8((p) + W), q2 = ld8((p) + 2 * W);                        \
+        const v8f q0 = fx_load8(p), q1 = fx_load8((p) + W), q2 = fx_load8((p) + 2 * W);                        \
         const v8i hq = (q0 != zero) | (q1 != zero) | (q2 != zero);                              \
         const v8f d = c0 * q0 + c1 * q1 + c2 * q2;                                              \
         mx |= hc ^ hq;                                                                          \
