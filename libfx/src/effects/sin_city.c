@@ -119,12 +119,6 @@ typedef struct sc_job {
     fx_levels q;
 } sc_job;
 
-static inline float finite_or(float v)
-{
-    v = v == v ? v : 0.0f;
-    return v > FLT_MAX ? FLT_MAX : v < -FLT_MAX ? -FLT_MAX : v;
-}
-
 /* Weight in [0, 1] of keeping colour (r, g, b) (finite, may be negative). */
 static inline __attribute__((always_inline)) float keep_weight(const sc_job *j, float r, float g, float b)
 {
