@@ -89,24 +89,31 @@ static const setting settings[] = {
 };
 #define NSET ((int)(sizeof settings / sizeof settings[0]))
 
-int main(int argc, char **argv)
+/* The command line. */
+typedef struct options {
+    const char *scene, *passes, *sidecar, *recipe, *csv, *md, *effects, *png_dir;
+    int threads, runs;
+} options;
+
+static int parse_options(int argc, char **argv, options *o)
 {
-    const char *scene = "scene", *passes = NULL, *sidecar = NULL, *recipe = NULL, *csv = NULL, *md = NULL;
-    const char *effects_opt = NULL, *png_dir = NULL;
-    int threads = 2, runs = 5;
+    memset(o, 0, sizeof *o);
+    o->scene = "scene";
+    o->threads = 2;
+    o->runs = 5;
     for (int i = 1; i < argc; i++) {
         const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
 #define OPT(s) (strcmp(a, s) == 0 && v && (i++, 1))
-        if (OPT("--scene")) scene = v;
-        else if (OPT("--passes")) passes = v;
-        else if (OPT("--sidecar")) sidecar = v;
-        else if (OPT("--recipe")) recipe = v;
-        else if (OPT("--threads")) threads = atoi(v);
-        else if (OPT("--runs")) runs = atoi(v);
-        else if (OPT("--effects")) effects_opt = v;
-        else if (OPT("--png-dir")) png_dir = v;
-        else if (OPT("-o")) csv = v;
-        else if (OPT("-m")) md = v;
+        if (OPT("--scene")) o->scene = v;
+        else if (OPT("--passes")) o->passes = v;
+        else if (OPT("--sidecar")) o->sidecar = v;
+        else if (OPT("--recipe")) o->recipe = v;
+        else if (OPT("--threads")) o->threads = atoi(v);
+        else if (OPT("--runs")) o->runs = atoi(v);
+        else if (OPT("--effects")) o->effects = v;
+        else if (OPT("--png-dir")) o->png_dir = v;
+        else if (OPT("-o")) o->csv = v;
+        else if (OPT("-m")) o->md = v;
         else {
             fprintf(stderr, "usage: bench_proxy --scene NAME --passes P.exr --sidecar S.json --recipe R.json "
                             "[--threads 2] [--runs 5] [--effects a,b] [--png-dir DIR] -o out.csv [-m out.md]\n");
@@ -114,20 +121,18 @@ int main(int argc, char **argv)
         }
 #undef OPT
     }
-    if (!passes || !recipe || !csv) {
+    if (!o->passes || !o->recipe || !o->csv) {
         fprintf(stderr, "bench_proxy: --passes, --recipe and -o are required\n");
         return 2;
     }
-    if (runs < 1)
-        runs = 1;
-    fx_context *ctx = NULL;
-    if (fx_context_new(&ctx, threads))
-        die("context", NULL);
-    char *rtext = bench_slurp(recipe);
-    cJSON *root = rtext ? cJSON_Parse(rtext) : NULL;
-    if (!root)
-        die("recipe", NULL);
-    /* the frame, with the passes the whole recipe needs */
+    if (o->runs < 1)
+        o->runs = 1;
+    return 0;
+}
+
+/* The frame, with the passes the whole recipe needs, and the sidecar. */
+static fx_frame *load_frame(fx_context *ctx, const cJSON *root, const options *o)
+{
     fx_stack *all = NULL;
     char *all_json = recipe_for(root, NULL, FX_QUALITY_FINAL);
     if (fx_stack_new(ctx, &all) || fx_stack_load_json(all, all_json))
@@ -137,17 +142,19 @@ int main(int argc, char **argv)
     ro.size = sizeof ro;
     ro.stack = all;
     fx_frame *frame = NULL;
-    if (fx_frame_read_exr(ctx, passes, &ro, &frame))
-        die(passes, ctx);
-    if (sidecar && fx_frame_apply_sidecar_file(frame, sidecar))
-        die(sidecar, ctx);
+    if (fx_frame_read_exr(ctx, o->passes, &ro, &frame))
+        die(o->passes, ctx);
+    if (o->sidecar && fx_frame_apply_sidecar_file(frame, o->sidecar))
+        die(o->sidecar, ctx);
     fx_stack_free(all);
     free(all_json);
-    const int W = fx_frame_width(frame), H = fx_frame_height(frame);
-    const size_t npx = (size_t)W * H;
+    return frame;
+}
 
-    /* the effects: names in recipe order, once each, then the identity and the stack */
-    const char *names[64];
+/* The effects to bench: names in recipe order, once each (those of --effects), then the
+ * identity and the whole stack. Returns how many (names has room for 64). */
+static int effect_names(const cJSON *root, const char *effects_opt, const char *names[64])
+{
     int nnames = 0;
     const cJSON *e;
     cJSON_ArrayForEach(e, cJSON_GetObjectItem(root, "effects")) {
@@ -172,131 +179,176 @@ int main(int argc, char **argv)
     names[nnames++] = "(identity)";
     if (!effects_opt || strstr(effects_opt, "(stack)"))
         names[nnames++] = "(stack)";
+    return nnames;
+}
 
-    FILE *out = fopen(csv, "a");
+/* The image (bottom-up rows, as fx_frame_read_pixels gives them) as a PNG. */
+static void write_png(fx_context *ctx, const float *img, int W, int H, const char *path)
+{
+    const size_t npx = (size_t)W * H;
+    fx_frame *pf = NULL;
+    float *td = malloc(npx * 4 * sizeof(float));
+    for (int y = 0; y < H; y++)
+        memcpy(td + (size_t)y * W * 4, img + (size_t)(H - 1 - y) * W * 4, (size_t)W * 4 * sizeof(float));
+    if (!fx_frame_new(ctx, W, H, &pf) && !fx_frame_add_pass(pf, "Combined", 4, td))
+        fx_frame_write_png(pf, path, NULL, 0.0f);
+    free(td);
+    fx_frame_free(pf);
+}
+
+/* Buffers every effect's rows share: the final image (ref), final reduced 1/2 and 1/4 and
+ * read back (what a perfect proxy would show), the image at hand, and the run times. */
+typedef struct bench_state {
+    fx_context *ctx;
+    const options *o;
+    const cJSON *root;
+    const fx_frame *frame;
+    int W, H;
+    FILE *out, *mdf;
+    float *ref, *ref2, *ref4, *img;
+    double *t_red, *t_run, *t_read, *t_tot;
+} bench_state;
+
+/* One effect (or the identity, or the stack) at every setting: its CSV rows, its Markdown
+ * row. */
+static void bench_effect(bench_state *b, const char *name)
+{
+    fx_context *ctx = b->ctx;
+    const options *o = b->o;
+    const int W = b->W, H = b->H, runs = o->runs;
+    const size_t npx = (size_t)W * H;
+    const char *filter = strcmp(name, "(identity)") == 0 ? "" : strcmp(name, "(stack)") == 0 ? NULL : name;
+    double row_ms[NSET], row_change[NSET], row_mae[NSET], row_psnr[NSET], row_mae_rs[NSET];
+    fx_frame *final_out = NULL;
+    for (int si = 0; si < NSET; si++) {
+        const setting *st = &settings[si];
+        char *json = recipe_for(b->root, filter, st->quality);
+        fx_stack *s = NULL;
+        if (fx_stack_new(ctx, &s) || fx_stack_load_json(s, json))
+            die(json, ctx);
+        for (int k = -1; k < runs; k++) {
+            double t0 = now_ms();
+            fx_frame *p = NULL, *out = NULL;
+            if (st->factor > 1 && fx_frame_reduce(b->frame, st->factor, &p))
+                die("reduce", ctx);
+            double t1 = now_ms();
+            if (fx_stack_run(s, p ? p : b->frame, &out))
+                die(name, ctx);
+            double t2 = now_ms();
+            if (fx_frame_read_pixels(out, "Combined", W, H, 1, b->img))
+                die("read_pixels", ctx);
+            double t3 = now_ms();
+            if (k >= 0) {
+                b->t_red[k] = t1 - t0;
+                b->t_run[k] = t2 - t1;
+                b->t_read[k] = t3 - t2;
+                b->t_tot[k] = t3 - t0;
+            }
+            if (si == 0 && k == runs - 1) {
+                fx_frame_free(final_out);
+                final_out = out; /* for the resampled references */
+            } else {
+                fx_frame_free(out);
+            }
+            fx_frame_free(p);
+        }
+        double red = median_d(b->t_red, runs), run = median_d(b->t_run, runs), rd = median_d(b->t_read, runs);
+        double tot = median_d(b->t_tot, runs);
+        if (si == 0) {
+            memcpy(b->ref, b->img, npx * 4 * sizeof(float));
+            /* final, reduced and read back: what a perfect proxy of the effect would show */
+            for (int fi = 0; fi < 2; fi++) {
+                fx_frame *r = NULL;
+                if (fx_frame_reduce(final_out, fi ? 4 : 2, &r) ||
+                    fx_frame_read_pixels(r, "Combined", W, H, 1, fi ? b->ref4 : b->ref2))
+                    die("reference", ctx);
+                fx_frame_free(r);
+            }
+        }
+        double mae, psnr, mae_rs, psnr_rs;
+        errors(b->img, b->ref, npx, &mae, &psnr);
+        errors(b->img, st->factor == 2 ? b->ref2 : st->factor == 4 ? b->ref4 : b->ref, npx, &mae_rs, &psnr_rs);
+        row_ms[si] = tot;
+        row_change[si] = run + rd;
+        row_mae[si] = mae;
+        row_psnr[si] = psnr;
+        row_mae_rs[si] = mae_rs;
+        fprintf(b->out, "%s,%s,%s,%s,%d,%d,%d,%d,%d,%.3f,%.3f,%.3f,%.3f,%.3f,%.6g,%.2f,%.6g,%.2f\n", o->scene, name,
+                st->label, fx_quality_name(st->quality), st->factor, W, H, o->threads, runs, red, run, rd, tot,
+                run + rd, mae, psnr, mae_rs, psnr_rs);
+        fflush(b->out);
+        fprintf(stderr, "bench_proxy: [%s] %-16s %-9s reduce %6.2f run %7.2f read %5.2f total %7.2f ms; "
+                        "MAE %.5f PSNR %.1f dB; vs final resampled MAE %.5f PSNR %.1f dB\n",
+                o->scene, name, st->label, red, run, rd, tot, mae, psnr, mae_rs, psnr_rs);
+        if (o->png_dir) {
+            char path[1024];
+            snprintf(path, sizeof path, "%s/%s_%s_%s_%d.png", o->png_dir, o->scene,
+                     filter ? (filter[0] ? filter : "identity") : "stack", fx_quality_name(st->quality), st->factor);
+            write_png(ctx, b->img, W, H, path);
+        }
+        fx_stack_free(s);
+        free(json);
+    }
+    if (b->mdf) {
+        fprintf(b->mdf, "| %s | %s |", o->scene, name);
+        for (int si = 0; si < NSET; si++)
+            fprintf(b->mdf, " %.1f (%.1f) |", row_ms[si], row_change[si]);
+        for (int si = 1; si < NSET; si++) {
+            if (isinf(row_psnr[si]))
+                fprintf(b->mdf, " %.4f / inf", row_mae[si]);
+            else
+                fprintf(b->mdf, " %.4f / %.1f", row_mae[si], row_psnr[si]);
+            if (settings[si].factor > 1)
+                fprintf(b->mdf, " (%.4f)", row_mae_rs[si]);
+            fprintf(b->mdf, " |");
+        }
+        fprintf(b->mdf, "\n");
+        fflush(b->mdf);
+    }
+    fx_frame_free(final_out);
+}
+
+int main(int argc, char **argv)
+{
+    options o;
+    int rc = parse_options(argc, argv, &o);
+    if (rc)
+        return rc;
+    fx_context *ctx = NULL;
+    if (fx_context_new(&ctx, o.threads))
+        die("context", NULL);
+    char *rtext = bench_slurp(o.recipe);
+    cJSON *root = rtext ? cJSON_Parse(rtext) : NULL;
+    if (!root)
+        die("recipe", NULL);
+    fx_frame *frame = load_frame(ctx, root, &o);
+    const char *names[64];
+    const int nnames = effect_names(root, o.effects, names);
+
+    FILE *out = fopen(o.csv, "a");
     if (!out)
-        die(csv, NULL);
+        die(o.csv, NULL);
     fseek(out, 0, SEEK_END);
     if (ftell(out) == 0)
         fprintf(out, "scene,effect,setting,quality,factor,width,height,threads,runs,reduce_ms,run_ms,read_ms,"
                      "total_ms,per_change_ms,mae,psnr_db,mae_vs_resampled,psnr_vs_resampled_db\n");
-    FILE *mdf = md ? fopen(md, "a") : NULL;
-
-    float *ref = malloc(npx * 4 * sizeof(float)), *img = malloc(npx * 4 * sizeof(float));
-    float *ref2 = malloc(npx * 4 * sizeof(float)), *ref4 = malloc(npx * 4 * sizeof(float));
-    double *t_red = malloc((size_t)runs * sizeof(double)), *t_run = malloc((size_t)runs * sizeof(double));
-    double *t_read = malloc((size_t)runs * sizeof(double)), *t_tot = malloc((size_t)runs * sizeof(double));
-    for (int ni = 0; ni < nnames; ni++) {
-        const char *name = names[ni];
-        const char *filter = strcmp(name, "(identity)") == 0 ? "" : strcmp(name, "(stack)") == 0 ? NULL : name;
-        double row_ms[NSET], row_change[NSET], row_mae[NSET], row_psnr[NSET], row_mae_rs[NSET];
-        fx_frame *final_out = NULL;
-        for (int si = 0; si < NSET; si++) {
-            const setting *st = &settings[si];
-            char *json = recipe_for(root, filter, st->quality);
-            fx_stack *s = NULL;
-            if (fx_stack_new(ctx, &s) || fx_stack_load_json(s, json))
-                die(json, ctx);
-            for (int k = -1; k < runs; k++) {
-                double t0 = now_ms();
-                fx_frame *p = NULL, *o = NULL;
-                if (st->factor > 1 && fx_frame_reduce(frame, st->factor, &p))
-                    die("reduce", ctx);
-                double t1 = now_ms();
-                if (fx_stack_run(s, p ? p : frame, &o))
-                    die(name, ctx);
-                double t2 = now_ms();
-                if (fx_frame_read_pixels(o, "Combined", W, H, 1, img))
-                    die("read_pixels", ctx);
-                double t3 = now_ms();
-                if (k >= 0) {
-                    t_red[k] = t1 - t0;
-                    t_run[k] = t2 - t1;
-                    t_read[k] = t3 - t2;
-                    t_tot[k] = t3 - t0;
-                }
-                if (si == 0 && k == runs - 1) {
-                    fx_frame_free(final_out);
-                    final_out = o; /* for the resampled references */
-                } else {
-                    fx_frame_free(o);
-                }
-                fx_frame_free(p);
-            }
-            double red = median_d(t_red, runs), run = median_d(t_run, runs), rd = median_d(t_read, runs);
-            double tot = median_d(t_tot, runs);
-            if (si == 0) {
-                memcpy(ref, img, npx * 4 * sizeof(float));
-                /* final, reduced and read back: what a perfect proxy of the effect would show */
-                for (int fi = 0; fi < 2; fi++) {
-                    fx_frame *r = NULL;
-                    if (fx_frame_reduce(final_out, fi ? 4 : 2, &r) ||
-                        fx_frame_read_pixels(r, "Combined", W, H, 1, fi ? ref4 : ref2))
-                        die("reference", ctx);
-                    fx_frame_free(r);
-                }
-            }
-            double mae, psnr, mae_rs, psnr_rs;
-            errors(img, ref, npx, &mae, &psnr);
-            errors(img, st->factor == 2 ? ref2 : st->factor == 4 ? ref4 : ref, npx, &mae_rs, &psnr_rs);
-            row_ms[si] = tot;
-            row_change[si] = run + rd;
-            row_mae[si] = mae;
-            row_psnr[si] = psnr;
-            row_mae_rs[si] = mae_rs;
-            fprintf(out, "%s,%s,%s,%s,%d,%d,%d,%d,%d,%.3f,%.3f,%.3f,%.3f,%.3f,%.6g,%.2f,%.6g,%.2f\n", scene, name,
-                    st->label, fx_quality_name(st->quality), st->factor, W, H, threads, runs, red, run, rd, tot,
-                    run + rd, mae, psnr, mae_rs, psnr_rs);
-            fflush(out);
-            fprintf(stderr, "bench_proxy: [%s] %-16s %-9s reduce %6.2f run %7.2f read %5.2f total %7.2f ms; "
-                            "MAE %.5f PSNR %.1f dB; vs final resampled MAE %.5f PSNR %.1f dB\n",
-                    scene, name, st->label, red, run, rd, tot, mae, psnr, mae_rs, psnr_rs);
-            if (png_dir) {
-                fx_frame *pf = NULL;
-                char path[1024];
-                snprintf(path, sizeof path, "%s/%s_%s_%s_%d.png", png_dir, scene,
-                         filter ? (filter[0] ? filter : "identity") : "stack", fx_quality_name(st->quality),
-                         st->factor);
-                /* read_pixels wrote bottom-up: read it back top-down for the PNG */
-                float *td = malloc(npx * 4 * sizeof(float));
-                for (int y = 0; y < H; y++)
-                    memcpy(td + (size_t)y * W * 4, img + (size_t)(H - 1 - y) * W * 4, (size_t)W * 4 * sizeof(float));
-                if (!fx_frame_new(ctx, W, H, &pf) && !fx_frame_add_pass(pf, "Combined", 4, td))
-                    fx_frame_write_png(pf, path, NULL, 0.0f);
-                free(td);
-                fx_frame_free(pf);
-            }
-            fx_stack_free(s);
-            free(json);
-        }
-        if (mdf) {
-            fprintf(mdf, "| %s | %s |", scene, name);
-            for (int si = 0; si < NSET; si++)
-                fprintf(mdf, " %.1f (%.1f) |", row_ms[si], row_change[si]);
-            for (int si = 1; si < NSET; si++) {
-                if (isinf(row_psnr[si]))
-                    fprintf(mdf, " %.4f / inf", row_mae[si]);
-                else
-                    fprintf(mdf, " %.4f / %.1f", row_mae[si], row_psnr[si]);
-                if (settings[si].factor > 1)
-                    fprintf(mdf, " (%.4f)", row_mae_rs[si]);
-                fprintf(mdf, " |");
-            }
-            fprintf(mdf, "\n");
-            fflush(mdf);
-        }
-        fx_frame_free(final_out);
-    }
-    free(ref);
-    free(ref2);
-    free(ref4);
-    free(img);
-    free(t_red);
-    free(t_run);
-    free(t_read);
-    free(t_tot);
-    if (mdf)
-        fclose(mdf);
+    bench_state b = {ctx, &o, root, frame, fx_frame_width(frame), fx_frame_height(frame), out,
+                     o.md ? fopen(o.md, "a") : NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL};
+    const size_t bytes = (size_t)b.W * b.H * 4 * sizeof(float), tb = (size_t)o.runs * sizeof(double);
+    b.ref = malloc(bytes), b.ref2 = malloc(bytes), b.ref4 = malloc(bytes), b.img = malloc(bytes);
+    b.t_red = malloc(tb), b.t_run = malloc(tb), b.t_read = malloc(tb), b.t_tot = malloc(tb);
+    for (int ni = 0; ni < nnames; ni++)
+        bench_effect(&b, names[ni]);
+    free(b.ref);
+    free(b.ref2);
+    free(b.ref4);
+    free(b.img);
+    free(b.t_red);
+    free(b.t_run);
+    free(b.t_read);
+    free(b.t_tot);
+    if (b.mdf)
+        fclose(b.mdf);
     fclose(out);
     fx_frame_free(frame);
     cJSON_Delete(root);
