@@ -807,7 +807,8 @@ static int parse_doubles(const char *s, double *out, int max)
     return n;
 }
 
-int main(int argc, char **argv)
+/* The command line into A (usage() on a bad one). */
+static void parse_args(int argc, char **argv)
 {
     A.scene = "";
     A.runs = 5;
@@ -868,6 +869,41 @@ int main(int argc, char **argv)
     }
     if (!A.passes || !A.recipe || A.nthreads < 1)
         usage();
+}
+
+/* Every effect of the recipe in recipe order, each with all its enabled entries (the
+ * mirror room's ten ssr_mirror entries run as one stack). */
+static void bench_groups(const cJSON *effects, const fx_frame *f, fx_context **ctxs)
+{
+    /* effect groups in recipe order */
+    char done[MAX_LIST][64];
+    int ndone = 0;
+    const cJSON *e;
+    cJSON_ArrayForEach(e, effects) {
+        const cJSON *name = cJSON_GetObjectItem(e, "effect"), *en = cJSON_GetObjectItem(e, "enabled");
+        if (!cJSON_IsString(name) || (en && cJSON_IsFalse(en)))
+            continue;
+        int seen = 0;
+        for (int k = 0; k < ndone; k++)
+            seen |= strcmp(done[k], name->valuestring) == 0;
+        if (seen || ndone >= MAX_LIST || (A.effects && !in_list(A.effects, name->valuestring)))
+            continue;
+        snprintf(done[ndone++], 64, "%s", name->valuestring);
+        cJSON *group = cJSON_CreateArray();
+        const cJSON *g;
+        cJSON_ArrayForEach(g, effects) {
+            const cJSON *gn = cJSON_GetObjectItem(g, "effect"), *ge = cJSON_GetObjectItem(g, "enabled");
+            if (cJSON_IsString(gn) && strcmp(gn->valuestring, name->valuestring) == 0 && !(ge && cJSON_IsFalse(ge)))
+                cJSON_AddItemToArray(group, cJSON_Duplicate(g, 1));
+        }
+        bench_effect(name->valuestring, group, f, ctxs);
+        cJSON_Delete(group);
+    }
+}
+
+int main(int argc, char **argv)
+{
+    parse_args(argc, argv);
     g_csv = stdout;
     if (A.out && !(g_csv = fopen(A.out, A.header ? "w" : "a"))) {
         perror(A.out);
@@ -899,30 +935,7 @@ int main(int argc, char **argv)
     fprintf(stderr, "bench_presets: read %s (%dx%d, %d passes) in %.0f ms\n", A.passes, fx_frame_width(f),
             fx_frame_height(f), fx_frame_pass_count(f), now_ms() - t0);
 
-    /* effect groups in recipe order */
-    char done[MAX_LIST][64];
-    int ndone = 0;
-    const cJSON *e;
-    cJSON_ArrayForEach(e, effects) {
-        const cJSON *name = cJSON_GetObjectItem(e, "effect"), *en = cJSON_GetObjectItem(e, "enabled");
-        if (!cJSON_IsString(name) || (en && cJSON_IsFalse(en)))
-            continue;
-        int seen = 0;
-        for (int k = 0; k < ndone; k++)
-            seen |= strcmp(done[k], name->valuestring) == 0;
-        if (seen || ndone >= MAX_LIST || (A.effects && !in_list(A.effects, name->valuestring)))
-            continue;
-        snprintf(done[ndone++], 64, "%s", name->valuestring);
-        cJSON *group = cJSON_CreateArray();
-        const cJSON *g;
-        cJSON_ArrayForEach(g, effects) {
-            const cJSON *gn = cJSON_GetObjectItem(g, "effect"), *ge = cJSON_GetObjectItem(g, "enabled");
-            if (cJSON_IsString(gn) && strcmp(gn->valuestring, name->valuestring) == 0 && !(ge && cJSON_IsFalse(ge)))
-                cJSON_AddItemToArray(group, cJSON_Duplicate(g, 1));
-        }
-        bench_effect(name->valuestring, group, f, ctxs);
-        cJSON_Delete(group);
-    }
+    bench_groups(effects, f, ctxs);
     cJSON_Delete(recipe);
     fx_frame_free(f);
     for (int t = 0; t < A.nthreads; t++)
