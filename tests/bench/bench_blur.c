@@ -143,6 +143,123 @@ static void row(const char *what, double sigma, int threads, double ms, double f
                 mean >= 0 ? e1 : "", mean >= 0 ? e2 : "", mean >= 0 ? e3 : "");
 }
 
+/* The test frame (smooth gradients and hashed noise) and an impulse at its centre. */
+static void synth_frames(float *src, float *imp)
+{
+    for (int y = 0; y < H; y++)
+        for (int x = 0; x < W; x++) {
+            float *p = src + ((size_t)y * W + x) * 4;
+            unsigned h = (unsigned)x * 73856093u ^ (unsigned)y * 19349663u;
+            h ^= h >> 13, h *= 0x5bd1e995u, h ^= h >> 15;
+            p[0] = 0.5f + 0.5f * sinf(x * 0.01f) * cosf(y * 0.013f);
+            p[1] = (float)y / H;
+            p[2] = (float)(h & 0xffff) / 65535.0f;
+            p[3] = 1.0f;
+        }
+    for (int c = 0; c < 4; c++)
+        imp[((size_t)(H / 2) * W + W / 2) * 4 + c] = 1.0f;
+}
+
+typedef struct bench_buffers {
+    float *src, *dst, *ref, *imp, *impref;
+    size_t n;
+    double floor_ms;
+    int threads;
+    const char *only;
+} bench_buffers;
+
+static const algo algos[] = {
+    { "box 3 (draft)", "box", 3 },   { "box 4 (preview)", "box", 4 }, { "box 5", "box", 5 },
+    { "box 6", "box", 6 },           { "recursive (final)", "recursive", 3 },
+};
+static const algo exact = { "exact (reference)", "exact", 3 };
+
+/* Every case at sigma sg: timed round-robin, then its errors against the exact reference. */
+static void bench_sigma(fx_context *ctx, bench_buffers *b, double sg, int time_only)
+{
+    float *src = b->src, *dst = b->dst, *ref = b->ref, *imp = b->imp, *impref = b->impref;
+    const size_t n = b->n;
+    const double floor_ms = b->floor_ms;
+    const int threads = b->threads;
+    const char *only = b->only;
+    if (!time_only) {
+        run_blur(ctx, imp, impref, sg, &exact, 0);
+        double tref = run_blur(ctx, src, ref, sg, &exact, sg > 20 ? 1 : 3);
+        row(exact.label, sg, threads, tref, floor_ms, -1, -1, -1);
+    }
+    double peak = impref[((size_t)(H / 2) * W + W / 2) * 4];
+    /* the cases are timed round-robin (one call of each per round), so that the
+     * machine's load shifts hit them alike and their ratios hold within the run */
+    enum { NA = sizeof algos / sizeof algos[0] };
+    prepared pr[NA];
+    double tm[NA][64];
+    int sel[NA], runs = RUNS > 64 ? 64 : RUNS;
+    for (int k = 0; k < NA; k++) {
+        sel[k] = !only || matches(algos[k].label, only);
+        if (sel[k]) {
+            prepare(&pr[k], ctx, src, dst, sg, &algos[k]);
+            run_once(&pr[k]);
+        }
+    }
+    for (int i = 0; i < runs; i++)
+        for (int k = 0; k < NA; k++)
+            if (sel[k])
+                tm[k][i] = run_once(&pr[k]);
+    for (int k = 0; k < NA; k++) {
+        if (!sel[k])
+            continue;
+        qsort(tm[k], runs, sizeof(double), cmp_d);
+        double ms = tm[k][runs / 2];
+        if (time_only) {
+            free(pr[k].params);
+            row(algos[k].label, sg, threads, ms, floor_ms, -1, -1, -1);
+            continue;
+        }
+        run_once(&pr[k]); /* dst = this case's result */
+        free(pr[k].params);
+        double s = 0, m = 0;
+        for (size_t i = 0; i < n; i++) {
+            double d = fabs((double)dst[i] - ref[i]);
+            s += d;
+            m = d > m ? d : m;
+        }
+        run_blur(ctx, imp, dst, sg, &algos[k], 0);
+        double mi = 0;
+        for (size_t i = 0; i < n; i++) {
+            double d = fabs((double)dst[i] - impref[i]);
+            mi = d > mi ? d : mi;
+        }
+        row(algos[k].label, sg, threads, ms, floor_ms, s / n, m, mi / peak);
+    }
+}
+
+#ifdef LIBFX_BENCH_OPENCV
+/* OpenCV's GaussianBlur at three kernel sizes, the in-memory peer. */
+static void bench_opencv(const bench_buffers *b)
+{
+    float *src = b->src, *dst = b->dst;
+    const char *only = b->only;
+    const int threads = b->threads;
+    const double floor_ms = b->floor_ms;
+bench_cv_set_threads(threads);
+const int ks[] = { 11, 51, 101 };
+for (int k = 0; k < (only && !matches("opencv", only) ? 0 : 3); k++) {
+    double t[64];
+    int runs = RUNS > 64 ? 64 : RUNS;
+    bench_cv_gaussian(src, dst, W, H, ks[k]);
+    for (int i = 0; i < runs; i++) {
+        double t0 = now_ms();
+        bench_cv_gaussian(src, dst, W, H, ks[k]);
+        t[i] = now_ms() - t0;
+    }
+    qsort(t, runs, sizeof(double), cmp_d);
+    char label[64];
+    snprintf(label, sizeof label, "cv::GaussianBlur %dx%d (CV_32FC4)", ks[k], ks[k]);
+    row(label, 0, threads, t[runs / 2], floor_ms, -1, -1, -1);
+}
+}
+#endif
+
 int main(int argc, char **argv)
 {
     int threads = 2;
@@ -170,18 +287,7 @@ int main(int argc, char **argv)
     size_t n = (size_t)W * H * 4;
     float *src = malloc(n * 4), *dst = malloc(n * 4), *ref = malloc(n * 4);
     float *imp = calloc(n, 4), *impref = malloc(n * 4);
-    for (int y = 0; y < H; y++)
-        for (int x = 0; x < W; x++) {
-            float *p = src + ((size_t)y * W + x) * 4;
-            unsigned h = (unsigned)x * 73856093u ^ (unsigned)y * 19349663u;
-            h ^= h >> 13, h *= 0x5bd1e995u, h ^= h >> 15;
-            p[0] = 0.5f + 0.5f * sinf(x * 0.01f) * cosf(y * 0.013f);
-            p[1] = (float)y / H;
-            p[2] = (float)(h & 0xffff) / 65535.0f;
-            p[3] = 1.0f;
-        }
-    for (int c = 0; c < 4; c++)
-        imp[((size_t)(H / 2) * W + W / 2) * 4 + c] = 1.0f;
+    synth_frames(src, imp);
     memset(dst, 0, n * 4), memset(ref, 0, n * 4), memset(impref, 0, n * 4);
     fx_context *ctx = NULL;
     fx_context_new(&ctx, threads);
@@ -191,82 +297,13 @@ int main(int argc, char **argv)
     printf("|---|---|---|---|---|---|---|---|\n");
     double floor_ms = memcpy_ms(src, dst);
     row("memcpy (the bandwidth floor)", 0, threads, floor_ms, floor_ms, -1, -1, -1);
-    static const algo algos[] = {
-        { "box 3 (draft)", "box", 3 },   { "box 4 (preview)", "box", 4 }, { "box 5", "box", 5 },
-        { "box 6", "box", 6 },           { "recursive (final)", "recursive", 3 },
-    };
-    const algo exact = { "exact (reference)", "exact", 3 };
+    bench_buffers b = {src, dst, ref, imp, impref, n, floor_ms, threads, only};
     /* BENCH_BLUR_TIME_ONLY=1: no exact reference and no errors (for profiling the cases) */
     const int time_only = getenv("BENCH_BLUR_TIME_ONLY") && atoi(getenv("BENCH_BLUR_TIME_ONLY"));
-    for (int si = 0; si < ns; si++) {
-        double sg = sigmas[si];
-        if (!time_only) {
-            run_blur(ctx, imp, impref, sg, &exact, 0);
-            double tref = run_blur(ctx, src, ref, sg, &exact, sg > 20 ? 1 : 3);
-            row(exact.label, sg, threads, tref, floor_ms, -1, -1, -1);
-        }
-        double peak = impref[((size_t)(H / 2) * W + W / 2) * 4];
-        /* the cases are timed round-robin (one call of each per round), so that the
-         * machine's load shifts hit them alike and their ratios hold within the run */
-        enum { NA = sizeof algos / sizeof algos[0] };
-        prepared pr[NA];
-        double tm[NA][64];
-        int sel[NA], runs = RUNS > 64 ? 64 : RUNS;
-        for (int k = 0; k < NA; k++) {
-            sel[k] = !only || matches(algos[k].label, only);
-            if (sel[k]) {
-                prepare(&pr[k], ctx, src, dst, sg, &algos[k]);
-                run_once(&pr[k]);
-            }
-        }
-        for (int i = 0; i < runs; i++)
-            for (int k = 0; k < NA; k++)
-                if (sel[k])
-                    tm[k][i] = run_once(&pr[k]);
-        for (int k = 0; k < NA; k++) {
-            if (!sel[k])
-                continue;
-            qsort(tm[k], runs, sizeof(double), cmp_d);
-            double ms = tm[k][runs / 2];
-            if (time_only) {
-                free(pr[k].params);
-                row(algos[k].label, sg, threads, ms, floor_ms, -1, -1, -1);
-                continue;
-            }
-            run_once(&pr[k]); /* dst = this case's result */
-            free(pr[k].params);
-            double s = 0, m = 0;
-            for (size_t i = 0; i < n; i++) {
-                double d = fabs((double)dst[i] - ref[i]);
-                s += d;
-                m = d > m ? d : m;
-            }
-            run_blur(ctx, imp, dst, sg, &algos[k], 0);
-            double mi = 0;
-            for (size_t i = 0; i < n; i++) {
-                double d = fabs((double)dst[i] - impref[i]);
-                mi = d > mi ? d : mi;
-            }
-            row(algos[k].label, sg, threads, ms, floor_ms, s / n, m, mi / peak);
-        }
-    }
+    for (int si = 0; si < ns; si++)
+        bench_sigma(ctx, &b, sigmas[si], time_only);
 #ifdef LIBFX_BENCH_OPENCV
-    bench_cv_set_threads(threads);
-    const int ks[] = { 11, 51, 101 };
-    for (int k = 0; k < (only && !matches("opencv", only) ? 0 : 3); k++) {
-        double t[64];
-        int runs = RUNS > 64 ? 64 : RUNS;
-        bench_cv_gaussian(src, dst, W, H, ks[k]);
-        for (int i = 0; i < runs; i++) {
-            double t0 = now_ms();
-            bench_cv_gaussian(src, dst, W, H, ks[k]);
-            t[i] = now_ms() - t0;
-        }
-        qsort(t, runs, sizeof(double), cmp_d);
-        char label[64];
-        snprintf(label, sizeof label, "cv::GaussianBlur %dx%d (CV_32FC4)", ks[k], ks[k]);
-        row(label, 0, threads, t[runs / 2], floor_ms, -1, -1, -1);
-    }
+    bench_opencv(&b);
 #endif
     floor_ms = memcpy_ms(src, dst);
     row("memcpy again (end of run)", 0, threads, floor_ms, floor_ms, -1, -1, -1);
