@@ -580,6 +580,66 @@ static inline int cell_coherent(const float *q00, const float *q10, const float 
     return !isnan(q00[2]) && !isnan(q10[2]) && !isnan(q01[2]) && !isnan(q11[2]);
 }
 
+/* caustics_rows moves to lattice cell i0 (next i1) of rows j0, j1 at weight ty: its
+ * columns interpolated to the row (c0 kept from the previous cell's c1 when adjacent), its
+ * first node, the node pixel's column on this row (-1: none), smooth and coherent flags. */
+static inline __attribute__((always_inline)) void enter_cell(const caustics_job *j, int i0, int i1, int j0, int j1,
+                                                             float ty, int node_row, float *c0, float *c1,
+                                                             const float **q00, int *cur, int *smooth,
+                                                             int *node_col, int *coherent)
+{
+    const float *nodes = j->nodes;
+    const int ns = j->node_size, nx = j->nx;
+    if (i0 == *cur + 1 && i0 != 0)
+        memcpy(c0, c1, NODE_MAX * sizeof(float));
+    else
+        column_at(j, j0, j1, ty, i0, c0);
+    column_at(j, j0, j1, ty, i1, c1);
+    *smooth = j->smooth ? j->smooth[(size_t)j0 * j->cx + i0] : 1;
+    *q00 = nodes + ((size_t)j0 * nx + i0) * ns;
+    *node_col = node_row && !isnan((*q00)[2]) ? j->node_x[i0] : -1;
+    *coherent = j->p->lattice_shading &&
+                cell_coherent(*q00, nodes + ((size_t)j0 * nx + i1) * ns, nodes + ((size_t)j1 * nx + i0) * ns,
+                              nodes + ((size_t)j1 * nx + i1) * ns);
+    *cur = i0;
+}
+
+/* lattice_shading's s and add (0 without seed mode or environment) at weight tx between
+ * the cell's interpolated columns c0 and c1. */
+static inline __attribute__((always_inline)) void lerp_s(int has_add, const float *c0, const float *c1, float tx,
+                                                         float v[4])
+{
+    const float ux = 1.0f - tx;
+    v[0] = c0[4] * ux + c1[4] * tx;
+    if (!has_add) {
+        v[1] = v[2] = v[3] = 0.0f;
+        return;
+    }
+    for (int k = 1; k < 4; k++)
+        v[k] = c0[4 + k] * ux + c1[4 + k] * tx;
+}
+
+/* A pixel shaded from s (and add) v: into the segment's lists, or at once. */
+static inline __attribute__((always_inline)) void put_gain(const caustics_job *j, size_t i, const float *v,
+                                                           int seg_shade, unsigned char *st, float *sv, float *av,
+                                                           float *nz)
+{
+    if (seg_shade) {
+        *st = PX_GAIN;
+        *sv = v[0];
+        *av = *nz = 0.0f;
+    } else {
+        apply_s(j, i, v);
+    }
+}
+
+/* A Position pass pixel as a world point; 0 when it is not one (far or not finite). */
+static inline __attribute__((always_inline)) int position_at(const float *pq, fx_vec3 *P)
+{
+    *P = fx_v3(pq[0], pq[1], pq[2]);
+    return fabsf(P->x) <= 1e15f && fabsf(P->y) <= 1e15f && isfinite(P->z);
+}
+
 static void caustics_rows(void *user, int begin, int end)
 {
     const caustics_job *j = user;
@@ -588,10 +648,10 @@ static void caustics_rows(void *user, int begin, int end)
     const float tol = (float)(0.1 * j->cell); /* world units: a tenth of a cell */
     const int lattice_shading = j->p->lattice_shading;
     /* the segment shading: physical mode, no additive term; else each pixel is shaded at once */
-    const int seg_shade = j->p->mode == MODE_PHYSICAL && !j->has_add;
+    const int seg_shade = j->p->mode == MODE_PHYSICAL && !j->has_add, has_add = j->has_add;
     const float *cov = run->mask ? run->mask->coverage : NULL;
     const float *nodes = j->nodes, *position = j->position;
-    const int ns = j->node_size, nx = j->nx, pc = j->pos_channels;
+    const int pc = j->pos_channels;
     const int *col_i0 = j->col_i0, *col_i1 = j->col_i1;
     const float *col_t = j->col_t;
     fx_noise_cache cache = {0};
@@ -616,34 +676,11 @@ static void caustics_rows(void *user, int begin, int end)
                 const size_t i = (size_t)y * w + x;
                 const int col = x - run->roi.x0;
                 st[c] = PX_DONE;
-                if (nodes) {
-                    const int i0 = col_i0[col];
-                    if (i0 != cur) {
-                        const int i1 = col_i1[col];
-                        if (i0 == cur + 1 && i0 != 0)
-                            memcpy(c0, c1, sizeof c0);
-                        else
-                            column_at(j, j0, j1, ty, i0, c0);
-                        column_at(j, j0, j1, ty, i1, c1);
-                        smooth = j->smooth ? j->smooth[(size_t)j0 * j->cx + i0] : 1;
-                        q00 = nodes + ((size_t)j0 * nx + i0) * ns;
-                        node_col = node_row && !isnan(q00[2]) ? j->node_x[i0] : -1;
-                        coherent = lattice_shading &&
-                                   cell_coherent(q00, nodes + ((size_t)j0 * nx + i1) * ns,
-                                                 nodes + ((size_t)j1 * nx + i0) * ns,
-                                                 nodes + ((size_t)j1 * nx + i1) * ns);
-                        cur = i0;
-                    }
-                }
+                if (nodes && col_i0[col] != cur)
+                    enter_cell(j, col_i0[col], col_i1[col], j0, j1, ty, node_row, c0, c1, &q00, &cur, &smooth,
+                               &node_col, &coherent);
                 fx_vec3 P;
-                int ok;
-                if (position) {
-                    const float *pq = position + i * pc;
-                    P = fx_v3(pq[0], pq[1], pq[2]);
-                    ok = fabsf(P.x) <= 1e15f && fabsf(P.y) <= 1e15f && isfinite(P.z);
-                } else {
-                    ok = world_at(j, x, y, &P);
-                }
+                const int ok = position ? position_at(position + i * pc, &P) : world_at(j, x, y, &P);
                 if ((cov && !(cov[i] > 0.0f)) || !ok) {
                     if (seg_shade) {
                         st[c] = PX_COPY;
@@ -654,18 +691,9 @@ static void caustics_rows(void *user, int begin, int end)
                     continue;
                 }
                 if (coherent) { /* lattice_shading: no surface test */
-                    const float tx = col_t[col], ux = 1.0f - tx;
-                    float v[4] = {c0[4] * ux + c1[4] * tx, 0.0f, 0.0f, 0.0f};
-                    if (seg_shade) {
-                        st[c] = PX_GAIN;
-                        sv[c] = v[0];
-                        av[c] = nz[c] = 0.0f;
-                        continue;
-                    }
-                    if (j->has_add)
-                        for (int k = 1; k < 4; k++)
-                            v[k] = c0[4 + k] * ux + c1[4 + k] * tx;
-                    apply_s(j, i, v);
+                    float v[4];
+                    lerp_s(has_add, c0, c1, col_t[col], v);
+                    put_gain(j, i, v, seg_shade, st + c, sv + c, av + c, nz + c);
                     continue;
                 }
                 float a, noise;
@@ -673,13 +701,7 @@ static void caustics_rows(void *user, int begin, int end)
                     if (x == node_col) {
                         /* a lattice node: its own values (what interpolation would give) */
                         if (lattice_shading) {
-                            if (seg_shade) {
-                                st[c] = PX_GAIN;
-                                sv[c] = q00[4];
-                                av[c] = nz[c] = 0.0f;
-                            } else {
-                                apply_s(j, i, q00 + 4);
-                            }
+                            put_gain(j, i, q00 + 4, seg_shade, st + c, sv + c, av + c, nz + c);
                             continue;
                         }
                         a = q00[0];
@@ -691,19 +713,9 @@ static void caustics_rows(void *user, int begin, int end)
                     /* a pixel whose corners are not on its surface (NaN corners fail too): exact */
                     if (fabsf(LERP2(2) - P.x) <= tol && fabsf(LERP2(3) - P.y) <= tol) {
                         if (lattice_shading) { /* s, and add (0 without seed mode or environment) */
-                            float v[4] = {LERP2(4), 0.0f, 0.0f, 0.0f};
-                            if (seg_shade) {
-                                st[c] = PX_GAIN;
-                                sv[c] = v[0];
-                                av[c] = nz[c] = 0.0f;
-                                continue;
-                            }
-                            if (j->has_add) {
-                                v[1] = LERP2(5);
-                                v[2] = LERP2(6);
-                                v[3] = LERP2(7);
-                            }
-                            apply_s(j, i, v);
+                            float v[4];
+                            lerp_s(has_add, c0, c1, tx, v);
+                            put_gain(j, i, v, seg_shade, st + c, sv + c, av + c, nz + c);
                             continue;
                         }
                         noise = LERP2(1);
