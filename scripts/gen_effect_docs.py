@@ -105,7 +105,7 @@ def type_cell(p):
             s = f"{n} floats"
         return s
     if t == "string" and hint == "mask":
-        return "mask (JSON text, as an entry's `mask`)"
+        return "string, mask (a JSON object as an entry's `mask` takes)"
     return f"{t}, {hint}" if hint else t
 
 
