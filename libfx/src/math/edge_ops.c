@@ -783,22 +783,16 @@ static void field_row(const edge_job *j, const band_rings *b, int y)
         normal_row(j->src->normal + row * 3, j->w, fr->x0, fr->x1, b->unorm + (size_t)(y % j->rf) * w * 3);
 }
 
-/* Thresholded strength of row y into out[x] for x in strength_rect's columns; the raw
- * strengths into j->strengths when write_dbg (row y inside the ROI and owned by this band). */
-static void strength_row(const edge_job *j, const band_rings *b, int y, float *out, int write_dbg)
+/* Strength stage 1: the luminance and depth responses of row y into b->sl and b->sd. With
+ * Sobel on luminance alone (the defaults) the AVX2 path writes the ramped strengths to out
+ * at once and returns 1 (nothing left to do). */
+static int raw_responses(const edge_job *j, const band_rings *b, int y, float *out, int dbg)
 {
     const fx_edge_settings *s = j->s;
     const fx_rect *sr = &j->strength_rect;
     const int w = j->w, h = j->h, rf = j->rf;
     const size_t ws = (size_t)w;
-    const ramp_k rl = ramp_of(s->luminance_threshold, s->softness), rd = ramp_of(s->depth_threshold, s->softness);
-    const ramp_k rn = ramp_of(s->normal_threshold, s->softness), ri = ramp_of(s->id_threshold, s->softness);
-    /* normals turning by less than the threshold give 0 without an acos: cos(threshold)
-     * plus a margin so that rounding never hides a value ramp() would make positive */
-    const float cos_skip = cosf(fx_clampf(s->normal_threshold, 0.0f, 180.0f) * (float)(3.14159265358979323846 / 180.0)) + 1e-5f;
     const int r = fx_edge_operator_radius(s->op);
-    float *sl_row = b->sl, *sd_row = b->sd;
-    const int dbg = write_dbg && j->strengths;
     if (s->use_luminance) {
         const float *A = ring_row(b->lum, rf, ws, clampi(y - r, 0, h - 1));
         const float *B = ring_row(b->lum, rf, ws, y), *C = ring_row(b->lum, rf, ws, clampi(y + r, 0, h - 1));
@@ -806,6 +800,7 @@ static void strength_row(const edge_job *j, const band_rings *b, int y, float *o
         if (s->op == FX_EDGE_SOBEL && !s->use_depth && !s->use_normal && !s->use_object && !s->use_material &&
             !dbg && __builtin_cpu_supports("avx2")) {
             /* the common case (the defaults): the Sobel magnitude and its ramp in one pass */
+            const ramp_k rl = ramp_of(s->luminance_threshold, s->softness);
             int xa = sr->x0 > 1 ? sr->x0 : 1, xb = sr->x1 < w - 1 ? sr->x1 : w - 1;
             if (xb < xa)
                 xa = xb = sr->x1;
@@ -815,10 +810,13 @@ static void strength_row(const edge_job *j, const band_rings *b, int y, float *o
             x = sobel_ramp_row_avx2(A, B, C, x, xb, rl.t, rl.inv, out);
             for (; x < sr->x1; x++)
                 out[x] = ramp(rl, response_at_rows(A, B, C, w, x, 1, s->op));
-            return;
+            return 1;
         }
+#else
+        (void)out;
+        (void)dbg;
 #endif
-        response_row(A, B, C, w, sr->x0, sr->x1, s->op, sl_row);
+        response_row(A, B, C, w, sr->x0, sr->x1, s->op, b->sl);
     }
     if (s->use_depth) {
         if (s->depth_planar) {
@@ -826,41 +824,29 @@ static void strength_row(const edge_job *j, const band_rings *b, int y, float *o
             const float *B = ring_row(b->ldepth, rf, ws, y);
             const float *A = has_v ? ring_row(b->ldepth, rf, ws, y - 1) : B;
             const float *C = has_v ? ring_row(b->ldepth, rf, ws, y + 1) : B;
-            planar_row(A, B, C, has_v, w, sr->x0, sr->x1, sd_row);
+            planar_row(A, B, C, has_v, w, sr->x0, sr->x1, b->sd);
         } else {
             const float *A = ring_row(b->ldepth, rf, ws, clampi(y - r, 0, h - 1));
             const float *B = ring_row(b->ldepth, rf, ws, y), *C = ring_row(b->ldepth, rf, ws, clampi(y + r, 0, h - 1));
-            response_row(A, B, C, w, sr->x0, sr->x1, s->op, sd_row);
+            response_row(A, B, C, w, sr->x0, sr->x1, s->op, b->sd);
         }
     }
-    if (s->use_luminance && s->use_depth && !s->use_normal && !s->use_object && !s->use_material && !dbg) {
-        for (int x = sr->x0; x < sr->x1; x++) { /* the common cases: simple loops */
-            float a = ramp(rl, sl_row[x]), c = ramp(rd, sd_row[x]);
-            out[x] = a > c ? a : c;
-        }
-        return;
-    }
-    if (s->use_luminance && !s->use_depth && !s->use_normal && !s->use_object && !s->use_material && !dbg) {
-        for (int x = sr->x0; x < sr->x1; x++)
-            out[x] = ramp(rl, sl_row[x]);
-        return;
-    }
-    /* luminance and depth first (simple loops), then the rest per pixel */
-    if (s->use_luminance && s->use_depth) {
-        for (int x = sr->x0; x < sr->x1; x++) {
-            float a = ramp(rl, sl_row[x]), c = ramp(rd, sd_row[x]);
-            out[x] = a > c ? a : c;
-        }
-    } else if (s->use_luminance) {
-        for (int x = sr->x0; x < sr->x1; x++)
-            out[x] = ramp(rl, sl_row[x]);
-    } else if (s->use_depth) {
-        for (int x = sr->x0; x < sr->x1; x++)
-            out[x] = ramp(rd, sd_row[x]);
-    } else {
-        for (int x = sr->x0; x < sr->x1; x++)
-            out[x] = 0.0f;
-    }
+    return 0;
+}
+
+/* Strength stage 3: normals and IDs, per pixel, on top of the ramped luminance and depth
+ * in out; the raw strengths into j->strengths on debug rows. */
+static void normal_id_strengths(const edge_job *j, const band_rings *b, int y, float *out, int dbg)
+{
+    const fx_edge_settings *s = j->s;
+    const fx_rect *sr = &j->strength_rect;
+    const int w = j->w, h = j->h, rf = j->rf;
+    const size_t ws = (size_t)w;
+    const ramp_k rn = ramp_of(s->normal_threshold, s->softness), ri = ramp_of(s->id_threshold, s->softness);
+    /* normals turning by less than the threshold give 0 without an acos: cos(threshold)
+     * plus a margin so that rounding never hides a value ramp() would make positive */
+    const float cos_skip = cosf(fx_clampf(s->normal_threshold, 0.0f, 180.0f) * (float)(3.14159265358979323846 / 180.0)) + 1e-5f;
+    const float *sl_row = b->sl, *sd_row = b->sd;
     const float *um = NULL, *u0 = NULL, *up = NULL;
     if (s->use_normal) {
         um = ring_row(b->unorm, rf, ws * 3, clampi(y - 1, 0, h - 1));
@@ -907,6 +893,37 @@ static void strength_row(const edge_job *j, const band_rings *b, int y, float *o
             o[3] = si;
         }
     }
+}
+
+/* Thresholded strength of row y into out[x] for x in strength_rect's columns; the raw
+ * strengths into j->strengths when write_dbg (row y inside the ROI and owned by this band). */
+static void strength_row(const edge_job *j, const band_rings *b, int y, float *out, int write_dbg)
+{
+    const fx_edge_settings *s = j->s;
+    const fx_rect *sr = &j->strength_rect;
+    const ramp_k rl = ramp_of(s->luminance_threshold, s->softness), rd = ramp_of(s->depth_threshold, s->softness);
+    const float *sl_row = b->sl, *sd_row = b->sd;
+    const int dbg = write_dbg && j->strengths;
+    if (raw_responses(j, b, y, out, dbg))
+        return;
+    /* stage 2: luminance and depth ramped (simple loops) */
+    if (s->use_luminance && s->use_depth) {
+        for (int x = sr->x0; x < sr->x1; x++) {
+            float a = ramp(rl, sl_row[x]), c = ramp(rd, sd_row[x]);
+            out[x] = a > c ? a : c;
+        }
+    } else if (s->use_luminance) {
+        for (int x = sr->x0; x < sr->x1; x++)
+            out[x] = ramp(rl, sl_row[x]);
+    } else if (s->use_depth) {
+        for (int x = sr->x0; x < sr->x1; x++)
+            out[x] = ramp(rd, sd_row[x]);
+    } else {
+        for (int x = sr->x0; x < sr->x1; x++)
+            out[x] = 0.0f;
+    }
+    if (s->use_normal || s->use_object || s->use_material || dbg)
+        normal_id_strengths(j, b, y, out, dbg);
 }
 
 /* m[x] = max(m[x], row[x + dx]) for |dx| <= hw, x + dx inside the image, x in [x0, x1). */
