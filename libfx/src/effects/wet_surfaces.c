@@ -261,6 +261,73 @@ static int wet_partial(const wet_job *j, const float *const c[4], const float bw
     return 1;
 }
 
+/* Each smooth cell of lattice row k (next k1) as a span along this pixel row, at weight
+ * vty between the rows: left values and their differences to the right corners. */
+static inline __attribute__((always_inline)) void row_spans(const wet_job *j, wet_span *sp, int k, int k1, int ncx,
+                                                            v4f vty)
+{
+    for (int i = 0; i < ncx; i++) {
+        if (!j->smooth[(size_t)k * j->nx + i])
+            continue;
+        const int i1 = j->nx > 1 ? i + 1 : i;
+        const float *a = j->nodes + ((size_t)k * j->nx + i) * WET_NODE;
+        const float *b = j->nodes + ((size_t)k * j->nx + i1) * WET_NODE;
+        const float *c = j->nodes + ((size_t)k1 * j->nx + i) * WET_NODE;
+        const float *e = j->nodes + ((size_t)k1 * j->nx + i1) * WET_NODE;
+        wet_span *s = &sp[i];
+#define LERP(p, q) (ld4(p) + vty * (ld4(q) - ld4(p)))
+        const v4f gl = LERP(a + N_G, c + N_G), gr = LERP(b + N_G, e + N_G);
+        const v4f ol = LERP(a + N_O, c + N_O), orr = LERP(b + N_O, e + N_O);
+        const v4f wl = LERP(a + N_WET, c + N_WET), wr = LERP(b + N_WET, e + N_WET);
+#undef LERP
+        s->gl = gl;
+        s->gd = gr - gl;
+        s->ol = ol;
+        s->od = orr - ol;
+        s->wl = wl;
+        s->wd = wr - wl;
+    }
+}
+
+/* A smooth cell's pixels [xs, xe) four at a time while all four lie on the cell's surface
+ * (the same tests, lane by lane, as wet_lattice_rows' one-pixel loop: the same bits);
+ * returns the first pixel not done. an: the cell's first corner's normal. */
+static inline __attribute__((always_inline)) int smooth_quads(const wet_span *sc, const float *an, float far,
+                                                              const float *restrict depth,
+                                                              const float *restrict normal,
+                                                              const float *restrict col_t, const float *restrict src,
+                                                              float *restrict dst, float *restrict dbg, int xs, int xe)
+{
+    const float an0 = an[0], an1 = an[1], an2 = an[2];
+    const v4f wl0 = V4(sc->wl[0]), wd0 = V4(sc->wd[0]), wl1 = V4(sc->wl[1]), wd1 = V4(sc->wd[1]);
+    int x = xs;
+    for (; x + 4 <= xe; x += 4) {
+        const v4f d4 = ld4(depth + x), tx4 = ld4(col_t + x);
+        const float *q = normal + 3 * (size_t)x;
+        const v4f nx = {q[0], q[3], q[6], q[9]}, ny = {q[1], q[4], q[7], q[10]}, nz = {q[2], q[5], q[8], q[11]};
+        const v4f dz = wl1 + tx4 * wd1;
+        const v4f nd = nx * V4(an0) + ny * V4(an1) + nz * V4(an2);
+        const v4f nn = nx * nx + ny * ny + nz * nz;
+        const v4f dd = (v4f)((v4i)(d4 - dz) & (v4i){0x7fffffff, 0x7fffffff, 0x7fffffff, 0x7fffffff}); /* |d - dz| */
+        const v4i ok = (d4 > V4(0.0f)) & (d4 < V4(far)) & (dd <= V4(0.02f) * d4) & (nd > V4(0.0f)) &
+                       (nd * nd >= V4(0.81f) * nn);
+        if (!(ok[0] & ok[1] & ok[2] & ok[3]))
+            break;
+        const v4f wet4 = wl0 + tx4 * wd0;
+        for (int m = 0; m < 4; m++) {
+            const float *s = src + 4 * (size_t)(x + m);
+            float *o = dst + 4 * (size_t)(x + m);
+            if (wet4[m] > 0.0f)
+                wet_apply4(s, o, sc->gl + V4(tx4[m]) * sc->gd, sc->ol + V4(tx4[m]) * sc->od);
+            else
+                memcpy(o, s, 4 * sizeof(float)); /* dry: the source */
+            if (dbg)
+                dbg[x + m] = wet4[m];
+        }
+    }
+    return x;
+}
+
 static void wet_lattice_rows(void *user, int y0, int y1, int worker)
 {
     wet_job *j = user;
@@ -280,28 +347,7 @@ static void wet_lattice_rows(void *user, int y0, int y1, int worker)
         float ty = span > 0 ? (float)(y - j->node_y[k]) / (float)span : 0.0f;
         ty = ty > 1.0f ? 1.0f : ty;
         const v4f vty = V4(ty);
-        /* the smooth cells' spans of this row */
-        for (int i = 0; i < ncx; i++) {
-            if (!j->smooth[(size_t)k * j->nx + i])
-                continue;
-            const int i1 = j->nx > 1 ? i + 1 : i;
-            const float *a = j->nodes + ((size_t)k * j->nx + i) * WET_NODE;
-            const float *b = j->nodes + ((size_t)k * j->nx + i1) * WET_NODE;
-            const float *c = j->nodes + ((size_t)k1 * j->nx + i) * WET_NODE;
-            const float *e = j->nodes + ((size_t)k1 * j->nx + i1) * WET_NODE;
-            wet_span *s = &sp[i];
-#define LERP(p, q) (ld4(p) + vty * (ld4(q) - ld4(p)))
-            const v4f gl = LERP(a + N_G, c + N_G), gr = LERP(b + N_G, e + N_G);
-            const v4f ol = LERP(a + N_O, c + N_O), orr = LERP(b + N_O, e + N_O);
-            const v4f wl = LERP(a + N_WET, c + N_WET), wr = LERP(b + N_WET, e + N_WET);
-#undef LERP
-            s->gl = gl;
-            s->gd = gr - gl;
-            s->ol = ol;
-            s->od = orr - ol;
-            s->wl = wl;
-            s->wd = wr - wl;
-        }
+        row_spans(j, sp, k, k1, ncx, vty);
         const float *restrict depth = j->surf.depth + (size_t)y * run->width;
         const float *restrict normal = j->surf.normal + (size_t)y * run->width * 3;
         const float *restrict src = run->src + (size_t)y * run->width * 4;
@@ -320,36 +366,8 @@ static void wet_lattice_rows(void *user, int y0, int y1, int worker)
             const float *c[4] = {nrow0 + (size_t)cc * WET_NODE, nrow0 + (size_t)c1 * WET_NODE,
                                  nrow1 + (size_t)cc * WET_NODE, nrow1 + (size_t)c1 * WET_NODE};
             int x = xs;
-            if (smooth) {
-                /* four pixels at a time while all four lie on the cell's surface (the same
-                 * tests, lane by lane, as the one-pixel loop below: the same bits) */
-                const v4f wl0 = V4(sc.wl[0]), wd0 = V4(sc.wd[0]), wl1 = V4(sc.wl[1]), wd1 = V4(sc.wd[1]);
-                for (; x + 4 <= xe; x += 4) {
-                    const v4f d4 = ld4(depth + x), tx4 = ld4(col_t + x);
-                    const float *q = normal + 3 * (size_t)x;
-                    const v4f nx = {q[0], q[3], q[6], q[9]}, ny = {q[1], q[4], q[7], q[10]},
-                              nz = {q[2], q[5], q[8], q[11]};
-                    const v4f dz = wl1 + tx4 * wd1;
-                    const v4f nd = nx * V4(an0) + ny * V4(an1) + nz * V4(an2);
-                    const v4f nn = nx * nx + ny * ny + nz * nz;
-                    const v4f dd = (v4f)((v4i)(d4 - dz) & (v4i){0x7fffffff, 0x7fffffff, 0x7fffffff, 0x7fffffff}); /* |d - dz| */
-                    const v4i ok = (d4 > V4(0.0f)) & (d4 < V4(far)) & (dd <= V4(0.02f) * d4) & (nd > V4(0.0f)) &
-                                   (nd * nd >= V4(0.81f) * nn);
-                    if (!(ok[0] & ok[1] & ok[2] & ok[3]))
-                        break;
-                    const v4f wet4 = wl0 + tx4 * wd0;
-                    for (int m = 0; m < 4; m++) {
-                        const float *s = src + 4 * (size_t)(x + m);
-                        float *o = dst + 4 * (size_t)(x + m);
-                        if (wet4[m] > 0.0f)
-                            wet_apply4(s, o, sc.gl + V4(tx4[m]) * sc.gd, sc.ol + V4(tx4[m]) * sc.od);
-                        else
-                            memcpy(o, s, 4 * sizeof(float)); /* dry: the source */
-                        if (dbg)
-                            dbg[x + m] = wet4[m];
-                    }
-                }
-            }
+            if (smooth)
+                x = smooth_quads(&sc, an, far, depth, normal, col_t, src, dst, dbg, xs, xe);
             for (; x < xe; x++) {
                 const float *s = src + 4 * (size_t)x;
                 float *o = dst + 4 * (size_t)x;
