@@ -476,24 +476,11 @@ static void camera_cases(fx_context *ctx, const char *effect, fx_frame *f)
     CHECK(fx_frame_camera(f, &tmp) && memcmp(&tmp, &good, sizeof tmp) == 0); /* unchanged */
 }
 
-int main(void)
+/* Odd and tiny frame sizes, where the reduced-resolution paths meet their edges. */
+static const int odd_sizes[][2] = {{1, 1}, {1, 9}, {9, 1}, {3, 5}, {17, 13}, {37, 23}};
+
+static void sweep_params(fx_context *ctx, fx_frame *hostile)
 {
-    struct sigaction sa;
-    memset(&sa, 0, sizeof sa);
-    sa.sa_handler = on_alarm;
-    sigaction(SIGALRM, &sa, NULL);
-    double t_start = now_s();
-
-    fx_context *ctx = NULL;
-    CHECK_OK(ctx, fx_context_new(&ctx, 2));
-    if (!ctx)
-        return tu_finish("test_extremes");
-    dir = tu_tmpdir("extremes");
-    write_aux_views(ctx, dir);
-
-    fx_frame *hostile = make_frame(ctx, 17, 13, HOSTILE_EXR, SIDECAR_LIGHTS_FRONT);
-    CHECK(hostile != NULL);
-
     /* 1. every numeric parameter of every effect */
     for (int e = 0; e < fx_effect_count() && hostile; e++) {
         const char *effect = fx_effect_name(e);
@@ -505,8 +492,10 @@ int main(void)
             sweep_accepted(ctx, effect, p, hostile);
         }
     }
-    double t_sweep = now_s();
+}
 
+static void defaults_on_shapes(fx_context *ctx)
+{
     /* 2. defaults on every input variant and frame shape (draft, and final on 1x1) */
     static const int sizes[][2] = {{1, 1}, {1, 9}, {9, 1}, {2, 2}, {17, 13}};
     const char *lights[3] = {SIDECAR_LIGHTS_FRONT, SIDECAR_LIGHTS_BEHIND, SIDECAR_LIGHTS_GRAZING};
@@ -534,19 +523,21 @@ int main(void)
                 }
                 fx_frame_free(f);
             }
+}
 
+static void presets_on_odd_frames(fx_context *ctx)
+{
     /* 2b. every preset, where the reduced-resolution paths live (cells, proxies, pyramid
-     * levels), on odd and tiny frames, whole and under a one-pixel mask (smaller than any
+     * levels), on odd_sizes and tiny frames, whole and under a one-pixel mask (smaller than any
      * reduced pixel): it runs, stays finite, and leaves every pixel outside the mask as it was */
-    static const int odd[][2] = {{1, 1}, {1, 9}, {9, 1}, {3, 5}, {17, 13}, {37, 23}};
-    for (int z = 0; z < FX_COUNT_OF(odd); z++) {
-        const int w = odd[z][0], h = odd[z][1];
+    for (int z = 0; z < FX_COUNT_OF(odd_sizes); z++) {
+        const int w = odd_sizes[z][0], h = odd_sizes[z][1];
         fx_frame *f = make_frame(ctx, w, h, HOSTILE_EXR, SIDECAR_LIGHTS_FRONT);
         CHECK(f != NULL);
         const float *in_px = NULL;
         if (f)
             fx_frame_pass_read(f, "Combined", &in_px, NULL);
-        const int mx = (w / 2) | 1, my = (h / 2) | 1; /* odd: off any 2x2 or 4x4 cell's corner */
+        const int mx = (w / 2) | 1, my = (h / 2) | 1; /* odd_sizes: off any 2x2 or 4x4 cell's corner */
         for (int e = 0; f && e < fx_effect_count(); e++) {
             const char *effect = fx_effect_name(e);
             for (int q = FX_QUALITY_DRAFT; q <= FX_QUALITY_REFERENCE; q++)
@@ -559,14 +550,17 @@ int main(void)
         }
         fx_frame_free(f);
     }
+}
 
+static void presets_on_proxies(fx_context *ctx)
+{
     /* 2c. proxies (issue 13): every preset on 1/2 and 1/4 proxies of the hostile frames
      * (fx_frame_reduce: colour averaged, data passes from one pixel per block), whole and
      * under a one-pixel mask given in full-frame pixels (smaller than a proxy pixel: it
      * selects the proxy pixel holding it). Output at the proxy's size, finite, and
      * untouched outside that proxy pixel. */
-    for (int z = 0; z < FX_COUNT_OF(odd); z++) {
-        const int w = odd[z][0], h = odd[z][1];
+    for (int z = 0; z < FX_COUNT_OF(odd_sizes); z++) {
+        const int w = odd_sizes[z][0], h = odd_sizes[z][1];
         fx_frame *f = make_frame(ctx, w, h, HOSTILE_EXR, SIDECAR_LIGHTS_FRONT);
         CHECK(f != NULL);
         for (int factor = 2; f && factor <= 4; factor *= 2) {
@@ -594,7 +588,10 @@ int main(void)
         }
         fx_frame_free(f);
     }
+}
 
+static void cameras_reference_all(fx_context *ctx, fx_frame *hostile)
+{
     /* 3. degenerate cameras, for the effects that use one */
     for (int e = 0; e < fx_effect_count() && hostile; e++) {
         const char *effect = fx_effect_name(e);
@@ -623,7 +620,33 @@ int main(void)
     if (hostile)
         run_case(ctx, all, hostile, "", 1);
     fx_stack_free(all);
+}
 
+int main(void)
+{
+    struct sigaction sa;
+    memset(&sa, 0, sizeof sa);
+    sa.sa_handler = on_alarm;
+    sigaction(SIGALRM, &sa, NULL);
+    double t_start = now_s();
+
+    fx_context *ctx = NULL;
+    CHECK_OK(ctx, fx_context_new(&ctx, 2));
+    if (!ctx)
+        return tu_finish("test_extremes");
+    dir = tu_tmpdir("extremes");
+    write_aux_views(ctx, dir);
+
+    fx_frame *hostile = make_frame(ctx, 17, 13, HOSTILE_EXR, SIDECAR_LIGHTS_FRONT);
+    CHECK(hostile != NULL);
+
+    sweep_params(ctx, hostile);
+    double t_sweep = now_s();
+
+    defaults_on_shapes(ctx);
+    presets_on_odd_frames(ctx);
+    presets_on_proxies(ctx);
+    cameras_reference_all(ctx, hostile);
     fx_frame_free(hostile);
     fx_context_free(ctx);
     printf("test_extremes: %d runs finished, %d refused with a clear error; sweep %.1f s, total %.1f s\n",
