@@ -56,36 +56,15 @@ static fx_frame *test_frame(fx_context *ctx)
     return f;
 }
 
-int main(void)
+/* Writing: every lossless codec, same bytes for any thread count, bit-exact back. */
+static void codecs_round_trip(fx_context *const ctx[3], fx_frame *const src[3], const char *dir)
 {
-    const char *data = getenv("LIBFX_TEST_DATA");
-    char blender[1200];
-    snprintf(blender, sizeof blender, "%s/blender/render_multilayer.exr", data ? data : "tests/data");
-    const char *dir = tu_tmpdir("exr_parallel");
     static const int threads[3] = {1, 2, 3};
-    fx_context *ctx[3];
-    for (int t = 0; t < 3; t++)
-        if (fx_context_new(&ctx[t], threads[t]) != FX_OK)
-            return 1;
-
-    /* Reading: a Blender render decodes to the same bits with 1, 2 and 3 threads. */
-    fx_frame *rd[3] = {NULL, NULL, NULL};
-    for (int t = 0; t < 3; t++)
-        CHECK_OK(ctx[t], fx_frame_read_exr(ctx[t], blender, NULL, &rd[t]));
-    CHECK(rd[0] && rd[1] && rd[2] && frames_equal(rd[0], rd[1]) && frames_equal(rd[0], rd[2]));
-    for (int t = 0; t < 3; t++)
-        fx_frame_free(rd[t]);
-
-    /* Writing: every lossless codec, same bytes for any thread count, bit-exact back. */
     static const struct {
         exr_compression_t c;
         int level;
     } codecs[] = {{EXR_COMPRESSION_NONE, 0}, {EXR_COMPRESSION_RLE, 0}, {EXR_COMPRESSION_ZIPS, 1},
                   {EXR_COMPRESSION_ZIP, 1},  {EXR_COMPRESSION_ZIP, 9}, {EXR_COMPRESSION_PIZ, 0}};
-    fx_frame *src[3];
-    for (int t = 0; t < 3; t++)
-        src[t] = test_frame(ctx[t]);
-    CHECK(src[0] && src[1] && src[2]);
     for (size_t k = 0; k < sizeof codecs / sizeof codecs[0] && src[0] && src[1] && src[2]; k++) {
         char *bytes[3] = {NULL, NULL, NULL};
         size_t len[3] = {0, 0, 0};
@@ -113,37 +92,12 @@ int main(void)
         for (int t = 0; t < 3; t++)
             free(bytes[t]);
     }
+}
 
-    /* The default is ZIP at FX_EXR_DEFAULT_ZIP_LEVEL: the same bytes as asking for it. */
-    if (src[1]) {
-        char a[700], b[700];
-        snprintf(a, sizeof a, "%s/default.exr", dir);
-        snprintf(b, sizeof b, "%s/explicit.exr", dir);
-        fx_exr_write_params p = {EXR_COMPRESSION_ZIP, FX_EXR_DEFAULT_ZIP_LEVEL};
-        CHECK_OK(ctx[1], fx_frame_write_exr(src[1], a, NULL));
-        CHECK_OK(ctx[1], fx_exr_write(src[1], b, NULL, &p));
-        size_t la = 0, lb = 0;
-        char *ba = tu_slurp(a, &la), *bb = tu_slurp(b, &lb);
-        CHECK(ba && bb && la == lb && memcmp(ba, bb, la) == 0);
-        free(ba);
-        free(bb);
-    }
-
-    /* Refused choices: lossy or unknown codecs, ZIP levels outside 1..9; no file left. */
-    if (src[1]) {
-        char path[700];
-        snprintf(path, sizeof path, "%s/refused.exr", dir);
-        fx_exr_write_params p = {EXR_COMPRESSION_DWAA, 1};
-        CHECK_FAIL(ctx[1], fx_exr_write(src[1], path, NULL, &p), FX_ERR_INVALID_ARGUMENT, "dwaa");
-        p.compression = EXR_COMPRESSION_ZIP, p.zip_level = 0;
-        CHECK_FAIL(ctx[1], fx_exr_write(src[1], path, NULL, &p), FX_ERR_INVALID_ARGUMENT, "level 0");
-        p.zip_level = 10;
-        CHECK_FAIL(ctx[1], fx_exr_write(src[1], path, NULL, &p), FX_ERR_INVALID_ARGUMENT, "level 10");
-        CHECK(access(path, F_OK) != 0);
-    }
-
-    /* A damaged chunk in the middle of the file: the same error, naming the file and
-     * the chunk, for 1, 2 and 3 threads (the lowest failing chunk wins). */
+/* A damaged chunk in the middle of the file: the same error, naming the file and the
+ * chunk, for 1, 2 and 3 threads (the lowest failing chunk wins). */
+static void damaged_chunk(fx_context *const ctx[3], fx_frame *const src[3], const char *dir)
+{
     if (src[0]) {
         char good[700], bad[700];
         snprintf(good, sizeof good, "%s/good.exr", dir);
@@ -174,6 +128,63 @@ int main(void)
         }
         free(b);
     }
+}
+
+int main(void)
+{
+    const char *data = getenv("LIBFX_TEST_DATA");
+    char blender[1200];
+    snprintf(blender, sizeof blender, "%s/blender/render_multilayer.exr", data ? data : "tests/data");
+    const char *dir = tu_tmpdir("exr_parallel");
+    static const int threads[3] = {1, 2, 3};
+    fx_context *ctx[3];
+    for (int t = 0; t < 3; t++)
+        if (fx_context_new(&ctx[t], threads[t]) != FX_OK)
+            return 1;
+
+    /* Reading: a Blender render decodes to the same bits with 1, 2 and 3 threads. */
+    fx_frame *rd[3] = {NULL, NULL, NULL};
+    for (int t = 0; t < 3; t++)
+        CHECK_OK(ctx[t], fx_frame_read_exr(ctx[t], blender, NULL, &rd[t]));
+    CHECK(rd[0] && rd[1] && rd[2] && frames_equal(rd[0], rd[1]) && frames_equal(rd[0], rd[2]));
+    for (int t = 0; t < 3; t++)
+        fx_frame_free(rd[t]);
+
+    fx_frame *src[3];
+    for (int t = 0; t < 3; t++)
+        src[t] = test_frame(ctx[t]);
+    CHECK(src[0] && src[1] && src[2]);
+    codecs_round_trip(ctx, src, dir);
+
+    /* The default is ZIP at FX_EXR_DEFAULT_ZIP_LEVEL: the same bytes as asking for it. */
+    if (src[1]) {
+        char a[700], b[700];
+        snprintf(a, sizeof a, "%s/default.exr", dir);
+        snprintf(b, sizeof b, "%s/explicit.exr", dir);
+        fx_exr_write_params p = {EXR_COMPRESSION_ZIP, FX_EXR_DEFAULT_ZIP_LEVEL};
+        CHECK_OK(ctx[1], fx_frame_write_exr(src[1], a, NULL));
+        CHECK_OK(ctx[1], fx_exr_write(src[1], b, NULL, &p));
+        size_t la = 0, lb = 0;
+        char *ba = tu_slurp(a, &la), *bb = tu_slurp(b, &lb);
+        CHECK(ba && bb && la == lb && memcmp(ba, bb, la) == 0);
+        free(ba);
+        free(bb);
+    }
+
+    /* Refused choices: lossy or unknown codecs, ZIP levels outside 1..9; no file left. */
+    if (src[1]) {
+        char path[700];
+        snprintf(path, sizeof path, "%s/refused.exr", dir);
+        fx_exr_write_params p = {EXR_COMPRESSION_DWAA, 1};
+        CHECK_FAIL(ctx[1], fx_exr_write(src[1], path, NULL, &p), FX_ERR_INVALID_ARGUMENT, "dwaa");
+        p.compression = EXR_COMPRESSION_ZIP, p.zip_level = 0;
+        CHECK_FAIL(ctx[1], fx_exr_write(src[1], path, NULL, &p), FX_ERR_INVALID_ARGUMENT, "level 0");
+        p.zip_level = 10;
+        CHECK_FAIL(ctx[1], fx_exr_write(src[1], path, NULL, &p), FX_ERR_INVALID_ARGUMENT, "level 10");
+        CHECK(access(path, F_OK) != 0);
+    }
+
+    damaged_chunk(ctx, src, dir);
 
     for (int t = 0; t < 3; t++) {
         fx_frame_free(src[t]);
