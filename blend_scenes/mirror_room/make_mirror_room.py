@@ -143,17 +143,8 @@ def bend(obj, convex_towards_room):
     return abs(bulge)
 
 
-def main():
-    scene = sc.reset_file()
-    scene.name = "MirrorRoom"
-    sc.render_settings(scene)
-
-    sun_dir = sc.direction_from_angles(160.0, 62.0)
-    sc.sky_world("Sky_MirrorRoom", zenith=(0.2, 0.4, 0.85), horizon=(0.75, 0.85, 1.0),
-                 ground=(0.3, 0.28, 0.25), strength=1.0)
-    sc.add_sun("Sun", sun_dir, strength=4.0, color=(1.0, 0.95, 0.85), angle_deg=1.0)
-
-    # room: separate objects and materials per surface
+def build_room():
+    """The room: floor, four walls and a ceiling with a skylight, each its own object and material; returns the materials."""
     mats = {
         "Floor_Checker": sc.principled_material(
             "Floor_Checker", (0.85, 0.85, 0.82), 1, roughness=0.45,
@@ -196,8 +187,11 @@ def main():
         sc.bm_box_minmax(bm, (-RX - t, y0, z0), (x0, y1, z1))
         sc.bm_box_minmax(bm, (x1, y0, z0), (RX + t, y1, z1))
     sc.mesh_object("Ceiling", ceiling, mats["Ceiling_White"], 6)
+    return mats
 
-    # mirrors
+
+def build_mirrors(mats):
+    """The mirrors of MIRRORS on their walls (the bent ones curved in place) and the wooden frames of the flat ones."""
     frames = []
     z0, z1 = MIRROR_Z
     h = z1 - z0
@@ -233,7 +227,9 @@ def main():
                 sc.bm_box(bm, p, (sx, SLAB_T + 0.05, sz), rot_deg=(0, 0, rz))
     sc.mesh_object("Mirror_Frames", build_frames, mats["Frame_Wood"], 8)
 
-    # coloured objects to reflect
+
+def build_props():
+    """Coloured objects for the mirrors to reflect."""
     def colour(name, rgb, idx, rough=0.35):
         return sc.principled_material(name, rgb, idx, roughness=rough)
     sc.mesh_object("Red_Sphere", lambda bm: sc.bm_sphere(bm, (-1.2, 4.6, 0.5), 0.5, segments=32,
@@ -255,6 +251,21 @@ def main():
                    auto_smooth_deg=60)
     sc.mesh_object("White_Pillar", lambda bm: sc.bm_box(bm, (2.6, 2.2, 0.9), (0.4, 0.4, 1.8)),
                    colour("White_Paint", (0.9, 0.9, 0.88), 45, rough=0.6), 45)
+
+
+def main():
+    scene = sc.reset_file()
+    scene.name = "MirrorRoom"
+    sc.render_settings(scene)
+
+    sun_dir = sc.direction_from_angles(160.0, 62.0)
+    sc.sky_world("Sky_MirrorRoom", zenith=(0.2, 0.4, 0.85), horizon=(0.75, 0.85, 1.0),
+                 ground=(0.3, 0.28, 0.25), strength=1.0)
+    sc.add_sun("Sun", sun_dir, strength=4.0, color=(1.0, 0.95, 0.85), angle_deg=1.0)
+
+    mats = build_room()
+    build_mirrors(mats)
+    build_props()
 
     sc.add_area_light("Ceiling_Light_Front", (0.0, 3.0, RZ - 0.02), (0.0, 3.0, 0.0),
                       size=(2.5, 0.6), power=350.0, color=(1.0, 0.97, 0.92))
