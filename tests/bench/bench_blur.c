@@ -241,22 +241,22 @@ static void bench_opencv(const bench_buffers *b)
     const char *only = b->only;
     const int threads = b->threads;
     const double floor_ms = b->floor_ms;
-bench_cv_set_threads(threads);
-const int ks[] = { 11, 51, 101 };
-for (int k = 0; k < (only && !matches("opencv", only) ? 0 : 3); k++) {
-    double t[64];
-    int runs = RUNS > 64 ? 64 : RUNS;
-    bench_cv_gaussian(src, dst, W, H, ks[k]);
-    for (int i = 0; i < runs; i++) {
-        double t0 = now_ms();
+    bench_cv_set_threads(threads);
+    const int ks[] = { 11, 51, 101 };
+    for (int k = 0; k < (only && !matches("opencv", only) ? 0 : 3); k++) {
+        double t[64];
+        int runs = RUNS > 64 ? 64 : RUNS;
         bench_cv_gaussian(src, dst, W, H, ks[k]);
-        t[i] = now_ms() - t0;
+        for (int i = 0; i < runs; i++) {
+            double t0 = now_ms();
+            bench_cv_gaussian(src, dst, W, H, ks[k]);
+            t[i] = now_ms() - t0;
+        }
+        qsort(t, runs, sizeof(double), cmp_d);
+        char label[64];
+        snprintf(label, sizeof label, "cv::GaussianBlur %dx%d (CV_32FC4)", ks[k], ks[k]);
+        row(label, 0, threads, t[runs / 2], floor_ms, -1, -1, -1);
     }
-    qsort(t, runs, sizeof(double), cmp_d);
-    char label[64];
-    snprintf(label, sizeof label, "cv::GaussianBlur %dx%d (CV_32FC4)", ks[k], ks[k]);
-    row(label, 0, threads, t[runs / 2], floor_ms, -1, -1, -1);
-}
 }
 #endif
 
