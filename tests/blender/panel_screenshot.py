@@ -115,6 +115,14 @@ def shoot(path):
             bpy.ops.screen.screenshot(filepath=path)
 
 
+def job_running(kind):
+    """bpy.app.is_job_running, False for a job type this Blender does not know."""
+    try:
+        return bpy.app.is_job_running(kind)
+    except (TypeError, ValueError):
+        return False
+
+
 def tick():
     state["t"] += 1
     try:
@@ -132,7 +140,9 @@ def tick():
             state["t_render"] = time.perf_counter()
             return 1.0
         if state["phase"] == "wait":
-            done = "libfx Result" in bpy.data.images and not bpy.app.is_job_running("RENDER")
+            # the compositor job may still hold the scene after the render job ends
+            done = ("libfx Result" in bpy.data.images and not job_running("RENDER")
+                    and not job_running("COMPOSITE"))
             if done or time.perf_counter() - state["t_render"] > 120:
                 state["ok"] = done
                 log("F12 result image:", done)
@@ -150,7 +160,15 @@ def tick():
             state["before_sum"] = pixels_sum()
             state["gen"] = libfx.live.session(scene).shown.get("generation", -1)
             state["t_change"] = time.perf_counter()
-            libfx.props.effect_group(item).sigma = 6.0   # the update callback starts the live run
+            try:
+                libfx.props.effect_group(item).sigma = 6.0   # the update callback starts the live run
+            except AttributeError as e:
+                # "Writing to ID classes in this context is not allowed": a job of the
+                # render still holds the scene for a moment; try again on a later tick
+                if "not allowed" not in str(e) or state.setdefault("live_retries", 0) >= 100:
+                    raise
+                state["live_retries"] += 1
+                return 0.1
             log("timing: the property set (update callback included) took %.0f ms"
                 % ((time.perf_counter() - state["t_change"]) * 1e3))
             state["phase"] = "live_wait"
