@@ -160,15 +160,7 @@ def tick():
             state["before_sum"] = pixels_sum()
             state["gen"] = libfx.live.session(scene).shown.get("generation", -1)
             state["t_change"] = time.perf_counter()
-            try:
-                libfx.props.effect_group(item).sigma = 6.0   # the update callback starts the live run
-            except AttributeError as e:
-                # "Writing to ID classes in this context is not allowed": a job of the
-                # render still holds the scene for a moment; try again on a later tick
-                if "not allowed" not in str(e) or state.setdefault("live_retries", 0) >= 100:
-                    raise
-                state["live_retries"] += 1
-                return 0.1
+            libfx.props.effect_group(item).sigma = 6.0   # the update callback starts the live run
             log("timing: the property set (update callback included) took %.0f ms"
                 % ((time.perf_counter() - state["t_change"]) * 1e3))
             state["phase"] = "live_wait"
@@ -218,6 +210,16 @@ def tick():
             log("result record:", rec and {k: rec[k] for k in ("ok", "error")})
             sys.stdout.flush()
             os._exit(0 if state["ok"] and state["live_ok"] and rec and rec["ok"] else 1)
+    except AttributeError as e:
+        # "Writing to ID classes in this context is not allowed": a job of the render can
+        # still hold the scene for a moment after it ends; the phase runs again shortly
+        if "not allowed" not in str(e) or state.setdefault("id_write_retries", 0) >= 100:
+            import traceback
+            traceback.print_exc()
+            os._exit(2)
+        state["id_write_retries"] += 1
+        log("retrying phase %s: %s" % (state["phase"], e))
+        return 0.1
     except Exception:
         import traceback
         traceback.print_exc()
