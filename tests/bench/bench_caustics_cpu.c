@@ -4,24 +4,12 @@
  *   bench_caustics_cpu PASSES.exr SIDECAR.json RECIPE.json QUALITY THREADS RUNS
  * Built with the other bench tools: build/tests/bench/bench_caustics_cpu. */
 #define _POSIX_C_SOURCE 200809L
+#include "bench_util.h"
 #include "libfx/fx.h"
 
 #include <stdio.h>
 #include <stdlib.h>
 #include <time.h>
-
-static double now(clockid_t c)
-{
-    struct timespec t;
-    clock_gettime(c, &t);
-    return t.tv_sec * 1e3 + t.tv_nsec * 1e-6;
-}
-
-static int cmp(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return x < y ? -1 : x > y;
-}
 
 int main(int argc, char **argv)
 {
@@ -44,20 +32,20 @@ int main(int argc, char **argv)
     double wall[100], cpu[100];
     for (int r = 0; r <= runs; r++) {
         fx_frame *out = NULL;
-        double w0 = now(CLOCK_MONOTONIC), c0 = now(CLOCK_PROCESS_CPUTIME_ID);
+        double w0 = clock_ms(CLOCK_MONOTONIC), c0 = clock_ms(CLOCK_PROCESS_CPUTIME_ID);
         if (fx_stack_run(s, f, &out)) {
             fprintf(stderr, "run failed: %s\n", fx_context_error(ctx));
             return 1;
         }
-        double w1 = now(CLOCK_MONOTONIC), c1 = now(CLOCK_PROCESS_CPUTIME_ID);
+        double w1 = clock_ms(CLOCK_MONOTONIC), c1 = clock_ms(CLOCK_PROCESS_CPUTIME_ID);
         fx_frame_free(out);
         if (r == 0)
             printf("first: wall %.1f ms, cpu %.1f ms\n", w1 - w0, c1 - c0);
         else
             wall[r - 1] = w1 - w0, cpu[r - 1] = c1 - c0;
     }
-    qsort(wall, runs, sizeof(double), cmp);
-    qsort(cpu, runs, sizeof(double), cmp);
+    qsort(wall, runs, sizeof(double), cmp_d);
+    qsort(cpu, runs, sizeof(double), cmp_d);
     printf("warm median of %d: wall %.1f ms (min %.1f), cpu %.1f ms (min %.1f)\n", runs, wall[runs / 2], wall[0],
            cpu[runs / 2], cpu[0]);
     fx_frame_free(f);

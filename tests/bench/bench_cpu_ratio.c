@@ -20,13 +20,6 @@
 
 #define MAX_RECIPES 16
 
-static double clock_ms(clockid_t id)
-{
-    struct timespec t;
-    clock_gettime(id, &t);
-    return t.tv_sec * 1e3 + t.tv_nsec / 1e6;
-}
-
 int main(int argc, char **argv)
 {
     if (argc < 5) {

@@ -14,6 +14,7 @@
  * writes one dump per timed run (cg.PID.out.1, .2, ...: "Trigger: Client Request: <preset>"),
  * whose `totals:` line is that run's instruction count. Used for docs/effects/bloom.md,
  * vsm_shadows.md, wet_surfaces.md (issue 16). */
+#include "bench_util.h"
 #include "libfx/fx.h"
 #include <valgrind/callgrind.h>
 #include <stdio.h>
@@ -21,17 +22,6 @@
 #include <string.h>
 #include <time.h>
 
-static double ms(clockid_t c)
-{
-    struct timespec t;
-    clock_gettime(c, &t);
-    return t.tv_sec * 1e3 + t.tv_nsec * 1e-6;
-}
-static int cmpd(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return x < y ? -1 : x > y;
-}
 static void die(const char *w, fx_context *c)
 {
     fprintf(stderr, "%s: %s\n", w, c ? fx_context_error(c) : "");
@@ -81,13 +71,13 @@ int main(int argc, char **argv)
     for (int r = 0; r < rounds; r++)
         for (int q = 0; q < nq; q++) {
             fx_frame *o;
-            double w0 = ms(CLOCK_MONOTONIC), c0 = ms(CLOCK_PROCESS_CPUTIME_ID);
+            double w0 = clock_ms(CLOCK_MONOTONIC), c0 = clock_ms(CLOCK_PROCESS_CPUTIME_ID);
             CALLGRIND_ZERO_STATS;
             if (fx_stack_run(s[q], f, &o))
                 die("run", ctx);
             CALLGRIND_DUMP_STATS_AT(argv[8 + q]);
-            wall[q][r] = ms(CLOCK_MONOTONIC) - w0;
-            cpu[q][r] = ms(CLOCK_PROCESS_CPUTIME_ID) - c0;
+            wall[q][r] = clock_ms(CLOCK_MONOTONIC) - w0;
+            cpu[q][r] = clock_ms(CLOCK_PROCESS_CPUTIME_ID) - c0;
             fx_frame_free(o);
         }
     for (int q = 0; q < nq; q++) {
@@ -97,8 +87,8 @@ int main(int argc, char **argv)
         printf("  cpu");
         for (int r = 0; r < rounds; r++)
             printf(" %.1f", cpu[q][r]);
-        qsort(wall[q], rounds, sizeof(double), cmpd);
-        qsort(cpu[q], rounds, sizeof(double), cmpd);
+        qsort(wall[q], rounds, sizeof(double), cmp_d);
+        qsort(cpu[q], rounds, sizeof(double), cmp_d);
         printf("  | median wall %.1f cpu %.1f\n", wall[q][rounds / 2], cpu[q][rounds / 2]);
     }
     return 0;

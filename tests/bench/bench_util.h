@@ -15,6 +15,15 @@ static inline double now_ms(void)
     return t.tv_sec * 1e3 + t.tv_nsec / 1e6;
 }
 
+/* Milliseconds on clock c: CLOCK_MONOTONIC (wall) or CLOCK_PROCESS_CPUTIME_ID (every
+ * thread's CPU time, which other processes on a shared machine disturb far less). */
+static inline double clock_ms(clockid_t c)
+{
+    struct timespec t;
+    clock_gettime(c, &t);
+    return t.tv_sec * 1e3 + t.tv_nsec / 1e6;
+}
+
 /* qsort comparator for doubles */
 static inline int cmp_d(const void *a, const void *b)
 {

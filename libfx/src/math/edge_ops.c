@@ -516,11 +516,28 @@ static inline __attribute__((always_inline)) int sobel_row_sse2(const float *A, 
 #    define EDGE_AVX2 1
 /* sobel_row_sse2 8 columns at a time in AVX2 (4 doubles per register): the same operations
  * in the same order, so the same bits. Called only when the CPU has AVX2. */
+/* The Sobel magnitude of 8 pixels from their column differences, in doubles (as the scalar
+ * response_at_rows: gx = g1 + 2 g2 + g3, the same for gy, |g| / 4), back to floats. */
+__attribute__((target("avx2"), always_inline)) static inline __m256 sobel_mag8_pd(__m256 gx1, __m256 gx2, __m256 gx3,
+                                                                                   __m256 gy1, __m256 gy2, __m256 gy3)
+{
+    const __m256d two = _mm256_set1_pd(2.0), quarter = _mm256_set1_pd(0.25);
+    __m128 half[2];
+    for (int k = 0; k < 2; k++) {
+#define LANES(v) _mm256_cvtps_pd(k == 0 ? _mm256_castps256_ps128(v) : _mm256_extractf128_ps((v), 1))
+        const __m256d gx = _mm256_add_pd(_mm256_add_pd(LANES(gx1), _mm256_mul_pd(two, LANES(gx2))), LANES(gx3));
+        const __m256d gy = _mm256_add_pd(_mm256_add_pd(LANES(gy1), _mm256_mul_pd(two, LANES(gy2))), LANES(gy3));
+#undef LANES
+        const __m256d q = _mm256_add_pd(_mm256_mul_pd(gx, gx), _mm256_mul_pd(gy, gy));
+        half[k] = _mm256_cvtpd_ps(_mm256_mul_pd(_mm256_sqrt_pd(q), quarter));
+    }
+    return _mm256_set_m128(half[1], half[0]);
+}
+
 __attribute__((target("avx2"), noinline)) static int sobel_row_avx2(const float *A, const float *B,
                                                                    const float *C, int xa, int xb,
                                                                    float *out)
 {
-    const __m256d two = _mm256_set1_pd(2.0), quarter = _mm256_set1_pd(0.25);
     const __m256 big = _mm256_set1_ps(FLT_MAX);
     int x = xa;
     for (; x + 8 <= xb; x += 8) {
@@ -531,17 +548,7 @@ __attribute__((target("avx2"), noinline)) static int sobel_row_avx2(const float 
         const __m256 sw = _mm256_sub_ps(_mm256_loadu_ps(C + x - 1), c), se = _mm256_sub_ps(_mm256_loadu_ps(C + x + 1), c);
         const __m256 gx1 = _mm256_sub_ps(ne, nw), gx2 = _mm256_sub_ps(ea, we), gx3 = _mm256_sub_ps(se, sw);
         const __m256 gy1 = _mm256_sub_ps(sw, nw), gy2 = _mm256_sub_ps(s, n), gy3 = _mm256_sub_ps(se, ne);
-        __m128 half[2];
-        for (int k = 0; k < 2; k++) {
-#define LANES(v) _mm256_cvtps_pd(k == 0 ? _mm256_castps256_ps128(v) : _mm256_extractf128_ps((v), 1))
-            const __m256d gx = _mm256_add_pd(_mm256_add_pd(LANES(gx1), _mm256_mul_pd(two, LANES(gx2))), LANES(gx3));
-            const __m256d gy = _mm256_add_pd(_mm256_add_pd(LANES(gy1), _mm256_mul_pd(two, LANES(gy2))), LANES(gy3));
-#undef LANES
-            const __m256d m = _mm256_mul_pd(_mm256_sqrt_pd(_mm256_add_pd(_mm256_mul_pd(gx, gx), _mm256_mul_pd(gy, gy))),
-                                            quarter);
-            half[k] = _mm256_cvtpd_ps(m);
-        }
-        __m256 v = _mm256_set_m128(half[1], half[0]);
+        __m256 v = sobel_mag8_pd(gx1, gx2, gx3, gy1, gy2, gy3);
         v = _mm256_min_ps(v, big); /* v <= FLT_MAX ? v : FLT_MAX (v is never NaN) */
         _mm256_storeu_ps(out + x, v);
     }
@@ -558,7 +565,6 @@ __attribute__((target("avx2"), noinline)) static int sobel_ramp_row_avx2(const f
                                                                         const float *C, int xa, int xb,
                                                                         float t, float inv, float *out)
 {
-    const __m256d two = _mm256_set1_pd(2.0), quarter = _mm256_set1_pd(0.25);
     const __m256 big = _mm256_set1_ps(FLT_MAX), tv = _mm256_set1_ps(t), iv = _mm256_set1_ps(inv);
     const __m256 one = _mm256_set1_ps(1.0f), zero = _mm256_setzero_ps();
     const double qs = 16.0 * (double)t * (double)t * (1.0 - 1.0 / 524288.0);
@@ -616,16 +622,7 @@ __attribute__((target("avx2"), noinline)) static int sobel_ramp_row_avx2(const f
         for (int i = 0; i < nl; i++) {
             const int xc = list[i];
             SOBEL_TERMS(xc);
-            __m128 half[2];
-            for (int k = 0; k < 2; k++) {
-#define LANES(v) _mm256_cvtps_pd(k == 0 ? _mm256_castps256_ps128(v) : _mm256_extractf128_ps((v), 1))
-                const __m256d gx = _mm256_add_pd(_mm256_add_pd(LANES(gx1), _mm256_mul_pd(two, LANES(gx2))), LANES(gx3));
-                const __m256d gy = _mm256_add_pd(_mm256_add_pd(LANES(gy1), _mm256_mul_pd(two, LANES(gy2))), LANES(gy3));
-#undef LANES
-                const __m256d q = _mm256_add_pd(_mm256_mul_pd(gx, gx), _mm256_mul_pd(gy, gy));
-                half[k] = _mm256_cvtpd_ps(_mm256_mul_pd(_mm256_sqrt_pd(q), quarter));
-            }
-            __m256 v = _mm256_set_m128(half[1], half[0]);
+            __m256 v = sobel_mag8_pd(gx1, gx2, gx3, gy1, gy2, gy3);
             v = _mm256_min_ps(v, big); /* v <= FLT_MAX ? v : FLT_MAX (v is never NaN) */
             /* ramp: e > 0 ? (e < 1 ? e : 1) : 0 is max(min(e, 1), +0) (maxps gives its second
              * operand, +0, for e = -0) */
