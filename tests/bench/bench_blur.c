@@ -21,11 +21,6 @@
 
 #include "bench_util.h"
 
-#ifdef LIBFX_BENCH_OPENCV
-void bench_cv_set_threads(int n);
-void bench_cv_gaussian(const float *src, float *dst, int w, int h, int ksize);
-#endif
-
 static const int W = 1920, H = 1080;
 static int RUNS = 7;
 static FILE *g_csv;
@@ -244,18 +239,10 @@ static void bench_opencv(const bench_buffers *b)
     bench_cv_set_threads(threads);
     const int ks[] = { 11, 51, 101 };
     for (int k = 0; k < (only && !matches("opencv", only) ? 0 : 3); k++) {
-        double t[64];
-        int runs = RUNS > 64 ? 64 : RUNS;
-        bench_cv_gaussian(src, dst, W, H, ks[k]);
-        for (int i = 0; i < runs; i++) {
-            double t0 = now_ms();
-            bench_cv_gaussian(src, dst, W, H, ks[k]);
-            t[i] = now_ms() - t0;
-        }
-        qsort(t, runs, sizeof(double), cmp_d);
+        const double ms = bench_cv_median_ms(src, dst, W, H, ks[k], RUNS);
         char label[64];
         snprintf(label, sizeof label, "cv::GaussianBlur %dx%d (CV_32FC4)", ks[k], ks[k]);
-        row(label, 0, threads, t[runs / 2], floor_ms, -1, -1, -1);
+        row(label, 0, threads, ms, floor_ms, -1, -1, -1);
     }
 }
 #endif

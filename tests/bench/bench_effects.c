@@ -16,11 +16,6 @@
 
 #include "bench_util.h"
 
-#ifdef LIBFX_BENCH_OPENCV
-void bench_cv_set_threads(int n);
-void bench_cv_gaussian(const float *src, float *dst, int w, int h, int ksize);
-#endif
-
 static int W = 1920, H = 1080, RUNS = 7;
 static float *g_src, *g_dst, *g_ref;
 static FILE *g_csv;
@@ -202,18 +197,10 @@ int main(int argc, char **argv)
         bench_cv_set_threads(threads);
         const int ks[] = { 11, 51, 101 };
         for (int k = 0; k < 3; k++) {
-            double t[64];
-            int runs = RUNS > 64 ? 64 : RUNS;
-            bench_cv_gaussian(g_src, tmp, W, H, ks[k]);
-            for (int i = 0; i < runs; i++) {
-                double t0 = now_ms();
-                bench_cv_gaussian(g_src, tmp, W, H, ks[k]);
-                t[i] = now_ms() - t0;
-            }
-            qsort(t, runs, sizeof(double), cmp_d);
+            const double ms = bench_cv_median_ms(g_src, tmp, W, H, ks[k], RUNS);
             char label[64];
             snprintf(label, sizeof label, "cv::GaussianBlur %dx%d (CV_32FC4)", ks[k], ks[k]);
-            row(label, threads, t[runs / 2], floor_ms, "-", "-");
+            row(label, threads, ms, floor_ms, "-", "-");
         }
 #endif
         const char *ops[] = { "grayscale_luminance", "sepia", "custom" };

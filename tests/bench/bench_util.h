@@ -72,4 +72,26 @@ static inline void bench_copy_rows(void *user, int y0, int y1)
     memcpy(j->dst + (size_t)y0 * row, j->src + (size_t)y0 * row, (size_t)(y1 - y0) * row * sizeof(float));
 }
 
+#ifdef LIBFX_BENCH_OPENCV
+/* OpenCV's GaussianBlur (bench_opencv.cpp), the in-memory peer of the blur benches. */
+void bench_cv_set_threads(int n);
+void bench_cv_gaussian(const float *src, float *dst, int w, int h, int ksize);
+
+/* Median ms of `runs` (at most 64) ksize x ksize blurs of a w x h RGBA frame, after one
+ * warm-up. */
+static inline double bench_cv_median_ms(const float *src, float *dst, int w, int h, int ksize, int runs)
+{
+    double t[64];
+    runs = runs < 1 ? 1 : runs > 64 ? 64 : runs;
+    bench_cv_gaussian(src, dst, w, h, ksize);
+    for (int i = 0; i < runs; i++) {
+        double t0 = now_ms();
+        bench_cv_gaussian(src, dst, w, h, ksize);
+        t[i] = now_ms() - t0;
+    }
+    qsort(t, (size_t)runs, sizeof(double), cmp_d);
+    return t[runs / 2];
+}
+#endif
+
 #endif
