@@ -2,8 +2,8 @@
 
 The effects live in the C library (libfx.so, bound in native.py); this add-on
 builds its UI from the library's own descriptions, enables the passes the
-stack needs, writes them through one File Output node and runs the stack after
-each rendered frame.  See docs/addon.md.
+stack needs, writes them from the Render Result to one EXR (passes_file.py) and
+runs the stack after each rendered frame.  See docs/addon.md.
 """
 
 bl_info = {

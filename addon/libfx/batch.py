@@ -22,7 +22,7 @@ farm relies on (docs/farm.md; tests/blender/test_batch_contract.py):
 
 Per frame it writes, beside the output prefix:
   <prefix>####.<ext>               Blender's own render (as the scene is set up)
-  <prefix>libfx_passes.####.exr    the passes the stack needs (File Output node; removed
+  <prefix>libfx_passes.####.exr    the render's passes (from the Render Result; removed
                                    once the result is written, unless --keep-passes)
   <prefix>libfx.####.exr           the result: Combined + the passes + camera attributes
   <prefix>libfx.####.<ext>         the result in the scene's format (if not EXR)

@@ -200,6 +200,27 @@ def set_file_format(settings, file_format, depth=None, codec=None):
         settings.exr_codec = codec
 
 
+#: ImageFormatSettings properties a format change may reset, in the order they are put back
+#: (media_type, 5.0+, first: it decides which file formats are valid).
+_FORMAT_PROPS = ("media_type", "file_format", "color_mode", "color_depth", "exr_codec", "quality",
+                 "compression", "use_preview")
+
+
+def image_format_snapshot(settings):
+    return [(p, getattr(settings, p)) for p in _FORMAT_PROPS if hasattr(settings, p)]
+
+
+def image_format_restore(settings, snapshot):
+    """Puts back what image_format_snapshot saw; a value the restored format refuses (none
+    should) is left as Blender set it rather than raising in a render handler."""
+    for prop, value in snapshot:
+        if getattr(settings, prop) != value:
+            try:
+                setattr(settings, prop, value)
+            except (TypeError, ValueError, AttributeError):
+                pass
+
+
 def file_output_format(node, file_format="OPEN_EXR_MULTILAYER", depth="32", codec="ZIP"):
     set_file_format(node.format, file_format, depth, codec)
 

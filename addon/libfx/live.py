@@ -202,9 +202,9 @@ def hold(scene_name, frame_no, frame, path, sidecar, proxy_factor=None):
         WORKER.submit_task(build)
 
 
-def _read_held(ctx, scene_name, frame_no, path, sidecar, fps, proxy_factor=None):
+def _read_held(ctx, scene_name, frame_no, path, sidecar, fps, proxy_factor=None, layer=None):
     """Reads a passes file into a held frame (worker thread, context lock held)."""
-    fin = native.Frame.read(ctx, path, None)   # every pass the file has: any later stack can run
+    fin = native.Frame.read(ctx, path, None, layer=layer)   # every pass it has: any later stack can run
     if sidecar is not None:
         fin.apply_sidecar(sidecar)
     fin.set_time(frame_no, fps)
@@ -226,7 +226,7 @@ class _Job:
         self.split = split
         self.debug_pass = debug_pass
         self.threads = threads
-        self.load = load              # (frame_no, path, sidecar, fps, proxy factor): read this frame first
+        self.load = load              # (frame_no, path, sidecar, fps, proxy factor, layer): read this frame first
         self.created = time.perf_counter()
 
 
@@ -339,10 +339,10 @@ def _run_job(job, obsolete):
     with render.ctx_lock():
         ctx = render.shared_context(job.threads)
         if job.load is not None:
-            frame_no, path, sidecar, fps, proxy_factor = job.load
+            frame_no, path, sidecar, fps, proxy_factor, layer = job.load
             t0 = time.perf_counter()
             try:
-                _read_held(ctx, job.scene_name, frame_no, path, sidecar, fps, proxy_factor)
+                _read_held(ctx, job.scene_name, frame_no, path, sidecar, fps, proxy_factor, layer)
             except native.LibfxError as e:
                 return {"job": job, "error": str(e)}
             log("frame %d: passes read in %.0f ms" % (frame_no, (time.perf_counter() - t0) * 1e3))
@@ -692,7 +692,8 @@ def start(scene, frame_no=None, path=None, sidecar=None):
         if scene.name not in SESSIONS:
             SESSIONS[scene.name] = Session(scene.name)
     fps = scene.render.fps / (scene.render.fps_base or 1.0)
-    _submit(_make_job(scene, "final", load=(frame_no, path, sidecar, fps, proxy_factor_of(scene))))
+    layer = scene_setup.passes_layer(scene)
+    _submit(_make_job(scene, "final", load=(frame_no, path, sidecar, fps, proxy_factor_of(scene), layer)))
 
 
 def refresh_if_stale(scene):

@@ -1,4 +1,4 @@
-"""Render handlers: the scene sidecar per frame, node setup, running the stack after a render.
+"""Render handlers: the scene sidecar per frame, the passes file, running the stack after a render.
 
 Order (GUIDE §3): ``-b -f/-a``: render_init, then per frame frame_change_post ->
 render_pre -> render_post -> render_write, render_complete; all on the main
@@ -17,7 +17,7 @@ import time
 import bpy
 from bpy.app.handlers import persistent
 
-from . import aux_views, native, recipe, scene_setup
+from . import aux_views, native, passes_file, recipe, scene_setup
 
 RESULT_IMAGE = "libfx Result"
 
@@ -125,12 +125,9 @@ def on_render_init(scene, *args):
     if req is None:
         _record(scene, scene.frame_current, error="stack cannot run: %s" % st.get("error"))
         return
-    missing = scene_setup.ensure_nodes(scene, req.get("passes", []))
+    scene_setup.remove_nodes(scene)   # the File Output node of add-ons before passes_file.py
     for w in st.get("warnings", []):
         log("warning: " + w, err=True)
-    if missing:
-        log("warning: %s does not render pass(es) %s that the stack needs" %
-            (scene.render.engine, ", ".join(missing)), err=True)
     if scene.camera is not None and (scene.name, scene.frame_current) not in SIDECARS:
         # F12 of the current frame: the evaluated camera of the current frame.
         try:
@@ -211,7 +208,7 @@ def sidecar_for(scene, frame, sidecar=None):
 
 def process_frame(scene, frame, recipe_dict=None, passes_file=None, sidecar=None, fps=None,
                   hold=False, show=False, defer_write=False, in_background=False):
-    """Runs the scene's stack on the File Output EXR of a frame and writes the results.
+    """Runs the scene's stack on the passes file of a frame and writes the results.
 
     hold: keep the decoded passes in memory for live re-runs (live.py). show: put the result
     into the "libfx Result" image from memory (UI). defer_write: write the result files on
@@ -226,6 +223,7 @@ def process_frame(scene, frame, recipe_dict=None, passes_file=None, sidecar=None
         "scene": scene.name, "frame": frame, "threads": scene.libfx.threads,
         "paths": scene_setup.result_paths(scene, frame),
         "passes_file": passes_file or scene_setup.passes_path(scene, frame),
+        "layer": scene_setup.passes_layer(scene),
         "recipe": recipe_dict or recipe.to_recipe(scene),
         "sidecar": sidecar_for(scene, frame, sidecar),
         "fps": fps or scene.render.fps / (scene.render.fps_base or 1.0),
@@ -258,8 +256,8 @@ def _run(job):
     frame, paths, passes_file = job["frame"], job["paths"], job["passes_file"]
     try:
         if not os.path.exists(passes_file):
-            raise native.LibfxError("the passes file %s was not written (is the compositor on, "
-                                    "and the node '%s' unmuted?)" % (passes_file, scene_setup.FO_NODE))
+            raise native.LibfxError("the passes file %s is missing (removed, or never written: "
+                                    "render the frame again)" % passes_file)
         t0 = time.perf_counter()
         with _ctx_lock:   # one thread at a time per context (F12's render thread, batch's main)
             ctx = _context(job["threads"])
@@ -267,7 +265,7 @@ def _run(job):
             stack = native.Stack(ctx, job["recipe"])
             try:
                 # held: every pass, so that any later stack can run on it
-                fin = native.Frame.read(ctx, passes_file, None if job["hold"] else stack)
+                fin = native.Frame.read(ctx, passes_file, None if job["hold"] else stack, layer=job["layer"])
                 if job["sidecar"] is not None:
                     fin.apply_sidecar(job["sidecar"])
                 fin.set_time(frame, job["fps"])
@@ -398,18 +396,29 @@ def on_render_post(scene, *args):
         return  # a depth render of an auxiliary view
     if not scene_setup.has_stack(scene):
         return
-    frame = scene.frame_current
-    if bpy.app.background:
-        rec = process_frame(scene, frame)
-        if rec["ok"] and scene_setup.writes_image(scene):
-            try:
-                save_image(scene, rec["paths"]["exr"], rec["paths"]["image"])
-            except Exception as e:
-                _record(scene, frame, error="cannot save %s: %s" % (rec["paths"]["image"], e))
-        return
-    # F12 / UI animation render: the result shows from memory (held for live re-runs when
-    # live is on); the files are written by the live worker meanwhile.
-    process_frame(scene, frame, hold=scene.libfx.live, show=scene.libfx.show_result, defer_write=True)
+    after_render(scene, scene.frame_current, ui=not bpy.app.background)
+
+
+def after_render(scene, frame, ui):
+    """render_post's work: the passes file from the Render Result, then the stack.
+    ui (F12 / UI animation render): the result shows from memory (held for live re-runs
+    when live is on) and the files are written by the live worker meanwhile; else (-b) the
+    result files are written here. Returns the result record."""
+    try:
+        _, secs = passes_file.write(scene, frame)
+        log("frame %d: passes file written in %.0f ms" % (frame, secs * 1e3))
+    except native.LibfxError as e:
+        return _record(scene, frame, error=str(e))
+    if ui:
+        return process_frame(scene, frame, hold=scene.libfx.live, show=scene.libfx.show_result,
+                             defer_write=True)
+    rec = process_frame(scene, frame)
+    if rec["ok"] and scene_setup.writes_image(scene):
+        try:
+            save_image(scene, rec["paths"]["exr"], rec["paths"]["image"])
+        except Exception as e:
+            rec = _record(scene, frame, error="cannot save %s: %s" % (rec["paths"]["image"], e))
+    return rec
 
 
 @persistent

@@ -1,11 +1,12 @@
-"""What the scene must render for its stack, and the compositor nodes that write it.
+"""What the scene must render for its stack.
 
 - ``sync(scene)`` asks the library which passes the stack needs
   (fx_stack_required_passes) and turns on exactly those view-layer passes,
   remembering what it turned on so it can turn it off again.
-- ``ensure_nodes(scene)`` (called from render_init: GUIDE §3) adds one labelled
-  Render Layers node and one File Output node "libfx passes" writing those
-  passes as 32-bit ZIP multilayer EXR beside the scene's output path.
+- The passes reach libfx as one multilayer EXR per frame beside the scene's output
+  path (``passes_path``), written from the Render Result by passes_file.py.
+- ``remove_nodes(scene)`` takes out the Render Layers and File Output nodes that
+  add-ons before passes_file.py put in the compositor (scenes saved with them).
 - ``restore(scene)`` undoes all of it (stack emptied, add-on disabled).
 """
 
@@ -56,8 +57,15 @@ def passes_base(scene):
 
 
 def passes_path(scene, frame):
-    """The File Output node's EXR for a frame (Blender appends 4 digits + .exr)."""
+    """The passes file of a frame (passes_file.py writes it)."""
     return "%s%04d.exr" % (passes_base(scene), frame)
+
+
+def passes_layer(scene):
+    """The layer libfx reads from a passes file: the render's view layer when the scene has
+    several (the file holds them all), else None (the only one; older add-ons' files name no
+    layer)."""
+    return render_view_layer(scene).name if len(scene.view_layers) > 1 else None
 
 
 def result_paths(scene, frame):
@@ -268,8 +276,6 @@ def engine_warnings(scene, passes):
     if other:
         out.append("%s renders no %s pass: render with Cycles or Eevee" % (compat.engine_label(engine),
                                                                           "/".join(other)))
-    if not scene.render.use_compositing:
-        out.append("Post Processing > Compositing is off: libfx cannot get the passes")
     return out
 
 
@@ -297,59 +303,7 @@ def _restore_settings(scene, keep):
         _save_owned(scene, owned)
 
 
-# ---------------------------------------------------------------- nodes
-
-def _sockets_for(rl, pass_name):
-    """Render Layers outputs carrying a canonical pass, as (EXR layer name, socket):
-    Combined is 'Image'; Cryptomatte types are their ranks (CryptoObject00, 01...)."""
-    if pass_name.startswith("Crypto") and not pass_name[-2:].isdigit():
-        names = [s.name for s in rl.outputs if re.fullmatch(re.escape(pass_name) + r"\d\d", s.name)]
-    else:
-        names = [pass_name]
-    out = []
-    for n in names:
-        sock = compat.render_layer_output(rl, n)
-        if sock is not None and sock.enabled:
-            out.append((n, sock))
-    return out
-
-
-def ensure_nodes(scene, passes):
-    """Adds/updates the libfx Render Layers + File Output nodes. Returns (missing passes)."""
-    owned = _owned(scene)
-    nt, made = compat.ensure_compositor_tree(scene, "libfx compositor")
-    if made:
-        owned["compositor"] = made
-        _save_owned(scene, owned)
-    vl = render_view_layer(scene)
-    rl = nt.nodes.get(RL_NODE)
-    if rl is None or rl.bl_idname != "CompositorNodeRLayers":
-        rl = nt.nodes.new("CompositorNodeRLayers")
-        rl.name = RL_NODE
-        rl.location = (-300, -500)
-    rl.label = "libfx"
-    rl.scene = scene
-    rl.layer = vl.name
-    rl.mute = False
-    fo = nt.nodes.get(FO_NODE)
-    if fo is None or fo.bl_idname != "CompositorNodeOutputFile":
-        fo = nt.nodes.new("CompositorNodeOutputFile")
-        fo.name = FO_NODE
-        fo.location = (0, -500)
-    fo.label = "libfx passes (written by the libfx add-on)"
-    fo.mute = False
-    compat.file_output_format(fo, "OPEN_EXR_MULTILAYER", "32", scene.libfx.passes_codec)
-    compat.file_output_set_prefix(fo, passes_base(scene))
-    wanted = []
-    missing = []
-    for p in ["Combined"] + [p for p in passes if p != "Combined"]:
-        socks = _sockets_for(rl, p)
-        if not socks:
-            missing.append(p)
-        wanted.extend(socks)
-    compat.file_output_link(nt, fo, wanted)
-    return missing
-
+# ---------------------------------------------------------------- nodes of earlier add-ons
 
 def remove_nodes(scene):
     nt = compat.compositor_tree(scene)

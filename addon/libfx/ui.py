@@ -289,7 +289,7 @@ class LIBFX_OT_live_load(bpy.types.Operator):
 class LIBFX_OT_restore_scene(bpy.types.Operator):
     bl_idname = "libfx.restore_scene"
     bl_label = "Undo Scene Changes"
-    bl_description = "Turn off the passes the add-on turned on and remove its compositor nodes"
+    bl_description = "Turn off the passes the add-on turned on (and remove the compositor nodes of earlier versions)"
     bl_options = {"REGISTER", "UNDO"}
 
     def execute(self, context):

@@ -59,7 +59,7 @@ def processed(stdout):
 
 def blender_saves(stdout):
     """The images Blender's render wrote ("Saved: '...'"; 5.x prefixes a time and a
-    category), leaving out the libfx File Output node's passes (3.4 does not print them)."""
+    category), leaving out libfx's passes files (3.4 does not print them)."""
     return [p for p in re.findall(r"Saved: '([^']*)'", stdout) if "libfx_passes" not in p]
 
 
@@ -71,16 +71,18 @@ def pixels(path):
 def same_result(a, b):
     """Two results of the same frame: every channel bit-identical, every header attribute
     equal but Blender's per-run stamps copied from the passes file: 'Date' (differs
-    between runs more than a second apart) and 'RenderTime' (4.3+ write the real time).
+    between runs more than a second apart), 'RenderTime' (4.3+ write the real time) and
+    Cycles' render statistics ('cycles.<layer>.<phase>_time').
     Returns whether the bytes are identical too."""
     ea, ca = pixels(a)
     eb, cb = pixels(b)
     assert sorted(ca) == sorted(cb)
     for n in ca:
         assert np.array_equal(ca[n], cb[n]), "channel %s differs in %d values" % (n, (ca[n] != cb[n]).sum())
-    stamps = ("Date", "RenderTime")
-    attrs_a = {k: v for k, v in ea.attrs.items() if k not in stamps}
-    attrs_b = {k: v for k, v in eb.attrs.items() if k not in stamps}
+    def stamp(k):   # the Render Result's per-run stats: "cycles.ViewLayer.render_time"...
+        return k in ("Date", "RenderTime") or (k.startswith("cycles.") and k.endswith("_time"))
+    attrs_a = {k: v for k, v in ea.attrs.items() if not stamp(k)}
+    attrs_b = {k: v for k, v in eb.attrs.items() if not stamp(k)}
     assert attrs_a == attrs_b
     return a.read_bytes() == b.read_bytes()
 

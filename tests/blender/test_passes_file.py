@@ -1,0 +1,93 @@
+"""The passes file written from the Render Result (addon/libfx/passes_file.py), in `blender -b`:
+every view layer is in it and libfx reads the render's one; the scene's own output format is
+untouched by the passes write (Blender writes its image after render_post); a scene saved with
+the File Output node of earlier add-ons loses it at the next render."""
+import numpy as np
+
+import addon_testlib as T
+
+#: A scene of two rendered view layers: "ViewLayer" (a grey cube on a floor, what libfx must
+#: read) and "Red" (everything overridden by a red emission), a blur masked to the cube, the
+#: scene's own output a 16-bit PNG, and the two compositor nodes an earlier add-on added.
+SETUP = T.PRELUDE + r"""
+from libfx import compat, props, scene_setup
+s = bpy.context.scene
+s.render.engine = "CYCLES"
+s.cycles.use_denoising = False
+bpy.ops.mesh.primitive_plane_add(size=8, location=(0, 0, -1))
+red = bpy.data.materials.new("Red")
+red.use_nodes = True
+nodes = red.node_tree.nodes
+em = nodes.new("ShaderNodeEmission")
+em.inputs["Color"].default_value = (1, 0, 0, 1)
+red.node_tree.links.new(em.outputs[0], nodes["Material Output"].inputs["Surface"])
+other = s.view_layers.new("Red")
+other.material_override = red
+is_ = s.render.image_settings
+compat.set_file_format(is_, "PNG", "16")
+is_.color_mode = "RGB"
+item = s.libfx.stack.add()
+item.effect = "gaussian_blur"
+props.effect_group(item).sigma = 3.0
+item.mask_kinds = {"OBJECT"}
+item.mask_objects.add().name = "Cube"
+scene_setup.request_sync(s)
+tree, made = compat.ensure_compositor_tree(s, "old add-on")
+rl = tree.nodes.new("CompositorNodeRLayers"); rl.name = scene_setup.RL_NODE
+fo = tree.nodes.new("CompositorNodeOutputFile"); fo.name = scene_setup.FO_NODE
+bpy.ops.wm.save_as_mainfile(filepath=%r)
+"""
+
+#: The saved scene rendered again in one session (batch saves nothing), then its compositor
+#: listed: the old add-on's nodes must be gone.
+AGAIN = T.PRELUDE + r"""
+from libfx import compat
+s = bpy.context.scene
+s.render.filepath = %r
+s.render.resolution_percentage = 10
+bpy.ops.render.render()
+tree = compat.compositor_tree(s)
+print("NODES", sorted(tree.nodes.keys()) if tree is not None else [])
+"""
+
+
+def test_passes_file_from_the_render_result(blender, library, tmp_path):
+    blend = tmp_path / "layers.blend"
+    p = T.run_blender([], env=T.addon_env(library), python_expr=SETUP % str(blend))
+    assert p.returncode == 0 and blend.is_file(), (p.stdout + p.stderr)[-3000:]
+    prefix = tmp_path / "out_"
+    p = T.run_blender([], env=T.addon_env(library), blend=blend, python=T.BATCH,
+                      script_args=["--keep-passes", "--frames", "1", "--output", str(prefix),
+                                   "--resolution", "160x90", "--samples", "2"], factory=False)
+    out = p.stdout + p.stderr
+    assert p.returncode == 0, out[-5000:]
+    assert not T.tracebacks(out), out[-5000:]
+    assert "passes file written in" in out, out[-3000:]
+
+    passes = T.Exr(tmp_path / "out_libfx_passes.0001.exr")
+    layers = {n.split(".")[0] for n in passes.names if n.count(".") >= 2}
+    assert {"ViewLayer", "Red"} <= layers, passes.names
+    mine = np.stack([passes.channels["ViewLayer.Combined." + c] for c in "RGBA"], axis=-1)
+    red = np.stack([passes.channels["Red.Combined." + c] for c in "RGBA"], axis=-1)
+    assert np.abs(mine - red).mean() > 0.05   # the two layers really differ
+
+    result = T.Exr(tmp_path / "out_libfx.0001.exr").get("Combined", "RGBA")
+    changed = np.abs(result - mine).max(axis=-1) > 1e-6
+    # the blur ran on the render's layer: inside the cube's mask it changed pixels, and
+    # everywhere else the result is that layer's render, bit for bit
+    assert 0 < changed.mean() < 0.5, changed.mean()
+    assert np.array_equal(result[~changed], mine[~changed])
+
+    # Blender's own image kept the scene's format: the passes write put it back in time
+    own = tmp_path / "out_0001.png"
+    assert own.is_file(), sorted(x.name for x in tmp_path.iterdir())
+    head = own.read_bytes()[:32]
+    assert head[:8] == b"\x89PNG\r\n\x1a\n" and head[24] == 16, head   # bit depth 16
+
+    # the File Output node of an earlier add-on went at render time
+    p = T.run_blender([], env=T.addon_env(library), blend=blend, factory=False,
+                      python_expr=AGAIN % str(tmp_path / "again_"))
+    out = p.stdout + p.stderr
+    assert p.returncode == 0, out[-3000:]
+    nodes = next(l for l in out.splitlines() if l.startswith("NODES"))
+    assert "libfx passes" not in nodes and "libfx Render Layers" not in nodes, nodes
