@@ -125,7 +125,8 @@ def on_render_init(scene, *args):
     if req is None:
         _record(scene, scene.frame_current, error="stack cannot run: %s" % st.get("error"))
         return
-    scene_setup.remove_nodes(scene)   # the File Output node of add-ons before passes_file.py
+    if bpy.app.background:   # the UI's are gone at load (on_load_post), off the render thread
+        scene_setup.remove_nodes(scene)   # the File Output node of add-ons before passes_file.py
     for w in st.get("warnings", []):
         log("warning: " + w, err=True)
     if scene.camera is not None and (scene.name, scene.frame_current) not in SIDECARS:
@@ -435,6 +436,7 @@ def on_load_post(*args):
             scene_setup.STATUS.setdefault(scene.name, {})["error"] = "recipe text: %s" % e
             log("scene '%s': recipe text %s: %s" % (scene.name, recipe.TEXT_NAME, e), err=True)
         migrate_parameters(scene)
+        scene_setup.remove_nodes(scene)   # the File Output node of add-ons before passes_file.py
 
 
 def migrate_parameters(scene):

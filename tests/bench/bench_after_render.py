@@ -144,6 +144,7 @@ def main():
     ap.add_argument("--scenes", default=",".join(SCENES))
     ap.add_argument("--resolution", default="1920x1080")
     ap.add_argument("--out", default=os.path.join(ROOT, "out", "bench_after_render"))
+    ap.add_argument("--verbose", action="store_true", help="print the add-on's log lines")
     a = ap.parse_args()
     w, h = (int(v) for v in a.resolution.split("x"))
     out = os.path.abspath(a.out)
@@ -160,6 +161,8 @@ def main():
             sys.stderr.write(p.stdout[-3000:] + p.stderr[-3000:])
             sys.exit("bench_after_render: %s failed" % scene)
         t = json.loads(line[7:])
+        if a.verbose:
+            sys.stderr.write("".join(l + "\n" for l in p.stdout.splitlines() if l.startswith(("libfx", "live"))))
         print("%s: shown %s ms; parts %s" % (scene, ", ".join("%.0f" % v for v in t["shown"]), t["parts"]), file=sys.stderr)
         writes = [float(x) for x in __import__("re").findall(r"passes file written in (\d+) ms", p.stdout)]
         rows.append({"scene": scene, "channels": t.get("channels"), "shown_ms": med(t["shown"]),
