@@ -43,15 +43,22 @@ typedef struct vsm_params {
     float roughness;
     int map_level;
     int screen_downsample;
+    float bounce_loss;
+    int remove_as;
 } vsm_params;
 
 enum { METHOD_VSM = 0, METHOD_PCF, METHOD_HARD };
-enum { APPLY_SUN_DIFFUSE = 0, APPLY_COMBINED };
+enum { APPLY_SUN_DIFFUSE = 0, APPLY_COMBINED, APPLY_SUN_DIRECT, APPLY_LIGHT_GROUP };
+enum { REMOVE_DIFFERENCE = 0, REMOVE_RATIO };
+/* remove_as ratio: the neighbourhood (2 R + 1)^2 over which Combined (and the light group)
+ * are averaged, on the same surface only */
+#define RATIO_RADIUS 2
 enum { DIFFUSE_PRINCIPLED = 0, DIFFUSE_LAMBERT };
 
 static const char *const method_items[] = {"vsm", "pcf", "hard"};
 static const char *const filter_items[] = {"box_sat", "gaussian"};
-static const char *const apply_items[] = {"sun_diffuse", "combined"};
+static const char *const apply_items[] = {"sun_diffuse", "combined", "sun_direct", "light_group"};
+static const char *const remove_items[] = {"difference", "ratio"};
 static const char *const diffuse_items[] = {"principled", "lambert"};
 
 static const fx_param_def vsm_param_defs[] = {
@@ -82,7 +89,10 @@ static const fx_param_def vsm_param_defs[] = {
     FX_P_ENUM(vsm_params, apply, "apply", APPLY_SUN_DIFFUSE, apply_items,
               "sun_diffuse: remove the light's direct diffuse where shadowed (needs Normal, DiffCol and "
               "the scene's lights; for lights that cast no ray-traced shadow); combined: darken "
-              "Combined by strength"),
+              "Combined by strength; sun_direct: the light's direct diffuse and glossy (GGX of "
+              "roughness, GlossCol) from the analytic BRDF; light_group: the light's own pass "
+              "(Combined_libfx_light, the light group the add-on makes): its direct part (the analytic "
+              "estimate, at most the pass) and bounce_loss of the rest"),
     FX_P_FLOAT(vsm_params, strength, "strength", 1.0, 0.0, 1.0, 0.0, 1.0, "factor",
                "How much of the shadowed light is removed (1: all)"),
     FX_P_ENUM(vsm_params, diffuse, "diffuse", DIFFUSE_PRINCIPLED, diffuse_items,
@@ -101,14 +111,25 @@ static const fx_param_def vsm_param_defs[] = {
              "from the neighbours on the same surface (depth within a few percent, similar normal); a pixel "
              "with no such neighbour (an edge, a thin object) is looked up itself. ~f^2 fewer lookups; "
              "shadow edges soften by about f pixels. 1: every pixel"),
+    FX_P_FLOAT(vsm_params, bounce_loss, "bounce_loss", 0.5, 0.0, 1.0, 0.0, 1.0, "factor",
+               "light_group: the share of the light's indirect contribution (the pass less its direct "
+               "estimate) removed with its direct light where shadowed (1: the light's whole share)"),
+    FX_P_ENUM(vsm_params, remove_as, "remove_as", REMOVE_DIFFERENCE, remove_items,
+              "difference: Combined less the removed light; ratio: Combined times (1 - removed / Combined), "
+              "both averaged over the pixel's surface in a 5x5 neighbourhood, so the noise of what is left "
+              "is scaled with it, not laid bare (not for combined)"),
 };
 
 static fx_pass_set vsm_passes(const void *params)
 {
     const vsm_params *p = params;
     fx_pass_set s = FX_PASS_BIT(FX_PASS_DEPTH);
-    if (p->apply == APPLY_SUN_DIFFUSE)
+    if (p->apply != APPLY_COMBINED)
         s |= FX_PASS_BIT(FX_PASS_NORMAL) | FX_PASS_BIT(FX_PASS_DIFF_COL);
+    if (p->apply == APPLY_SUN_DIRECT || p->apply == APPLY_LIGHT_GROUP)
+        s |= FX_PASS_BIT(FX_PASS_GLOSS_COL);
+    if (p->apply == APPLY_LIGHT_GROUP)
+        s |= FX_PASS_BIT(FX_PASS_LIGHT_GROUP);
     return s;
 }
 
@@ -119,6 +140,8 @@ typedef struct vsm_job {
     const fx_shadow_map *sm;
     fx_surface_src surf;
     const float *diffcol;
+    const float *glosscol, *group; /* sun_direct, light_group (RGB), or NULL */
+    int general; /* remove_share does the removal (any apply but the two old difference ones) */
     fx_vec3 sun_rad; /* colour * energy / pi */
     fx_vec3 to_light;
     float min_var, eps, bias_norm;
@@ -201,10 +224,133 @@ static float shade_at(const vsm_job *j, int x, int y, int *has, float *a)
 {
     float v = visibility_at(j, x, y, has);
     float k = j->p->strength * (1.0f - v);
-    if (j->p->apply == APPLY_SUN_DIFFUSE)
+    if (j->p->apply == APPLY_SUN_DIFFUSE && !j->general)
         k *= sun_cosine(j, x, y, k);
     *a = k;
     return v;
+}
+
+/* The unit direction from the surface at pixel (x, y) towards the camera (n if degenerate). */
+static fx_vec3 view_dir(const vsm_job *j, int x, int y, fx_vec3 n)
+{
+    fx_vec2 ndc = fx_view_pixel_to_ndc(&j->surf.view, (float)x + 0.5f, (float)y + 0.5f);
+    fx_vec3 v = fx_v3_scale(fx_view_dir_to_world(&j->surf.view, fx_view_ray(&j->surf.view, ndc)), -1.0f);
+    return fx_v3_normalize_or(v, n);
+}
+
+/* The light's unshadowed direct light at (x, y), RGB: the diffuse of sun_diffuse
+ * (DiffCol sun_rad N.L, Burley's factor with the principled model) and, for sun_direct and
+ * light_group, a glossy estimate: GlossCol E D G / (4 N.V) of GGX (alpha = roughness^2)
+ * with the separable Smith masking. 0 without a normal or facing away. */
+static void direct_light(const vsm_job *j, int x, int y, size_t i, float out[3])
+{
+    out[0] = out[1] = out[2] = 0.0f;
+    fx_vec3 n;
+    if (!fx_surface_normal(&j->surf, x, y, &n))
+        return;
+    const float ndl = fx_v3_dot(n, j->to_light);
+    if (!(ndl > 0.0f))
+        return;
+    const float fd = j->p->diffuse == DIFFUSE_PRINCIPLED ? ndl * burley(j, x, y, n, ndl) : ndl;
+    const float *dc = j->diffcol + 3 * i;
+    const float rad[3] = {j->sun_rad.x, j->sun_rad.y, j->sun_rad.z};
+    float fs = 0.0f;
+    if (j->glosscol) {
+        const fx_vec3 v = view_dir(j, x, y, n);
+        const float ndv = fx_clampf(fx_v3_dot(n, v), 1e-3f, 1.0f);
+        const fx_vec3 h = fx_v3_normalize_or(fx_v3_add(v, j->to_light), n);
+        const float ndh = fx_clampf(fx_v3_dot(n, h), 0.0f, 1.0f);
+        float a2 = j->p->roughness * j->p->roughness;
+        a2 = a2 * a2 > 1e-6f ? a2 * a2 : 1e-6f;
+        const float den = ndh * ndh * (a2 - 1.0f) + 1.0f;
+        const float d = a2 / (3.14159265f * den * den);
+        const float nl = ndl < 1.0f ? ndl : 1.0f;
+        const float g1l = 2.0f * nl / (nl + sqrtf(a2 + (1.0f - a2) * nl * nl));
+        const float g1v = 2.0f * ndv / (ndv + sqrtf(a2 + (1.0f - a2) * ndv * ndv));
+        /* times pi: sun_rad is E / pi */
+        fs = 3.14159265f * d * g1l * g1v / (4.0f * ndv);
+        fs = fs < 1e4f ? fs : 1e4f;
+    }
+    const float *gc = j->glosscol ? j->glosscol + 3 * i : NULL;
+    for (int c = 0; c < 3; c++) {
+        float t = fd * dc[c] + (gc ? fs * gc[c] : 0.0f);
+        t *= rad[c];
+        out[c] = fabsf(t) <= FLT_MAX ? t : (t > 0.0f ? FLT_MAX : 0.0f);
+    }
+}
+
+/* What is removed from (x, y) of channel c, given the direct light d and the light group
+ * g (light_group; else unused): k d, or k (min(d, g) + bounce_loss (g - min(d, g))). */
+static inline double removed_of(const vsm_job *j, double k, double d, double g)
+{
+    if (!j->group)
+        return k * d;
+    g = g > 0.0 ? g : 0.0;
+    d = d < g ? d : g;
+    d = d > 0.0 ? d : 0.0;
+    return k * (d + (double)j->p->bounce_loss * (g - d));
+}
+
+/* The removal of a share k (strength (1 - v), in (0, 1]) of the light at pixel (x, y), from
+ * s into o (RGBA; alpha kept), for every apply but the old difference paths:
+ * difference: s - removed; ratio: s (1 - removed' / C'), the primes averaged over the pixels
+ * of the (2 RATIO_RADIUS + 1)^2 neighbourhood on the same surface (depth within 2 %,
+ * normals within ~25 degrees): the averages make the factor smooth, so the noise in s is
+ * scaled with its mean rather than left whole on a smaller mean. */
+static void remove_share(const vsm_job *j, int x, int y, float k, const float *s, float *o)
+{
+    const fx_effect_run *run = j->run;
+    const size_t i = (size_t)y * run->width + x;
+    float d[3];
+    direct_light(j, x, y, i, d);
+    const float *g = j->group ? j->group + 3 * i : NULL;
+    o[3] = s[3];
+    if (j->p->remove_as == REMOVE_RATIO) {
+        const fx_surface_src *sf = &j->surf;
+        const float dz = sf->depth[i];
+        fx_vec3 n = fx_v3(0.0f, 0.0f, 0.0f);
+        const int has_n = fx_surface_normal(sf, x, y, &n);
+        double cs[3] = {0, 0, 0}, gs[3] = {0, 0, 0};
+        int cnt = 0;
+        const int ya = y - RATIO_RADIUS > 0 ? y - RATIO_RADIUS : 0;
+        const int yb = y + RATIO_RADIUS < run->height - 1 ? y + RATIO_RADIUS : run->height - 1;
+        const int xa = x - RATIO_RADIUS > 0 ? x - RATIO_RADIUS : 0;
+        const int xb = x + RATIO_RADIUS < run->width - 1 ? x + RATIO_RADIUS : run->width - 1;
+        for (int yy = ya; yy <= yb; yy++)
+            for (int xx = xa; xx <= xb; xx++) {
+                const size_t q = (size_t)yy * run->width + xx;
+                if (q != i) {
+                    const float dq = sf->depth[q];
+                    if (!(fabsf(dq - dz) <= 0.02f * dz))
+                        continue;
+                    if (has_n) {
+                        fx_vec3 m;
+                        if (!fx_surface_normal(sf, xx, yy, &m) || !(fx_v3_dot(n, m) >= 0.9f))
+                            continue;
+                    }
+                }
+                const float *sq = run->src + 4 * q;
+                for (int c = 0; c < 3; c++) {
+                    cs[c] += sq[c];
+                    if (g)
+                        gs[c] += j->group[3 * q + c];
+                }
+                cnt++;
+            }
+        for (int c = 0; c < 3; c++) {
+            const double cm = cs[c] / cnt, gm = gs[c] / cnt;
+            const double r = removed_of(j, k, d[c], gm);
+            double f = cm > 1e-12 ? 1.0 - r / cm : 0.0;
+            f = f > 0.0 ? (f < 1.0 ? f : 1.0) : 0.0;
+            o[c] = (float)(s[c] * f);
+        }
+        return;
+    }
+    for (int c = 0; c < 3; c++) {
+        double r = (double)s[c] - removed_of(j, k, d[c], g ? g[c] : 0.0);
+        r = r > FLT_MAX ? FLT_MAX : r < -FLT_MAX ? -FLT_MAX : r;
+        o[c] = s[c] >= 0.0f && r < 0.0 ? 0.0f : (float)r;
+    }
 }
 
 /* The representative pixel of lo texel index X along an axis of the ROI [a, b). */
@@ -442,6 +588,10 @@ static void vsm_rows_lo(vsm_job *j, int y0, int y1)
                     memcpy(o, s, 4 * sizeof(float));
                 continue;
             }
+            if (j->general) { /* a is strength (1 - v) here */
+                remove_share(j, x, y, a, s, o);
+                continue;
+            }
             if (combined) {
                 for (int c = 0; c < 3; c++)
                     o[c] = s[c] * (1.0f - a);
@@ -492,7 +642,12 @@ static void vsm_rows(void *user, int y0, int y1)
             if (j->vis_out)
                 j->vis_out[i] = v;
             float k = j->p->strength * (1.0f - v);
-            if (j->p->apply == APPLY_COMBINED) {
+            if (j->general) {
+                if (k > 0.0f)
+                    remove_share(j, x, y, k, s, o);
+                else
+                    memcpy(o, s, 3 * sizeof(float));
+            } else if (j->p->apply == APPLY_COMBINED) {
                 for (int c = 0; c < 3; c++)
                     o[c] = s[c] * (1.0f - k);
             } else {
@@ -543,7 +698,8 @@ static fx_result vsm_process(const fx_effect_run *run)
         return r;
     const fx_aux_view *av = map.av;
     j.av = av;
-    if (p->apply == APPLY_SUN_DIFFUSE) {
+    j.general = !(p->apply == APPLY_COMBINED || (p->apply == APPLY_SUN_DIFFUSE && p->remove_as == REMOVE_DIFFERENCE));
+    if (p->apply != APPLY_COMBINED) {
         fx_light light;
         if ((r = fx_frame_find_light(run->frame, av->name + 6, where, &light))) {
             fx_aux_map_release(run->ctx, &map);
@@ -552,14 +708,34 @@ static fx_result vsm_process(const fx_effect_run *run)
         fx_pass *dc = fx_frame_find_pass(run->frame, "DiffCol");
         if (!dc || dc->channels < 3) {
             fx_aux_map_release(run->ctx, &map);
-            return fx_fail(run->ctx, FX_ERR_MISSING_PASS, "%s: apply sun_diffuse needs the DiffCol pass", where);
+            return fx_fail(run->ctx, FX_ERR_MISSING_PASS, "%s: apply %s needs the DiffCol pass", where,
+                           apply_items[p->apply]);
         }
         j.diffcol = dc->data;
+        static const char *const extra[2] = {"GlossCol", "Combined_" FX_LIGHT_GROUP_NAME};
+        for (int e = 0; e < 2 && p->apply >= APPLY_SUN_DIRECT; e++) {
+            if (e == 1 && p->apply != APPLY_LIGHT_GROUP)
+                break;
+            fx_pass *ps = fx_frame_find_pass(run->frame, extra[e]);
+            if (!ps || ps->channels < 3) {
+                fx_aux_map_release(run->ctx, &map);
+                return fx_fail(run->ctx, FX_ERR_MISSING_PASS,
+                               "%s: apply %s needs the %s pass%s", where, apply_items[p->apply], extra[e],
+                               e ? " (the light group '" FX_LIGHT_GROUP_NAME "' holding the light: the add-on "
+                                   "makes it; else use apply sun_direct)"
+                                 : "");
+            }
+            if (e == 0)
+                j.glosscol = ps->data;
+            else
+                j.group = ps->data;
+        }
         float e = light.energy * 0.318309886f /* 1/pi */;
         j.sun_rad = fx_v3(light.color.x * e, light.color.y * e, light.color.z * e);
         j.to_light = fx_v3_scale(light.direction, -1.0f);
         if (light.type != FX_LIGHT_SUN)
-            fx_warn(run->ctx, "%s: light '%s' is not a sun: sun_diffuse treats it as one", where, light.name);
+            fx_warn(run->ctx, "%s: light '%s' is not a sun: %s treats it as one", where, light.name,
+                    apply_items[p->apply]);
     }
     const fx_shadow_map *sm = map.sm;
     j.sm = sm;
@@ -622,6 +798,15 @@ static int vsm_aux_views(const void *params, fx_aux_need *out, int max)
     return 1;
 }
 
+/* remove_as ratio averages over a 5x5 neighbourhood */
+static int vsm_halo(const void *params, int width, int height)
+{
+    const vsm_params *p = params;
+    (void)width;
+    (void)height;
+    return p->remove_as == REMOVE_RATIO && p->apply != APPLY_COMBINED ? RATIO_RADIUS : 0;
+}
+
 const fx_effect_class fx_effect_vsm_shadows = {
     .name = "vsm_shadows",
     .doc = "Shadows of a light from its depth view: variance shadow maps (box or Gaussian), PCF or hard",
@@ -632,7 +817,7 @@ const fx_effect_class fx_effect_vsm_shadows = {
     .passes = vsm_passes,
     .flags = FX_EFFECT_NEEDS_CAMERA,
     .aux_views = vsm_aux_views,
-    .halo = NULL,
+    .halo = vsm_halo,
     .validate = NULL,
     .process = vsm_process,
 };
