@@ -604,6 +604,30 @@ static void test_share_modes(fx_context *ctx)
     }
 }
 
+/* params_version 2 made remove_as ratio the default: a version-1 recipe keeps difference
+ * unless it names one; a version-2 recipe gets ratio. */
+static void test_migration(fx_context *ctx)
+{
+    const char *recipes[3] = {
+        "{\"version\": 1, \"effects\": [{\"effect\": \"vsm_shadows\", \"params\": {\"apply\": \"sun_diffuse\"}}]}",
+        "{\"version\": 1, \"effects\": [{\"effect\": \"vsm_shadows\", \"params\": {\"remove_as\": \"ratio\"}}]}",
+        "{\"version\": 1, \"effects\": [{\"effect\": \"vsm_shadows\", \"params_version\": 2, \"params\": "
+        "{\"apply\": \"sun_diffuse\"}}]}"};
+    const char *want[3] = {"\"remove_as\":\"difference\"", "\"remove_as\":\"ratio\"", "\"remove_as\":\"ratio\""};
+    for (int i = 0; i < 3; i++) {
+        fx_stack *s = NULL;
+        CHECK_OK(ctx, fx_stack_new(ctx, &s));
+        CHECK_OK(ctx, fx_stack_load_json(s, recipes[i]));
+        char *e = NULL;
+        CHECK_OK(ctx, fx_stack_effective_params_json(s, 0, &e));
+        CHECK(e && strstr(e, want[i]) != NULL);
+        if (e && !strstr(e, want[i]))
+            fprintf(stderr, "migration %d: %s\n", i, e);
+        fx_free(e);
+        fx_stack_free(s);
+    }
+}
+
 /* The per-context cache of built light maps (scene/aux_map.h): frames 2..N reuse the map
  * and give the same bits as an uncached context (1 and 2 threads, box and Gaussian); a
  * replaced view file, other filter parameters or a too small limit build again. */
@@ -902,6 +926,7 @@ int main(void)
     test_sat_precision(ctx);
     test_sun_diffuse(ctx);
     test_share_modes(ctx);
+    test_migration(ctx);
     test_cache();
     test_box_and_levels(ctx);
     test_map_level_effect(ctx);

@@ -22,6 +22,7 @@
 #include "math/surface.h"
 #include "core/simd4.h"
 
+#include <cjson/cJSON.h>
 #include <float.h>
 #include <math.h>
 #include <stdio.h>
@@ -114,7 +115,7 @@ static const fx_param_def vsm_param_defs[] = {
     FX_P_FLOAT(vsm_params, bounce_loss, "bounce_loss", 0.5, 0.0, 1.0, 0.0, 1.0, "factor",
                "light_group: the share of the light's indirect contribution (the pass less its direct "
                "estimate) removed with its direct light where shadowed (1: the light's whole share)"),
-    FX_P_ENUM(vsm_params, remove_as, "remove_as", REMOVE_DIFFERENCE, remove_items,
+    FX_P_ENUM(vsm_params, remove_as, "remove_as", REMOVE_RATIO, remove_items,
               "difference: Combined less the removed light; ratio: Combined times (1 - removed / Combined), "
               "both averaged over the pixel's surface in a 5x5 neighbourhood, so the noise of what is left "
               "is scaled with it, not laid bare (not for combined)"),
@@ -176,8 +177,33 @@ static float visibility_at(const vsm_job *j, int x, int y, int *has_surface)
     switch (j->p->method) {
     case METHOD_HARD:
         return fx_shadow_map_hard(j->sm, px, py, t, j->eps);
-    case METHOD_PCF:
-        return fx_shadow_map_pcf(j->sm, px, py, t, j->pcf_radius, j->eps);
+    case METHOD_PCF: {
+        /* derivative_bias: the receiver's plane (fx_shadow_map_pcf_plane) from two points a
+         * little along its tangents, projected too: the slopes dt/dpx, dt/dpy solved from
+         * their texel and depth offsets */
+        float gx = 0.0f, gy = 0.0f;
+        if (j->p->derivative_bias && fx_surface_normal(&j->surf, x, y, &n)) {
+            fx_vec3 a = fabsf(n.x) < 0.9f ? fx_v3(1.0f, 0.0f, 0.0f) : fx_v3(0.0f, 1.0f, 0.0f);
+            fx_vec3 t1 = fx_v3_normalize_or(fx_v3_cross(n, a), a);
+            fx_vec3 t2 = fx_v3_cross(n, t1);
+            const float h = 0.01f * (d > 1.0f ? d : 1.0f);
+            float ax, ay, ad, bx, by, bd;
+            if (fx_aux_view_project(j->av, fx_v3_add(w, fx_v3_scale(t1, h)), &ax, &ay, &ad) &&
+                fx_aux_view_project(j->av, fx_v3_add(w, fx_v3_scale(t2, h)), &bx, &by, &bd)) {
+                const float u1 = ax - px, v1 = ay - py, z1 = fx_shadow_map_norm(j->sm, ad) - t;
+                const float u2 = bx - px, v2 = by - py, z2 = fx_shadow_map_norm(j->sm, bd) - t;
+                const float det = u1 * v2 - u2 * v1;
+                if (fabsf(det) > 1e-6f) {
+                    gx = (z1 * v2 - z2 * v1) / det;
+                    gy = (u1 * z2 - u2 * z1) / det;
+                    /* grazing receivers: at most 0.05 normalised depth per texel */
+                    gx = fx_clampf(gx, -0.05f, 0.05f);
+                    gy = fx_clampf(gy, -0.05f, 0.05f);
+                }
+            }
+        }
+        return fx_shadow_map_pcf_plane(j->sm, px, py, t, j->pcf_radius, j->eps, gx, gy);
+    }
     default: {
         float m1, m2;
         fx_shadow_map_moments(j->sm, px, py, &m1, &m2);
@@ -798,6 +824,19 @@ static int vsm_aux_views(const void *params, fx_aux_need *out, int max)
     return 1;
 }
 
+/* params_version 2 added remove_as with the default ratio: a recipe of version 1 keeps the
+ * subtraction it was made with (remove_as difference unless it names one). Silent: the
+ * output is the same as before, nothing for the user to act on. */
+static fx_result vsm_migrate(int from_version, cJSON *params, char *note, size_t note_size)
+{
+    (void)note;
+    (void)note_size;
+    if (from_version == 1 && params && !cJSON_GetObjectItemCaseSensitive(params, "remove_as") &&
+        !cJSON_AddStringToObject(params, "remove_as", "difference"))
+        return FX_ERR_OUT_OF_MEMORY;
+    return FX_OK;
+}
+
 /* remove_as ratio averages over a 5x5 neighbourhood */
 static int vsm_halo(const void *params, int width, int height)
 {
@@ -820,4 +859,6 @@ const fx_effect_class fx_effect_vsm_shadows = {
     .halo = vsm_halo,
     .validate = NULL,
     .process = vsm_process,
+    .params_version = 2,
+    .migrate = vsm_migrate,
 };
