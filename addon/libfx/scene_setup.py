@@ -339,6 +339,25 @@ def _ensure_light_group(scene, vl, group, light_name):
     return None
 
 
+def _remove_light_group(scene, vl, name):
+    """Removes the view layer's light group `name`: Blender 3.4's collection has no
+    remove(), only the operator on the active group (run with the view layer as context);
+    where neither works the empty group stays (it renders an empty pass, nothing else)."""
+    idx = vl.lightgroups.find(name)
+    if idx < 0:
+        return
+    coll = vl.lightgroups
+    if hasattr(coll, "remove"):
+        coll.remove(coll[idx])
+        return
+    try:
+        vl.active_lightgroup_index = idx
+        with bpy.context.temp_override(scene=scene, view_layer=vl):
+            bpy.ops.scene.view_layer_remove_lightgroup()
+    except (AttributeError, RuntimeError, TypeError):
+        pass
+
+
 def _restore_light_group(scene):
     """Undoes _ensure_light_group: the light's previous group, the group removed if the
     add-on made it."""
@@ -352,9 +371,7 @@ def _restore_light_group(scene):
         ob.lightgroup = mine["previous"]
     vl = scene.view_layers.get(mine.get("view_layer", ""))
     if vl is not None and mine.get("made_group") and hasattr(vl, "lightgroups"):
-        lg = vl.lightgroups.get(mine.get("group", ""))
-        if lg is not None:
-            vl.lightgroups.remove(lg)
+        _remove_light_group(scene, vl, mine.get("group", ""))
     _save_owned(scene, owned)
 
 
