@@ -112,12 +112,13 @@ static const fx_param_def vsm_param_defs[] = {
              "from the neighbours on the same surface (depth within a few percent, similar normal); a pixel "
              "with no such neighbour (an edge, a thin object) is looked up itself. ~f^2 fewer lookups; "
              "shadow edges soften by about f pixels. 1: every pixel"),
-    FX_P_FLOAT(vsm_params, bounce_loss, "bounce_loss", 0.5, 0.0, 1.0, 0.0, 1.0, "factor",
+    FX_P_FLOAT(vsm_params, bounce_loss, "bounce_loss", 1.0, 0.0, 1.0, 0.0, 1.0, "factor",
                "light_group: the share of the light's indirect contribution (the pass less its direct "
                "estimate) removed with its direct light where shadowed (1: the light's whole share)"),
     FX_P_ENUM(vsm_params, remove_as, "remove_as", REMOVE_RATIO, remove_items,
               "difference: Combined less the removed light; ratio: Combined times (1 - removed / Combined), "
-              "both averaged over the pixel's surface in a 5x5 neighbourhood, so the noise of what is left "
+              "both averaged over the pixel's surface in a 5x5 neighbourhood (3x3 when screen_downsample > 1), so "
+              "the noise of what is left "
               "is scaled with it, not laid bare (not for combined)"),
 };
 
@@ -334,14 +335,19 @@ static void remove_share(const vsm_job *j, int x, int y, float k, const float *s
     if (j->p->remove_as == REMOVE_RATIO) {
         const fx_surface_src *sf = &j->surf;
         const float dz = sf->depth[i];
-        fx_vec3 n = fx_v3(0.0f, 0.0f, 0.0f);
-        const int has_n = fx_surface_normal(sf, x, y, &n);
+        /* normals as stored (unnormalised): the likeness test compares squares, c > 0 and
+         * c^2 >= 0.81 |n|^2 |m|^2 (cosine at least 0.9) */
+        const float *pn = sf->normal ? sf->normal + 3 * i : NULL;
+        const float nn = pn ? pn[0] * pn[0] + pn[1] * pn[1] + pn[2] * pn[2] : 0.0f;
+        const int has_n = nn > 1e-8f;
         double cs[3] = {0, 0, 0}, gs[3] = {0, 0, 0};
         int cnt = 0;
-        const int ya = y - RATIO_RADIUS > 0 ? y - RATIO_RADIUS : 0;
-        const int yb = y + RATIO_RADIUS < run->height - 1 ? y + RATIO_RADIUS : run->height - 1;
-        const int xa = x - RATIO_RADIUS > 0 ? x - RATIO_RADIUS : 0;
-        const int xb = x + RATIO_RADIUS < run->width - 1 ? x + RATIO_RADIUS : run->width - 1;
+        /* 5x5; 3x3 with screen_downsample (the draft and preview presets) */
+        const int rr = j->f > 1 ? 1 : RATIO_RADIUS;
+        const int ya = y - rr > 0 ? y - rr : 0;
+        const int yb = y + rr < run->height - 1 ? y + rr : run->height - 1;
+        const int xa = x - rr > 0 ? x - rr : 0;
+        const int xb = x + rr < run->width - 1 ? x + rr : run->width - 1;
         for (int yy = ya; yy <= yb; yy++)
             for (int xx = xa; xx <= xb; xx++) {
                 const size_t q = (size_t)yy * run->width + xx;
@@ -350,8 +356,10 @@ static void remove_share(const vsm_job *j, int x, int y, float k, const float *s
                     if (!(fabsf(dq - dz) <= 0.02f * dz))
                         continue;
                     if (has_n) {
-                        fx_vec3 m;
-                        if (!fx_surface_normal(sf, xx, yy, &m) || !(fx_v3_dot(n, m) >= 0.9f))
+                        const float *m = sf->normal + 3 * q;
+                        const float c = pn[0] * m[0] + pn[1] * m[1] + pn[2] * m[2];
+                        const float mm = m[0] * m[0] + m[1] * m[1] + m[2] * m[2];
+                        if (!(c > 0.0f && c * c >= 0.81f * nn * mm))
                             continue;
                     }
                 }
