@@ -28,18 +28,19 @@ VARIANTS = ("floor", "wall", "roof")
 # vsm_shadows params over the scene's recipe; the first is the one the docs' strips show
 CONFIGS = {
     "light_group": {"apply": "light_group"},
-    "sun_diffuse": {"apply": "sun_diffuse", "remove_as": "difference"},
+    "sun_diffuse difference": {"apply": "sun_diffuse", "remove_as": "difference"},
+    "sun_diffuse ratio": {"apply": "sun_diffuse", "remove_as": "ratio"},
     "sun_direct": {"apply": "sun_direct"},
     "light_group b0": {"apply": "light_group", "bounce_loss": 0.0},
     "light_group b0.5": {"apply": "light_group", "bounce_loss": 0.5},
-    "light_group b1": {"apply": "light_group", "bounce_loss": 1.0},
     "light_group difference": {"apply": "light_group", "remove_as": "difference"},
-    "light_group ratio": {"apply": "light_group", "remove_as": "ratio"},
+    "light_group reach 0.1": {"apply": "light_group", "bounce_reach": 0.1},
 }
 
 
 def with_params(recipe, params):
     r = json.loads(json.dumps(recipe))
+    r["effects"][0]["params_version"] = 2   # the params as written here, not migrated from 1
     r["effects"][0]["params"].update(params)
     return r
 

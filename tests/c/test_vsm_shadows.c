@@ -449,13 +449,15 @@ typedef struct share_case {
     int noise, downsample;
     const char *drop; /* a pass left out */
     float base;
+    float reach;  /* bounce_reach */
+    int half;     /* the roof over x < N / 2 only */
 } share_case;
 
 static float *run_share(fx_context *ctx, const share_case *c, fx_result *res)
 {
     float h[N * N];
     for (int i = 0; i < N * N; i++)
-        h[i] = 3.0f;
+        h[i] = !c->half || (i % N) < N / 2 ? 3.0f : 0.0f;
     fx_frame *f = floor_frame(ctx, write_light_view(ctx, h, "roof_share"));
     float *rgba = malloc(N * N * 4 * sizeof(float));
     float *nrm = malloc(N * N * 3 * sizeof(float)), *dcol = malloc(N * N * 3 * sizeof(float));
@@ -500,6 +502,7 @@ static float *run_share(fx_context *ctx, const share_case *c, fx_result *res)
     CHECK_OK(ctx, fx_stack_set_enum(s, 0, "remove_as", c->remove_as));
     CHECK_OK(ctx, fx_stack_set_float(s, 0, "roughness", 0.5f));
     CHECK_OK(ctx, fx_stack_set_float(s, 0, "bounce_loss", c->bounce));
+    CHECK_OK(ctx, fx_stack_set_float(s, 0, "bounce_reach", c->reach));
     CHECK_OK(ctx, fx_stack_set_float(s, 0, "normal_offset", 0.0));
     CHECK_OK(ctx, fx_stack_set_int(s, 0, "screen_downsample", c->downsample));
     fx_frame *out = NULL;
@@ -527,7 +530,7 @@ static void test_share_modes(fx_context *ctx)
     fx_result r;
     /* sun_direct: diffuse + glossy; with GlossCol 0 exactly sun_diffuse's lambert */
     for (int k = 0; k < 2; k++) {
-        share_case c = {"sun_direct", "difference", k ? 0.04f : 0.0f, 0, 0, 0, 1, NULL, 4.0f};
+        share_case c = {"sun_direct", "difference", k ? 0.04f : 0.0f, 0, 0, 0, 1, NULL, 4.0f, 0.0f, 0};
         float *o = run_share(ctx, &c, &r);
         CHECK(o != NULL);
         double want = diff + c.gc * gloss_f;
@@ -541,7 +544,7 @@ static void test_share_modes(fx_context *ctx)
     const float gs[2] = {0.2f, 1.5f}, bs[3] = {0.0f, 0.5f, 1.0f};
     for (int gi = 0; gi < 2; gi++)
         for (int bi = 0; bi < 3; bi++) {
-            share_case c = {"light_group", "difference", 0.04f, gs[gi], bs[bi], 0, 1, NULL, 4.0f};
+            share_case c = {"light_group", "difference", 0.04f, gs[gi], bs[bi], 0, 1, NULL, 4.0f, 0.0f, 0};
             float *o = run_share(ctx, &c, &r);
             CHECK(o != NULL);
             double dd = diff + c.gc * gloss_f, dm = dd < c.g ? dd : c.g;
@@ -559,7 +562,7 @@ static void test_share_modes(fx_context *ctx)
     /* the passes each mode needs, by name */
     const char *drop[2][2] = {{"light_group", "Combined_libfx_light"}, {"sun_direct", "GlossCol"}};
     for (int k = 0; k < 2; k++) {
-        share_case c = {drop[k][0], "difference", 0.04f, 1.0f, 0.5f, 0, 1, drop[k][1], 4.0f};
+        share_case c = {drop[k][0], "difference", 0.04f, 1.0f, 0.5f, 0, 1, drop[k][1], 4.0f, 0.0f, 0};
         float *o = run_share(ctx, &c, &r);
         CHECK(o == NULL && r == FX_ERR_MISSING_PASS);
         CHECK(strstr(fx_context_error(ctx), drop[k][1]) != NULL);
@@ -569,7 +572,7 @@ static void test_share_modes(fx_context *ctx)
      * with the mean (difference keeps its whole amplitude on a smaller mean) */
     for (int m = 0; m < 3; m++) {
         const char *ap = m == 2 ? "light_group" : m ? "sun_direct" : "sun_diffuse";
-        share_case c = {ap, "difference", 0.04f, 1.0f, 1.0f, 0, 1, NULL, 2.0f};
+        share_case c = {ap, "difference", 0.04f, 1.0f, 1.0f, 0, 1, NULL, 2.0f, 0.0f, 0};
         float *od = run_share(ctx, &c, &r);
         c.remove_as = "ratio";
         float *or_ = run_share(ctx, &c, &r);
@@ -595,9 +598,40 @@ static void test_share_modes(fx_context *ctx)
         free(od);
         free(or_);
     }
+    /* bounce_reach: under a roof over everything the same as 0 (V = 0); a half roof: a lit
+     * pixel far from it loses a little of the bounce (0 < loss < the whole), one deep
+     * under it most but not all of it; 0 keeps the lit pixel whole */
+    {
+        share_case c = {"light_group", "difference", 0.0f, 1.5f, 1.0f, 0, 1, NULL, 4.0f, 0.0f, 0};
+        float *o0 = run_share(ctx, &c, &r);
+        c.reach = 0.1f;
+        float *o1 = run_share(ctx, &c, &r);
+        CHECK(o0 && o1);
+        if (o0 && o1)
+            CHECK(fabsf(o0[mid] - o1[mid]) < 1e-5f);
+        free(o0);
+        free(o1);
+        c.half = 1;
+        c.reach = 0.0f;
+        o0 = run_share(ctx, &c, &r);
+        c.reach = 0.2f;
+        o1 = run_share(ctx, &c, &r);
+        CHECK(o0 && o1);
+        const int lit = 4 * (N / 2 * N + N - 4), dark = 4 * (N / 2 * N + 4);
+        if (o0 && o1) {
+            const double ind = 1.5 - diff; /* the bounce part of g */
+            CHECK(o0[lit] == 4.0f);
+            CHECK(4.0 - o1[lit] > 0.01 * ind && 4.0 - o1[lit] < 0.5 * ind);
+            CHECK(4.0 - o1[dark] > diff + 0.5 * ind && 4.0 - o1[dark] < 1.5 - 1e-3);
+            printf("bounce_reach 0.2, half roof: lit pixel loses %.4f, shadowed %.4f (direct %.4f, bounce %.4f)\n",
+                   4.0 - o1[lit], 4.0 - o1[dark], diff, ind);
+        }
+        free(o0);
+        free(o1);
+    }
     /* huge values stay finite */
     for (int m = 0; m < 2; m++) {
-        share_case c = {"light_group", m ? "ratio" : "difference", 3e38f, 3e38f, 0.5f, 1, 2, NULL, 3e38f};
+        share_case c = {"light_group", m ? "ratio" : "difference", 3e38f, 3e38f, 0.5f, 1, 2, NULL, 3e38f, (float)m * 0.1f, m};
         float *o = run_share(ctx, &c, &r);
         CHECK(o && tu_all_finite(o, N * N * 4));
         free(o);

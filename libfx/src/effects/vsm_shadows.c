@@ -18,6 +18,7 @@
 #include "core/effect.h"
 #include "scene/lights.h"
 #include "core/parallel.h"
+#include "math/blur.h"
 #include "math/shadow_map.h"
 #include "math/surface.h"
 #include "core/simd4.h"
@@ -46,6 +47,7 @@ typedef struct vsm_params {
     int screen_downsample;
     float bounce_loss;
     int remove_as;
+    float bounce_reach;
 } vsm_params;
 
 enum { METHOD_VSM = 0, METHOD_PCF, METHOD_HARD };
@@ -115,6 +117,11 @@ static const fx_param_def vsm_param_defs[] = {
     FX_P_FLOAT(vsm_params, bounce_loss, "bounce_loss", 1.0, 0.0, 1.0, 0.0, 1.0, "factor",
                "light_group: the share of the light's indirect contribution (the pass less its direct "
                "estimate) removed with its direct light where shadowed (1: the light's whole share)"),
+    FX_P_FLOAT(vsm_params, bounce_reach, "bounce_reach", 0.1, 0.0, 1.0, 0.0, 0.25, "frame widths",
+               "light_group: 0: the bounce light is lost where the pixel is shadowed (bounce_loss (1 - v)); "
+               "above 0: every pixel loses bounce_loss (1 - V) of it, V the visibility of the surfaces around "
+               "it, averaged by a Gaussian of this sigma (a share of the frame's width): lit pixels amid "
+               "shadow lose bounce too, shadowed ones near lit ground keep some"),
     FX_P_ENUM(vsm_params, remove_as, "remove_as", REMOVE_RATIO, remove_items,
               "difference: Combined less the removed light; ratio: Combined times (1 - removed / Combined), "
               "both averaged over the pixel's surface in a 5x5 neighbourhood (3x3 when screen_downsample > 1), so "
@@ -144,6 +151,11 @@ typedef struct vsm_job {
     const float *diffcol;
     const float *glosscol, *group; /* sun_direct, light_group (RGB), or NULL */
     int general; /* remove_share does the removal (any apply but the two old difference ones) */
+    /* bounce_reach > 0 (light_group): first pass (vis_only) stores each pixel's visibility
+     * v and surface flag as (v m, m) in vm (frame size, 2 channels), blurred in place
+     * before the second pass reads it */
+    int vis_only;
+    float *vm;
     fx_vec3 sun_rad; /* colour * energy / pi */
     fx_vec3 to_light;
     float min_var, eps, bias_norm;
@@ -308,14 +320,14 @@ static void direct_light(const vsm_job *j, int x, int y, size_t i, float out[3])
 
 /* What is removed from (x, y) of channel c, given the direct light d and the light group
  * g (light_group; else unused): k d, or k (min(d, g) + bounce_loss (g - min(d, g))). */
-static inline double removed_of(const vsm_job *j, double k, double d, double g)
+static inline double removed_of(const vsm_job *j, double k, double ib, double d, double g)
 {
     if (!j->group)
         return k * d;
     g = g > 0.0 ? g : 0.0;
     d = d < g ? d : g;
     d = d > 0.0 ? d : 0.0;
-    return k * (d + (double)j->p->bounce_loss * (g - d));
+    return k * d + ib * (g - d);
 }
 
 /* The removal of a share k (strength (1 - v), in (0, 1]) of the light at pixel (x, y), from
@@ -328,6 +340,14 @@ static void remove_share(const vsm_job *j, int x, int y, float k, const float *s
 {
     const fx_effect_run *run = j->run;
     const size_t i = (size_t)y * run->width + x;
+    /* the share of the light's indirect part lost: bounce_loss k, or bounce_loss (1 - V)
+     * with the surroundings' visibility V (bounce_reach) */
+    double ib = (double)j->p->bounce_loss * k;
+    if (j->vm) {
+        const float num = j->vm[2 * i], den = j->vm[2 * i + 1];
+        const double vl = den > 1e-6f ? fx_saturate(num / den) : 1.0;
+        ib = (double)j->p->bounce_loss * (1.0 - vl);
+    }
     float d[3];
     direct_light(j, x, y, i, d);
     const float *g = j->group ? j->group + 3 * i : NULL;
@@ -373,7 +393,7 @@ static void remove_share(const vsm_job *j, int x, int y, float k, const float *s
             }
         for (int c = 0; c < 3; c++) {
             const double cm = cs[c] / cnt, gm = gs[c] / cnt;
-            const double r = removed_of(j, k, d[c], gm);
+            const double r = removed_of(j, k, ib, d[c], gm);
             double f = cm > 1e-12 ? 1.0 - r / cm : 0.0;
             f = f > 0.0 ? (f < 1.0 ? f : 1.0) : 0.0;
             o[c] = (float)(s[c] * f);
@@ -381,7 +401,7 @@ static void remove_share(const vsm_job *j, int x, int y, float k, const float *s
         return;
     }
     for (int c = 0; c < 3; c++) {
-        double r = (double)s[c] - removed_of(j, k, d[c], g ? g[c] : 0.0);
+        double r = (double)s[c] - removed_of(j, k, ib, d[c], g ? g[c] : 0.0);
         r = r > FLT_MAX ? FLT_MAX : r < -FLT_MAX ? -FLT_MAX : r;
         o[c] = s[c] >= 0.0f && r < 0.0 ? 0.0f : (float)r;
     }
@@ -616,6 +636,16 @@ static void vsm_rows_lo(vsm_job *j, int y0, int y1)
             const float v = shade_lo(j, x, y, &cell, &has, &a);
             if (vrow)
                 vrow[x] = v;
+            if (j->vis_only) {
+                const size_t q = (size_t)y * run->width + x;
+                j->vm[2 * q] = has ? v : 0.0f;
+                j->vm[2 * q + 1] = has ? 1.0f : 0.0f;
+                continue;
+            }
+            if (j->vm && has) { /* every surface pixel may lose bounce light */
+                remove_share(j, x, y, a, s, o);
+                continue;
+            }
             if (a == 0.0f) {
                 /* nothing lost (most lit pixels): both formulas below give s itself */
                 if (o != s)
@@ -675,9 +705,14 @@ static void vsm_rows(void *user, int y0, int y1)
             float v = visibility_at(j, x, y, &has);
             if (j->vis_out)
                 j->vis_out[i] = v;
+            if (j->vis_only) {
+                j->vm[2 * i] = has ? v : 0.0f;
+                j->vm[2 * i + 1] = has ? 1.0f : 0.0f;
+                continue;
+            }
             float k = j->p->strength * (1.0f - v);
             if (j->general) {
-                if (k > 0.0f)
+                if (k > 0.0f || (j->vm && has))
                     remove_share(j, x, y, k, s, o);
                 else
                     memcpy(o, s, 3 * sizeof(float));
@@ -814,7 +849,33 @@ static fx_result vsm_process(const fx_effect_run *run)
         fx_parallel_for(run->ctx, j.lh, fx_grain_for(run->ctx, j.lh), lo_rows, &j);
         fx_parallel_for(run->ctx, j.lh, fx_grain_for(run->ctx, j.lh), lo_flag_rows, &j);
     }
+    float *vm = NULL;
+    const size_t vm_bytes = (size_t)run->width * run->height * 2 * sizeof(float);
+    if (p->apply == APPLY_LIGHT_GROUP && p->bounce_reach > 0.0f && p->bounce_loss > 0.0f) {
+        /* bounce_reach: the visibility of every pixel first, then its surroundings' mean
+         * (a Gaussian of v m over one of m), then the removal */
+        vm = fx_buffer_get(run->ctx, vm_bytes);
+        if (!vm) {
+            fx_buffer_put(run->ctx, lo, lo_bytes);
+            fx_aux_map_release(run->ctx, &map);
+            return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
+        }
+        memset(vm, 0, vm_bytes);
+        j.vm = vm;
+        j.vis_only = 1;
+        fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), vsm_rows, &j);
+        j.vis_only = 0;
+        fx_blur_spec bs = {p->bounce_reach * (double)run->width, FX_BLUR_RECURSIVE, 3};
+        r = fx_blur_image(run->ctx, vm, vm, run->width, run->height, 2, &bs, roi, where);
+        if (r) {
+            fx_buffer_put(run->ctx, vm, vm_bytes);
+            fx_buffer_put(run->ctx, lo, lo_bytes);
+            fx_aux_map_release(run->ctx, &map);
+            return r;
+        }
+    }
     fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), vsm_rows, &j);
+    fx_buffer_put(run->ctx, vm, vm_bytes);
     fx_buffer_put(run->ctx, lo, lo_bytes);
     fx_aux_map_release(run->ctx, &map);
     return FX_OK;
