@@ -36,10 +36,10 @@ CONFIGS = {
     "sun_direct": {"apply": "sun_direct"},
     "light_group b0": {"apply": "light_group", "bounce_loss": 0.0},
     "light_group b0.5": {"apply": "light_group", "bounce_loss": 0.5},
-    "light_group difference": {"apply": "light_group", "remove_as": "difference"},
-    "light_group reach 0.03": {"apply": "light_group", "bounce_reach": 0.03},
-    "light_group reach 0.1": {"apply": "light_group", "bounce_reach": 0.1},
+    "light_group reach 0 difference": {"apply": "light_group", "bounce_reach": 0.0, "remove_as": "difference"},
+    "light_group reach 0": {"apply": "light_group", "bounce_reach": 0.0},
     "light_group reach 0.3": {"apply": "light_group", "bounce_reach": 0.3},
+    "light_group difference": {"apply": "light_group", "remove_as": "difference"},
     "light_group": {"apply": "light_group"},
 }
 

@@ -33,8 +33,8 @@ CONFIGS = {
     "sun_direct": {"apply": "sun_direct"},
     "light_group b0": {"apply": "light_group", "bounce_loss": 0.0},
     "light_group b0.5": {"apply": "light_group", "bounce_loss": 0.5},
+    "light_group reach 0": {"apply": "light_group", "bounce_reach": 0.0},
     "light_group difference": {"apply": "light_group", "remove_as": "difference"},
-    "light_group reach 0.1": {"apply": "light_group", "bounce_reach": 0.1},
 }
 
 

@@ -94,8 +94,8 @@ static const fx_param_def vsm_param_defs[] = {
               "the scene's lights; for lights that cast no ray-traced shadow); combined: darken "
               "Combined by strength; sun_direct: the light's direct diffuse and glossy (GGX of "
               "roughness, GlossCol) from the analytic BRDF; light_group: the light's own pass "
-              "(Combined_libfx_light, the light group the add-on makes): its direct part (the analytic "
-              "estimate, at most the pass) and bounce_loss of the rest"),
+              "(Combined_libfx_light, the light group the add-on makes): its direct share (the analytic "
+              "estimate's luminance over the pass's, at most 1) and bounce_loss of the rest"),
     FX_P_FLOAT(vsm_params, strength, "strength", 1.0, 0.0, 1.0, 0.0, 1.0, "factor",
                "How much of the shadowed light is removed (1: all)"),
     FX_P_ENUM(vsm_params, diffuse, "diffuse", DIFFUSE_PRINCIPLED, diffuse_items,
@@ -116,7 +116,7 @@ static const fx_param_def vsm_param_defs[] = {
              "shadow edges soften by about f pixels. 1: every pixel"),
     FX_P_FLOAT(vsm_params, bounce_loss, "bounce_loss", 1.0, 0.0, 1.0, 0.0, 1.0, "factor",
                "light_group: the share of the light's indirect contribution (the pass less its direct "
-               "estimate) removed with its direct light where shadowed (1: the light's whole share)"),
+               "share) removed with its direct light where shadowed (1: the light's whole share)"),
     FX_P_FLOAT(vsm_params, bounce_reach, "bounce_reach", 0.1, 0.0, 1.0, 0.0, 0.25, "frame widths",
                "light_group: 0: the bounce light is lost where the pixel is shadowed (bounce_loss (1 - v)); "
                "above 0: every pixel loses bounce_loss (1 - V) of it, V the visibility of the surfaces around "
@@ -318,16 +318,28 @@ static void direct_light(const vsm_job *j, int x, int y, size_t i, float out[3])
     }
 }
 
-/* What is removed from (x, y) of channel c, given the direct light d and the light group
- * g (light_group; else unused): k d, or k (min(d, g) + bounce_loss (g - min(d, g))). */
-static inline double removed_of(const vsm_job *j, double k, double ib, double d, double g)
+/* light_group: the direct share t of the pass g, lum(d) / lum(g) in [0, 1] (d: the direct
+ * estimate); the pass splits into t g direct and (1 - t) g bounce light, both in the pass's
+ * own hue (a per-channel min(d, g) left the estimate's hue errors in the bounce part: red
+ * walls under the atrium's arcades). */
+static inline double direct_share(const float d[3], const double g[3])
+{
+    const double ld = 0.2126 * d[0] + 0.7152 * d[1] + 0.0722 * d[2];
+    const double lg = 0.2126 * (g[0] > 0 ? g[0] : 0) + 0.7152 * (g[1] > 0 ? g[1] : 0) + 0.0722 * (g[2] > 0 ? g[2] : 0);
+    if (!(lg > 1e-12))
+        return 1.0;
+    const double t = ld / lg;
+    return t > 0.0 ? (t < 1.0 ? t : 1.0) : 0.0;
+}
+
+/* What is removed from (x, y) of channel c, given the direct light d and, for light_group,
+ * the pass g and its direct share t: k d, or g (k t + ib (1 - t)) (ib: the bounce share lost). */
+static inline double removed_of(const vsm_job *j, double k, double ib, double t, double d, double g)
 {
     if (!j->group)
         return k * d;
     g = g > 0.0 ? g : 0.0;
-    d = d < g ? d : g;
-    d = d > 0.0 ? d : 0.0;
-    return k * d + ib * (g - d);
+    return g * (k * t + ib * (1.0 - t));
 }
 
 /* The removal of a share k (strength (1 - v), in (0, 1]) of the light at pixel (x, y), from
@@ -391,17 +403,21 @@ static void remove_share(const vsm_job *j, int x, int y, float k, const float *s
                 }
                 cnt++;
             }
+        const double gm3[3] = {gs[0] / cnt, gs[1] / cnt, gs[2] / cnt};
+        const double t = g ? direct_share(d, gm3) : 1.0;
         for (int c = 0; c < 3; c++) {
-            const double cm = cs[c] / cnt, gm = gs[c] / cnt;
-            const double r = removed_of(j, k, ib, d[c], gm);
+            const double cm = cs[c] / cnt, gm = gm3[c];
+            const double r = removed_of(j, k, ib, t, d[c], gm);
             double f = cm > 1e-12 ? 1.0 - r / cm : 0.0;
             f = f > 0.0 ? (f < 1.0 ? f : 1.0) : 0.0;
             o[c] = (float)(s[c] * f);
         }
         return;
     }
+    const double g3[3] = {g ? g[0] : 0.0, g ? g[1] : 0.0, g ? g[2] : 0.0};
+    const double t = g ? direct_share(d, g3) : 1.0;
     for (int c = 0; c < 3; c++) {
-        double r = (double)s[c] - removed_of(j, k, ib, d[c], g ? g[c] : 0.0);
+        double r = (double)s[c] - removed_of(j, k, ib, t, d[c], g3[c]);
         r = r > FLT_MAX ? FLT_MAX : r < -FLT_MAX ? -FLT_MAX : r;
         o[c] = s[c] >= 0.0f && r < 0.0 ? 0.0f : (float)r;
     }
