@@ -473,6 +473,13 @@ static float *run_share(fx_context *ctx, const share_case *c, fx_result *res)
         }
         rgba[4 * i + 3] = 1.0f;
     }
+    if (c->base > 1e30f) { /* the extreme case: NaN and Inf in the passes too */
+        grp[3 * 5] = NAN;
+        grp[3 * 6 + 1] = INFINITY;
+        gcol[3 * 7] = NAN;
+        dcol[3 * 8 + 2] = -INFINITY;
+        rgba[4 * 9] = NAN;
+    }
     fx_frame *g = et_frame(ctx, N, N, rgba);
     /* the floor frame's passes with this Combined */
     float *d = malloc(N * N * sizeof(float));
@@ -628,6 +635,20 @@ static void test_share_modes(fx_context *ctx)
         }
         free(o0);
         free(o1);
+    }
+    /* 1 and 2 threads: the same bits (ratio, bounce_reach's blur, screen_downsample 1 and 3) */
+    {
+        fx_context *one = NULL;
+        fx_context_new(&one, 1);
+        for (int ds = 1; ds <= 3; ds += 2) {
+            share_case c = {"light_group", "ratio", 0.04f, 1.5f, 1.0f, 1, ds, NULL, 4.0f, 0.1f, 1};
+            float *o2 = run_share(ctx, &c, &r);
+            float *o1 = run_share(one, &c, &r);
+            CHECK(o1 && o2 && memcmp(o1, o2, N * N * 4 * sizeof(float)) == 0);
+            free(o1);
+            free(o2);
+        }
+        fx_context_free(one);
     }
     /* huge values stay finite */
     for (int m = 0; m < 2; m++) {
