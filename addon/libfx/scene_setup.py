@@ -293,6 +293,9 @@ def engine_warnings(scene, passes):
     if other:
         out.append("%s renders no %s pass: render with Cycles or Eevee" % (compat.engine_label(engine),
                                                                           "/".join(other)))
+    if any(p.startswith("Combined_") for p in passes) and engine != "CYCLES":
+        out.append("%s writes no light group passes (Cycles only): vsm_shadows' apply light_group "
+                   "cannot run; use apply sun_direct" % compat.engine_label(engine))
     if not scene.render.use_compositing:
         out.append("Post Processing > Compositing is off: libfx cannot get the passes")
     return out
@@ -336,6 +339,9 @@ def _ensure_light_group(scene, vl, group, light_name):
         light.lightgroup = group
     owned["lightgroup"] = mine
     _save_owned(scene, owned)
+    if mine["previous"]:
+        return ("light '%s' was in light group '%s': it is in '%s' while the stack needs it (put "
+                "back when it no longer does)" % (light.name, mine["previous"], group))
     return None
 
 

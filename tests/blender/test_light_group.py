@@ -37,6 +37,10 @@ assert len(vl.lightgroups) == 0 and ob.lightgroup == '', (list(vl.lightgroups), 
 sc.libfx.stack[0].enabled = True
 scene_setup.sync(sc)
 assert ob.lightgroup == 'libfx_light'
+sc.render.engine = 'BLENDER_EEVEE'
+scene_setup.sync(sc)
+assert any('light group' in w for w in scene_setup.status(sc).get('warnings', [])), scene_setup.status(sc)
+sc.render.engine = 'CYCLES'
 scene_setup.restore(sc)
 assert len(vl.lightgroups) == 0 and ob.lightgroup == ''
 print('LIGHT_GROUP_OK')
