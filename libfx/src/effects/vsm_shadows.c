@@ -156,6 +156,7 @@ typedef struct vsm_job {
      * before the second pass reads it */
     int vis_only;
     float *vm;
+    int vm_lo; /* screen_downsample > 1: vm is the lo grid's (lw x lh, from the lo texels) */
     fx_vec3 sun_rad; /* colour * energy / pi */
     fx_vec3 to_light;
     float min_var, eps, bias_norm;
@@ -356,7 +357,26 @@ static void remove_share(const vsm_job *j, int x, int y, float k, const float *s
      * with the surroundings' visibility V (bounce_reach) */
     double ib = (double)j->p->bounce_loss * k;
     if (j->vm) {
-        const float num = j->vm[2 * i], den = j->vm[2 * i + 1];
+        float num, den;
+        if (j->vm_lo) { /* bilinear on the lo grid (lo texel X sits at pixel x0 + f X + f / 2) */
+            const fx_rect *roi = &run->roi;
+            const float inv_f = 1.0f / (float)j->f;
+            float u = (float)(x - roi->x0 - j->f / 2) * inv_f, w = (float)(y - roi->y0 - j->f / 2) * inv_f;
+            u = u > 0.0f ? (u < (float)(j->lw - 1) ? u : (float)(j->lw - 1)) : 0.0f;
+            w = w > 0.0f ? (w < (float)(j->lh - 1) ? w : (float)(j->lh - 1)) : 0.0f;
+            const int X0 = (int)u, Y0 = (int)w;
+            const int X1 = X0 + 1 < j->lw ? X0 + 1 : X0, Y1 = Y0 + 1 < j->lh ? Y0 + 1 : Y0;
+            const float tx = u - (float)X0, ty = w - (float)Y0;
+            const float *a = j->vm + 2 * ((size_t)Y0 * j->lw + X0), *b = j->vm + 2 * ((size_t)Y0 * j->lw + X1);
+            const float *c = j->vm + 2 * ((size_t)Y1 * j->lw + X0), *e = j->vm + 2 * ((size_t)Y1 * j->lw + X1);
+            const float n0 = a[0] + tx * (b[0] - a[0]), n1 = c[0] + tx * (e[0] - c[0]);
+            const float d0 = a[1] + tx * (b[1] - a[1]), d1 = c[1] + tx * (e[1] - c[1]);
+            num = n0 + ty * (n1 - n0);
+            den = d0 + ty * (d1 - d0);
+        } else {
+            num = j->vm[2 * i];
+            den = j->vm[2 * i + 1];
+        }
         const double vl = den > 1e-6f ? fx_saturate(num / den) : 1.0;
         ib = (double)j->p->bounce_loss * (1.0 - vl);
     }
@@ -866,10 +886,12 @@ static fx_result vsm_process(const fx_effect_run *run)
         fx_parallel_for(run->ctx, j.lh, fx_grain_for(run->ctx, j.lh), lo_flag_rows, &j);
     }
     float *vm = NULL;
-    const size_t vm_bytes = (size_t)run->width * run->height * 2 * sizeof(float);
+    const int vm_lo = j.f > 1;
+    const size_t vm_bytes = (vm_lo ? (size_t)j.lw * j.lh : (size_t)run->width * run->height) * 2 * sizeof(float);
     if (p->apply == APPLY_LIGHT_GROUP && p->bounce_reach > 0.0f && p->bounce_loss > 0.0f) {
-        /* bounce_reach: the visibility of every pixel first, then its surroundings' mean
-         * (a Gaussian of v m over one of m), then the removal */
+        /* bounce_reach: the visibility of every pixel first (with screen_downsample, the lo
+         * texels'), then its surroundings' mean (a Gaussian of v m over one of m), then the
+         * removal */
         vm = fx_buffer_get(run->ctx, vm_bytes);
         if (!vm) {
             fx_buffer_put(run->ctx, lo, lo_bytes);
@@ -878,11 +900,23 @@ static fx_result vsm_process(const fx_effect_run *run)
         }
         memset(vm, 0, vm_bytes);
         j.vm = vm;
-        j.vis_only = 1;
-        fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), vsm_rows, &j);
-        j.vis_only = 0;
-        fx_blur_spec bs = {p->bounce_reach * (double)run->width, FX_BLUR_RECURSIVE, 3};
-        r = fx_blur_image(run->ctx, vm, vm, run->width, run->height, 2, &bs, roi, where);
+        j.vm_lo = vm_lo;
+        double sigma = p->bounce_reach * (double)run->width;
+        if (vm_lo) {
+            for (size_t k = 0; k < (size_t)j.lw * j.lh; k++) {
+                const int has = j.lo_d[k] > 0.0f;
+                vm[2 * k] = has ? fx_saturate(j.lo_v[k]) : 0.0f;
+                vm[2 * k + 1] = has ? 1.0f : 0.0f;
+            }
+            sigma /= (double)j.f;
+        } else {
+            j.vis_only = 1;
+            fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), vsm_rows, &j);
+            j.vis_only = 0;
+        }
+        fx_blur_spec bs = {sigma, FX_BLUR_RECURSIVE, 3};
+        r = fx_blur_image(run->ctx, vm, vm, vm_lo ? j.lw : run->width, vm_lo ? j.lh : run->height, 2, &bs,
+                          vm_lo ? NULL : roi, where);
         if (r) {
             fx_buffer_put(run->ctx, vm, vm_bytes);
             fx_buffer_put(run->ctx, lo, lo_bytes);
