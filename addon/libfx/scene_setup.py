@@ -8,6 +8,11 @@
 - ``remove_nodes(scene)`` takes out the Render Layers and File Output nodes that
   add-ons before passes_file.py put in the compositor (scenes saved with them).
 - ``restore(scene)`` undoes all of it (stack emptied, add-on disabled).
+
+A setting "lightgroup:<group>" (vsm_shadows' apply light_group) is not a view-layer
+property: the add-on makes the light group <group> on the view layer and puts the light
+of the stack's first light view in it (Blender 3.2+), so Blender writes the pass
+Combined_<group>; it remembers what it changed and undoes it as the other settings.
 """
 
 import json
@@ -29,6 +34,9 @@ STATUS = {}
 
 def status(scene):
     return STATUS.get(scene.name, {})
+
+
+LIGHT_GROUP_SETTING = "lightgroup:"
 
 
 def _set_status(scene, **kw):
@@ -225,6 +233,7 @@ def sync(scene, rec=None):
         return None
     if not has_stack(scene):
         _restore_settings(scene, keep=set())
+        _restore_light_group(scene)
         _set_status(scene, error=None, warnings=[], passes=[], camera=False)
         return None
     try:
@@ -242,9 +251,13 @@ def sync(scene, rec=None):
     owned = _owned(scene)
     mine = set(owned["settings"].get(vl.name, []))
     keep = set()
+    group_wanted = None
     for setting in settings:
         if not setting:
             continue  # Combined, Alpha: always there
+        if setting.startswith(LIGHT_GROUP_SETTING):
+            group_wanted = setting[len(LIGHT_GROUP_SETTING):]
+            continue
         holder = _setting_holder(vl, setting)
         if holder is None:
             warnings.append("this Blender has no view layer setting '%s'" % setting)
@@ -256,6 +269,18 @@ def sync(scene, rec=None):
     owned["settings"][vl.name] = sorted(mine)
     _save_owned(scene, owned)
     _restore_settings(scene, keep={(vl.name, s) for s in keep})
+    if group_wanted:
+        from . import recipe
+        try:
+            views = answers(recipe.to_recipe(scene) if rec is None else rec)["aux_views"]
+        except (native.LibfxError, ValueError):
+            views = []
+        lname = next((v.get("light") or "" for v in views if v.get("kind") == "light"), "")
+        problem = _ensure_light_group(scene, vl, group_wanted, lname)
+        if problem:
+            warnings.append(problem)
+    else:
+        _restore_light_group(scene)
     warnings += engine_warnings(scene, req.get("passes", []))
     problem = scene_problem(scene, create_folder=False)
     if problem:
@@ -276,7 +301,90 @@ def engine_warnings(scene, passes):
     if other:
         out.append("%s renders no %s pass: render with Cycles or Eevee" % (compat.engine_label(engine),
                                                                           "/".join(other)))
+    if any(p.startswith("Combined_") for p in passes) and engine != "CYCLES":
+        out.append("%s writes no light group passes (Cycles only): vsm_shadows' apply light_group "
+                   "cannot run; use apply sun_direct" % compat.engine_label(engine))
     return out
+
+
+def _find_light(scene, name):
+    """The light object `name`, or the scene's first sun when name is empty (as the light
+    views find it); None if there is none."""
+    for ob in scene.objects:
+        if ob.type == "LIGHT" and not ob.hide_render and (ob.name == name or (not name and ob.data.type == "SUN")):
+            return ob
+    return None
+
+
+def _ensure_light_group(scene, vl, group, light_name):
+    """Makes the light group `group` on view layer vl hold the light `light_name` (empty:
+    the first sun); returns a problem to show, or None. What it changes is kept in the
+    scene's owned state for _restore_light_group."""
+    if not hasattr(vl, "lightgroups"):
+        return ("this Blender has no light groups (3.2+): vsm_shadows' apply light_group needs one; "
+                "use apply sun_direct")
+    light = _find_light(scene, light_name)
+    if light is None:
+        return "light group '%s': the scene has no light '%s'" % (group, light_name or "(first sun)")
+    owned = _owned(scene)
+    mine = owned.get("lightgroup")
+    if mine and (mine.get("view_layer") != vl.name or mine.get("light") != light.name
+                 or mine.get("group") != group):
+        _restore_light_group(scene)
+        owned = _owned(scene)
+        mine = None
+    if mine is None:
+        mine = {"view_layer": vl.name, "group": group, "light": light.name, "made_group": False,
+                "previous": None}
+    if vl.lightgroups.get(group) is None:
+        vl.lightgroups.add(name=group)
+        mine["made_group"] = True
+    if light.lightgroup != group:
+        if mine["previous"] is None:
+            mine["previous"] = light.lightgroup
+        light.lightgroup = group
+    owned["lightgroup"] = mine
+    _save_owned(scene, owned)
+    if mine["previous"]:
+        return ("light '%s' was in light group '%s': it is in '%s' while the stack needs it (put "
+                "back when it no longer does)" % (light.name, mine["previous"], group))
+    return None
+
+
+def _remove_light_group(scene, vl, name):
+    """Removes the view layer's light group `name`: Blender 3.4's collection has no
+    remove(), only the operator on the active group (run with the view layer as context);
+    where neither works the empty group stays (it renders an empty pass, nothing else)."""
+    idx = vl.lightgroups.find(name)
+    if idx < 0:
+        return
+    coll = vl.lightgroups
+    if hasattr(coll, "remove"):
+        coll.remove(coll[idx])
+        return
+    try:
+        vl.active_lightgroup_index = idx
+        with bpy.context.temp_override(scene=scene, view_layer=vl):
+            bpy.ops.scene.view_layer_remove_lightgroup()
+    except (AttributeError, RuntimeError, TypeError):
+        pass
+
+
+def _restore_light_group(scene):
+    """Undoes _ensure_light_group: the light's previous group, the group removed if the
+    add-on made it."""
+    owned = _owned(scene)
+    mine = owned.pop("lightgroup", None)
+    if not mine:
+        return
+    ob = scene.objects.get(mine.get("light", ""))
+    if ob is not None and ob.type == "LIGHT" and ob.lightgroup == mine.get("group") \
+            and mine.get("previous") is not None:
+        ob.lightgroup = mine["previous"]
+    vl = scene.view_layers.get(mine.get("view_layer", ""))
+    if vl is not None and mine.get("made_group") and hasattr(vl, "lightgroups"):
+        _remove_light_group(scene, vl, mine.get("group", ""))
+    _save_owned(scene, owned)
 
 
 def _restore_settings(scene, keep):
@@ -325,4 +433,5 @@ def restore(scene):
     if getattr(scene, "libfx", None) is None:
         return
     _restore_settings(scene, keep=set())
+    _restore_light_group(scene)
     remove_nodes(scene)

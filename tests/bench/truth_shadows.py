@@ -3,10 +3,12 @@
 
     LIBFX_LIBRARY=build/libfx/libfx.so LIBFX_CLI=build/libfx/libfx \\
         /usr/bin/python3 tests/bench/truth_shadows.py OUT_DIR [--res 480x270] [--spp 16] \\
-        [--runs 3] [--variants floor,wall,roof] [--docs docs]
+        [--runs 3] [--variants floor,wall,roof] [--configs NAME,...] [--docs docs]
 
-Per variant: the input (the Sun casts no Cycles shadow; the scene's recipe: vsm_shadows,
-apply sun_diffuse, with the Sun's light view the add-on renders) and the truth
+Per variant: the input (the Sun casts no Cycles shadow; rendered with the scene's recipe
+turned to apply light_group, so the passes hold everything every apply mode reads, the
+light group Combined_libfx_light included, and the Sun's light view the add-on renders;
+each configuration of CONFIGS is the scene's recipe with those params) and the truth
 (apply_truth: the Sun's shadow on) through the add-on's batch path, a second truth with
 seed 17 (the noise floor); `libfx run` at each preset. Region: the pixels the Sun's
 shadow changes (|input - truth| luminance above 2 % of the truth's 99th percentile, as
@@ -23,6 +25,24 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import truth_common as C  # noqa: E402
 
 VARIANTS = ("floor", "wall", "roof")
+# vsm_shadows params over the scene's recipe; the first is the one the docs' strips show
+CONFIGS = {
+    "light_group": {"apply": "light_group"},
+    "sun_diffuse difference": {"apply": "sun_diffuse", "remove_as": "difference"},
+    "sun_diffuse ratio": {"apply": "sun_diffuse", "remove_as": "ratio"},
+    "sun_direct": {"apply": "sun_direct"},
+    "light_group b0": {"apply": "light_group", "bounce_loss": 0.0},
+    "light_group b0.5": {"apply": "light_group", "bounce_loss": 0.5},
+    "light_group reach 0": {"apply": "light_group", "bounce_reach": 0.0},
+    "light_group difference": {"apply": "light_group", "remove_as": "difference"},
+}
+
+
+def with_params(recipe, params):
+    r = json.loads(json.dumps(recipe))
+    r["effects"][0]["params_version"] = 2   # the params as written here, not migrated from 1
+    r["effects"][0]["params"].update(params)
+    return r
 
 
 def shadow_region(plain, truth):
@@ -31,21 +51,37 @@ def shadow_region(plain, truth):
 
 
 def main():
+    configs = [c for c in os.environ.get("TRUTH_SHADOWS_CONFIGS", ",".join(CONFIGS)).split(",") if c]
     a = C.parse_args(res="480x270", spp=16, variants=VARIANTS)
     d = C.scene_dir("shadows")
     recipe = json.load(open(d / "recipe.json"))
     noop = C.noop_recipe(C.pathlib.Path(a.out))
+    in_recipe = os.path.join(a.out, "input_recipe.json")
+    with open(in_recipe, "w") as f:
+        json.dump(with_params(recipe, {"apply": "light_group"}), f)
     md, report, series = [], {}, {}
     for v in a.variants.split(","):
         blend = d / ("truth_shadows_%s.blend" % v)
         p = os.path.join(a.out, "s_%s_" % v)
-        passes, side, tpass, t2pass = C.render_three("shadows", blend, p, a, noop)
+        passes, side, _ = C.batch(blend, p + "in_", a.res, a.spp, recipe=in_recipe)
+        tpass, _, _ = C.batch(blend, p + "truth_", a.res, a.spp, expr=C.truth_expr("shadows"), recipe=noop)
+        t2pass, _, _ = C.batch(blend, p + "truth2_", a.res, a.spp, expr=C.truth_expr("shadows"), recipe=noop,
+                               seed=17)
         truth, truth2, plain = C.rgb(tpass), C.rgb(t2pass), C.rgb(passes)
         region = shadow_region(plain, truth)
         flat = C.flat_mask(passes)
-        outs = C.run_presets(recipe, passes, side, a.out, "s_%s" % v, runs=a.runs)
-        rows = C.rows_for(truth, truth2, plain, outs, region, flat=flat)
-        series[v] = [r for r in rows if r[0] != "Cycles truth"]
+        rows = None
+        for ci, cname in enumerate(configs):
+            outs = C.run_presets(with_params(recipe, CONFIGS[cname]), passes, side, a.out,
+                                 "s_%s_%s" % (v, cname.replace(" ", "_")), runs=a.runs)
+            crow = C.rows_for(truth, truth2, plain, outs, region, flat=flat)
+            if rows is None:
+                rows = crow[:3]
+                first = outs
+            rows += [[cname + " " + r[0][len("libfx "):]] + list(r[1:]) for r in crow[3:]]
+        outs = first
+        series[v] = rows[1:3] + [["libfx " + r[0][len(configs[0]) + 1:]] + list(r[1:]) for r in rows[3:]
+                                 if r[0][len(configs[0]) + 1:] in C.PRESETS and r[0].startswith(configs[0] + " ")]
         report[v] = {"region_px": int(region.sum()), "flat_px": int(flat.sum()), "rows": rows}
         md.append("### %s (%s, %d spp; shadow-changed pixels %.1f %%, flat pixels %.1f %%)\n"
                   % (v, a.res, a.spp, 100 * region.mean(), 100 * flat.mean()))

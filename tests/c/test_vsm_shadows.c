@@ -439,6 +439,250 @@ static void test_sun_diffuse(fx_context *ctx)
     }
 }
 
+/* The apply modes that remove more than the direct diffuse, on synthetic passes: a roof
+ * over everything (all shadowed), a floor seen straight down, the Sun straight down
+ * (N.L = N.V = N.H = 1), lambert diffuse. Combined c(x) (checkerboard noise around `base`
+ * when `noise`), DiffCol dc, GlossCol gc, the light group g. */
+typedef struct share_case {
+    const char *apply, *remove_as;
+    float gc, g, bounce;
+    int noise, downsample;
+    const char *drop; /* a pass left out */
+    float base;
+    float reach;  /* bounce_reach */
+    int half;     /* the roof over x < N / 2 only */
+} share_case;
+
+static float *run_share(fx_context *ctx, const share_case *c, fx_result *res)
+{
+    float h[N * N];
+    for (int i = 0; i < N * N; i++)
+        h[i] = !c->half || (i % N) < N / 2 ? 3.0f : 0.0f;
+    fx_frame *f = floor_frame(ctx, write_light_view(ctx, h, "roof_share"));
+    float *rgba = malloc(N * N * 4 * sizeof(float));
+    float *nrm = malloc(N * N * 3 * sizeof(float)), *dcol = malloc(N * N * 3 * sizeof(float));
+    float *gcol = malloc(N * N * 3 * sizeof(float)), *grp = malloc(N * N * 3 * sizeof(float));
+    for (int i = 0; i < N * N; i++) {
+        float v = c->base + (c->noise ? (((i % N) + (i / N)) % 2 ? 0.2f : -0.2f) : 0.0f);
+        for (int k = 0; k < 3; k++) {
+            rgba[4 * i + k] = v;
+            nrm[3 * i + k] = k == 2 ? 1.0f : 0.0f;
+            dcol[3 * i + k] = 0.5f;
+            gcol[3 * i + k] = c->gc;
+            grp[3 * i + k] = c->g;
+        }
+        rgba[4 * i + 3] = 1.0f;
+    }
+    if (c->base > 1e30f) { /* the extreme case: NaN and Inf in the passes too */
+        grp[3 * 5] = NAN;
+        grp[3 * 6 + 1] = INFINITY;
+        gcol[3 * 7] = NAN;
+        dcol[3 * 8 + 2] = -INFINITY;
+        rgba[4 * 9] = NAN;
+    }
+    fx_frame *g = et_frame(ctx, N, N, rgba);
+    /* the floor frame's passes with this Combined */
+    float *d = malloc(N * N * sizeof(float));
+    for (int i = 0; i < N * N; i++)
+        d[i] = CAM_Z;
+    fx_frame_add_pass(g, "Depth", 1, d);
+    fx_camera cam = top_camera();
+    fx_frame_set_camera(g, &cam);
+    CHECK_OK(ctx, fx_frame_set_aux_view(g, "light:Sun", write_light_view(ctx, h, "roof_share"), &cam));
+    if (!c->drop || strcmp(c->drop, "Normal"))
+        fx_frame_add_pass(g, "Normal", 3, nrm);
+    fx_frame_add_pass(g, "DiffCol", 3, dcol);
+    if (!c->drop || strcmp(c->drop, "GlossCol"))
+        fx_frame_add_pass(g, "GlossCol", 3, gcol);
+    if (!c->drop || strcmp(c->drop, "Combined_libfx_light"))
+        fx_frame_add_pass(g, "Combined_libfx_light", 3, grp);
+    CHECK_OK(ctx, fx_frame_apply_sidecar(g,
+        "{\"world_to_camera\": [[1,0,0,0],[0,1,0,0],[0,0,1,-10],[0,0,0,1]], \"projection\": "
+        "[[0.2,0,0,0],[0,0.2,0,0],[0,0,-0.100502513,-1.01005025],[0,0,0,1]], \"clip_start\": 0.1, "
+        "\"clip_end\": 20, \"orthographic\": true, \"lights\": [{\"name\": \"Sun\", \"type\": \"SUN\", "
+        "\"position\": [0,0,10], \"direction\": [0, 0, -1], \"color\": [1,1,1], \"energy\": 3}]}"));
+    fx_stack *s = et_stack(ctx, "vsm_shadows");
+    CHECK_OK(ctx, fx_stack_set_string(s, 0, "light", "Sun"));
+    CHECK_OK(ctx, fx_stack_set_enum(s, 0, "method", "hard"));
+    CHECK_OK(ctx, fx_stack_set_enum(s, 0, "diffuse", "lambert"));
+    CHECK_OK(ctx, fx_stack_set_enum(s, 0, "apply", c->apply));
+    CHECK_OK(ctx, fx_stack_set_enum(s, 0, "remove_as", c->remove_as));
+    CHECK_OK(ctx, fx_stack_set_float(s, 0, "roughness", 0.5f));
+    CHECK_OK(ctx, fx_stack_set_float(s, 0, "bounce_loss", c->bounce));
+    CHECK_OK(ctx, fx_stack_set_float(s, 0, "bounce_reach", c->reach));
+    CHECK_OK(ctx, fx_stack_set_float(s, 0, "normal_offset", 0.0));
+    CHECK_OK(ctx, fx_stack_set_int(s, 0, "screen_downsample", c->downsample));
+    fx_frame *out = NULL;
+    *res = fx_stack_run(s, g, &out);
+    float *o = NULL;
+    if (*res == FX_OK) {
+        const fx_pass *p = fx_frame_find_pass(out, "Combined");
+        o = malloc(N * N * 4 * sizeof(float));
+        memcpy(o, p->data, N * N * 4 * sizeof(float));
+    }
+    fx_frame_free(out);
+    fx_stack_free(s);
+    fx_frame_free(g);
+    fx_frame_free(f);
+    free(rgba); free(nrm); free(dcol); free(gcol); free(grp); free(d);
+    return o;
+}
+
+static void test_share_modes(fx_context *ctx)
+{
+    const double E = 3.0, pi = 3.14159265358979, diff = 0.5 * E / pi;
+    const double a2 = 0.0625; /* alpha = roughness^2 = 0.25 */
+    const double gloss_f = E / pi * (1.0 / (4.0 * a2)); /* times GlossCol: D G / (4 N.V) pi E/pi */
+    const int mid = 4 * (N / 2 * N + N / 2);
+    fx_result r;
+    /* sun_direct: diffuse + glossy; with GlossCol 0 exactly sun_diffuse's lambert */
+    for (int k = 0; k < 2; k++) {
+        share_case c = {"sun_direct", "difference", k ? 0.04f : 0.0f, 0, 0, 0, 1, NULL, 4.0f, 0.0f, 0};
+        float *o = run_share(ctx, &c, &r);
+        CHECK(o != NULL);
+        double want = diff + c.gc * gloss_f;
+        if (o) {
+            CHECK(fabs((4.0 - o[mid]) - want) < 1e-4);
+            printf("sun_direct gc %.2f: removed %.5f (want %.5f)\n", c.gc, 4.0 - o[mid], want);
+        }
+        free(o);
+    }
+    /* light_group: min(direct, g) + bounce (g - min(direct, g)) */
+    const float gs[2] = {0.2f, 1.5f}, bs[3] = {0.0f, 0.5f, 1.0f};
+    for (int gi = 0; gi < 2; gi++)
+        for (int bi = 0; bi < 3; bi++) {
+            share_case c = {"light_group", "difference", 0.04f, gs[gi], bs[bi], 0, 1, NULL, 4.0f, 0.0f, 0};
+            float *o = run_share(ctx, &c, &r);
+            CHECK(o != NULL);
+            double dd = diff + c.gc * gloss_f, dm = dd < c.g ? dd : c.g;
+            double want = dm + c.bounce * (c.g - dm);
+            if (o)
+                CHECK(fabs((4.0 - o[mid]) - want) < 1e-4);
+            free(o);
+            /* screen_downsample 2: the same in a uniform shadow */
+            c.downsample = 2;
+            o = run_share(ctx, &c, &r);
+            if (o)
+                CHECK(fabs((4.0 - o[mid]) - want) < 1e-4);
+            free(o);
+        }
+    /* the passes each mode needs, by name */
+    const char *drop[2][2] = {{"light_group", "Combined_libfx_light"}, {"sun_direct", "GlossCol"}};
+    for (int k = 0; k < 2; k++) {
+        share_case c = {drop[k][0], "difference", 0.04f, 1.0f, 0.5f, 0, 1, drop[k][1], 4.0f, 0.0f, 0};
+        float *o = run_share(ctx, &c, &r);
+        CHECK(o == NULL && r == FX_ERR_MISSING_PASS);
+        CHECK(strstr(fx_context_error(ctx), drop[k][1]) != NULL);
+        free(o);
+    }
+    /* ratio: on a uniform frame the same as difference; on a noisy one the noise is scaled
+     * with the mean (difference keeps its whole amplitude on a smaller mean) */
+    for (int m = 0; m < 3; m++) {
+        const char *ap = m == 2 ? "light_group" : m ? "sun_direct" : "sun_diffuse";
+        share_case c = {ap, "difference", 0.04f, 1.0f, 1.0f, 0, 1, NULL, 2.0f, 0.0f, 0};
+        float *od = run_share(ctx, &c, &r);
+        c.remove_as = "ratio";
+        float *or_ = run_share(ctx, &c, &r);
+        CHECK(od && or_);
+        if (od && or_)
+            CHECK(fabsf(od[mid] - or_[mid]) < 1e-5f);
+        free(od);
+        free(or_);
+        c.noise = 1;
+        c.remove_as = "difference";
+        od = run_share(ctx, &c, &r);
+        c.remove_as = "ratio";
+        or_ = run_share(ctx, &c, &r);
+        CHECK(od && or_);
+        if (od && or_) {
+            /* neighbours mid and mid + 1 pixel: amplitude over the mean */
+            double ad = fabs(od[mid] - od[mid + 4]) / (od[mid] + od[mid + 4]);
+            double ar = fabs(or_[mid] - or_[mid + 4]) / (or_[mid] + or_[mid + 4]);
+            CHECK(fabs(ar - 0.2 / 2.0) < 0.006); /* about the input's own relative amplitude (the 5x5 mean of a checkerboard is off by 1/25) */
+            CHECK(ad > ar * 1.2);
+            printf("%s: relative noise difference %.4f, ratio %.4f (input 0.1000)\n", ap, ad, ar);
+        }
+        free(od);
+        free(or_);
+    }
+    /* bounce_reach: under a roof over everything the same as 0 (V = 0); a half roof: a lit
+     * pixel far from it loses a little of the bounce (0 < loss < the whole), one deep
+     * under it most but not all of it; 0 keeps the lit pixel whole */
+    {
+        share_case c = {"light_group", "difference", 0.0f, 1.5f, 1.0f, 0, 1, NULL, 4.0f, 0.0f, 0};
+        float *o0 = run_share(ctx, &c, &r);
+        c.reach = 0.1f;
+        float *o1 = run_share(ctx, &c, &r);
+        CHECK(o0 && o1);
+        if (o0 && o1)
+            CHECK(fabsf(o0[mid] - o1[mid]) < 1e-5f);
+        free(o0);
+        free(o1);
+        c.half = 1;
+        c.reach = 0.0f;
+        o0 = run_share(ctx, &c, &r);
+        c.reach = 0.2f;
+        o1 = run_share(ctx, &c, &r);
+        CHECK(o0 && o1);
+        const int lit = 4 * (N / 2 * N + N - 4), dark = 4 * (N / 2 * N + 4);
+        if (o0 && o1) {
+            const double ind = 1.5 - diff; /* the bounce part of g */
+            CHECK(o0[lit] == 4.0f);
+            CHECK(4.0 - o1[lit] > 0.01 * ind && 4.0 - o1[lit] < 0.5 * ind);
+            CHECK(4.0 - o1[dark] > diff + 0.5 * ind && 4.0 - o1[dark] < 1.5 - 1e-3);
+            printf("bounce_reach 0.2, half roof: lit pixel loses %.4f, shadowed %.4f (direct %.4f, bounce %.4f)\n",
+                   4.0 - o1[lit], 4.0 - o1[dark], diff, ind);
+        }
+        free(o0);
+        free(o1);
+    }
+    /* 1 and 2 threads: the same bits (ratio, bounce_reach's blur, screen_downsample 1 and 3) */
+    {
+        fx_context *one = NULL;
+        fx_context_new(&one, 1);
+        for (int ds = 1; ds <= 3; ds += 2) {
+            share_case c = {"light_group", "ratio", 0.04f, 1.5f, 1.0f, 1, ds, NULL, 4.0f, 0.1f, 1};
+            float *o2 = run_share(ctx, &c, &r);
+            float *o1 = run_share(one, &c, &r);
+            CHECK(o1 && o2 && memcmp(o1, o2, N * N * 4 * sizeof(float)) == 0);
+            free(o1);
+            free(o2);
+        }
+        fx_context_free(one);
+    }
+    /* huge values stay finite */
+    for (int m = 0; m < 2; m++) {
+        share_case c = {"light_group", m ? "ratio" : "difference", 3e38f, 3e38f, 0.5f, 1, 2, NULL, 3e38f, (float)m * 0.1f, m};
+        float *o = run_share(ctx, &c, &r);
+        CHECK(o && tu_all_finite(o, N * N * 4));
+        free(o);
+    }
+}
+
+/* params_version 2 made remove_as ratio the default: a version-1 recipe keeps difference
+ * unless it names one; a version-2 recipe gets ratio. */
+static void test_migration(fx_context *ctx)
+{
+    const char *recipes[3] = {
+        "{\"version\": 1, \"effects\": [{\"effect\": \"vsm_shadows\", \"params\": {\"apply\": \"sun_diffuse\"}}]}",
+        "{\"version\": 1, \"effects\": [{\"effect\": \"vsm_shadows\", \"params\": {\"remove_as\": \"ratio\"}}]}",
+        "{\"version\": 1, \"effects\": [{\"effect\": \"vsm_shadows\", \"params_version\": 2, \"params\": "
+        "{\"apply\": \"sun_diffuse\"}}]}"};
+    const char *want[3] = {"\"remove_as\":\"difference\"", "\"remove_as\":\"ratio\"", "\"remove_as\":\"ratio\""};
+    for (int i = 0; i < 3; i++) {
+        fx_stack *s = NULL;
+        CHECK_OK(ctx, fx_stack_new(ctx, &s));
+        CHECK_OK(ctx, fx_stack_load_json(s, recipes[i]));
+        char *e = NULL;
+        CHECK_OK(ctx, fx_stack_effective_params_json(s, 0, &e));
+        CHECK(e && strstr(e, want[i]) != NULL);
+        if (e && !strstr(e, want[i]))
+            fprintf(stderr, "migration %d: %s\n", i, e);
+        fx_free(e);
+        fx_stack_free(s);
+    }
+}
+
 /* The per-context cache of built light maps (scene/aux_map.h): frames 2..N reuse the map
  * and give the same bits as an uncached context (1 and 2 threads, box and Gaussian); a
  * replaced view file, other filter parameters or a too small limit build again. */
@@ -736,6 +980,8 @@ int main(void)
     test_sidecar_threads_errors(ctx);
     test_sat_precision(ctx);
     test_sun_diffuse(ctx);
+    test_share_modes(ctx);
+    test_migration(ctx);
     test_cache();
     test_box_and_levels(ctx);
     test_map_level_effect(ctx);

@@ -34,6 +34,7 @@ static const fx_pass_desc pass_table[FX_PASS_COUNT] = {
     [FX_PASS_CRYPTO_OBJECT] = {"CryptoObject", 4, "RGBA", 1, 0, 1, "use_pass_cryptomatte_object"},
     [FX_PASS_CRYPTO_MATERIAL] = {"CryptoMaterial", 4, "RGBA", 1, 0, 1, "use_pass_cryptomatte_material"},
     [FX_PASS_CRYPTO_ASSET] = {"CryptoAsset", 4, "RGBA", 1, 0, 1, "use_pass_cryptomatte_asset"},
+    [FX_PASS_LIGHT_GROUP] = {"Combined_" FX_LIGHT_GROUP_NAME, 3, "RGB", 0, 1, 0, FX_LIGHT_GROUP_SETTING},
 };
 
 const fx_pass_desc *fx_pass_describe(fx_pass_id id)

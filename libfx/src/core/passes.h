@@ -35,8 +35,17 @@ typedef enum fx_pass_id {
     FX_PASS_CRYPTO_OBJECT,   /* all ranks: CryptoObject00, CryptoObject01, ... */
     FX_PASS_CRYPTO_MATERIAL,
     FX_PASS_CRYPTO_ASSET,
+    /* The light group "libfx_light" (Blender 3.2+): the whole contribution (direct and
+     * indirect) of the light(s) the add-on puts in that group: vsm_shadows' shadowed
+     * light. Blender names it Combined_<group> on both routes. */
+    FX_PASS_LIGHT_GROUP,
     FX_PASS_COUNT
 } fx_pass_id;
+
+/* The light group's name, and the blender_setting that asks the add-on to create it and put
+ * the shadowed light in it (not a view-layer property: the add-on handles it by name). */
+#define FX_LIGHT_GROUP_NAME "libfx_light"
+#define FX_LIGHT_GROUP_SETTING "lightgroup:libfx_light"
 
 typedef uint64_t fx_pass_set; /* bit (1 << fx_pass_id) */
 #define FX_PASS_BIT(id) ((fx_pass_set)1 << (id))

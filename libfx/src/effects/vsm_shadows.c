@@ -18,10 +18,12 @@
 #include "core/effect.h"
 #include "scene/lights.h"
 #include "core/parallel.h"
+#include "math/blur.h"
 #include "math/shadow_map.h"
 #include "math/surface.h"
 #include "core/simd4.h"
 
+#include <cjson/cJSON.h>
 #include <float.h>
 #include <math.h>
 #include <stdio.h>
@@ -43,15 +45,23 @@ typedef struct vsm_params {
     float roughness;
     int map_level;
     int screen_downsample;
+    float bounce_loss;
+    int remove_as;
+    float bounce_reach;
 } vsm_params;
 
 enum { METHOD_VSM = 0, METHOD_PCF, METHOD_HARD };
-enum { APPLY_SUN_DIFFUSE = 0, APPLY_COMBINED };
+enum { APPLY_SUN_DIFFUSE = 0, APPLY_COMBINED, APPLY_SUN_DIRECT, APPLY_LIGHT_GROUP };
+enum { REMOVE_DIFFERENCE = 0, REMOVE_RATIO };
+/* remove_as ratio: the neighbourhood (2 R + 1)^2 over which Combined (and the light group)
+ * are averaged, on the same surface only */
+#define RATIO_RADIUS 2
 enum { DIFFUSE_PRINCIPLED = 0, DIFFUSE_LAMBERT };
 
 static const char *const method_items[] = {"vsm", "pcf", "hard"};
 static const char *const filter_items[] = {"box_sat", "gaussian"};
-static const char *const apply_items[] = {"sun_diffuse", "combined"};
+static const char *const apply_items[] = {"sun_diffuse", "combined", "sun_direct", "light_group"};
+static const char *const remove_items[] = {"difference", "ratio"};
 static const char *const diffuse_items[] = {"principled", "lambert"};
 
 static const fx_param_def vsm_param_defs[] = {
@@ -82,7 +92,10 @@ static const fx_param_def vsm_param_defs[] = {
     FX_P_ENUM(vsm_params, apply, "apply", APPLY_SUN_DIFFUSE, apply_items,
               "sun_diffuse: remove the light's direct diffuse where shadowed (needs Normal, DiffCol and "
               "the scene's lights; for lights that cast no ray-traced shadow); combined: darken "
-              "Combined by strength"),
+              "Combined by strength; sun_direct: the light's direct diffuse and glossy (GGX of "
+              "roughness, GlossCol) from the analytic BRDF; light_group: the light's own pass "
+              "(Combined_libfx_light, the light group the add-on makes): its direct share (the analytic "
+              "estimate's luminance over the pass's, at most 1) and bounce_loss of the rest"),
     FX_P_FLOAT(vsm_params, strength, "strength", 1.0, 0.0, 1.0, 0.0, 1.0, "factor",
                "How much of the shadowed light is removed (1: all)"),
     FX_P_ENUM(vsm_params, diffuse, "diffuse", DIFFUSE_PRINCIPLED, diffuse_items,
@@ -101,14 +114,31 @@ static const fx_param_def vsm_param_defs[] = {
              "from the neighbours on the same surface (depth within a few percent, similar normal); a pixel "
              "with no such neighbour (an edge, a thin object) is looked up itself. ~f^2 fewer lookups; "
              "shadow edges soften by about f pixels. 1: every pixel"),
+    FX_P_FLOAT(vsm_params, bounce_loss, "bounce_loss", 1.0, 0.0, 1.0, 0.0, 1.0, "factor",
+               "light_group: the share of the light's indirect contribution (the pass less its direct "
+               "share) removed with its direct light where shadowed (1: the light's whole share)"),
+    FX_P_FLOAT(vsm_params, bounce_reach, "bounce_reach", 0.1, 0.0, 1.0, 0.0, 0.25, "frame widths",
+               "light_group: 0: the bounce light is lost where the pixel is shadowed (bounce_loss (1 - v)); "
+               "above 0: every pixel loses bounce_loss (1 - V) of it, V the visibility of the surfaces around "
+               "it, averaged by a Gaussian of this sigma (a share of the frame's width): lit pixels amid "
+               "shadow lose bounce too, shadowed ones near lit ground keep some"),
+    FX_P_ENUM(vsm_params, remove_as, "remove_as", REMOVE_RATIO, remove_items,
+              "difference: Combined less the removed light; ratio: Combined times (1 - removed / Combined), "
+              "both averaged over the pixel's surface in a 5x5 neighbourhood (3x3 when screen_downsample > 1), so "
+              "the noise of what is left "
+              "is scaled with it, not laid bare (not for combined)"),
 };
 
 static fx_pass_set vsm_passes(const void *params)
 {
     const vsm_params *p = params;
     fx_pass_set s = FX_PASS_BIT(FX_PASS_DEPTH);
-    if (p->apply == APPLY_SUN_DIFFUSE)
+    if (p->apply != APPLY_COMBINED)
         s |= FX_PASS_BIT(FX_PASS_NORMAL) | FX_PASS_BIT(FX_PASS_DIFF_COL);
+    if (p->apply == APPLY_SUN_DIRECT || p->apply == APPLY_LIGHT_GROUP)
+        s |= FX_PASS_BIT(FX_PASS_GLOSS_COL);
+    if (p->apply == APPLY_LIGHT_GROUP)
+        s |= FX_PASS_BIT(FX_PASS_LIGHT_GROUP);
     return s;
 }
 
@@ -119,6 +149,14 @@ typedef struct vsm_job {
     const fx_shadow_map *sm;
     fx_surface_src surf;
     const float *diffcol;
+    const float *glosscol, *group; /* sun_direct, light_group (RGB), or NULL */
+    int general; /* remove_share does the removal (any apply but the two old difference ones) */
+    /* bounce_reach > 0 (light_group): first pass (vis_only) stores each pixel's visibility
+     * v and surface flag as (v m, m) in vm (frame size, 2 channels), blurred in place
+     * before the second pass reads it */
+    int vis_only;
+    float *vm;
+    int vm_lo; /* screen_downsample > 1: vm is the lo grid's (lw x lh, from the lo texels) */
     fx_vec3 sun_rad; /* colour * energy / pi */
     fx_vec3 to_light;
     float min_var, eps, bias_norm;
@@ -153,8 +191,33 @@ static float visibility_at(const vsm_job *j, int x, int y, int *has_surface)
     switch (j->p->method) {
     case METHOD_HARD:
         return fx_shadow_map_hard(j->sm, px, py, t, j->eps);
-    case METHOD_PCF:
-        return fx_shadow_map_pcf(j->sm, px, py, t, j->pcf_radius, j->eps);
+    case METHOD_PCF: {
+        /* derivative_bias: the receiver's plane (fx_shadow_map_pcf_plane) from two points a
+         * little along its tangents, projected too: the slopes dt/dpx, dt/dpy solved from
+         * their texel and depth offsets */
+        float gx = 0.0f, gy = 0.0f;
+        if (j->p->derivative_bias && fx_surface_normal(&j->surf, x, y, &n)) {
+            fx_vec3 a = fabsf(n.x) < 0.9f ? fx_v3(1.0f, 0.0f, 0.0f) : fx_v3(0.0f, 1.0f, 0.0f);
+            fx_vec3 t1 = fx_v3_normalize_or(fx_v3_cross(n, a), a);
+            fx_vec3 t2 = fx_v3_cross(n, t1);
+            const float h = 0.01f * (d > 1.0f ? d : 1.0f);
+            float ax, ay, ad, bx, by, bd;
+            if (fx_aux_view_project(j->av, fx_v3_add(w, fx_v3_scale(t1, h)), &ax, &ay, &ad) &&
+                fx_aux_view_project(j->av, fx_v3_add(w, fx_v3_scale(t2, h)), &bx, &by, &bd)) {
+                const float u1 = ax - px, v1 = ay - py, z1 = fx_shadow_map_norm(j->sm, ad) - t;
+                const float u2 = bx - px, v2 = by - py, z2 = fx_shadow_map_norm(j->sm, bd) - t;
+                const float det = u1 * v2 - u2 * v1;
+                if (fabsf(det) > 1e-6f) {
+                    gx = (z1 * v2 - z2 * v1) / det;
+                    gy = (u1 * z2 - u2 * z1) / det;
+                    /* grazing receivers: at most 0.05 normalised depth per texel */
+                    gx = fx_clampf(gx, -0.05f, 0.05f);
+                    gy = fx_clampf(gy, -0.05f, 0.05f);
+                }
+            }
+        }
+        return fx_shadow_map_pcf_plane(j->sm, px, py, t, j->pcf_radius, j->eps, gx, gy);
+    }
     default: {
         float m1, m2;
         fx_shadow_map_moments(j->sm, px, py, &m1, &m2);
@@ -201,10 +264,183 @@ static float shade_at(const vsm_job *j, int x, int y, int *has, float *a)
 {
     float v = visibility_at(j, x, y, has);
     float k = j->p->strength * (1.0f - v);
-    if (j->p->apply == APPLY_SUN_DIFFUSE)
+    if (j->p->apply == APPLY_SUN_DIFFUSE && !j->general)
         k *= sun_cosine(j, x, y, k);
     *a = k;
     return v;
+}
+
+/* The unit direction from the surface at pixel (x, y) towards the camera (n if degenerate). */
+static fx_vec3 view_dir(const vsm_job *j, int x, int y, fx_vec3 n)
+{
+    fx_vec2 ndc = fx_view_pixel_to_ndc(&j->surf.view, (float)x + 0.5f, (float)y + 0.5f);
+    fx_vec3 v = fx_v3_scale(fx_view_dir_to_world(&j->surf.view, fx_view_ray(&j->surf.view, ndc)), -1.0f);
+    return fx_v3_normalize_or(v, n);
+}
+
+/* The light's unshadowed direct light at (x, y), RGB: the diffuse of sun_diffuse
+ * (DiffCol sun_rad N.L, Burley's factor with the principled model) and, for sun_direct and
+ * light_group, a glossy estimate: GlossCol E D G / (4 N.V) of GGX (alpha = roughness^2)
+ * with the separable Smith masking. 0 without a normal or facing away. */
+static void direct_light(const vsm_job *j, int x, int y, size_t i, float out[3])
+{
+    out[0] = out[1] = out[2] = 0.0f;
+    fx_vec3 n;
+    if (!fx_surface_normal(&j->surf, x, y, &n))
+        return;
+    const float ndl = fx_v3_dot(n, j->to_light);
+    if (!(ndl > 0.0f))
+        return;
+    const float fd = j->p->diffuse == DIFFUSE_PRINCIPLED ? ndl * burley(j, x, y, n, ndl) : ndl;
+    const float *dc = j->diffcol + 3 * i;
+    const float rad[3] = {j->sun_rad.x, j->sun_rad.y, j->sun_rad.z};
+    float fs = 0.0f;
+    if (j->glosscol) {
+        const fx_vec3 v = view_dir(j, x, y, n);
+        const float ndv = fx_clampf(fx_v3_dot(n, v), 1e-3f, 1.0f);
+        const fx_vec3 h = fx_v3_normalize_or(fx_v3_add(v, j->to_light), n);
+        const float ndh = fx_clampf(fx_v3_dot(n, h), 0.0f, 1.0f);
+        float a2 = j->p->roughness * j->p->roughness;
+        a2 = a2 * a2 > 1e-6f ? a2 * a2 : 1e-6f;
+        const float den = ndh * ndh * (a2 - 1.0f) + 1.0f;
+        const float d = a2 / (3.14159265f * den * den);
+        const float nl = ndl < 1.0f ? ndl : 1.0f;
+        const float g1l = 2.0f * nl / (nl + sqrtf(a2 + (1.0f - a2) * nl * nl));
+        const float g1v = 2.0f * ndv / (ndv + sqrtf(a2 + (1.0f - a2) * ndv * ndv));
+        /* times pi: sun_rad is E / pi */
+        fs = 3.14159265f * d * g1l * g1v / (4.0f * ndv);
+        fs = fs < 1e4f ? fs : 1e4f;
+    }
+    const float *gc = j->glosscol ? j->glosscol + 3 * i : NULL;
+    for (int c = 0; c < 3; c++) {
+        float t = fd * dc[c] + (gc ? fs * gc[c] : 0.0f);
+        t *= rad[c];
+        out[c] = fabsf(t) <= FLT_MAX ? t : (t > 0.0f ? FLT_MAX : 0.0f);
+    }
+}
+
+/* light_group: the direct share t of the pass g, lum(d) / lum(g) in [0, 1] (d: the direct
+ * estimate); the pass splits into t g direct and (1 - t) g bounce light, both in the pass's
+ * own hue (a per-channel min(d, g) left the estimate's hue errors in the bounce part: red
+ * walls under the atrium's arcades). */
+static inline double direct_share(const float d[3], const double g[3])
+{
+    const double ld = 0.2126 * d[0] + 0.7152 * d[1] + 0.0722 * d[2];
+    const double lg = 0.2126 * (g[0] > 0 ? g[0] : 0) + 0.7152 * (g[1] > 0 ? g[1] : 0) + 0.0722 * (g[2] > 0 ? g[2] : 0);
+    if (!(lg > 1e-12))
+        return 1.0;
+    const double t = ld / lg;
+    return t > 0.0 ? (t < 1.0 ? t : 1.0) : 0.0;
+}
+
+/* What is removed from (x, y) of channel c, given the direct light d and, for light_group,
+ * the pass g and its direct share t: k d, or g (k t + ib (1 - t)) (ib: the bounce share lost). */
+static inline double removed_of(const vsm_job *j, double k, double ib, double t, double d, double g)
+{
+    if (!j->group)
+        return k * d;
+    g = g > 0.0 ? g : 0.0;
+    return g * (k * t + ib * (1.0 - t));
+}
+
+/* The removal of a share k (strength (1 - v), in (0, 1]) of the light at pixel (x, y), from
+ * s into o (RGBA; alpha kept), for every apply but the old difference paths:
+ * difference: s - removed; ratio: s (1 - removed' / C'), the primes averaged over the pixels
+ * of the (2 RATIO_RADIUS + 1)^2 neighbourhood on the same surface (depth within 2 %,
+ * normals within ~25 degrees): the averages make the factor smooth, so the noise in s is
+ * scaled with its mean rather than left whole on a smaller mean. */
+static void remove_share(const vsm_job *j, int x, int y, float k, const float *s, float *o)
+{
+    const fx_effect_run *run = j->run;
+    const size_t i = (size_t)y * run->width + x;
+    /* the share of the light's indirect part lost: bounce_loss k, or bounce_loss (1 - V)
+     * with the surroundings' visibility V (bounce_reach) */
+    double ib = (double)j->p->bounce_loss * k;
+    if (j->vm) {
+        float num, den;
+        if (j->vm_lo) { /* bilinear on the lo grid (lo texel X sits at pixel x0 + f X + f / 2) */
+            const fx_rect *roi = &run->roi;
+            const float inv_f = 1.0f / (float)j->f;
+            float u = (float)(x - roi->x0 - j->f / 2) * inv_f, w = (float)(y - roi->y0 - j->f / 2) * inv_f;
+            u = u > 0.0f ? (u < (float)(j->lw - 1) ? u : (float)(j->lw - 1)) : 0.0f;
+            w = w > 0.0f ? (w < (float)(j->lh - 1) ? w : (float)(j->lh - 1)) : 0.0f;
+            const int X0 = (int)u, Y0 = (int)w;
+            const int X1 = X0 + 1 < j->lw ? X0 + 1 : X0, Y1 = Y0 + 1 < j->lh ? Y0 + 1 : Y0;
+            const float tx = u - (float)X0, ty = w - (float)Y0;
+            const float *a = j->vm + 2 * ((size_t)Y0 * j->lw + X0), *b = j->vm + 2 * ((size_t)Y0 * j->lw + X1);
+            const float *c = j->vm + 2 * ((size_t)Y1 * j->lw + X0), *e = j->vm + 2 * ((size_t)Y1 * j->lw + X1);
+            const float n0 = a[0] + tx * (b[0] - a[0]), n1 = c[0] + tx * (e[0] - c[0]);
+            const float d0 = a[1] + tx * (b[1] - a[1]), d1 = c[1] + tx * (e[1] - c[1]);
+            num = n0 + ty * (n1 - n0);
+            den = d0 + ty * (d1 - d0);
+        } else {
+            num = j->vm[2 * i];
+            den = j->vm[2 * i + 1];
+        }
+        const double vl = den > 1e-6f ? fx_saturate(num / den) : 1.0;
+        ib = (double)j->p->bounce_loss * (1.0 - vl);
+    }
+    float d[3];
+    direct_light(j, x, y, i, d);
+    const float *g = j->group ? j->group + 3 * i : NULL;
+    o[3] = s[3];
+    if (j->p->remove_as == REMOVE_RATIO) {
+        const fx_surface_src *sf = &j->surf;
+        const float dz = sf->depth[i];
+        /* normals as stored (unnormalised): the likeness test compares squares, c > 0 and
+         * c^2 >= 0.81 |n|^2 |m|^2 (cosine at least 0.9) */
+        const float *pn = sf->normal ? sf->normal + 3 * i : NULL;
+        const float nn = pn ? pn[0] * pn[0] + pn[1] * pn[1] + pn[2] * pn[2] : 0.0f;
+        const int has_n = nn > 1e-8f;
+        double cs[3] = {0, 0, 0}, gs[3] = {0, 0, 0};
+        int cnt = 0;
+        /* 5x5; 3x3 with screen_downsample (the draft and preview presets) */
+        const int rr = j->f > 1 ? 1 : RATIO_RADIUS;
+        const int ya = y - rr > 0 ? y - rr : 0;
+        const int yb = y + rr < run->height - 1 ? y + rr : run->height - 1;
+        const int xa = x - rr > 0 ? x - rr : 0;
+        const int xb = x + rr < run->width - 1 ? x + rr : run->width - 1;
+        for (int yy = ya; yy <= yb; yy++)
+            for (int xx = xa; xx <= xb; xx++) {
+                const size_t q = (size_t)yy * run->width + xx;
+                if (q != i) {
+                    const float dq = sf->depth[q];
+                    if (!(fabsf(dq - dz) <= 0.02f * dz))
+                        continue;
+                    if (has_n) {
+                        const float *m = sf->normal + 3 * q;
+                        const float c = pn[0] * m[0] + pn[1] * m[1] + pn[2] * m[2];
+                        const float mm = m[0] * m[0] + m[1] * m[1] + m[2] * m[2];
+                        if (!(c > 0.0f && c * c >= 0.81f * nn * mm))
+                            continue;
+                    }
+                }
+                const float *sq = run->src + 4 * q;
+                for (int c = 0; c < 3; c++) {
+                    cs[c] += sq[c];
+                    if (g)
+                        gs[c] += j->group[3 * q + c];
+                }
+                cnt++;
+            }
+        const double gm3[3] = {gs[0] / cnt, gs[1] / cnt, gs[2] / cnt};
+        const double t = g ? direct_share(d, gm3) : 1.0;
+        for (int c = 0; c < 3; c++) {
+            const double cm = cs[c] / cnt, gm = gm3[c];
+            const double r = removed_of(j, k, ib, t, d[c], gm);
+            double f = cm > 1e-12 ? 1.0 - r / cm : 0.0;
+            f = f > 0.0 ? (f < 1.0 ? f : 1.0) : 0.0;
+            o[c] = (float)(s[c] * f);
+        }
+        return;
+    }
+    const double g3[3] = {g ? g[0] : 0.0, g ? g[1] : 0.0, g ? g[2] : 0.0};
+    const double t = g ? direct_share(d, g3) : 1.0;
+    for (int c = 0; c < 3; c++) {
+        double r = (double)s[c] - removed_of(j, k, ib, t, d[c], g3[c]);
+        r = r > FLT_MAX ? FLT_MAX : r < -FLT_MAX ? -FLT_MAX : r;
+        o[c] = s[c] >= 0.0f && r < 0.0 ? 0.0f : (float)r;
+    }
 }
 
 /* The representative pixel of lo texel index X along an axis of the ROI [a, b). */
@@ -436,10 +672,24 @@ static void vsm_rows_lo(vsm_job *j, int y0, int y1)
             const float v = shade_lo(j, x, y, &cell, &has, &a);
             if (vrow)
                 vrow[x] = v;
+            if (j->vis_only) {
+                const size_t q = (size_t)y * run->width + x;
+                j->vm[2 * q] = has ? v : 0.0f;
+                j->vm[2 * q + 1] = has ? 1.0f : 0.0f;
+                continue;
+            }
+            if (j->vm && has) { /* every surface pixel may lose bounce light */
+                remove_share(j, x, y, a, s, o);
+                continue;
+            }
             if (a == 0.0f) {
                 /* nothing lost (most lit pixels): both formulas below give s itself */
                 if (o != s)
                     memcpy(o, s, 4 * sizeof(float));
+                continue;
+            }
+            if (j->general) { /* a is strength (1 - v) here */
+                remove_share(j, x, y, a, s, o);
                 continue;
             }
             if (combined) {
@@ -491,8 +741,18 @@ static void vsm_rows(void *user, int y0, int y1)
             float v = visibility_at(j, x, y, &has);
             if (j->vis_out)
                 j->vis_out[i] = v;
+            if (j->vis_only) {
+                j->vm[2 * i] = has ? v : 0.0f;
+                j->vm[2 * i + 1] = has ? 1.0f : 0.0f;
+                continue;
+            }
             float k = j->p->strength * (1.0f - v);
-            if (j->p->apply == APPLY_COMBINED) {
+            if (j->general) {
+                if (k > 0.0f || (j->vm && has))
+                    remove_share(j, x, y, k, s, o);
+                else
+                    memcpy(o, s, 3 * sizeof(float));
+            } else if (j->p->apply == APPLY_COMBINED) {
                 for (int c = 0; c < 3; c++)
                     o[c] = s[c] * (1.0f - k);
             } else {
@@ -543,7 +803,8 @@ static fx_result vsm_process(const fx_effect_run *run)
         return r;
     const fx_aux_view *av = map.av;
     j.av = av;
-    if (p->apply == APPLY_SUN_DIFFUSE) {
+    j.general = !(p->apply == APPLY_COMBINED || (p->apply == APPLY_SUN_DIFFUSE && p->remove_as == REMOVE_DIFFERENCE));
+    if (p->apply != APPLY_COMBINED) {
         fx_light light;
         if ((r = fx_frame_find_light(run->frame, av->name + 6, where, &light))) {
             fx_aux_map_release(run->ctx, &map);
@@ -552,14 +813,34 @@ static fx_result vsm_process(const fx_effect_run *run)
         fx_pass *dc = fx_frame_find_pass(run->frame, "DiffCol");
         if (!dc || dc->channels < 3) {
             fx_aux_map_release(run->ctx, &map);
-            return fx_fail(run->ctx, FX_ERR_MISSING_PASS, "%s: apply sun_diffuse needs the DiffCol pass", where);
+            return fx_fail(run->ctx, FX_ERR_MISSING_PASS, "%s: apply %s needs the DiffCol pass", where,
+                           apply_items[p->apply]);
         }
         j.diffcol = dc->data;
+        static const char *const extra[2] = {"GlossCol", "Combined_" FX_LIGHT_GROUP_NAME};
+        for (int e = 0; e < 2 && p->apply >= APPLY_SUN_DIRECT; e++) {
+            if (e == 1 && p->apply != APPLY_LIGHT_GROUP)
+                break;
+            fx_pass *ps = fx_frame_find_pass(run->frame, extra[e]);
+            if (!ps || ps->channels < 3) {
+                fx_aux_map_release(run->ctx, &map);
+                return fx_fail(run->ctx, FX_ERR_MISSING_PASS,
+                               "%s: apply %s needs the %s pass%s", where, apply_items[p->apply], extra[e],
+                               e ? " (the light group '" FX_LIGHT_GROUP_NAME "' holding the light: the add-on "
+                                   "makes it; else use apply sun_direct)"
+                                 : "");
+            }
+            if (e == 0)
+                j.glosscol = ps->data;
+            else
+                j.group = ps->data;
+        }
         float e = light.energy * 0.318309886f /* 1/pi */;
         j.sun_rad = fx_v3(light.color.x * e, light.color.y * e, light.color.z * e);
         j.to_light = fx_v3_scale(light.direction, -1.0f);
         if (light.type != FX_LIGHT_SUN)
-            fx_warn(run->ctx, "%s: light '%s' is not a sun: sun_diffuse treats it as one", where, light.name);
+            fx_warn(run->ctx, "%s: light '%s' is not a sun: %s treats it as one", where, light.name,
+                    apply_items[p->apply]);
     }
     const fx_shadow_map *sm = map.sm;
     j.sm = sm;
@@ -604,7 +885,47 @@ static fx_result vsm_process(const fx_effect_run *run)
         fx_parallel_for(run->ctx, j.lh, fx_grain_for(run->ctx, j.lh), lo_rows, &j);
         fx_parallel_for(run->ctx, j.lh, fx_grain_for(run->ctx, j.lh), lo_flag_rows, &j);
     }
+    float *vm = NULL;
+    const int vm_lo = j.f > 1;
+    const size_t vm_bytes = (vm_lo ? (size_t)j.lw * j.lh : (size_t)run->width * run->height) * 2 * sizeof(float);
+    if (p->apply == APPLY_LIGHT_GROUP && p->bounce_reach > 0.0f && p->bounce_loss > 0.0f) {
+        /* bounce_reach: the visibility of every pixel first (with screen_downsample, the lo
+         * texels'), then its surroundings' mean (a Gaussian of v m over one of m), then the
+         * removal */
+        vm = fx_buffer_get(run->ctx, vm_bytes);
+        if (!vm) {
+            fx_buffer_put(run->ctx, lo, lo_bytes);
+            fx_aux_map_release(run->ctx, &map);
+            return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
+        }
+        memset(vm, 0, vm_bytes);
+        j.vm = vm;
+        j.vm_lo = vm_lo;
+        double sigma = p->bounce_reach * (double)run->width;
+        if (vm_lo) {
+            for (size_t k = 0; k < (size_t)j.lw * j.lh; k++) {
+                const int has = j.lo_d[k] > 0.0f;
+                vm[2 * k] = has ? fx_saturate(j.lo_v[k]) : 0.0f;
+                vm[2 * k + 1] = has ? 1.0f : 0.0f;
+            }
+            sigma /= (double)j.f;
+        } else {
+            j.vis_only = 1;
+            fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), vsm_rows, &j);
+            j.vis_only = 0;
+        }
+        fx_blur_spec bs = {sigma, FX_BLUR_RECURSIVE, 3};
+        r = fx_blur_image(run->ctx, vm, vm, vm_lo ? j.lw : run->width, vm_lo ? j.lh : run->height, 2, &bs,
+                          vm_lo ? NULL : roi, where);
+        if (r) {
+            fx_buffer_put(run->ctx, vm, vm_bytes);
+            fx_buffer_put(run->ctx, lo, lo_bytes);
+            fx_aux_map_release(run->ctx, &map);
+            return r;
+        }
+    }
     fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), vsm_rows, &j);
+    fx_buffer_put(run->ctx, vm, vm_bytes);
     fx_buffer_put(run->ctx, lo, lo_bytes);
     fx_aux_map_release(run->ctx, &map);
     return FX_OK;
@@ -622,6 +943,28 @@ static int vsm_aux_views(const void *params, fx_aux_need *out, int max)
     return 1;
 }
 
+/* params_version 2 added remove_as with the default ratio: a recipe of version 1 keeps the
+ * subtraction it was made with (remove_as difference unless it names one). Silent: the
+ * output is the same as before, nothing for the user to act on. */
+static fx_result vsm_migrate(int from_version, cJSON *params, char *note, size_t note_size)
+{
+    (void)note;
+    (void)note_size;
+    if (from_version == 1 && params && !cJSON_GetObjectItemCaseSensitive(params, "remove_as") &&
+        !cJSON_AddStringToObject(params, "remove_as", "difference"))
+        return FX_ERR_OUT_OF_MEMORY;
+    return FX_OK;
+}
+
+/* remove_as ratio averages over a 5x5 neighbourhood */
+static int vsm_halo(const void *params, int width, int height)
+{
+    const vsm_params *p = params;
+    (void)width;
+    (void)height;
+    return p->remove_as == REMOVE_RATIO && p->apply != APPLY_COMBINED ? RATIO_RADIUS : 0;
+}
+
 const fx_effect_class fx_effect_vsm_shadows = {
     .name = "vsm_shadows",
     .doc = "Shadows of a light from its depth view: variance shadow maps (box or Gaussian), PCF or hard",
@@ -632,7 +975,9 @@ const fx_effect_class fx_effect_vsm_shadows = {
     .passes = vsm_passes,
     .flags = FX_EFFECT_NEEDS_CAMERA,
     .aux_views = vsm_aux_views,
-    .halo = NULL,
+    .halo = vsm_halo,
     .validate = NULL,
     .process = vsm_process,
+    .params_version = 2,
+    .migrate = vsm_migrate,
 };
