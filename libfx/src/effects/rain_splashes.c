@@ -13,7 +13,7 @@
  * Additive. */
 #include "scene/aux_view.h"
 #include "core/effect.h"
-#include "core/mem.h"
+#include "core/buffers.h"
 #include "core/parallel.h"
 #include "effects/rain_common.h"
 #include "math/hash.h"
@@ -218,6 +218,8 @@ static void splash_rows(void *user, int y0, int y1)
             if (j->dbg)
                 j->dbg[i] = v;
         }
+        /* finite while the row is in cache (FX_EFFECT_OWN_FINITE: the stack skips its scan) */
+        fx_effect_finish_row(run, run->dst + 4 * ((size_t)y * run->width + roi->x0), (size_t)(roi->x1 - roi->x0) * 4);
     }
 }
 
@@ -338,6 +340,7 @@ static void interp_rows(void *user, int y0, int y1)
                     j->dbg[i] = v;
             }
         }
+        fx_effect_finish_row(run, run->dst + 4 * (row + roi->x0), (size_t)(roi->x1 - roi->x0) * 4);
     }
 }
 
@@ -360,34 +363,24 @@ static fx_result splash_process(const fx_effect_run *run)
         return fx_rain_effect_end(run, &j.rm, FX_OK);
     }
     splash_lattice l = { n, (roi->x1 - roi->x0 - 1 + n - 1) / n + 1, (rows - 1 + n - 1) / n + 1, NULL, NULL, NULL, NULL };
-    const size_t nodes = (size_t)l.nx * l.ny;
-    l.v = fx_mem_alloc(nodes * sizeof(float));
-    l.ground = fx_mem_alloc(nodes);
-    if (!l.v || !l.ground) {
-        fx_mem_free(l.v);
-        fx_mem_free(l.ground);
+    const size_t nodes = (size_t)l.nx * l.ny, cells = (size_t)(l.nx - 1) * (l.ny - 1);
+    /* one block from the context's store (core/buffers.h): later frames of the same size reuse
+     * its pages instead of faulting fresh ones in */
+    const size_t bytes = (nodes + cells + (size_t)(l.ny - 1)) * 4 + nodes;
+    unsigned char *block = fx_buffer_get(run->ctx, bytes);
+    if (!block)
         return fx_rain_effect_end(run, &j.rm,
                                   fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the lattice", run->where));
-    }
-    l.cell = fx_mem_alloc((size_t)(l.nx - 1) * (l.ny - 1) * sizeof(int));
-    l.ncell = fx_mem_alloc((size_t)(l.ny - 1) * sizeof(int));
-    if (!l.cell || !l.ncell) {
-        fx_mem_free(l.v);
-        fx_mem_free(l.ground);
-        fx_mem_free(l.cell);
-        fx_mem_free(l.ncell);
-        return fx_rain_effect_end(run, &j.rm,
-                                  fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the lattice", run->where));
-    }
+    l.v = (float *)block;
+    l.cell = (int *)(block + nodes * 4);
+    l.ncell = (int *)(block + (nodes + cells) * 4);
+    l.ground = block + (nodes + cells + (size_t)(l.ny - 1)) * 4;
     lattice_job lj = { &j, &l };
     fx_parallel_for(run->ctx, l.ny, fx_grain_for(run->ctx, l.ny), lattice_rows, &lj);
     fx_parallel_for(run->ctx, l.ny - 1, fx_grain_for(run->ctx, l.ny - 1), cell_rows, &lj);
     interp_job ij = { &j, &l };
     fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), interp_rows, &ij);
-    fx_mem_free(l.v);
-    fx_mem_free(l.ground);
-    fx_mem_free(l.cell);
-    fx_mem_free(l.ncell);
+    fx_buffer_put(run->ctx, block, bytes);
     return fx_rain_effect_end(run, &j.rm, FX_OK);
 }
 
@@ -405,8 +398,9 @@ const fx_effect_class fx_effect_rain_splashes = {
         "{\"downsample\": 1}",
     },
     .passes = splash_passes,
-    /* each pixel reads its own input pixel before writing it */
-    .flags = FX_EFFECT_NEEDS_CAMERA | FX_EFFECT_IN_PLACE,
+    /* each pixel reads its own input pixel before writing it; every row goes through
+     * fx_effect_finish_row while in cache */
+    .flags = FX_EFFECT_NEEDS_CAMERA | FX_EFFECT_IN_PLACE | FX_EFFECT_OWN_FINITE,
     .aux_views = fx_aux_needs_rain_map, /* what is under cover */
     .halo = NULL,
     .validate = splash_validate,
