@@ -267,6 +267,9 @@ __attribute__((target("avx2"), noinline)) static int lum_row_avx2(const float *p
     const __m256i mant = _mm256_set1_epi32((1 << (23 - FX_SRGB_LUT_BITS)) - 1);
     const __m256i base = _mm256_set1_epi32((int32_t)((uint32_t)(127 + FX_SRGB_LUT_MIN_EXP) << FX_SRGB_LUT_BITS));
     const __m256i order = _mm256_setr_epi32(0, 4, 1, 5, 2, 6, 3, 7);
+    /* lanes 0 1 4 5 to the first gather, 2 3 6 7 to the second: _mm256_shuffle_ps then puts
+     * them back in order */
+    const __m256i pair_order = _mm256_setr_epi32(0, 1, 4, 5, 2, 3, 6, 7);
     int x = x0;
     for (; x + 8 <= x1; x += 8) {
         const float *q = p + 4 * (size_t)x;
@@ -286,7 +289,13 @@ __attribute__((target("avx2"), noinline)) static int lum_row_avx2(const float *p
         const __m256i i = _mm256_andnot_si256(_mm256_castps_si256(small),
                                               _mm256_sub_epi32(_mm256_srli_epi32(bits, 23 - FX_SRGB_LUT_BITS), base));
         const __m256 t = _mm256_mul_ps(_mm256_cvtepi32_ps(_mm256_and_si256(bits, mant)), tscale);
-        const __m256 l0 = _mm256_i32gather_ps(lut, i, 4), l1 = _mm256_i32gather_ps(lut + 1, i, 4);
+        /* the pairs (lut[i], lut[i + 1]) as 8-byte elements: 2 gathers of 4, then split */
+        const __m256i ip = _mm256_permutevar8x32_epi32(i, pair_order);
+        const __m256 r0 = _mm256_castsi256_ps(
+            _mm256_i32gather_epi64((const long long *)(const void *)lut, _mm256_castsi256_si128(ip), 4));
+        const __m256 r1 = _mm256_castsi256_ps(
+            _mm256_i32gather_epi64((const long long *)(const void *)lut, _mm256_extracti128_si256(ip, 1), 4));
+        const __m256 l0 = _mm256_shuffle_ps(r0, r1, 0x88), l1 = _mm256_shuffle_ps(r0, r1, 0xdd);
         const __m256 e = _mm256_add_ps(l0, _mm256_mul_ps(t, _mm256_sub_ps(l1, l0)));
         const __m256 v = _mm256_blendv_ps(e, _mm256_mul_ps(lin, l), small);
         _mm256_storeu_ps(out + x, _mm256_permutevar8x32_ps(v, order));
