@@ -218,8 +218,6 @@ static void splash_rows(void *user, int y0, int y1)
             if (j->dbg)
                 j->dbg[i] = v;
         }
-        /* finite while the row is in cache (FX_EFFECT_OWN_FINITE: the stack skips its scan) */
-        fx_effect_finish_row(run, run->dst + 4 * ((size_t)y * run->width + roi->x0), (size_t)(roi->x1 - roi->x0) * 4);
     }
 }
 
@@ -340,7 +338,6 @@ static void interp_rows(void *user, int y0, int y1)
                     j->dbg[i] = v;
             }
         }
-        fx_effect_finish_row(run, run->dst + 4 * (row + roi->x0), (size_t)(roi->x1 - roi->x0) * 4);
     }
 }
 
@@ -398,9 +395,8 @@ const fx_effect_class fx_effect_rain_splashes = {
         "{\"downsample\": 1}",
     },
     .passes = splash_passes,
-    /* each pixel reads its own input pixel before writing it; every row goes through
-     * fx_effect_finish_row while in cache */
-    .flags = FX_EFFECT_NEEDS_CAMERA | FX_EFFECT_IN_PLACE | FX_EFFECT_OWN_FINITE,
+    /* each pixel reads its own input pixel before writing it */
+    .flags = FX_EFFECT_NEEDS_CAMERA | FX_EFFECT_IN_PLACE,
     .aux_views = fx_aux_needs_rain_map, /* what is under cover */
     .halo = NULL,
     .validate = splash_validate,
