@@ -93,7 +93,8 @@ KNOBS = {
     "pixelate": [("look", "cell_size", "4,12,32", "4", "")],
     "posterize": [("look", "levels", "2,4,8,16", "16", "")],
     "rain": [("look", "density", "0.1,0.35,1", "1", "")],
-    "rain_splashes": [("look", "spacing", "0.25,0.35,1", "0.25", "")],  # size 0.12 <= spacing / 2
+    "rain_splashes": [("knob", "downsample", "1,2,4,8", "8", ""),
+                      ("look", "spacing", "0.25,0.35,1", "0.25", "")],  # size 0.12 <= spacing / 2
     "sin_city": [("look", "levels", "0,4,8", "0", "")],
     "ssr_mirror": [("knob", "max_steps", "16,32,64,128,256", "16,64", ""),
                    ("knob", "resolution_scale", "0.25,0.5,1", "0.5", ""),

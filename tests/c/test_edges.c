@@ -481,6 +481,68 @@ static void test_in_place(fx_context *c1, fx_context *c2)
         }
 }
 
+/* The default luminance Sobel takes a fast path (AVX2 where the CPU has it: bounds that skip
+ * the exact magnitude for pixels surely under or over the ramp); the debug strengths force
+ * the exact path. Both must give the same bits, for thresholds from 0 to 300, hard and soft
+ * ramps, on a field with gradients of every size (noise on ramps, steps near the
+ * thresholds, values up to the encoder's clamp, non-finite pixels). */
+static void test_fast_path(fx_context *ctx)
+{
+    const int w = 203, h = 71;
+    float *px = malloc((size_t)w * h * 4 * sizeof(float));
+    uint32_t st = 12345u;
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++) {
+            float *p = px + ((size_t)y * w + x) * 4;
+            st = st * 1664525u + 1013904223u;
+            const float r = (float)(st >> 8) * (1.0f / 16777216.0f);
+            float v;
+            switch ((x / 29 + y / 13) % 5) {
+            case 0: v = 0.2f + 0.01f * (float)x + 0.02f * r; break;              /* ramp + fine noise */
+            case 1: v = (x % 7 < 3 ? 0.1f : 0.1f + 0.05f * (float)(y % 9)) + 1e-4f * r; break; /* steps */
+            case 2: v = r * r * 4.0f; break;                                       /* coarse noise */
+            case 3: v = (x + y) % 11 == 0 ? 1e6f * r : 1e-3f * r; break;          /* huge values */
+            default: v = r < 0.02f ? (r < 0.01f ? NAN : INFINITY) : 50.0f * r; break;
+            }
+            p[0] = v;
+            p[1] = v * (0.5f + r);
+            p[2] = v * 0.25f;
+            p[3] = 1.0f;
+        }
+    fx_frame *f = et_frame(ctx, w, h, px);
+    free(px);
+    const float ts[] = { 0.0f, 1e-4f, 0.003f, 0.05f, 0.15f, 0.5f, 2.0f, 30.0f, 300.0f };
+    const float sf[] = { 0.0f, 0.5f, 3.0f };
+    int same = 1, lines = 0;
+    for (size_t i = 0; i < sizeof ts / sizeof ts[0]; i++)
+        for (size_t k = 0; k < sizeof sf / sizeof sf[0]; k++) {
+            char p[256];
+            snprintf(p, sizeof p, "\"luminance_threshold\":%.9g,\"softness\":%.9g,\"line_color\":[1,0,0,1]",
+                     (double)ts[i], (double)sf[k]);
+            float *a = run_pass(ctx, f, recipe(p, NULL), NULL);
+            fx_stack *s = NULL;
+            fx_frame *out = NULL;
+            float *b = NULL;
+            if (fx_stack_new(ctx, &s) == FX_OK && fx_stack_load_json(s, recipe(p, NULL)) == FX_OK) {
+                fx_stack_set_debug_outputs(s, 1);
+                if (fx_stack_run(s, f, &out) == FX_OK) {
+                    b = malloc((size_t)w * h * 4 * sizeof(float));
+                    memcpy(b, et_combined(out), (size_t)w * h * 4 * sizeof(float));
+                }
+            }
+            same &= a && b && memcmp(a, b, (size_t)w * h * 4 * sizeof(float)) == 0;
+            for (int q = 0; a && q < w * h; q++)
+                lines += a[4 * q] == 1.0f && a[4 * q + 1] == 0.0f;
+            fx_frame_free(out);
+            fx_stack_free(s);
+            free(a);
+            free(b);
+        }
+    CHECK(same);
+    CHECK(lines > 1000);
+    fx_frame_free(f);
+}
+
 int main(void)
 {
     test_srgb_lut();
@@ -494,6 +556,8 @@ int main(void)
     test_properties(c1, c2);
     test_extremes(c1);
     test_in_place(c1, c2);
+    test_fast_path(c1);
+    test_fast_path(c2);
     fx_context_free(c1);
     fx_context_free(c2);
     return tu_finish("test_edges");

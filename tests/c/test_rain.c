@@ -211,12 +211,12 @@ static fx_frame *ground_frame(fx_context *ctx, const char *map, const fx_camera 
 /* the roof covers world y > 1 (top of the image is y = 5), up to a rain-map texel */
 static int covered_row(int y) { return 5.0f - (y + 0.5f) * 10.0f / N > 1.0f + 0.16f; }
 
-static void test_splashes_and_wet(fx_context *ctx)
+/* A rain map with a roof over world y > 1 at z = 3 (rain_map() covers y < roof_y, so it is
+ * mirrored here), written into a fresh temporary directory: its path in path. */
+static void roof_map(fx_context *ctx, const char *dir, fx_camera *mcp, char *path, size_t n)
 {
     fx_camera mc;
-    /* rain map with a roof over y > 1 at z = 3: rain_map() covers y < roof_y, so mirror it */
-    char path[512];
-    snprintf(path, sizeof path, "%s/roof_north.exr", tu_tmpdir("rain_maps2"));
+    snprintf(path, n, "%s/roof_north.exr", tu_tmpdir(dir));
     {
         float w2c[16] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, -40, 0, 0, 0, 1};
         ortho(&mc, w2c, 20.0f, 1.0f, 60.0f);
@@ -234,6 +234,14 @@ static void test_splashes_and_wet(fx_context *ctx)
         fx_frame_free(m);
         free(d);
     }
+    *mcp = mc;
+}
+
+static void test_splashes_and_wet(fx_context *ctx)
+{
+    fx_camera mc;
+    char path[512];
+    roof_map(ctx, "rain_maps2", &mc, path, sizeof path);
     int total = 0;
     for (int fr = 1; fr <= 6; fr++) {
         fx_frame *f = ground_frame(ctx, path, &mc, fr);
@@ -301,6 +309,74 @@ static void test_splashes_and_wet(fx_context *ctx)
     fx_frame_free(out);
     fx_stack_free(s);
     fx_frame_free(f);
+}
+
+/* rain_splashes' downsample knob (the splashes on a lattice of every n-th pixel, interpolated
+ * where a cell's corners are all ground): no splash on walls or far under the roof, close to
+ * every pixel's splashes, the same bits on 1 and 2 threads and in place (a consumed input),
+ * the pixels outside a mask untouched. */
+static void test_splashes_downsample(fx_context *ctx)
+{
+    fx_camera mc;
+    char path[512];
+    roof_map(ctx, "rain_maps3", &mc, path, sizeof path);
+    fx_context *c2 = NULL;
+    CHECK_OK(ctx, fx_context_new(&c2, 2));
+    const int ns[] = {2, 3, 4};
+    for (size_t k = 0; k < sizeof ns / sizeof ns[0]; k++) {
+        int total = 0, bad = 0;
+        double err = 0.0, mass = 0.0;
+        for (int fr = 1; fr <= 4; fr++) {
+            fx_frame *f = ground_frame(ctx, path, &mc, fr);
+            char params[320], exact[256];
+            snprintf(exact, sizeof exact, "\"spacing\": 1.0, \"size\": 0.45, \"rate\": 1.0");
+            snprintf(params, sizeof params, "%s, \"downsample\": %d", exact, ns[k]);
+            float *o = et_run_effect(ctx, "rain_splashes", f, params, NULL);
+            float *o2 = et_run_effect(c2, "rain_splashes", f, params, NULL);
+            float *e = et_run_effect(ctx, "rain_splashes", f, exact, NULL);
+            float *m = et_run_effect(ctx, "rain_splashes", f, params, "{\"rect\":[5,9,30,40]}");
+            CHECK(o && o2 && memcmp(o, o2, N * N * 4 * sizeof(float)) == 0);
+            const float *src = et_combined(f);
+            CHECK(m && et_outside_equal(m, src, N, N, 5, 9, 30, 40));
+            for (int y = 0; o && e && y < N; y++)
+                for (int x = 0; x < N; x++) {
+                    const int i = y * N + x;
+                    const int changed = memcmp(o + 4 * i, src + 4 * i, 16) != 0;
+                    /* under the roof by more than n pixels (plus a texel) or on the wall: none */
+                    const int deep = covered_row(y) && (y + ns[k] < N ? covered_row(y + ns[k]) : 1) &&
+                                     (y >= ns[k] ? covered_row(y - ns[k]) : 1);
+                    bad += changed && (deep || (x >= 40 && x < 48));
+                    total += changed;
+                    err += (double)o[4 * i] - src[4 * i]; /* light added */
+                    mass += (double)e[4 * i] - src[4 * i];
+                }
+            CHECK(o && tu_all_finite(o, N * N * 4));
+            /* in place: the stack consumes a frame of its own */
+            fx_frame *g = ground_frame(ctx, path, &mc, fr);
+            fx_stack *s = NULL;
+            char buf[512];
+            snprintf(buf, sizeof buf, "{\"version\":1,\"effects\":[{\"effect\":\"rain_splashes\",\"params\":{%s}}]}",
+                     params);
+            fx_frame *out = NULL;
+            CHECK_OK(ctx, fx_stack_new(ctx, &s));
+            CHECK_OK(ctx, fx_stack_load_json(s, buf));
+            CHECK_OK(ctx, fx_stack_run_consume(s, g, 0, &out));
+            CHECK(o && out && memcmp(o, et_combined(out), N * N * 4 * sizeof(float)) == 0);
+            fx_frame_free(out);
+            fx_stack_free(s);
+            free(o);
+            free(o2);
+            free(e);
+            free(m);
+            fx_frame_free(f);
+        }
+        fprintf(stderr, "splashes downsample %d: %d pixels changed, %d bad, light added / every pixel's %.3f\n",
+                ns[k], total, bad, mass > 0 ? err / mass : 0.0);
+        CHECK(bad == 0 && total > 20);
+        /* rings 0.6 px wide here (the lattice samples them or not): only the amount of light */
+        CHECK(mass > 0 && err / mass > 0.4 && err / mass < 2.5);
+    }
+    fx_context_free(c2);
 }
 
 /* The rain map goes through the context's cache (scene/aux_map.h): a stack of wet_surfaces,
@@ -427,9 +503,11 @@ static void test_rain_layers_extremes(fx_context *ctx)
                                  {"rain", "\"cover_material\": \"\", \"downsample\": 8"},
                                  {"rain", "\"cover_material\": \"\", \"downsample\": 2"},
                                  {"rain_splashes", ""},
+                                 {"rain_splashes", "\"downsample\": 2"},
+                                 {"rain_splashes", "\"downsample\": 16"},
                                  {"wet_surfaces", ""},
                                  {"wet_surfaces", "\"downsample\": 2"}};
-        for (int r = 0; r < 7; r++) {
+        for (int r = 0; r < (int)(sizeof runs / sizeof runs[0]); r++) {
             float *out = et_run_effect(ctx, runs[r][0], g, runs[r][1], NULL);
             CHECK(out && tu_all_finite(out, (size_t)w * h * 4));
             free(out);
@@ -574,6 +652,7 @@ int main(void)
     fx_context_new(&ctx, 2);
     test_rain(ctx);
     test_splashes_and_wet(ctx);
+    test_splashes_downsample(ctx);
     test_cache();
     test_rain_layers_extremes(ctx);
     test_rain_downsample(ctx);

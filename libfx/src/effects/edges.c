@@ -242,6 +242,16 @@ FX_CLONES static void draw_row(void *user, int y, const float *matte)
             const int finite = !any8(inf[0] | inf[1] | inf[2] | inf[3]);
             const v8f pair[4] = { FX_SHUF8(a8, a8, 0, 0, 0, 0, 1, 1, 1, 1), FX_SHUF8(a8, a8, 2, 2, 2, 2, 3, 3, 3, 3),
                                   FX_SHUF8(a8, a8, 4, 4, 4, 4, 5, 5, 5, 5), FX_SHUF8(a8, a8, 6, 6, 6, 6, 7, 7, 7, 7) };
+            if (finite) {
+                /* finite pixels: s + a (lc - s) is finite (a in [0, 1], |lc| <= 65504), finite8
+                 * would leave it as it is */
+                for (int k = 0; k < 4; k++) {
+                    const v8f a = pair[k];
+                    const v8f o = SEL8(a == S8(0.0f), s[k], s[k] + a * (lc8 - s[k]));
+                    memcpy(drow + 4 * (size_t)xc + 8 * k, &o, sizeof o);
+                }
+                continue;
+            }
             for (int k = 0; k < 4; k++) {
                 const v8f a = pair[k]; /* pixels 2k and 2k + 1's opacities, four lanes each */
                 const v8f t = finite8(s[k] + a * (lc8 - s[k]));

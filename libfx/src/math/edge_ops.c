@@ -251,11 +251,68 @@ static inline float lum_px(const float *p, const float *lut)
     return fx_srgb_encode_lut(lut, l); /* no powf: math/srgb_lut.h */
 }
 
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && !defined(FX_NO_CLONES)
+#  include <immintrin.h>
+#  define EDGE_LUM_AVX2 1
+/* lum_row's 8-pixel loop in AVX2 intrinsics: the same operations lane by lane (no FMA: the
+ * same bits), with the table's two reads per lane as two gathers and a shorter transpose
+ * (R, G, B only, the lanes in the order 0 2 4 6 1 3 5 7, put back before the store). Returns
+ * where it stopped. Called only when the CPU has AVX2. */
+__attribute__((target("avx2"), noinline)) static int lum_row_avx2(const float *p, const float *lut, int x0,
+                                                                 int x1, float *out)
+{
+    const __m256 kr = _mm256_set1_ps(FX_LUMA_R), kg = _mm256_set1_ps(FX_LUMA_G), kb = _mm256_set1_ps(FX_LUMA_B);
+    const __m256 zero = _mm256_setzero_ps(), cap = _mm256_set1_ps(1e6f), lo = _mm256_set1_ps(0.001953125f);
+    const __m256 lin = _mm256_set1_ps(12.92f), tscale = _mm256_set1_ps(1.0f / (float)(1u << (23 - FX_SRGB_LUT_BITS)));
+    const __m256i mant = _mm256_set1_epi32((1 << (23 - FX_SRGB_LUT_BITS)) - 1);
+    const __m256i base = _mm256_set1_epi32((int32_t)((uint32_t)(127 + FX_SRGB_LUT_MIN_EXP) << FX_SRGB_LUT_BITS));
+    const __m256i order = _mm256_setr_epi32(0, 4, 1, 5, 2, 6, 3, 7);
+    /* lanes 0 1 4 5 to the first gather, 2 3 6 7 to the second: _mm256_shuffle_ps then puts
+     * them back in order */
+    const __m256i pair_order = _mm256_setr_epi32(0, 1, 4, 5, 2, 3, 6, 7);
+    int x = x0;
+    for (; x + 8 <= x1; x += 8) {
+        const float *q = p + 4 * (size_t)x;
+        const __m256 m0 = _mm256_loadu_ps(q), m1 = _mm256_loadu_ps(q + 8);
+        const __m256 m2 = _mm256_loadu_ps(q + 16), m3 = _mm256_loadu_ps(q + 24);
+        /* m0 = r0 g0 b0 a0 r1 g1 b1 a1, ...: t0 = r0 r2 g0 g2 | r1 r3 g1 g3 */
+        const __m256 t0 = _mm256_unpacklo_ps(m0, m1), t1 = _mm256_unpackhi_ps(m0, m1);
+        const __m256 t2 = _mm256_unpacklo_ps(m2, m3), t3 = _mm256_unpackhi_ps(m2, m3);
+        const __m256 r = _mm256_castpd_ps(_mm256_unpacklo_pd(_mm256_castps_pd(t0), _mm256_castps_pd(t2)));
+        const __m256 g = _mm256_castpd_ps(_mm256_unpackhi_pd(_mm256_castps_pd(t0), _mm256_castps_pd(t2)));
+        const __m256 b = _mm256_castpd_ps(_mm256_unpacklo_pd(_mm256_castps_pd(t1), _mm256_castps_pd(t3)));
+        __m256 l = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(kr, r), _mm256_mul_ps(kg, g)), _mm256_mul_ps(kb, b));
+        const __m256 pos = _mm256_cmp_ps(l, zero, _CMP_GT_OQ); /* false for NaN: 0, as lum_px */
+        l = _mm256_and_ps(pos, _mm256_min_ps(l, cap));         /* l < 1e6 ? l : 1e6 where positive */
+        const __m256 small = _mm256_cmp_ps(l, lo, _CMP_LT_OQ);
+        const __m256i bits = _mm256_castps_si256(l);
+        const __m256i i = _mm256_andnot_si256(_mm256_castps_si256(small),
+                                              _mm256_sub_epi32(_mm256_srli_epi32(bits, 23 - FX_SRGB_LUT_BITS), base));
+        const __m256 t = _mm256_mul_ps(_mm256_cvtepi32_ps(_mm256_and_si256(bits, mant)), tscale);
+        /* the pairs (lut[i], lut[i + 1]) as 8-byte elements: 2 gathers of 4, then split */
+        const __m256i ip = _mm256_permutevar8x32_epi32(i, pair_order);
+        const __m256 r0 = _mm256_castsi256_ps(
+            _mm256_i32gather_epi64((const long long *)(const void *)lut, _mm256_castsi256_si128(ip), 4));
+        const __m256 r1 = _mm256_castsi256_ps(
+            _mm256_i32gather_epi64((const long long *)(const void *)lut, _mm256_extracti128_si256(ip, 1), 4));
+        const __m256 l0 = _mm256_shuffle_ps(r0, r1, 0x88), l1 = _mm256_shuffle_ps(r0, r1, 0xdd);
+        const __m256 e = _mm256_add_ps(l0, _mm256_mul_ps(t, _mm256_sub_ps(l1, l0)));
+        const __m256 v = _mm256_blendv_ps(e, _mm256_mul_ps(lin, l), small);
+        _mm256_storeu_ps(out + x, _mm256_permutevar8x32_ps(v, order));
+    }
+    return x;
+}
+#endif
+
 /* 8 pixels at a time in GCC vector types (the transpose of core/simd8.h, then lum_px's
  * operations lane by lane: the same bits), the table read per lane; the rest per pixel. */
 FX_CLONES static void lum_row(const float *p, const float *lut, int x0, int x1, float *out)
 {
     int x = x0;
+#ifdef EDGE_LUM_AVX2
+    if (__builtin_cpu_supports("avx2"))
+        x = lum_row_avx2(p, lut, x0, x1, out);
+#endif
     const v8f lo = S8(0.001953125f); /* 2^-9 */
     const v8i imask = { 0, 0, 0, 0, 0, 0, 0, 0 };
     for (; x + 8 <= x1; x += 8) {
@@ -568,7 +625,7 @@ __attribute__((target("avx2"), noinline)) static int sobel_ramp_row_avx2(const f
     const __m256 big = _mm256_set1_ps(FLT_MAX), tv = _mm256_set1_ps(t), iv = _mm256_set1_ps(inv);
     const __m256 one = _mm256_set1_ps(1.0f), zero = _mm256_setzero_ps();
     const double qs = 16.0 * (double)t * (double)t * (1.0 - 1.0 / 524288.0);
-    const __m256 qskipf = _mm256_set1_ps((float)(qs * (1.0 - 1.0 / 4096.0))), margin = _mm256_set1_ps(1.0f / 16384.0f);
+    const __m256 qskipf = _mm256_set1_ps((float)(qs * (1.0 - 1.0 / 4096.0)));
     const __m256 absm = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fffffff));
     /* ramp 1 for sure: v >= (t + W)(1 + 1e-5), W = 1 / inv, then (v - t) inv >= 1 after its two
      * roundings; v = sqrt(q) / 4 rounded: q >= 16 (t + W)^2 (1 + 2e-5)^2 is enough, and the float
@@ -587,11 +644,18 @@ __attribute__((target("avx2"), noinline)) static int sobel_ramp_row_avx2(const f
     const __m256 se = _mm256_sub_ps(_mm256_loadu_ps(C + (x) + 1), c);                                           \
     const __m256 gx1 = _mm256_sub_ps(ne, nw), gx2 = _mm256_sub_ps(ea, we), gx3 = _mm256_sub_ps(se, sw);         \
     const __m256 gy1 = _mm256_sub_ps(sw, nw), gy2 = _mm256_sub_ps(s, n), gy3 = _mm256_sub_ps(se, ne)
-    /* Pass 1, branch-free: float bounds on |gx| and |gy| from above and below. |gx - gxf| <=
-     * 2^-22 (|gx1| + 2 |gx2| + |gx3|), far below the 2^-14 taken here (likewise gy); qskipf is
+    /* Pass 1, branch-free: float bounds on |gx| and |gy| from above and below, from the
+     * column differences (8 loads, no centre subtracted: the sums of the exact path in another
+     * order). Every value of a luminance field is in [0, 341] (lum_row: luminance clamped to
+     * 1e6, encoded; L = 512 below). The exact path's gx (float differences from the centre,
+     * then the double sum) is within 16 u L of the real sum over the inputs (u = 2^-24: each
+     * of its 3 float differences per term errs by at most 4 u L, weights 1 + 2 + 1), and gxf
+     * here within 10 u L of it: |gx - gxf| <= 26 u L = 7.9e-4, plus the rounding of ax +- M
+     * (u 8 L = 2.4e-4): the margin M = 2^-9 = 1.95e-3 covers both (likewise gy). qskipf is
      * below qs and qhighf above qh's exact bound, so a lane under qskipf has ramp 0 (v <= t)
      * and one over qhighf ramp 1. Those values are stored; a chunk with any other lane goes on
      * a list (no branch: edges cut across chunks at random and mispredicted). */
+    const __m256 mg = _mm256_set1_ps(0.001953125f);
     enum { SEG = 256 }; /* chunks per list */
     int list[SEG];
     int x = xa;
@@ -599,17 +663,17 @@ __attribute__((target("avx2"), noinline)) static int sobel_ramp_row_avx2(const f
         int nl = 0;
         const int x_end = x + 8 * SEG <= xb ? x + 8 * SEG : xb;
         for (; x + 8 <= x_end; x += 8) {
-            SOBEL_TERMS(x);
-            const __m256 gxf = _mm256_add_ps(_mm256_add_ps(gx1, _mm256_add_ps(gx2, gx2)), gx3);
-            const __m256 gyf = _mm256_add_ps(_mm256_add_ps(gy1, _mm256_add_ps(gy2, gy2)), gy3);
-            const __m256 sx = _mm256_add_ps(_mm256_add_ps(_mm256_and_ps(gx1, absm), _mm256_and_ps(gx2, absm)),
-                                            _mm256_add_ps(_mm256_and_ps(gx2, absm), _mm256_and_ps(gx3, absm)));
-            const __m256 sy = _mm256_add_ps(_mm256_add_ps(_mm256_and_ps(gy1, absm), _mm256_and_ps(gy2, absm)),
-                                            _mm256_add_ps(_mm256_and_ps(gy2, absm), _mm256_and_ps(gy3, absm)));
+            const __m256 am = _mm256_loadu_ps(A + x - 1), a0 = _mm256_loadu_ps(A + x), ap = _mm256_loadu_ps(A + x + 1);
+            const __m256 bm = _mm256_loadu_ps(B + x - 1), bp = _mm256_loadu_ps(B + x + 1);
+            const __m256 cm = _mm256_loadu_ps(C + x - 1), c0 = _mm256_loadu_ps(C + x), cp = _mm256_loadu_ps(C + x + 1);
+            const __m256 db = _mm256_sub_ps(bp, bm), dc = _mm256_sub_ps(c0, a0);
+            const __m256 gxf = _mm256_add_ps(_mm256_add_ps(_mm256_sub_ps(ap, am), _mm256_sub_ps(cp, cm)),
+                                             _mm256_add_ps(db, db));
+            const __m256 gyf = _mm256_add_ps(_mm256_add_ps(_mm256_sub_ps(cm, am), _mm256_sub_ps(cp, ap)),
+                                             _mm256_add_ps(dc, dc));
             const __m256 ax = _mm256_and_ps(gxf, absm), ay = _mm256_and_ps(gyf, absm);
-            const __m256 mx = _mm256_mul_ps(sx, margin), my = _mm256_mul_ps(sy, margin);
-            const __m256 bx = _mm256_add_ps(ax, mx), by = _mm256_add_ps(ay, my);
-            const __m256 lx = _mm256_max_ps(_mm256_sub_ps(ax, mx), zero), ly = _mm256_max_ps(_mm256_sub_ps(ay, my), zero);
+            const __m256 bx = _mm256_add_ps(ax, mg), by = _mm256_add_ps(ay, mg);
+            const __m256 lx = _mm256_max_ps(_mm256_sub_ps(ax, mg), zero), ly = _mm256_max_ps(_mm256_sub_ps(ay, mg), zero);
             const __m256 qf = _mm256_add_ps(_mm256_mul_ps(bx, bx), _mm256_mul_ps(by, by));
             const __m256 qlo = _mm256_add_ps(_mm256_mul_ps(lx, lx), _mm256_mul_ps(ly, ly));
             const __m256 lo = _mm256_cmp_ps(qf, qskipf, _CMP_LT_OQ), hi = _mm256_cmp_ps(qlo, qhighf, _CMP_GT_OQ);
