@@ -8,8 +8,18 @@
  * reflected colour is the current Combined sampled bilinearly at the hit coordinates
  * (from a Gaussian-blurred copy for glossy mirrors: the lookup is blurred, not the
  * result), faded towards the fallback (the mirror's own texture or an environment
- * colour) as the hit nears the frame border, put through the colour operator, and
- * mixed by w = reflectivity x Fresnel: C = C_texture (1 - w) + C_reflection w.
+ * colour, or the reflection probe) as the hit nears the frame border, put through the
+ * colour operator, and mixed by w = reflectivity x Fresnel:
+ * C = C_texture (1 - w) + C_reflection w.
+ *
+ * Reflection probe (fallback "probe", the final and reference presets): an equirectangular
+ * panorama with radial depth that the add-on renders from beside the mirror (aux view
+ * "probe:<mask key>", scene/aux_view.h, math/panorama.h). Where a ray misses, leaves the
+ * frame or meets the back of an object, the reflection is the probe's colour where the
+ * reflected ray, marched from the mirror's surface point, meets the probe's depth surface
+ * (parallax-corrected), blended with the trace by its confidence. Without the probe (not
+ * rendered, failed): a warning and the texture fallback; debug pass "fallback_<name>"
+ * names the one in use and holds its weight per pixel.
  *
  * One stack entry is one mirror kind: many mirrors are many entries, each with its own
  * mask and parameters (the add-on's UI, `libfx describe` and the docs keep working on
@@ -36,7 +46,9 @@
 #include "math/color.h"
 #include "math/color_ops.h"
 #include "math/edge_ops.h"
+#include "math/panorama.h"
 #include "math/ssr_trace.h"
+#include "scene/aux_view.h"
 
 #include <float.h>
 #include <math.h>
@@ -70,15 +82,16 @@ typedef struct ssr_params {
     float resolution_scale;
     int retrace_edges;
     int hiz;
+    int probe_steps;
 } ssr_params;
 
 enum { OP_NONE = 0, OP_SEPIA, OP_GRAYSCALE, OP_CEL };
 /* Jacobi iterations of the finished one-bounce image (the estimate past the last bounce) */
 enum { FIN_ITERATIONS = 3 };
-enum { FALLBACK_TEXTURE = 0, FALLBACK_ENVIRONMENT };
+enum { FALLBACK_TEXTURE = 0, FALLBACK_ENVIRONMENT, FALLBACK_PROBE };
 
 static const char *const op_items[] = { "none", "sepia", "grayscale", "cel" };
-static const char *const fallback_items[] = { "texture", "environment" };
+static const char *const fallback_items[] = { "texture", "environment", "probe" };
 static const float env_default[3] = { 0.5f, 0.6f, 0.75f };
 
 static const fx_param_def ssr_param_defs[] = {
@@ -103,8 +116,10 @@ static const fx_param_def ssr_param_defs[] = {
                "Curved mirror from a flat one: the normal tilts by bend x (position on the face "
                "from its centre, -1..1); > 0 bulges out (convex, wider view), < 0 in (concave)"),
     FX_P_ENUM(ssr_params, fallback, "fallback", FALLBACK_TEXTURE, fallback_items,
-              "Where a ray misses (or leaves the frame): texture: the mirror's own pixel; "
-              "environment: environment_color"),
+              "Where a ray misses (or leaves the frame, or meets the back of an object): texture: the "
+              "mirror's own pixel; environment: environment_color; probe: the reflection probe (a "
+              "panorama with depth the add-on renders beside the mirror), parallax-corrected, or the "
+              "texture with a warning when the frame has no probe"),
     FX_P_FLOATS(ssr_params, environment, "environment_color", 3, env_default, 0.0, 65504.0, "color",
                 "Reflection colour of missed rays when fallback is environment (linear RGB)"),
     FX_P_FLOAT(ssr_params, edge_fade, "edge_fade", 0.08, 0.0, 0.5, 0.0, 0.2, "factor",
@@ -138,6 +153,9 @@ static const fx_param_def ssr_param_defs[] = {
               "ray passes in front of (or far behind) are skipped whole, every other pixel is tested "
               "(stride and growth unused, max_steps caps the walk). Closer to reference on the mirror "
               "room, but misses grazing hits between facing mirrors; no preset uses it"),
+    FX_P_INT(ssr_params, probe_steps, "probe_steps", 48, 1, 4096, 8, 256, "",
+             "fallback probe: steps of the march along the reflected ray to the probe's depth surface "
+             "(geometric, 2 cm to max_distance; then refine bisections)"),
 };
 
 /* ---- helpers ---- */
@@ -268,8 +286,16 @@ typedef struct ssr_job {
     int reuse_fin;             /* final shading after the estimate, no debug layers: pixels whose
                                   first hit bounces no further copy their estimate */
     float opm[16];
-    float *dbg_hit, *dbg_xy, *dbg_len;
+    float *dbg_hit, *dbg_xy, *dbg_len, *dbg_fb;
+    const fx_pano *probe;      /* the reflection probe (fallback probe and present), or NULL */
+    fx_pano_trace_settings pst;
 } ssr_job;
+
+/* The reflection of ray o + t dir (view space) seen in the probe, parallax-corrected. */
+static inline void probe_colour(const ssr_job *j, fx_vec3 o, fx_vec3 dir, float rgb[3])
+{
+    fx_pano_trace(j->probe, &j->pst, o, dir, rgb);
+}
 
 static inline int in_mask(const fx_mask *m, int w, int x, int y)
 {
@@ -555,13 +581,20 @@ static void ray_colour(const ssr_job *j, fx_vec3 ro, fx_vec3 rd, float px, float
     fx_vec3 r = fx_v3_reflect(inc, n);
     fx_vec3 o = fx_v3_add(pos, fx_v3_scale(n, j->p->bias * fx_ssr_pixel_footprint(&F->view, -pos.z)));
     fx_ssr_hit hit;
-    if (!fx_ssr_trace(&F->scene, &j->st, o, r, &hit))
+    float fade = fx_ssr_trace(&F->scene, &j->st, o, r, &hit) ? hit_fade(j, F, &hit, r) : 0.0f;
+    if (!(fade > 0.0f) && !j->probe)
         return;
-    float fade = hit_fade(j, F, &hit, r);
-    if (!(fade > 0.0f))
-        return;
-    float next[3], tex[3], est[3] = { rgb[0], rgb[1], rgb[2] };
-    ray_colour(j, o, r, hit.px, hit.py, left - 1, next);
+    float next[3] = { 0.0f, 0.0f, 0.0f }, tex[3], est[3] = { rgb[0], rgb[1], rgb[2] };
+    if (fade > 0.0f)
+        ray_colour(j, o, r, hit.px, hit.py, left - 1, next);
+    if (j->probe && fade < 1.0f) {
+        /* the bounce's miss: the probe, blended by the hit's confidence */
+        float pc[3];
+        probe_colour(j, pos, r, pc);
+        for (int k = 0; k < 3; k++)
+            next[k] = pc[k] + (next[k] - pc[k]) * fade;
+        fade = 1.0f;
+    }
     float wgt;
     if (own) {
         /* this mirror again: its backing under its reflectivity x Fresnel at this angle */
@@ -654,13 +687,15 @@ static void shade_rows(void *user, int begin, int end)
             if (fx_ssr_is_background(d) || !shading_normal(j, x, y, pos, inc, &n))
                 continue; /* no surface: the texture stays */
             float refl[3], fb[3];
-            if (p->fallback == FALLBACK_ENVIRONMENT)
+            float conf = h.state == 1 ? h.conf : 0.0f;
+            fx_vec3 rd = fx_v3_reflect(inc, n);
+            if (j->probe && conf < 1.0f)
+                probe_colour(j, pos, rd, fb); /* only where the fallback shows */
+            else if (p->fallback == FALLBACK_ENVIRONMENT)
                 memcpy(fb, p->environment, sizeof fb);
             else
                 memcpy(fb, s, sizeof fb);
-            float conf = h.state == 1 ? h.conf : 0.0f;
             if (conf > 0.0f) {
-                fx_vec3 rd = fx_v3_reflect(inc, n);
                 fx_vec3 ro = fx_v3_add(pos, fx_v3_scale(n, p->bias * fx_ssr_pixel_footprint(&F->view, d)));
                 ray_colour(j, ro, rd, h.px, h.py, j->last_bounce, refl);
                 if (p->op != OP_NONE)
@@ -686,6 +721,8 @@ static void shade_rows(void *user, int begin, int end)
             }
             if (j->dbg_len)
                 j->dbg_len[i] = conf > 0 ? h.length : 0.0f;
+            if (j->dbg_fb)
+                j->dbg_fb[i] = 1.0f - conf;
         }
 }
 
@@ -945,6 +982,41 @@ static fx_result ssr_multi_bounce(const fx_effect_run *run, ssr_job *j, float *f
     return FX_OK;
 }
 
+/* Process stage 0 (fallback probe): the entry's reflection probe as j->probe, in the
+ * frame's view space. Missing or unreadable: a warning, and the texture fallback. */
+static fx_result ssr_probe_load(const fx_effect_run *run, ssr_job *j, const ssr_frame *F, fx_aux_view **av,
+                                fx_pano *pano)
+{
+    const ssr_params *p = run->params;
+    char name[FX_NAME_MAX];
+    snprintf(name, sizeof name, FX_AUX_PROBE "%s", run->mask_key ? run->mask_key : "");
+    fx_result r = fx_aux_view_load(run->frame, name, run->where, av);
+    if (r == FX_ERR_OUT_OF_MEMORY)
+        return r;
+    if (!r && !(*av)->panorama) {
+        fx_warn(run->ctx, "%s: aux view '%s' is not a panorama (\"panorama\": \"equirect\"): missed rays take "
+                "the mirror's texture", run->where, name);
+        fx_aux_view_free(*av);
+        *av = NULL;
+        return FX_OK;
+    }
+    if (r) {
+        char msg[1024];
+        snprintf(msg, sizeof msg, "%s", fx_context_error(run->ctx));
+        fx_warn(run->ctx, "%s: no reflection probe (%s): missed rays take the mirror's texture", run->where, msg);
+        *av = NULL;
+        return FX_OK;
+    }
+    pano->color = (*av)->color;
+    pano->depth = (*av)->depth;
+    pano->w = (*av)->width;
+    pano->h = (*av)->height;
+    fx_m4_mul((*av)->view.cam.world_to_camera, F->view.camera_to_world, pano->to_probe);
+    j->probe = pano;
+    j->pst = (fx_pano_trace_settings){ p->probe_steps, p->refine, 0.02f, p->max_distance, p->thickness };
+    return FX_OK;
+}
+
 static fx_result ssr_process(const fx_effect_run *run)
 {
     const ssr_params *p = run->params;
@@ -963,6 +1035,10 @@ static fx_result ssr_process(const fx_effect_run *run)
     fx_color_op_matrix(p->op == OP_SEPIA ? FX_COLOR_OP_SEPIA : FX_COLOR_OP_GRAY_LUMINANCE, j.opm);
     if (p->bend != 0.0f)
         fit_face(&j);
+    fx_aux_view *probe_view = NULL;
+    fx_pano pano;
+    if (p->fallback == FALLBACK_PROBE && (r = ssr_probe_load(run, &j, &F, &probe_view, &pano)))
+        return r;
 
     fx_mask *surfaces = NULL;
     float *blurred = NULL, *fin[2] = { NULL, NULL };
@@ -983,13 +1059,17 @@ static fx_result ssr_process(const fx_effect_run *run)
         j.dbg_xy = fx_effect_debug_pass(run, "hit_xy", 3, &r);
     if (!r)
         j.dbg_len = fx_effect_debug_pass(run, "ray_length", 1, &r);
+    if (!r) /* the fallback in use, by name; its weight per pixel */
+        j.dbg_fb = fx_effect_debug_pass(run, j.probe ? "fallback_probe"
+                                             : p->fallback == FALLBACK_ENVIRONMENT ? "fallback_environment"
+                                                                                   : "fallback_texture", 1, &r);
     if (r || (p->bounces > 1 && run->mask && ssr_needs_estimate(&j) && (r = ssr_multi_bounce(run, &j, fin, frame_bytes))))
         goto out;
     /* stage 5: the mirror shaded into dst */
     const int rows = roi->y1 - roi->y0;
     j.out = run->dst;
     j.last_bounce = p->bounces - 1;
-    j.reuse_fin = j.fin && !j.dbg_hit && !j.dbg_xy && !j.dbg_len;
+    j.reuse_fin = j.fin && !j.dbg_hit && !j.dbg_xy && !j.dbg_len && !j.dbg_fb;
     fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), shade_rows, &j);
 out:
     fx_buffer_put(run->ctx, fin[0], 2 * frame_bytes);
@@ -997,7 +1077,22 @@ out:
     fx_buffer_put(run->ctx, blurred, frame_bytes);
     fx_mask_free(surfaces);
     fx_depth_pyramid_free(run->ctx, &pyr);
+    fx_aux_view_free(probe_view);
     return r;
+}
+
+/* fallback probe: this entry's probe ("probe:<mask key>", placed by the add-on at the
+ * entry's mask). */
+static int ssr_aux_views(const void *params, fx_aux_need *out, int max)
+{
+    const ssr_params *p = params;
+    if (p->fallback != FALLBACK_PROBE || max < 1)
+        return 0;
+    memset(out, 0, sizeof *out);
+    snprintf(out->name, sizeof out->name, "%s", FX_AUX_PROBE);
+    out->kind = "probe";
+    out->per_mask = 1;
+    return 1;
 }
 
 const fx_effect_class fx_effect_ssr_mirror = {
@@ -1012,10 +1107,13 @@ const fx_effect_class fx_effect_ssr_mirror = {
         "\"retrace_edges\": true}",
         "{\"max_steps\": 96, \"stride\": 1.5, \"growth\": 1.04, \"refine\": 6, \"resolution_scale\": 0.5, "
         "\"retrace_edges\": true}",
-        "{\"max_steps\": 96, \"stride\": 1.5, \"growth\": 1.04, \"refine\": 6, \"resolution_scale\": 1}",
-        "{\"max_steps\": 4096, \"stride\": 1, \"growth\": 1, \"refine\": 10, \"resolution_scale\": 1}",
+        "{\"max_steps\": 96, \"stride\": 1.5, \"growth\": 1.04, \"refine\": 6, \"resolution_scale\": 1, "
+        "\"fallback\": \"probe\", \"probe_steps\": 48}",
+        "{\"max_steps\": 4096, \"stride\": 1, \"growth\": 1, \"refine\": 10, \"resolution_scale\": 1, "
+        "\"fallback\": \"probe\", \"probe_steps\": 160}",
     },
     .passes = ssr_passes,
+    .aux_views = ssr_aux_views,
     .flags = FX_EFFECT_NEEDS_CAMERA,
     .halo = ssr_halo,
     .validate = ssr_validate,

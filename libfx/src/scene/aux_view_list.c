@@ -9,7 +9,7 @@
 #include <string.h>
 
 static const char *const view_keys[] = {"name", "path", "world_to_camera", "projection",
-                                        "clip_start", "clip_end", "orthographic", "kind", "signature"};
+                                        "clip_start", "clip_end", "orthographic", "kind", "signature", "panorama", "mask"};
 
 fx_result fx_aux_views_check(fx_context *ctx, const cJSON *list)
 {
@@ -34,9 +34,14 @@ fx_result fx_aux_views_check(fx_context *ctx, const cJSON *list)
             if (!known)
                 return fx_fail(ctx, FX_ERR_BAD_RECIPE,
                                "sidecar: aux_views[%d] ('%s'): unknown key \"%s\" (known: name, path, world_to_camera, "
-                               "projection, clip_start, clip_end, orthographic, kind, signature)",
+                               "projection, clip_start, clip_end, orthographic, kind, signature, panorama, mask)",
                                i, name->valuestring, item->string);
         }
+        const cJSON *pano = cJSON_GetObjectItemCaseSensitive(v, "panorama");
+        if (pano && !(cJSON_IsString(pano) && strcmp(pano->valuestring, "equirect") == 0))
+            return fx_fail(ctx, FX_ERR_BAD_RECIPE,
+                           "sidecar: aux_views[%d] ('%s'): \"panorama\" must be \"equirect\" (the only kind)", i,
+                           name->valuestring);
         fx_camera cam;
         char err[256];
         if (!fx_camera_parse(v, 1, &cam, err, sizeof err))
