@@ -25,6 +25,13 @@ alpha threshold exactly as in the main render and cast leaf-shaped shadows.
   at the centre of the mirror objects' bounding box pushed out past their front
   along their mean normal (towards the camera).  A probe that fails to render
   is a warning: the run goes on and ssr_mirror takes its texture fallback.
+- ``planar:<key>``: for a flat mirror (one plane fits all its faces), the scene seen
+  by the camera mirrored in that plane (ssr_mirror's ``planar_view``, the
+  ``reference`` preset), at the render's size and samples (or
+  ``libfx_planar_samples``), colour + Depth, with the mirror hidden and the objects
+  wholly behind its plane left out; the entry carries the plane. A mirror that is
+  not flat (a curved one, a facing pair in one entry) gets no view: a log line, and
+  ssr_mirror keeps the trace and the probe there.
 
 A view is rendered once and reused while its signature (camera, resolution, the
 light, every linked object's transform, mesh size and materials) does not
@@ -383,8 +390,16 @@ def _render_probe(scene, spec, objs, path):
         for ob in objs:
             aux.collection.objects.link(ob)
         aux.collection.objects.link(cam)
-        compat.set_equirect_camera(cam_data)
-        cam_data.clip_start = 0.01
+        if spec["kind"] == "probe":
+            compat.set_equirect_camera(cam_data)
+            cam_data.clip_start = 0.01
+        else:  # planar: the main camera's lens, mirrored (x flipped: the shift too)
+            src = scene.camera.data
+            for k in ("type", "lens", "lens_unit", "sensor_width", "sensor_height", "sensor_fit", "shift_y",
+                      "ortho_scale"):
+                setattr(cam_data, k, getattr(src, k))
+            cam_data.shift_x = -src.shift_x
+            cam_data.clip_start = spec["clip_start"]
         cam_data.clip_end = spec["clip_end"]
         cam.matrix_world = Matrix(spec["matrix_world"])
         for name in spec["hidden"]:
@@ -437,7 +452,7 @@ def _render_probe(scene, spec, objs, path):
             found = sorted(glob.glob(glob.escape(base) + "[0-9]*.exr"))
             written = found[-1] if found else base + "0001.exr"
         if not os.path.exists(written):
-            raise native.LibfxError("the probe render '%s' wrote no file (%s)" % (spec["name"], written))
+            raise native.LibfxError("the %s render '%s' wrote no file (%s)" % (spec["kind"], spec["name"], written))
         os.replace(written, path)
     finally:
         for ob in hidden:
@@ -448,11 +463,85 @@ def _render_probe(scene, spec, objs, path):
         bpy.data.cameras.remove(cam_data)
 
 
+class NotPlanar(Exception):
+    pass
+
+
+def planar_spec(scene, view):
+    """The mirrored camera of a flat mirror: its matrices, the plane, what it hides."""
+    mask = view.get("mask") or {}
+    objs = mask_objects(scene, mask)
+    cam = scene.camera
+    if not objs or cam is None:
+        raise NotPlanar("the mask names no object" if cam else "the scene has no camera")
+    faces = _mirror_faces(objs, set(mask.get("material") or []))
+    cam_pos = cam.matrix_world.translation
+    n = Vector((0, 0, 0))
+    c = Vector((0, 0, 0))
+    total = 0.0
+    for fc, fn, area in faces:
+        n += fn * area * (1.0 if fn.dot(cam_pos - fc) >= 0 else -1.0)
+        c += fc * area
+        total += area
+    lo, hi = world_box(objs)
+    size = (hi - lo).length
+    if total <= 0 or n.length < 1e-9:
+        raise NotPlanar("its faces have no common normal")
+    n.normalize()
+    c /= total
+    tol = 0.01 + 0.002 * size
+    for fc, fn, _ in faces:
+        if abs(fn.dot(n)) < 0.999 or abs((fc - c).dot(n)) > tol:
+            raise NotPlanar("its faces do not lie in one plane (a curved mirror, or mirrors facing each other)")
+    d = n.dot(c)
+    if n.dot(cam_pos) - d <= 0:
+        raise NotPlanar("the camera is behind its plane")
+    S = Matrix.Identity(3)
+    for i in range(3):
+        for k in range(3):
+            S[i][k] -= 2.0 * n[i] * n[k]
+    R = cam.matrix_world.to_3x3().normalized()
+    e2 = cam_pos - 2.0 * (cam_pos.dot(n) - d) * n
+    R2 = S @ R @ Matrix.Diagonal((-1.0, 1.0, 1.0))   # a proper rotation: the image is mirrored
+    mw = Matrix.Translation(e2) @ R2.to_4x4()
+    r = scene.render
+    rw = int(r.resolution_x * r.resolution_percentage / 100)
+    rh = int(r.resolution_y * r.resolution_percentage / 100)
+    proj = cam.calc_matrix_camera(bpy.context.evaluated_depsgraph_get(), x=rw, y=rh, scale_x=r.pixel_aspect_x,
+                                  scale_y=r.pixel_aspect_y)
+    proj = [list(row) for row in proj]
+    proj[0][2] = -proj[0][2]                          # the lens shift, mirrored with x
+    behind = []
+    for ob in scene.objects:
+        if ob.type in ("MESH", "CURVE", "SURFACE", "META", "FONT") and ob not in objs:
+            corners = [ob.matrix_world @ Vector(v) for v in ob.bound_box]
+            if all(n.dot(p) - d < -1e-4 for p in corners):
+                behind.append(ob.name)
+    samples = int(scene.get("libfx_planar_samples") or max(1, scene.cycles.samples))
+    return {
+        "name": view["name"], "kind": "planar", "width": rw, "height": rh, "samples": samples,
+        "matrix_world": [list(row) for row in mw], "world_to_camera": [list(row) for row in mw.inverted()],
+        "projection": proj, "clip_start": float(cam.data.clip_start), "clip_end": float(cam.data.clip_end),
+        "hidden": [o.name for o in objs], "behind": sorted(behind), "plane": [n.x, n.y, n.z, d],
+        "where": "the plane of %s" % ", ".join(o.name for o in objs[:4]),
+    }
+
+
 def _prepare_probe(scene, view, path, meta_path):
-    """Renders (or reuses) one probe; its sidecar entry, or None (a warning) when it fails."""
+    """Renders (or reuses) one probe or planar view; its sidecar entry, or None (a log
+    line: a warning when it failed) when there is none."""
     try:
-        spec = probe_spec(scene, view)
-        objs = _probe_scene_objects(scene)
+        if view["kind"] == "planar":
+            try:
+                spec = planar_spec(scene, view)
+            except NotPlanar as e:
+                log("no planar view '%s': the mirror is not flat (%s); ssr_mirror uses the trace and the "
+                    "probe there" % (view["name"], e))
+                return None
+            objs = [o for o in _probe_scene_objects(scene) if o.name not in spec["behind"]]
+        else:
+            spec = probe_spec(scene, view)
+            objs = _probe_scene_objects(scene)
         sig = _probe_signature(scene, spec, objs)
         old = None
         if os.path.exists(path) and os.path.exists(meta_path):
@@ -462,18 +551,23 @@ def _prepare_probe(scene, view, path, meta_path):
             except (OSError, ValueError):
                 old = None
         if old and old.get("signature") == sig:
-            log("probe '%s' reused (scene unchanged): %s" % (view["name"], path))
+            log("%s '%s' reused (scene unchanged): %s" % (view["kind"], view["name"], path))
         else:
             os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
             t0 = time.perf_counter()
             _render_probe(scene, spec, objs, path)
-            log("probe '%s' at %s rendered %dx%d (%d samples) in %.2f s: %s"
-                % (view["name"], spec["where"], spec["width"], spec["height"], spec["samples"],
+            log("%s '%s' at %s rendered %dx%d (%d samples) in %.2f s: %s"
+                % (view["kind"], view["name"], spec["where"], spec["width"], spec["height"], spec["samples"],
                    time.perf_counter() - t0, path))
     except Exception as e:  # a probe is an improvement, never a reason to fail the frame
-        log("warning: the probe '%s' failed to render (%s): ssr_mirror falls back to the "
-            "mirror's texture" % (view["name"], e))
+        log("warning: the %s view '%s' failed to render (%s): ssr_mirror falls back to %s"
+            % (view["kind"], view["name"], e,
+               "the mirror's texture" if view["kind"] == "probe" else "the trace and the probe"))
         return None
+    if view["kind"] == "planar":
+        return {"name": view["name"], "path": path, "world_to_camera": spec["world_to_camera"],
+                "projection": spec["projection"], "clip_start": spec["clip_start"], "clip_end": spec["clip_end"],
+                "orthographic": False, "kind": "planar", "plane": spec["plane"], "signature": sig}
     ident = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
     return {"name": view["name"], "path": path, "world_to_camera": spec["world_to_camera"],
             "projection": ident, "clip_start": 0.0, "clip_end": spec["clip_end"], "orthographic": False,
@@ -493,7 +587,7 @@ def prepare(scene, frames):
     objs = casters(scene)
     entries = []
     for view in views:
-        if view["kind"] == "probe":
+        if view["kind"] in ("probe", "planar"):
             path = "%slibfx_aux_%s.exr" % (scene_setup.output_prefix(scene), _file_name(view["name"]))
             meta_path = path[:-4] + ".json"
             entry = _prepare_probe(scene, view, path, meta_path)

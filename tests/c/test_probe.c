@@ -11,7 +11,10 @@
  *    reflection, the debug pass names the fallback; without the probe a warning and the
  *    texture fallback, bit for bit;
  *  - degenerate probes (zero depth, NaN/Inf colour and depth, 1 x 1, placed outside the
- *    room behind the mirror): finite output. */
+ *    room behind the mirror): finite output;
+ *  - the planar view (planar_view, reference): the room rendered from the camera mirrored
+ *    in the mirror wall's plane gives the exact reflection; a view whose plane is not the
+ *    mirror's is not used; a planar mirror seen edge-on stays finite. */
 #include "fx_effect_test.h"
 #include "math/panorama.h"
 
@@ -418,6 +421,149 @@ static void test_end_to_end(fx_context *ctx)
     free(want);
 }
 
+/* ---- planar view ---- */
+
+/* The planar view: the room seen from CAM mirrored in y = 3 (E' = (0, 7.5, 1.5)) looking
+ * along -Y, up +Z, through the (hidden) mirror wall; the same projection as the frame. */
+static const double RP[9] = { -1, 0, 0, 0, 0, 1, 0, 1, 0 }; /* columns x -> -X, y -> +Z, z -> +Y */
+
+static void write_planar(fx_context *ctx, const char *path, float w2c_out[16], float proj[16])
+{
+    const double e[3] = { CAM[0], 6.0 - CAM[1], CAM[2] };
+    size_t n = (size_t)FW * FH;
+    float *rgba = calloc(n * 4, sizeof(float)), *dep = calloc(n, sizeof(float));
+    double fy = tan(30 * PI / 180), asp = (double)FW / FH;
+    for (int y = 0; y < FH; y++)
+        for (int x = 0; x < FW; x++) {
+            size_t i = (size_t)y * FW + x;
+            double v[3] = { ((x + 0.5) / FW * 2 - 1) * fy * asp, (1 - (y + 0.5) / FH * 2) * fy, -1 }, d[3];
+            rot(RP, v, d);
+            rgba[i * 4 + 3] = 1;
+            dep[i] = 1e10f;
+            if (!(d[1] < -1e-9))
+                continue;
+            double t0 = (3.0 - e[1]) / d[1]; /* enters the room through the mirror wall */
+            double p0[3] = { e[0] + t0 * d[0], e[1] + t0 * d[1], e[2] + t0 * d[2] };
+            if (p0[0] <= LO[0] || p0[0] >= HI[0] || p0[2] <= LO[2] || p0[2] >= HI[2])
+                continue;
+            int wall;
+            double t = box_exit(p0, d, &wall);
+            double q[3] = { p0[0] + t * d[0], p0[1] + t * d[1], p0[2] + t * d[2] };
+            room_colour(q, wall, rgba + i * 4);
+            dep[i] = (float)((t0 + t) / sqrt(v[0] * v[0] + v[1] * v[1] + 1));
+        }
+    fx_frame *f = et_frame(ctx, FW, FH, rgba);
+    CHECK_OK(ctx, fx_frame_add_pass(f, "Depth", 1, dep));
+    CHECK_OK(ctx, fx_frame_write_exr(f, path, NULL));
+    fx_frame_free(f);
+    free(rgba), free(dep);
+    memset(w2c_out, 0, 16 * sizeof(float));
+    for (int i = 0; i < 3; i++) {
+        double tt = 0;
+        for (int k = 0; k < 3; k++) {
+            w2c_out[i * 4 + k] = (float)RP[k * 3 + i];
+            tt -= RP[k * 3 + i] * e[k];
+        }
+        w2c_out[i * 4 + 3] = (float)tt;
+    }
+    w2c_out[15] = 1;
+    double nn = 0.1, ff = 100.0, f1 = 1.0 / fy;
+    memset(proj, 0, 16 * sizeof(float));
+    proj[0] = (float)(f1 / asp);
+    proj[5] = (float)f1;
+    proj[10] = (float)((ff + nn) / (nn - ff));
+    proj[11] = (float)(2 * ff * nn / (nn - ff));
+    proj[14] = -1;
+}
+
+static void add_planar(fx_context *ctx, fx_frame *f, const char *name, const char *path, const float m[16],
+                       const float pr[16], const char *plane)
+{
+    char json[8192];
+    int n = snprintf(json, sizeof json, "{\"aux_views\": [{\"name\": \"%s\", \"path\": \"%s\", \"world_to_camera\": [",
+                     name, path);
+    for (int i = 0; i < 16; i++)
+        n += snprintf(json + n, sizeof json - n, "%s%.9g", i ? ", " : "", m[i]);
+    n += snprintf(json + n, sizeof json - n, "], \"projection\": [");
+    for (int i = 0; i < 16; i++)
+        n += snprintf(json + n, sizeof json - n, "%s%.9g", i ? ", " : "", pr[i]);
+    snprintf(json + n, sizeof json - n,
+             "], \"clip_start\": 0.1, \"clip_end\": 100, \"kind\": \"planar\", \"plane\": %s}]}", plane);
+    CHECK_OK(ctx, fx_frame_apply_sidecar(f, json));
+}
+
+static void test_planar(fx_context *ctx)
+{
+    const char *dir = tu_tmpdir("planar");
+    float *want = calloc((size_t)FW * FH * 3, sizeof(float));
+    fx_frame *f = room_frame(ctx, want);
+    fx_stack *s = et_stack(ctx, "ssr_mirror");
+    CHECK_OK(ctx, fx_stack_set_mask_json(s, 0, "{\"material_index\": 1}"));
+    CHECK_OK(ctx, fx_stack_set_quality(s, FX_QUALITY_REFERENCE));
+    fx_stack_set_debug_outputs(s, 1);
+    char *req = NULL;
+    CHECK_OK(ctx, fx_stack_required_aux_views(s, &req));
+    printf("required at reference: %s\n", req);
+    CHECK(req && tu_contains(req, "\"planar:") && tu_contains(req, "\"probe:") && tu_contains(req, "\"kind\":\"planar\""));
+    char pname[64] = "planar:?";
+    const char *at = req ? strstr(req, "\"planar:") : NULL;
+    if (at)
+        snprintf(pname, 20, "%s", at + 1); /* "planar:" and 12 hex digits */
+    fx_free(req);
+    /* without it: a warning, the trace (no probe here either) */
+    fx_frame *o0 = NULL;
+    fx_context_clear_warnings(ctx);
+    CHECK_OK(ctx, fx_stack_run(s, f, &o0));
+    int warned = 0;
+    for (int k = 0; k < fx_context_warning_count(ctx); k++)
+        warned |= tu_contains(fx_context_warning(ctx, k), "no planar mirror view");
+    CHECK(warned);
+    char path[600];
+    snprintf(path, sizeof path, "%s/planar.exr", dir);
+    float m[16], pr[16];
+    write_planar(ctx, path, m, pr);
+    add_planar(ctx, f, pname, path, m, pr, "[0, -1, 0, -3]");
+    fx_frame *o1 = NULL;
+    fx_context_clear_warnings(ctx);
+    CHECK_OK(ctx, fx_stack_run(s, f, &o1));
+    float *pl = NULL;
+    int c;
+    CHECK(fx_frame_pass(o1, "fx0_ssr_mirror_planar", &pl, &c) == FX_OK);
+    float *ima;
+    fx_frame_pass(f, "IndexMA", &ima, &c);
+    int used = 0, mirror = 0;
+    for (size_t i = 0; pl && i < (size_t)FW * FH; i++) {
+        mirror += ima[i] == 1;
+        used += pl[i] > 0.5f;
+    }
+    double e0 = mirror_mae(f, o0, want), e1 = mirror_mae(f, o1, want);
+    printf("planar view: %d of %d mirror pixels, MAE against the exact reflection %.4f (trace only: %.4f)\n", used,
+           mirror, e1, e0);
+    CHECK(used > 0.97 * mirror);
+    CHECK(e1 < 0.01 && e1 < 0.25 * e0);
+    /* a view whose plane is another one (x = 0): not used, the same bits as without it */
+    fx_frame_free(o1);
+    o1 = NULL;
+    add_planar(ctx, f, pname, path, m, pr, "[1, 0, 0, 0]");
+    CHECK_OK(ctx, fx_stack_run(s, f, &o1));
+    const float *a = et_combined(o0), *b = et_combined(o1);
+    CHECK(a && b && memcmp(a, b, (size_t)FW * FH * 4 * sizeof(float)) == 0);
+    /* a degenerate plane (zero normal), a malformed one: refused or unused, never NaN */
+    add_planar(ctx, f, pname, path, m, pr, "[0, 0, 0, 1]");
+    fx_frame_free(o1);
+    o1 = NULL;
+    CHECK_OK(ctx, fx_stack_run(s, f, &o1));
+    CHECK(tu_all_finite(et_combined(o1), (size_t)FW * FH * 4));
+    CHECK(fx_frame_apply_sidecar(f, "{\"aux_views\": [{\"name\": \"planar:x\", \"path\": \"/p\", "
+                                    "\"world_to_camera\": [1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1], "
+                                    "\"projection\": [1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1], \"clip_start\": 0, "
+                                    "\"clip_end\": 1, \"plane\": [0, 1, \"a\", 0]}]}") == FX_ERR_BAD_RECIPE);
+    fx_frame_free(o0), fx_frame_free(o1);
+    fx_stack_free(s);
+    fx_frame_free(f);
+    free(want);
+}
+
 int main(void)
 {
     fx_context *ctx = NULL;
@@ -425,6 +571,7 @@ int main(void)
     test_conventions();
     test_parallax();
     test_end_to_end(ctx);
+    test_planar(ctx);
     fx_context_free(ctx);
     return tu_finish("test_probe");
 }

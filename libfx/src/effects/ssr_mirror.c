@@ -21,6 +21,13 @@
  * rendered, failed): a warning and the texture fallback; debug pass "fallback_<name>"
  * names the one in use and holds its weight per pixel.
  *
+ * Planar view (planar_view, the reference preset): for a flat mirror the add-on renders
+ * the scene from the camera mirrored in the mirror's plane (aux view "planar:<mask key>",
+ * with the plane). A mirror pixel on that plane (its normal along the plane's, within a
+ * few centimetres of it) takes that view's colour at the projection of its world
+ * position: the exact reflection, no tracing. Other pixels (a curved mirror, a pair of
+ * mirrors, which the add-on does not fit with one plane) keep the trace and the probe.
+ *
  * One stack entry is one mirror kind: many mirrors are many entries, each with its own
  * mask and parameters (the add-on's UI, `libfx describe` and the docs keep working on
  * plain parameter tables). Multiple reflections: a ray that lands on a pixel of this
@@ -83,6 +90,7 @@ typedef struct ssr_params {
     int retrace_edges;
     int hiz;
     int probe_steps;
+    int planar_view;
 } ssr_params;
 
 enum { OP_NONE = 0, OP_SEPIA, OP_GRAYSCALE, OP_CEL };
@@ -156,6 +164,10 @@ static const fx_param_def ssr_param_defs[] = {
     FX_P_INT(ssr_params, probe_steps, "probe_steps", 48, 1, 4096, 8, 256, "",
              "fallback probe: steps of the march along the reflected ray to the probe's depth surface "
              "(geometric, 2 cm to max_distance; then refine bisections)"),
+    FX_P_BOOL(ssr_params, planar_view, "planar_view", 0,
+              "Flat mirrors: the reflection is the add-on's render from the camera mirrored in the "
+              "mirror's plane (exact; one more render per mirror plane). Pixels off that plane, glossy, "
+              "bent or cel mirrors, and a frame without that view keep the trace and the fallback"),
 };
 
 /* ---- helpers ---- */
@@ -288,6 +300,8 @@ typedef struct ssr_job {
     float opm[16];
     float *dbg_hit, *dbg_xy, *dbg_len, *dbg_fb;
     const fx_pano *probe;      /* the reflection probe (fallback probe and present), or NULL */
+    const fx_aux_view *planar; /* the mirrored camera's view (planar_view and present), or NULL */
+    float *dbg_planar;
     fx_pano_trace_settings pst;
 } ssr_job;
 
@@ -610,6 +624,29 @@ static void ray_colour(const ssr_job *j, fx_vec3 ro, fx_vec3 rd, float px, float
     }
 }
 
+/* The planar view's colour for mirror pixel (x, y) at view position pos, if the pixel
+ * lies on the view's plane and projects into it. */
+static int planar_colour(const ssr_job *j, int x, int y, fx_vec3 pos, float rgb[3])
+{
+    const ssr_frame *F = j->F;
+    const fx_aux_view *pv = j->planar;
+    const float *np = F->normal + ((size_t)y * F->w + x) * F->nch;
+    fx_vec3 nw = fx_v3_normalize_or(fx_v3(np[0], np[1], np[2]), fx_v3(0, 0, 0));
+    fx_vec3 pn = fx_v3(pv->plane[0], pv->plane[1], pv->plane[2]);
+    if (!(fabsf(fx_v3_dot(nw, pn)) > 0.99f))
+        return 0;
+    fx_vec3 wp = fx_view_to_world(&F->view, pos);
+    float dist = fx_v3_dot(pn, wp) - pv->plane[3];
+    if (!(fabsf(dist) < 0.02f + 0.002f * fx_v3_length(pos)))
+        return 0;
+    float px, py, dd;
+    if (!fx_aux_view_project(pv, wp, &px, &py, &dd) || !(px >= 0.0f && px <= (float)pv->width) ||
+        !(py >= 0.0f && py <= (float)pv->height))
+        return 0;
+    sample_bilinear(pv->color, pv->width, pv->height, px, py, rgb);
+    return 1;
+}
+
 static void apply_operator(const ssr_job *j, float px, float py, float rgb[3])
 {
     const ssr_params *p = j->p;
@@ -689,13 +726,20 @@ static void shade_rows(void *user, int begin, int end)
             float refl[3], fb[3];
             float conf = h.state == 1 ? h.conf : 0.0f;
             fx_vec3 rd = fx_v3_reflect(inc, n);
-            if (j->probe && conf < 1.0f)
+            int on_plane = j->planar && planar_colour(j, x, y, pos, refl);
+            if (on_plane) {
+                if (p->op == OP_SEPIA || p->op == OP_GRAYSCALE)
+                    fx_color_op_apply3(j->opm, refl, refl);
+                conf = 1.0f;
+            } else if (j->probe && conf < 1.0f)
                 probe_colour(j, pos, rd, fb); /* only where the fallback shows */
             else if (p->fallback == FALLBACK_ENVIRONMENT)
                 memcpy(fb, p->environment, sizeof fb);
             else
                 memcpy(fb, s, sizeof fb);
-            if (conf > 0.0f) {
+            if (on_plane) {
+                /* the mirrored camera's view: refl holds it */
+            } else if (conf > 0.0f) {
                 fx_vec3 ro = fx_v3_add(pos, fx_v3_scale(n, p->bias * fx_ssr_pixel_footprint(&F->view, d)));
                 ray_colour(j, ro, rd, h.px, h.py, j->last_bounce, refl);
                 if (p->op != OP_NONE)
@@ -723,6 +767,8 @@ static void shade_rows(void *user, int begin, int end)
                 j->dbg_len[i] = conf > 0 ? h.length : 0.0f;
             if (j->dbg_fb)
                 j->dbg_fb[i] = 1.0f - conf;
+            if (j->dbg_planar)
+                j->dbg_planar[i] = (float)on_plane;
         }
 }
 
@@ -1013,7 +1059,28 @@ static fx_result ssr_probe_load(const fx_effect_run *run, ssr_job *j, const ssr_
     pano->h = (*av)->height;
     fx_m4_mul((*av)->view.cam.world_to_camera, F->view.camera_to_world, pano->to_probe);
     j->probe = pano;
-    j->pst = (fx_pano_trace_settings){ p->probe_steps, p->refine, 0.02f, p->max_distance, p->thickness };
+    j->pst = (fx_pano_trace_settings){ p->probe_steps, p->refine, 0.02f, p->max_distance, 0.05f };
+    return FX_OK;
+}
+
+/* Process stage 0 (planar_view): the entry's mirrored-camera view as j->planar. Missing
+ * (not rendered: a curved mirror or a pair, or failed): a warning, the trace serves. */
+static fx_result ssr_planar_load(const fx_effect_run *run, ssr_job *j, fx_aux_view **av)
+{
+    char name[FX_NAME_MAX];
+    snprintf(name, sizeof name, FX_AUX_PLANAR "%s", run->mask_key ? run->mask_key : "");
+    fx_result r = fx_aux_view_load(run->frame, name, run->where, av);
+    if (r == FX_ERR_OUT_OF_MEMORY)
+        return r;
+    if (r || !(*av)->color || !(*av)->has_plane || (*av)->panorama) {
+        char msg[1024];
+        snprintf(msg, sizeof msg, "%s", r ? fx_context_error(run->ctx) : "it has no colour pass or no \"plane\"");
+        fx_warn(run->ctx, "%s: no planar mirror view (%s): the trace and the fallback serve", run->where, msg);
+        fx_aux_view_free(*av);
+        *av = NULL;
+        return FX_OK;
+    }
+    j->planar = *av;
     return FX_OK;
 }
 
@@ -1039,6 +1106,12 @@ static fx_result ssr_process(const fx_effect_run *run)
     fx_pano pano;
     if (p->fallback == FALLBACK_PROBE && (r = ssr_probe_load(run, &j, &F, &probe_view, &pano)))
         return r;
+    fx_aux_view *planar_view = NULL;
+    if (p->planar_view && p->glossiness == 0.0f && p->bend == 0.0f && p->op != OP_CEL &&
+        (r = ssr_planar_load(run, &j, &planar_view))) {
+        fx_aux_view_free(probe_view);
+        return r;
+    }
 
     fx_mask *surfaces = NULL;
     float *blurred = NULL, *fin[2] = { NULL, NULL };
@@ -1063,13 +1136,15 @@ static fx_result ssr_process(const fx_effect_run *run)
         j.dbg_fb = fx_effect_debug_pass(run, j.probe ? "fallback_probe"
                                              : p->fallback == FALLBACK_ENVIRONMENT ? "fallback_environment"
                                                                                    : "fallback_texture", 1, &r);
+    if (!r && j.planar)
+        j.dbg_planar = fx_effect_debug_pass(run, "planar", 1, &r);
     if (r || (p->bounces > 1 && run->mask && ssr_needs_estimate(&j) && (r = ssr_multi_bounce(run, &j, fin, frame_bytes))))
         goto out;
     /* stage 5: the mirror shaded into dst */
     const int rows = roi->y1 - roi->y0;
     j.out = run->dst;
     j.last_bounce = p->bounces - 1;
-    j.reuse_fin = j.fin && !j.dbg_hit && !j.dbg_xy && !j.dbg_len && !j.dbg_fb;
+    j.reuse_fin = j.fin && !j.dbg_hit && !j.dbg_xy && !j.dbg_len && !j.dbg_fb && !j.dbg_planar;
     fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), shade_rows, &j);
 out:
     fx_buffer_put(run->ctx, fin[0], 2 * frame_bytes);
@@ -1078,6 +1153,7 @@ out:
     fx_mask_free(surfaces);
     fx_depth_pyramid_free(run->ctx, &pyr);
     fx_aux_view_free(probe_view);
+    fx_aux_view_free(planar_view);
     return r;
 }
 
@@ -1086,13 +1162,22 @@ out:
 static int ssr_aux_views(const void *params, fx_aux_need *out, int max)
 {
     const ssr_params *p = params;
-    if (p->fallback != FALLBACK_PROBE || max < 1)
-        return 0;
-    memset(out, 0, sizeof *out);
-    snprintf(out->name, sizeof out->name, "%s", FX_AUX_PROBE);
-    out->kind = "probe";
-    out->per_mask = 1;
-    return 1;
+    int n = 0;
+    if (p->fallback == FALLBACK_PROBE && n < max) {
+        memset(&out[n], 0, sizeof out[n]);
+        snprintf(out[n].name, sizeof out[n].name, "%s", FX_AUX_PROBE);
+        out[n].kind = "probe";
+        out[n].per_mask = 1;
+        n++;
+    }
+    if (p->planar_view && p->glossiness == 0.0f && p->bend == 0.0f && p->op != OP_CEL && n < max) {
+        memset(&out[n], 0, sizeof out[n]);
+        snprintf(out[n].name, sizeof out[n].name, "%s", FX_AUX_PLANAR);
+        out[n].kind = "planar";
+        out[n].per_mask = 1;
+        n++;
+    }
+    return n;
 }
 
 const fx_effect_class fx_effect_ssr_mirror = {
@@ -1110,7 +1195,7 @@ const fx_effect_class fx_effect_ssr_mirror = {
         "{\"max_steps\": 96, \"stride\": 1.5, \"growth\": 1.04, \"refine\": 6, \"resolution_scale\": 1, "
         "\"fallback\": \"probe\", \"probe_steps\": 48}",
         "{\"max_steps\": 4096, \"stride\": 1, \"growth\": 1, \"refine\": 10, \"resolution_scale\": 1, "
-        "\"fallback\": \"probe\", \"probe_steps\": 160}",
+        "\"fallback\": \"probe\", \"probe_steps\": 160, \"planar_view\": true}",
     },
     .passes = ssr_passes,
     .aux_views = ssr_aux_views,

@@ -16,7 +16,10 @@
  *
  * Probes are entries with "panorama": "equirect": an equirectangular panorama (colour in
  * its Combined pass, radial distance in its Depth pass, math/panorama.h) rendered from
- * the camera position of "world_to_camera" (its "projection" is unused: identity). */
+ * the camera position of "world_to_camera" (its "projection" is unused: identity).
+ * "planar:<key>" is the scene seen by the camera mirrored in a planar mirror's plane
+ * (a perspective view with colour and Depth), with "plane": [nx, ny, nz, d], the world
+ * plane n . x = d of the mirror (n towards the main camera). */
 #ifndef LIBFX_SCENE_AUX_VIEW_H
 #define LIBFX_SCENE_AUX_VIEW_H
 
@@ -29,6 +32,7 @@
 #define FX_AUX_META_KEY "libfx/aux_views"
 #define FX_AUX_RAIN_MAP "rain_map"
 #define FX_AUX_PROBE "probe:"
+#define FX_AUX_PLANAR "planar:"
 
 typedef struct fx_aux_view {
     char name[FX_NAME_MAX];
@@ -39,6 +43,8 @@ typedef struct fx_aux_view {
     fx_view view;      /* the view's camera (from the sidecar, not the EXR) */
     int panorama;      /* 1: an equirectangular probe (depth is then radial) */
     const float *color;/* its Combined pass (RGBA, non-finite values replaced by 0), or NULL */
+    int has_plane;     /* "plane" given (planar mirror views) */
+    float plane[4];    /* world plane n . x = d: nx, ny, nz (unit), d */
 } fx_aux_view;
 
 /* Loads the aux view `name` of frame f (see above for "light:"). `where` names the

@@ -106,6 +106,15 @@ fx_result fx_aux_view_load(const fx_frame *f, const char *name, const char *wher
     snprintf(av->name, sizeof av->name, "%s", cJSON_GetObjectItemCaseSensitive(found, "name")->valuestring);
     snprintf(av->path, sizeof av->path, "%s", cJSON_GetObjectItemCaseSensitive(found, "path")->valuestring);
     av->panorama = cJSON_IsString(cJSON_GetObjectItemCaseSensitive(found, "panorama"));
+    const cJSON *plane = cJSON_GetObjectItemCaseSensitive(found, "plane");
+    if (cJSON_IsArray(plane) && cJSON_GetArraySize(plane) == 4) {
+        for (int k = 0; k < 4; k++)
+            av->plane[k] = (float)cJSON_GetArrayItem(plane, k)->valuedouble;
+        float n = sqrtf(av->plane[0] * av->plane[0] + av->plane[1] * av->plane[1] + av->plane[2] * av->plane[2]);
+        av->has_plane = n > 1e-6f && isfinite(n);
+        for (int k = 0; av->has_plane && k < 4; k++)
+            av->plane[k] /= n;
+    }
     cJSON_Delete(list);
     fx_result r = fx_exr_read(ctx, av->path, NULL, &av->frame);
     if (r) {
