@@ -20,7 +20,8 @@ alpha threshold exactly as in the main render and cast leaf-shaped shadows.
   entry's mask): an equirectangular panorama (Cycles PANO camera, 512x256 or
   ``libfx_probe_size`` wide, ``libfx_probe_samples`` samples (16 at most by
   default), colour with the scene's indirect light + radial Depth) of the whole
-  scene with the mirror's objects hidden from the camera.  Placed at the
+  scene with the mirror's objects rendered as perfect mirrors (so each mirror of a
+  facing pair sees the other one's reflections).  Placed at the
   reflection-cubemap Light Probe nearest the mirror if the scene has one, else
   at the centre of the mirror objects' bounding box pushed out past their front
   along their mean normal (towards the camera).  A probe that fails to render
@@ -362,6 +363,7 @@ def probe_spec(scene, view):
         "name": view["name"], "kind": "probe", "width": width, "height": width // 2, "samples": samples,
         "matrix_world": [list(row) for row in mw], "world_to_camera": [list(row) for row in mw.inverted()],
         "clip_start": 0.0, "clip_end": clip_end, "hidden": [o.name for o in objs], "where": where,
+        "mirrors": "perfect",   # how the probe shows the entry's mirrors (part of the signature)
     }
 
 
@@ -380,12 +382,33 @@ def _probe_signature(scene, spec, objs):
     return signature(dict(spec, lights=lights, world=world, engine_samples=scene.cycles.max_bounces), objs)
 
 
+PROBE_MIRROR = "libfx probe mirror"
+
+
+def _probe_mirror_material():
+    """A perfect white mirror (sharp Glossy BSDF) for the mirrors a probe sees."""
+    mat = bpy.data.materials.get(PROBE_MIRROR)
+    if mat is None:
+        mat = bpy.data.materials.new(PROBE_MIRROR)
+        mat.use_nodes = True
+        nt = mat.node_tree
+        for n in list(nt.nodes):
+            nt.nodes.remove(n)
+        g = nt.nodes.new("ShaderNodeBsdfGlossy")
+        g.inputs["Color"].default_value = (1, 1, 1, 1)
+        g.inputs["Roughness"].default_value = 0.0
+        out = nt.nodes.new("ShaderNodeOutputMaterial")
+        nt.links.new(g.outputs[0], out.inputs[0])
+    return mat
+
+
 def _render_probe(scene, spec, objs, path):
     aux = bpy.data.scenes.new(AUX_SCENE)
     cam_data = bpy.data.cameras.new(AUX_SCENE)
     cam = bpy.data.objects.new(AUX_SCENE, cam_data)
     made = None
     hidden = []
+    swapped = []
     try:
         for ob in objs:
             aux.collection.objects.link(ob)
@@ -404,7 +427,19 @@ def _render_probe(scene, spec, objs, path):
         cam.matrix_world = Matrix(spec["matrix_world"])
         for name in spec["hidden"]:
             ob = bpy.data.objects.get(name)
-            if ob is not None and ob.visible_camera:
+            if ob is None:
+                continue
+            if spec["kind"] == "probe":
+                # the probe sees the entry's mirrors as perfect mirrors: a mirror of a facing
+                # pair reflects the other one (and what that one reflects); a flat or convex
+                # mirror never looks up its own direction
+                swapped.append((ob, [sl.material for sl in ob.material_slots], ob.data.materials[:]))
+                mat = _probe_mirror_material()
+                if not ob.material_slots:
+                    ob.data.materials.append(mat)
+                for sl in ob.material_slots:
+                    sl.material = mat
+            elif ob.visible_camera:
                 ob.visible_camera = False   # the mirror shows the room, not itself
                 hidden.append(ob)
         aux.camera = cam
@@ -457,6 +492,11 @@ def _render_probe(scene, spec, objs, path):
     finally:
         for ob in hidden:
             ob.visible_camera = True
+        for ob, slot_mats, data_mats in swapped:
+            if len(ob.data.materials) > len(data_mats):
+                ob.data.materials.pop()
+            for sl, m in zip(ob.material_slots, slot_mats):
+                sl.material = m
         compat.release_compositor_tree(aux, made)
         bpy.data.scenes.remove(aux)
         bpy.data.objects.remove(cam)
@@ -474,25 +514,29 @@ def planar_spec(scene, view):
     cam = scene.camera
     if not objs or cam is None:
         raise NotPlanar("the mask names no object" if cam else "the scene has no camera")
-    faces = _mirror_faces(objs, set(mask.get("material") or []))
     cam_pos = cam.matrix_world.translation
+    # the faces the camera sees (a slab's back face does not reflect anything it sees)
+    faces = [f for f in _mirror_faces(objs, set(mask.get("material") or [])) if f[1].dot(cam_pos - f[0]) > 0]
     n = Vector((0, 0, 0))
-    c = Vector((0, 0, 0))
-    total = 0.0
     for fc, fn, area in faces:
-        n += fn * area * (1.0 if fn.dot(cam_pos - fc) >= 0 else -1.0)
-        c += fc * area
-        total += area
+        n += fn * area
     lo, hi = world_box(objs)
     size = (hi - lo).length
-    if total <= 0 or n.length < 1e-9:
-        raise NotPlanar("its faces have no common normal")
+    if not faces or n.length < 1e-9:
+        raise NotPlanar("its faces have no common normal (mirrors facing each other?)")
     n.normalize()
+    plane = [f for f in faces if f[1].dot(n) > 0.999]
+    total = sum(f[2] for f in plane)
+    other = sum(f[2] for f in faces) - total
+    if total <= 0 or other > 0.05 * total:
+        raise NotPlanar("its faces do not lie in one plane (a curved mirror, or mirrors facing each other)")
+    c = Vector((0, 0, 0))
+    for fc, _, area in plane:
+        c += fc * area
     c /= total
     tol = 0.01 + 0.002 * size
-    for fc, fn, _ in faces:
-        if abs(fn.dot(n)) < 0.999 or abs((fc - c).dot(n)) > tol:
-            raise NotPlanar("its faces do not lie in one plane (a curved mirror, or mirrors facing each other)")
+    if any(abs((fc - c).dot(n)) > tol for fc, _, _ in plane):
+        raise NotPlanar("its faces lie in parallel planes, not one")
     d = n.dot(c)
     if n.dot(cam_pos) - d <= 0:
         raise NotPlanar("the camera is behind its plane")
@@ -517,7 +561,9 @@ def planar_spec(scene, view):
             corners = [ob.matrix_world @ Vector(v) for v in ob.bound_box]
             if all(n.dot(p) - d < -1e-4 for p in corners):
                 behind.append(ob.name)
-    samples = int(scene.get("libfx_planar_samples") or max(1, scene.cycles.samples))
+    # the view is the mirror's whole reflection at the converged preset: 4x the scene's
+    # samples, so its noise is half the render's
+    samples = int(scene.get("libfx_planar_samples") or 4 * max(1, scene.cycles.samples))
     return {
         "name": view["name"], "kind": "planar", "width": rw, "height": rh, "samples": samples,
         "matrix_world": [list(row) for row in mw], "world_to_camera": [list(row) for row in mw.inverted()],

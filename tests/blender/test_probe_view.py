@@ -7,7 +7,8 @@ tests/c/test_probe.c checks the library against the same statement):
 - the Depth pass of a panoramic Cycles camera is the radial distance from its centre
   (checked on a floor 1 m below: depth = 1 / cos(angle from straight down)), not a
   planar depth;
-- the mirror objects named in the probe's spec are hidden from the probe's camera;
+- the mirror objects named in the probe's spec render as perfect mirrors in the probe
+  (the yellow cube at -X shows the red cube at +X) and get their materials back;
 - colour comes with the Depth (the File Output node's Image), rows as the library reads
   them (top row = up)."""
 import math
@@ -68,7 +69,8 @@ objs = aux_views._probe_scene_objects(scene)
 path = os.environ["PROBE_OUT"]
 aux_views._render_probe(scene, spec, objs, path)
 assert os.path.exists(path)
-assert bpy.data.objects["Hidden"].visible_camera, "the hidden object's visibility was not restored"
+assert bpy.data.objects["Hidden"].visible_camera, "the mirror's visibility was not restored"
+assert bpy.data.objects["Hidden"].material_slots[0].material.name == "yellow", "the mirror's material was not restored"
 print("LIBFX-TEST-OK")
 """
 
@@ -113,8 +115,8 @@ def test_probe_conventions(blender, library, tmp_path):
     assert xy[1] < 4 and c[2] > 0.5 and c[0] < 0.2, (xy, c)
     c, d, xy = colour_at((0, -1, 0))    # -Y: the seam, white
     assert (xy[0] < 2 or xy[0] > w - 3) and c.min() > 0.5, (xy, c)
-    c, d, xy = colour_at((-1, 0, 0))    # -X: the hidden "mirror" is not there (floor/black)
-    assert not (c[0] > 0.5 and c[1] > 0.5), ("the hidden object shows", c)
+    c, d, xy = colour_at((-1, 0, 0))    # -X: the "mirror" cube, a perfect mirror: the red cube
+    assert c[0] > 0.5 and c[1] < 0.2 and c[2] < 0.2, ("the mirror does not reflect the red cube", c)
     # radial depth on the floor 1 m below: 1 / cos(angle from straight down)
     worst = 0.0
     for row in range(h // 2 + 8, h - 2, 4):
