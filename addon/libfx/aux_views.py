@@ -29,8 +29,9 @@ alpha threshold exactly as in the main render and cast leaf-shaped shadows.
 - ``planar:<key>``: for a flat mirror (one plane fits all its faces), the scene seen
   by the camera mirrored in that plane (ssr_mirror's ``planar_view``, the
   ``reference`` preset), at the render's size and samples (or
-  ``libfx_planar_samples``), colour + Depth, with the mirror hidden and the objects
-  wholly behind its plane left out; the entry carries the plane. A mirror that is
+  ``libfx_planar_samples``), colour + Depth, with the mirror and the objects wholly
+  behind its plane hidden from the camera (they still cast shadows and bounce
+  light); the entry carries the plane. A mirror that is
   not flat (a curved one, a facing pair in one entry) gets no view: a log line, and
   ssr_mirror keeps the trace and the probe there.
 
@@ -425,7 +426,7 @@ def _render_probe(scene, spec, objs, path):
             cam_data.clip_start = spec["clip_start"]
         cam_data.clip_end = spec["clip_end"]
         cam.matrix_world = Matrix(spec["matrix_world"])
-        for name in spec["hidden"]:
+        for name in spec["hidden"] + spec.get("behind", []):
             ob = bpy.data.objects.get(name)
             if ob is None:
                 continue
@@ -440,7 +441,9 @@ def _render_probe(scene, spec, objs, path):
                 for sl in ob.material_slots:
                     sl.material = mat
             elif ob.visible_camera:
-                ob.visible_camera = False   # the mirror shows the room, not itself
+                # the mirror shows the room, not itself, and not what stands behind its plane
+                # (still there for shadows and bounce light: the room must be lit as it is)
+                ob.visible_camera = False
                 hidden.append(ob)
         aux.camera = cam
         aux.world = scene.world
@@ -584,7 +587,7 @@ def _prepare_probe(scene, view, path, meta_path):
                 log("no planar view '%s': the mirror is not flat (%s); ssr_mirror uses the trace and the "
                     "probe there" % (view["name"], e))
                 return None
-            objs = [o for o in _probe_scene_objects(scene) if o.name not in spec["behind"]]
+            objs = _probe_scene_objects(scene)
         else:
             spec = probe_spec(scene, view)
             objs = _probe_scene_objects(scene)

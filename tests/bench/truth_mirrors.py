@@ -19,8 +19,9 @@ The two truths render with --truth-spp samples (default 64: their seed-to-seed n
 the floor no method can go under; 16 spp put it at 0.033-0.045, a fifth of the input's
 error). The input's batch render also renders the reflection probe the `final` preset
 asks for (issue 14); its time, from the add-on's log, is reported apart. Each preset
-runs as shipped (draft/preview: screen space only; final/reference: + probe) and with
-the other fallback ("<preset>, screen space only" / "<preset> + probe").
+runs as shipped (draft/preview: screen space only; final: + probe; reference: + probe +
+planar view) and with the other fallback ("<preset>, no probe": fallback texture, the
+planar view stays at reference; "<preset> + probe").
 """
 import json
 import os
@@ -102,12 +103,12 @@ def main():
         truth, truth2, plain = C.rgb(tpass), C.rgb(t2pass), C.rgb(passes)
         outs = C.run_presets(recipe, passes, side, a.out, "m_%s" % v, runs=a.runs)
         rows = C.rows_for(truth, truth2, plain, outs, region)
-        # the other fallback at each preset
+        # the other fallback at each preset ("no probe": fallback texture; reference keeps its planar view)
         tex = C.run_presets(with_fallback(recipe, "texture"), passes, side, a.out, "m_%s_ss" % v, runs=a.runs)
         prb = C.run_presets(with_fallback(recipe, "probe"), passes, side, a.out, "m_%s_probe" % v, runs=a.runs)
         for q in C.PRESETS:
             if q in ("final", "reference"):
-                rows.append(C.error_row("%s, screen space only" % q, tex[q][0], tex[q][1], truth, region))
+                rows.append(C.error_row("%s, no probe" % q, tex[q][0], tex[q][1], truth, region))
             else:
                 rows.append(C.error_row("%s + probe" % q, prb[q][0], prb[q][1], truth, region))
         if a.eevee:  # the real-time peer: Eevee's own screen-space reflections
@@ -135,8 +136,8 @@ def main():
                          [truth, outs["final"][0], tex["final"][0], plain])
     # the issue's goal: the region error's fall relative to no reflection, averaged
     summ = []
-    methods = ["libfx " + q for q in C.PRESETS] + ["draft + probe", "preview + probe", "final, screen space only",
-                                                   "reference, screen space only"]
+    methods = ["libfx " + q for q in C.PRESETS] + ["draft + probe", "preview + probe", "final, no probe",
+                                                   "reference, no probe"]
     if a.eevee:
         methods.append("Eevee SSR")
     for m in methods:
