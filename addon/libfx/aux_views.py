@@ -16,6 +16,25 @@ alpha threshold exactly as in the main render and cast leaf-shaped shadows.
 - ``rain_map``: orthographic, straight down, over the same region in XY, ~5 cm
   texels (128..2048) or ``libfx_rain_map_size``.
 
+- ``probe:<key>``: a reflection probe for one mirror entry (the view lists the
+  entry's mask): an equirectangular panorama (Cycles PANO camera, 512x256 or
+  ``libfx_probe_size`` wide, ``libfx_probe_samples`` samples (16 at most by
+  default), colour with the scene's indirect light + radial Depth) of the whole
+  scene with the mirror's objects rendered as perfect mirrors (so each mirror of a
+  facing pair sees the other one's reflections).  Placed at the
+  reflection-cubemap Light Probe nearest the mirror if the scene has one, else
+  at the centre of the mirror objects' bounding box pushed out past their front
+  along their mean normal (towards the camera).  A probe that fails to render
+  is a warning: the run goes on and ssr_mirror takes its texture fallback.
+- ``planar:<key>``: for a flat mirror (one plane fits all its faces), the scene seen
+  by the camera mirrored in that plane (ssr_mirror's ``planar_view``, the
+  ``reference`` preset), at the render's size and samples (or
+  ``libfx_planar_samples``), colour + Depth, with the mirror and the objects wholly
+  behind its plane hidden from the camera (they still cast shadows and bounce
+  light); the entry carries the plane. A mirror that is
+  not flat (a curved one, a facing pair in one entry) gets no view: a log line, and
+  ssr_mirror keeps the trace and the probe there.
+
 A view is rendered once and reused while its signature (camera, resolution, the
 light, every linked object's transform, mesh size and materials) does not
 change: frames 2..N of a batch cost no extra render.  Log lines say which.
@@ -28,7 +47,7 @@ import os
 import time
 
 import bpy
-from mathutils import Matrix, Vector
+from mathutils import Euler, Matrix, Vector
 
 from . import compat, native, scene_setup
 
@@ -267,6 +286,343 @@ def _render(scene, spec, objs, path):
         bpy.data.cameras.remove(cam_data)
 
 
+# ---------------------------------------------------------------- probes
+
+def mask_objects(scene, mask):
+    """The scene's objects a stack mask selects by name or index (materials, objects);
+    rectangles and inversion cannot place a probe and are ignored."""
+    mats = set(mask.get("material") or [])
+    obs = set(mask.get("object") or [])
+    mat_idx = set(mask.get("material_index") or [])
+    ob_idx = set(mask.get("object_index") or [])
+    out = []
+    for ob in scene.objects:
+        if ob.type != "MESH" or ob.hide_render:
+            continue
+        slots = [sl.material for sl in ob.material_slots if sl.material]
+        if (ob.name in obs or ob.pass_index in ob_idx or any(m.name in mats for m in slots)
+                or any(m.pass_index in mat_idx for m in slots)):
+            out.append(ob)
+    return sorted(out, key=lambda o: o.name)
+
+
+def _mirror_faces(objs, mats):
+    """World (centre, area-weighted normal, area) of the mirror's faces (those with a
+    mirror material, or all faces of an object named by the mask)."""
+    faces = []
+    for ob in objs:
+        me = ob.data
+        mw = ob.matrix_world
+        nm = mw.to_3x3().inverted_safe().transposed()
+        slot_mat = [sl.material.name if sl.material else "" for sl in ob.material_slots]
+        for poly in me.polygons:
+            if mats and slot_mat and poly.material_index < len(slot_mat) and slot_mat[poly.material_index] not in mats:
+                continue
+            n = (nm @ poly.normal).normalized()
+            faces.append((mw @ poly.center, n, poly.area))
+    return faces
+
+
+def probe_spec(scene, view):
+    """Where the probe of `view` goes, its size and its camera matrices."""
+    mask = view.get("mask") or {}
+    objs = mask_objects(scene, mask)
+    cam = scene.camera
+    cam_pos = cam.matrix_world.translation if cam else Vector((0, 0, 0))
+    if objs:
+        lo, hi = world_box(objs)
+        centre = (lo + hi) / 2
+        faces = _mirror_faces(objs, set(mask.get("material") or []))
+        n = Vector((0, 0, 0))
+        for c, fn, area in faces:
+            # each face's normal turned to the camera's side: a pair facing each other
+            # cancels out (the probe stays in the room between them)
+            n += fn * area * (1.0 if fn.dot(cam_pos - c) >= 0 else -1.0)
+        size = (hi - lo).length
+        if n.length > 1e-6 * max(1e-6, size * size):
+            n.normalize()
+            front = max([(c - centre).dot(n) for c, _, _ in faces] + [0.0])
+            pos = centre + n * (front + min(1.0, max(0.1, 0.15 * size)))
+        else:
+            pos = centre
+        where = "the mirror (%s)" % ", ".join(o.name for o in objs[:4])
+    else:
+        centre = pos = Vector(cam_pos)
+        where = "the camera (the mask names no object)"
+    probes = [ob for ob in scene.objects if compat.is_reflection_probe(ob) and not ob.hide_render]
+    if probes and objs:
+        ob = min(probes, key=lambda o: ((o.matrix_world.translation - centre).length, o.name))
+        pos = ob.matrix_world.translation.copy()
+        where = "the Light Probe '%s'" % ob.name
+    width = int(scene.get("libfx_probe_size") or 512)
+    width = max(16, width + width % 2)
+    samples = int(scene.get("libfx_probe_samples") or min(16, max(1, scene.cycles.samples)))
+    # looks along world +Y, up +Z (any rotation would do: the matrix goes to the library)
+    mw = Matrix.Translation(pos) @ Euler((math.pi / 2, 0.0, 0.0)).to_matrix().to_4x4()
+    clip_end = cam.data.clip_end if cam else 1000.0
+    return {
+        "name": view["name"], "kind": "probe", "width": width, "height": width // 2, "samples": samples,
+        "matrix_world": [list(row) for row in mw], "world_to_camera": [list(row) for row in mw.inverted()],
+        "clip_start": 0.0, "clip_end": clip_end, "hidden": [o.name for o in objs], "where": where,
+        "mirrors": "perfect",   # how the probe shows the entry's mirrors (part of the signature)
+    }
+
+
+def _probe_scene_objects(scene):
+    return sorted([ob for ob in scene.objects if ob.type != "CAMERA" and not ob.hide_render],
+                  key=lambda o: o.name)
+
+
+def _probe_signature(scene, spec, objs):
+    lights = []
+    for ob in objs:
+        if ob.type == "LIGHT":
+            d = ob.data
+            lights.append([ob.name, d.type, round(d.energy, 5), [round(c, 5) for c in d.color]])
+    world = scene.world.name if scene.world else ""
+    return signature(dict(spec, lights=lights, world=world, engine_samples=scene.cycles.max_bounces), objs)
+
+
+PROBE_MIRROR = "libfx probe mirror"
+
+
+def _probe_mirror_material():
+    """A perfect white mirror (sharp Glossy BSDF) for the mirrors a probe sees."""
+    mat = bpy.data.materials.get(PROBE_MIRROR)
+    if mat is None:
+        mat = bpy.data.materials.new(PROBE_MIRROR)
+        mat.use_nodes = True
+        nt = mat.node_tree
+        for n in list(nt.nodes):
+            nt.nodes.remove(n)
+        g = nt.nodes.new("ShaderNodeBsdfGlossy")
+        g.inputs["Color"].default_value = (1, 1, 1, 1)
+        g.inputs["Roughness"].default_value = 0.0
+        out = nt.nodes.new("ShaderNodeOutputMaterial")
+        nt.links.new(g.outputs[0], out.inputs[0])
+    return mat
+
+
+def _render_probe(scene, spec, objs, path):
+    aux = bpy.data.scenes.new(AUX_SCENE)
+    cam_data = bpy.data.cameras.new(AUX_SCENE)
+    cam = bpy.data.objects.new(AUX_SCENE, cam_data)
+    made = None
+    hidden = []
+    swapped = []
+    try:
+        for ob in objs:
+            aux.collection.objects.link(ob)
+        aux.collection.objects.link(cam)
+        if spec["kind"] == "probe":
+            compat.set_equirect_camera(cam_data)
+            cam_data.clip_start = 0.01
+        else:  # planar: the main camera's lens, mirrored (x flipped: the shift too)
+            src = scene.camera.data
+            for k in ("type", "lens", "lens_unit", "sensor_width", "sensor_height", "sensor_fit", "shift_y",
+                      "ortho_scale"):
+                setattr(cam_data, k, getattr(src, k))
+            cam_data.shift_x = -src.shift_x
+            cam_data.clip_start = spec["clip_start"]
+        cam_data.clip_end = spec["clip_end"]
+        cam.matrix_world = Matrix(spec["matrix_world"])
+        for name in spec["hidden"] + spec.get("behind", []):
+            ob = bpy.data.objects.get(name)
+            if ob is None:
+                continue
+            if spec["kind"] == "probe":
+                # the probe sees the entry's mirrors as perfect mirrors: a mirror of a facing
+                # pair reflects the other one (and what that one reflects); a flat or convex
+                # mirror never looks up its own direction
+                swapped.append((ob, [sl.material for sl in ob.material_slots], ob.data.materials[:]))
+                mat = _probe_mirror_material()
+                if not ob.material_slots:
+                    ob.data.materials.append(mat)
+                for sl in ob.material_slots:
+                    sl.material = mat
+            elif ob.visible_camera:
+                # the mirror shows the room, not itself, and not what stands behind its plane
+                # (still there for shadows and bounce light: the room must be lit as it is)
+                ob.visible_camera = False
+                hidden.append(ob)
+        aux.camera = cam
+        aux.world = scene.world
+        r = aux.render
+        r.engine = "CYCLES"
+        r.resolution_x, r.resolution_y, r.resolution_percentage = spec["width"], spec["height"], 100
+        r.film_transparent = False
+        r.use_compositing = True
+        r.filepath = os.path.join(os.path.dirname(path), "")
+        c, sc = aux.cycles, scene.cycles
+        c.samples = spec["samples"]
+        c.use_adaptive_sampling = False
+        c.use_denoising = False
+        for k in ("max_bounces", "diffuse_bounces", "glossy_bounces", "transmission_bounces",
+                  "volume_bounces", "transparent_max_bounces", "sample_clamp_indirect",
+                  "sample_clamp_direct", "blur_glossy", "caustics_reflective", "caustics_refractive"):
+            if hasattr(sc, k):
+                setattr(c, k, getattr(sc, k))
+        c.seed = 0
+        aux.frame_start = aux.frame_end = aux.frame_current = 1
+        vl = aux.view_layers[0]
+        vl.use_pass_z = True
+        nt, made = compat.ensure_compositor_tree(aux, AUX_SCENE)
+        rl = next(n for n in nt.nodes if n.bl_idname == "CompositorNodeRLayers")
+        rl.scene = aux
+        fo = nt.nodes.new("CompositorNodeOutputFile")
+        compat.file_output_format(fo, "OPEN_EXR_MULTILAYER", "32", "ZIP")
+        base = path[:-len(".exr")] + ".tmp."
+        compat.file_output_set_prefix(fo, base)
+        compat.file_output_link(nt, fo, [("Image", compat.render_layer_output(rl, "Combined")),
+                                         ("Depth", compat.render_layer_output(rl, "Depth"))])
+        BUSY["on"] = True
+        try:
+            bpy.ops.render.render(write_still=False, scene=aux.name)
+        finally:
+            BUSY["on"] = False
+        written = None
+        for f in (scene.frame_current, 1):
+            if os.path.exists(base + "%04d.exr" % f):
+                written = base + "%04d.exr" % f
+                break
+        if written is None:
+            import glob
+            found = sorted(glob.glob(glob.escape(base) + "[0-9]*.exr"))
+            written = found[-1] if found else base + "0001.exr"
+        if not os.path.exists(written):
+            raise native.LibfxError("the %s render '%s' wrote no file (%s)" % (spec["kind"], spec["name"], written))
+        os.replace(written, path)
+    finally:
+        for ob in hidden:
+            ob.visible_camera = True
+        for ob, slot_mats, data_mats in swapped:
+            if len(ob.data.materials) > len(data_mats):
+                ob.data.materials.pop()
+            for sl, m in zip(ob.material_slots, slot_mats):
+                sl.material = m
+        compat.release_compositor_tree(aux, made)
+        bpy.data.scenes.remove(aux)
+        bpy.data.objects.remove(cam)
+        bpy.data.cameras.remove(cam_data)
+
+
+class NotPlanar(Exception):
+    pass
+
+
+def planar_spec(scene, view):
+    """The mirrored camera of a flat mirror: its matrices, the plane, what it hides."""
+    mask = view.get("mask") or {}
+    objs = mask_objects(scene, mask)
+    cam = scene.camera
+    if not objs or cam is None:
+        raise NotPlanar("the mask names no object" if cam else "the scene has no camera")
+    cam_pos = cam.matrix_world.translation
+    # the faces the camera sees (a slab's back face does not reflect anything it sees)
+    faces = [f for f in _mirror_faces(objs, set(mask.get("material") or [])) if f[1].dot(cam_pos - f[0]) > 0]
+    n = Vector((0, 0, 0))
+    for fc, fn, area in faces:
+        n += fn * area
+    lo, hi = world_box(objs)
+    size = (hi - lo).length
+    if not faces or n.length < 1e-9:
+        raise NotPlanar("its faces have no common normal (mirrors facing each other?)")
+    n.normalize()
+    plane = [f for f in faces if f[1].dot(n) > 0.999]
+    total = sum(f[2] for f in plane)
+    other = sum(f[2] for f in faces) - total
+    if total <= 0 or other > 0.05 * total:
+        raise NotPlanar("its faces do not lie in one plane (a curved mirror, or mirrors facing each other)")
+    c = Vector((0, 0, 0))
+    for fc, _, area in plane:
+        c += fc * area
+    c /= total
+    tol = 0.01 + 0.002 * size
+    if any(abs((fc - c).dot(n)) > tol for fc, _, _ in plane):
+        raise NotPlanar("its faces lie in parallel planes, not one")
+    d = n.dot(c)
+    if n.dot(cam_pos) - d <= 0:
+        raise NotPlanar("the camera is behind its plane")
+    S = Matrix.Identity(3)
+    for i in range(3):
+        for k in range(3):
+            S[i][k] -= 2.0 * n[i] * n[k]
+    R = cam.matrix_world.to_3x3().normalized()
+    e2 = cam_pos - 2.0 * (cam_pos.dot(n) - d) * n
+    R2 = S @ R @ Matrix.Diagonal((-1.0, 1.0, 1.0))   # a proper rotation: the image is mirrored
+    mw = Matrix.Translation(e2) @ R2.to_4x4()
+    r = scene.render
+    rw = int(r.resolution_x * r.resolution_percentage / 100)
+    rh = int(r.resolution_y * r.resolution_percentage / 100)
+    proj = cam.calc_matrix_camera(bpy.context.evaluated_depsgraph_get(), x=rw, y=rh, scale_x=r.pixel_aspect_x,
+                                  scale_y=r.pixel_aspect_y)
+    proj = [list(row) for row in proj]
+    proj[0][2] = -proj[0][2]                          # the lens shift, mirrored with x
+    behind = []
+    for ob in scene.objects:
+        if ob.type in ("MESH", "CURVE", "SURFACE", "META", "FONT") and ob not in objs:
+            corners = [ob.matrix_world @ Vector(v) for v in ob.bound_box]
+            if all(n.dot(p) - d < -1e-4 for p in corners):
+                behind.append(ob.name)
+    # the view is the mirror's whole reflection at the converged preset: 4x the scene's
+    # samples, so its noise is half the render's
+    samples = int(scene.get("libfx_planar_samples") or 4 * max(1, scene.cycles.samples))
+    return {
+        "name": view["name"], "kind": "planar", "width": rw, "height": rh, "samples": samples,
+        "matrix_world": [list(row) for row in mw], "world_to_camera": [list(row) for row in mw.inverted()],
+        "projection": proj, "clip_start": float(cam.data.clip_start), "clip_end": float(cam.data.clip_end),
+        "hidden": [o.name for o in objs], "behind": sorted(behind), "plane": [n.x, n.y, n.z, d],
+        "where": "the plane of %s" % ", ".join(o.name for o in objs[:4]),
+    }
+
+
+def _prepare_probe(scene, view, path, meta_path):
+    """Renders (or reuses) one probe or planar view; its sidecar entry, or None (a log
+    line: a warning when it failed) when there is none."""
+    try:
+        if view["kind"] == "planar":
+            try:
+                spec = planar_spec(scene, view)
+            except NotPlanar as e:
+                log("no planar view '%s': the mirror is not flat (%s); ssr_mirror uses the trace and the "
+                    "probe there" % (view["name"], e))
+                return None
+            objs = _probe_scene_objects(scene)
+        else:
+            spec = probe_spec(scene, view)
+            objs = _probe_scene_objects(scene)
+        sig = _probe_signature(scene, spec, objs)
+        old = None
+        if os.path.exists(path) and os.path.exists(meta_path):
+            try:
+                with open(meta_path, encoding="utf-8") as f:
+                    old = json.load(f)
+            except (OSError, ValueError):
+                old = None
+        if old and old.get("signature") == sig:
+            log("%s '%s' reused (scene unchanged): %s" % (view["kind"], view["name"], path))
+        else:
+            os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
+            t0 = time.perf_counter()
+            _render_probe(scene, spec, objs, path)
+            log("%s '%s' at %s rendered %dx%d (%d samples) in %.2f s: %s"
+                % (view["kind"], view["name"], spec["where"], spec["width"], spec["height"], spec["samples"],
+                   time.perf_counter() - t0, path))
+    except Exception as e:  # a probe is an improvement, never a reason to fail the frame
+        log("warning: the %s view '%s' failed to render (%s): ssr_mirror falls back to %s"
+            % (view["kind"], view["name"], e,
+               "the mirror's texture" if view["kind"] == "probe" else "the trace and the probe"))
+        return None
+    if view["kind"] == "planar":
+        return {"name": view["name"], "path": path, "world_to_camera": spec["world_to_camera"],
+                "projection": spec["projection"], "clip_start": spec["clip_start"], "clip_end": spec["clip_end"],
+                "orthographic": False, "kind": "planar", "plane": spec["plane"], "signature": sig}
+    ident = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
+    return {"name": view["name"], "path": path, "world_to_camera": spec["world_to_camera"],
+            "projection": ident, "clip_start": 0.0, "clip_end": spec["clip_end"], "orthographic": False,
+            "kind": "probe", "panorama": "equirect", "signature": sig}
+
+
 def _file_name(view_name):
     return "".join(c if c.isalnum() or c in "-_" else "_" for c in view_name)
 
@@ -280,6 +636,17 @@ def prepare(scene, frames):
     objs = casters(scene)
     entries = []
     for view in views:
+        if view["kind"] in ("probe", "planar"):
+            path = "%slibfx_aux_%s.exr" % (scene_setup.output_prefix(scene), _file_name(view["name"]))
+            meta_path = path[:-4] + ".json"
+            entry = _prepare_probe(scene, view, path, meta_path)
+            if entry is None:
+                continue
+            with open(meta_path + ".tmp", "w", encoding="utf-8") as f:
+                json.dump(entry, f, indent=1)
+            os.replace(meta_path + ".tmp", meta_path)
+            entries.append(entry)
+            continue
         spec = view_spec(scene, view, frames, objs)
         sig = signature(spec, objs)
         path = "%slibfx_aux_%s.exr" % (scene_setup.output_prefix(scene), _file_name(view["name"]))

@@ -29,6 +29,9 @@ The differences, and the releases that made them:
 - light shadows (``cycles.cast_shadow`` gone in 5.0) and animation F-curves
   (slotted actions: ``action.fcurves`` gone in 5.0), for the scene builders.
 - mesh auto smooth (``use_auto_smooth`` until 4.0; ``set_sharp_from_angle`` 4.1+).
+- panoramic cameras: the projection is ``cam.data.cycles.panorama_type`` (3.x)
+  or ``cam.data.panorama_type`` (4.0+); reflection-cubemap light probes are
+  type ``CUBEMAP`` (3.x) or ``SPHERE`` (4.1+).
 - extensions (4.2+): the add-on's module is ``bl_ext.<repo>.libfx`` (batch.py
   looks for either name before it can import this module).
 """
@@ -388,3 +391,25 @@ def mesh_smooth_by_angle(mesh, angle):
     else:                                            # 3.4-4.0: auto smooth
         mesh.use_auto_smooth = True
         mesh.auto_smooth_angle = angle
+
+
+# ---------------------------------------------------------------- probes
+
+def set_equirect_camera(cam_data):
+    """Makes a camera Cycles' full 360 x 180 degree equirectangular panorama:
+    ``panorama_type`` on the camera (4.0+) or on its Cycles settings (3.x)."""
+    cam_data.type = "PANO"
+    for owner in (cam_data, getattr(cam_data, "cycles", None)):
+        if owner is not None and hasattr(owner, "panorama_type"):
+            owner.panorama_type = "EQUIRECTANGULAR"
+            for k, v in (("latitude_min", -1.5707963), ("latitude_max", 1.5707963),
+                         ("longitude_min", -3.1415927), ("longitude_max", 3.1415927)):
+                if hasattr(owner, k):
+                    setattr(owner, k, v)
+            return
+    raise RuntimeError("this Blender has no panoramic camera type setting")
+
+
+def is_reflection_probe(ob):
+    """A reflection-cubemap Light Probe object (3.x 'CUBEMAP', 4.1+ 'SPHERE')."""
+    return ob.type == "LIGHT_PROBE" and getattr(ob.data, "type", "") in ("CUBEMAP", "SPHERE")

@@ -43,9 +43,14 @@ def test_truth_scene_builds_and_renders(name, args, blend_name, blender, library
     # the builder's recipe is the committed one
     assert T.read_json(built / "recipe.json") == T.read_json(sdir / "recipe.json")
 
-    _batch(blend, str(tmp_path / "in_"), library)
+    log = _batch(blend, str(tmp_path / "in_"), library)
     passes = tmp_path / "in_libfx_passes.0001.exr"
     assert passes.is_file() and (tmp_path / "in_libfx.0001.camera.json").is_file()
+    if name == "mirrors":  # the final preset's reflection probe: rendered and in the sidecar
+        assert "probe 'probe:" in log and "rendered" in log, log[-3000:]
+        side = T.read_json(tmp_path / "in_libfx.0001.camera.json")
+        probes = [v for v in side.get("aux_views", []) if v.get("kind") == "probe"]
+        assert len(probes) == 1 and probes[0]["panorama"] == "equirect", side.get("aux_views")
     import subprocess
     need = json.loads(subprocess.run([str(cli), "passes", "--stack", str(built / "recipe.json")],
                                      capture_output=True, text=True, check=True).stdout)

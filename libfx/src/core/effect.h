@@ -115,9 +115,12 @@ int fx_param_is_mask(const fx_param_def *def);
 /* An auxiliary view an effect reads (a light's depth view, the rain map): the add-on
  * renders exactly the views the stack's effects ask for (fx_stack_required_aux_views). */
 typedef struct fx_aux_need {
-    char name[FX_NAME_MAX];     /* "light:Sun" ("light:" = the scene's first sun), "rain_map" */
-    const char *kind;           /* "light" or "rain_map" */
+    char name[FX_NAME_MAX];     /* "light:Sun" ("light:" = the scene's first sun), "rain_map", "probe:" */
+    const char *kind;           /* "light", "rain_map" or "probe" */
     char light[FX_NAME_MAX];    /* for kind "light": the light's name, "" = the first sun */
+    int per_mask;               /* 1: a view of this entry's mask (a mirror's probe): the stack
+                                   appends the entry's mask key (fx_effect_run.mask_key) to
+                                   name and lists the mask, so the add-on knows where to render */
 } fx_aux_need;
 
 /* Everything process() gets. */
@@ -139,6 +142,8 @@ typedef struct fx_effect_run {
     const char *where;      /* "effect <index> (<name>)": the prefix of this effect's messages */
     fx_frame *debug;        /* add debug passes here ("<name>" is prefixed by the stack), or NULL */
     atomic_size_t *nonfinite; /* FX_EFFECT_OWN_FINITE: fx_effect_finish_row counts here */
+    const char *mask_key;   /* the entry's mask as a short stable hash (hex; of "{}" without a
+                               mask): names per-mask aux views (fx_aux_need.per_mask) */
     int proxy_factor;       /* 1, or f on a proxy (fx_frame_reduce): a frame pixel is f full
                                pixels wide. Parameters hinted "pixels" come divided by f
                                already; an effect scales its own fixed pixel distances by it */

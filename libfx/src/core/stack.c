@@ -742,6 +742,22 @@ fx_result fx_stack_required_passes(const fx_stack *s, char **out_json)
     return *out_json ? FX_OK : fx_fail(s->ctx, FX_ERR_OUT_OF_MEMORY, "out of memory");
 }
 
+/* The entry's mask key (fx_effect_run.mask_key): 12 hex digits of the 64-bit FNV-1a hash
+ * of its canonical mask JSON ("{}" without a mask). Stable across runs and machines, so
+ * the add-on's view names and the run's match. */
+static void mask_key(const fx_entry *e, char out[16])
+{
+    cJSON *m = fx_mask_spec_to_json(&e->mask);
+    char *text = m ? cJSON_PrintUnformatted(m) : NULL;
+    cJSON_Delete(m);
+    const char *t = text ? text : "{}";
+    uint64_t h = 1469598103934665603ull;
+    for (const unsigned char *c = (const unsigned char *)t; *c; c++)
+        h = (h ^ *c) * 1099511628211ull;
+    cJSON_free(text);
+    snprintf(out, 16, "%012llx", (unsigned long long)(h & 0xffffffffffffull));
+}
+
 /* The aux views the enabled effects read, from their effective parameters (so a preset
  * or default counts as much as an explicit value); each view once. */
 fx_result fx_stack_required_aux_views(const fx_stack *s, char **out_json)
@@ -757,20 +773,40 @@ fx_result fx_stack_required_aux_views(const fx_stack *s, char **out_json)
         if (!e->enabled || !e->cls->aux_views)
             continue;
         fx_aux_need need[4];
+        memset(need, 0, sizeof need);
         int n = e->cls->aux_views(e->effective, need, 4);
         for (int k = 0; k < n && !r; k++) {
+            cJSON *mask = NULL;
+            if (need[k].per_mask) {
+                char key[16];
+                mask_key(e, key);
+                size_t len = strlen(need[k].name);
+                snprintf(need[k].name + len, sizeof need[k].name - len, "%s", key);
+                mask = fx_mask_spec_to_json(&e->mask);
+                if (!mask)
+                    mask = cJSON_CreateObject();
+                if (!mask) {
+                    r = fx_fail(s->ctx, FX_ERR_OUT_OF_MEMORY, "out of memory listing aux views");
+                    break;
+                }
+            }
             int seen = 0;
             const cJSON *v;
             cJSON_ArrayForEach(v, views) {
                 const cJSON *name = cJSON_GetObjectItemCaseSensitive(v, "name");
                 seen |= cJSON_IsString(name) && strcmp(name->valuestring, need[k].name) == 0;
             }
-            if (seen)
+            if (seen) {
+                cJSON_Delete(mask);
                 continue;
+            }
             cJSON *item = cJSON_CreateObject();
             if (!item || !cJSON_AddStringToObject(item, "name", need[k].name) ||
                 !cJSON_AddStringToObject(item, "kind", need[k].kind) ||
-                (strcmp(need[k].kind, "light") == 0 && !cJSON_AddStringToObject(item, "light", need[k].light))) {
+                (strcmp(need[k].kind, "light") == 0 && !cJSON_AddStringToObject(item, "light", need[k].light)) ||
+                (mask && !cJSON_AddItemToObject(item, "mask", mask))) {
+                if (mask && (!item || cJSON_GetObjectItemCaseSensitive(item, "mask") != mask))
+                    cJSON_Delete(mask);
                 cJSON_Delete(item);
                 r = fx_fail(s->ctx, FX_ERR_OUT_OF_MEMORY, "out of memory listing aux views");
             } else {
@@ -1214,6 +1250,10 @@ static fx_result run_entry(fx_stack *s, fx_entry *e, int i, const fx_frame *in, 
     run.where = where;
     run.debug = s->debug ? o : NULL;
     run.proxy_factor = in->proxy_factor > 1 ? in->proxy_factor : 1;
+    char key[16] = "";
+    if (e->cls->aux_views)
+        mask_key(e, key);
+    run.mask_key = key;
     atomic_size_t own_bad;
     atomic_init(&own_bad, 0);
     run.nonfinite = &own_bad;

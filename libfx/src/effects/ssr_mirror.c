@@ -8,8 +8,25 @@
  * reflected colour is the current Combined sampled bilinearly at the hit coordinates
  * (from a Gaussian-blurred copy for glossy mirrors: the lookup is blurred, not the
  * result), faded towards the fallback (the mirror's own texture or an environment
- * colour) as the hit nears the frame border, put through the colour operator, and
- * mixed by w = reflectivity x Fresnel: C = C_texture (1 - w) + C_reflection w.
+ * colour, or the reflection probe) as the hit nears the frame border, put through the
+ * colour operator, and mixed by w = reflectivity x Fresnel:
+ * C = C_texture (1 - w) + C_reflection w.
+ *
+ * Reflection probe (fallback "probe", the final and reference presets): an equirectangular
+ * panorama with radial depth that the add-on renders from beside the mirror (aux view
+ * "probe:<mask key>", scene/aux_view.h, math/panorama.h). Where a ray misses, leaves the
+ * frame or meets the back of an object, the reflection is the probe's colour where the
+ * reflected ray, marched from the mirror's surface point, meets the probe's depth surface
+ * (parallax-corrected), blended with the trace by its confidence. Without the probe (not
+ * rendered, failed): a warning and the texture fallback; debug pass "fallback_<name>"
+ * names the one in use and holds its weight per pixel.
+ *
+ * Planar view (planar_view, the reference preset): for a flat mirror the add-on renders
+ * the scene from the camera mirrored in the mirror's plane (aux view "planar:<mask key>",
+ * with the plane). A mirror pixel on that plane (its normal along the plane's, within a
+ * few centimetres of it) takes that view's colour at the projection of its world
+ * position: the exact reflection, no tracing. Other pixels (a curved mirror, a pair of
+ * mirrors, which the add-on does not fit with one plane) keep the trace and the probe.
  *
  * One stack entry is one mirror kind: many mirrors are many entries, each with its own
  * mask and parameters (the add-on's UI, `libfx describe` and the docs keep working on
@@ -36,7 +53,9 @@
 #include "math/color.h"
 #include "math/color_ops.h"
 #include "math/edge_ops.h"
+#include "math/panorama.h"
 #include "math/ssr_trace.h"
+#include "scene/aux_view.h"
 
 #include <float.h>
 #include <math.h>
@@ -70,15 +89,17 @@ typedef struct ssr_params {
     float resolution_scale;
     int retrace_edges;
     int hiz;
+    int probe_steps;
+    int planar_view;
 } ssr_params;
 
 enum { OP_NONE = 0, OP_SEPIA, OP_GRAYSCALE, OP_CEL };
 /* Jacobi iterations of the finished one-bounce image (the estimate past the last bounce) */
 enum { FIN_ITERATIONS = 3 };
-enum { FALLBACK_TEXTURE = 0, FALLBACK_ENVIRONMENT };
+enum { FALLBACK_TEXTURE = 0, FALLBACK_ENVIRONMENT, FALLBACK_PROBE };
 
 static const char *const op_items[] = { "none", "sepia", "grayscale", "cel" };
-static const char *const fallback_items[] = { "texture", "environment" };
+static const char *const fallback_items[] = { "texture", "environment", "probe" };
 static const float env_default[3] = { 0.5f, 0.6f, 0.75f };
 
 static const fx_param_def ssr_param_defs[] = {
@@ -103,8 +124,10 @@ static const fx_param_def ssr_param_defs[] = {
                "Curved mirror from a flat one: the normal tilts by bend x (position on the face "
                "from its centre, -1..1); > 0 bulges out (convex, wider view), < 0 in (concave)"),
     FX_P_ENUM(ssr_params, fallback, "fallback", FALLBACK_TEXTURE, fallback_items,
-              "Where a ray misses (or leaves the frame): texture: the mirror's own pixel; "
-              "environment: environment_color"),
+              "Where a ray misses (or leaves the frame, or meets the back of an object): texture: the "
+              "mirror's own pixel; environment: environment_color; probe: the reflection probe (a "
+              "panorama with depth the add-on renders beside the mirror), parallax-corrected, or the "
+              "texture with a warning when the frame has no probe"),
     FX_P_FLOATS(ssr_params, environment, "environment_color", 3, env_default, 0.0, 65504.0, "color",
                 "Reflection colour of missed rays when fallback is environment (linear RGB)"),
     FX_P_FLOAT(ssr_params, edge_fade, "edge_fade", 0.08, 0.0, 0.5, 0.0, 0.2, "factor",
@@ -138,6 +161,13 @@ static const fx_param_def ssr_param_defs[] = {
               "ray passes in front of (or far behind) are skipped whole, every other pixel is tested "
               "(stride and growth unused, max_steps caps the walk). Closer to reference on the mirror "
               "room, but misses grazing hits between facing mirrors; no preset uses it"),
+    FX_P_INT(ssr_params, probe_steps, "probe_steps", 48, 1, 4096, 8, 256, "",
+             "fallback probe: steps of the march along the reflected ray to the probe's depth surface "
+             "(geometric, 2 cm to max_distance; then refine bisections)"),
+    FX_P_BOOL(ssr_params, planar_view, "planar_view", 0,
+              "Flat mirrors: the reflection is the add-on's render from the camera mirrored in the "
+              "mirror's plane (exact; one more render per mirror plane). Pixels off that plane, glossy, "
+              "bent or cel mirrors, and a frame without that view keep the trace and the fallback"),
 };
 
 /* ---- helpers ---- */
@@ -268,8 +298,18 @@ typedef struct ssr_job {
     int reuse_fin;             /* final shading after the estimate, no debug layers: pixels whose
                                   first hit bounces no further copy their estimate */
     float opm[16];
-    float *dbg_hit, *dbg_xy, *dbg_len;
+    float *dbg_hit, *dbg_xy, *dbg_len, *dbg_fb;
+    const fx_pano *probe;      /* the reflection probe (fallback probe and present), or NULL */
+    const fx_aux_view *planar; /* the mirrored camera's view (planar_view and present), or NULL */
+    float *dbg_planar;
+    fx_pano_trace_settings pst;
 } ssr_job;
+
+/* The reflection of ray o + t dir (view space) seen in the probe, parallax-corrected. */
+static inline void probe_colour(const ssr_job *j, fx_vec3 o, fx_vec3 dir, float rgb[3])
+{
+    fx_pano_trace(j->probe, &j->pst, o, dir, rgb);
+}
 
 static inline int in_mask(const fx_mask *m, int w, int x, int y)
 {
@@ -555,13 +595,20 @@ static void ray_colour(const ssr_job *j, fx_vec3 ro, fx_vec3 rd, float px, float
     fx_vec3 r = fx_v3_reflect(inc, n);
     fx_vec3 o = fx_v3_add(pos, fx_v3_scale(n, j->p->bias * fx_ssr_pixel_footprint(&F->view, -pos.z)));
     fx_ssr_hit hit;
-    if (!fx_ssr_trace(&F->scene, &j->st, o, r, &hit))
+    float fade = fx_ssr_trace(&F->scene, &j->st, o, r, &hit) ? hit_fade(j, F, &hit, r) : 0.0f;
+    if (!(fade > 0.0f) && !j->probe)
         return;
-    float fade = hit_fade(j, F, &hit, r);
-    if (!(fade > 0.0f))
-        return;
-    float next[3], tex[3], est[3] = { rgb[0], rgb[1], rgb[2] };
-    ray_colour(j, o, r, hit.px, hit.py, left - 1, next);
+    float next[3] = { 0.0f, 0.0f, 0.0f }, tex[3], est[3] = { rgb[0], rgb[1], rgb[2] };
+    if (fade > 0.0f)
+        ray_colour(j, o, r, hit.px, hit.py, left - 1, next);
+    if (j->probe && fade < 1.0f) {
+        /* the bounce's miss: the probe, blended by the hit's confidence */
+        float pc[3];
+        probe_colour(j, pos, r, pc);
+        for (int k = 0; k < 3; k++)
+            next[k] = pc[k] + (next[k] - pc[k]) * fade;
+        fade = 1.0f;
+    }
     float wgt;
     if (own) {
         /* this mirror again: its backing under its reflectivity x Fresnel at this angle */
@@ -575,6 +622,29 @@ static void ray_colour(const ssr_job *j, fx_vec3 ro, fx_vec3 rd, float px, float
         float v = tex[k] * (1.0f - wgt) + next[k] * wgt;
         rgb[k] = est[k] + (v - est[k]) * fade;
     }
+}
+
+/* The planar view's colour for mirror pixel (x, y) at view position pos, if the pixel
+ * lies on the view's plane and projects into it. */
+static int planar_colour(const ssr_job *j, int x, int y, fx_vec3 pos, float rgb[3])
+{
+    const ssr_frame *F = j->F;
+    const fx_aux_view *pv = j->planar;
+    const float *np = F->normal + ((size_t)y * F->w + x) * F->nch;
+    fx_vec3 nw = fx_v3_normalize_or(fx_v3(np[0], np[1], np[2]), fx_v3(0, 0, 0));
+    fx_vec3 pn = fx_v3(pv->plane[0], pv->plane[1], pv->plane[2]);
+    if (!(fabsf(fx_v3_dot(nw, pn)) > 0.99f))
+        return 0;
+    fx_vec3 wp = fx_view_to_world(&F->view, pos);
+    float dist = fx_v3_dot(pn, wp) - pv->plane[3];
+    if (!(fabsf(dist) < 0.02f + 0.002f * fx_v3_length(pos)))
+        return 0;
+    float px, py, dd;
+    if (!fx_aux_view_project(pv, wp, &px, &py, &dd) || !(px >= 0.0f && px <= (float)pv->width) ||
+        !(py >= 0.0f && py <= (float)pv->height))
+        return 0;
+    sample_bilinear(pv->color, pv->width, pv->height, px, py, rgb);
+    return 1;
 }
 
 static void apply_operator(const ssr_job *j, float px, float py, float rgb[3])
@@ -654,13 +724,22 @@ static void shade_rows(void *user, int begin, int end)
             if (fx_ssr_is_background(d) || !shading_normal(j, x, y, pos, inc, &n))
                 continue; /* no surface: the texture stays */
             float refl[3], fb[3];
-            if (p->fallback == FALLBACK_ENVIRONMENT)
+            float conf = h.state == 1 ? h.conf : 0.0f;
+            fx_vec3 rd = fx_v3_reflect(inc, n);
+            int on_plane = j->planar && planar_colour(j, x, y, pos, refl);
+            if (on_plane) {
+                if (p->op == OP_SEPIA || p->op == OP_GRAYSCALE)
+                    fx_color_op_apply3(j->opm, refl, refl);
+                conf = 1.0f;
+            } else if (j->probe && conf < 1.0f)
+                probe_colour(j, pos, rd, fb); /* only where the fallback shows */
+            else if (p->fallback == FALLBACK_ENVIRONMENT)
                 memcpy(fb, p->environment, sizeof fb);
             else
                 memcpy(fb, s, sizeof fb);
-            float conf = h.state == 1 ? h.conf : 0.0f;
-            if (conf > 0.0f) {
-                fx_vec3 rd = fx_v3_reflect(inc, n);
+            if (on_plane) {
+                /* the mirrored camera's view: refl holds it */
+            } else if (conf > 0.0f) {
                 fx_vec3 ro = fx_v3_add(pos, fx_v3_scale(n, p->bias * fx_ssr_pixel_footprint(&F->view, d)));
                 ray_colour(j, ro, rd, h.px, h.py, j->last_bounce, refl);
                 if (p->op != OP_NONE)
@@ -686,6 +765,10 @@ static void shade_rows(void *user, int begin, int end)
             }
             if (j->dbg_len)
                 j->dbg_len[i] = conf > 0 ? h.length : 0.0f;
+            if (j->dbg_fb)
+                j->dbg_fb[i] = 1.0f - conf;
+            if (j->dbg_planar)
+                j->dbg_planar[i] = (float)on_plane;
         }
 }
 
@@ -945,6 +1028,62 @@ static fx_result ssr_multi_bounce(const fx_effect_run *run, ssr_job *j, float *f
     return FX_OK;
 }
 
+/* Process stage 0 (fallback probe): the entry's reflection probe as j->probe, in the
+ * frame's view space. Missing or unreadable: a warning, and the texture fallback. */
+static fx_result ssr_probe_load(const fx_effect_run *run, ssr_job *j, const ssr_frame *F, fx_aux_view **av,
+                                fx_pano *pano)
+{
+    const ssr_params *p = run->params;
+    char name[FX_NAME_MAX];
+    snprintf(name, sizeof name, FX_AUX_PROBE "%s", run->mask_key ? run->mask_key : "");
+    fx_result r = fx_aux_view_load(run->frame, name, run->where, av);
+    if (r == FX_ERR_OUT_OF_MEMORY)
+        return r;
+    if (!r && !(*av)->panorama) {
+        fx_warn(run->ctx, "%s: aux view '%s' is not a panorama (\"panorama\": \"equirect\"): missed rays take "
+                "the mirror's texture", run->where, name);
+        fx_aux_view_free(*av);
+        *av = NULL;
+        return FX_OK;
+    }
+    if (r) {
+        char msg[1024];
+        snprintf(msg, sizeof msg, "%s", fx_context_error(run->ctx));
+        fx_warn(run->ctx, "%s: no reflection probe (%s): missed rays take the mirror's texture", run->where, msg);
+        *av = NULL;
+        return FX_OK;
+    }
+    pano->color = (*av)->color;
+    pano->depth = (*av)->depth;
+    pano->w = (*av)->width;
+    pano->h = (*av)->height;
+    fx_m4_mul((*av)->view.cam.world_to_camera, F->view.camera_to_world, pano->to_probe);
+    j->probe = pano;
+    j->pst = (fx_pano_trace_settings){ p->probe_steps, p->refine, 0.02f, p->max_distance, 0.05f };
+    return FX_OK;
+}
+
+/* Process stage 0 (planar_view): the entry's mirrored-camera view as j->planar. Missing
+ * (not rendered: a curved mirror or a pair, or failed): a warning, the trace serves. */
+static fx_result ssr_planar_load(const fx_effect_run *run, ssr_job *j, fx_aux_view **av)
+{
+    char name[FX_NAME_MAX];
+    snprintf(name, sizeof name, FX_AUX_PLANAR "%s", run->mask_key ? run->mask_key : "");
+    fx_result r = fx_aux_view_load(run->frame, name, run->where, av);
+    if (r == FX_ERR_OUT_OF_MEMORY)
+        return r;
+    if (r || !(*av)->color || !(*av)->has_plane || (*av)->panorama) {
+        char msg[1024];
+        snprintf(msg, sizeof msg, "%s", r ? fx_context_error(run->ctx) : "it has no colour pass or no \"plane\"");
+        fx_warn(run->ctx, "%s: no planar mirror view (%s): the trace and the fallback serve", run->where, msg);
+        fx_aux_view_free(*av);
+        *av = NULL;
+        return FX_OK;
+    }
+    j->planar = *av;
+    return FX_OK;
+}
+
 static fx_result ssr_process(const fx_effect_run *run)
 {
     const ssr_params *p = run->params;
@@ -963,6 +1102,16 @@ static fx_result ssr_process(const fx_effect_run *run)
     fx_color_op_matrix(p->op == OP_SEPIA ? FX_COLOR_OP_SEPIA : FX_COLOR_OP_GRAY_LUMINANCE, j.opm);
     if (p->bend != 0.0f)
         fit_face(&j);
+    fx_aux_view *probe_view = NULL;
+    fx_pano pano;
+    if (p->fallback == FALLBACK_PROBE && (r = ssr_probe_load(run, &j, &F, &probe_view, &pano)))
+        return r;
+    fx_aux_view *planar_view = NULL;
+    if (p->planar_view && p->glossiness == 0.0f && p->bend == 0.0f && p->op != OP_CEL &&
+        (r = ssr_planar_load(run, &j, &planar_view))) {
+        fx_aux_view_free(probe_view);
+        return r;
+    }
 
     fx_mask *surfaces = NULL;
     float *blurred = NULL, *fin[2] = { NULL, NULL };
@@ -983,13 +1132,19 @@ static fx_result ssr_process(const fx_effect_run *run)
         j.dbg_xy = fx_effect_debug_pass(run, "hit_xy", 3, &r);
     if (!r)
         j.dbg_len = fx_effect_debug_pass(run, "ray_length", 1, &r);
+    if (!r) /* the fallback in use, by name; its weight per pixel */
+        j.dbg_fb = fx_effect_debug_pass(run, j.probe ? "fallback_probe"
+                                             : p->fallback == FALLBACK_ENVIRONMENT ? "fallback_environment"
+                                                                                   : "fallback_texture", 1, &r);
+    if (!r && j.planar)
+        j.dbg_planar = fx_effect_debug_pass(run, "planar", 1, &r);
     if (r || (p->bounces > 1 && run->mask && ssr_needs_estimate(&j) && (r = ssr_multi_bounce(run, &j, fin, frame_bytes))))
         goto out;
     /* stage 5: the mirror shaded into dst */
     const int rows = roi->y1 - roi->y0;
     j.out = run->dst;
     j.last_bounce = p->bounces - 1;
-    j.reuse_fin = j.fin && !j.dbg_hit && !j.dbg_xy && !j.dbg_len;
+    j.reuse_fin = j.fin && !j.dbg_hit && !j.dbg_xy && !j.dbg_len && !j.dbg_fb && !j.dbg_planar;
     fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), shade_rows, &j);
 out:
     fx_buffer_put(run->ctx, fin[0], 2 * frame_bytes);
@@ -997,7 +1152,32 @@ out:
     fx_buffer_put(run->ctx, blurred, frame_bytes);
     fx_mask_free(surfaces);
     fx_depth_pyramid_free(run->ctx, &pyr);
+    fx_aux_view_free(probe_view);
+    fx_aux_view_free(planar_view);
     return r;
+}
+
+/* fallback probe: this entry's probe ("probe:<mask key>", placed by the add-on at the
+ * entry's mask). */
+static int ssr_aux_views(const void *params, fx_aux_need *out, int max)
+{
+    const ssr_params *p = params;
+    int n = 0;
+    if (p->fallback == FALLBACK_PROBE && n < max) {
+        memset(&out[n], 0, sizeof out[n]);
+        snprintf(out[n].name, sizeof out[n].name, "%s", FX_AUX_PROBE);
+        out[n].kind = "probe";
+        out[n].per_mask = 1;
+        n++;
+    }
+    if (p->planar_view && p->glossiness == 0.0f && p->bend == 0.0f && p->op != OP_CEL && n < max) {
+        memset(&out[n], 0, sizeof out[n]);
+        snprintf(out[n].name, sizeof out[n].name, "%s", FX_AUX_PLANAR);
+        out[n].kind = "planar";
+        out[n].per_mask = 1;
+        n++;
+    }
+    return n;
 }
 
 const fx_effect_class fx_effect_ssr_mirror = {
@@ -1012,10 +1192,13 @@ const fx_effect_class fx_effect_ssr_mirror = {
         "\"retrace_edges\": true}",
         "{\"max_steps\": 96, \"stride\": 1.5, \"growth\": 1.04, \"refine\": 6, \"resolution_scale\": 0.5, "
         "\"retrace_edges\": true}",
-        "{\"max_steps\": 96, \"stride\": 1.5, \"growth\": 1.04, \"refine\": 6, \"resolution_scale\": 1}",
-        "{\"max_steps\": 4096, \"stride\": 1, \"growth\": 1, \"refine\": 10, \"resolution_scale\": 1}",
+        "{\"max_steps\": 96, \"stride\": 1.5, \"growth\": 1.04, \"refine\": 6, \"resolution_scale\": 1, "
+        "\"fallback\": \"probe\", \"probe_steps\": 48}",
+        "{\"max_steps\": 4096, \"stride\": 1, \"growth\": 1, \"refine\": 10, \"resolution_scale\": 1, "
+        "\"fallback\": \"probe\", \"probe_steps\": 160, \"planar_view\": true}",
     },
     .passes = ssr_passes,
+    .aux_views = ssr_aux_views,
     .flags = FX_EFFECT_NEEDS_CAMERA,
     .halo = ssr_halo,
     .validate = ssr_validate,

@@ -10,7 +10,16 @@
  * positions into it (fx_aux_view_project).
  *
  * Names: "light:<light name>" (the shadow view of a light; "light:" alone asks for the
- * first light view there is) and "rain_map" (top-down orthographic over the rain area). */
+ * first light view there is), "rain_map" (top-down orthographic over the rain area) and
+ * "probe:<key>" (a reflection probe for the mirror of the stack entry whose mask hashes
+ * to <key>: the stack's fx_effect_run.mask_key).
+ *
+ * Probes are entries with "panorama": "equirect": an equirectangular panorama (colour in
+ * its Combined pass, radial distance in its Depth pass, math/panorama.h) rendered from
+ * the camera position of "world_to_camera" (its "projection" is unused: identity).
+ * "planar:<key>" is the scene seen by the camera mirrored in a planar mirror's plane
+ * (a perspective view with colour and Depth), with "plane": [nx, ny, nz, d], the world
+ * plane n . x = d of the mirror (n towards the main camera). */
 #ifndef LIBFX_SCENE_AUX_VIEW_H
 #define LIBFX_SCENE_AUX_VIEW_H
 
@@ -22,6 +31,8 @@
 
 #define FX_AUX_META_KEY "libfx/aux_views"
 #define FX_AUX_RAIN_MAP "rain_map"
+#define FX_AUX_PROBE "probe:"
+#define FX_AUX_PLANAR "planar:"
 
 typedef struct fx_aux_view {
     char name[FX_NAME_MAX];
@@ -30,6 +41,10 @@ typedef struct fx_aux_view {
     const float *depth;/* its Depth pass: planar depth along the view's -Z, rows top down */
     int width, height;
     fx_view view;      /* the view's camera (from the sidecar, not the EXR) */
+    int panorama;      /* 1: an equirectangular probe (depth is then radial) */
+    const float *color;/* its Combined pass (RGBA, non-finite values replaced by 0), or NULL */
+    int has_plane;     /* "plane" given (planar mirror views) */
+    float plane[4];    /* world plane n . x = d: nx, ny, nz (unit), d */
 } fx_aux_view;
 
 /* Loads the aux view `name` of frame f (see above for "light:"). `where` names the

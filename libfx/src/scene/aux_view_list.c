@@ -6,10 +6,11 @@
 #include "scene/camera_json.h"
 
 #include <cjson/cJSON.h>
+#include <math.h>
 #include <string.h>
 
 static const char *const view_keys[] = {"name", "path", "world_to_camera", "projection",
-                                        "clip_start", "clip_end", "orthographic", "kind", "signature"};
+                                        "clip_start", "clip_end", "orthographic", "kind", "signature", "panorama", "mask", "plane"};
 
 fx_result fx_aux_views_check(fx_context *ctx, const cJSON *list)
 {
@@ -34,9 +35,23 @@ fx_result fx_aux_views_check(fx_context *ctx, const cJSON *list)
             if (!known)
                 return fx_fail(ctx, FX_ERR_BAD_RECIPE,
                                "sidecar: aux_views[%d] ('%s'): unknown key \"%s\" (known: name, path, world_to_camera, "
-                               "projection, clip_start, clip_end, orthographic, kind, signature)",
+                               "projection, clip_start, clip_end, orthographic, kind, signature, panorama, mask, plane)",
                                i, name->valuestring, item->string);
         }
+        const cJSON *pano = cJSON_GetObjectItemCaseSensitive(v, "panorama");
+        if (pano && !(cJSON_IsString(pano) && strcmp(pano->valuestring, "equirect") == 0))
+            return fx_fail(ctx, FX_ERR_BAD_RECIPE,
+                           "sidecar: aux_views[%d] ('%s'): \"panorama\" must be \"equirect\" (the only kind)", i,
+                           name->valuestring);
+        const cJSON *plane = cJSON_GetObjectItemCaseSensitive(v, "plane");
+        int plane_ok = !plane || (cJSON_IsArray(plane) && cJSON_GetArraySize(plane) == 4);
+        for (int k = 0; plane && plane_ok && k < 4; k++)
+            plane_ok = cJSON_IsNumber(cJSON_GetArrayItem(plane, k)) &&
+                       isfinite(cJSON_GetArrayItem(plane, k)->valuedouble);
+        if (!plane_ok)
+            return fx_fail(ctx, FX_ERR_BAD_RECIPE,
+                           "sidecar: aux_views[%d] ('%s'): \"plane\" must be 4 finite numbers [nx, ny, nz, d] "
+                           "(the world plane n . x = d)", i, name->valuestring);
         fx_camera cam;
         char err[256];
         if (!fx_camera_parse(v, 1, &cam, err, sizeof err))

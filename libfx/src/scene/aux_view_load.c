@@ -9,6 +9,7 @@
 #include "scene/camera_json.h"
 
 #include <cjson/cJSON.h>
+#include <math.h>
 #include <stdio.h>
 #include <string.h>
 
@@ -104,6 +105,16 @@ fx_result fx_aux_view_load(const fx_frame *f, const char *name, const char *wher
     }
     snprintf(av->name, sizeof av->name, "%s", cJSON_GetObjectItemCaseSensitive(found, "name")->valuestring);
     snprintf(av->path, sizeof av->path, "%s", cJSON_GetObjectItemCaseSensitive(found, "path")->valuestring);
+    av->panorama = cJSON_IsString(cJSON_GetObjectItemCaseSensitive(found, "panorama"));
+    const cJSON *plane = cJSON_GetObjectItemCaseSensitive(found, "plane");
+    if (cJSON_IsArray(plane) && cJSON_GetArraySize(plane) == 4) {
+        for (int k = 0; k < 4; k++)
+            av->plane[k] = (float)cJSON_GetArrayItem(plane, k)->valuedouble;
+        float n = sqrtf(av->plane[0] * av->plane[0] + av->plane[1] * av->plane[1] + av->plane[2] * av->plane[2]);
+        av->has_plane = n > 1e-6f && isfinite(n);
+        for (int k = 0; av->has_plane && k < 4; k++)
+            av->plane[k] /= n;
+    }
     cJSON_Delete(list);
     fx_result r = fx_exr_read(ctx, av->path, NULL, &av->frame);
     if (r) {
@@ -122,6 +133,21 @@ fx_result fx_aux_view_load(const fx_frame *f, const char *name, const char *wher
     av->depth = d->data;
     av->width = av->frame->width;
     av->height = av->frame->height;
+    /* the colour (probes reflect it): finite and within half-float range (the reader
+     * turns +-Inf into +-FLT_MAX, which a blend would overflow) */
+    fx_pass *c = fx_frame_find_pass(av->frame, "Combined");
+    if (c && c->channels == 4) {
+        size_t n = (size_t)av->width * av->height * 4;
+        for (size_t k = 0; k < n; k++)
+            c->data[k] = !isfinite(c->data[k]) ? 0.0f : c->data[k] > 65504.0f ? 65504.0f
+                         : c->data[k] < -65504.0f ? -65504.0f : c->data[k];
+        av->color = c->data;
+    } else if (av->panorama) {
+        fx_result rr = fx_fail(ctx, FX_ERR_MISSING_PASS, "%s: probe '%s' (%s) has no RGBA colour (Combined/Image) pass",
+                               where, av->name, av->path);
+        fx_aux_view_free(av);
+        return rr;
+    }
     if (fx_frame_set_camera(av->frame, &cam) || !fx_view_init(&av->view, av->frame)) {
         fx_aux_view_free(av);
         return fx_fail(ctx, FX_ERR_NO_CAMERA, "%s: aux view '%s' has a singular camera matrix", where, name);

@@ -1,0 +1,577 @@
+/* Reflection probes (ssr_mirror's fallback "probe"; math/panorama.h, scene/aux_view.h) on
+ * a synthetic room made here: a 6 x 6 x 3 m box whose walls carry smooth colour
+ * gradients, "rendered" into an equirectangular probe (colour + radial depth) written as
+ * an EXR, and a frame looking at the room's +Y wall, which is the mirror.
+ *  - conventions: which pixel is which direction (as Cycles' equirectangular camera:
+ *    tests/blender/test_probe_view.py checks that side on a real render);
+ *  - the parallax-corrected lookup against the exact ray-box intersection, and against
+ *    the plain direction lookup it corrects;
+ *  - end to end: the stack asks for "probe:<mask key>" with the mask, the mirror reflects
+ *    the room behind the camera (what no screen-space ray sees) close to the exact
+ *    reflection, the debug pass names the fallback; without the probe a warning and the
+ *    texture fallback, bit for bit;
+ *  - degenerate probes (zero depth, NaN/Inf colour and depth, 1 x 1, placed outside the
+ *    room behind the mirror): finite output;
+ *  - the planar view (planar_view, reference): the room rendered from the camera mirrored
+ *    in the mirror wall's plane gives the exact reflection; a view whose plane is not the
+ *    mirror's is not used; a planar mirror seen edge-on stays finite. */
+#include "fx_effect_test.h"
+#include "math/panorama.h"
+
+#include <cjson/cJSON.h>
+#include <math.h>
+
+#define PI 3.14159265358979
+
+static const double LO[3] = { -3, -3, 0 }, HI[3] = { 3, 3, 3 };
+
+/* Exit of the ray o + t d from inside the box: t, and the wall (axis * 2 + (d > 0)). */
+static double box_exit(const double o[3], const double d[3], int *wall)
+{
+    double best = 1e30;
+    *wall = -1;
+    for (int a = 0; a < 3; a++) {
+        if (fabs(d[a]) < 1e-12)
+            continue;
+        double t = ((d[a] > 0 ? HI[a] : LO[a]) - o[a]) / d[a];
+        if (t > 0 && t < best)
+            best = t, *wall = a * 2 + (d[a] > 0);
+    }
+    return best;
+}
+
+static void room_colour(const double p[3], int wall, float c[3])
+{
+    static const float base[6][3] = { { 0.2f, 0.8f, 0.2f }, { 0.9f, 0.2f, 0.2f }, { 0.9f, 0.9f, 0.2f },
+                                      { 0.2f, 0.3f, 0.9f }, { 0.5f, 0.5f, 0.5f }, { 1.0f, 1.0f, 1.0f } };
+    double g = 0.6 + 0.4 * sin(1.3 * p[0] + 0.7) * cos(0.9 * p[1] - 0.4) * cos(1.1 * p[2]);
+    for (int k = 0; k < 3; k++)
+        c[k] = wall >= 0 ? (float)(base[wall][k] * g) : 0.0f;
+}
+
+/* Probe camera: Blender camera looking along world +Y, up +Z (rotation X 90 deg). Camera
+ * to world: x -> (1,0,0), y -> (0,0,1), z -> (0,-1,0). */
+static const double R[9] = { 1, 0, 0, 0, 0, -1, 0, 1, 0 };
+
+static void rot(const double m[9], const double v[3], double out[3])
+{
+    for (int i = 0; i < 3; i++)
+        out[i] = m[i * 3] * v[0] + m[i * 3 + 1] * v[1] + m[i * 3 + 2] * v[2];
+}
+
+static void w2c(const double pos[3], float m[16])
+{
+    memset(m, 0, 16 * sizeof(float));
+    for (int i = 0; i < 3; i++) {
+        double t = 0;
+        for (int k = 0; k < 3; k++) {
+            m[i * 4 + k] = (float)R[k * 3 + i];
+            t -= R[k * 3 + i] * pos[k];
+        }
+        m[i * 4 + 3] = (float)t;
+    }
+    m[15] = 1;
+}
+
+/* The probe from pos: colour and radial depth (background where the room is not around). */
+static void render_probe(const double pos[3], int w, int h, float *rgba, float *depth)
+{
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++) {
+            fx_vec3 dc = fx_pano_pixel_to_dir(x + 0.5f, y + 0.5f, w, h);
+            double d[3], v[3] = { dc.x, dc.y, dc.z };
+            rot(R, v, d);
+            int wall;
+            double t = box_exit(pos, d, &wall);
+            size_t i = (size_t)y * w + x;
+            int inside = pos[0] > LO[0] && pos[0] < HI[0] && pos[1] > LO[1] && pos[1] < HI[1] && pos[2] > LO[2] &&
+                         pos[2] < HI[2];
+            if (!inside || wall < 0) {
+                depth[i] = 1e10f;
+                rgba[i * 4] = rgba[i * 4 + 1] = rgba[i * 4 + 2] = 0.05f;
+            } else {
+                double p[3] = { pos[0] + t * d[0], pos[1] + t * d[1], pos[2] + t * d[2] };
+                room_colour(p, wall, rgba + i * 4);
+                depth[i] = (float)t;
+            }
+            rgba[i * 4 + 3] = 1;
+        }
+}
+
+static void test_conventions(void)
+{
+    const int w = 256, h = 128;
+    float px, py;
+    fx_pano_dir_to_pixel(fx_v3(0, 0, -1), w, h, &px, &py); /* forward: the centre */
+    CHECK(fabsf(px - 128) < 1e-3f && fabsf(py - 64) < 1e-3f);
+    fx_pano_dir_to_pixel(fx_v3(1, 0, 0), w, h, &px, &py); /* right: three quarters across */
+    CHECK(fabsf(px - 192) < 1e-3f && fabsf(py - 64) < 1e-3f);
+    fx_pano_dir_to_pixel(fx_v3(-1, 0, 0), w, h, &px, &py);
+    CHECK(fabsf(px - 64) < 1e-3f);
+    fx_pano_dir_to_pixel(fx_v3(0, 1, 0), w, h, &px, &py); /* up: row 0 */
+    CHECK(fabsf(py) < 1e-3f);
+    fx_pano_dir_to_pixel(fx_v3(0, -1, 0), w, h, &px, &py);
+    CHECK(fabsf(py - 128) < 1e-3f);
+    fx_pano_dir_to_pixel(fx_v3(0, 0, 1), w, h, &px, &py); /* back: the seam */
+    CHECK(fabsf(px) < 1e-3f || fabsf(px - 256) < 1e-3f);
+    fx_pano_dir_to_pixel(fx_v3(0, 0, 0), w, h, &px, &py); /* degenerate: finite */
+    CHECK(isfinite(px) && isfinite(py));
+    fx_pano_dir_to_pixel(fx_v3(NAN, 0, 1), w, h, &px, &py);
+    CHECK(isfinite(px) && isfinite(py));
+    double worst = 0;
+    for (int y = 0; y < h; y += 7)
+        for (int x = 0; x < w; x += 5) {
+            fx_vec3 d = fx_pano_pixel_to_dir(x + 0.5f, y + 0.5f, w, h);
+            fx_pano_dir_to_pixel(d, w, h, &px, &py);
+            double e = fmax(fabs(px - (x + 0.5)), fabs(py - (y + 0.5)));
+            worst = e > worst ? e : worst;
+            CHECK(fabsf(fx_v3_length(d) - 1) < 1e-5f);
+        }
+    printf("pixel -> direction -> pixel: worst %.2e px\n", worst);
+    CHECK(worst < 1e-3);
+}
+
+/* The parallax-corrected lookup against the exact intersection. */
+static void test_parallax(void)
+{
+    const int w = 512, h = 256;
+    const double pos[3] = { 0.3, 1.9, 1.4 };
+    float *rgba = malloc((size_t)w * h * 4 * sizeof(float)), *dep = malloc((size_t)w * h * sizeof(float));
+    render_probe(pos, w, h, rgba, dep);
+    fx_pano p = { rgba, dep, w, h, { 0 } };
+    w2c(pos, p.to_probe);
+    fx_pano_trace_settings st = { 64, 8, 0.02f, 100.0f, 0.35f };
+    double err = 0, err_dir = 0;
+    int n = 0, hits = 0;
+    unsigned s = 12345;
+    for (int k = 0; k < 2000; k++) {
+        double v[6];
+        for (int i = 0; i < 6; i++) {
+            s = s * 1664525u + 1013904223u;
+            v[i] = (s >> 8) / 16777216.0;
+        }
+        /* origins on and before the mirror wall y = 3, rays into the room */
+        double o[3] = { -2.5 + 5 * v[0], 1.0 + 1.9 * v[1], 0.3 + 2.4 * v[2] };
+        double th = acos(1 - 2 * v[3]), ph = 2 * PI * v[4];
+        double d[3] = { sin(th) * cos(ph), -fabs(sin(th) * sin(ph)) - 0.05, cos(th) };
+        double l = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+        for (int i = 0; i < 3; i++)
+            d[i] /= l;
+        int wall;
+        double t = box_exit(o, d, &wall);
+        double q[3] = { o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2] };
+        float want[3], got[3], dir_only[3];
+        room_colour(q, wall, want);
+        hits += fx_pano_trace(&p, &st, fx_v3((float)o[0], (float)o[1], (float)o[2]),
+                              fx_v3((float)d[0], (float)d[1], (float)d[2]), got);
+        fx_pano_color(&p, fx_m4_dir(p.to_probe, fx_v3((float)d[0], (float)d[1], (float)d[2])), dir_only);
+        for (int c = 0; c < 3; c++) {
+            err += fabs(got[c] - want[c]);
+            err_dir += fabs(dir_only[c] - want[c]);
+        }
+        n += 3;
+    }
+    printf("probe lookup, 2000 rays in the room: MAE parallax-corrected %.4f (%d hits), direction only %.4f\n",
+           err / n, hits, err_dir / n);
+    CHECK(hits > 1900);
+    CHECK(err / n < 0.02);
+    CHECK(err / n < 0.25 * err_dir / n);
+    /* a probe whose depth is all zero or all background: the direction lookup, finite */
+    for (int mode = 0; mode < 3; mode++) {
+        for (size_t i = 0; i < (size_t)w * h; i++)
+            dep[i] = mode == 0 ? 0.0f : mode == 1 ? 1e10f : NAN;
+        float got[3];
+        fx_pano_trace(&p, &st, fx_v3(0, 2, 1), fx_v3(0, -1, 0), got);
+        CHECK(isfinite(got[0]) && isfinite(got[1]) && isfinite(got[2]));
+        fx_pano_trace(&p, &st, fx_v3(NAN, 2, 1), fx_v3(0, -1, 0), got);
+        CHECK(isfinite(got[0]) && isfinite(got[1]) && isfinite(got[2]));
+        fx_pano_trace(&p, &st, fx_v3(0, 2, 1), fx_v3(0, 0, 0), got);
+        CHECK(isfinite(got[0]) && isfinite(got[1]) && isfinite(got[2]));
+    }
+    free(rgba), free(dep);
+}
+
+/* ---- end to end ---- */
+
+static const double CAM[3] = { 0.0, -1.5, 1.5 };
+enum { FW = 96, FH = 54 };
+
+static void cam_dir(double px, double py, double d[3])
+{
+    double fy = tan(30 * PI / 180), asp = (double)FW / FH;
+    double v[3] = { (px / FW * 2 - 1) * fy * asp, (1 - py / FH * 2) * fy, -1 }, r[3];
+    rot(R, v, r);
+    double l = sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2]);
+    for (int i = 0; i < 3; i++)
+        d[i] = r[i] / l;
+}
+
+/* The room seen from CAM; the +Y wall (y = 3) is the mirror (IndexMA 1, grey 0.1).
+ * want: the exact reflection on mirror pixels. */
+static fx_frame *room_frame(fx_context *ctx, float *want)
+{
+    size_t n = (size_t)FW * FH;
+    float *rgba = calloc(n * 4, sizeof(float)), *dep = calloc(n, sizeof(float));
+    float *nor = calloc(n * 3, sizeof(float)), *ima = calloc(n, sizeof(float));
+    for (int y = 0; y < FH; y++)
+        for (int x = 0; x < FW; x++) {
+            size_t i = (size_t)y * FW + x;
+            double d[3];
+            cam_dir(x + 0.5, y + 0.5, d);
+            int wall;
+            double t = box_exit(CAM, d, &wall);
+            double p[3] = { CAM[0] + t * d[0], CAM[1] + t * d[1], CAM[2] + t * d[2] };
+            dep[i] = (float)(p[1] - CAM[1]); /* planar: the camera looks along +Y */
+            nor[i * 3 + wall / 2] = wall % 2 ? -1.0f : 1.0f;
+            rgba[i * 4 + 3] = 1;
+            if (wall == 3) {
+                ima[i] = 1;
+                rgba[i * 4] = rgba[i * 4 + 1] = rgba[i * 4 + 2] = 0.1f;
+                double r[3] = { d[0], -d[1], d[2] };
+                int w2;
+                double t2 = box_exit(p, r, &w2);
+                double q[3] = { p[0] + t2 * r[0], p[1] + t2 * r[1], p[2] + t2 * r[2] };
+                room_colour(q, w2, want + i * 3);
+            } else {
+                room_colour(p, wall, rgba + i * 4);
+            }
+        }
+    fx_frame *f = et_frame(ctx, FW, FH, rgba);
+    fx_camera c;
+    memset(&c, 0, sizeof c);
+    c.size = sizeof c;
+    w2c(CAM, c.world_to_camera);
+    double nn = 0.1, ff = 100.0, fy = 1.0 / tan(30 * PI / 180), asp = (double)FW / FH;
+    c.projection[0] = (float)(fy / asp);
+    c.projection[5] = (float)fy;
+    c.projection[10] = (float)((ff + nn) / (nn - ff));
+    c.projection[11] = (float)(2 * ff * nn / (nn - ff));
+    c.projection[14] = -1;
+    c.clip_start = (float)nn;
+    c.clip_end = (float)ff;
+    fx_frame_add_pass(f, "Depth", 1, dep);
+    fx_frame_add_pass(f, "Normal", 3, nor);
+    fx_frame_add_pass(f, "IndexMA", 1, ima);
+    fx_frame_set_camera(f, &c);
+    free(rgba), free(dep), free(nor), free(ima);
+    return f;
+}
+
+/* Writes a probe EXR from pos (w x h; mode 1: zero depth, 2: NaN/Inf colour and depth). */
+static void write_probe(fx_context *ctx, const char *path, const double pos[3], int w, int h, int mode)
+{
+    float *rgba = malloc((size_t)w * h * 4 * sizeof(float)), *dep = malloc((size_t)w * h * sizeof(float));
+    render_probe(pos, w, h, rgba, dep);
+    for (size_t i = 0; mode && i < (size_t)w * h; i++) {
+        dep[i] = mode == 1 ? 0.0f : i % 3 == 0 ? NAN : i % 3 == 1 ? INFINITY : -INFINITY;
+        if (mode == 2)
+            rgba[i * 4 + i % 3] = i % 2 ? NAN : INFINITY;
+    }
+    fx_frame *f = et_frame(ctx, w, h, rgba);
+    CHECK_OK(ctx, fx_frame_add_pass(f, "Depth", 1, dep));
+    CHECK_OK(ctx, fx_frame_write_exr(f, path, NULL));
+    fx_frame_free(f);
+    free(rgba), free(dep);
+}
+
+static void add_probe(fx_context *ctx, fx_frame *f, const char *name, const char *path, const double pos[3])
+{
+    float m[16];
+    w2c(pos, m);
+    char json[4096];
+    int n = snprintf(json, sizeof json, "{\"aux_views\": [{\"name\": \"%s\", \"path\": \"%s\", \"world_to_camera\": [",
+                     name, path);
+    for (int i = 0; i < 16; i++)
+        n += snprintf(json + n, sizeof json - n, "%s%.9g", i ? ", " : "", m[i]);
+    snprintf(json + n, sizeof json - n,
+             "], \"projection\": [1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1], \"clip_start\": 0, \"clip_end\": 1e6, "
+             "\"orthographic\": false, \"kind\": \"probe\", \"panorama\": \"equirect\"}]}");
+    CHECK_OK(ctx, fx_frame_apply_sidecar(f, json));
+}
+
+static int has_pass(const fx_frame *f, const char *name)
+{
+    float *d;
+    int c;
+    return fx_frame_pass(f, name, &d, &c) == FX_OK;
+}
+
+static double mirror_mae(const fx_frame *in, const fx_frame *out, const float *want)
+{
+    float *ima, *o;
+    int c;
+    fx_frame_pass(in, "IndexMA", &ima, &c);
+    fx_frame_pass(out, "Combined", &o, &c);
+    double e = 0;
+    int n = 0;
+    for (size_t i = 0; i < (size_t)FW * FH; i++)
+        if (ima[i] == 1) {
+            for (int k = 0; k < 3; k++)
+                e += fabs(o[i * 4 + k] - want[i * 3 + k]);
+            n += 3;
+        }
+    return n ? e / n : 1e9;
+}
+
+static void test_end_to_end(fx_context *ctx)
+{
+    const char *dir = tu_tmpdir("probe");
+    float *want = calloc((size_t)FW * FH * 3, sizeof(float));
+    fx_frame *f = room_frame(ctx, want);
+    fx_stack *s = et_stack(ctx, "ssr_mirror");
+    CHECK_OK(ctx, fx_stack_set_mask_json(s, 0, "{\"material_index\": 1}"));
+    fx_stack_set_debug_outputs(s, 1);
+    /* the stack asks for the probe with the mask (final: fallback probe) */
+    char *req = NULL;
+    CHECK_OK(ctx, fx_stack_required_aux_views(s, &req));
+    cJSON *rj = cJSON_Parse(req);
+    const cJSON *v0 = cJSON_GetArrayItem(cJSON_GetObjectItem(rj, "aux_views"), 0);
+    const cJSON *name = cJSON_GetObjectItem(v0, "name"), *mask = cJSON_GetObjectItem(v0, "mask");
+    CHECK(cJSON_IsString(name) && strncmp(name->valuestring, "probe:", 6) == 0 && strlen(name->valuestring) == 18);
+    CHECK(cJSON_IsString(cJSON_GetObjectItem(v0, "kind")) &&
+          strcmp(cJSON_GetObjectItem(v0, "kind")->valuestring, "probe") == 0);
+    CHECK(cJSON_IsObject(mask) && cJSON_GetObjectItem(mask, "material_index"));
+    printf("required: %s\n", req);
+    char pname[64];
+    snprintf(pname, sizeof pname, "%s", cJSON_IsString(name) ? name->valuestring : "probe:?");
+    cJSON_Delete(rj);
+    fx_free(req);
+    /* draft and preview: screen space only, no probe asked */
+    CHECK_OK(ctx, fx_stack_set_quality(s, FX_QUALITY_PREVIEW));
+    CHECK_OK(ctx, fx_stack_required_aux_views(s, &req));
+    CHECK(req && strcmp(req, "{\"aux_views\":[]}") == 0);
+    fx_free(req);
+
+    /* without the probe (texture fallback at preview; final warns and takes the texture) */
+    fx_frame *o_tex = NULL, *o_missing = NULL, *o_probe = NULL;
+    CHECK_OK(ctx, fx_stack_set_quality(s, FX_QUALITY_FINAL));
+    fx_stack *st = et_stack(ctx, "ssr_mirror");
+    CHECK_OK(ctx, fx_stack_set_mask_json(st, 0, "{\"material_index\": 1}"));
+    CHECK_OK(ctx, fx_stack_set_enum(st, 0, "fallback", "texture"));
+    CHECK_OK(ctx, fx_stack_run(st, f, &o_tex));
+    fx_stack_free(st);
+    fx_context_clear_warnings(ctx);
+    CHECK_OK(ctx, fx_stack_run(s, f, &o_missing));
+    int warned = 0;
+    for (int k = 0; k < fx_context_warning_count(ctx); k++)
+        warned |= tu_contains(fx_context_warning(ctx, k), "no reflection probe");
+    CHECK(warned);
+    CHECK(has_pass(o_missing, "fx0_ssr_mirror_fallback_texture"));
+    CHECK(!has_pass(o_missing, "fx0_ssr_mirror_fallback_probe"));
+    const float *a = et_combined(o_tex), *b = et_combined(o_missing);
+    CHECK(a && b && memcmp(a, b, (size_t)FW * FH * 4 * sizeof(float)) == 0);
+
+    /* with the probe beside the mirror */
+    char path[600];
+    snprintf(path, sizeof path, "%s/probe.exr", dir);
+    const double ppos[3] = { 0.0, 2.6, 1.5 };
+    write_probe(ctx, path, ppos, 256, 128, 0);
+    add_probe(ctx, f, pname, path, ppos);
+    fx_context_clear_warnings(ctx);
+    CHECK_OK(ctx, fx_stack_run(s, f, &o_probe));
+    CHECK(fx_context_warning_count(ctx) == 0);
+    CHECK(has_pass(o_probe, "fx0_ssr_mirror_fallback_probe"));
+    double e_tex = mirror_mae(f, o_tex, want), e_probe = mirror_mae(f, o_probe, want);
+    printf("mirror facing the camera, MAE against the exact reflection: texture fallback %.4f, probe %.4f\n",
+           e_tex, e_probe);
+    CHECK(e_probe < 0.04);
+    CHECK(e_probe < 0.2 * e_tex);
+    /* thread count: the same bits */
+    fx_context *ctx1 = NULL;
+    fx_context_new(&ctx1, 1);
+    fx_stack *s1 = et_stack(ctx1, "ssr_mirror");
+    CHECK_OK(ctx1, fx_stack_set_mask_json(s1, 0, "{\"material_index\": 1}"));
+    fx_frame *o1 = NULL;
+    CHECK_OK(ctx1, fx_stack_run(s1, f, &o1));
+    const float *c1 = et_combined(o1), *c2 = et_combined(o_probe);
+    CHECK(c1 && c2 && memcmp(c1, c2, (size_t)FW * FH * 4 * sizeof(float)) == 0);
+    fx_frame_free(o1);
+    fx_stack_free(s1);
+    fx_context_free(ctx1);
+
+    /* degenerate probes: finite output, no failure */
+    struct { int w, h, mode; double pos[3]; const char *what; } bad[] = {
+        { 64, 32, 1, { 0.0, 2.6, 1.5 }, "zero depth" },
+        { 64, 32, 2, { 0.0, 2.6, 1.5 }, "NaN/Inf colour and depth" },
+        { 1, 1, 0, { 0.0, 2.6, 1.5 }, "1 x 1" },
+        { 64, 32, 0, { 0.0, 3.5, 1.5 }, "behind the mirror, outside the room" },
+        { 64, 32, 0, { 0.0, 3.0, 1.5 }, "on the mirror's plane" },
+    };
+    for (size_t k = 0; k < sizeof bad / sizeof bad[0]; k++) {
+        snprintf(path, sizeof path, "%s/bad%d.exr", dir, (int)k);
+        write_probe(ctx, path, bad[k].pos, bad[k].w, bad[k].h, bad[k].mode);
+        add_probe(ctx, f, pname, path, bad[k].pos);
+        fx_frame *o = NULL;
+        fx_context_clear_warnings(ctx);
+        CHECK_OK(ctx, fx_stack_run(s, f, &o));
+        const float *c = et_combined(o);
+        CHECK(c && tu_all_finite(c, (size_t)FW * FH * 4));
+        /* the stack's NaN guard must not have had anything to replace */
+        int guard = 0;
+        for (int i = 0; i < fx_context_warning_count(ctx); i++)
+            guard |= tu_contains(fx_context_warning(ctx, i), "non-finite");
+        CHECK(!guard);
+        printf("probe %s: finite, MAE %.4f\n", bad[k].what, mirror_mae(f, o, want));
+        fx_frame_free(o);
+    }
+    /* a view of that name that is not a panorama: a warning and the texture */
+    fx_frame_free(o_tex), fx_frame_free(o_missing), fx_frame_free(o_probe);
+    fx_stack_free(s);
+    fx_frame_free(f);
+    free(want);
+}
+
+/* ---- planar view ---- */
+
+/* The planar view: the room seen from CAM mirrored in y = 3 (E' = (0, 7.5, 1.5)) looking
+ * along -Y, up +Z, through the (hidden) mirror wall; the same projection as the frame. */
+static const double RP[9] = { -1, 0, 0, 0, 0, 1, 0, 1, 0 }; /* columns x -> -X, y -> +Z, z -> +Y */
+
+static void write_planar(fx_context *ctx, const char *path, float w2c_out[16], float proj[16])
+{
+    const double e[3] = { CAM[0], 6.0 - CAM[1], CAM[2] };
+    size_t n = (size_t)FW * FH;
+    float *rgba = calloc(n * 4, sizeof(float)), *dep = calloc(n, sizeof(float));
+    double fy = tan(30 * PI / 180), asp = (double)FW / FH;
+    for (int y = 0; y < FH; y++)
+        for (int x = 0; x < FW; x++) {
+            size_t i = (size_t)y * FW + x;
+            double v[3] = { ((x + 0.5) / FW * 2 - 1) * fy * asp, (1 - (y + 0.5) / FH * 2) * fy, -1 }, d[3];
+            rot(RP, v, d);
+            rgba[i * 4 + 3] = 1;
+            dep[i] = 1e10f;
+            if (!(d[1] < -1e-9))
+                continue;
+            double t0 = (3.0 - e[1]) / d[1]; /* enters the room through the mirror wall */
+            double p0[3] = { e[0] + t0 * d[0], e[1] + t0 * d[1], e[2] + t0 * d[2] };
+            if (p0[0] <= LO[0] || p0[0] >= HI[0] || p0[2] <= LO[2] || p0[2] >= HI[2])
+                continue;
+            int wall;
+            double t = box_exit(p0, d, &wall);
+            double q[3] = { p0[0] + t * d[0], p0[1] + t * d[1], p0[2] + t * d[2] };
+            room_colour(q, wall, rgba + i * 4);
+            dep[i] = (float)((t0 + t) / sqrt(v[0] * v[0] + v[1] * v[1] + 1));
+        }
+    fx_frame *f = et_frame(ctx, FW, FH, rgba);
+    CHECK_OK(ctx, fx_frame_add_pass(f, "Depth", 1, dep));
+    CHECK_OK(ctx, fx_frame_write_exr(f, path, NULL));
+    fx_frame_free(f);
+    free(rgba), free(dep);
+    memset(w2c_out, 0, 16 * sizeof(float));
+    for (int i = 0; i < 3; i++) {
+        double tt = 0;
+        for (int k = 0; k < 3; k++) {
+            w2c_out[i * 4 + k] = (float)RP[k * 3 + i];
+            tt -= RP[k * 3 + i] * e[k];
+        }
+        w2c_out[i * 4 + 3] = (float)tt;
+    }
+    w2c_out[15] = 1;
+    double nn = 0.1, ff = 100.0, f1 = 1.0 / fy;
+    memset(proj, 0, 16 * sizeof(float));
+    proj[0] = (float)(f1 / asp);
+    proj[5] = (float)f1;
+    proj[10] = (float)((ff + nn) / (nn - ff));
+    proj[11] = (float)(2 * ff * nn / (nn - ff));
+    proj[14] = -1;
+}
+
+static void add_planar(fx_context *ctx, fx_frame *f, const char *name, const char *path, const float m[16],
+                       const float pr[16], const char *plane)
+{
+    char json[8192];
+    int n = snprintf(json, sizeof json, "{\"aux_views\": [{\"name\": \"%s\", \"path\": \"%s\", \"world_to_camera\": [",
+                     name, path);
+    for (int i = 0; i < 16; i++)
+        n += snprintf(json + n, sizeof json - n, "%s%.9g", i ? ", " : "", m[i]);
+    n += snprintf(json + n, sizeof json - n, "], \"projection\": [");
+    for (int i = 0; i < 16; i++)
+        n += snprintf(json + n, sizeof json - n, "%s%.9g", i ? ", " : "", pr[i]);
+    snprintf(json + n, sizeof json - n,
+             "], \"clip_start\": 0.1, \"clip_end\": 100, \"kind\": \"planar\", \"plane\": %s}]}", plane);
+    CHECK_OK(ctx, fx_frame_apply_sidecar(f, json));
+}
+
+static void test_planar(fx_context *ctx)
+{
+    const char *dir = tu_tmpdir("planar");
+    float *want = calloc((size_t)FW * FH * 3, sizeof(float));
+    fx_frame *f = room_frame(ctx, want);
+    fx_stack *s = et_stack(ctx, "ssr_mirror");
+    CHECK_OK(ctx, fx_stack_set_mask_json(s, 0, "{\"material_index\": 1}"));
+    CHECK_OK(ctx, fx_stack_set_quality(s, FX_QUALITY_REFERENCE));
+    fx_stack_set_debug_outputs(s, 1);
+    char *req = NULL;
+    CHECK_OK(ctx, fx_stack_required_aux_views(s, &req));
+    printf("required at reference: %s\n", req);
+    CHECK(req && tu_contains(req, "\"planar:") && tu_contains(req, "\"probe:") && tu_contains(req, "\"kind\":\"planar\""));
+    char pname[64] = "planar:?";
+    const char *at = req ? strstr(req, "\"planar:") : NULL;
+    if (at)
+        snprintf(pname, 20, "%s", at + 1); /* "planar:" and 12 hex digits */
+    fx_free(req);
+    /* without it: a warning, the trace (no probe here either) */
+    fx_frame *o0 = NULL;
+    fx_context_clear_warnings(ctx);
+    CHECK_OK(ctx, fx_stack_run(s, f, &o0));
+    int warned = 0;
+    for (int k = 0; k < fx_context_warning_count(ctx); k++)
+        warned |= tu_contains(fx_context_warning(ctx, k), "no planar mirror view");
+    CHECK(warned);
+    char path[600];
+    snprintf(path, sizeof path, "%s/planar.exr", dir);
+    float m[16], pr[16];
+    write_planar(ctx, path, m, pr);
+    add_planar(ctx, f, pname, path, m, pr, "[0, -1, 0, -3]");
+    fx_frame *o1 = NULL;
+    fx_context_clear_warnings(ctx);
+    CHECK_OK(ctx, fx_stack_run(s, f, &o1));
+    float *pl = NULL;
+    int c;
+    CHECK(fx_frame_pass(o1, "fx0_ssr_mirror_planar", &pl, &c) == FX_OK);
+    float *ima;
+    fx_frame_pass(f, "IndexMA", &ima, &c);
+    int used = 0, mirror = 0;
+    for (size_t i = 0; pl && i < (size_t)FW * FH; i++) {
+        mirror += ima[i] == 1;
+        used += pl[i] > 0.5f;
+    }
+    double e0 = mirror_mae(f, o0, want), e1 = mirror_mae(f, o1, want);
+    printf("planar view: %d of %d mirror pixels, MAE against the exact reflection %.4f (trace only: %.4f)\n", used,
+           mirror, e1, e0);
+    CHECK(used > 0.97 * mirror);
+    CHECK(e1 < 0.01 && e1 < 0.25 * e0);
+    /* a view whose plane is another one (x = 0): not used, the same bits as without it */
+    fx_frame_free(o1);
+    o1 = NULL;
+    add_planar(ctx, f, pname, path, m, pr, "[1, 0, 0, 0]");
+    CHECK_OK(ctx, fx_stack_run(s, f, &o1));
+    const float *a = et_combined(o0), *b = et_combined(o1);
+    CHECK(a && b && memcmp(a, b, (size_t)FW * FH * 4 * sizeof(float)) == 0);
+    /* a degenerate plane (zero normal), a malformed one: refused or unused, never NaN */
+    add_planar(ctx, f, pname, path, m, pr, "[0, 0, 0, 1]");
+    fx_frame_free(o1);
+    o1 = NULL;
+    CHECK_OK(ctx, fx_stack_run(s, f, &o1));
+    CHECK(tu_all_finite(et_combined(o1), (size_t)FW * FH * 4));
+    CHECK(fx_frame_apply_sidecar(f, "{\"aux_views\": [{\"name\": \"planar:x\", \"path\": \"/p\", "
+                                    "\"world_to_camera\": [1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1], "
+                                    "\"projection\": [1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1], \"clip_start\": 0, "
+                                    "\"clip_end\": 1, \"plane\": [0, 1, \"a\", 0]}]}") == FX_ERR_BAD_RECIPE);
+    fx_frame_free(o0), fx_frame_free(o1);
+    fx_stack_free(s);
+    fx_frame_free(f);
+    free(want);
+}
+
+int main(void)
+{
+    fx_context *ctx = NULL;
+    fx_context_new(&ctx, 2);
+    test_conventions();
+    test_parallax();
+    test_end_to_end(ctx);
+    test_planar(ctx);
+    fx_context_free(ctx);
+    return tu_finish("test_probe");
+}
