@@ -34,16 +34,17 @@ LEAF_SEED = 1234
 LEAF_COUNT = 1600
 
 # The rainy atrium (issue 7): VSM shadows of the columns and the leaf tree from the
-# Sun's light view (the Sun casts no ray-traced shadow: libfx adds them), the wet
+# Sun's light view (the Sun casts no ray-traced shadow: libfx adds them, taking away the
+# Sun's direct and bounce light in its light group pass: docs/accuracy_truth.md), the wet
 # courtyard, splashes, then the rain in front of everything.  The light view and the
 # rain map are auxiliary depth renders the add-on makes because these effects ask.
 RECIPE = {
     "version": 1,
     "quality": "final",
     "effects": [
-        {"effect": "vsm_shadows", "enabled": True,
+        {"effect": "vsm_shadows", "enabled": True, "params_version": 2,
          "params": {"light": "Sun", "filter_size": 5.0, "bleed_reduction": 0.3,
-                    "apply": "sun_diffuse"}},
+                    "apply": "light_group"}},
         {"effect": "wet_surfaces", "enabled": True,
          "params": {"darken": 0.35, "specular": 0.8, "edge_softness": 0.4}},
         {"effect": "rain_splashes", "enabled": True,
@@ -322,7 +323,8 @@ def main():
     sc.sky_world("Sky_Atrium", zenith=(0.15, 0.35, 0.85), horizon=(0.7, 0.82, 0.95),
                  ground=(0.3, 0.28, 0.25), strength=1.8)
     sun = sc.add_sun("Sun", sun_dir, strength=4.5, color=(1.0, 0.93, 0.8), angle_deg=1.5)
-    # libfx's vsm_shadows adds the Sun's shadows (apply "sun_diffuse"): Cycles must not.
+    # libfx's vsm_shadows adds the Sun's shadows (apply "light_group": the Sun's whole share,
+    # from the light group pass the add-on makes): Cycles must not.
     # tests/bench/bench_atrium.py renders the ray-traced truth with this switched on.
     sc.compat.light_cast_shadow(sun.data, False)
 

@@ -1,6 +1,6 @@
 """Build the sun-shadow truth scenes (issue 14): one .blend per variant. The ``Sun``
 casts no ray-traced shadow in the .blend (libfx's vsm_shadows adds it, ``apply:
-sun_diffuse``, as in the atrium); ``apply_truth()`` turns its Cycles shadow on (the
+light_group``, as in the atrium); ``apply_truth()`` turns its Cycles shadow on (the
 ground truth, tests/bench/truth_shadows.py).
 
     blender -b --factory-startup --python blend_scenes/truth_shadows/make_truth_shadows.py \\
@@ -37,8 +37,8 @@ RECIPE = {
     "version": 1,
     "quality": "final",
     "effects": [
-        {"effect": "vsm_shadows", "enabled": True,
-         "params": {"light": "Sun", "filter_size": 5.0, "bleed_reduction": 0.3, "apply": "sun_diffuse"}},
+        {"effect": "vsm_shadows", "enabled": True, "params_version": 2,
+         "params": {"light": "Sun", "filter_size": 5.0, "bleed_reduction": 0.3, "apply": "light_group"}},
     ],
 }
 
@@ -110,7 +110,7 @@ def build(variant):
     cam.location = cam_loc
     cam.rotation_euler = sc.look_at_euler(cam_loc, target)
     sun = sc.add_sun("Sun", sun_dir, strength=3.0, color=(1.0, 0.95, 0.85), angle_deg=1.0)
-    # libfx's vsm_shadows adds the Sun's shadows (apply "sun_diffuse"): Cycles must not
+    # libfx's vsm_shadows adds the Sun's shadows (apply "light_group"): Cycles must not
     sc.compat.light_cast_shadow(sun.data, False)
     sc.check_unique_indices()
     sc.write_recipe(HERE, RECIPE)

@@ -9,7 +9,7 @@ Per scene, one Blender session renders frame 1 (Cycles, 1 sample: the render's o
 counted) --runs times with the add-on's render_post replaced by the F12 branch of it
 (`render.after_render(scene, frame, ui=True)`, then the UI queue drained, as the timers do in
 the UI): the passes file written from the Render Result, read, the stack, the result's pixels
-in the "libfx Result" image. The clock starts in a render_post handler placed before the
+in the "libfx Result" image. The aux views the stack reads are rendered once before, untimed. The clock starts in a render_post handler placed before the
 add-on's, i.e. when Blender has finished the render, and stops when the image holds the result.
 The result EXR is written afterwards on the worker: listed apart.
 
@@ -70,6 +70,9 @@ def f12(sc, *a):
     T["shown"].append((t1 - T["t0"]) * 1e3)
     T["stack"] = sum(t["ms"] for t in rec.get("timings", []))
 
+# the aux views the stack reads (light view, rain map, probes), rendered once beforehand as
+# a batch or the panel's button does; not timed
+render.AUX[(scene.name, scene.frame_current)] = render.aux_views.prepare(scene, [scene.frame_current])
 bpy.app.handlers.render_post.insert(0, stamp)
 bpy.app.handlers.render_post.append(f12)
 for r in range(A["runs"]):
