@@ -48,6 +48,8 @@ scene.cycles.use_denoising = False
 scene.libfx.live = True
 scene.libfx.show_result = True
 scene.libfx.keep_passes = True   # the File Output comparison reads it
+if A["codec"]:
+    scene.libfx.passes_codec = A["codec"]
 bpy.app.handlers.render_post.remove(render.on_render_post)
 T = {"post": [], "shown": [], "write_passes": [], "result_exr": []}
 
@@ -148,6 +150,7 @@ def main():
     ap.add_argument("--resolution", default="1920x1080")
     ap.add_argument("--out", default=os.path.join(ROOT, "out", "bench_after_render"))
     ap.add_argument("--verbose", action="store_true", help="print the add-on's log lines")
+    ap.add_argument("--codec", default="", help="the Passes Codec (default: the add-on's)")
     a = ap.parse_args()
     w, h = (int(v) for v in a.resolution.split("x"))
     out = os.path.abspath(a.out)
@@ -155,7 +158,7 @@ def main():
     rows = []
     for scene in a.scenes.split(","):
         args = {"addon": os.path.join(ROOT, "addon"), "prefix": os.path.join(out, scene + "_"),
-                "runs": a.runs, "w": w, "h": h}
+                "runs": a.runs, "w": w, "h": h, "codec": a.codec}
         cmd = blender_cmd(a.blender) + ["-b", os.path.join(ROOT, "blend_scenes", scene, scene + ".blend"),
                                         "--python-expr", SCRIPT, "--", json.dumps(args)]
         p = subprocess.run(cmd, capture_output=True, text=True, env=dict(os.environ, PYTHONDONTWRITEBYTECODE="1"))
@@ -165,7 +168,7 @@ def main():
             sys.exit("bench_after_render: %s failed" % scene)
         t = json.loads(line[7:])
         if a.verbose:
-            sys.stderr.write("".join(l + "\n" for l in p.stdout.splitlines() if l.startswith(("libfx", "live"))))
+            sys.stderr.write("".join(l + "\n" for l in (p.stdout + p.stderr).splitlines() if l.startswith(("libfx", "live", "Assert"))))
         print("%s: shown %s ms; parts %s" % (scene, ", ".join("%.0f" % v for v in t["shown"]), t["parts"]), file=sys.stderr)
         writes = [float(x) for x in __import__("re").findall(r"passes file written in (\d+) ms", p.stdout)]
         rows.append({"scene": scene, "channels": t.get("channels"), "shown_ms": med(t["shown"]),

@@ -135,6 +135,28 @@ static void test_plan(fx_context *ctx)
     CHECK(p && p->src[0] == 4);
     fx_mem_free(plan);
 
+    /* Blender 5.x render output: the light and index passes under their UI names */
+    const char *b5[] = {"ViewLayer.Diffuse Color.B", "ViewLayer.Diffuse Color.G", "ViewLayer.Diffuse Color.R",
+                        "ViewLayer.Glossy Direct.R", "ViewLayer.Object Index.X", "ViewLayer.Ambient Occlusion.R",
+                        "ViewLayer.Volume Direct.R"};
+    fx_exr_chan c5[7];
+    for (int i = 0; i < 7; i++)
+        c5[i] = split(b5[i], NULL, 0, NULL);
+    fx_exr_select s5 = {"ViewLayer", "", 1, 0};
+    CHECK_OK(ctx, fx_exr_plan(ctx, "b5.exr", c5, 7, NULL, 0, &s5, &plan, &np));
+    p = find(plan, np, "DiffCol");
+    CHECK(p && p->id == FX_PASS_DIFF_COL && p->channels == 3 && p->src[0] == 2 && p->src[2] == 0);
+    p = find(plan, np, "GlossDir");
+    CHECK(p && p->id == FX_PASS_GLOSS_DIR);
+    p = find(plan, np, "IndexOB");
+    CHECK(p && p->id == FX_PASS_INDEX_OB && p->src[0] == 4);
+    CHECK(find(plan, np, "AO") != NULL);
+    p = find(plan, np, "Volume Direct"); /* not a pass libfx reads: kept under its own name */
+    CHECK(p && p->id == -1);
+    fx_mem_free(plan);
+    CHECK(fx_pass_is_blendable("Diffuse Color") && !fx_pass_is_blendable("Object Index") &&
+          fx_pass_is_blendable("Volume Indirect"));
+
     /* other tools' Cryptomatte names become the canonical type */
     fx_exr_crypto cr;
     memset(&cr, 0, sizeof cr);

@@ -44,13 +44,29 @@ const fx_pass_desc *fx_pass_describe(fx_pass_id id)
     return &pass_table[id];
 }
 
-/* Aliases written by other routes: the File Output node names its sockets. */
+/* Aliases written by other routes: the File Output node names its sockets; Blender 5.0+
+ * renamed the light and index passes in its render output (and so in files saved from the
+ * Render Result) to their UI names. */
 static const struct {
     const char *alias;
     fx_pass_id id;
 } pass_aliases[] = {
     {"Image", FX_PASS_COMBINED},
     {"Z", FX_PASS_DEPTH},
+    {"Object Index", FX_PASS_INDEX_OB},
+    {"Material Index", FX_PASS_INDEX_MA},
+    {"Diffuse Direct", FX_PASS_DIFF_DIR},
+    {"Diffuse Indirect", FX_PASS_DIFF_IND},
+    {"Diffuse Color", FX_PASS_DIFF_COL},
+    {"Glossy Direct", FX_PASS_GLOSS_DIR},
+    {"Glossy Indirect", FX_PASS_GLOSS_IND},
+    {"Glossy Color", FX_PASS_GLOSS_COL},
+    {"Transmission Direct", FX_PASS_TRANS_DIR},
+    {"Transmission Indirect", FX_PASS_TRANS_IND},
+    {"Transmission Color", FX_PASS_TRANS_COL},
+    {"Emission", FX_PASS_EMIT},
+    {"Environment", FX_PASS_ENV},
+    {"Ambient Occlusion", FX_PASS_AO},
 };
 
 int fx_pass_lookup(const char *name)
