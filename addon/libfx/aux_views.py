@@ -96,7 +96,6 @@ def world_box(objs):
 
 def frustum_points(scene, cam_ob, far):
     """World corners of the camera frustum from clip_start to `far`."""
-    r = scene.render
     data = cam_ob.data
     frame = data.view_frame(scene=scene)  # 4 points at distance 1 (perspective) in camera space
     mw = cam_ob.matrix_world
@@ -220,11 +219,45 @@ def signature(spec, objs):
 
 # ---------------------------------------------------------------- render
 
+def _render_view(scene, aux, path, passes, what):
+    """Renders the aux scene and moves the EXR its File Output node wrote to path (32-bit
+    ZIP multilayer): passes [(EXR layer name, render pass)]; `what` names the view in errors."""
+    nt, made = compat.ensure_compositor_tree(aux, AUX_SCENE)
+    try:
+        rl = next(n for n in nt.nodes if n.bl_idname == "CompositorNodeRLayers")
+        rl.scene = aux
+        fo = nt.nodes.new("CompositorNodeOutputFile")
+        compat.file_output_format(fo, "OPEN_EXR_MULTILAYER", "32", "ZIP")
+        base = path[:-len(".exr")] + ".tmp."
+        compat.file_output_set_prefix(fo, base)
+        compat.file_output_link(nt, fo, [(name, compat.render_layer_output(rl, p)) for name, p in passes])
+        BUSY["on"] = True
+        try:
+            bpy.ops.render.render(write_still=False, scene=aux.name)
+        finally:
+            BUSY["on"] = False
+        # the File Output node numbers the file with the frame of the scene the render was
+        # started from (frame 8 of a batch gives .0008.exr), not the aux scene's frame 1
+        written = None
+        for f in (scene.frame_current, 1):
+            if os.path.exists(base + "%04d.exr" % f):
+                written = base + "%04d.exr" % f
+                break
+        if written is None:
+            import glob
+            found = sorted(glob.glob(glob.escape(base) + "[0-9]*.exr"))
+            written = found[-1] if found else base + "0001.exr"
+        if not os.path.exists(written):
+            raise native.LibfxError("%s wrote no file (%s)" % (what, written))
+        os.replace(written, path)
+    finally:
+        compat.release_compositor_tree(aux, made)
+
+
 def _render(scene, spec, objs, path):
     aux = bpy.data.scenes.new(AUX_SCENE)
     cam_data = bpy.data.cameras.new(AUX_SCENE)
     cam = bpy.data.objects.new(AUX_SCENE, cam_data)
-    made = None
     try:
         for ob in objs:
             aux.collection.objects.link(ob)
@@ -252,35 +285,8 @@ def _render(scene, spec, objs, path):
         aux.frame_start = aux.frame_end = aux.frame_current = 1
         vl = aux.view_layers[0]
         vl.use_pass_z = True
-        nt, made = compat.ensure_compositor_tree(aux, AUX_SCENE)
-        rl = next(n for n in nt.nodes if n.bl_idname == "CompositorNodeRLayers")
-        rl.scene = aux
-        fo = nt.nodes.new("CompositorNodeOutputFile")
-        compat.file_output_format(fo, "OPEN_EXR_MULTILAYER", "32", "ZIP")
-        base = path[:-len(".exr")] + ".tmp."
-        compat.file_output_set_prefix(fo, base)
-        compat.file_output_link(nt, fo, [("Depth", compat.render_layer_output(rl, "Depth"))])
-        BUSY["on"] = True
-        try:
-            bpy.ops.render.render(write_still=False, scene=aux.name)
-        finally:
-            BUSY["on"] = False
-        # the File Output node numbers the file with the frame of the scene the render was
-        # started from (frame 8 of a batch gives .0008.exr), not the aux scene's frame 1
-        written = None
-        for f in (scene.frame_current, 1):
-            if os.path.exists(base + "%04d.exr" % f):
-                written = base + "%04d.exr" % f
-                break
-        if written is None:
-            import glob
-            found = sorted(glob.glob(glob.escape(base) + "[0-9]*.exr"))
-            written = found[-1] if found else base + "0001.exr"
-        if not os.path.exists(written):
-            raise native.LibfxError("the aux view render of '%s' wrote no file (%s)" % (spec["name"], written))
-        os.replace(written, path)
+        _render_view(scene, aux, path, [("Depth", "Depth")], "the aux view render of '%s'" % spec["name"])
     finally:
-        compat.release_compositor_tree(aux, made)
         bpy.data.scenes.remove(aux)
         bpy.data.objects.remove(cam)
         bpy.data.cameras.remove(cam_data)
@@ -407,7 +413,6 @@ def _render_probe(scene, spec, objs, path):
     aux = bpy.data.scenes.new(AUX_SCENE)
     cam_data = bpy.data.cameras.new(AUX_SCENE)
     cam = bpy.data.objects.new(AUX_SCENE, cam_data)
-    made = None
     hidden = []
     swapped = []
     try:
@@ -466,32 +471,8 @@ def _render_probe(scene, spec, objs, path):
         aux.frame_start = aux.frame_end = aux.frame_current = 1
         vl = aux.view_layers[0]
         vl.use_pass_z = True
-        nt, made = compat.ensure_compositor_tree(aux, AUX_SCENE)
-        rl = next(n for n in nt.nodes if n.bl_idname == "CompositorNodeRLayers")
-        rl.scene = aux
-        fo = nt.nodes.new("CompositorNodeOutputFile")
-        compat.file_output_format(fo, "OPEN_EXR_MULTILAYER", "32", "ZIP")
-        base = path[:-len(".exr")] + ".tmp."
-        compat.file_output_set_prefix(fo, base)
-        compat.file_output_link(nt, fo, [("Image", compat.render_layer_output(rl, "Combined")),
-                                         ("Depth", compat.render_layer_output(rl, "Depth"))])
-        BUSY["on"] = True
-        try:
-            bpy.ops.render.render(write_still=False, scene=aux.name)
-        finally:
-            BUSY["on"] = False
-        written = None
-        for f in (scene.frame_current, 1):
-            if os.path.exists(base + "%04d.exr" % f):
-                written = base + "%04d.exr" % f
-                break
-        if written is None:
-            import glob
-            found = sorted(glob.glob(glob.escape(base) + "[0-9]*.exr"))
-            written = found[-1] if found else base + "0001.exr"
-        if not os.path.exists(written):
-            raise native.LibfxError("the %s render '%s' wrote no file (%s)" % (spec["kind"], spec["name"], written))
-        os.replace(written, path)
+        _render_view(scene, aux, path, [("Image", "Combined"), ("Depth", "Depth")],
+                     "the %s render '%s'" % (spec["kind"], spec["name"]))
     finally:
         for ob in hidden:
             ob.visible_camera = True
@@ -500,7 +481,6 @@ def _render_probe(scene, spec, objs, path):
                 ob.data.materials.pop()
             for sl, m in zip(ob.material_slots, slot_mats):
                 sl.material = m
-        compat.release_compositor_tree(aux, made)
         bpy.data.scenes.remove(aux)
         bpy.data.objects.remove(cam)
         bpy.data.cameras.remove(cam_data)

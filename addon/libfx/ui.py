@@ -1,6 +1,5 @@
 """Operators, the stack list and the panels (Properties > Output, Compositor sidebar)."""
 
-import json
 import os
 
 import bpy

@@ -337,27 +337,6 @@ void fx_shadow_map_free(fx_shadow_map *sm)
     sm->depth = sm->moments = NULL;
 }
 
-float fx_shadow_map_pcf(const fx_shadow_map *sm, float px, float py, float t, int radius, float eps)
-{
-    int cx = (int)floorf(px), cy = (int)floorf(py);
-    int x0 = cx - radius, x1 = cx + radius, y0 = cy - radius, y1 = cy + radius;
-    x0 = x0 < 0 ? 0 : x0;
-    y0 = y0 < 0 ? 0 : y0;
-    x1 = x1 >= sm->width ? sm->width - 1 : x1;
-    y1 = y1 >= sm->height ? sm->height - 1 : y1;
-    if (x1 < x0 || y1 < y0)
-        return fx_shadow_map_hard(sm, px, py, t, eps);
-    int lit = 0, n = 0;
-    for (int y = y0; y <= y1; y++) {
-        const float *row = sm->depth + (size_t)y * sm->width;
-        for (int x = x0; x <= x1; x++) {
-            lit += t <= row[x] + eps;
-            n++;
-        }
-    }
-    return (float)lit / (float)n;
-}
-
 float fx_shadow_map_pcf_plane(const fx_shadow_map *sm, float px, float py, float t, int radius, float eps, float gx,
                               float gy)
 {

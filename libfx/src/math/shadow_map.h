@@ -125,15 +125,14 @@ static inline float fx_shadow_map_hard(const fx_shadow_map *sm, float px, float 
 }
 
 /* Percentage-closer filtering: the lit fraction of the (2r+1)^2 texels around the nearest
- * one (clipped to the map). Cost O(r^2): the reference VSM is measured against. */
-float fx_shadow_map_pcf(const fx_shadow_map *sm, float px, float py, float t, int radius, float eps);
-/* PCF with a receiver-plane depth bias: each texel (x, y) is tested against the receiver's
+ * one (clipped to the map), cost O(r^2), the reference VSM is measured against; with a
+ * receiver-plane depth bias: each texel (x, y) is tested against the receiver's
  * plane extended under it, t + gx (x + 0.5 - px) + gy (y + 0.5 - py) (gx, gy: the
  * receiver's normalised depth per texel), plus eps and half a texel of its slope
  * (0.5 (|gx| + |gy|): the depth a texel's centre may differ from the plane within it). A
  * lit flat receiver far from occluders is then lit at every tap, where the plain test
- * compares the far taps of a tilted receiver with its centre's depth (acne). gx = gy = 0
- * is fx_shadow_map_pcf. */
+ * compares the far taps of a tilted receiver with its centre's depth (acne). gx = gy = 0:
+ * the plain test against t + eps. */
 float fx_shadow_map_pcf_plane(const fx_shadow_map *sm, float px, float py, float t, int radius, float eps, float gx,
                               float gy);
 
