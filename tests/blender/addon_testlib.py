@@ -124,6 +124,18 @@ def need_oiio():
 
 # ---------------------------------------------------------------- EXR helpers
 
+#: Blender 5.x names these passes in its render output (the Render Result the add-on saves)
+#: by their UI names; libfx reads them as the short names (libfx/src/core/passes.c).
+BLENDER5_PASS_NAMES = {
+    "Object Index": "IndexOB", "Material Index": "IndexMA",
+    "Diffuse Direct": "DiffDir", "Diffuse Indirect": "DiffInd", "Diffuse Color": "DiffCol",
+    "Glossy Direct": "GlossDir", "Glossy Indirect": "GlossInd", "Glossy Color": "GlossCol",
+    "Transmission Direct": "TransDir", "Transmission Indirect": "TransInd",
+    "Transmission Color": "TransCol", "Emission": "Emit", "Environment": "Env",
+    "Ambient Occlusion": "AO",
+}
+
+
 class Exr:
     """All channels of a (multilayer, single-part) EXR as float32 arrays by name."""
 
@@ -149,11 +161,13 @@ class Exr:
         inp.close()
 
     def passes(self):
-        """Pass names: 'Layer.Pass.C' -> 'Pass' (parsed from the right, GUIDE §3)."""
+        """Pass names: 'Layer.Pass.C' -> 'Pass' (parsed from the right, GUIDE §3); 5.x's
+        render-output names as libfx's canonical ones ('Diffuse Color' -> 'DiffCol')."""
         out = []
         for n in self.names:
             parts = n.split(".")
             p = parts[-2] if len(parts) >= 2 else parts[0]
+            p = BLENDER5_PASS_NAMES.get(p, p)
             if p not in out:
                 out.append(p)
         return out
@@ -161,6 +175,7 @@ class Exr:
     def get(self, pass_name, chans):
         """Channels of a pass, e.g. get('Combined', 'RGBA') -> HxWx4 (Image is Combined)."""
         aliases = {"Combined": ("Combined", "Image")}.get(pass_name, (pass_name,))
+        aliases += tuple(k for k, v in BLENDER5_PASS_NAMES.items() if v == pass_name)
         out = []
         for c in chans:
             found = None
@@ -268,7 +283,7 @@ def mask_support(exr, mask):
 def exr_single_channel(exr, pass_name):
     for n in exr.names:
         parts = n.split(".")
-        if len(parts) >= 2 and parts[-2] == pass_name:
+        if len(parts) >= 2 and BLENDER5_PASS_NAMES.get(parts[-2], parts[-2]) == pass_name:
             return parts[-1]
     raise AssertionError("no pass %s in %s" % (pass_name, exr.names))
 
