@@ -37,7 +37,8 @@ assert len(vl.lightgroups) == 0 and ob.lightgroup == '', (list(vl.lightgroups), 
 sc.libfx.stack[0].enabled = True
 scene_setup.sync(sc)
 assert ob.lightgroup == 'libfx_light'
-sc.render.engine = 'BLENDER_EEVEE'
+from libfx import compat
+sc.render.engine = compat.eevee_engine()
 scene_setup.sync(sc)
 assert any('light group' in w for w in scene_setup.status(sc).get('warnings', [])), scene_setup.status(sc)
 sc.render.engine = 'CYCLES'
