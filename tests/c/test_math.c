@@ -1,11 +1,13 @@
-/* math/: vectors, matrices, the camera model and hashing. */
+/* math/: vectors, matrices, the camera model, hashing and libc-independent inverse trigonometry. */
 #include "testutil.h"
 
 #include "math/camera.h"
 #include "math/hash.h"
+#include "math/trig.h"
 #include "math/vec.h"
 
 #include <math.h>
+#include <stdlib.h>
 #include <string.h>
 
 static int near(float a, float b, float tol) { return fabsf(a - b) <= tol; }
@@ -82,9 +84,36 @@ static void test_hash(void)
     CHECK(lo > 9000 && lo < 11000);
 }
 
+/* fx_atan2f / fx_acosf against the double-precision libm over a grid of the whole plane
+ * (every quadrant, the axes, signed zeros, infinities), and their fixed points; their bits
+ * are the same on every libc by construction (no libm call), which tests/matrix checks
+ * across Debian 12/13/unstable through the probe lookups. */
+static void test_trig(void)
+{
+    double worst = 0.0;
+    for (int i = -200; i <= 200; i++)
+        for (int j = -200; j <= 200; j++) {
+            float y = (float)i * 0.37f * (float)(abs(i) > 150 ? 1e3 : 1), x = (float)j * 0.41f * (float)(abs(j) > 150 ? 1e-3 : 1);
+            double e = fabs((double)fx_atan2f(y, x) - atan2((double)y, (double)x));
+            worst = e > worst ? e : worst;
+        }
+    for (int i = -1000; i <= 1000; i++) {
+        float c = (float)i / 1000.0f;
+        double e = fabs((double)fx_acosf(c) - acos((double)c));
+        worst = e > worst ? e : worst;
+    }
+    CHECK(worst < 4e-7);
+    CHECK(fx_atan2f(0.0f, 0.0f) == 0.0f && fx_atan2f(0.0f, -1.0f) == FX_TRIG_PI && fx_atan2f(-0.0f, -1.0f) == -FX_TRIG_PI);
+    CHECK(near(fx_atan2f(1.0f, 0.0f), FX_TRIG_PI_2, 1e-7f) && near(fx_atan2f(INFINITY, INFINITY), FX_TRIG_PI_4, 1e-7f));
+    CHECK(fx_atan2f(1.0f, INFINITY) == 0.0f && near(fx_atan2f(-INFINITY, 1.0f), -FX_TRIG_PI_2, 1e-7f));
+    CHECK(isnan(fx_atan2f(NAN, 1.0f)) && isnan(fx_acosf(NAN)));
+    CHECK(fx_acosf(1.0f) == 0.0f && near(fx_acosf(-1.0f), FX_TRIG_PI, 1e-7f) && fx_acosf(2.0f) == 0.0f);
+}
+
 int main(void)
 {
     test_vectors();
+    test_trig();
     test_camera();
     test_hash();
     return tu_finish("test_math");

@@ -15,6 +15,7 @@
 #ifndef LIBFX_MATH_PANORAMA_H
 #define LIBFX_MATH_PANORAMA_H
 
+#include "math/trig.h"
 #include "math/vec.h"
 
 #include <math.h>
@@ -36,9 +37,9 @@ static inline void fx_pano_dir_to_pixel(fx_vec3 d, int w, int h, float *px, floa
         *py = 0.5f * (float)h;
         return;
     }
-    float u = 0.5f - atan2f(-d.x, -d.z) / (2.0f * FX_PANO_PI);
+    float u = 0.5f - fx_atan2f(-d.x, -d.z) / (2.0f * FX_PANO_PI);
     float cy = fx_clampf(d.y / len, -1.0f, 1.0f);
-    float v = acosf(cy) / FX_PANO_PI;
+    float v = fx_acosf(cy) / FX_PANO_PI; /* fx_: the same bits on every libc */
     *px = fx_clampf(u, 0.0f, 1.0f) * (float)w;
     *py = fx_clampf(v, 0.0f, 1.0f) * (float)h;
 }
