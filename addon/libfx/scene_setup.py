@@ -234,10 +234,12 @@ def sync(scene, rec=None):
     if not has_stack(scene):
         _restore_settings(scene, keep=set())
         _restore_light_group(scene)
-        _set_status(scene, error=None, warnings=[], passes=[], camera=False)
+        _set_status(scene, error=None, warnings=[], passes=[], camera=False, aux_views=[])
         return None
     try:
-        req = query(scene, rec)
+        from . import recipe
+        got = answers(recipe.to_recipe(scene) if rec is None else rec)
+        req = got["required"]
     except (native.LibfxError, ValueError) as e:
         _set_status(scene, error=str(e))
         return None
@@ -270,12 +272,7 @@ def sync(scene, rec=None):
     _save_owned(scene, owned)
     _restore_settings(scene, keep={(vl.name, s) for s in keep})
     if group_wanted:
-        from . import recipe
-        try:
-            views = answers(recipe.to_recipe(scene) if rec is None else rec)["aux_views"]
-        except (native.LibfxError, ValueError):
-            views = []
-        lname = next((v.get("light") or "" for v in views if v.get("kind") == "light"), "")
+        lname = next((v.get("light") or "" for v in got["aux_views"] if v.get("kind") == "light"), "")
         problem = _ensure_light_group(scene, vl, group_wanted, lname)
         if problem:
             warnings.append(problem)
@@ -286,7 +283,8 @@ def sync(scene, rec=None):
     if problem:
         warnings.append(problem)
     _set_status(scene, error=None, warnings=warnings, passes=req.get("passes", []),
-                camera=bool(req.get("camera", False)))
+                camera=bool(req.get("camera", False)),
+                aux_views=[v["name"] for v in got["aux_views"]])
     return req
 
 

@@ -6,7 +6,7 @@ import bpy
 from bpy.props import EnumProperty, IntProperty, StringProperty
 from bpy_extras.io_utils import ExportHelper, ImportHelper
 
-from . import live, native, props, recipe, render, scene_setup
+from . import aux_views, live, native, props, recipe, render, scene_setup
 
 
 def _settings(context):
@@ -267,6 +267,28 @@ class LIBFX_OT_rerun(bpy.types.Operator):
         return {"FINISHED"}
 
 
+class LIBFX_OT_render_views(bpy.types.Operator):
+    bl_idname = "libfx.render_views"
+    bl_label = "Render Views"
+    bl_description = ("Render the extra views the stack reads (a light's shadow view, the rain map, "
+                      "the mirrors' probes and planar views) for the current frame, beside the output: "
+                      "F12 uses them (it cannot render them itself); reused while nothing moves")
+
+    @classmethod
+    def poll(cls, context):
+        return scene_setup.has_stack(context.scene) and bool(scene_setup.status(context.scene).get("aux_views"))
+
+    def execute(self, context):
+        scene = context.scene
+        try:
+            views = aux_views.prepare(scene, [scene.frame_current])
+        except Exception as e:   # a failed Cycles render, an unwritable folder
+            self.report({"ERROR"}, "libfx: views: %s" % e)
+            return {"CANCELLED"}
+        self.report({"INFO"}, "libfx: %d view(s) ready: %s" % (len(views), ", ".join(v["name"] for v in views)))
+        return {"FINISHED"}
+
+
 class LIBFX_OT_live_load(bpy.types.Operator):
     bl_idname = "libfx.live_load"
     bl_label = "Load Passes"
@@ -487,6 +509,10 @@ def draw_stack(layout, context):
         row.label(text="Renders: " + ", ".join(st["passes"]) +
                   ("  + camera" if st.get("camera") else ""), icon="RENDERLAYERS")
         row.operator(LIBFX_OT_restore_scene.bl_idname, text="", icon="TRASH")
+    if st.get("aux_views"):
+        row = layout.row()
+        row.label(text="Views: " + ", ".join(st["aux_views"]), icon="LIGHT_SUN")
+        row.operator(LIBFX_OT_render_views.bl_idname, text="Render Views", icon="RENDER_STILL")
 
     row = layout.row(align=True)
     row.operator(LIBFX_OT_recipe_import.bl_idname, icon="IMPORT", text="Import")
@@ -604,7 +630,7 @@ classes = (
     LIBFX_OT_stack_add, LIBFX_OT_stack_remove, LIBFX_OT_stack_duplicate, LIBFX_OT_stack_move,
     LIBFX_OT_param_reset, LIBFX_OT_mask_name_add, LIBFX_OT_mask_name_remove,
     LIBFX_OT_recipe_import, LIBFX_OT_recipe_export, LIBFX_OT_recipe_text, LIBFX_OT_rerun,
-    LIBFX_OT_live_load,
+    LIBFX_OT_live_load, LIBFX_OT_render_views,
     LIBFX_OT_restore_scene, LIBFX_OT_report,
     LIBFX_UL_stack, LIBFX_MT_add, LIBFX_PT_output, LIBFX_PT_compositor,
 )
