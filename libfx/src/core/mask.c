@@ -227,28 +227,39 @@ fx_result fx_mask_spec_parse_text(fx_context *ctx, const char *json, const char 
     return r;
 }
 
+/* Adds item to o as key; a NULL item (its allocation failed) or a failed add is freed. */
+static int add_item(cJSON *o, const char *key, cJSON *item)
+{
+    if (item && cJSON_AddItemToObject(o, key, item))
+        return 1;
+    cJSON_Delete(item);
+    return 0;
+}
+
 cJSON *fx_mask_spec_to_json(const fx_mask_spec *s)
 {
     if (fx_mask_spec_is_empty(s))
         return NULL;
     cJSON *o = cJSON_CreateObject();
-    if (s->material_count)
-        cJSON_AddItemToObject(o, "material", cJSON_CreateStringArray((const char *const *)s->materials,
-                                                                     s->material_count));
-    if (s->object_count)
-        cJSON_AddItemToObject(o, "object",
-                              cJSON_CreateStringArray((const char *const *)s->objects, s->object_count));
-    if (s->material_index_count)
-        cJSON_AddItemToObject(o, "material_index",
-                              cJSON_CreateIntArray(s->material_indices, s->material_index_count));
-    if (s->object_index_count)
-        cJSON_AddItemToObject(o, "object_index", cJSON_CreateIntArray(s->object_indices, s->object_index_count));
-    if (s->has_rect)
-        cJSON_AddItemToObject(o, "rect", cJSON_CreateIntArray(s->rect, 4));
-    if (s->has_rect_relative)
-        cJSON_AddItemToObject(o, "rect_relative", cJSON_CreateFloatArray(s->rect_relative, 4));
-    if (s->invert)
-        cJSON_AddBoolToObject(o, "invert", 1);
+    int ok = o != NULL;
+    if (ok && s->material_count)
+        ok = add_item(o, "material", cJSON_CreateStringArray((const char *const *)s->materials, s->material_count));
+    if (ok && s->object_count)
+        ok = add_item(o, "object", cJSON_CreateStringArray((const char *const *)s->objects, s->object_count));
+    if (ok && s->material_index_count)
+        ok = add_item(o, "material_index", cJSON_CreateIntArray(s->material_indices, s->material_index_count));
+    if (ok && s->object_index_count)
+        ok = add_item(o, "object_index", cJSON_CreateIntArray(s->object_indices, s->object_index_count));
+    if (ok && s->has_rect)
+        ok = add_item(o, "rect", cJSON_CreateIntArray(s->rect, 4));
+    if (ok && s->has_rect_relative)
+        ok = add_item(o, "rect_relative", cJSON_CreateFloatArray(s->rect_relative, 4));
+    if (ok && s->invert)
+        ok = add_item(o, "invert", cJSON_CreateTrue());
+    if (!ok) {
+        cJSON_Delete(o);
+        return NULL;
+    }
     return o;
 }
 

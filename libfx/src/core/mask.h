@@ -49,7 +49,7 @@ fx_result fx_mask_spec_parse(fx_context *ctx, const struct cJSON *json, const ch
  * 'mirror_surfaces'"). Text that is not JSON is FX_ERR_BAD_RECIPE. */
 fx_result fx_mask_spec_parse_text(fx_context *ctx, const char *json, const char *where, const char *what,
                                   fx_mask_spec *out);
-struct cJSON *fx_mask_spec_to_json(const fx_mask_spec *spec); /* NULL if empty */
+struct cJSON *fx_mask_spec_to_json(const fx_mask_spec *spec); /* NULL if empty or out of memory */
 void fx_mask_spec_clear(fx_mask_spec *spec);
 fx_pass_set fx_mask_spec_passes(const fx_mask_spec *spec);
 

@@ -745,17 +745,23 @@ fx_result fx_stack_required_passes(const fx_stack *s, char **out_json)
 /* The entry's mask key (fx_effect_run.mask_key): 12 hex digits of the 64-bit FNV-1a hash
  * of its canonical mask JSON ("{}" without a mask). Stable across runs and machines, so
  * the add-on's view names and the run's match. */
-static void mask_key(const fx_entry *e, char out[16])
+static int mask_key(const fx_entry *e, char out[16])
 {
+    out[0] = '\0';
     cJSON *m = fx_mask_spec_to_json(&e->mask);
+    if (!m && !fx_mask_spec_is_empty(&e->mask))
+        return 0; /* out of memory: no key rather than the key of another mask */
     char *text = m ? cJSON_PrintUnformatted(m) : NULL;
     cJSON_Delete(m);
+    if (m && !text)
+        return 0;
     const char *t = text ? text : "{}";
     uint64_t h = 1469598103934665603ull;
     for (const unsigned char *c = (const unsigned char *)t; *c; c++)
         h = (h ^ *c) * 1099511628211ull;
     cJSON_free(text);
     snprintf(out, 16, "%012llx", (unsigned long long)(h & 0xffffffffffffull));
+    return 1;
 }
 
 /* The aux views the enabled effects read, from their effective parameters (so a preset
@@ -779,7 +785,10 @@ fx_result fx_stack_required_aux_views(const fx_stack *s, char **out_json)
             cJSON *mask = NULL;
             if (need[k].per_mask) {
                 char key[16];
-                mask_key(e, key);
+                if (!mask_key(e, key)) {
+                    r = fx_fail(s->ctx, FX_ERR_OUT_OF_MEMORY, "out of memory listing aux views");
+                    break;
+                }
                 size_t len = strlen(need[k].name);
                 snprintf(need[k].name + len, sizeof need[k].name - len, "%s", key);
                 mask = fx_mask_spec_to_json(&e->mask);
@@ -1230,6 +1239,11 @@ static fx_result run_entry(fx_stack *s, fx_entry *e, int i, const fx_frame *in, 
     const fx_rect roi = mask ? mask->bounds : (fx_rect){0, 0, w, h};
     if (roi.x1 <= roi.x0 || roi.y1 <= roi.y0)
         goto out; /* nothing selected: the effect is skipped and the image passes through */
+    char key[16] = "";
+    if (e->cls->aux_views && !mask_key(e, key)) {
+        r = fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
+        goto out;
+    }
     float *dst = NULL;
     if ((r = pick_dst(ctx, b, e->cls, params, mask, where, &dst)))
         goto out;
@@ -1250,9 +1264,6 @@ static fx_result run_entry(fx_stack *s, fx_entry *e, int i, const fx_frame *in, 
     run.where = where;
     run.debug = s->debug ? o : NULL;
     run.proxy_factor = in->proxy_factor > 1 ? in->proxy_factor : 1;
-    char key[16] = "";
-    if (e->cls->aux_views)
-        mask_key(e, key);
     run.mask_key = key;
     atomic_size_t own_bad;
     atomic_init(&own_bad, 0);
