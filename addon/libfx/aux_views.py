@@ -572,13 +572,7 @@ def _prepare_probe(scene, view, path, meta_path):
             spec = probe_spec(scene, view)
             objs = _probe_scene_objects(scene)
         sig = _probe_signature(scene, spec, objs)
-        old = None
-        if os.path.exists(path) and os.path.exists(meta_path):
-            try:
-                with open(meta_path, encoding="utf-8") as f:
-                    old = json.load(f)
-            except (OSError, ValueError):
-                old = None
+        old = _stored_entry(path, meta_path)
         if old and old.get("signature") == sig:
             log("%s '%s' reused (scene unchanged): %s" % (view["kind"], view["name"], path))
         else:
@@ -607,6 +601,23 @@ def _file_name(view_name):
     return "".join(c if c.isalnum() or c in "-_" else "_" for c in view_name)
 
 
+def _stored_entry(path, meta_path):
+    """The sidecar entry stored beside a view's EXR by an earlier render, or None."""
+    if not (os.path.exists(path) and os.path.exists(meta_path)):
+        return None
+    try:
+        with open(meta_path, encoding="utf-8") as f:
+            return json.load(f)
+    except (OSError, ValueError):
+        return None
+
+
+def _store_entry(meta_path, entry):
+    with open(meta_path + ".tmp", "w", encoding="utf-8") as f:
+        json.dump(entry, f, indent=1)
+    os.replace(meta_path + ".tmp", meta_path)
+
+
 def prepare(scene, frames):
     """Renders (or reuses) every aux view the stack needs for `frames`; returns the
     sidecar entries. An empty list, and no render, when the stack needs none."""
@@ -622,22 +633,14 @@ def prepare(scene, frames):
             entry = _prepare_probe(scene, view, path, meta_path)
             if entry is None:
                 continue
-            with open(meta_path + ".tmp", "w", encoding="utf-8") as f:
-                json.dump(entry, f, indent=1)
-            os.replace(meta_path + ".tmp", meta_path)
+            _store_entry(meta_path, entry)
             entries.append(entry)
             continue
         spec = view_spec(scene, view, frames, objs)
         sig = signature(spec, objs)
         path = "%slibfx_aux_%s.exr" % (scene_setup.output_prefix(scene), _file_name(view["name"]))
         meta_path = path[:-4] + ".json"
-        old = None
-        if os.path.exists(path) and os.path.exists(meta_path):
-            try:
-                with open(meta_path, encoding="utf-8") as f:
-                    old = json.load(f)
-            except (OSError, ValueError):
-                old = None
+        old = _stored_entry(path, meta_path)
         if old and old.get("signature") == sig:
             log("aux view '%s' reused (light and geometry unchanged): %s" % (view["name"], path))
         else:
@@ -649,9 +652,7 @@ def prepare(scene, frames):
         entry = {"name": view["name"], "path": path, "world_to_camera": spec["world_to_camera"],
                  "projection": spec["projection"], "clip_start": spec["clip_start"],
                  "clip_end": spec["clip_end"], "orthographic": True, "kind": view["kind"], "signature": sig}
-        with open(meta_path + ".tmp", "w", encoding="utf-8") as f:
-            json.dump(entry, f, indent=1)
-        os.replace(meta_path + ".tmp", meta_path)
+        _store_entry(meta_path, entry)
         entries.append(entry)
     return entries
 
