@@ -198,13 +198,6 @@ def forget():
     STATUS.clear()
 
 
-def query(scene, rec=None):
-    """The library's fx_stack_required_passes answer for the scene's stack (``rec``: its
-    recipe, when the caller has built it already)."""
-    from . import recipe
-    return answers(recipe.to_recipe(scene) if rec is None else rec)["required"]
-
-
 def stack_changed(scene):
     """A stack setting changed (property update, operator, import): the recipe is built once
     here, the passes follow it and the live loop runs it."""
