@@ -140,7 +140,7 @@ static void test_parallax(void)
     render_probe(pos, w, h, rgba, dep);
     fx_pano p = { rgba, dep, w, h, { 0 } };
     w2c(pos, p.to_probe);
-    fx_pano_trace_settings st = { 64, 8, 0.02f, 100.0f, 0.35f };
+    fx_pano_trace_settings st = fx_pano_trace_setup(64, 8, 0.02f, 100.0f, 0.35f);
     double err = 0, err_dir = 0;
     int n = 0, hits = 0;
     unsigned s = 12345;

@@ -1059,7 +1059,7 @@ static fx_result ssr_probe_load(const fx_effect_run *run, ssr_job *j, const ssr_
     pano->h = (*av)->height;
     fx_m4_mul((*av)->view.cam.world_to_camera, F->view.camera_to_world, pano->to_probe);
     j->probe = pano;
-    j->pst = (fx_pano_trace_settings){ p->probe_steps, p->refine, 0.02f, p->max_distance, 0.05f };
+    j->pst = fx_pano_trace_setup(p->probe_steps, p->refine, 0.02f, p->max_distance, 0.05f);
     return FX_OK;
 }
 

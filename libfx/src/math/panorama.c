@@ -29,6 +29,16 @@ static inline int in_front(const fx_pano *p, fx_vec3 q, float *gap)
     return !(dist >= D);
 }
 
+fx_pano_trace_settings fx_pano_trace_setup(int steps, int refine, float min_distance, float max_distance,
+                                           float thickness)
+{
+    fx_pano_trace_settings st = {steps < 1 ? 1 : steps, refine, min_distance, max_distance, thickness, 0, 0, 0};
+    st.t0 = min_distance > 1e-4f ? min_distance : 1e-4f;
+    st.tmax = max_distance > 2.0f * st.t0 ? max_distance : 2.0f * st.t0;
+    st.growth = powf(st.tmax / st.t0, 1.0f / (float)st.steps);
+    return st;
+}
+
 int fx_pano_trace(const fx_pano *p, const fx_pano_trace_settings *st, fx_vec3 o, fx_vec3 dir, float rgb[3])
 {
     fx_vec3 po = fx_m4_point(p->to_probe, o);
@@ -38,10 +48,8 @@ int fx_pano_trace(const fx_pano *p, const fx_pano_trace_settings *st, fx_vec3 o,
         return 0;
     }
     pd = fx_v3_normalize_or(pd, fx_v3(0.0f, 0.0f, -1.0f));
-    const int steps = st->steps < 1 ? 1 : st->steps;
-    const float t0 = st->min_distance > 1e-4f ? st->min_distance : 1e-4f;
-    const float tmax = st->max_distance > 2.0f * t0 ? st->max_distance : 2.0f * t0;
-    const float g = powf(tmax / t0, 1.0f / (float)steps);
+    const int steps = st->steps;
+    const float t0 = st->t0, g = st->growth;
     float gap;
     int prev_front = in_front(p, po, &gap);
     float prev_t = 0.0f, t = t0;

@@ -87,7 +87,13 @@ typedef struct fx_pano_trace_settings {
     float max_distance; /* metres along the ray */
     float thickness;    /* metres: a crossing further behind the probe's surface than this
                            (plus the step) passes behind an occluder, not a hit */
+    /* derived by fx_pano_trace_setup, once per run: the clamped range and the step ratio */
+    float t0, tmax, growth;
 } fx_pano_trace_settings;
+
+/* The settings with their derived fields (one powf per run, not one per ray). */
+fx_pano_trace_settings fx_pano_trace_setup(int steps, int refine, float min_distance, float max_distance,
+                                           float thickness);
 
 /* Parallax-corrected reflection: marches the ray o + t dir (the caller's space, dir unit)
  * and returns the probe's colour where the ray meets the probe's depth surface (the
