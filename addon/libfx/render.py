@@ -406,14 +406,14 @@ def after_render(scene, frame, ui):
     when live is on) and the files are written by the live worker meanwhile; else (-b) the
     result files are written here. Returns the result record."""
     try:
-        _, secs = passes_file.write(scene, frame)
+        path, secs = passes_file.write(scene, frame)
         log("frame %d: passes file written in %.0f ms" % (frame, secs * 1e3))
     except native.LibfxError as e:
         return _record(scene, frame, error=str(e))
     if ui:
-        return process_frame(scene, frame, hold=scene.libfx.live, show=scene.libfx.show_result,
-                             defer_write=True)
-    rec = process_frame(scene, frame)
+        return process_frame(scene, frame, passes_file=path, hold=scene.libfx.live,
+                             show=scene.libfx.show_result, defer_write=True)
+    rec = process_frame(scene, frame, passes_file=path)
     if rec["ok"] and scene_setup.writes_image(scene):
         try:
             save_image(scene, rec["paths"]["exr"], rec["paths"]["image"])

@@ -11,7 +11,9 @@ counted) --runs times with the add-on's render_post replaced by the F12 branch o
 the UI): the passes file written from the Render Result, read, the stack, the result's pixels
 in the "libfx Result" image. The aux views the stack reads are rendered once before, untimed. The clock starts in a render_post handler placed before the
 add-on's, i.e. when Blender has finished the render, and stops when the image holds the result.
-The result EXR is written afterwards on the worker: listed apart.
+The result EXR is written afterwards on the worker: listed apart. Renders alternate between
+the add-on's default (passes not kept: the file goes to RAM, /dev/shm, when there is room) and
+Keep Passes Files on (the file beside the output, on disk): both columns come from one session.
 
 For comparison, the same session then writes the same passes through a compositor File Output
 node (the add-on's route before passes_file.py): a Workbench render() of an Image node holding
@@ -47,11 +49,20 @@ scene.cycles.use_adaptive_sampling = False
 scene.cycles.use_denoising = False
 scene.libfx.live = True
 scene.libfx.show_result = True
-scene.libfx.keep_passes = True   # the File Output comparison reads it
 if A["codec"]:
     scene.libfx.passes_codec = A["codec"]
 bpy.app.handlers.render_post.remove(render.on_render_post)
-T = {"post": [], "shown": [], "write_passes": [], "result_exr": []}
+MODES = ("ram", "kept")
+T = {m: {"shown": [], "write_passes": [], "result_exr": [], "parts": []} for m in MODES}
+_write = render.passes_file.write
+
+def timed_write(sc, frame):
+    t = time.perf_counter()
+    try:
+        return _write(sc, frame)
+    finally:
+        T[T["mode"]]["write_passes"].append((time.perf_counter() - t) * 1e3)
+render.passes_file.write = timed_write
 
 def stamp(sc, *a):
     T["t0"] = time.perf_counter()
@@ -64,12 +75,13 @@ def f12(sc, *a):
     t_pf = time.perf_counter()
     render._drain_ui()
     t1 = time.perf_counter()
-    T.setdefault("parts", []).append([(t_w - T["t0"]) * 1e3, (t_pf - t_w) * 1e3, (t1 - t_pf) * 1e3])
+    M = T[T["mode"]]
+    M["parts"].append([(t_w - T["t0"]) * 1e3, (t_pf - t_w) * 1e3, (t1 - t_pf) * 1e3])
     assert rec["ok"], rec
     assert bpy.data.images.get(render.RESULT_IMAGE) is not None
     live.WORKER.wait_idle(300)
-    T["result_exr"].append((time.perf_counter() - t1) * 1e3)
-    T["shown"].append((t1 - T["t0"]) * 1e3)
+    M["result_exr"].append((time.perf_counter() - t1) * 1e3)
+    M["shown"].append((t1 - T["t0"]) * 1e3)
     T["stack"] = sum(t["ms"] for t in rec.get("timings", []))
 
 # the aux views the stack reads (light view, rain map, probes), rendered once beforehand as
@@ -78,8 +90,11 @@ render.AUX[(scene.name, scene.frame_current)] = render.aux_views.prepare(scene, 
 bpy.app.handlers.render_post.insert(0, stamp)
 bpy.app.handlers.render_post.append(f12)
 for r in range(A["runs"]):
-    live.drop()
-    bpy.ops.render.render()
+    for mode in MODES:   # the kept one last: the File Output comparison reads its file
+        T["mode"] = mode
+        scene.libfx.keep_passes = mode == "kept"
+        live.drop()
+        bpy.ops.render.render()
 passes = scene_setup.passes_path(scene, scene.frame_current)
 nchan = None
 try:
@@ -169,23 +184,27 @@ def main():
         t = json.loads(line[7:])
         if a.verbose:
             sys.stderr.write("".join(l + "\n" for l in (p.stdout + p.stderr).splitlines() if l.startswith(("libfx", "live", "Assert"))))
-        print("%s: shown %s ms; parts %s" % (scene, ", ".join("%.0f" % v for v in t["shown"]), t["parts"]), file=sys.stderr)
-        writes = [float(x) for x in __import__("re").findall(r"passes file written in (\d+) ms", p.stdout)]
-        rows.append({"scene": scene, "channels": t.get("channels"), "shown_ms": med(t["shown"]),
-                     "passes_write_ms": med(writes), "stack_ms": t.get("stack"),
-                     "result_exr_ms": med(t["result_exr"]), "file_output_ms": t["file_output"],
-                     "runs": len(t["shown"])})
-    keys = ["scene", "channels", "shown_ms", "passes_write_ms", "stack_ms", "result_exr_ms", "file_output_ms", "runs"]
+        for mode in ("ram", "kept"):
+            m = t[mode]
+            print("%s, %s: shown %s ms; parts %s" % (scene, mode, ", ".join("%.0f" % v for v in m["shown"]),
+                                                     m["parts"]), file=sys.stderr)
+            rows.append({"scene": scene, "passes": mode, "channels": t.get("channels"), "shown_ms": med(m["shown"]),
+                         "passes_write_ms": med(m["write_passes"]), "stack_ms": t.get("stack"),
+                         "result_exr_ms": med(m["result_exr"]), "file_output_ms": t["file_output"],
+                         "runs": len(m["shown"])})
+    keys = ["scene", "passes", "channels", "shown_ms", "passes_write_ms", "stack_ms", "result_exr_ms",
+            "file_output_ms", "runs"]
     with open(os.path.join(out, "bench_after_render.csv"), "w", newline="") as f:
         wr = csv.DictWriter(f, fieldnames=keys)
         wr.writeheader()
         wr.writerows(rows)
-    print("| scene | channels | render finished to result shown ms | of which: passes file written | stack (effects) | "
-          "shown minus stack | result EXR after (worker) | File Output node, same passes (the route before) |")
-    print("|---|---:|---:|---:|---:|---:|---:|---:|")
+    print("| scene | passes file | channels | render finished to result shown ms | of which: passes file written | "
+          "stack (effects) | shown minus stack | result EXR after (worker) | File Output node, same passes (the route before) |")
+    print("|---|---|---:|---:|---:|---:|---:|---:|---:|")
     for r in rows:
-        print("| %s | %s | %.0f | %.0f | %.0f | %.0f | %.0f | %.0f |" % (
-            r["scene"], r["channels"], r["shown_ms"], r["passes_write_ms"], r["stack_ms"] or 0,
+        print("| %s | %s | %s | %.0f | %.0f | %.0f | %.0f | %.0f | %.0f |" % (
+            r["scene"], {"ram": "not kept (RAM)", "kept": "kept (disk)"}[r["passes"]], r["channels"],
+            r["shown_ms"], r["passes_write_ms"], r["stack_ms"] or 0,
             r["shown_ms"] - (r["stack_ms"] or 0), r["result_exr_ms"], r["file_output_ms"]))
     print("\n%dx%d, %s Blender, median of %d renders" % (w, h, a.blender, a.runs))
 

@@ -91,3 +91,63 @@ def test_passes_file_from_the_render_result(blender, library, tmp_path):
     assert p.returncode == 0, out[-3000:]
     nodes = next(l for l in out.splitlines() if l.startswith("NODES"))
     assert "libfx passes" not in nodes and "libfx Render Layers" not in nodes, nodes
+
+
+#: Three renders of a small blurred cube, passes not kept: the first two with RAM to spare,
+#: the third with RAM "too small" (the room asked per pixel made huge). A folder left by a
+#: process that is gone waits in the RAM root. Prints where each passes file went.
+RAM = T.PRELUDE + r"""
+import json, os
+from libfx import passes_file, props, render, scene_setup
+s = bpy.context.scene
+s.render.filepath = %r
+s.render.resolution_x, s.render.resolution_y, s.render.resolution_percentage = 160, 90, 100
+s.render.engine = "CYCLES"
+s.cycles.samples = 1
+s.cycles.use_denoising = False
+item = s.libfx.stack.add()
+item.effect = "gaussian_blur"
+props.effect_group(item).sigma = 2.0
+scene_setup.request_sync(s)
+base = os.path.join(passes_file.RAM_ROOT, "libfx-passes-%%d" %% os.getuid())
+dead = os.path.join(base, "999999999")   # above any pid_max: no such process
+if os.path.isdir(passes_file.RAM_ROOT):
+    os.makedirs(dead, exist_ok=True)
+    open(os.path.join(dead, "left.exr"), "w").close()
+written = []
+_write = passes_file.write
+passes_file.write = lambda sc, f: written.append(_write(sc, f)[0]) or (written[-1], 0.0)
+rows = []
+for room in ("ample", "ample", "none"):
+    if room == "none":
+        passes_file.RAM_BYTES_PER_PIXEL = 1 << 60
+    bpy.ops.render.render()
+    rows.append({"room": room, "path": written[-1], "exists_after": os.path.exists(written[-1])})
+print("RAM " + json.dumps({"rows": rows, "pid": os.getpid(), "base": base,
+                           "has_ram": os.path.isdir(passes_file.RAM_ROOT),
+                           "dead_left": os.path.exists(dead),
+                           "beside": scene_setup.passes_path(s, s.frame_current),
+                           "result": scene_setup.result_paths(s, s.frame_current)["exr"]}))
+"""
+
+
+def test_passes_not_kept_go_to_ram_when_there_is_room(blender, library, tmp_path):
+    import json
+    import os
+    p = T.run_blender([], env=T.addon_env(library), python_expr=RAM % str(tmp_path / "ram_"))
+    out = p.stdout + p.stderr
+    assert p.returncode == 0, out[-5000:]
+    assert not T.tracebacks(out), out[-5000:]
+    r = json.loads(next(l for l in out.splitlines() if l.startswith("RAM "))[4:])
+    rows = r["rows"]
+    assert os.path.isfile(r["result"]), r
+    for row in rows:   # never left behind: the result holds the passes
+        assert not row["exists_after"], rows
+    assert rows[2]["path"] == r["beside"], rows   # no room in RAM: beside the output, as kept
+    if r["has_ram"]:
+        mine = os.path.join(r["base"], str(r["pid"]))
+        assert os.path.dirname(rows[0]["path"]) == mine and rows[1]["path"] == rows[0]["path"], rows
+        assert not r["dead_left"], r    # a gone process's folder was removed
+        assert not os.path.exists(mine)   # and this one's at exit
+    else:
+        assert all(row["path"] == r["beside"] for row in rows), rows
