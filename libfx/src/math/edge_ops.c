@@ -10,6 +10,7 @@
 #include "core/parallel.h"
 #include "math/color.h"
 #include "math/srgb_lut.h"
+#include "math/trig.h"
 #include "core/simd8.h"
 
 typedef uint32_t v8ui __attribute__((vector_size(32)));
@@ -440,10 +441,11 @@ FX_CLONES static void normal_min_dot_row(const float *um, const float *u0, const
         mixed[x] = -m;
     }
 }
+/* fx_acosf: glibc 2.41 rounds acosf differently from 2.36 (math/trig.h), and the ramp is continuous */
 
 static inline float normal_angle(float min_dot, int mixed)
 {
-    float a = acosf(fx_clampf(min_dot, -1.0f, 1.0f)) * (float)(180.0 / 3.14159265358979323846);
+    float a = fx_acosf(min_dot) * (float)(180.0 / 3.14159265358979323846);
     return mixed && a < 90.0f ? 90.0f : a;
 }
 
