@@ -28,6 +28,11 @@ static fx_context *ctx;
 static fx_stack *fixed;
 static char path[256];
 
+static void remove_scratch(void)
+{
+    remove(path);
+}
+
 static void setup(void)
 {
     if (ctx)
@@ -39,6 +44,7 @@ static void setup(void)
         abort();
     const char *dir = access("/dev/shm", W_OK) == 0 ? "/dev/shm" : "/tmp";
     snprintf(path, sizeof path, "%s/libfx-fuzz-%d.exr", dir, (int)getpid());
+    atexit(remove_scratch); /* libFuzzer ends with exit() at -max_total_time */
 }
 
 static void fuzz_recipe(const char *json)
