@@ -22,8 +22,9 @@ farm relies on (docs/farm.md; tests/blender/test_batch_contract.py):
 
 Per frame it writes, beside the output prefix:
   <prefix>####.<ext>               Blender's own render (as the scene is set up)
-  <prefix>libfx_passes.####.exr    the render's passes (from the Render Result; removed
-                                   once the result is written, unless --keep-passes)
+  <prefix>libfx_passes.####.exr    with --keep-passes: the render's passes (from the Render
+                                   Result); without, they go to RAM (/dev/shm) when there
+                                   is room and are removed once the result is written
   <prefix>libfx.####.exr           the result: Combined + the passes + camera attributes
   <prefix>libfx.####.<ext>         the result in the scene's format (if not EXR)
   <prefix>libfx.####.camera.json   the scene sidecar: camera, lights, time, aux views
