@@ -326,16 +326,66 @@ static int index_match(float v, const int *idx, int n)
     return 0;
 }
 
+/* One Cryptomatte name of one type, the usual mask (a material, an object): rank 0 holds
+ * the pixel's whole coverage in most pixels, so it is read first, without the general
+ * loops; the same sums in the same order as crypto_coverage, so the same bits. Clamped to
+ * [0, 1] as mask_rows does; returns the row's first and last x with coverage > 0. */
+static void crypto_row_one_id(const crypto_rank *ranks, int nranks, float id, size_t i0, int w, float *row,
+                              int *first, int *last)
+{
+    const float *p = ranks[0].data + i0 * 4;
+    int f = -1, l = -1;
+    for (int x = 0; x < w; x++, p += 4) {
+        float c = (p[0] == id ? p[1] : 0.0f) + (p[2] == id ? p[3] : 0.0f);
+        float seen = p[1] + p[3];
+        if (seen < 0.99999f)
+            for (int r = 1; r < nranks && seen < 0.99999f; r++) {
+                const float *q = ranks[r].data + (i0 + (size_t)x) * 4;
+                if (q[0] == id)
+                    c += q[1];
+                if (q[2] == id)
+                    c += q[3];
+                seen += q[1] + q[3];
+            }
+        c = !(c >= 0.0f) ? 0.0f : c > 1.0f ? 1.0f : c;
+        row[x] = c;
+        if (c > 0.0f) {
+            if (f < 0)
+                f = x;
+            l = x;
+        }
+    }
+    *first = f;
+    *last = l;
+}
+
 static void mask_rows(void *user, int y0, int y1)
 {
     mask_job *j = user;
     const fx_mask_spec *s = j->spec;
+    const int has_rect = s->has_rect || s->has_rect_relative;
+    /* one name of one Cryptomatte type and nothing else: crypto_row_one_id */
+    const int one_obj = s->object_count == 1 && !s->material_count && !j->index_ob && !j->index_ma;
+    const int one_mat = s->material_count == 1 && !s->object_count && !j->index_ob && !j->index_ma;
     for (int y = y0; y < y1; y++) {
-        for (int x = 0; x < j->w; x++) {
-            size_t i = (size_t)y * j->w + x;
-            float c = 1.0f;
-            if (j->selectors) {
-                c = 0.0f;
+        const size_t i0 = (size_t)y * j->w;
+        float *row = j->cov + i0;
+        if (!j->selectors) {
+            for (int x = 0; x < j->w; x++)
+                row[x] = 1.0f;
+        } else if (one_obj || one_mat) {
+            if (one_obj)
+                crypto_row_one_id(j->obj_ranks, j->obj_rank_count, j->obj_ids[0], i0, j->w, row,
+                                  &j->row_first[y], &j->row_last[y]);
+            else
+                crypto_row_one_id(j->mat_ranks, j->mat_rank_count, j->mat_ids[0], i0, j->w, row,
+                                  &j->row_first[y], &j->row_last[y]);
+            if (!has_rect && !s->invert)
+                continue;   /* the row's extent is known */
+        } else {
+            for (int x = 0; x < j->w; x++) {
+                size_t i = i0 + (size_t)x;
+                float c = 0.0f;
                 if (j->obj_rank_count)
                     c += crypto_coverage(j->obj_ranks, j->obj_rank_count, j->obj_ids, s->object_count, i);
                 if (j->mat_rank_count)
@@ -348,16 +398,22 @@ static void mask_rows(void *user, int y0, int y1)
                     c = 0.0f;
                 if (c > 1.0f)
                     c = 1.0f;
+                row[x] = c;
             }
-            if ((s->has_rect || s->has_rect_relative) &&
-                !(x >= j->rect.x0 && x < j->rect.x1 && y >= j->rect.y0 && y < j->rect.y1))
-                c = 0.0f;
-            if (s->invert)
-                c = 1.0f - c;
-            j->cov[i] = c;
         }
+        if (has_rect) {
+            int x0 = j->rect.x0, x1 = j->rect.x1;
+            if (y < j->rect.y0 || y >= j->rect.y1)
+                x0 = x1 = j->w;
+            for (int x = 0; x < x0; x++)
+                row[x] = 0.0f;
+            for (int x = x1; x < j->w; x++)
+                row[x] = 0.0f;
+        }
+        if (s->invert)
+            for (int x = 0; x < j->w; x++)
+                row[x] = 1.0f - row[x];
         int first = -1, last = -1;
-        const float *row = j->cov + (size_t)y * j->w;
         for (int x = 0; x < j->w; x++)
             if (row[x] > 0.0f) {
                 if (first < 0)
