@@ -55,6 +55,7 @@
 #include "math/edge_ops.h"
 #include "math/panorama.h"
 #include "math/ssr_trace.h"
+#include "scene/aux_map.h"
 #include "scene/aux_view.h"
 
 #include <float.h>
@@ -1030,34 +1031,34 @@ static fx_result ssr_multi_bounce(const fx_effect_run *run, ssr_job *j, float *f
 
 /* Process stage 0 (fallback probe): the entry's reflection probe as j->probe, in the
  * frame's view space. Missing or unreadable: a warning, and the texture fallback. */
-static fx_result ssr_probe_load(const fx_effect_run *run, ssr_job *j, const ssr_frame *F, fx_aux_view **av,
+static fx_result ssr_probe_load(const fx_effect_run *run, ssr_job *j, const ssr_frame *F, fx_aux_map *pm,
                                 fx_pano *pano)
 {
     const ssr_params *p = run->params;
     char name[FX_NAME_MAX];
     snprintf(name, sizeof name, FX_AUX_PROBE "%s", run->mask_key ? run->mask_key : "");
-    fx_result r = fx_aux_view_load(run->frame, name, run->where, av);
+    /* from the context's cache: a batch or a live session decodes each probe once */
+    fx_result r = fx_aux_view_acquire(run->frame, name, run->where, pm);
     if (r == FX_ERR_OUT_OF_MEMORY)
         return r;
-    if (!r && !(*av)->panorama) {
+    if (!r && !pm->av->panorama) {
         fx_warn(run->ctx, "%s: aux view '%s' is not a panorama (\"panorama\": \"equirect\"): missed rays take "
                 "the mirror's texture", run->where, name);
-        fx_aux_view_free(*av);
-        *av = NULL;
+        fx_aux_map_release(run->ctx, pm);
         return FX_OK;
     }
     if (r) {
         char msg[1024];
         snprintf(msg, sizeof msg, "%s", fx_context_error(run->ctx));
         fx_warn(run->ctx, "%s: no reflection probe (%s): missed rays take the mirror's texture", run->where, msg);
-        *av = NULL;
         return FX_OK;
     }
-    pano->color = (*av)->color;
-    pano->depth = (*av)->depth;
-    pano->w = (*av)->width;
-    pano->h = (*av)->height;
-    fx_m4_mul((*av)->view.cam.world_to_camera, F->view.camera_to_world, pano->to_probe);
+    const fx_aux_view *av = pm->av;
+    pano->color = av->color;
+    pano->depth = av->depth;
+    pano->w = av->width;
+    pano->h = av->height;
+    fx_m4_mul(av->view.cam.world_to_camera, F->view.camera_to_world, pano->to_probe);
     j->probe = pano;
     j->pst = fx_pano_trace_setup(p->probe_steps, p->refine, 0.02f, p->max_distance, 0.05f);
     return FX_OK;
@@ -1102,14 +1103,15 @@ static fx_result ssr_process(const fx_effect_run *run)
     fx_color_op_matrix(p->op == OP_SEPIA ? FX_COLOR_OP_SEPIA : FX_COLOR_OP_GRAY_LUMINANCE, j.opm);
     if (p->bend != 0.0f)
         fit_face(&j);
-    fx_aux_view *probe_view = NULL;
+    fx_aux_map probe_map;
+    memset(&probe_map, 0, sizeof probe_map);
     fx_pano pano;
-    if (p->fallback == FALLBACK_PROBE && (r = ssr_probe_load(run, &j, &F, &probe_view, &pano)))
+    if (p->fallback == FALLBACK_PROBE && (r = ssr_probe_load(run, &j, &F, &probe_map, &pano)))
         return r;
     fx_aux_view *planar_view = NULL;
     if (p->planar_view && p->glossiness == 0.0f && p->bend == 0.0f && p->op != OP_CEL &&
         (r = ssr_planar_load(run, &j, &planar_view))) {
-        fx_aux_view_free(probe_view);
+        fx_aux_map_release(run->ctx, &probe_map);
         return r;
     }
 
@@ -1152,7 +1154,7 @@ out:
     fx_buffer_put(run->ctx, blurred, frame_bytes);
     fx_mask_free(surfaces);
     fx_depth_pyramid_free(run->ctx, &pyr);
-    fx_aux_view_free(probe_view);
+    fx_aux_map_release(run->ctx, &probe_map);
     fx_aux_view_free(planar_view);
     return r;
 }

@@ -17,7 +17,8 @@
 #include "scene/aux_view.h"
 
 typedef struct fx_aux_map {
-    const fx_aux_view *av;   /* its camera and name; av->depth is NULL (the raw depth is dropped) */
+    const fx_aux_view *av;   /* its camera and name; av->depth is NULL (the raw depth is dropped)
+                              * except from fx_aux_view_acquire */
     const fx_shadow_map *sm; /* normalised depth; moments only when a filter asked for them */
     int cached;              /* 1: came from (or went into) the cache; 0: private */
 } fx_aux_map;
@@ -26,6 +27,11 @@ typedef struct fx_aux_map {
  * depth; VSM asks for a width above 1). */
 fx_result fx_aux_map_acquire(const fx_frame *f, const char *name, int derivative_bias, int filter, float width,
                              const char *where, fx_aux_map *out);
+/* The view itself, as read (colour, depth, camera; no shadow map): reflection probes and
+ * planar views, which are looked up as images. Cached and keyed as the maps are, so a
+ * batch or a live session decodes each probe once. out->av stays valid until release;
+ * out->sm is only the handle release needs. */
+fx_result fx_aux_view_acquire(const fx_frame *f, const char *name, const char *where, fx_aux_map *out);
 void fx_aux_map_release(fx_context *ctx, fx_aux_map *m);
 /* Counters since the context was made: maps built and maps reused (tests, benches). */
 void fx_aux_cache_stats(const fx_context *ctx, long *built, long *reused);

@@ -11,7 +11,7 @@
 #include <string.h>
 
 #define AUX_CACHE_DEFAULT_BYTES ((uint64_t)768 << 20) /* a 4096^2 light map is 192 MiB */
-#define AUX_CACHE_MAX_ENTRIES 8
+#define AUX_CACHE_MAX_ENTRIES 32 /* light views, the rain map, a probe and a planar view per mirror */
 
 typedef struct aux_entry {
     char *key;
@@ -117,6 +117,9 @@ void fx_aux_cache_stats(const fx_context *ctx, long *built, long *reused)
     *reused = ctx && ctx->aux_cache ? ctx->aux_cache->reused : 0;
 }
 
+/* filter value of an entry that keeps the view as read (fx_aux_view_acquire) */
+#define AUX_RAW_VIEW (-2)
+
 /* Builds the map of entry e (key already set). */
 static fx_result entry_build(const fx_frame *f, const char *name, int bias, int filter, float width,
                              const char *where, aux_entry *e)
@@ -125,6 +128,11 @@ static fx_result entry_build(const fx_frame *f, const char *name, int bias, int 
     if (r)
         return r;
     fx_aux_view *av = e->av;
+    if (filter == AUX_RAW_VIEW) {
+        e->bytes = (uint64_t)av->width * av->height * ((av->color ? 4 : 0) + (av->depth ? 1 : 0)) * sizeof(float) +
+                   sizeof *av;
+        return FX_OK;
+    }
     r = fx_shadow_map_build(f->ctx, av->depth, av->width, av->height, av->view.cam.clip_start,
                             av->view.cam.clip_end, bias, &e->sm, where);
     if (!r && filter >= 0 && width > 1.0f)
@@ -139,8 +147,8 @@ static fx_result entry_build(const fx_frame *f, const char *name, int bias, int 
     return FX_OK;
 }
 
-fx_result fx_aux_map_acquire(const fx_frame *f, const char *name, int derivative_bias, int filter, float width,
-                             const char *where, fx_aux_map *out)
+static fx_result acquire(const fx_frame *f, const char *name, int derivative_bias, int filter, float width,
+                         const char *where, fx_aux_map *out)
 {
     memset(out, 0, sizeof *out);
     fx_context *ctx = f->ctx;
@@ -154,7 +162,7 @@ fx_result fx_aux_map_acquire(const fx_frame *f, const char *name, int derivative
     struct fx_aux_cache *c = cache_of(ctx);
     if (c && cache_limit(ctx) > 0 && stat(path, &st) == 0) {
         char tail[160];
-        if (!(filter >= 0 && width > 1.0f)) {
+        if (filter != AUX_RAW_VIEW && !(filter >= 0 && width > 1.0f)) {
             filter = -1;
             width = 0.0f;
         }
@@ -219,14 +227,26 @@ fx_result fx_aux_map_acquire(const fx_frame *f, const char *name, int derivative
     return FX_OK;
 }
 
+fx_result fx_aux_map_acquire(const fx_frame *f, const char *name, int derivative_bias, int filter, float width,
+                             const char *where, fx_aux_map *out)
+{
+    return acquire(f, name, derivative_bias, filter < 0 ? -1 : filter, width, where, out);
+}
+
+fx_result fx_aux_view_acquire(const fx_frame *f, const char *name, const char *where, fx_aux_map *out)
+{
+    return acquire(f, name, 0, AUX_RAW_VIEW, 0.0f, where, out);
+}
+
 void fx_aux_map_release(fx_context *ctx, fx_aux_map *m)
 {
     if (!m || !m->sm)
         return;
     if (m->cached) {
         struct fx_aux_cache *c = ctx ? ctx->aux_cache : NULL;
+        /* by the view's address: an entry's own moves when an eviction compacts the table */
         for (int i = 0; c && i < c->n; i++)
-            if (&c->e[i].sm == m->sm && c->e[i].refs > 0)
+            if (c->e[i].av == m->av && c->e[i].refs > 0)
                 c->e[i].refs--;
     } else {
         /* the private entry: sm is its first field after key and av */
