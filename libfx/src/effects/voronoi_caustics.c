@@ -527,6 +527,16 @@ static inline float exp_neg(float x)
     return q * scale;
 }
 
+typedef float v4f __attribute__((vector_size(16)));
+typedef int32_t v4i __attribute__((vector_size(16)));
+
+static inline v4f load4(const float *p)
+{
+    v4f v;
+    memcpy(&v, p, sizeof v);
+    return v;
+}
+
 /* physical mode without an additive term (no environment): out = src (1 + s tint) per
  * pixel of a segment, s from the pattern (a, noise) or given (lattice_shading), or src
  * copied; loops without calls or branches (auto-vectorised). */
@@ -552,23 +562,24 @@ static void shade_segment(const caustics_job *j, const float *restrict src, floa
             sv[c] = st[c] == PX_PATTERN ? amp * g : sv[c];
         }
     }
-    /* per channel: the gain, and whether the input is kept (copied pixels, alpha) */
-    float gain[4 * SEG];
-    int32_t keep[4 * SEG];
+    /* per pixel, its four channels as one vector: the gain (alpha's 1 + s 0 = 1: the same
+     * product), the clamp to [0, FLT_MAX] (NaN to 0) by masks, alpha and copied pixels
+     * taken from src: the same values as a channel at a time */
+    const v4f tint = {t0, t1, t2, 0.0f}, zero = {0.0f, 0.0f, 0.0f, 0.0f};
+    const v4f fmax = {FLT_MAX, FLT_MAX, FLT_MAX, FLT_MAX};
+    const v4i alpha = {0, 0, 0, -1};
     for (int c = 0; c < n; c++) {
-        const float sc = sv[c];
-        const int32_t k = st[c] == PX_COPY;
-        gain[4 * c] = 1.0f + sc * t0;
-        gain[4 * c + 1] = 1.0f + sc * t1;
-        gain[4 * c + 2] = 1.0f + sc * t2;
-        gain[4 * c + 3] = 1.0f;
-        keep[4 * c] = keep[4 * c + 1] = keep[4 * c + 2] = k;
-        keep[4 * c + 3] = 1;
-    }
-    for (int e = 0; e < 4 * n; e++) {
-        float v = src[e] * gain[e];
-        v = !(v > 0.0f) ? 0.0f : v > FLT_MAX ? FLT_MAX : v;
-        dst[e] = keep[e] ? src[e] : v;
+        const v4f sc = {sv[c], sv[c], sv[c], sv[c]};
+        const v4f in = load4(src + 4 * c);
+        const v4f gain = 1.0f + sc * tint;
+        v4f v = in * gain;
+        v4i vi = (v4i)v & (v > zero);                 /* !(v > 0): 0 */
+        v4i big = (v4i)((v4f)vi > fmax);              /* > FLT_MAX: FLT_MAX */
+        vi = (vi & ~big) | ((v4i)fmax & big);
+        const int32_t k = st[c] == PX_COPY ? -1 : 0;
+        const v4i keep = alpha | (v4i){k, k, k, k};
+        vi = (vi & ~keep) | ((v4i)in & keep);
+        memcpy(dst + 4 * c, &vi, sizeof vi);
     }
 }
 
@@ -742,6 +753,103 @@ static void caustics_rows(void *user, int begin, int end)
             }
         }
     }
+}
+
+
+/* The default path's rows (physical mode without an additive term, the Position pass, a
+ * lattice without lattice_shading): the same values as caustics_rows, in passes over a
+ * segment of SEG pixels: the lattice's columns interpolated to the row once (a node's
+ * four channels as one vector), then per pixel its validity, its interpolated pattern and
+ * its surface test with vector arithmetic, the pixels that need a search queued; then the
+ * searches; then the shading (shade_segment). Each value is computed by the same float
+ * operations, in the same order, as caustics_rows: the same bits. */
+static void caustics_rows_lattice(void *user, int begin, int end)
+{
+    const caustics_job *j = user;
+    const fx_effect_run *run = j->run;
+    const int w = run->width, x0 = run->roi.x0, nx = j->nx;
+    const float tol = (float)(0.1 * j->cell);
+    const float *cov = run->mask ? run->mask->coverage : NULL;
+    const float *nodes = j->nodes, *position = j->position;
+    const int pc = j->pos_channels;
+    const int *col_i0 = j->col_i0, *col_i1 = j->col_i1, *node_x = j->node_x;
+    const float *col_t = j->col_t;
+    const unsigned char *smooth_flags = j->smooth;
+    fx_noise_cache cache = {0};
+    unsigned char st[SEG];
+    float av[SEG], nz[SEG], sv[SEG];
+    int queue[SEG];
+    unsigned char exact[SEG];
+    v4f *colv = NULL;
+    /* a thread's row of interpolated lattice columns (nx vectors) */
+    colv = fx_mem_alloc((size_t)nx * sizeof(v4f));
+    if (!colv) { /* no memory for the row buffer: the per-pixel code, same bits */
+        caustics_rows(user, begin, end);
+        return;
+    }
+    for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++) {
+        int j0, j1;
+        float ty;
+        lattice_pos(j->node_y, j->ny, j->f, run->roi.y0, y, &j0, &j1, &ty);
+        const int node_row = y == j->node_y[j0];
+        {
+            const float uy = 1.0f - ty;
+            const float *a = nodes + (size_t)j0 * nx * 4, *b = nodes + (size_t)j1 * nx * 4;
+            for (int i = 0; i < nx; i++)
+                colv[i] = load4(a + 4 * i) * uy + load4(b + 4 * i) * ty;
+        }
+        const unsigned char *srow = smooth_flags ? smooth_flags + (size_t)j0 * j->cx : NULL;
+        const float *nrow = nodes + (size_t)j0 * nx * 4;
+        for (int xs = x0; xs < run->roi.x1; xs += SEG) {
+            const int n = run->roi.x1 - xs < SEG ? run->roi.x1 - xs : SEG;
+            int nq = 0, patterns = 0;
+            for (int c = 0; c < n; c++) {
+                const int x = xs + c, col = x - x0;
+                const size_t i = (size_t)y * w + x;
+                const float *pq = position + i * pc;
+                const float px = pq[0], py = pq[1], pz = pq[2];
+                const int ok = fabsf(px) <= 1e15f && fabsf(py) <= 1e15f && isfinite(pz);
+                if ((cov && !(cov[i] > 0.0f)) || !ok) {
+                    st[c] = PX_COPY;
+                    sv[c] = av[c] = nz[c] = 0.0f;
+                    continue;
+                }
+                const int i0 = col_i0[col];
+                const float *q00 = nrow + 4 * i0;
+                st[c] = PX_PATTERN;
+                if (node_row && x == node_x[i0] && !isnan(q00[2])) { /* a lattice node: its own values */
+                    av[c] = q00[0];
+                    nz[c] = q00[1];
+                    continue;
+                }
+                const float tx = col_t[col], ux = 1.0f - tx;
+                const v4f v = colv[i0] * ux + colv[col_i1[col]] * tx;
+                if (fabsf(v[2] - px) <= tol && fabsf(v[3] - py) <= tol) {
+                    nz[c] = v[1];
+                    if (!srow || srow[i0]) {
+                        av[c] = v[0];
+                        continue;
+                    }
+                    exact[nq] = 0;
+                } else {
+                    exact[nq] = 1;
+                }
+                queue[nq++] = c;
+            }
+            for (int k = 0; k < nq; k++) {
+                const int c = queue[k];
+                const float *pq = position + ((size_t)y * w + xs + c) * pc;
+                av[c] = value_at(j, pq[0], pq[1], NULL);
+                if (exact[k])
+                    nz[c] = noise_at(j, pq[0], pq[1], &cache);
+            }
+            for (int c = 0; c < n && !patterns; c++)
+                patterns = st[c] == PX_PATTERN;
+            size_t i = (size_t)y * w + xs;
+            shade_segment(j, run->src + i * 4, run->dst + i * 4, n, st, av, nz, sv, patterns);
+        }
+    }
+    fx_mem_free(colv);
 }
 
 /* Mean of g over the tile at this time: a fixed lattice, independent of the camera. */
@@ -962,7 +1070,12 @@ static fx_result caustics_process(const fx_effect_run *run)
             r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", run->where);
         } else {
             int rows = run->roi.y1 - run->roi.y0;
-            fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), caustics_rows, &j);
+            /* the default path (physical, no additive term, Position, lattice without
+             * lattice_shading) in vector-friendly passes: the same bits */
+            int lattice_path = j.nodes && !p->lattice_shading && p->mode == MODE_PHYSICAL && !j.has_add &&
+                               j.position && j.node_size == 4;
+            fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows),
+                            lattice_path ? caustics_rows_lattice : caustics_rows, &j);
         }
     }
     job_free(&j);
