@@ -42,6 +42,9 @@
 #include "math/voronoi.h"
 
 #include <float.h>
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
@@ -541,7 +544,7 @@ static inline v4f load4(const float *p)
  * pixel of a segment, s from the pattern (a, noise) or given (lattice_shading), or src
  * copied; loops without calls or branches (auto-vectorised). */
 static void shade_segment(const caustics_job *j, const float *restrict src, float *restrict dst, int n,
-                          const unsigned char *restrict st, const float *restrict av, const float *restrict nz,
+                          const int32_t *restrict st, const float *restrict av, const float *restrict nz,
                           float *restrict sv, int patterns)
 {
     const float inv_lw = j->inv_lw, inv_mean = j->inv_mean, strength = j->p->strength;
@@ -555,7 +558,26 @@ static void shade_segment(const caustics_job *j, const float *restrict src, floa
         }
         for (int c = 0; c < n; c++)
             xs[c] = exp_neg(xs[c]);
-        for (int c = 0; c < n; c++) {
+        /* the focus gain s = strength noise' (min(g / mean, 16) - 1) of pattern pixels, four
+         * at a time (gcc does not vectorise the scalar loop: "control flow"), the rest of
+         * the segment one at a time by the same operations */
+        int c = 0;
+#ifdef __SSE2__
+        const v4f vmean = {inv_mean, inv_mean, inv_mean, inv_mean}, vcap = {16.0f, 16.0f, 16.0f, 16.0f};
+        for (; c + 4 <= n; c += 4) {
+            v4f g = load4(xs + c) * vmean;
+            g = _mm_min_ps(g, vcap); /* g < 16 ? g : 16 (g is never NaN) */
+            g = g - 1.0f;
+            const v4f amp = strength * (0.4f + 1.2f * load4(nz + c));
+            const v4f sn = amp * g;
+            v4i m;
+            memcpy(&m, st + c, sizeof m);
+            m = m == PX_PATTERN;
+            const v4i r = ((v4i)sn & m) | ((v4i)load4(sv + c) & ~m);
+            memcpy(sv + c, &r, sizeof r);
+        }
+#endif
+        for (; c < n; c++) {
             float g = xs[c] * inv_mean;
             g = (g < (float)FOCUS_MAX ? g : (float)FOCUS_MAX) - 1.0f;
             float amp = strength * (0.4f + 1.2f * nz[c]);
@@ -573,9 +595,13 @@ static void shade_segment(const caustics_job *j, const float *restrict src, floa
         const v4f in = load4(src + 4 * c);
         const v4f gain = 1.0f + sc * tint;
         v4f v = in * gain;
+#ifdef __SSE2__ /* maxps(v, 0) is 0 for NaN (its second operand), minps(v, FLT_MAX) caps +inf */
+        v4i vi = (v4i)_mm_min_ps(_mm_max_ps(v, zero), fmax);
+#else
         v4i vi = (v4i)v & (v > zero);                 /* !(v > 0): 0 */
         v4i big = (v4i)((v4f)vi > fmax);              /* > FLT_MAX: FLT_MAX */
         vi = (vi & ~big) | ((v4i)fmax & big);
+#endif
         const int32_t k = st[c] == PX_COPY ? -1 : 0;
         const v4i keep = alpha | (v4i){k, k, k, k};
         vi = (vi & ~keep) | ((v4i)in & keep);
@@ -632,7 +658,7 @@ static inline __attribute__((always_inline)) void lerp_s(int has_add, const floa
 
 /* A pixel shaded from s (and add) v: into the segment's lists, or at once. */
 static inline __attribute__((always_inline)) void put_gain(const caustics_job *j, size_t i, const float *v,
-                                                           int seg_shade, unsigned char *st, float *sv, float *av,
+                                                           int seg_shade, int32_t *st, float *sv, float *av,
                                                            float *nz)
 {
     if (seg_shade) {
@@ -666,7 +692,7 @@ static void caustics_rows(void *user, int begin, int end)
     const int *col_i0 = j->col_i0, *col_i1 = j->col_i1;
     const float *col_t = j->col_t;
     fx_noise_cache cache = {0};
-    unsigned char st[SEG];
+    int32_t st[SEG]; /* int32: shade_segment's loops vectorise */
     float av[SEG], nz[SEG], sv[SEG];
     for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++) {
         int j0 = 0, j1 = 0;
@@ -775,8 +801,9 @@ static void caustics_rows_lattice(void *user, int begin, int end)
     const int *col_i0 = j->col_i0, *col_i1 = j->col_i1, *node_x = j->node_x;
     const float *col_t = j->col_t;
     const unsigned char *smooth_flags = j->smooth;
+    const int batch = j->table.kind && j->p->method == METHOD_GRID;
     fx_noise_cache cache = {0};
-    unsigned char st[SEG];
+    int32_t st[SEG]; /* int32: shade_segment's loops vectorise */
     float av[SEG], nz[SEG], sv[SEG];
     int queue[SEG];
     unsigned char exact[SEG];
@@ -836,10 +863,24 @@ static void caustics_rows_lattice(void *user, int begin, int end)
                 }
                 queue[nq++] = c;
             }
+            if (batch) { /* the searches in one batch (fast kinds, grid): value_at's bits */
+                double qx[SEG], qy[SEG], f1[SEG], f2[SEG];
+                for (int k = 0; k < nq; k++) {
+                    const float *pq = position + ((size_t)y * w + xs + queue[k]) * pc;
+                    qx[k] = (double)pq[0] * j->inv_cell_d;
+                    qy[k] = (double)pq[1] * j->inv_cell_d;
+                }
+                fx_voronoi_table_grid_n(&j->table, nq, qx, qy, f1, f2);
+                for (int k = 0; k < nq; k++) {
+                    const double v = f2[k] - f1[k];
+                    av[queue[k]] = !(v >= 0.0) ? 0.0f : v > 1e30 ? 1e30f : (float)v;
+                }
+            }
             for (int k = 0; k < nq; k++) {
                 const int c = queue[k];
                 const float *pq = position + ((size_t)y * w + xs + c) * pc;
-                av[c] = value_at(j, pq[0], pq[1], NULL);
+                if (!batch)
+                    av[c] = value_at(j, pq[0], pq[1], NULL);
                 if (exact[k])
                     nz[c] = noise_at(j, pq[0], pq[1], &cache);
             }

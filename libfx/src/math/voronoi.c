@@ -597,6 +597,74 @@ void fx_voronoi_table_grid(const fx_voronoi_table *t, double x, double y, fx_vor
     exact_grid(&s, x, y, out);
 }
 
+/* n queries at once (the caller's batch of a row): the same candidates, order and bits as
+ * n calls of fx_voronoi_table_grid, with the per-query switches hoisted: the keys of every
+ * query with a square list first, then their distances in one loop per kind. */
+void fx_voronoi_table_grid_n(const fx_voronoi_table *t, int n, const double *x, const double *y, double *f1,
+                             double *f2)
+{
+    if (!t->kind || !t->sub) {
+        for (int q = 0; q < n; q++) {
+            fx_voronoi_hit h;
+            fx_voronoi_table_grid(t, x[q], y[q], &h);
+            f1[q] = h.f1;
+            f2[q] = h.f2;
+        }
+        return;
+    }
+    const int G = t->grid, GS = G * t->sub;
+    const float subf = (float)t->sub;
+    const double Gd = G, inv = t->inv_grid;
+    float k1[FX_VORONOI_BATCH], k2[FX_VORONOI_BATCH];
+    for (int q0 = 0; q0 < n; q0 += FX_VORONOI_BATCH) {
+        const int m = n - q0 < FX_VORONOI_BATCH ? n - q0 : FX_VORONOI_BATCH;
+        for (int q = 0; q < m; q++) {
+            const float qx = (float)wrap_tile_inv(x[q0 + q], Gd, inv), qy = (float)wrap_tile_inv(y[q0 + q], Gd, inv);
+            int ux = (int)(qx * subf), uy = (int)(qy * subf);
+            ux = ux < GS ? ux : GS - 1;
+            uy = uy < GS ? uy : GS - 1;
+            const size_t sq = (size_t)uy * GS + ux;
+            const int nl = t->list_n[sq];
+            if (nl >= 2) {
+                fast_hit h;
+                list_search(t, qx, qy, nl, sq * FX_VORONOI_LIST_MAX, &h);
+                k1[q] = h.k1;
+                k2[q] = h.k2;
+            } else { /* the ring search (no list): its distances directly; key NaN marks it */
+                fx_voronoi_hit h;
+                fx_voronoi_table_grid(t, x[q0 + q], y[q0 + q], &h);
+                f1[q0 + q] = h.f1;
+                f2[q0 + q] = h.f2;
+                k1[q] = k2[q] = NAN;
+            }
+        }
+        double *o1 = f1 + q0, *o2 = f2 + q0;
+        switch (t->kind) {
+        case 2:
+            for (int q = 0; q < m; q++)
+                if (k1[q] == k1[q]) {
+                    o1[q] = cbrt23(t->cbrt_lut, k1[q]);
+                    o2[q] = cbrt23(t->cbrt_lut, k2[q]);
+                }
+            break;
+        case 3:
+            for (int q = 0; q < m; q++)
+                if (k1[q] == k1[q]) {
+                    o1[q] = sqrtf(k1[q]);
+                    o2[q] = sqrtf(k2[q]);
+                }
+            break;
+        default:
+            for (int q = 0; q < m; q++)
+                if (k1[q] == k1[q]) {
+                    o1[q] = k1[q];
+                    o2[q] = k2[q];
+                }
+            break;
+        }
+    }
+}
+
 static inline void noise_corners(double fx, double fy, uint32_t seed, double *a, double *b, double *c, double *d)
 {
     /* lattice coordinates kept in int range (fmod is the identity below 2^20: skip its cost) */
