@@ -405,24 +405,32 @@ static void cell_rows(void *user, int begin, int end)
     }
 }
 
+/* The lattice nodes of rows [begin, end): a row's positions first, then (fast kinds, grid)
+ * its searches as one batch (value_at's bits), then the noise and shading factors. */
 static void node_rows(void *user, int begin, int end)
 {
     caustics_job *j = user;
-    const int ns = j->node_size;
+    const int ns = j->node_size, nx = j->nx;
+    const int batch = j->table.kind && j->p->method == METHOD_GRID;
     fx_noise_cache cache = {0};
-    for (int nj = begin; nj < end; nj++)
-        for (int ni = 0; ni < j->nx; ni++) {
-            float *q = j->nodes + ((size_t)nj * j->nx + ni) * ns;
+    /* per row: the queued nodes, their cell coordinates, distances and points */
+    double *buf = batch ? fx_mem_alloc((size_t)nx * 4 * sizeof(double) + (size_t)nx * 3 * sizeof(int)) : NULL;
+    double *qx = buf, *qy = buf ? buf + nx : NULL, *f1 = buf ? buf + 2 * nx : NULL, *f2 = buf ? buf + 3 * nx : NULL;
+    int *qi = buf ? (int *)(buf + 4 * nx) : NULL, *i1 = qi ? qi + nx : NULL, *i2 = qi ? qi + 2 * nx : NULL;
+    for (int nj = begin; nj < end; nj++) {
+        int nq = 0;
+        for (int ni = 0; ni < nx; ni++) {
+            float *q = j->nodes + ((size_t)nj * nx + ni) * ns;
             for (int c = 0; c < ns; c++)
                 q[c] = NAN;
-            int *id = j->node_id + ((size_t)nj * j->nx + ni) * 2;
+            int *id = j->node_id + ((size_t)nj * nx + ni) * 2;
             id[0] = id[1] = -1;
             if (j->cell_any) { /* a masked pixel in one of the four cells around the node */
                 int need = 0;
                 for (int dj = -1; dj <= 0 && !need; dj++)
                     for (int di = -1; di <= 0 && !need; di++) {
                         int cj = nj + dj, ci = ni + di;
-                        need = cj >= 0 && ci >= 0 && j->cell_any[(size_t)cj * j->nx + ci];
+                        need = cj >= 0 && ci >= 0 && j->cell_any[(size_t)cj * nx + ci];
                     }
                 if (!need)
                     continue;
@@ -430,13 +438,40 @@ static void node_rows(void *user, int begin, int end)
             fx_vec3 P;
             if (!world_at(j, j->node_x[ni], j->node_y[nj], &P))
                 continue;
-            q[0] = value_at(j, P.x, P.y, id);
-            q[1] = noise_at(j, P.x, P.y, &cache);
             q[2] = P.x;
             q[3] = P.y;
-            if (j->p->lattice_shading)
-                factors(j, (size_t)j->node_y[nj] * j->run->width + j->node_x[ni], P, q[0], q[1], q + 4, q + 5);
+            if (buf) {
+                qx[nq] = (double)P.x * j->inv_cell_d;
+                qy[nq] = (double)P.y * j->inv_cell_d;
+                qi[nq++] = ni;
+            } else {
+                q[0] = value_at(j, P.x, P.y, id);
+            }
         }
+        if (buf) {
+            fx_voronoi_table_grid_n(&j->table, nq, qx, qy, f1, f2, i1, i2);
+            for (int k = 0; k < nq; k++) {
+                const int ni = qi[k];
+                fx_voronoi_hit h = {i1[k], i2[k], f1[k], f2[k]};
+                j->nodes[((size_t)nj * nx + ni) * ns] = value_of(j, &h);
+                int *id = j->node_id + ((size_t)nj * nx + ni) * 2;
+                id[0] = h.i1;
+                id[1] = h.i2;
+            }
+        }
+        for (int ni = 0; ni < nx; ni++) {
+            float *q = j->nodes + ((size_t)nj * nx + ni) * ns;
+            if (isnan(q[2]))
+                continue;
+            q[1] = noise_at(j, q[2], q[3], &cache);
+            if (j->p->lattice_shading) {
+                fx_vec3 P;
+                world_at(j, j->node_x[ni], j->node_y[nj], &P);
+                factors(j, (size_t)j->node_y[nj] * j->run->width + j->node_x[ni], P, q[0], q[1], q + 4, q + 5);
+            }
+        }
+    }
+    fx_mem_free(buf);
 }
 
 /* Whether lattice cell (i0..i1, j0..j1) is smooth: the same nearest points at its four
@@ -870,7 +905,7 @@ static void caustics_rows_lattice(void *user, int begin, int end)
                     qx[k] = (double)pq[0] * j->inv_cell_d;
                     qy[k] = (double)pq[1] * j->inv_cell_d;
                 }
-                fx_voronoi_table_grid_n(&j->table, nq, qx, qy, f1, f2);
+                fx_voronoi_table_grid_n(&j->table, nq, qx, qy, f1, f2, NULL, NULL);
                 for (int k = 0; k < nq; k++) {
                     const double v = f2[k] - f1[k];
                     av[queue[k]] = !(v >= 0.0) ? 0.0f : v > 1e30 ? 1e30f : (float)v;

@@ -601,7 +601,7 @@ void fx_voronoi_table_grid(const fx_voronoi_table *t, double x, double y, fx_vor
  * n calls of fx_voronoi_table_grid, with the per-query switches hoisted: the keys of every
  * query with a square list first, then their distances in one loop per kind. */
 void fx_voronoi_table_grid_n(const fx_voronoi_table *t, int n, const double *x, const double *y, double *f1,
-                             double *f2)
+                             double *f2, int *i1, int *i2)
 {
     if (!t->kind || !t->sub) {
         for (int q = 0; q < n; q++) {
@@ -609,6 +609,10 @@ void fx_voronoi_table_grid_n(const fx_voronoi_table *t, int n, const double *x, 
             fx_voronoi_table_grid(t, x[q], y[q], &h);
             f1[q] = h.f1;
             f2[q] = h.f2;
+            if (i1) {
+                i1[q] = h.i1;
+                i2[q] = h.i2;
+            }
         }
         return;
     }
@@ -630,11 +634,19 @@ void fx_voronoi_table_grid_n(const fx_voronoi_table *t, int n, const double *x, 
                 list_search(t, qx, qy, nl, sq * FX_VORONOI_LIST_MAX, &h);
                 k1[q] = h.k1;
                 k2[q] = h.k2;
+                if (i1) {
+                    i1[q0 + q] = h.i1;
+                    i2[q0 + q] = h.i2;
+                }
             } else { /* the ring search (no list): its distances directly; key NaN marks it */
                 fx_voronoi_hit h;
                 fx_voronoi_table_grid(t, x[q0 + q], y[q0 + q], &h);
                 f1[q0 + q] = h.f1;
                 f2[q0 + q] = h.f2;
+                if (i1) {
+                    i1[q0 + q] = h.i1;
+                    i2[q0 + q] = h.i2;
+                }
                 k1[q] = k2[q] = NAN;
             }
         }

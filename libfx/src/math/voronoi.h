@@ -98,10 +98,11 @@ void fx_voronoi_table_free(fx_voronoi_table *t);
 void fx_voronoi_table_brute(const fx_voronoi_table *t, double x, double y, fx_voronoi_hit *out);
 void fx_voronoi_table_grid(const fx_voronoi_table *t, double x, double y, fx_voronoi_hit *out);
 
-/* n queries of fx_voronoi_table_grid at once: their F1 and F2 only, the same bits. */
+/* n queries of fx_voronoi_table_grid at once: their F1 and F2 and (i1 not NULL) the
+ * points' indices, the same bits. */
 #define FX_VORONOI_BATCH 64
 void fx_voronoi_table_grid_n(const fx_voronoi_table *t, int n, const double *x, const double *y, double *f1,
-                             double *f2);
+                             double *f2, int *i1, int *i2);
 
 /* Smooth value noise in [0, 1] (bilinear over hashed lattice values, smoothstep weights),
  * keeping the last lattice cell's four hashed values: nearby queries (a row of pixels
