@@ -563,6 +563,13 @@ static void test_lattice_accuracy(fx_context *ctx)
             CHECK(all_finite_bounded(og, (size_t)300 * 7 * 4));
             free(og);
             free(ob);
+            /* the row passes' batched searches (grid) against value_at's one at a time (brute)
+             * under a mask whose ROI starts off the lattice's origin and spans two segments */
+            og = et_run_effect(ctx, "voronoi_caustics", fs, pg, "{\"rect\": [3, 1, 290, 5]}");
+            ob = et_run_effect(ctx, "voronoi_caustics", fs, pb, "{\"rect\": [3, 1, 290, 5]}");
+            CHECK(og && ob && memcmp(og, ob, (size_t)300 * 7 * 4 * sizeof(float)) == 0);
+            free(og);
+            free(ob);
         }
         fx_frame_free(fs);
     }
