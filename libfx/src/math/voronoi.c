@@ -301,8 +301,21 @@ int fx_voronoi_table_init(fx_voronoi_table *t, const fx_voronoi *v, int fast)
                 t->fy[k * 3 + s + 1] = (float)(t->y[k] + s * (double)G);
             }
     }
-    if (t->kind == 2)
+    if (t->kind == 2) {
         cbrt_table(t->cbrt_lut);
+        for (int eb = 0; eb < 256; eb++) { /* cbrt23's exponent split, once per table */
+            int e = eb - 127;
+            int q = (e + 129) / 3 - 43; /* floor(e / 3), e in [-126, 127] */
+            int r = e - 3 * q;
+            uint64_t sb = (uint64_t)(q + 1023) << 52;
+            memcpy(&t->cbrt_scale[eb], &sb, sizeof sb);
+            t->cbrt_off[eb] = r * (FX_VORONOI_CBRT_BINS + 1); /* CBRT_ROW */
+            if (eb == 0) { /* not read: cbrt23_t returns 0 first */
+                t->cbrt_scale[eb] = 0.0;
+                t->cbrt_off[eb] = 0;
+            }
+        }
+    }
     if (t->kind && G <= 64 && fast != 3) {
         t->sub = G <= 32 ? 4 : 2;
         const size_t squares = n * t->sub * t->sub;
@@ -383,22 +396,19 @@ static void cbrt_table(double *lut)
  * cbrt(2^r m) interpolated linearly between the table's nodes (1024 bins: m's top 10
  * mantissa bits pick the bin, the other 13 the weight; the error of the chord, h^2 / 8
  * max |f''|, is below 5e-8 relative: the float key's own rounding), squared. No division
- * and no libm: the same bits everywhere. */
-static inline double cbrt23(const double *lut, float kf)
+ * and no libm: the same bits everywhere. The exponent's split (q = floor(e / 3), r, 2^q and
+ * r's row) is read from the table's per-exponent entries, made once per table. */
+static inline double cbrt23(const fx_voronoi_table *t, float kf)
 {
     uint32_t b;
     memcpy(&b, &kf, sizeof b);
-    if (!(kf > 0.0f) || (b >> 23) == 0) /* 0, or below 1.2e-38 (a distance below 1e-25) */
+    if (!(kf > 0.0f) || (b >> 23) == 0)
         return 0.0;
-    int e = (int)(b >> 23) - 127;
-    int q = (e + 129) / 3 - 43; /* floor(e / 3), e in [-126, 127] */
-    int r = e - 3 * q;
-    uint64_t sb = (uint64_t)(q + 1023) << 52;
-    double scale;
-    memcpy(&scale, &sb, sizeof scale);
-    const double *row = lut + r * CBRT_ROW + ((b >> 13) & (FX_VORONOI_CBRT_BINS - 1));
-    double t = (double)(b & 0x1FFFu) * (1.0 / 8192.0);
-    double x = scale * (row[0] + (row[1] - row[0]) * t);
+    const uint32_t eb = b >> 23; /* kf > 0: the sign bit is 0, eb in [1, 255] */
+    const double scale = t->cbrt_scale[eb];
+    const double *row = t->cbrt_lut + t->cbrt_off[eb] + ((b >> 13) & (FX_VORONOI_CBRT_BINS - 1));
+    double tt = (double)(b & 0x1FFFu) * (1.0 / 8192.0);
+    double x = scale * (row[0] + (row[1] - row[0]) * tt);
     return x * x;
 }
 
@@ -406,7 +416,7 @@ static inline double dist_of_key(const fx_voronoi_table *t, float k)
 {
     switch (t->kind) {
     case 2:
-        return cbrt23(t->cbrt_lut, k);
+        return cbrt23(t, k);
     case 3:
         return sqrtf(k);
     default:
@@ -655,8 +665,8 @@ void fx_voronoi_table_grid_n(const fx_voronoi_table *t, int n, const double *x, 
         case 2:
             for (int q = 0; q < m; q++)
                 if (k1[q] == k1[q]) {
-                    o1[q] = cbrt23(t->cbrt_lut, k1[q]);
-                    o2[q] = cbrt23(t->cbrt_lut, k2[q]);
+                    o1[q] = cbrt23(t, k1[q]);
+                    o2[q] = cbrt23(t, k2[q]);
                 }
             break;
         case 3:

@@ -81,6 +81,10 @@ typedef struct fx_voronoi_table {
     int *lk;           /* ... and its point index */
     double inv_grid;   /* 1 / G: the fast kinds wrap queries with a product, no division */
     double cbrt_lut[3 * (1024 + 1)]; /* p = 1.5: cbrt(2^r m) at m = 1 + i / FX_VORONOI_CBRT_BINS */
+    /* p = 1.5, per biased float exponent eb (1..254, e = eb - 127 = 3 q + r): 2^q, and r's
+     * row offset in cbrt_lut (eb 0: scale 0) */
+    double cbrt_scale[256];
+    int cbrt_off[256];
 } fx_voronoi_table;
 
 #define FX_VORONOI_CBRT_BINS 1024
