@@ -6,6 +6,9 @@
 
 #include <math.h>
 #include <string.h>
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
 
 #ifndef M_PI
 #define M_PI 3.14159265358979323846
@@ -607,6 +610,40 @@ void fx_voronoi_table_grid(const fx_voronoi_table *t, double x, double y, fx_vor
     exact_grid(&s, x, y, out);
 }
 
+/* wrap_tile_inv of n values into floats, two at a time in SSE2 where both quotients lie
+ * within int32 (floor by truncation and a correction, as floor_fast does below 2^52): the
+ * same operations on the same values, the same bits; others one at a time. */
+static void wrap_tile_n(const double *a, int n, double G, double inv, float *out)
+{
+    int q = 0;
+#ifdef __SSE2__
+    const __m128d vg = _mm_set1_pd(G), vinv = _mm_set1_pd(inv), lim = _mm_set1_pd(2147483647.0);
+    const __m128d one = _mm_set1_pd(1.0), zero = _mm_setzero_pd();
+    const __m128d absmask = _mm_castsi128_pd(_mm_set1_epi64x(0x7FFFFFFFFFFFFFFFLL));
+    for (; q + 2 <= n; q += 2) {
+        const __m128d va = _mm_loadu_pd(a + q);
+        const __m128d t = _mm_mul_pd(va, vinv);
+        if (_mm_movemask_pd(_mm_cmplt_pd(_mm_and_pd(t, absmask), lim)) != 3) { /* large or NaN */
+            out[q] = (float)wrap_tile_inv(a[q], G, inv);
+            out[q + 1] = (float)wrap_tile_inv(a[q + 1], G, inv);
+            continue;
+        }
+        __m128d f = _mm_cvtepi32_pd(_mm_cvttpd_epi32(t));
+        f = _mm_sub_pd(f, _mm_and_pd(_mm_cmpgt_pd(f, t), one)); /* f > t ? f - 1 : f */
+        __m128d r = _mm_sub_pd(va, _mm_mul_pd(vg, f));
+        /* r >= G || !(r > 0) ? 0 : r */
+        const __m128d keep = _mm_andnot_pd(_mm_cmpge_pd(r, vg), _mm_cmpgt_pd(r, zero));
+        r = _mm_and_pd(r, keep);
+        float o[4];
+        _mm_storeu_ps(o, _mm_cvtpd_ps(r));
+        out[q] = o[0];
+        out[q + 1] = o[1];
+    }
+#endif
+    for (; q < n; q++)
+        out[q] = (float)wrap_tile_inv(a[q], G, inv);
+}
+
 /* n queries at once (the caller's batch of a row): the same candidates, order and bits as
  * n calls of fx_voronoi_table_grid, with the per-query switches hoisted: the keys of every
  * query with a square list first, then their distances in one loop per kind. */
@@ -629,11 +666,13 @@ void fx_voronoi_table_grid_n(const fx_voronoi_table *t, int n, const double *x, 
     const int G = t->grid, GS = G * t->sub;
     const float subf = (float)t->sub;
     const double Gd = G, inv = t->inv_grid;
-    float k1[FX_VORONOI_BATCH], k2[FX_VORONOI_BATCH];
+    float k1[FX_VORONOI_BATCH], k2[FX_VORONOI_BATCH], wx[FX_VORONOI_BATCH], wy[FX_VORONOI_BATCH];
     for (int q0 = 0; q0 < n; q0 += FX_VORONOI_BATCH) {
         const int m = n - q0 < FX_VORONOI_BATCH ? n - q0 : FX_VORONOI_BATCH;
+        wrap_tile_n(x + q0, m, Gd, inv, wx);
+        wrap_tile_n(y + q0, m, Gd, inv, wy);
         for (int q = 0; q < m; q++) {
-            const float qx = (float)wrap_tile_inv(x[q0 + q], Gd, inv), qy = (float)wrap_tile_inv(y[q0 + q], Gd, inv);
+            const float qx = wx[q], qy = wy[q];
             int ux = (int)(qx * subf), uy = (int)(qy * subf);
             ux = ux < GS ? ux : GS - 1;
             uy = uy < GS ? uy : GS - 1;
