@@ -35,7 +35,10 @@
  * frame. `reference` (downsample 1, distance exact) evaluates every pixel with double pow:
  * the setting errors are measured against. Physical mode without an environment shades a
  * row in segments of SEG pixels: the pattern pass per pixel, then loops without branches
- * (exp in float without libm, the gain, the clamp) that the compiler vectorises. */
+ * (exp in float without libm, the gain, the clamp) that the compiler vectorises. With the
+ * Position pass and a lattice without lattice_shading (final, preview) the pattern pass is
+ * caustics_rows_lattice: the lattice columns once per row, the searches of a segment in one
+ * batch (fx_voronoi_table_grid_n); the same bits as caustics_rows. */
 #include "core/effect.h"
 #include "core/parallel.h"
 #include "math/camera.h"
