@@ -122,6 +122,28 @@ static void test_lists(void)
                     fprintf(stderr, "lists G %d p %g (%g, %g): grid %d/%d brute %d/%d\n", grids[gi], ps[pi], x, y,
                             a.i1, a.i2, b.i1, b.i2);
             }
+            /* the batch (its wraps two at a time) gives fx_voronoi_table_grid's bits, also for
+             * odd counts, negative, far (beyond int32 quotients) and tile-edge coordinates */
+            enum { NB = 203 };
+            double bx[NB], by[NB], f1[NB], f2[NB];
+            int i1[NB], i2[NB];
+            const double far[] = {-0.0, 1e12, -3.7e9, 2147483647.5, -2147483648.5, 1e15, (double)grids[gi]};
+            for (int q = 0; q < NB; q++) {
+                bx[q] = (fx_rand4(q, gi, pi, 8) - 0.5) * 3.0 * grids[gi];
+                by[q] = q % 7 == 0 ? far[(q / 7) % 7] * (q % 2 ? 1.0 : 1.0 / grids[gi]) : (fx_rand4(q, gi, pi, 9) - 0.5) * 40.0;
+                if (q % 11 == 0)
+                    bx[q] = far[(q / 11) % 7];
+            }
+            fx_voronoi_table_grid_n(&t, NB, bx, by, f1, f2, i1, i2);
+            for (int q = 0; q < NB; q++) {
+                fx_voronoi_hit a;
+                fx_voronoi_table_grid(&t, bx[q], by[q], &a);
+                if ((memcmp(&a.f1, &f1[q], sizeof a.f1) || memcmp(&a.f2, &f2[q], sizeof a.f2) || a.i1 != i1[q] ||
+                     a.i2 != i2[q]) &&
+                    bad++ < 5)
+                    fprintf(stderr, "batch G %d p %g (%g, %g): %d/%d vs %d/%d\n", grids[gi], ps[pi], bx[q], by[q],
+                            a.i1, a.i2, i1[q], i2[q]);
+            }
             fx_voronoi_table_free(&t);
         }
     CHECK(bad == 0);
@@ -561,6 +583,13 @@ static void test_lattice_accuracy(fx_context *ctx)
             float *ob = et_run_effect(ctx, "voronoi_caustics", fs, pb, NULL);
             CHECK(og && ob && memcmp(og, ob, (size_t)300 * 7 * 4 * sizeof(float)) == 0);
             CHECK(all_finite_bounded(og, (size_t)300 * 7 * 4));
+            free(og);
+            free(ob);
+            /* the row passes' batched searches (grid) against value_at's one at a time (brute)
+             * under a mask whose ROI starts off the lattice's origin and spans two segments */
+            og = et_run_effect(ctx, "voronoi_caustics", fs, pg, "{\"rect\": [3, 1, 290, 5]}");
+            ob = et_run_effect(ctx, "voronoi_caustics", fs, pb, "{\"rect\": [3, 1, 290, 5]}");
+            CHECK(og && ob && memcmp(og, ob, (size_t)300 * 7 * 4 * sizeof(float)) == 0);
             free(og);
             free(ob);
         }

@@ -35,13 +35,19 @@
  * frame. `reference` (downsample 1, distance exact) evaluates every pixel with double pow:
  * the setting errors are measured against. Physical mode without an environment shades a
  * row in segments of SEG pixels: the pattern pass per pixel, then loops without branches
- * (exp in float without libm, the gain, the clamp) that the compiler vectorises. */
+ * (exp in float without libm, the gain, the clamp) that the compiler vectorises. With the
+ * Position pass and a lattice without lattice_shading (final, preview) the pattern pass is
+ * caustics_rows_lattice: the lattice columns once per row, the searches of a segment in one
+ * batch (fx_voronoi_table_grid_n); the same bits as caustics_rows. */
 #include "core/effect.h"
 #include "core/parallel.h"
 #include "math/camera.h"
 #include "math/voronoi.h"
 
 #include <float.h>
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
@@ -402,24 +408,32 @@ static void cell_rows(void *user, int begin, int end)
     }
 }
 
+/* The lattice nodes of rows [begin, end): a row's positions first, then (fast kinds, grid)
+ * its searches as one batch (value_at's bits), then the noise and shading factors. */
 static void node_rows(void *user, int begin, int end)
 {
     caustics_job *j = user;
-    const int ns = j->node_size;
+    const int ns = j->node_size, nx = j->nx;
+    const int batch = j->table.kind && j->p->method == METHOD_GRID;
     fx_noise_cache cache = {0};
-    for (int nj = begin; nj < end; nj++)
-        for (int ni = 0; ni < j->nx; ni++) {
-            float *q = j->nodes + ((size_t)nj * j->nx + ni) * ns;
+    /* per row: the queued nodes, their cell coordinates, distances and points */
+    double *buf = batch ? fx_mem_alloc((size_t)nx * 4 * sizeof(double) + (size_t)nx * 3 * sizeof(int)) : NULL;
+    double *qx = buf, *qy = buf ? buf + nx : NULL, *f1 = buf ? buf + 2 * nx : NULL, *f2 = buf ? buf + 3 * nx : NULL;
+    int *qi = buf ? (int *)(buf + 4 * nx) : NULL, *i1 = qi ? qi + nx : NULL, *i2 = qi ? qi + 2 * nx : NULL;
+    for (int nj = begin; nj < end; nj++) {
+        int nq = 0;
+        for (int ni = 0; ni < nx; ni++) {
+            float *q = j->nodes + ((size_t)nj * nx + ni) * ns;
             for (int c = 0; c < ns; c++)
                 q[c] = NAN;
-            int *id = j->node_id + ((size_t)nj * j->nx + ni) * 2;
+            int *id = j->node_id + ((size_t)nj * nx + ni) * 2;
             id[0] = id[1] = -1;
             if (j->cell_any) { /* a masked pixel in one of the four cells around the node */
                 int need = 0;
                 for (int dj = -1; dj <= 0 && !need; dj++)
                     for (int di = -1; di <= 0 && !need; di++) {
                         int cj = nj + dj, ci = ni + di;
-                        need = cj >= 0 && ci >= 0 && j->cell_any[(size_t)cj * j->nx + ci];
+                        need = cj >= 0 && ci >= 0 && j->cell_any[(size_t)cj * nx + ci];
                     }
                 if (!need)
                     continue;
@@ -427,13 +441,40 @@ static void node_rows(void *user, int begin, int end)
             fx_vec3 P;
             if (!world_at(j, j->node_x[ni], j->node_y[nj], &P))
                 continue;
-            q[0] = value_at(j, P.x, P.y, id);
-            q[1] = noise_at(j, P.x, P.y, &cache);
             q[2] = P.x;
             q[3] = P.y;
-            if (j->p->lattice_shading)
-                factors(j, (size_t)j->node_y[nj] * j->run->width + j->node_x[ni], P, q[0], q[1], q + 4, q + 5);
+            if (buf) {
+                qx[nq] = (double)P.x * j->inv_cell_d;
+                qy[nq] = (double)P.y * j->inv_cell_d;
+                qi[nq++] = ni;
+            } else {
+                q[0] = value_at(j, P.x, P.y, id);
+            }
         }
+        if (buf) {
+            fx_voronoi_table_grid_n(&j->table, nq, qx, qy, f1, f2, i1, i2);
+            for (int k = 0; k < nq; k++) {
+                const int ni = qi[k];
+                fx_voronoi_hit h = {i1[k], i2[k], f1[k], f2[k]};
+                j->nodes[((size_t)nj * nx + ni) * ns] = value_of(j, &h);
+                int *id = j->node_id + ((size_t)nj * nx + ni) * 2;
+                id[0] = h.i1;
+                id[1] = h.i2;
+            }
+        }
+        for (int ni = 0; ni < nx; ni++) {
+            float *q = j->nodes + ((size_t)nj * nx + ni) * ns;
+            if (isnan(q[2]))
+                continue;
+            q[1] = noise_at(j, q[2], q[3], &cache);
+            if (j->p->lattice_shading) {
+                fx_vec3 P;
+                world_at(j, j->node_x[ni], j->node_y[nj], &P);
+                factors(j, (size_t)j->node_y[nj] * j->run->width + j->node_x[ni], P, q[0], q[1], q + 4, q + 5);
+            }
+        }
+    }
+    fx_mem_free(buf);
 }
 
 /* Whether lattice cell (i0..i1, j0..j1) is smooth: the same nearest points at its four
@@ -527,11 +568,21 @@ static inline float exp_neg(float x)
     return q * scale;
 }
 
+typedef float v4f __attribute__((vector_size(16)));
+typedef int32_t v4i __attribute__((vector_size(16)));
+
+static inline v4f load4(const float *p)
+{
+    v4f v;
+    memcpy(&v, p, sizeof v);
+    return v;
+}
+
 /* physical mode without an additive term (no environment): out = src (1 + s tint) per
  * pixel of a segment, s from the pattern (a, noise) or given (lattice_shading), or src
  * copied; loops without calls or branches (auto-vectorised). */
 static void shade_segment(const caustics_job *j, const float *restrict src, float *restrict dst, int n,
-                          const unsigned char *restrict st, const float *restrict av, const float *restrict nz,
+                          const int32_t *restrict st, const float *restrict av, const float *restrict nz,
                           float *restrict sv, int patterns)
 {
     const float inv_lw = j->inv_lw, inv_mean = j->inv_mean, strength = j->p->strength;
@@ -545,30 +596,54 @@ static void shade_segment(const caustics_job *j, const float *restrict src, floa
         }
         for (int c = 0; c < n; c++)
             xs[c] = exp_neg(xs[c]);
-        for (int c = 0; c < n; c++) {
+        /* the focus gain s = strength noise' (min(g / mean, 16) - 1) of pattern pixels, four
+         * at a time (gcc does not vectorise the scalar loop: "control flow"), the rest of
+         * the segment one at a time by the same operations */
+        int c = 0;
+#ifdef __SSE2__
+        const v4f vmean = {inv_mean, inv_mean, inv_mean, inv_mean}, vcap = {16.0f, 16.0f, 16.0f, 16.0f};
+        for (; c + 4 <= n; c += 4) {
+            v4f g = load4(xs + c) * vmean;
+            g = _mm_min_ps(g, vcap); /* g < 16 ? g : 16 (g is never NaN) */
+            g = g - 1.0f;
+            const v4f amp = strength * (0.4f + 1.2f * load4(nz + c));
+            const v4f sn = amp * g;
+            v4i m;
+            memcpy(&m, st + c, sizeof m);
+            m = m == PX_PATTERN;
+            const v4i r = ((v4i)sn & m) | ((v4i)load4(sv + c) & ~m);
+            memcpy(sv + c, &r, sizeof r);
+        }
+#endif
+        for (; c < n; c++) {
             float g = xs[c] * inv_mean;
             g = (g < (float)FOCUS_MAX ? g : (float)FOCUS_MAX) - 1.0f;
             float amp = strength * (0.4f + 1.2f * nz[c]);
             sv[c] = st[c] == PX_PATTERN ? amp * g : sv[c];
         }
     }
-    /* per channel: the gain, and whether the input is kept (copied pixels, alpha) */
-    float gain[4 * SEG];
-    int32_t keep[4 * SEG];
+    /* per pixel, its four channels as one vector: the gain (alpha's 1 + s 0 = 1: the same
+     * product), the clamp to [0, FLT_MAX] (NaN to 0) by masks, alpha and copied pixels
+     * taken from src: the same values as a channel at a time */
+    const v4f tint = {t0, t1, t2, 0.0f}, zero = {0.0f, 0.0f, 0.0f, 0.0f};
+    const v4f fmax = {FLT_MAX, FLT_MAX, FLT_MAX, FLT_MAX};
+    const v4i alpha = {0, 0, 0, -1};
     for (int c = 0; c < n; c++) {
-        const float sc = sv[c];
-        const int32_t k = st[c] == PX_COPY;
-        gain[4 * c] = 1.0f + sc * t0;
-        gain[4 * c + 1] = 1.0f + sc * t1;
-        gain[4 * c + 2] = 1.0f + sc * t2;
-        gain[4 * c + 3] = 1.0f;
-        keep[4 * c] = keep[4 * c + 1] = keep[4 * c + 2] = k;
-        keep[4 * c + 3] = 1;
-    }
-    for (int e = 0; e < 4 * n; e++) {
-        float v = src[e] * gain[e];
-        v = !(v > 0.0f) ? 0.0f : v > FLT_MAX ? FLT_MAX : v;
-        dst[e] = keep[e] ? src[e] : v;
+        const v4f sc = {sv[c], sv[c], sv[c], sv[c]};
+        const v4f in = load4(src + 4 * c);
+        const v4f gain = 1.0f + sc * tint;
+        v4f v = in * gain;
+#ifdef __SSE2__ /* maxps(v, 0) is 0 for NaN (its second operand), minps(v, FLT_MAX) caps +inf */
+        v4i vi = (v4i)_mm_min_ps(_mm_max_ps(v, zero), fmax);
+#else
+        v4i vi = (v4i)v & (v > zero);                 /* !(v > 0): 0 */
+        v4i big = (v4i)((v4f)vi > fmax);              /* > FLT_MAX: FLT_MAX */
+        vi = (vi & ~big) | ((v4i)fmax & big);
+#endif
+        const int32_t k = st[c] == PX_COPY ? -1 : 0;
+        const v4i keep = alpha | (v4i){k, k, k, k};
+        vi = (vi & ~keep) | ((v4i)in & keep);
+        memcpy(dst + 4 * c, &vi, sizeof vi);
     }
 }
 
@@ -621,7 +696,7 @@ static inline __attribute__((always_inline)) void lerp_s(int has_add, const floa
 
 /* A pixel shaded from s (and add) v: into the segment's lists, or at once. */
 static inline __attribute__((always_inline)) void put_gain(const caustics_job *j, size_t i, const float *v,
-                                                           int seg_shade, unsigned char *st, float *sv, float *av,
+                                                           int seg_shade, int32_t *st, float *sv, float *av,
                                                            float *nz)
 {
     if (seg_shade) {
@@ -655,7 +730,7 @@ static void caustics_rows(void *user, int begin, int end)
     const int *col_i0 = j->col_i0, *col_i1 = j->col_i1;
     const float *col_t = j->col_t;
     fx_noise_cache cache = {0};
-    unsigned char st[SEG];
+    int32_t st[SEG]; /* int32: shade_segment's loops vectorise */
     float av[SEG], nz[SEG], sv[SEG];
     for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++) {
         int j0 = 0, j1 = 0;
@@ -742,6 +817,118 @@ static void caustics_rows(void *user, int begin, int end)
             }
         }
     }
+}
+
+
+/* The default path's rows (physical mode without an additive term, the Position pass, a
+ * lattice without lattice_shading): the same values as caustics_rows, in passes over a
+ * segment of SEG pixels: the lattice's columns interpolated to the row once (a node's
+ * four channels as one vector), then per pixel its validity, its interpolated pattern and
+ * its surface test with vector arithmetic, the pixels that need a search queued; then the
+ * searches; then the shading (shade_segment). Each value is computed by the same float
+ * operations, in the same order, as caustics_rows: the same bits. */
+static void caustics_rows_lattice(void *user, int begin, int end)
+{
+    const caustics_job *j = user;
+    const fx_effect_run *run = j->run;
+    const int w = run->width, x0 = run->roi.x0, nx = j->nx;
+    const float tol = (float)(0.1 * j->cell);
+    const float *cov = run->mask ? run->mask->coverage : NULL;
+    const float *nodes = j->nodes, *position = j->position;
+    const int pc = j->pos_channels;
+    const int *col_i0 = j->col_i0, *col_i1 = j->col_i1, *node_x = j->node_x;
+    const float *col_t = j->col_t;
+    const unsigned char *smooth_flags = j->smooth;
+    const int batch = j->table.kind && j->p->method == METHOD_GRID;
+    fx_noise_cache cache = {0};
+    int32_t st[SEG]; /* int32: shade_segment's loops vectorise */
+    float av[SEG], nz[SEG], sv[SEG];
+    int queue[SEG];
+    unsigned char exact[SEG];
+    v4f *colv = NULL;
+    /* a thread's row of interpolated lattice columns (nx vectors) */
+    colv = fx_mem_alloc((size_t)nx * sizeof(v4f));
+    if (!colv) { /* no memory for the row buffer: the per-pixel code, same bits */
+        caustics_rows(user, begin, end);
+        return;
+    }
+    for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++) {
+        int j0, j1;
+        float ty;
+        lattice_pos(j->node_y, j->ny, j->f, run->roi.y0, y, &j0, &j1, &ty);
+        const int node_row = y == j->node_y[j0];
+        {
+            const float uy = 1.0f - ty;
+            const float *a = nodes + (size_t)j0 * nx * 4, *b = nodes + (size_t)j1 * nx * 4;
+            for (int i = 0; i < nx; i++)
+                colv[i] = load4(a + 4 * i) * uy + load4(b + 4 * i) * ty;
+        }
+        const unsigned char *srow = smooth_flags ? smooth_flags + (size_t)j0 * j->cx : NULL;
+        const float *nrow = nodes + (size_t)j0 * nx * 4;
+        for (int xs = x0; xs < run->roi.x1; xs += SEG) {
+            const int n = run->roi.x1 - xs < SEG ? run->roi.x1 - xs : SEG;
+            int nq = 0, patterns = 0;
+            for (int c = 0; c < n; c++) {
+                const int x = xs + c, col = x - x0;
+                const size_t i = (size_t)y * w + x;
+                const float *pq = position + i * pc;
+                const float px = pq[0], py = pq[1], pz = pq[2];
+                const int ok = fabsf(px) <= 1e15f && fabsf(py) <= 1e15f && isfinite(pz);
+                if ((cov && !(cov[i] > 0.0f)) || !ok) {
+                    st[c] = PX_COPY;
+                    sv[c] = av[c] = nz[c] = 0.0f;
+                    continue;
+                }
+                const int i0 = col_i0[col];
+                const float *q00 = nrow + 4 * i0;
+                st[c] = PX_PATTERN;
+                if (node_row && x == node_x[i0] && !isnan(q00[2])) { /* a lattice node: its own values */
+                    av[c] = q00[0];
+                    nz[c] = q00[1];
+                    continue;
+                }
+                const float tx = col_t[col], ux = 1.0f - tx;
+                const v4f v = colv[i0] * ux + colv[col_i1[col]] * tx;
+                if (fabsf(v[2] - px) <= tol && fabsf(v[3] - py) <= tol) {
+                    nz[c] = v[1];
+                    if (!srow || srow[i0]) {
+                        av[c] = v[0];
+                        continue;
+                    }
+                    exact[nq] = 0;
+                } else {
+                    exact[nq] = 1;
+                }
+                queue[nq++] = c;
+            }
+            if (batch) { /* the searches in one batch (fast kinds, grid): value_at's bits */
+                double qx[SEG], qy[SEG], f1[SEG], f2[SEG];
+                for (int k = 0; k < nq; k++) {
+                    const float *pq = position + ((size_t)y * w + xs + queue[k]) * pc;
+                    qx[k] = (double)pq[0] * j->inv_cell_d;
+                    qy[k] = (double)pq[1] * j->inv_cell_d;
+                }
+                fx_voronoi_table_grid_n(&j->table, nq, qx, qy, f1, f2, NULL, NULL);
+                for (int k = 0; k < nq; k++) {
+                    const double v = f2[k] - f1[k];
+                    av[queue[k]] = !(v >= 0.0) ? 0.0f : v > 1e30 ? 1e30f : (float)v;
+                }
+            }
+            for (int k = 0; k < nq; k++) {
+                const int c = queue[k];
+                const float *pq = position + ((size_t)y * w + xs + c) * pc;
+                if (!batch)
+                    av[c] = value_at(j, pq[0], pq[1], NULL);
+                if (exact[k])
+                    nz[c] = noise_at(j, pq[0], pq[1], &cache);
+            }
+            for (int c = 0; c < n && !patterns; c++)
+                patterns = st[c] == PX_PATTERN;
+            size_t i = (size_t)y * w + xs;
+            shade_segment(j, run->src + i * 4, run->dst + i * 4, n, st, av, nz, sv, patterns);
+        }
+    }
+    fx_mem_free(colv);
 }
 
 /* Mean of g over the tile at this time: a fixed lattice, independent of the camera. */
@@ -962,7 +1149,12 @@ static fx_result caustics_process(const fx_effect_run *run)
             r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", run->where);
         } else {
             int rows = run->roi.y1 - run->roi.y0;
-            fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), caustics_rows, &j);
+            /* the default path (physical, no additive term, Position, lattice without
+             * lattice_shading) in vector-friendly passes: the same bits */
+            int lattice_path = j.nodes && !p->lattice_shading && p->mode == MODE_PHYSICAL && !j.has_add &&
+                               j.position && j.node_size == 4;
+            fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows),
+                            lattice_path ? caustics_rows_lattice : caustics_rows, &j);
         }
     }
     job_free(&j);

@@ -6,6 +6,9 @@
 
 #include <math.h>
 #include <string.h>
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
 
 #ifndef M_PI
 #define M_PI 3.14159265358979323846
@@ -301,8 +304,21 @@ int fx_voronoi_table_init(fx_voronoi_table *t, const fx_voronoi *v, int fast)
                 t->fy[k * 3 + s + 1] = (float)(t->y[k] + s * (double)G);
             }
     }
-    if (t->kind == 2)
+    if (t->kind == 2) {
         cbrt_table(t->cbrt_lut);
+        for (int eb = 0; eb < 256; eb++) { /* cbrt23's exponent split, once per table */
+            int e = eb - 127;
+            int q = (e + 129) / 3 - 43; /* floor(e / 3), e in [-126, 127] */
+            int r = e - 3 * q;
+            uint64_t sb = (uint64_t)(q + 1023) << 52;
+            memcpy(&t->cbrt_scale[eb], &sb, sizeof sb);
+            t->cbrt_off[eb] = r * (FX_VORONOI_CBRT_BINS + 1); /* CBRT_ROW */
+            if (eb == 0) { /* not read: cbrt23_t returns 0 first */
+                t->cbrt_scale[eb] = 0.0;
+                t->cbrt_off[eb] = 0;
+            }
+        }
+    }
     if (t->kind && G <= 64 && fast != 3) {
         t->sub = G <= 32 ? 4 : 2;
         const size_t squares = n * t->sub * t->sub;
@@ -383,22 +399,19 @@ static void cbrt_table(double *lut)
  * cbrt(2^r m) interpolated linearly between the table's nodes (1024 bins: m's top 10
  * mantissa bits pick the bin, the other 13 the weight; the error of the chord, h^2 / 8
  * max |f''|, is below 5e-8 relative: the float key's own rounding), squared. No division
- * and no libm: the same bits everywhere. */
-static inline double cbrt23(const double *lut, float kf)
+ * and no libm: the same bits everywhere. The exponent's split (q = floor(e / 3), r, 2^q and
+ * r's row) is read from the table's per-exponent entries, made once per table. */
+static inline double cbrt23(const fx_voronoi_table *t, float kf)
 {
     uint32_t b;
     memcpy(&b, &kf, sizeof b);
-    if (!(kf > 0.0f) || (b >> 23) == 0) /* 0, or below 1.2e-38 (a distance below 1e-25) */
+    if (!(kf > 0.0f) || (b >> 23) == 0)
         return 0.0;
-    int e = (int)(b >> 23) - 127;
-    int q = (e + 129) / 3 - 43; /* floor(e / 3), e in [-126, 127] */
-    int r = e - 3 * q;
-    uint64_t sb = (uint64_t)(q + 1023) << 52;
-    double scale;
-    memcpy(&scale, &sb, sizeof scale);
-    const double *row = lut + r * CBRT_ROW + ((b >> 13) & (FX_VORONOI_CBRT_BINS - 1));
-    double t = (double)(b & 0x1FFFu) * (1.0 / 8192.0);
-    double x = scale * (row[0] + (row[1] - row[0]) * t);
+    const uint32_t eb = b >> 23; /* kf > 0: the sign bit is 0, eb in [1, 255] */
+    const double scale = t->cbrt_scale[eb];
+    const double *row = t->cbrt_lut + t->cbrt_off[eb] + ((b >> 13) & (FX_VORONOI_CBRT_BINS - 1));
+    double tt = (double)(b & 0x1FFFu) * (1.0 / 8192.0);
+    double x = scale * (row[0] + (row[1] - row[0]) * tt);
     return x * x;
 }
 
@@ -406,7 +419,7 @@ static inline double dist_of_key(const fx_voronoi_table *t, float k)
 {
     switch (t->kind) {
     case 2:
-        return cbrt23(t->cbrt_lut, k);
+        return cbrt23(t, k);
     case 3:
         return sqrtf(k);
     default:
@@ -595,6 +608,122 @@ void fx_voronoi_table_grid(const fx_voronoi_table *t, double x, double y, fx_vor
     }
     point_source s = {NULL, t->x, t->y, G, t->p};
     exact_grid(&s, x, y, out);
+}
+
+/* wrap_tile_inv of n values into floats, two at a time in SSE2 where both quotients lie
+ * within int32 (floor by truncation and a correction, as floor_fast does below 2^52): the
+ * same operations on the same values, the same bits; others one at a time. */
+static void wrap_tile_n(const double *a, int n, double G, double inv, float *out)
+{
+    int q = 0;
+#ifdef __SSE2__
+    const __m128d vg = _mm_set1_pd(G), vinv = _mm_set1_pd(inv), lim = _mm_set1_pd(2147483647.0);
+    const __m128d one = _mm_set1_pd(1.0), zero = _mm_setzero_pd();
+    const __m128d absmask = _mm_castsi128_pd(_mm_set1_epi64x(0x7FFFFFFFFFFFFFFFLL));
+    for (; q + 2 <= n; q += 2) {
+        const __m128d va = _mm_loadu_pd(a + q);
+        const __m128d t = _mm_mul_pd(va, vinv);
+        if (_mm_movemask_pd(_mm_cmplt_pd(_mm_and_pd(t, absmask), lim)) != 3) { /* large or NaN */
+            out[q] = (float)wrap_tile_inv(a[q], G, inv);
+            out[q + 1] = (float)wrap_tile_inv(a[q + 1], G, inv);
+            continue;
+        }
+        __m128d f = _mm_cvtepi32_pd(_mm_cvttpd_epi32(t));
+        f = _mm_sub_pd(f, _mm_and_pd(_mm_cmpgt_pd(f, t), one)); /* f > t ? f - 1 : f */
+        __m128d r = _mm_sub_pd(va, _mm_mul_pd(vg, f));
+        /* r >= G || !(r > 0) ? 0 : r */
+        const __m128d keep = _mm_andnot_pd(_mm_cmpge_pd(r, vg), _mm_cmpgt_pd(r, zero));
+        r = _mm_and_pd(r, keep);
+        float o[4];
+        _mm_storeu_ps(o, _mm_cvtpd_ps(r));
+        out[q] = o[0];
+        out[q + 1] = o[1];
+    }
+#endif
+    for (; q < n; q++)
+        out[q] = (float)wrap_tile_inv(a[q], G, inv);
+}
+
+/* n queries at once (the caller's batch of a row): the same candidates, order and bits as
+ * n calls of fx_voronoi_table_grid, with the per-query switches hoisted: the keys of every
+ * query with a square list first, then their distances in one loop per kind. */
+void fx_voronoi_table_grid_n(const fx_voronoi_table *t, int n, const double *x, const double *y, double *f1,
+                             double *f2, int *i1, int *i2)
+{
+    if (!t->kind || !t->sub) {
+        for (int q = 0; q < n; q++) {
+            fx_voronoi_hit h;
+            fx_voronoi_table_grid(t, x[q], y[q], &h);
+            f1[q] = h.f1;
+            f2[q] = h.f2;
+            if (i1) {
+                i1[q] = h.i1;
+                i2[q] = h.i2;
+            }
+        }
+        return;
+    }
+    const int G = t->grid, GS = G * t->sub;
+    const float subf = (float)t->sub;
+    const double Gd = G, inv = t->inv_grid;
+    float k1[FX_VORONOI_BATCH], k2[FX_VORONOI_BATCH], wx[FX_VORONOI_BATCH], wy[FX_VORONOI_BATCH];
+    for (int q0 = 0; q0 < n; q0 += FX_VORONOI_BATCH) {
+        const int m = n - q0 < FX_VORONOI_BATCH ? n - q0 : FX_VORONOI_BATCH;
+        wrap_tile_n(x + q0, m, Gd, inv, wx);
+        wrap_tile_n(y + q0, m, Gd, inv, wy);
+        for (int q = 0; q < m; q++) {
+            const float qx = wx[q], qy = wy[q];
+            int ux = (int)(qx * subf), uy = (int)(qy * subf);
+            ux = ux < GS ? ux : GS - 1;
+            uy = uy < GS ? uy : GS - 1;
+            const size_t sq = (size_t)uy * GS + ux;
+            const int nl = t->list_n[sq];
+            if (nl >= 2) {
+                fast_hit h;
+                list_search(t, qx, qy, nl, sq * FX_VORONOI_LIST_MAX, &h);
+                k1[q] = h.k1;
+                k2[q] = h.k2;
+                if (i1) {
+                    i1[q0 + q] = h.i1;
+                    i2[q0 + q] = h.i2;
+                }
+            } else { /* the ring search (no list): its distances directly; key NaN marks it */
+                fx_voronoi_hit h;
+                fx_voronoi_table_grid(t, x[q0 + q], y[q0 + q], &h);
+                f1[q0 + q] = h.f1;
+                f2[q0 + q] = h.f2;
+                if (i1) {
+                    i1[q0 + q] = h.i1;
+                    i2[q0 + q] = h.i2;
+                }
+                k1[q] = k2[q] = NAN;
+            }
+        }
+        double *o1 = f1 + q0, *o2 = f2 + q0;
+        switch (t->kind) {
+        case 2:
+            for (int q = 0; q < m; q++)
+                if (k1[q] == k1[q]) {
+                    o1[q] = cbrt23(t, k1[q]);
+                    o2[q] = cbrt23(t, k2[q]);
+                }
+            break;
+        case 3:
+            for (int q = 0; q < m; q++)
+                if (k1[q] == k1[q]) {
+                    o1[q] = sqrtf(k1[q]);
+                    o2[q] = sqrtf(k2[q]);
+                }
+            break;
+        default:
+            for (int q = 0; q < m; q++)
+                if (k1[q] == k1[q]) {
+                    o1[q] = k1[q];
+                    o2[q] = k2[q];
+                }
+            break;
+        }
+    }
 }
 
 static inline void noise_corners(double fx, double fy, uint32_t seed, double *a, double *b, double *c, double *d)

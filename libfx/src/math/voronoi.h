@@ -81,6 +81,10 @@ typedef struct fx_voronoi_table {
     int *lk;           /* ... and its point index */
     double inv_grid;   /* 1 / G: the fast kinds wrap queries with a product, no division */
     double cbrt_lut[3 * (1024 + 1)]; /* p = 1.5: cbrt(2^r m) at m = 1 + i / FX_VORONOI_CBRT_BINS */
+    /* p = 1.5, per biased float exponent eb (1..254, e = eb - 127 = 3 q + r): 2^q, and r's
+     * row offset in cbrt_lut (eb 0: scale 0) */
+    double cbrt_scale[256];
+    int cbrt_off[256];
 } fx_voronoi_table;
 
 #define FX_VORONOI_CBRT_BINS 1024
@@ -97,6 +101,12 @@ void fx_voronoi_table_build_lists(fx_voronoi_table *t, int row0, int row1);
 void fx_voronoi_table_free(fx_voronoi_table *t);
 void fx_voronoi_table_brute(const fx_voronoi_table *t, double x, double y, fx_voronoi_hit *out);
 void fx_voronoi_table_grid(const fx_voronoi_table *t, double x, double y, fx_voronoi_hit *out);
+
+/* n queries of fx_voronoi_table_grid at once: their F1 and F2 and (i1 not NULL) the
+ * points' indices, the same bits. */
+#define FX_VORONOI_BATCH 64
+void fx_voronoi_table_grid_n(const fx_voronoi_table *t, int n, const double *x, const double *y, double *f1,
+                             double *f2, int *i1, int *i2);
 
 /* Smooth value noise in [0, 1] (bilinear over hashed lattice values, smoothstep weights),
  * keeping the last lattice cell's four hashed values: nearby queries (a row of pixels
