@@ -332,6 +332,14 @@ def _mirror_faces(objs, mats):
     return faces
 
 
+def _mirror_normals(ob, mats):
+    """The mesh-space normals of ob's faces that _mirror_faces([ob], mats) lists, in its order."""
+    slot_mat = [sl.material.name if sl.material else "" for sl in ob.material_slots]
+    return [poly.normal for poly in ob.data.polygons
+            if not (mats and slot_mat and poly.material_index < len(slot_mat)
+                    and slot_mat[poly.material_index] not in mats)]
+
+
 def probe_spec(scene, view):
     """Where the probe of `view` goes, its size and its camera matrices."""
     mask = view.get("mask") or {}
@@ -510,7 +518,15 @@ def _planes(objs, mats, cam_pos):
     more than 10 % of it (a curved mirror) or there are more than PLANAR_MAX."""
     faces = []
     for ob in objs:
-        for fc, fn, area in _mirror_faces([ob], mats):
+        m3 = ob.matrix_world.to_3x3()
+        # _mirror_faces' areas are the mesh's own: a scaled object's faces grow by
+        # |det M| |M^-T n| in the world (a slab made by scaling a cube)
+        det = abs(m3.determinant())
+        nm = m3.inverted_safe().transposed()
+        for (fc, fn, area), n0 in zip(_mirror_faces([ob], mats), _mirror_normals(ob, mats)):
+            k = det * (nm @ n0).length
+            if abs(k - 1.0) > 1e-4:   # (an unscaled object's areas stay bit for bit)
+                area *= k
             if fn.dot(cam_pos - fc) > 0:   # a slab's back face reflects nothing the camera sees
                 faces.append((fc, fn, area, ob))
     if not faces:
