@@ -163,7 +163,7 @@ _cam = sc.camera.matrix_world.translation
 _cube = bpy.data.objects.new("libfx_eevee_cubemap", bpy.data.lightprobes.new("libfx_eevee_cubemap", "CUBE"))
 sc.collection.objects.link(_cube)
 _cube.data.influence_type = "BOX"
-_cube.data.influence_distance = 0.05
+_cube.data.influence_distance = 1.0   # the box: the object scale times this (the room)
 _cube.location = Vector(((_lo.x + _hi.x) / 2, (_lo.y + _hi.y) / 2, 1.5))
 _cube.scale = (_hi - _lo) / 2
 _planes = []

@@ -10,9 +10,9 @@ Per variant: the input (the card is diffuse grey; the scene's recipe, one ssr_mi
 material Mirror) and the truth (apply_truth: a perfect Glossy mirror) rendered through
 the add-on's batch path, a second truth with seed 17 (the noise floor); `libfx run` at
 each preset; the truth scene rendered by Eevee (Blender 3.x's Eevee Legacy, the same
-samples) with its screen-space reflections, and again with its own reflection probes (a
-Reflection Cubemap over the room and a Reflection Plane on each flat mirror, the light
-cache baked before the render; the bake's time apart): the real-time peer, its ms the
+samples) with its screen-space reflections, and again with its own reflection probe (a
+Reflection Cubemap over the room, the light cache baked before the render; the bake's
+time apart; no Reflection Plane: see truth_common.EEVEE_PROBES): the real-time peer, its ms the
 whole render on this VM's software OpenGL. Region: the Mirror material's pixels
 (Cryptomatte of the input). Writes
 OUT_DIR/truth_mirrors.md and .json; with --docs the images and plot into DOCS/images/.
@@ -132,8 +132,8 @@ def main():
             md.append("%s at %s: Cycles %sx%s, %s samples, rendered in %.1f s (apart from the ms above)\n"
                       % (n, at, w, h, sp, float(t)))
         if bake is not None:
-            md.append("Eevee + probes: its light cache (a reflection cubemap over the room, a reflection plane "
-                      "on each flat mirror) baked in %.1f s, apart from the render's ms\n" % bake)
+            md.append("Eevee + probes: its light cache (a reflection cubemap over the room; no reflection plane: "
+                      "truth_common.EEVEE_PROBES) baked in %.1f s, apart from the render's ms\n" % bake)
         if not probes:
             md.append("views: reused from an earlier run or not rendered (see %sinref_batch.log)\n" % p)
         for line in log.splitlines():
