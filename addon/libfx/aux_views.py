@@ -26,14 +26,17 @@ alpha threshold exactly as in the main render and cast leaf-shaped shadows.
   at the centre of the mirror objects' bounding box pushed out past their front
   along their mean normal (towards the camera).  A probe that fails to render
   is a warning: the run goes on and ssr_mirror takes its texture fallback.
-- ``planar:<key>``: for a flat mirror (one plane fits all its faces), the scene seen
-  by the camera mirrored in that plane (ssr_mirror's ``planar_view``, the
-  ``reference`` preset), at the render's size and samples (or
-  ``libfx_planar_samples``), colour + Depth, with the mirror and the objects wholly
-  behind its plane hidden from the camera (they still cast shadows and bounce
-  light); the entry carries the plane. A mirror that is
-  not flat (a curved one, a facing pair in one entry) gets no view: a log line, and
-  ssr_mirror keeps the trace and the probe there.
+- ``planar:<key>``: for a mirror whose faces lie in a few planes (a flat mirror: one;
+  a facing pair in one entry: two; at most PLANAR_MAX), one view per plane
+  (``planar:<key>``, ``planar:<key>#2``, ...): the scene seen by the camera mirrored
+  in that plane (ssr_mirror's ``planar_view``, the ``reference`` preset), at the
+  render's size and 4x its samples (or ``libfx_planar_samples``), colour + Depth,
+  with the entry's mirrors as perfect mirrors (the other plane's mirror reflects the
+  room again) and the plane's own mirror objects and the objects wholly behind the
+  plane hidden from the camera (they still cast shadows and bounce light); each entry
+  carries its plane and ssr_mirror looks each pixel up in its own plane's view. A
+  mirror that is not flat (a curved one) gets no view: a log line, and ssr_mirror
+  keeps the trace and the probe there.
 
 A view is rendered once and reused while its signature (camera, resolution, the
 light, every linked object's transform, mesh size and materials) does not
@@ -329,6 +332,14 @@ def _mirror_faces(objs, mats):
     return faces
 
 
+def _mirror_normals(ob, mats):
+    """The mesh-space normals of ob's faces that _mirror_faces([ob], mats) lists, in its order."""
+    slot_mat = [sl.material.name if sl.material else "" for sl in ob.material_slots]
+    return [poly.normal for poly in ob.data.polygons
+            if not (mats and slot_mat and poly.material_index < len(slot_mat)
+                    and slot_mat[poly.material_index] not in mats)]
+
+
 def probe_spec(scene, view):
     """Where the probe of `view` goes, its size and its camera matrices."""
     mask = view.get("mask") or {}
@@ -431,23 +442,24 @@ def _render_probe(scene, spec, objs, path):
             cam_data.clip_start = spec["clip_start"]
         cam_data.clip_end = spec["clip_end"]
         cam.matrix_world = Matrix(spec["matrix_world"])
-        for name in spec["hidden"] + spec.get("behind", []):
+        # the views see the entry's mirrors as perfect mirrors: a mirror of a facing pair
+        # reflects the other one (and what that one reflects); a flat or convex mirror never
+        # looks up its own direction; the room is lit with the mirror in it, as in Cycles
+        for name in spec["hidden"] if spec["kind"] == "probe" else spec.get("mirrors", []):
             ob = bpy.data.objects.get(name)
             if ob is None:
                 continue
-            if spec["kind"] == "probe":
-                # the probe sees the entry's mirrors as perfect mirrors: a mirror of a facing
-                # pair reflects the other one (and what that one reflects); a flat or convex
-                # mirror never looks up its own direction
-                swapped.append((ob, [sl.material for sl in ob.material_slots], ob.data.materials[:]))
-                mat = _probe_mirror_material()
-                if not ob.material_slots:
-                    ob.data.materials.append(mat)
-                for sl in ob.material_slots:
-                    sl.material = mat
-            elif ob.visible_camera:
-                # the mirror shows the room, not itself, and not what stands behind its plane
-                # (still there for shadows and bounce light: the room must be lit as it is)
+            swapped.append((ob, [sl.material for sl in ob.material_slots], ob.data.materials[:]))
+            mat = _probe_mirror_material()
+            if not ob.material_slots:
+                ob.data.materials.append(mat)
+            for sl in ob.material_slots:
+                sl.material = mat
+        for name in spec["hidden"] + spec.get("behind", []) if spec["kind"] == "planar" else []:
+            ob = bpy.data.objects.get(name)
+            if ob is not None and ob.visible_camera:
+                # a planar view shows the room, not its own plane's mirror, and not what stands
+                # behind that plane (still there for shadows and bounce light)
                 ob.visible_camera = False
                 hidden.append(ob)
         aux.camera = cam
@@ -490,47 +502,84 @@ class NotPlanar(Exception):
     pass
 
 
-def planar_spec(scene, view):
-    """The mirrored camera of a flat mirror: its matrices, the plane, what it hides."""
+PLANAR_MAX = 4   # planar views per mirror entry (ssr_mirror looks up at most this many)
+
+
+def planar_view_name(name, k):
+    """The k-th plane's view of the need `name` ("planar:<key>"): the first plane keeps the
+    need's name, the others are "planar:<key>#2", "#3", ... (ssr_mirror loads them in turn)."""
+    return name if k == 0 else "%s#%d" % (name, k + 1)
+
+
+def _planes(objs, mats, cam_pos):
+    """The planes of a mirror's faces that the camera sees: [(n, d, area, objects)], the
+    largest first. Faces are grouped by normal (within 2.6 deg) and offset; groups under
+    10 % of the seen area (a slab's edges) are left out; NotPlanar when the planes leave
+    more than 10 % of it (a curved mirror) or there are more than PLANAR_MAX."""
+    faces = []
+    for ob in objs:
+        m3 = ob.matrix_world.to_3x3()
+        # _mirror_faces' areas are the mesh's own: a scaled object's faces grow by
+        # |det M| |M^-T n| in the world (a slab made by scaling a cube)
+        det = abs(m3.determinant())
+        nm = m3.inverted_safe().transposed()
+        for (fc, fn, area), n0 in zip(_mirror_faces([ob], mats), _mirror_normals(ob, mats)):
+            k = det * (nm @ n0).length
+            if abs(k - 1.0) > 1e-4:   # (an unscaled object's areas stay bit for bit)
+                area *= k
+            if fn.dot(cam_pos - fc) > 0:   # a slab's back face reflects nothing the camera sees
+                faces.append((fc, fn, area, ob))
+    if not faces:
+        raise NotPlanar("the camera sees none of its faces")
+    lo, hi = world_box(objs)
+    tol = 0.01 + 0.002 * (hi - lo).length
+    groups = []   # [n, [faces]]: n the first (largest) face's normal
+    for f in sorted(faces, key=lambda f: -f[2]):
+        for g in groups:
+            if f[1].dot(g[0]) > 0.999 and abs((f[0] - g[1][0][0]).dot(g[0])) <= tol:
+                g[1].append(f)
+                break
+        else:
+            groups.append([f[1], [f]])
+    total = sum(f[2] for f in faces)
+    out = []
+    for _, fs in groups:
+        area = sum(f[2] for f in fs)
+        if area < 0.1 * total:
+            continue
+        n = Vector((0, 0, 0))
+        c = Vector((0, 0, 0))
+        for fc, fn, a, _ in fs:
+            n += fn * a
+            c += fc * a
+        if n.length < 1e-12:
+            continue
+        n.normalize()
+        c /= area
+        if any(abs((fc - c).dot(n)) > tol for fc, _, _, _ in fs):
+            raise NotPlanar("its faces lie in parallel planes, not one")
+        out.append((n, n.dot(c), area, sorted({f[3].name for f in fs})))
+    if not out or sum(o[2] for o in out) < 0.9 * total:
+        raise NotPlanar("its faces do not lie in a few planes (a curved mirror?)")
+    if len(out) > PLANAR_MAX:
+        raise NotPlanar("its faces lie in %d planes (at most %d planar views)" % (len(out), PLANAR_MAX))
+    out.sort(key=lambda o: -o[2])
+    return out
+
+
+def planar_specs(scene, view):
+    """One mirrored camera per plane of the mirror (a flat mirror: one; a facing pair in
+    one entry: two): its matrices, the plane, what it hides. Each view shows the entry's
+    mirrors as perfect mirrors (the other plane's mirror reflects the room again, as
+    Cycles' mirror does) and hides from its camera the mirror objects on its own plane and
+    what stands wholly behind that plane."""
     mask = view.get("mask") or {}
     objs = mask_objects(scene, mask)
     cam = scene.camera
     if not objs or cam is None:
         raise NotPlanar("the mask names no object" if cam else "the scene has no camera")
     cam_pos = cam.matrix_world.translation
-    # the faces the camera sees (a slab's back face does not reflect anything it sees)
-    faces = [f for f in _mirror_faces(objs, set(mask.get("material") or [])) if f[1].dot(cam_pos - f[0]) > 0]
-    n = Vector((0, 0, 0))
-    for fc, fn, area in faces:
-        n += fn * area
-    lo, hi = world_box(objs)
-    size = (hi - lo).length
-    if not faces or n.length < 1e-9:
-        raise NotPlanar("its faces have no common normal (mirrors facing each other?)")
-    n.normalize()
-    plane = [f for f in faces if f[1].dot(n) > 0.999]
-    total = sum(f[2] for f in plane)
-    other = sum(f[2] for f in faces) - total
-    if total <= 0 or other > 0.05 * total:
-        raise NotPlanar("its faces do not lie in one plane (a curved mirror, or mirrors facing each other)")
-    c = Vector((0, 0, 0))
-    for fc, _, area in plane:
-        c += fc * area
-    c /= total
-    tol = 0.01 + 0.002 * size
-    if any(abs((fc - c).dot(n)) > tol for fc, _, _ in plane):
-        raise NotPlanar("its faces lie in parallel planes, not one")
-    d = n.dot(c)
-    if n.dot(cam_pos) - d <= 0:
-        raise NotPlanar("the camera is behind its plane")
-    S = Matrix.Identity(3)
-    for i in range(3):
-        for k in range(3):
-            S[i][k] -= 2.0 * n[i] * n[k]
-    R = cam.matrix_world.to_3x3().normalized()
-    e2 = cam_pos - 2.0 * (cam_pos.dot(n) - d) * n
-    R2 = S @ R @ Matrix.Diagonal((-1.0, 1.0, 1.0))   # a proper rotation: the image is mirrored
-    mw = Matrix.Translation(e2) @ R2.to_4x4()
+    planes = _planes(objs, set(mask.get("material") or []), cam_pos)
     r = scene.render
     rw = int(r.resolution_x * r.resolution_percentage / 100)
     rh = int(r.resolution_y * r.resolution_percentage / 100)
@@ -538,63 +587,81 @@ def planar_spec(scene, view):
                                   scale_y=r.pixel_aspect_y)
     proj = [list(row) for row in proj]
     proj[0][2] = -proj[0][2]                          # the lens shift, mirrored with x
-    behind = []
-    for ob in scene.objects:
-        if ob.type in ("MESH", "CURVE", "SURFACE", "META", "FONT") and ob not in objs:
-            corners = [ob.matrix_world @ Vector(v) for v in ob.bound_box]
-            if all(n.dot(p) - d < -1e-4 for p in corners):
-                behind.append(ob.name)
     # the view is the mirror's whole reflection at the converged preset: 4x the scene's
     # samples, so its noise is half the render's
     samples = int(scene.get("libfx_planar_samples") or 4 * max(1, scene.cycles.samples))
-    return {
-        "name": view["name"], "kind": "planar", "width": rw, "height": rh, "samples": samples,
-        "matrix_world": [list(row) for row in mw], "world_to_camera": [list(row) for row in mw.inverted()],
-        "projection": proj, "clip_start": float(cam.data.clip_start), "clip_end": float(cam.data.clip_end),
-        "hidden": [o.name for o in objs], "behind": sorted(behind), "plane": [n.x, n.y, n.z, d],
-        "where": "the plane of %s" % ", ".join(o.name for o in objs[:4]),
-    }
+    specs = []
+    for k, (n, d, _, on_plane) in enumerate(planes):
+        if n.dot(cam_pos) - d <= 0:
+            raise NotPlanar("the camera is behind its plane")
+        S = Matrix.Identity(3)
+        for i in range(3):
+            for j in range(3):
+                S[i][j] -= 2.0 * n[i] * n[j]
+        R = cam.matrix_world.to_3x3().normalized()
+        e2 = cam_pos - 2.0 * (cam_pos.dot(n) - d) * n
+        R2 = S @ R @ Matrix.Diagonal((-1.0, 1.0, 1.0))   # a proper rotation: the image is mirrored
+        mw = Matrix.Translation(e2) @ R2.to_4x4()
+        behind = []
+        for ob in scene.objects:
+            if ob.type in ("MESH", "CURVE", "SURFACE", "META", "FONT") and ob not in objs:
+                corners = [ob.matrix_world @ Vector(v) for v in ob.bound_box]
+                if all(n.dot(p) - d < -1e-4 for p in corners):
+                    behind.append(ob.name)
+        specs.append({
+            "name": planar_view_name(view["name"], k), "kind": "planar", "width": rw, "height": rh,
+            "samples": samples, "matrix_world": [list(row) for row in mw],
+            "world_to_camera": [list(row) for row in mw.inverted()], "projection": proj,
+            "clip_start": float(cam.data.clip_start), "clip_end": float(cam.data.clip_end),
+            "hidden": on_plane, "mirrors": [o.name for o in objs], "behind": sorted(behind),
+            "plane": [n.x, n.y, n.z, d],
+            "where": "the plane of %s" % ", ".join(on_plane[:4]),
+        })
+    return specs
 
 
-def _prepare_probe(scene, view, path, meta_path):
-    """Renders (or reuses) one probe or planar view; its sidecar entry, or None (a log
-    line: a warning when it failed) when there is none."""
+def _prepare_probe(scene, spec, path, meta_path):
+    """Renders (or reuses) one probe or planar view (spec: probe_spec / planar_specs); its
+    sidecar entry, or None (a warning) when it failed to render."""
     try:
-        if view["kind"] == "planar":
-            try:
-                spec = planar_spec(scene, view)
-            except NotPlanar as e:
-                log("no planar view '%s': the mirror is not flat (%s); ssr_mirror uses the trace and the "
-                    "probe there" % (view["name"], e))
-                return None
-            objs = _probe_scene_objects(scene)
-        else:
-            spec = probe_spec(scene, view)
-            objs = _probe_scene_objects(scene)
+        objs = _probe_scene_objects(scene)
         sig = _probe_signature(scene, spec, objs)
         old = _stored_entry(path, meta_path)
         if old and old.get("signature") == sig:
-            log("%s '%s' reused (scene unchanged): %s" % (view["kind"], view["name"], path))
+            log("%s '%s' reused (scene unchanged): %s" % (spec["kind"], spec["name"], path))
         else:
             os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
             t0 = time.perf_counter()
             _render_probe(scene, spec, objs, path)
             log("%s '%s' at %s rendered %dx%d (%d samples) in %.2f s: %s"
-                % (view["kind"], view["name"], spec["where"], spec["width"], spec["height"], spec["samples"],
+                % (spec["kind"], spec["name"], spec["where"], spec["width"], spec["height"], spec["samples"],
                    time.perf_counter() - t0, path))
     except Exception as e:  # a probe is an improvement, never a reason to fail the frame
         log("warning: the %s view '%s' failed to render (%s): ssr_mirror falls back to %s"
-            % (view["kind"], view["name"], e,
-               "the mirror's texture" if view["kind"] == "probe" else "the trace and the probe"))
+            % (spec["kind"], spec["name"], e,
+               "the mirror's texture" if spec["kind"] == "probe" else "the trace and the probe"))
         return None
-    if view["kind"] == "planar":
-        return {"name": view["name"], "path": path, "world_to_camera": spec["world_to_camera"],
+    if spec["kind"] == "planar":
+        return {"name": spec["name"], "path": path, "world_to_camera": spec["world_to_camera"],
                 "projection": spec["projection"], "clip_start": spec["clip_start"], "clip_end": spec["clip_end"],
                 "orthographic": False, "kind": "planar", "plane": spec["plane"], "signature": sig}
     ident = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
-    return {"name": view["name"], "path": path, "world_to_camera": spec["world_to_camera"],
+    return {"name": spec["name"], "path": path, "world_to_camera": spec["world_to_camera"],
             "projection": ident, "clip_start": 0.0, "clip_end": spec["clip_end"], "orthographic": False,
             "kind": "probe", "panorama": "equirect", "signature": sig}
+
+
+def _view_specs(scene, view):
+    """The renders one needed probe or planar view takes: [spec] (planar: one per plane;
+    none, with a log line, for a mirror that is not flat)."""
+    if view["kind"] != "planar":
+        return [probe_spec(scene, view)]
+    try:
+        return planar_specs(scene, view)
+    except NotPlanar as e:
+        log("no planar view '%s': the mirror is not flat (%s); ssr_mirror uses the trace and the "
+            "probe there" % (view["name"], e))
+        return []
 
 
 def _file_name(view_name):
@@ -628,13 +695,21 @@ def prepare(scene, frames):
     entries = []
     for view in views:
         if view["kind"] in ("probe", "planar"):
-            path = "%slibfx_aux_%s.exr" % (scene_setup.output_prefix(scene), _file_name(view["name"]))
-            meta_path = path[:-4] + ".json"
-            entry = _prepare_probe(scene, view, path, meta_path)
-            if entry is None:
-                continue
-            _store_entry(meta_path, entry)
-            entries.append(entry)
+            try:
+                specs = _view_specs(scene, view)
+            except Exception as e:  # a probe is an improvement, never a reason to fail the frame
+                log("warning: the %s view '%s' could not be placed (%s): ssr_mirror falls back to %s"
+                    % (view["kind"], view["name"], e,
+                       "the mirror's texture" if view["kind"] == "probe" else "the trace and the probe"))
+                specs = []
+            for spec in specs:
+                path = "%slibfx_aux_%s.exr" % (scene_setup.output_prefix(scene), _file_name(spec["name"]))
+                meta_path = path[:-4] + ".json"
+                entry = _prepare_probe(scene, spec, path, meta_path)
+                if entry is None:
+                    continue
+                _store_entry(meta_path, entry)
+                entries.append(entry)
             continue
         spec = view_spec(scene, view, frames, objs)
         sig = signature(spec, objs)
@@ -662,12 +737,16 @@ def from_disk(scene):
     render them from inside a render)."""
     out = []
     for view in needed(scene):
-        meta_path = "%slibfx_aux_%s.json" % (scene_setup.output_prefix(scene), _file_name(view["name"]))
-        try:
-            with open(meta_path, encoding="utf-8") as f:
-                out.append(json.load(f))
-            log("aux view '%s' from disk (F12 cannot render it; a batch run re-renders it when it is stale)"
-                % view["name"])
-        except (OSError, ValueError):
-            pass
+        names = [view["name"]]
+        if view["kind"] == "planar":   # one view per plane of the mirror
+            names = [planar_view_name(view["name"], k) for k in range(PLANAR_MAX)]
+        for name in names:
+            meta_path = "%slibfx_aux_%s.json" % (scene_setup.output_prefix(scene), _file_name(name))
+            try:
+                with open(meta_path, encoding="utf-8") as f:
+                    out.append(json.load(f))
+                log("aux view '%s' from disk (F12 cannot render it; a batch run re-renders it when it is stale)"
+                    % name)
+            except (OSError, ValueError):
+                pass
     return out

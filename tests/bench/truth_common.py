@@ -120,24 +120,90 @@ sc.eevee.use_ssr = True
 sc.eevee.use_ssr_halfres = False
 sc.eevee.ssr_quality = 1.0
 sc.eevee.ssr_max_roughness = 0.5
+t_bake = None
+%(probes)s
 is_ = sc.render.image_settings
 is_.file_format, is_.color_depth, is_.color_mode = "OPEN_EXR", "32", "RGBA"
 sc.render.filepath = %(out)r
 t0 = time.perf_counter()
 bpy.ops.render.render(write_still=True)
 t_render = time.perf_counter() - t0
-print("LIBFX_EEVEE " + json.dumps({"render_s": t_render}))
+print("LIBFX_EEVEE " + json.dumps({"render_s": t_render, "bake_s": t_bake}))
+"""
+
+# Eevee's own probes (eevee(..., probes=True)): a Reflection Cubemap whose box influence is
+# the room (the meshes other than the mirrors), at its centre 1.5 m up; then the light
+# cache baked (bpy.ops.scene.light_cache_bake works under -b in Blender 3.4: about 100 s
+# here on the VM's software OpenGL). USE_PLANES adds a Reflection Plane on each flat
+# mirror object (its largest camera-facing "Mirror" face; skipped when the object's seen
+# mirror faces turn, as a curved mirror's do), sized to that face: off, because on this
+# VM's software OpenGL (Mesa llvmpipe) the plane's clipping leaks into the main render,
+# which then loses everything behind the mirror's plane (the back wall, the far floor)
+# and the mirror itself (facing scene, 2026-11-26: region MAE 0.184 against SSR's 0.152).
+EEVEE_PROBES = r"""
+USE_PLANES = False
+from mathutils import Vector, Matrix
+def _mirror_faces(o):
+    slots = [s.material.name if s.material else "" for s in o.material_slots]
+    mw = o.matrix_world
+    nm = mw.to_3x3().inverted_safe().transposed()
+    for p in o.data.polygons:
+        if p.material_index < len(slots) and slots[p.material_index] == "Mirror":
+            yield p, mw, (nm @ p.normal).normalized()
+_meshes = [o for o in sc.objects if o.type == "MESH" and not o.hide_render]
+_mirrors = [o for o in _meshes if any(True for _ in _mirror_faces(o))]
+_lo, _hi = Vector((1e9,) * 3), Vector((-1e9,) * 3)
+for o in _meshes:
+    if o in _mirrors:
+        continue
+    for c in o.bound_box:
+        q = o.matrix_world @ Vector(c)
+        _lo, _hi = Vector(map(min, _lo, q)), Vector(map(max, _hi, q))
+_cam = sc.camera.matrix_world.translation
+_cube = bpy.data.objects.new("libfx_eevee_cubemap", bpy.data.lightprobes.new("libfx_eevee_cubemap", "CUBE"))
+sc.collection.objects.link(_cube)
+_cube.data.influence_type = "BOX"
+_cube.data.influence_distance = 1.0   # the box: the object scale times this (the room)
+_cube.location = Vector(((_lo.x + _hi.x) / 2, (_lo.y + _hi.y) / 2, 1.5))
+_cube.scale = (_hi - _lo) / 2
+_planes = []
+for o in (_mirrors if USE_PLANES else []):
+    seen = [f for f in _mirror_faces(o) if f[2].dot(_cam - f[1] @ f[0].center) > 0]
+    if not seen:
+        continue
+    p, mw, n = max(seen, key=lambda f: f[0].area)
+    if any(f[2].dot(n) < 0.999 and f[0].area > 0.1 * p.area for f in seen):
+        continue   # not flat: the cubemap and SSR serve it
+    c = mw @ p.center
+    t1 = mw @ o.data.vertices[p.vertices[1]].co - mw @ o.data.vertices[p.vertices[0]].co
+    t1 = (t1 - n * t1.dot(n)).normalized()
+    t2 = n.cross(t1)
+    pts = [mw @ o.data.vertices[v].co - c for v in p.vertices]
+    e1, e2 = max(abs(q.dot(t1)) for q in pts), max(abs(q.dot(t2)) for q in pts)
+    pl = bpy.data.objects.new("libfx_eevee_plane_" + o.name, bpy.data.lightprobes.new("libfx_eevee_plane", "PLANAR"))
+    sc.collection.objects.link(pl)
+    pl.matrix_world = (Matrix.Translation(c) @ Matrix((t1, t2, n)).transposed().to_4x4()
+                       @ Matrix.Diagonal((e1 * 1.05, e2 * 1.05, 1.0, 1.0)))
+    pl.data.influence_distance = 0.05
+    _planes.append(o.name)
+t0 = time.perf_counter()
+if bpy.ops.scene.light_cache_bake() != {"FINISHED"}:
+    raise SystemExit("truth: Eevee's light cache did not bake")
+t_bake = time.perf_counter() - t0
+print("LIBFX_EEVEE_PROBES " + json.dumps({"planes": _planes, "cache": sc.eevee.gi_cache_info}))
 """
 
 
-def eevee(name, blend, out, res, spp):
+def eevee(name, blend, out, res, spp, probes=False):
     """The truth scene (apply_truth) rendered by Eevee Legacy with SSR: (linear RGB,
-    render seconds); kept and reused like the Cycles renders (OUT.json holds the time)."""
+    render seconds); kept and reused like the Cycles renders (OUT.json holds the time).
+    probes: with Eevee's own reflection probes too (EEVEE_PROBES; the bake's seconds are
+    in OUT.json as bake_s, apart from the render's)."""
     times = out + ".json"
     if not (os.path.exists(out) and os.path.exists(times)):
         w, h = (int(x) for x in res.split("x"))
-        code = EEVEE_CODE % {"res": (w, h), "spp": spp, "out": out}
-        p = subprocess.run([BLENDER, "-b", str(blend), "--python-expr", truth_expr(name, code)],
+        code = EEVEE_CODE % {"res": (w, h), "spp": spp, "out": out, "probes": EEVEE_PROBES if probes else ""}
+        p = subprocess.run(["nice", "-n", "5", BLENDER, "-b", str(blend), "--python-expr", truth_expr(name, code)],
                            capture_output=True, text=True)
         line = [x for x in p.stdout.splitlines() if x.startswith("LIBFX_EEVEE ")]
         if p.returncode or not line or not os.path.exists(out):

@@ -10,8 +10,10 @@ Per variant: the input (the card is diffuse grey; the scene's recipe, one ssr_mi
 material Mirror) and the truth (apply_truth: a perfect Glossy mirror) rendered through
 the add-on's batch path, a second truth with seed 17 (the noise floor); `libfx run` at
 each preset; the truth scene rendered by Eevee (Blender 3.x's Eevee Legacy, the same
-samples) with its screen-space reflections: the real-time peer, its ms the whole render
-on this VM's software OpenGL. Region: the Mirror material's pixels
+samples) with its screen-space reflections, and again with its own reflection probe (a
+Reflection Cubemap over the room, the light cache baked before the render; the bake's
+time apart; no Reflection Plane: see truth_common.EEVEE_PROBES): the real-time peer, its ms the
+whole render on this VM's software OpenGL. Region: the Mirror material's pixels
 (Cryptomatte of the input). Writes
 OUT_DIR/truth_mirrors.md and .json; with --docs the images and plot into DOCS/images/.
 
@@ -111,19 +113,27 @@ def main():
                 rows.append(C.error_row("%s, no probe" % q, tex[q][0], tex[q][1], truth, region))
             else:
                 rows.append(C.error_row("%s + probe" % q, prb[q][0], prb[q][1], truth, region))
-        if a.eevee:  # the real-time peer: Eevee's own screen-space reflections
+        bake = None
+        if a.eevee:  # the real-time peer: Eevee's own screen-space reflections, then with its probes
             img, render_s = C.eevee("mirrors", blend, p + "eevee_ssr.exr", a.res, a.spp)
             rows.append(C.error_row("Eevee SSR", img, 1e3 * render_s, truth, region))
+            img, render_s = C.eevee("mirrors", blend, p + "eevee_probes.exr", a.res, a.spp, probes=True)
+            rows.append(C.error_row("Eevee + probes", img, 1e3 * render_s, truth, region))
+            bake = json.load(open(p + "eevee_probes.exr.json")).get("bake_s")
         series[v] = rows
         report[v] = {"region_px": int(region.sum()), "rows": rows,
                      "probes": [{"name": n, "at": at, "size": [int(w), int(h)], "samples": int(sp),
-                                 "render_s": float(t)} for n, at, w, h, sp, t in probes]}
+                                 "render_s": float(t)} for n, at, w, h, sp, t in probes],
+                     "eevee_bake_s": bake}
         md.append("### %s (%s, %d spp; mirror region %d px, %.1f %% of the frame)\n"
                   % (v, a.res, a.spp, region.sum(), 100 * region.mean()))
         md.append(C.fmt_rows(rows) + "\n")
         for n, at, w, h, sp, t in probes:
             md.append("%s at %s: Cycles %sx%s, %s samples, rendered in %.1f s (apart from the ms above)\n"
                       % (n, at, w, h, sp, float(t)))
+        if bake is not None:
+            md.append("Eevee + probes: its light cache (a reflection cubemap over the room; no reflection plane: "
+                      "truth_common.EEVEE_PROBES) baked in %.1f s, apart from the render's ms\n" % bake)
         if not probes:
             md.append("views: reused from an earlier run or not rendered (see %sinref_batch.log)\n" % p)
         for line in log.splitlines():
@@ -139,7 +149,7 @@ def main():
     methods = ["libfx " + q for q in C.PRESETS] + ["draft + probe", "preview + probe", "final, no probe",
                                                    "reference, no probe"]
     if a.eevee:
-        methods.append("Eevee SSR")
+        methods += ["Eevee SSR", "Eevee + probes"]
     for m in methods:
         falls = []
         for v, rows in series.items():

@@ -21,12 +21,14 @@
  * rendered, failed): a warning and the texture fallback; debug pass "fallback_<name>"
  * names the one in use and holds its weight per pixel.
  *
- * Planar view (planar_view, the reference preset): for a flat mirror the add-on renders
+ * Planar views (planar_view, the reference preset): for a flat mirror the add-on renders
  * the scene from the camera mirrored in the mirror's plane (aux view "planar:<mask key>",
- * with the plane). A mirror pixel on that plane (its normal along the plane's, within a
- * few centimetres of it) takes that view's colour at the projection of its world
- * position: the exact reflection, no tracing. Other pixels (a curved mirror, a pair of
- * mirrors, which the add-on does not fit with one plane) keep the trace and the probe.
+ * with the plane); for a mirror whose faces lie in a few planes (a facing pair in one
+ * entry) one view per plane ("planar:<mask key>", "...#2", up to PLANAR_VIEWS_MAX). A
+ * mirror pixel on one of those planes (its normal within 37 deg of the plane's, within a
+ * few centimetres of it; the nearest plane if several) takes that plane's view's colour at
+ * the projection of its world position: the exact reflection, no tracing. Other pixels
+ * (a curved mirror, a slab's edges) keep the trace and the probe.
  *
  * One stack entry is one mirror kind: many mirrors are many entries, each with its own
  * mask and parameters (the add-on's UI, `libfx describe` and the docs keep working on
@@ -59,6 +61,8 @@
 #include "scene/aux_view.h"
 
 #include <float.h>
+
+#define PLANAR_VIEWS_MAX 4 /* planar views per entry (the add-on's aux_views.PLANAR_MAX) */
 #include <math.h>
 #include <stdatomic.h>
 #include <stdio.h>
@@ -301,7 +305,8 @@ typedef struct ssr_job {
     float opm[16];
     float *dbg_hit, *dbg_xy, *dbg_len, *dbg_fb;
     const fx_pano *probe;      /* the reflection probe (fallback probe and present), or NULL */
-    const fx_aux_view *planar; /* the mirrored camera's view (planar_view and present), or NULL */
+    const fx_aux_view *planar[PLANAR_VIEWS_MAX]; /* the mirrored cameras' views, one per plane */
+    int planar_count;          /* how many (0: planar_view off or none rendered) */
     float *dbg_planar;
     fx_pano_trace_settings pst;
 } ssr_job;
@@ -625,27 +630,40 @@ static void ray_colour(const ssr_job *j, fx_vec3 ro, fx_vec3 rd, float px, float
     }
 }
 
-/* The planar view's colour for mirror pixel (x, y) at view position pos, if the pixel
- * lies on the view's plane and projects into it. */
+/* The colour of mirror pixel (x, y) at view position pos in the planar view of its plane:
+ * 1 + that view's index, or 0 when the pixel lies on none of the views' planes (or
+ * projects outside its view). */
 static int planar_colour(const ssr_job *j, int x, int y, fx_vec3 pos, float rgb[3])
 {
     const ssr_frame *F = j->F;
-    const fx_aux_view *pv = j->planar;
     const float *np = F->normal + ((size_t)y * F->w + x) * F->nch;
     fx_vec3 nw = fx_v3_normalize_or(fx_v3(np[0], np[1], np[2]), fx_v3(0, 0, 0));
-    fx_vec3 pn = fx_v3(pv->plane[0], pv->plane[1], pv->plane[2]);
-    if (!(fabsf(fx_v3_dot(nw, pn)) > 0.99f))
-        return 0;
     fx_vec3 wp = fx_view_to_world(&F->view, pos);
-    float dist = fx_v3_dot(pn, wp) - pv->plane[3];
-    if (!(fabsf(dist) < 0.02f + 0.002f * fx_v3_length(pos)))
+    float tol = 0.02f + 0.002f * fx_v3_length(pos);
+    int best = -1;
+    float best_dist = 0.0f;
+    for (int k = 0; k < j->planar_count; k++) {
+        const fx_aux_view *pv = j->planar[k];
+        fx_vec3 pn = fx_v3(pv->plane[0], pv->plane[1], pv->plane[2]);
+        float dist = fabsf(fx_v3_dot(pn, wp) - pv->plane[3]);
+        /* on the plane (Depth is not anti-aliased) with a normal within 37 deg of it: an
+         * anti-aliased border pixel blends the mirror's normal with its neighbour's (0.99
+         * left 1 347 of the truth pair's border pixels to the trace: 0.3 pt of its fall);
+         * a slab's side faces (90 deg) stay out */
+        if (fabsf(fx_v3_dot(nw, pn)) > 0.8f && dist < tol && (best < 0 || dist < best_dist)) {
+            best = k;
+            best_dist = dist;
+        }
+    }
+    if (best < 0)
         return 0;
+    const fx_aux_view *pv = j->planar[best];
     float px, py, dd;
     if (!fx_aux_view_project(pv, wp, &px, &py, &dd) || !(px >= 0.0f && px <= (float)pv->width) ||
         !(py >= 0.0f && py <= (float)pv->height))
         return 0;
     sample_bilinear(pv->color, pv->width, pv->height, px, py, rgb);
-    return 1;
+    return best + 1;
 }
 
 static void apply_operator(const ssr_job *j, float px, float py, float rgb[3])
@@ -727,7 +745,7 @@ static void shade_rows(void *user, int begin, int end)
             float refl[3], fb[3];
             float conf = h.state == 1 ? h.conf : 0.0f;
             fx_vec3 rd = fx_v3_reflect(inc, n);
-            int on_plane = j->planar && planar_colour(j, x, y, pos, refl);
+            int on_plane = j->planar_count ? planar_colour(j, x, y, pos, refl) : 0; /* 1 + its view */
             if (on_plane) {
                 if (p->op == OP_SEPIA || p->op == OP_GRAYSCALE)
                     fx_color_op_apply3(j->opm, refl, refl);
@@ -1064,24 +1082,40 @@ static fx_result ssr_probe_load(const fx_effect_run *run, ssr_job *j, const ssr_
     return FX_OK;
 }
 
-/* Process stage 0 (planar_view): the entry's mirrored-camera view as j->planar. Missing
- * (not rendered: a curved mirror or a pair, or failed): a warning, the trace serves. */
-static fx_result ssr_planar_load(const fx_effect_run *run, ssr_job *j, fx_aux_view **av)
+/* Process stage 0 (planar_view): the entry's mirrored-camera views, one per plane
+ * ("planar:<key>", then "planar:<key>#2", ... while the frame has them), as j->planar.
+ * A missing or unusable view (not rendered: a curved mirror, or failed): a warning, the
+ * trace serves its pixels. av[] receives the loaded views (freed by the caller). */
+static fx_result ssr_planar_load(const fx_effect_run *run, ssr_job *j, fx_aux_view *av[PLANAR_VIEWS_MAX])
 {
-    char name[FX_NAME_MAX];
-    snprintf(name, sizeof name, FX_AUX_PLANAR "%s", run->mask_key ? run->mask_key : "");
-    fx_result r = fx_aux_view_load(run->frame, name, run->where, av);
-    if (r == FX_ERR_OUT_OF_MEMORY)
-        return r;
-    if (r || !(*av)->color || !(*av)->has_plane || (*av)->panorama) {
-        char msg[1024];
-        snprintf(msg, sizeof msg, "%s", r ? fx_context_error(run->ctx) : "it has no colour pass or no \"plane\"");
-        fx_warn(run->ctx, "%s: no planar mirror view (%s): the trace and the fallback serve", run->where, msg);
-        fx_aux_view_free(*av);
-        *av = NULL;
-        return FX_OK;
+    for (int k = 0; k < PLANAR_VIEWS_MAX; k++) {
+        char name[FX_NAME_MAX];
+        if (k == 0)
+            snprintf(name, sizeof name, FX_AUX_PLANAR "%s", run->mask_key ? run->mask_key : "");
+        else
+            snprintf(name, sizeof name, FX_AUX_PLANAR "%s#%d", run->mask_key ? run->mask_key : "", k + 1);
+        if (k > 0) {
+            int has = fx_aux_view_has(run->frame, name);
+            if (has < 0)
+                return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory reading the frame's aux views",
+                               run->where);
+            if (!has)
+                break;
+        }
+        fx_result r = fx_aux_view_load(run->frame, name, run->where, &av[k]);
+        if (r == FX_ERR_OUT_OF_MEMORY)
+            return r;
+        if (r || !av[k]->color || !av[k]->has_plane || av[k]->panorama) {
+            char msg[1024];
+            snprintf(msg, sizeof msg, "%s", r ? fx_context_error(run->ctx) : "it has no colour pass or no \"plane\"");
+            fx_warn(run->ctx, "%s: no planar mirror view '%s' (%s): the trace and the fallback serve", run->where,
+                    name, msg);
+            fx_aux_view_free(av[k]);
+            av[k] = NULL;
+            continue;
+        }
+        j->planar[j->planar_count++] = av[k];
     }
-    j->planar = *av;
     return FX_OK;
 }
 
@@ -1108,10 +1142,12 @@ static fx_result ssr_process(const fx_effect_run *run)
     fx_pano pano;
     if (p->fallback == FALLBACK_PROBE && (r = ssr_probe_load(run, &j, &F, &probe_map, &pano)))
         return r;
-    fx_aux_view *planar_view = NULL;
+    fx_aux_view *planar_views[PLANAR_VIEWS_MAX] = { NULL };
     if (p->planar_view && p->glossiness == 0.0f && p->bend == 0.0f && p->op != OP_CEL &&
-        (r = ssr_planar_load(run, &j, &planar_view))) {
+        (r = ssr_planar_load(run, &j, planar_views))) {
         fx_aux_map_release(run->ctx, &probe_map);
+        for (int k = 0; k < PLANAR_VIEWS_MAX; k++)
+            fx_aux_view_free(planar_views[k]);
         return r;
     }
 
@@ -1124,7 +1160,7 @@ static fx_result ssr_process(const fx_effect_run *run)
     if (p->bounces > 1 && p->mirror_surfaces.spec) {
         r = fx_mask_build(run->ctx, p->mirror_surfaces.spec, run->frame, where, &surfaces);
         if (r)
-            return r;
+            goto out; /* frees the probe and planar views */
         j.surfaces = surfaces;
     }
     if ((r = ssr_trace_hits(run, &j, &F, &pyr, hits_bytes)) || (r = ssr_glossy_lookup(run, &j, &blurred, frame_bytes)))
@@ -1138,7 +1174,7 @@ static fx_result ssr_process(const fx_effect_run *run)
         j.dbg_fb = fx_effect_debug_pass(run, j.probe ? "fallback_probe"
                                              : p->fallback == FALLBACK_ENVIRONMENT ? "fallback_environment"
                                                                                    : "fallback_texture", 1, &r);
-    if (!r && j.planar)
+    if (!r && j.planar_count) /* 1 + the index of the planar view a pixel took, 0 for none */
         j.dbg_planar = fx_effect_debug_pass(run, "planar", 1, &r);
     if (r || (p->bounces > 1 && run->mask && ssr_needs_estimate(&j) && (r = ssr_multi_bounce(run, &j, fin, frame_bytes))))
         goto out;
@@ -1155,7 +1191,8 @@ out:
     fx_mask_free(surfaces);
     fx_depth_pyramid_free(run->ctx, &pyr);
     fx_aux_map_release(run->ctx, &probe_map);
-    fx_aux_view_free(planar_view);
+    for (int k = 0; k < PLANAR_VIEWS_MAX; k++)
+        fx_aux_view_free(planar_views[k]);
     return r;
 }
 

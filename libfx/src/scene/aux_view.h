@@ -19,7 +19,9 @@
  * the camera position of "world_to_camera" (its "projection" is unused: identity).
  * "planar:<key>" is the scene seen by the camera mirrored in a planar mirror's plane
  * (a perspective view with colour and Depth), with "plane": [nx, ny, nz, d], the world
- * plane n . x = d of the mirror (n towards the main camera). */
+ * plane n . x = d of the mirror (n towards the main camera). A mirror whose faces lie in
+ * several planes (a facing pair in one entry) has one such view per plane:
+ * "planar:<key>", then "planar:<key>#2", "planar:<key>#3", ... */
 #ifndef LIBFX_SCENE_AUX_VIEW_H
 #define LIBFX_SCENE_AUX_VIEW_H
 
@@ -53,6 +55,8 @@ typedef struct fx_aux_view {
  * the EXR has no Depth pass, and the reader's errors. */
 fx_result fx_aux_view_load(const fx_frame *f, const char *name, const char *where, fx_aux_view **out);
 void fx_aux_view_free(fx_aux_view *v);
+/* 1 when frame f carries a view named exactly `name`, 0 when not, -1 out of memory. */
+int fx_aux_view_has(const fx_frame *f, const char *name);
 /* The frame's entry for view `name` (matched as fx_aux_view_load does) as unformatted JSON,
  * and its path; NULL with the error recorded in *res when there is none. Freed with
  * cJSON_free. */

@@ -61,6 +61,23 @@ char *fx_aux_view_entry(const fx_frame *f, const char *name, const char *where, 
     return out;
 }
 
+int fx_aux_view_has(const fx_frame *f, const char *name)
+{
+    const char *text = fx_frame_meta(f, FX_AUX_META_KEY);
+    unsigned long failures = fx_mem_failure_count();
+    cJSON *list = text ? cJSON_Parse(text) : NULL;
+    if (text && !list && fx_mem_failure_count() != failures)
+        return -1;
+    int found = 0;
+    const cJSON *v;
+    cJSON_ArrayForEach(v, list) {
+        const cJSON *n = cJSON_GetObjectItemCaseSensitive(v, "name");
+        found |= cJSON_IsString(n) && strcmp(n->valuestring, name) == 0;
+    }
+    cJSON_Delete(list);
+    return found;
+}
+
 fx_result fx_aux_view_load(const fx_frame *f, const char *name, const char *where, fx_aux_view **out)
 {
     *out = NULL;

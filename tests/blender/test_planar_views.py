@@ -1,0 +1,122 @@
+"""Planar views per plane (addon/libfx/aux_views.planar_specs): a mirror entry whose faces
+lie in two planes (a facing pair, one material) gets two planar views, named
+"planar:<key>" and "planar:<key>#2", each with its own plane, the camera mirrored in that
+plane, and only that plane's mirror hidden from its camera; each view renders (the
+mirrors shown as perfect mirrors, materials and visibility restored after); a curved
+mirror gets none (NotPlanar), a single flat card one. The library's side (each pixel
+looks up its own plane's view) is tests/c/test_planar_views.c."""
+import json
+
+import addon_testlib as T
+
+OK = "LIBFX-TEST-OK"
+
+SCRIPT = T.PRELUDE + r"""
+import json, math, os
+from mathutils import Vector
+from libfx import aux_views
+scene = bpy.context.scene
+for ob in list(bpy.data.objects):
+    bpy.data.objects.remove(ob)
+scene.world = bpy.data.worlds.new("grey")
+scene.world.color = (0.3, 0.3, 0.3)
+scene.render.engine = "CYCLES"
+scene.cycles.samples = 2
+scene.cycles.use_denoising = False
+scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = 64, 36, 100
+
+mirror = bpy.data.materials.new("Mirror")
+grey = bpy.data.materials.new("Grey")
+
+def card(name, loc, rot_z):
+    bpy.ops.mesh.primitive_cube_add(size=1, location=loc, rotation=(0, 0, rot_z))
+    ob = bpy.context.active_object
+    ob.name = name
+    ob.scale = (0.04, 2.0, 1.5)   # a slab: its big faces along local +-X
+    ob.data.materials.append(mirror)
+    return ob
+
+left = card("Mirror_Left", (-2.0, 3.0, 1.0), 0.0)
+right = card("Mirror_Right", (2.0, 3.0, 1.0), 0.0)
+bpy.ops.mesh.primitive_cube_add(size=0.5, location=(0, 3, 0.5))
+block = bpy.context.active_object
+block.name = "Block"
+block.data.materials.append(grey)
+bpy.ops.mesh.primitive_cube_add(size=1, location=(-4, 3, 1))   # wholly behind the left mirror's plane
+behind = bpy.context.active_object
+behind.name = "Behind_Left"
+behind.data.materials.append(grey)
+cam_data = bpy.data.cameras.new("cam")
+cam = bpy.data.objects.new("cam", cam_data)
+scene.collection.objects.link(cam)
+cam.location = (0.3, -2.0, 1.2)
+cam.rotation_euler = (math.radians(90), 0, 0)
+scene.camera = cam
+bpy.context.view_layer.update()
+
+view = {"name": "planar:k", "kind": "planar", "mask": {"material": ["Mirror"]}}
+specs = aux_views.planar_specs(scene, view)
+out = {"specs": [{k: s[k] for k in ("name", "plane", "hidden", "behind", "mirrors", "matrix_world")} for s in specs]}
+# each view renders; materials and visibility come back
+paths = []
+objs = aux_views._probe_scene_objects(scene)
+for s in specs:
+    path = os.path.join(os.environ["PLANAR_OUT"], aux_views._file_name(s["name"]) + ".exr")
+    aux_views._render_probe(scene, s, objs, path)
+    assert os.path.exists(path), path
+    paths.append(path)
+for ob in (left, right, behind):
+    assert ob.visible_camera, ob.name + ": visibility not restored"
+assert left.material_slots[0].material.name == "Mirror" and right.material_slots[0].material.name == "Mirror"
+out["paths"] = paths
+# one flat card: one view, the need's own name
+bpy.data.objects.remove(right)
+bpy.context.view_layer.update()
+out["single"] = [s["name"] for s in aux_views.planar_specs(scene, view)]
+# a curved mirror (a cylinder section): none
+bpy.data.objects.remove(left)
+bpy.ops.mesh.primitive_cylinder_add(vertices=48, radius=0.9, depth=1.5, location=(0, 4, 1))
+cyl = bpy.context.active_object
+cyl.data.materials.append(mirror)
+bpy.context.view_layer.update()
+try:
+    aux_views.planar_specs(scene, view)
+    out["curved"] = "planar"
+except aux_views.NotPlanar as e:
+    out["curved"] = "not planar: %s" % e
+print("PLANAR-RESULT " + json.dumps(out))
+print("LIBFX-TEST-OK")
+"""
+
+
+def test_planar_views_per_plane(blender, library, tmp_path):
+    proc = T.run_blender([], python_expr=SCRIPT, env=dict(T.addon_env(library), PLANAR_OUT=str(tmp_path)),
+                         timeout=300)
+    text = proc.stdout + proc.stderr
+    assert proc.returncode == 0 and OK in proc.stdout, text[-4000:]
+    line = [x for x in proc.stdout.splitlines() if x.startswith("PLANAR-RESULT ")][-1]
+    res = json.loads(line[len("PLANAR-RESULT "):])
+    specs = {s["name"]: s for s in res["specs"]}
+    assert sorted(specs) == ["planar:k", "planar:k#2"], specs.keys()
+    cam = (0.3, -2.0, 1.2)
+    seen = {}
+    for s in specs.values():
+        n, d = s["plane"][:3], s["plane"][3]
+        # a side wall's plane, facing the camera (n . cam > d)
+        assert abs(abs(n[0]) - 1) < 1e-5 and abs(n[1]) < 1e-5 and abs(n[2]) < 1e-5, s
+        assert sum(a * b for a, b in zip(n, cam)) > d
+        # the mirrored camera: the camera reflected in the view's plane
+        dist = sum(a * b for a, b in zip(n, cam)) - d
+        want = [c - 2 * dist * a for c, a in zip(cam, n)]
+        got = [row[3] for row in s["matrix_world"][:3]]
+        assert max(abs(a - b) for a, b in zip(got, want)) < 1e-4, (got, want)
+        assert sorted(s["mirrors"]) == ["Mirror_Left", "Mirror_Right"]
+        seen["left" if n[0] > 0 else "right"] = s
+    # each view hides only its own plane's mirror (the other one reflects the room again)
+    assert seen["left"]["hidden"] == ["Mirror_Left"] and seen["right"]["hidden"] == ["Mirror_Right"], seen
+    assert "Behind_Left" in seen["left"]["behind"] and "Behind_Left" not in seen["right"]["behind"]
+    for p in res["paths"]:
+        exr = T.Exr(p)
+        assert (exr.width, exr.height) == (64, 36)
+    assert res["single"] == ["planar:k"]
+    assert res["curved"].startswith("not planar"), res["curved"]

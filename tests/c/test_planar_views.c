@@ -1,0 +1,210 @@
+/* ssr_mirror's planar views per plane (the reference preset's planar_view): a mirror entry
+ * whose pixels lie on two planes (a facing pair in one entry) gets one planar view per
+ * plane from the add-on ("planar:<key>" and "planar:<key>#2"), and each mirror pixel is
+ * looked up in its own plane's view.
+ *
+ * The frame: a camera at the origin looking along -Z; the mirror (IndexMA 1) fills the
+ * frame's left half on plane A (z = -4, facing the camera) and its right half on plane B
+ * (turned 30 deg about Y, through (0, 0, -6)). The views are flat colours (A red, B green)
+ * seen by the frame's own camera, so every mirror pixel projects into both: only the plane
+ * test decides which view a pixel takes. Checked: the debug pass "planar" (1 + the view's
+ * index) is 1 on A's pixels and 2 on B's; A's pixels turn red and B's green; with A's view
+ * alone B's pixels take none (0) and keep the trace; a "#3" after a missing "#2" is not
+ * read (the views are numbered without gaps); the output is the same for 1 and 2 threads. */
+#include "fx_effect_test.h"
+
+#include <math.h>
+
+enum { W = 64, H = 32 };
+
+static const double TAN_HALF = 0.57735026918962576; /* tan 30 deg: vertical half-angle */
+static const double NB[3] = { 0.5, 0.0, 0.86602540378443865 }; /* plane B's normal */
+static const double DB = -6.0 * 0.86602540378443865;           /* n . x = d through (0, 0, -6) */
+
+static void ray(int x, int y, double v[3])
+{
+    double asp = (double)W / H;
+    v[0] = ((x + 0.5) / W * 2 - 1) * TAN_HALF * asp;
+    v[1] = (1 - (y + 0.5) / H * 2) * TAN_HALF;
+    v[2] = -1;
+}
+
+static void camera(fx_camera *c)
+{
+    memset(c, 0, sizeof *c);
+    c->size = sizeof *c;
+    for (int i = 0; i < 4; i++)
+        c->world_to_camera[i * 5] = 1;
+    double nn = 0.1, ff = 100.0, fy = 1.0 / TAN_HALF, asp = (double)W / H;
+    c->projection[0] = (float)(fy / asp);
+    c->projection[5] = (float)fy;
+    c->projection[10] = (float)((ff + nn) / (nn - ff));
+    c->projection[11] = (float)(2 * ff * nn / (nn - ff));
+    c->projection[14] = -1;
+    c->clip_start = (float)nn;
+    c->clip_end = (float)ff;
+}
+
+static fx_frame *pair_frame(fx_context *ctx)
+{
+    size_t n = (size_t)W * H;
+    float *rgba = calloc(n * 4, sizeof(float)), *dep = calloc(n, sizeof(float));
+    float *nor = calloc(n * 3, sizeof(float)), *ima = calloc(n, sizeof(float));
+    for (int y = 0; y < H; y++)
+        for (int x = 0; x < W; x++) {
+            size_t i = (size_t)y * W + x;
+            double v[3];
+            ray(x, y, v);
+            int b = x >= W / 2;
+            /* planar depth t: the point t v lies on the pixel's plane (v.z = -1) */
+            double t = b ? DB / (NB[0] * v[0] + NB[2] * v[2]) : 4.0;
+            dep[i] = (float)t;
+            nor[i * 3] = b ? (float)NB[0] : 0.0f;
+            nor[i * 3 + 2] = b ? (float)NB[2] : 1.0f;
+            ima[i] = 1;
+            rgba[i * 4] = rgba[i * 4 + 1] = rgba[i * 4 + 2] = 0.1f;
+            rgba[i * 4 + 3] = 1;
+        }
+    fx_frame *f = et_frame(ctx, W, H, rgba);
+    fx_camera c;
+    camera(&c);
+    CHECK_OK(ctx, fx_frame_add_pass(f, "Depth", 1, dep));
+    CHECK_OK(ctx, fx_frame_add_pass(f, "Normal", 3, nor));
+    CHECK_OK(ctx, fx_frame_add_pass(f, "IndexMA", 1, ima));
+    CHECK_OK(ctx, fx_frame_set_camera(f, &c));
+    free(rgba), free(dep), free(nor), free(ima);
+    return f;
+}
+
+/* A flat-colour view EXR (colour + Depth 5 m) at `path`. */
+static void write_view(fx_context *ctx, const char *path, float r, float g, float b)
+{
+    size_t n = (size_t)W * H;
+    float *rgba = malloc(n * 4 * sizeof(float)), *dep = malloc(n * sizeof(float));
+    for (size_t i = 0; i < n; i++) {
+        rgba[i * 4] = r, rgba[i * 4 + 1] = g, rgba[i * 4 + 2] = b, rgba[i * 4 + 3] = 1;
+        dep[i] = 5.0f;
+    }
+    fx_frame *f = et_frame(ctx, W, H, rgba);
+    CHECK_OK(ctx, fx_frame_add_pass(f, "Depth", 1, dep));
+    CHECK_OK(ctx, fx_frame_write_exr(f, path, NULL));
+    fx_frame_free(f);
+    free(rgba), free(dep);
+}
+
+/* One planar view entry: the frame's own camera, the given plane. */
+static int add_view(fx_context *ctx, fx_frame *f, const char *name, const char *path, const double pl[4])
+{
+    fx_camera c;
+    camera(&c);
+    char json[4096];
+    int n = snprintf(json, sizeof json, "{\"aux_views\": [{\"name\": \"%s\", \"path\": \"%s\", \"world_to_camera\": [",
+                     name, path);
+    for (int i = 0; i < 16; i++)
+        n += snprintf(json + n, sizeof json - n, "%s%.9g", i ? ", " : "", c.world_to_camera[i]);
+    n += snprintf(json + n, sizeof json - n, "], \"projection\": [");
+    for (int i = 0; i < 16; i++)
+        n += snprintf(json + n, sizeof json - n, "%s%.9g", i ? ", " : "", c.projection[i]);
+    snprintf(json + n, sizeof json - n,
+             "], \"clip_start\": 0.1, \"clip_end\": 100, \"kind\": \"planar\", \"plane\": [%.9g, %.9g, %.9g, %.9g]}]}",
+             pl[0], pl[1], pl[2], pl[3]);
+    return fx_frame_apply_sidecar(f, json);
+}
+
+/* Runs s on f; counts per half the pixels whose debug "planar" value is `a` (left) and
+ * `b` (right) and whose colour leans to red (left) / green (right) when asked. */
+static void run_check(fx_context *ctx, fx_stack *s, const fx_frame *f, float a, float b, int colours,
+                      fx_frame **keep)
+{
+    fx_frame *o = NULL;
+    CHECK_OK(ctx, fx_stack_run(s, f, &o));
+    float *pl = NULL, *rgb = NULL;
+    int c = 0;
+    CHECK(o && fx_frame_pass(o, "fx0_ssr_mirror_planar", &pl, &c) == FX_OK && c == 1);
+    CHECK(o && fx_frame_pass(o, "Combined", &rgb, &c) == FX_OK && c == 4);
+    int ok_a = 0, ok_b = 0, red = 0, green = 0;
+    for (int y = 0; pl && rgb && y < H; y++)
+        for (int x = 0; x < W; x++) {
+            size_t i = (size_t)y * W + x;
+            if (x < W / 2) {
+                ok_a += pl[i] == a;
+                red += rgb[i * 4] > rgb[i * 4 + 1] + 0.05f;
+            } else {
+                ok_b += pl[i] == b;
+                green += rgb[i * 4 + 1] > rgb[i * 4] + 0.05f;
+            }
+        }
+    int half = W / 2 * H;
+    printf("planar %g/%g: %d and %d of %d pixels per half; red %d, green %d\n", a, b, ok_a, ok_b, half, red, green);
+    CHECK(ok_a == half && ok_b == half);
+    if (colours)
+        CHECK(red == half && green == half);
+    if (keep)
+        *keep = o;
+    else
+        fx_frame_free(o);
+}
+
+int main(void)
+{
+    fx_context *ctx = NULL;
+    fx_context_new(&ctx, 2);
+    const char *dir = tu_tmpdir("planar_views");
+    char pa[600], pb[600];
+    snprintf(pa, sizeof pa, "%s/plane_a.exr", dir);
+    snprintf(pb, sizeof pb, "%s/plane_b.exr", dir);
+    write_view(ctx, pa, 1.0f, 0.0f, 0.0f);
+    write_view(ctx, pb, 0.0f, 1.0f, 0.0f);
+    const double plane_a[4] = { 0, 0, 1, -4 }, plane_b[4] = { NB[0], NB[1], NB[2], DB };
+
+    fx_frame *f = pair_frame(ctx);
+    fx_stack *s = et_stack(ctx, "ssr_mirror");
+    CHECK_OK(ctx, fx_stack_set_mask_json(s, 0, "{\"material_index\": 1}"));
+    CHECK_OK(ctx, fx_stack_set_quality(s, FX_QUALITY_REFERENCE));
+    fx_stack_set_debug_outputs(s, 1);
+    char *req = NULL;
+    CHECK_OK(ctx, fx_stack_required_aux_views(s, &req));
+    char name[64] = "planar:?", name2[80], name3[80];
+    const char *at = req ? strstr(req, "\"planar:") : NULL;
+    if (at)
+        snprintf(name, 20, "%s", at + 1); /* "planar:" and 12 hex digits */
+    fx_free(req);
+    snprintf(name2, sizeof name2, "%s#2", name);
+    snprintf(name3, sizeof name3, "%s#3", name);
+
+    /* A's view alone: A's pixels take it (1), B's none (0) */
+    CHECK_OK(ctx, add_view(ctx, f, name, pa, plane_a));
+    run_check(ctx, s, f, 1.0f, 0.0f, 0, NULL);
+    /* a "#3" without a "#2": not read */
+    CHECK_OK(ctx, add_view(ctx, f, name3, pb, plane_b));
+    run_check(ctx, s, f, 1.0f, 0.0f, 0, NULL);
+    /* both planes: each pixel its own plane's view, in its colour */
+    CHECK_OK(ctx, add_view(ctx, f, name2, pb, plane_b));
+    fx_frame *o2 = NULL, *o1 = NULL;
+    run_check(ctx, s, f, 1.0f, 2.0f, 1, &o2);
+    /* the views in the other order (B first): the pixels follow their plane, not the name */
+    CHECK_OK(ctx, add_view(ctx, f, name, pb, plane_b));
+    CHECK_OK(ctx, add_view(ctx, f, name2, pa, plane_a));
+    run_check(ctx, s, f, 2.0f, 1.0f, 1, NULL);
+    /* one thread: the same bits */
+    CHECK_OK(ctx, add_view(ctx, f, name, pa, plane_a));
+    CHECK_OK(ctx, add_view(ctx, f, name2, pb, plane_b));
+    fx_context *ctx1 = NULL;
+    fx_context_new(&ctx1, 1);
+    fx_frame *f1 = pair_frame(ctx1);
+    CHECK_OK(ctx1, add_view(ctx1, f1, name, pa, plane_a));
+    CHECK_OK(ctx1, add_view(ctx1, f1, name2, pb, plane_b));
+    fx_stack *s1 = et_stack(ctx1, "ssr_mirror");
+    CHECK_OK(ctx1, fx_stack_set_mask_json(s1, 0, "{\"material_index\": 1}"));
+    CHECK_OK(ctx1, fx_stack_set_quality(s1, FX_QUALITY_REFERENCE));
+    fx_stack_set_debug_outputs(s1, 1);
+    CHECK_OK(ctx1, fx_stack_run(s1, f1, &o1));
+    const float *a = et_combined(o2), *b = et_combined(o1);
+    CHECK(a && b && memcmp(a, b, (size_t)W * H * 4 * sizeof(float)) == 0);
+    CHECK(b && tu_all_finite(b, (size_t)W * H * 4));
+    fx_frame_free(o1), fx_frame_free(o2), fx_frame_free(f1), fx_frame_free(f);
+    fx_stack_free(s1), fx_stack_free(s);
+    fx_context_free(ctx1);
+    fx_context_free(ctx);
+    return tu_finish("test_planar_views");
+}
