@@ -343,18 +343,12 @@ static inline double removed_of(const vsm_job *j, double k, double ib, double t,
     return g * (k * t + ib * (1.0 - t));
 }
 
-/* The removal of a share k (strength (1 - v), in (0, 1]) of the light at pixel (x, y), from
- * s into o (RGBA; alpha kept), for every apply but the old difference paths:
- * difference: s - removed; ratio: s (1 - removed' / C'), the primes averaged over the pixels
- * of the (2 RATIO_RADIUS + 1)^2 neighbourhood on the same surface (depth within 2 %,
- * normals within ~25 degrees): the averages make the factor smooth, so the noise in s is
- * scaled with its mean rather than left whole on a smaller mean. */
-static void remove_share(const vsm_job *j, int x, int y, float k, const float *s, float *o)
+/* The share of the light's indirect part lost at (x, y): bounce_loss k, or bounce_loss (1 - V)
+ * with the surroundings' visibility V (bounce_reach) */
+static double bounce_lost(const vsm_job *j, int x, int y, float k)
 {
     const fx_effect_run *run = j->run;
     const size_t i = (size_t)y * run->width + x;
-    /* the share of the light's indirect part lost: bounce_loss k, or bounce_loss (1 - V)
-     * with the surroundings' visibility V (bounce_reach) */
     double ib = (double)j->p->bounce_loss * k;
     if (j->vm) {
         float num, den;
@@ -380,60 +374,85 @@ static void remove_share(const vsm_job *j, int x, int y, float k, const float *s
         const double vl = den > 1e-6f ? fx_saturate(num / den) : 1.0;
         ib = (double)j->p->bounce_loss * (1.0 - vl);
     }
+    return ib;
+}
+
+/* remove_as ratio's factor per channel at (x, y), in [0, 1]: 1 - removed' / C', both averaged
+ * over the pixels of the (2 rr + 1)^2 neighbourhood on the same surface (depth within 2 %,
+ * normals within ~25 degrees); d: the direct estimate at (x, y) */
+static void ratio_factor(const vsm_job *j, int x, int y, float k, double ib, const float d[3], int rr, double f3[3])
+{
+    const fx_effect_run *run = j->run;
+    const size_t i = (size_t)y * run->width + x;
+    const fx_surface_src *sf = &j->surf;
+    const float dz = sf->depth[i];
+    /* normals as stored (unnormalised): the likeness test compares squares, c > 0 and
+     * c^2 >= 0.81 |n|^2 |m|^2 (cosine at least 0.9) */
+    const float *pn = sf->normal ? sf->normal + 3 * i : NULL;
+    const float nn = pn ? pn[0] * pn[0] + pn[1] * pn[1] + pn[2] * pn[2] : 0.0f;
+    const int has_n = nn > 1e-8f;
+    const float *g = j->group;
+    double cs[3] = {0, 0, 0}, gs[3] = {0, 0, 0};
+    int cnt = 0;
+    const int ya = y - rr > 0 ? y - rr : 0;
+    const int yb = y + rr < run->height - 1 ? y + rr : run->height - 1;
+    const int xa = x - rr > 0 ? x - rr : 0;
+    const int xb = x + rr < run->width - 1 ? x + rr : run->width - 1;
+    for (int yy = ya; yy <= yb; yy++)
+        for (int xx = xa; xx <= xb; xx++) {
+            const size_t q = (size_t)yy * run->width + xx;
+            if (q != i) {
+                const float dq = sf->depth[q];
+                if (!(fabsf(dq - dz) <= 0.02f * dz))
+                    continue;
+                if (has_n) {
+                    const float *m = sf->normal + 3 * q;
+                    const float c = pn[0] * m[0] + pn[1] * m[1] + pn[2] * m[2];
+                    const float mm = m[0] * m[0] + m[1] * m[1] + m[2] * m[2];
+                    if (!(c > 0.0f && c * c >= 0.81f * nn * mm))
+                        continue;
+                }
+            }
+            const float *sq = run->src + 4 * q;
+            for (int c = 0; c < 3; c++) {
+                cs[c] += sq[c];
+                if (g)
+                    gs[c] += g[3 * q + c];
+            }
+            cnt++;
+        }
+    const double gm3[3] = {gs[0] / cnt, gs[1] / cnt, gs[2] / cnt};
+    const double t = g ? direct_share(d, gm3) : 1.0;
+    for (int c = 0; c < 3; c++) {
+        const double cm = cs[c] / cnt, gm = gm3[c];
+        const double r = removed_of(j, k, ib, t, d[c], gm);
+        double f = cm > 1e-12 ? 1.0 - r / cm : 0.0;
+        f3[c] = f > 0.0 ? (f < 1.0 ? f : 1.0) : 0.0;
+    }
+}
+
+/* The removal of a share k (strength (1 - v), in (0, 1]) of the light at pixel (x, y), from
+ * s into o (RGBA; alpha kept), for every apply but the old difference paths:
+ * difference: s - removed; ratio: s (1 - removed' / C') (ratio_factor: 5x5, 3x3 with
+ * screen_downsample): the averages make the factor smooth, so the noise in s is scaled with
+ * its mean rather than left whole on a smaller mean. */
+static void remove_share(const vsm_job *j, int x, int y, float k, const float *s, float *o)
+{
+    const fx_effect_run *run = j->run;
+    const size_t i = (size_t)y * run->width + x;
+    const double ib = bounce_lost(j, x, y, k);
     float d[3];
     direct_light(j, x, y, i, d);
-    const float *g = j->group ? j->group + 3 * i : NULL;
     o[3] = s[3];
     if (j->p->remove_as == REMOVE_RATIO) {
-        const fx_surface_src *sf = &j->surf;
-        const float dz = sf->depth[i];
-        /* normals as stored (unnormalised): the likeness test compares squares, c > 0 and
-         * c^2 >= 0.81 |n|^2 |m|^2 (cosine at least 0.9) */
-        const float *pn = sf->normal ? sf->normal + 3 * i : NULL;
-        const float nn = pn ? pn[0] * pn[0] + pn[1] * pn[1] + pn[2] * pn[2] : 0.0f;
-        const int has_n = nn > 1e-8f;
-        double cs[3] = {0, 0, 0}, gs[3] = {0, 0, 0};
-        int cnt = 0;
+        double f3[3];
         /* 5x5; 3x3 with screen_downsample (the draft and preview presets) */
-        const int rr = j->f > 1 ? 1 : RATIO_RADIUS;
-        const int ya = y - rr > 0 ? y - rr : 0;
-        const int yb = y + rr < run->height - 1 ? y + rr : run->height - 1;
-        const int xa = x - rr > 0 ? x - rr : 0;
-        const int xb = x + rr < run->width - 1 ? x + rr : run->width - 1;
-        for (int yy = ya; yy <= yb; yy++)
-            for (int xx = xa; xx <= xb; xx++) {
-                const size_t q = (size_t)yy * run->width + xx;
-                if (q != i) {
-                    const float dq = sf->depth[q];
-                    if (!(fabsf(dq - dz) <= 0.02f * dz))
-                        continue;
-                    if (has_n) {
-                        const float *m = sf->normal + 3 * q;
-                        const float c = pn[0] * m[0] + pn[1] * m[1] + pn[2] * m[2];
-                        const float mm = m[0] * m[0] + m[1] * m[1] + m[2] * m[2];
-                        if (!(c > 0.0f && c * c >= 0.81f * nn * mm))
-                            continue;
-                    }
-                }
-                const float *sq = run->src + 4 * q;
-                for (int c = 0; c < 3; c++) {
-                    cs[c] += sq[c];
-                    if (g)
-                        gs[c] += j->group[3 * q + c];
-                }
-                cnt++;
-            }
-        const double gm3[3] = {gs[0] / cnt, gs[1] / cnt, gs[2] / cnt};
-        const double t = g ? direct_share(d, gm3) : 1.0;
-        for (int c = 0; c < 3; c++) {
-            const double cm = cs[c] / cnt, gm = gm3[c];
-            const double r = removed_of(j, k, ib, t, d[c], gm);
-            double f = cm > 1e-12 ? 1.0 - r / cm : 0.0;
-            f = f > 0.0 ? (f < 1.0 ? f : 1.0) : 0.0;
-            o[c] = (float)(s[c] * f);
-        }
+        ratio_factor(j, x, y, k, ib, d, j->f > 1 ? 1 : RATIO_RADIUS, f3);
+        for (int c = 0; c < 3; c++)
+            o[c] = (float)(s[c] * f3[c]);
         return;
     }
+    const float *g = j->group ? j->group + 3 * i : NULL;
     const double g3[3] = {g ? g[0] : 0.0, g ? g[1] : 0.0, g ? g[2] : 0.0};
     const double t = g ? direct_share(d, g3) : 1.0;
     for (int c = 0; c < 3; c++) {
