@@ -167,6 +167,10 @@ typedef struct vsm_job {
      * normal (0 0 0: none) */
     int f, lw, lh;
     float *lo_v, *lo_a, *lo_d, *lo_n;
+    /* remove_as ratio with screen_downsample: each lo texel's ratio factor (RGB, in [0, 1];
+     * ratio_factor at its pixel), interpolated to the pixels as the visibility is */
+    int lo_factor;
+    float *lo_F;
     unsigned char *lo_flags; /* per lo cell: lo_flag_rows */
     int *col_X0;   /* per ROI column: its lo texel column (left) ... */
     float *col_tx; /* ... and the weight of the right one */
@@ -491,6 +495,37 @@ static void lo_rows(void *user, int y0, int y1)
     }
 }
 
+/* lo_factor: each lo texel's ratio factor at its pixel (after the bounce visibility's blur,
+ * which it reads), over a 5x5 neighbourhood (3x3 for f < 4: about the texel's block); 1
+ * where there is no surface */
+static void lo_factor_rows(void *user, int y0, int y1)
+{
+    vsm_job *j = user;
+    const fx_rect *roi = &j->run->roi;
+    const int rr = j->f >= 4 ? RATIO_RADIUS : 1;
+    for (int Y = y0; Y < y1; Y++) {
+        const int y = lo_pixel(j, Y, roi->y0, roi->y1);
+        for (int X = 0; X < j->lw; X++) {
+            const size_t k = (size_t)Y * j->lw + X;
+            float *F = j->lo_F + 3 * k;
+            F[0] = F[1] = F[2] = 1.0f;
+            if (!(j->lo_d[k] > 0.0f))
+                continue;
+            const int x = lo_pixel(j, X, roi->x0, roi->x1);
+            const float a = j->lo_a[k];
+            if (!j->vm && a == 0.0f)
+                continue;
+            const double ib = bounce_lost(j, x, y, a);
+            float d[3];
+            double f3[3];
+            direct_light(j, x, y, (size_t)y * j->run->width + x, d);
+            ratio_factor(j, x, y, a, ib, d, rr, f3);
+            for (int c = 0; c < 3; c++)
+                F[c] = (float)f3[c];
+        }
+    }
+}
+
 /* Per lo cell (texels X, X + 1 of rows Y, Y + 1, clamped to the grid): bit 0, its four
  * texels alike in value (visibility and lost fraction); bit 1, coherent (see lo_cell). */
 static void lo_flag_rows(void *user, int y0, int y1)
@@ -531,6 +566,7 @@ typedef struct lo_cell {
      * (l) and their change to its right edge (r - l): visibility, lost fraction, depth */
     int coherent;
     float vl, vd, al, ad, dl, dd;
+    float Fl[3], Fd[3]; /* lo_factor: the ratio factor's, likewise */
 } lo_cell;
 
 static void lo_cell_row(const vsm_job *j, int y, lo_cell *c)
@@ -572,6 +608,14 @@ static void lo_cell_at(const vsm_job *j, int X0, lo_cell *c)
         c->ad = ar - al;
         c->dl = dl;
         c->dd = dr - dl;
+        if (j->lo_factor)
+            for (int k = 0; k < 3; k++) {
+                const float *F = j->lo_F;
+                const float fl = F[3 * c->id[0] + k] + ty * (F[3 * c->id[2] + k] - F[3 * c->id[0] + k]);
+                const float fr = F[3 * c->id[1] + k] + ty * (F[3 * c->id[3] + k] - F[3 * c->id[1] + k]);
+                c->Fl[k] = fl;
+                c->Fd[k] = fr - fl;
+            }
     }
 }
 
@@ -580,8 +624,10 @@ static void lo_cell_at(const vsm_job *j, int X0, lo_cell *c)
  * (cosine above 0.8); the pixel's own shade_at when no neighbour is alike. `cell` carries
  * the row's and the last cell's values (lo_cell_row for each row first). */
 static inline __attribute__((always_inline)) float shade_lo(const vsm_job *j, int x, int y, lo_cell *cell,
-                                                            int *has_surface, float *a)
+                                                            int *has_surface, float *a, float *F)
 {
+    if (F)
+        F[0] = -1.0f; /* none: the pixel's own removal */
     const fx_surface_src *sf = &j->surf;
     const float d = sf->depth[(size_t)y * sf->width + x];
     if (!(d > 0.0f) || !(d < sf->far_limit)) {
@@ -601,7 +647,7 @@ static inline __attribute__((always_inline)) float shade_lo(const vsm_job *j, in
     const float tol = 0.015f * (float)j->f, lim = tol * d;
     /* the four texels alike in value (a lit or evenly shadowed area: most pixels): the
      * first one on the pixel's surface gives the answer */
-    if (cell->uniform) {
+    if (cell->uniform && !F) { /* (with F the factor varies where the visibility does not) */
         for (int k = 0; k < 4; k++) {
             const size_t i = cell->id[k];
             const float ds = j->lo_d[i];
@@ -631,13 +677,16 @@ static inline __attribute__((always_inline)) float shade_lo(const vsm_job *j, in
         }
         if (on) {
             *has_surface = 1;
+            if (F)
+                for (int c = 0; c < 3; c++)
+                    F[c] = fx_saturate(cell->Fl[c] + tx * cell->Fd[c]);
             *a = fx_saturate(cell->al + tx * cell->ad);
             return fx_saturate(cell->vl + tx * cell->vd);
         }
     }
     const float inv_lim = 1.0f / lim;
     const float bw[4] = {(1.0f - tx) * (1.0f - ty), tx * (1.0f - ty), (1.0f - tx) * ty, tx * ty};
-    float acc = 0.0f, acc_a = 0.0f, wsum = 0.0f;
+    float acc = 0.0f, acc_a = 0.0f, wsum = 0.0f, acc_f[3] = {0.0f, 0.0f, 0.0f};
     for (int k = 0; k < 4; k++) {
         const size_t i = cell->id[k];
         const float ds = j->lo_d[i];
@@ -655,11 +704,17 @@ static inline __attribute__((always_inline)) float shade_lo(const vsm_job *j, in
         const float w = (bw[k] + 1e-3f) * (1.0f - dd * inv_lim);
         acc += w * j->lo_v[i];
         acc_a += w * j->lo_a[i];
+        if (F)
+            for (int c = 0; c < 3; c++)
+                acc_f[c] += w * j->lo_F[3 * i + c];
         wsum += w;
     }
     if (wsum > 1e-6f) {
         const float inv = 1.0f / wsum;
         *has_surface = 1;
+        if (F)
+            for (int c = 0; c < 3; c++)
+                F[c] = fx_saturate(acc_f[c] * inv);
         *a = fx_saturate(acc_a * inv);
         return fx_saturate(acc * inv);
     }
@@ -687,10 +742,21 @@ static void vsm_rows_lo(vsm_job *j, int y0, int y1)
             const float *s = srow + 4 * (size_t)x;
             float *o = drow + 4 * (size_t)x;
             int has;
-            float a;
-            const float v = shade_lo(j, x, y, &cell, &has, &a);
+            float a, F[3] = {-1.0f, 1.0f, 1.0f};
+            const float v = j->lo_factor ? shade_lo(j, x, y, &cell, &has, &a, F)
+                                         : shade_lo(j, x, y, &cell, &has, &a, NULL);
             if (vrow)
                 vrow[x] = v;
+            if (j->lo_factor && ((j->vm && has) || a != 0.0f)) {
+                if (F[0] >= 0.0f) { /* the lo texels' ratio factor */
+                    for (int c = 0; c < 3; c++)
+                        o[c] = s[c] * F[c];
+                    o[3] = s[3];
+                } else {
+                    remove_share(j, x, y, a, s, o);
+                }
+                continue;
+            }
             if (j->vis_only) {
                 const size_t q = (size_t)y * run->width + x;
                 j->vm[2 * q] = has ? v : 0.0f;
@@ -881,7 +947,9 @@ static fx_result vsm_process(const fx_effect_run *run)
         j.lh = rows / j.f + (rows % j.f ? 1 : 0);
         /* one block from the context's buffer store (no fresh pages frame after frame) */
         lo_n = (size_t)j.lw * j.lh;
-        lo_bytes = lo_n * 6 * sizeof(float) + (size_t)(roi->x1 - roi->x0) * 2 * sizeof(float) + lo_n;
+        j.lo_factor = j.general && p->remove_as == REMOVE_RATIO;
+        const size_t per = j.lo_factor ? 9 : 6; /* floats per lo texel */
+        lo_bytes = lo_n * per * sizeof(float) + (size_t)(roi->x1 - roi->x0) * 2 * sizeof(float) + lo_n;
         lo = fx_buffer_get(run->ctx, lo_bytes);
         if (!lo) {
             fx_aux_map_release(run->ctx, &map);
@@ -891,7 +959,8 @@ static fx_result vsm_process(const fx_effect_run *run)
         j.lo_a = lo + lo_n;
         j.lo_d = lo + 2 * lo_n;
         j.lo_n = lo + 3 * lo_n;
-        j.col_tx = lo + 6 * lo_n;
+        j.lo_F = j.lo_factor ? lo + 6 * lo_n : NULL;
+        j.col_tx = lo + per * lo_n;
         j.col_X0 = (int *)(j.col_tx + (roi->x1 - roi->x0));
         j.lo_flags = (unsigned char *)(j.col_X0 + (roi->x1 - roi->x0));
         for (int x = roi->x0; x < roi->x1; x++) {
@@ -943,6 +1012,10 @@ static fx_result vsm_process(const fx_effect_run *run)
             return r;
         }
     }
+    if (j.lo_factor) {
+        /* the lo texels' ratio factors (reading the blurred bounce visibility) */
+        fx_parallel_for(run->ctx, j.lh, fx_grain_for(run->ctx, j.lh), lo_factor_rows, &j);
+    }
     fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), vsm_rows, &j);
     fx_buffer_put(run->ctx, vm, vm_bytes);
     fx_buffer_put(run->ctx, lo, lo_bytes);
@@ -990,7 +1063,8 @@ const fx_effect_class fx_effect_vsm_shadows = {
     .params_size = sizeof(vsm_params),
     .params = vsm_param_defs,
     .param_count = FX_COUNT_OF(vsm_param_defs),
-    .presets = {"{\"map_level\": 2, \"screen_downsample\": 5}", "{\"map_level\": 1, \"screen_downsample\": 2}", "{\"map_level\": 0}", "{\"method\": \"pcf\"}"},
+    .presets = {"{\"map_level\": 2, \"screen_downsample\": 5, \"normal_offset\": 0}",
+                "{\"map_level\": 1, \"screen_downsample\": 2, \"normal_offset\": 0}", "{\"map_level\": 0}", "{\"method\": \"pcf\"}"},
     .passes = vsm_passes,
     .flags = FX_EFFECT_NEEDS_CAMERA,
     .aux_views = vsm_aux_views,
