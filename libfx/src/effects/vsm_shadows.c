@@ -112,7 +112,8 @@ static const fx_param_def vsm_param_defs[] = {
     FX_P_INT(vsm_params, screen_downsample, "screen_downsample", 1, 1, 8, 1, 4, "",
              "The visibility is looked up at one pixel of every f x f block and interpolated to the others "
              "from the neighbours on the same surface (depth within a few percent, similar normal); a pixel "
-             "with no such neighbour (an edge, a thin object) is looked up itself. ~f^2 fewer lookups; "
+             "with no such neighbour (an edge, a thin object) is looked up itself. With remove_as ratio the "
+             "removal factor is made at the same pixels and interpolated alike. ~f^2 fewer lookups; "
              "shadow edges soften by about f pixels. 1: every pixel"),
     FX_P_FLOAT(vsm_params, bounce_loss, "bounce_loss", 1.0, 0.0, 1.0, 0.0, 1.0, "factor",
                "light_group: the share of the light's indirect contribution (the pass less its direct "
@@ -124,7 +125,8 @@ static const fx_param_def vsm_param_defs[] = {
                "shadow lose bounce too, shadowed ones near lit ground keep some"),
     FX_P_ENUM(vsm_params, remove_as, "remove_as", REMOVE_RATIO, remove_items,
               "difference: Combined less the removed light; ratio: Combined times (1 - removed / Combined), "
-              "both averaged over the pixel's surface in a 5x5 neighbourhood (3x3 when screen_downsample > 1), so "
+              "both averaged over the pixel's surface in a 5x5 neighbourhood (with screen_downsample f > 1: "
+              "made at one pixel of every f x f block, over 5x5 for f >= 4, 3x3 below, and interpolated), so "
               "the noise of what is left "
               "is scaled with it, not laid bare (not for combined)"),
 };
@@ -349,7 +351,7 @@ static inline double removed_of(const vsm_job *j, double k, double ib, double t,
 
 /* The share of the light's indirect part lost at (x, y): bounce_loss k, or bounce_loss (1 - V)
  * with the surroundings' visibility V (bounce_reach) */
-static double bounce_lost(const vsm_job *j, int x, int y, float k)
+static inline __attribute__((always_inline)) double bounce_lost(const vsm_job *j, int x, int y, float k)
 {
     const fx_effect_run *run = j->run;
     const size_t i = (size_t)y * run->width + x;
@@ -384,7 +386,8 @@ static double bounce_lost(const vsm_job *j, int x, int y, float k)
 /* remove_as ratio's factor per channel at (x, y), in [0, 1]: 1 - removed' / C', both averaged
  * over the pixels of the (2 rr + 1)^2 neighbourhood on the same surface (depth within 2 %,
  * normals within ~25 degrees); d: the direct estimate at (x, y) */
-static void ratio_factor(const vsm_job *j, int x, int y, float k, double ib, const float d[3], int rr, double f3[3])
+static inline __attribute__((always_inline)) void ratio_factor(const vsm_job *j, int x, int y, float k, double ib,
+                                                              const float d[3], int rr, double f3[3])
 {
     const fx_effect_run *run = j->run;
     const size_t i = (size_t)y * run->width + x;

@@ -5,6 +5,7 @@
 #include "core/buffers.h"
 #include "core/mem.h"
 
+#include <float.h>
 #include <math.h>
 #include <string.h>
 
@@ -14,15 +15,28 @@ typedef struct build_job {
     int bias;
 } build_job;
 
+/* fx_shadow_map_norm over rows, written branch-free so that the compiler vectorises it (the
+ * same operations in the same order, so the same bits: IEEE division and comparisons are
+ * exact lane by lane) */
 static void norm_rows(void *user, int y0, int y1)
 {
     build_job *j = user;
     fx_shadow_map *sm = j->sm;
-    for (int y = y0; y < y1; y++)
+    const float znear = sm->znear, range = sm->zfar - sm->znear;
+    if (!(range > 1e-20f)) { /* as fx_shadow_map_norm: z = 0 */
+        for (int y = y0; y < y1; y++)
+            memset(sm->depth + (size_t)y * sm->width, 0, (size_t)sm->width * sizeof(float));
+        return;
+    }
+    for (int y = y0; y < y1; y++) {
+        const float *restrict raw = j->raw + (size_t)y * sm->width;
+        float *restrict out = sm->depth + (size_t)y * sm->width;
         for (int x = 0; x < sm->width; x++) {
-            size_t i = (size_t)y * sm->width + x;
-            sm->depth[i] = fx_shadow_map_norm(sm, j->raw[i]);
+            const float z = 2.0f * (raw[x] - znear) / range - 1.0f;
+            const float c = z < -1.0f ? -1.0f : z > 1.0f ? 1.0f : z;
+            out[x] = fabsf(z) <= FLT_MAX ? c : 1.0f; /* NaN, +-Inf: 1 (isfinite) */
         }
+    }
 }
 
 /* The smaller of the forward and backward differences (0 at a border). */
