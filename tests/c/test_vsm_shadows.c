@@ -650,6 +650,37 @@ static void test_share_modes(fx_context *ctx)
         }
         fx_context_free(one);
     }
+    /* ratio with screen_downsample: the lo texels' factors interpolated to the pixels. Under
+     * a uniform roof the same as difference; under half a roof with bounce_reach close to
+     * every pixel's own removal (screen_downsample 1) at the lit and the shadowed probe */
+    {
+        share_case c = {"light_group", "difference", 0.04f, 1.5f, 1.0f, 0, 1, NULL, 4.0f, 0.0f, 0};
+        float *od = run_share(ctx, &c, &r);
+        c.remove_as = "ratio";
+        c.downsample = 3;
+        float *or_ = run_share(ctx, &c, &r);
+        CHECK(od && or_);
+        if (od && or_)
+            CHECK(fabsf(od[mid] - or_[mid]) < 1e-4f);
+        free(od);
+        free(or_);
+        c.half = 1;
+        c.reach = 0.2f;
+        c.downsample = 1;
+        float *o1 = run_share(ctx, &c, &r);
+        c.downsample = 3;
+        float *o3 = run_share(ctx, &c, &r);
+        CHECK(o1 && o3 && tu_all_finite(o3, N * N * 4));
+        const int lit = 4 * (N / 2 * N + N - 4), dark = 4 * (N / 2 * N + 4);
+        if (o1 && o3) {
+            CHECK(fabsf(o1[lit] - o3[lit]) < 0.02f * o1[lit]);
+            CHECK(fabsf(o1[dark] - o3[dark]) < 0.02f * o1[dark] + 1e-3f);
+            printf("ratio, half roof, reach 0.2: screen_downsample 1: lit %.4f dark %.4f; 3: lit %.4f dark %.4f\n",
+                   o1[lit], o1[dark], o3[lit], o3[dark]);
+        }
+        free(o1);
+        free(o3);
+    }
     /* huge values stay finite */
     for (int m = 0; m < 2; m++) {
         share_case c = {"light_group", m ? "ratio" : "difference", 3e38f, 3e38f, 0.5f, 1, 2, NULL, 3e38f, (float)m * 0.1f, m};

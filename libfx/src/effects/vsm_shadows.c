@@ -112,7 +112,8 @@ static const fx_param_def vsm_param_defs[] = {
     FX_P_INT(vsm_params, screen_downsample, "screen_downsample", 1, 1, 8, 1, 4, "",
              "The visibility is looked up at one pixel of every f x f block and interpolated to the others "
              "from the neighbours on the same surface (depth within a few percent, similar normal); a pixel "
-             "with no such neighbour (an edge, a thin object) is looked up itself. ~f^2 fewer lookups; "
+             "with no such neighbour (an edge, a thin object) is looked up itself. With remove_as ratio the "
+             "removal factor is made at the same pixels and interpolated alike. ~f^2 fewer lookups; "
              "shadow edges soften by about f pixels. 1: every pixel"),
     FX_P_FLOAT(vsm_params, bounce_loss, "bounce_loss", 1.0, 0.0, 1.0, 0.0, 1.0, "factor",
                "light_group: the share of the light's indirect contribution (the pass less its direct "
@@ -124,7 +125,8 @@ static const fx_param_def vsm_param_defs[] = {
                "shadow lose bounce too, shadowed ones near lit ground keep some"),
     FX_P_ENUM(vsm_params, remove_as, "remove_as", REMOVE_RATIO, remove_items,
               "difference: Combined less the removed light; ratio: Combined times (1 - removed / Combined), "
-              "both averaged over the pixel's surface in a 5x5 neighbourhood (3x3 when screen_downsample > 1), so "
+              "both averaged over the pixel's surface in a 5x5 neighbourhood (with screen_downsample f > 1: "
+              "made at one pixel of every f x f block, over 5x5 for f >= 4, 3x3 below, and interpolated), so "
               "the noise of what is left "
               "is scaled with it, not laid bare (not for combined)"),
 };
@@ -167,6 +169,10 @@ typedef struct vsm_job {
      * normal (0 0 0: none) */
     int f, lw, lh;
     float *lo_v, *lo_a, *lo_d, *lo_n;
+    /* remove_as ratio with screen_downsample: each lo texel's ratio factor (RGB, in [0, 1];
+     * ratio_factor at its pixel), interpolated to the pixels as the visibility is */
+    int lo_factor;
+    float *lo_F;
     unsigned char *lo_flags; /* per lo cell: lo_flag_rows */
     int *col_X0;   /* per ROI column: its lo texel column (left) ... */
     float *col_tx; /* ... and the weight of the right one */
@@ -343,18 +349,12 @@ static inline double removed_of(const vsm_job *j, double k, double ib, double t,
     return g * (k * t + ib * (1.0 - t));
 }
 
-/* The removal of a share k (strength (1 - v), in (0, 1]) of the light at pixel (x, y), from
- * s into o (RGBA; alpha kept), for every apply but the old difference paths:
- * difference: s - removed; ratio: s (1 - removed' / C'), the primes averaged over the pixels
- * of the (2 RATIO_RADIUS + 1)^2 neighbourhood on the same surface (depth within 2 %,
- * normals within ~25 degrees): the averages make the factor smooth, so the noise in s is
- * scaled with its mean rather than left whole on a smaller mean. */
-static void remove_share(const vsm_job *j, int x, int y, float k, const float *s, float *o)
+/* The share of the light's indirect part lost at (x, y): bounce_loss k, or bounce_loss (1 - V)
+ * with the surroundings' visibility V (bounce_reach) */
+static inline __attribute__((always_inline)) double bounce_lost(const vsm_job *j, int x, int y, float k)
 {
     const fx_effect_run *run = j->run;
     const size_t i = (size_t)y * run->width + x;
-    /* the share of the light's indirect part lost: bounce_loss k, or bounce_loss (1 - V)
-     * with the surroundings' visibility V (bounce_reach) */
     double ib = (double)j->p->bounce_loss * k;
     if (j->vm) {
         float num, den;
@@ -380,60 +380,86 @@ static void remove_share(const vsm_job *j, int x, int y, float k, const float *s
         const double vl = den > 1e-6f ? fx_saturate(num / den) : 1.0;
         ib = (double)j->p->bounce_loss * (1.0 - vl);
     }
+    return ib;
+}
+
+/* remove_as ratio's factor per channel at (x, y), in [0, 1]: 1 - removed' / C', both averaged
+ * over the pixels of the (2 rr + 1)^2 neighbourhood on the same surface (depth within 2 %,
+ * normals within ~25 degrees); d: the direct estimate at (x, y) */
+static inline __attribute__((always_inline)) void ratio_factor(const vsm_job *j, int x, int y, float k, double ib,
+                                                              const float d[3], int rr, double f3[3])
+{
+    const fx_effect_run *run = j->run;
+    const size_t i = (size_t)y * run->width + x;
+    const fx_surface_src *sf = &j->surf;
+    const float dz = sf->depth[i];
+    /* normals as stored (unnormalised): the likeness test compares squares, c > 0 and
+     * c^2 >= 0.81 |n|^2 |m|^2 (cosine at least 0.9) */
+    const float *pn = sf->normal ? sf->normal + 3 * i : NULL;
+    const float nn = pn ? pn[0] * pn[0] + pn[1] * pn[1] + pn[2] * pn[2] : 0.0f;
+    const int has_n = nn > 1e-8f;
+    const float *g = j->group;
+    double cs[3] = {0, 0, 0}, gs[3] = {0, 0, 0};
+    int cnt = 0;
+    const int ya = y - rr > 0 ? y - rr : 0;
+    const int yb = y + rr < run->height - 1 ? y + rr : run->height - 1;
+    const int xa = x - rr > 0 ? x - rr : 0;
+    const int xb = x + rr < run->width - 1 ? x + rr : run->width - 1;
+    for (int yy = ya; yy <= yb; yy++)
+        for (int xx = xa; xx <= xb; xx++) {
+            const size_t q = (size_t)yy * run->width + xx;
+            if (q != i) {
+                const float dq = sf->depth[q];
+                if (!(fabsf(dq - dz) <= 0.02f * dz))
+                    continue;
+                if (has_n) {
+                    const float *m = sf->normal + 3 * q;
+                    const float c = pn[0] * m[0] + pn[1] * m[1] + pn[2] * m[2];
+                    const float mm = m[0] * m[0] + m[1] * m[1] + m[2] * m[2];
+                    if (!(c > 0.0f && c * c >= 0.81f * nn * mm))
+                        continue;
+                }
+            }
+            const float *sq = run->src + 4 * q;
+            for (int c = 0; c < 3; c++) {
+                cs[c] += sq[c];
+                if (g)
+                    gs[c] += g[3 * q + c];
+            }
+            cnt++;
+        }
+    const double gm3[3] = {gs[0] / cnt, gs[1] / cnt, gs[2] / cnt};
+    const double t = g ? direct_share(d, gm3) : 1.0;
+    for (int c = 0; c < 3; c++) {
+        const double cm = cs[c] / cnt, gm = gm3[c];
+        const double r = removed_of(j, k, ib, t, d[c], gm);
+        double f = cm > 1e-12 ? 1.0 - r / cm : 0.0;
+        f3[c] = f > 0.0 ? (f < 1.0 ? f : 1.0) : 0.0;
+    }
+}
+
+/* The removal of a share k (strength (1 - v), in (0, 1]) of the light at pixel (x, y), from
+ * s into o (RGBA; alpha kept), for every apply but the old difference paths:
+ * difference: s - removed; ratio: s (1 - removed' / C') (ratio_factor: 5x5, 3x3 with
+ * screen_downsample): the averages make the factor smooth, so the noise in s is scaled with
+ * its mean rather than left whole on a smaller mean. */
+static void remove_share(const vsm_job *j, int x, int y, float k, const float *s, float *o)
+{
+    const fx_effect_run *run = j->run;
+    const size_t i = (size_t)y * run->width + x;
+    const double ib = bounce_lost(j, x, y, k);
     float d[3];
     direct_light(j, x, y, i, d);
-    const float *g = j->group ? j->group + 3 * i : NULL;
     o[3] = s[3];
     if (j->p->remove_as == REMOVE_RATIO) {
-        const fx_surface_src *sf = &j->surf;
-        const float dz = sf->depth[i];
-        /* normals as stored (unnormalised): the likeness test compares squares, c > 0 and
-         * c^2 >= 0.81 |n|^2 |m|^2 (cosine at least 0.9) */
-        const float *pn = sf->normal ? sf->normal + 3 * i : NULL;
-        const float nn = pn ? pn[0] * pn[0] + pn[1] * pn[1] + pn[2] * pn[2] : 0.0f;
-        const int has_n = nn > 1e-8f;
-        double cs[3] = {0, 0, 0}, gs[3] = {0, 0, 0};
-        int cnt = 0;
+        double f3[3];
         /* 5x5; 3x3 with screen_downsample (the draft and preview presets) */
-        const int rr = j->f > 1 ? 1 : RATIO_RADIUS;
-        const int ya = y - rr > 0 ? y - rr : 0;
-        const int yb = y + rr < run->height - 1 ? y + rr : run->height - 1;
-        const int xa = x - rr > 0 ? x - rr : 0;
-        const int xb = x + rr < run->width - 1 ? x + rr : run->width - 1;
-        for (int yy = ya; yy <= yb; yy++)
-            for (int xx = xa; xx <= xb; xx++) {
-                const size_t q = (size_t)yy * run->width + xx;
-                if (q != i) {
-                    const float dq = sf->depth[q];
-                    if (!(fabsf(dq - dz) <= 0.02f * dz))
-                        continue;
-                    if (has_n) {
-                        const float *m = sf->normal + 3 * q;
-                        const float c = pn[0] * m[0] + pn[1] * m[1] + pn[2] * m[2];
-                        const float mm = m[0] * m[0] + m[1] * m[1] + m[2] * m[2];
-                        if (!(c > 0.0f && c * c >= 0.81f * nn * mm))
-                            continue;
-                    }
-                }
-                const float *sq = run->src + 4 * q;
-                for (int c = 0; c < 3; c++) {
-                    cs[c] += sq[c];
-                    if (g)
-                        gs[c] += j->group[3 * q + c];
-                }
-                cnt++;
-            }
-        const double gm3[3] = {gs[0] / cnt, gs[1] / cnt, gs[2] / cnt};
-        const double t = g ? direct_share(d, gm3) : 1.0;
-        for (int c = 0; c < 3; c++) {
-            const double cm = cs[c] / cnt, gm = gm3[c];
-            const double r = removed_of(j, k, ib, t, d[c], gm);
-            double f = cm > 1e-12 ? 1.0 - r / cm : 0.0;
-            f = f > 0.0 ? (f < 1.0 ? f : 1.0) : 0.0;
-            o[c] = (float)(s[c] * f);
-        }
+        ratio_factor(j, x, y, k, ib, d, j->f > 1 ? 1 : RATIO_RADIUS, f3);
+        for (int c = 0; c < 3; c++)
+            o[c] = (float)(s[c] * f3[c]);
         return;
     }
+    const float *g = j->group ? j->group + 3 * i : NULL;
     const double g3[3] = {g ? g[0] : 0.0, g ? g[1] : 0.0, g ? g[2] : 0.0};
     const double t = g ? direct_share(d, g3) : 1.0;
     for (int c = 0; c < 3; c++) {
@@ -468,6 +494,37 @@ static void lo_rows(void *user, int y0, int y1)
             j->lo_n[3 * k] = n.x;
             j->lo_n[3 * k + 1] = n.y;
             j->lo_n[3 * k + 2] = n.z;
+        }
+    }
+}
+
+/* lo_factor: each lo texel's ratio factor at its pixel (after the bounce visibility's blur,
+ * which it reads), over a 5x5 neighbourhood (3x3 for f < 4: about the texel's block); 1
+ * where there is no surface */
+static void lo_factor_rows(void *user, int y0, int y1)
+{
+    vsm_job *j = user;
+    const fx_rect *roi = &j->run->roi;
+    const int rr = j->f >= 4 ? RATIO_RADIUS : 1;
+    for (int Y = y0; Y < y1; Y++) {
+        const int y = lo_pixel(j, Y, roi->y0, roi->y1);
+        for (int X = 0; X < j->lw; X++) {
+            const size_t k = (size_t)Y * j->lw + X;
+            float *F = j->lo_F + 3 * k;
+            F[0] = F[1] = F[2] = 1.0f;
+            if (!(j->lo_d[k] > 0.0f))
+                continue;
+            const int x = lo_pixel(j, X, roi->x0, roi->x1);
+            const float a = j->lo_a[k];
+            if (!j->vm && a == 0.0f)
+                continue;
+            const double ib = bounce_lost(j, x, y, a);
+            float d[3];
+            double f3[3];
+            direct_light(j, x, y, (size_t)y * j->run->width + x, d);
+            ratio_factor(j, x, y, a, ib, d, rr, f3);
+            for (int c = 0; c < 3; c++)
+                F[c] = (float)f3[c];
         }
     }
 }
@@ -512,6 +569,7 @@ typedef struct lo_cell {
      * (l) and their change to its right edge (r - l): visibility, lost fraction, depth */
     int coherent;
     float vl, vd, al, ad, dl, dd;
+    float Fl[3], Fd[3]; /* lo_factor: the ratio factor's, likewise */
 } lo_cell;
 
 static void lo_cell_row(const vsm_job *j, int y, lo_cell *c)
@@ -553,6 +611,14 @@ static void lo_cell_at(const vsm_job *j, int X0, lo_cell *c)
         c->ad = ar - al;
         c->dl = dl;
         c->dd = dr - dl;
+        if (j->lo_factor)
+            for (int k = 0; k < 3; k++) {
+                const float *F = j->lo_F;
+                const float fl = F[3 * c->id[0] + k] + ty * (F[3 * c->id[2] + k] - F[3 * c->id[0] + k]);
+                const float fr = F[3 * c->id[1] + k] + ty * (F[3 * c->id[3] + k] - F[3 * c->id[1] + k]);
+                c->Fl[k] = fl;
+                c->Fd[k] = fr - fl;
+            }
     }
 }
 
@@ -561,8 +627,10 @@ static void lo_cell_at(const vsm_job *j, int X0, lo_cell *c)
  * (cosine above 0.8); the pixel's own shade_at when no neighbour is alike. `cell` carries
  * the row's and the last cell's values (lo_cell_row for each row first). */
 static inline __attribute__((always_inline)) float shade_lo(const vsm_job *j, int x, int y, lo_cell *cell,
-                                                            int *has_surface, float *a)
+                                                            int *has_surface, float *a, float *F)
 {
+    if (F)
+        F[0] = -1.0f; /* none: the pixel's own removal */
     const fx_surface_src *sf = &j->surf;
     const float d = sf->depth[(size_t)y * sf->width + x];
     if (!(d > 0.0f) || !(d < sf->far_limit)) {
@@ -582,7 +650,7 @@ static inline __attribute__((always_inline)) float shade_lo(const vsm_job *j, in
     const float tol = 0.015f * (float)j->f, lim = tol * d;
     /* the four texels alike in value (a lit or evenly shadowed area: most pixels): the
      * first one on the pixel's surface gives the answer */
-    if (cell->uniform) {
+    if (cell->uniform && !F) { /* (with F the factor varies where the visibility does not) */
         for (int k = 0; k < 4; k++) {
             const size_t i = cell->id[k];
             const float ds = j->lo_d[i];
@@ -612,13 +680,16 @@ static inline __attribute__((always_inline)) float shade_lo(const vsm_job *j, in
         }
         if (on) {
             *has_surface = 1;
+            if (F)
+                for (int c = 0; c < 3; c++)
+                    F[c] = fx_saturate(cell->Fl[c] + tx * cell->Fd[c]);
             *a = fx_saturate(cell->al + tx * cell->ad);
             return fx_saturate(cell->vl + tx * cell->vd);
         }
     }
     const float inv_lim = 1.0f / lim;
     const float bw[4] = {(1.0f - tx) * (1.0f - ty), tx * (1.0f - ty), (1.0f - tx) * ty, tx * ty};
-    float acc = 0.0f, acc_a = 0.0f, wsum = 0.0f;
+    float acc = 0.0f, acc_a = 0.0f, wsum = 0.0f, acc_f[3] = {0.0f, 0.0f, 0.0f};
     for (int k = 0; k < 4; k++) {
         const size_t i = cell->id[k];
         const float ds = j->lo_d[i];
@@ -636,11 +707,17 @@ static inline __attribute__((always_inline)) float shade_lo(const vsm_job *j, in
         const float w = (bw[k] + 1e-3f) * (1.0f - dd * inv_lim);
         acc += w * j->lo_v[i];
         acc_a += w * j->lo_a[i];
+        if (F)
+            for (int c = 0; c < 3; c++)
+                acc_f[c] += w * j->lo_F[3 * i + c];
         wsum += w;
     }
     if (wsum > 1e-6f) {
         const float inv = 1.0f / wsum;
         *has_surface = 1;
+        if (F)
+            for (int c = 0; c < 3; c++)
+                F[c] = fx_saturate(acc_f[c] * inv);
         *a = fx_saturate(acc_a * inv);
         return fx_saturate(acc * inv);
     }
@@ -668,10 +745,21 @@ static void vsm_rows_lo(vsm_job *j, int y0, int y1)
             const float *s = srow + 4 * (size_t)x;
             float *o = drow + 4 * (size_t)x;
             int has;
-            float a;
-            const float v = shade_lo(j, x, y, &cell, &has, &a);
+            float a, F[3] = {-1.0f, 1.0f, 1.0f};
+            const float v = j->lo_factor ? shade_lo(j, x, y, &cell, &has, &a, F)
+                                         : shade_lo(j, x, y, &cell, &has, &a, NULL);
             if (vrow)
                 vrow[x] = v;
+            if (j->lo_factor && ((j->vm && has) || a != 0.0f)) {
+                if (F[0] >= 0.0f) { /* the lo texels' ratio factor */
+                    for (int c = 0; c < 3; c++)
+                        o[c] = s[c] * F[c];
+                    o[3] = s[3];
+                } else {
+                    remove_share(j, x, y, a, s, o);
+                }
+                continue;
+            }
             if (j->vis_only) {
                 const size_t q = (size_t)y * run->width + x;
                 j->vm[2 * q] = has ? v : 0.0f;
@@ -862,7 +950,9 @@ static fx_result vsm_process(const fx_effect_run *run)
         j.lh = rows / j.f + (rows % j.f ? 1 : 0);
         /* one block from the context's buffer store (no fresh pages frame after frame) */
         lo_n = (size_t)j.lw * j.lh;
-        lo_bytes = lo_n * 6 * sizeof(float) + (size_t)(roi->x1 - roi->x0) * 2 * sizeof(float) + lo_n;
+        j.lo_factor = j.general && p->remove_as == REMOVE_RATIO;
+        const size_t per = j.lo_factor ? 9 : 6; /* floats per lo texel */
+        lo_bytes = lo_n * per * sizeof(float) + (size_t)(roi->x1 - roi->x0) * 2 * sizeof(float) + lo_n;
         lo = fx_buffer_get(run->ctx, lo_bytes);
         if (!lo) {
             fx_aux_map_release(run->ctx, &map);
@@ -872,7 +962,8 @@ static fx_result vsm_process(const fx_effect_run *run)
         j.lo_a = lo + lo_n;
         j.lo_d = lo + 2 * lo_n;
         j.lo_n = lo + 3 * lo_n;
-        j.col_tx = lo + 6 * lo_n;
+        j.lo_F = j.lo_factor ? lo + 6 * lo_n : NULL;
+        j.col_tx = lo + per * lo_n;
         j.col_X0 = (int *)(j.col_tx + (roi->x1 - roi->x0));
         j.lo_flags = (unsigned char *)(j.col_X0 + (roi->x1 - roi->x0));
         for (int x = roi->x0; x < roi->x1; x++) {
@@ -924,6 +1015,10 @@ static fx_result vsm_process(const fx_effect_run *run)
             return r;
         }
     }
+    if (j.lo_factor) {
+        /* the lo texels' ratio factors (reading the blurred bounce visibility) */
+        fx_parallel_for(run->ctx, j.lh, fx_grain_for(run->ctx, j.lh), lo_factor_rows, &j);
+    }
     fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), vsm_rows, &j);
     fx_buffer_put(run->ctx, vm, vm_bytes);
     fx_buffer_put(run->ctx, lo, lo_bytes);
@@ -971,7 +1066,8 @@ const fx_effect_class fx_effect_vsm_shadows = {
     .params_size = sizeof(vsm_params),
     .params = vsm_param_defs,
     .param_count = FX_COUNT_OF(vsm_param_defs),
-    .presets = {"{\"map_level\": 2, \"screen_downsample\": 5}", "{\"map_level\": 1, \"screen_downsample\": 2}", "{\"map_level\": 0}", "{\"method\": \"pcf\"}"},
+    .presets = {"{\"map_level\": 2, \"screen_downsample\": 5, \"normal_offset\": 0}",
+                "{\"map_level\": 1, \"screen_downsample\": 2, \"normal_offset\": 0}", "{\"map_level\": 0}", "{\"method\": \"pcf\"}"},
     .passes = vsm_passes,
     .flags = FX_EFFECT_NEEDS_CAMERA,
     .aux_views = vsm_aux_views,

@@ -5,6 +5,7 @@
 #include "core/buffers.h"
 #include "core/mem.h"
 
+#include <float.h>
 #include <math.h>
 #include <string.h>
 
@@ -14,15 +15,28 @@ typedef struct build_job {
     int bias;
 } build_job;
 
+/* fx_shadow_map_norm over rows, written branch-free so that the compiler vectorises it (the
+ * same operations in the same order, so the same bits: IEEE division and comparisons are
+ * exact lane by lane) */
 static void norm_rows(void *user, int y0, int y1)
 {
     build_job *j = user;
     fx_shadow_map *sm = j->sm;
-    for (int y = y0; y < y1; y++)
+    const float znear = sm->znear, range = sm->zfar - sm->znear;
+    if (!(range > 1e-20f)) { /* as fx_shadow_map_norm: z = 0 */
+        for (int y = y0; y < y1; y++)
+            memset(sm->depth + (size_t)y * sm->width, 0, (size_t)sm->width * sizeof(float));
+        return;
+    }
+    for (int y = y0; y < y1; y++) {
+        const float *restrict raw = j->raw + (size_t)y * sm->width;
+        float *restrict out = sm->depth + (size_t)y * sm->width;
         for (int x = 0; x < sm->width; x++) {
-            size_t i = (size_t)y * sm->width + x;
-            sm->depth[i] = fx_shadow_map_norm(sm, j->raw[i]);
+            const float z = 2.0f * (raw[x] - znear) / range - 1.0f;
+            const float c = z < -1.0f ? -1.0f : z > 1.0f ? 1.0f : z;
+            out[x] = fabsf(z) <= FLT_MAX ? c : 1.0f; /* NaN, +-Inf: 1 (isfinite) */
         }
+    }
 }
 
 /* The smaller of the forward and backward differences (0 at a border). */
@@ -98,34 +112,55 @@ typedef struct reduce_job {
     int mw, step;
 } reduce_job;
 
+/* One row's texel moments (texel_moments) into t1, t2: inside the map without the border
+ * tests, in a loop the compiler vectorises (the same operations, so the same values). */
+static void row_moments(const fx_shadow_map *sm, int y, float *t1, float *t2)
+{
+    const int w = sm->width;
+    const float *z = sm->depth + (size_t)y * w;
+    if (!sm->derivative_bias) {
+        for (int x = 0; x < w; x++) {
+            t1[x] = z[x];
+            t2[x] = z[x] * z[x];
+        }
+        return;
+    }
+    if (y == 0 || y == sm->height - 1 || w < 3) {
+        for (int x = 0; x < w; x++)
+            texel_moments(sm, x, y, &t1[x], &t2[x]);
+        return;
+    }
+    const float *restrict up = z - w, *restrict dn = z + w;
+    for (int x = 1; x < w - 1; x++) {
+        const float c = z[x];
+        float f = z[x + 1] - c, k = c - z[x - 1];
+        const float dx = fabsf(f) < fabsf(k) ? f : k;
+        f = dn[x] - c;
+        k = c - up[x];
+        const float dy = fabsf(f) < fabsf(k) ? f : k;
+        t1[x] = c;
+        t2[x] = c * c + 0.25f * (dx * dx + dy * dy);
+    }
+    texel_moments(sm, 0, y, &t1[0], &t2[0]);
+    texel_moments(sm, w - 1, y, &t1[w - 1], &t2[w - 1]);
+}
+
 /* Each reduced texel is the mean of its block's texels' moments (clipped at the far
- * borders), summed in double in a fixed order, computed from the depth on the fly. */
+ * borders), summed in double in a fixed order (the block's rows, each left to right), the
+ * moments made a row at a time from the depth. */
 static void reduce_rows(void *user, int y0, int y1)
 {
     reduce_job *j = user;
     const fx_shadow_map *sm = j->sm;
-    for (int my = y0; my < y1; my++) {
-        int by0 = my * j->step, by1 = by0 + j->step < sm->height ? by0 + j->step : sm->height;
-        for (int mx = 0; mx < j->mw; mx++) {
-            int bx0 = mx * j->step, bx1 = bx0 + j->step < sm->width ? bx0 + j->step : sm->width;
-            double a = 0.0, b = 0.0;
-            if (sm->derivative_bias && bx0 > 0 && bx1 < sm->width && by0 > 0 && by1 < sm->height) {
-                /* inside the map: texel_moments without its border tests (the same values) */
-                const size_t w = (size_t)sm->width;
-                for (int y = by0; y < by1; y++) {
-                    const float *z = sm->depth + (size_t)y * w;
-                    for (int x = bx0; x < bx1; x++) {
-                        const float c = z[x];
-                        float f = z[x + 1] - c, k = c - z[x - 1];
-                        const float dx = fabsf(f) < fabsf(k) ? f : k;
-                        f = z[x + w] - c;
-                        k = c - z[x - w];
-                        const float dy = fabsf(f) < fabsf(k) ? f : k;
-                        a += c;
-                        b += c * c + 0.25f * (dx * dx + dy * dy);
-                    }
-                }
-            } else {
+    const int w = sm->width, mw = j->mw, step = j->step;
+    /* per call: the row's moments (2 w floats) and the blocks' sums (2 mw doubles) */
+    double *acc = fx_mem_alloc((size_t)mw * 2 * sizeof(double) + (size_t)w * 2 * sizeof(float));
+    if (!acc) { /* no memory for the scratch: the same sums texel by texel */
+        for (int my = y0; my < y1; my++) {
+            int by0 = my * step, by1 = by0 + step < sm->height ? by0 + step : sm->height;
+            for (int mx = 0; mx < mw; mx++) {
+                int bx0 = mx * step, bx1 = bx0 + step < w ? bx0 + step : w;
+                double a = 0.0, b = 0.0;
                 for (int y = by0; y < by1; y++)
                     for (int x = bx0; x < bx1; x++) {
                         float m1, m2;
@@ -133,13 +168,40 @@ static void reduce_rows(void *user, int y0, int y1)
                         a += m1;
                         b += m2;
                     }
+                double n = (double)(by1 - by0) * (double)(bx1 - bx0);
+                float *o = j->dst + ((size_t)my * mw + mx) * 2;
+                o[0] = (float)(a / n);
+                o[1] = (float)(b / n);
             }
+        }
+        return;
+    }
+    float *t1 = (float *)(acc + 2 * (size_t)mw), *t2 = t1 + w;
+    for (int my = y0; my < y1; my++) {
+        int by0 = my * step, by1 = by0 + step < sm->height ? by0 + step : sm->height;
+        memset(acc, 0, (size_t)mw * 2 * sizeof(double));
+        for (int y = by0; y < by1; y++) {
+            row_moments(sm, y, t1, t2);
+            for (int mx = 0; mx < mw; mx++) {
+                int bx0 = mx * step, bx1 = bx0 + step < w ? bx0 + step : w;
+                double a = acc[2 * mx], b = acc[2 * mx + 1];
+                for (int x = bx0; x < bx1; x++) {
+                    a += t1[x];
+                    b += t2[x];
+                }
+                acc[2 * mx] = a;
+                acc[2 * mx + 1] = b;
+            }
+        }
+        for (int mx = 0; mx < mw; mx++) {
+            int bx0 = mx * step, bx1 = bx0 + step < w ? bx0 + step : w;
             double n = (double)(by1 - by0) * (double)(bx1 - bx0);
-            float *o = j->dst + ((size_t)my * j->mw + mx) * 2;
-            o[0] = (float)(a / n);
-            o[1] = (float)(b / n);
+            float *o = j->dst + ((size_t)my * mw + mx) * 2;
+            o[0] = (float)(acc[2 * mx] / n);
+            o[1] = (float)(acc[2 * mx + 1] / n);
         }
     }
+    fx_mem_free(acc);
 }
 
 /* The moments at level `level` (0: every texel) into sm->moments. */
