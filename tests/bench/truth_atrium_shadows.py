@@ -3,7 +3,7 @@ goals; docs/accuracy_truth.md, "Sun shadows", the atrium table).
 
     LIBFX_LIBRARY=build/libfx/libfx.so LIBFX_CLI=build/libfx/libfx \\
         /usr/bin/python3 tests/bench/truth_atrium_shadows.py OUT_DIR [--res 640x360] [--spp 32] \\
-        [--runs 3] [--configs NAME,...] [--docs docs]
+        [--runs 3] [--configs NAME,...] [--docs docs] [--no-eevee]
 
 Renders (kept in OUT_DIR and reused) frame 8 of blend_scenes/atrium through the add-on's
 batch path: the input with a recipe asking for every pass the apply modes read (the light
@@ -25,6 +25,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import truth_common as C  # noqa: E402
 import bench_atrium as B  # noqa: E402
+import truth_eevee as E  # noqa: E402
 
 FRAME = 8
 BASE = {"light": "Sun", "filter_size": 5.0, "bleed_reduction": 0.3}
@@ -44,13 +45,17 @@ CONFIGS = {
 }
 
 
+# what makes the atrium the truth: the Sun casts its shadows
+TRUTH_SETUP = "import bpy\nbpy.data.objects['Sun'].data.cycles.cast_shadow = True\n"
+
+
 def render(out, res, spp):
     rec = out / "input_recipe.json"
     rec.write_text(json.dumps({"version": 1, "effects": [
         {"effect": "vsm_shadows", "params": dict(BASE, apply="light_group")}]}))
     pref = lambda p: out / ("%s_libfx_passes.%04d.exr" % (p, FRAME))
     B.batch(str(out / "a_"), str(FRAME), res, spp, recipe=str(rec), check=pref("a"))
-    on = "import bpy\nbpy.data.objects['Sun'].data.cycles.cast_shadow = True\n"
+    on = TRUTH_SETUP
     B.batch(str(out / "t_"), str(FRAME), res, spp, recipe=B.noop_recipe(out), expr=on, check=pref("t"))
     B.batch(str(out / "u_"), str(FRAME), res, spp, recipe=B.noop_recipe(out),
             expr=on + "bpy.context.scene.cycles.seed = 17\n", check=pref("u"))
@@ -71,6 +76,7 @@ def main():
     ap.add_argument("--configs", default=",".join(CONFIGS))
     ap.add_argument("--presets", default=",".join(C.PRESETS))
     ap.add_argument("--docs")
+    ap.add_argument("--no-eevee", dest="eevee", action="store_false", help="skip the Eevee peer render")
     a = ap.parse_args()
     out = pathlib.Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -96,6 +102,10 @@ def main():
             images[(name, q)] = img
             rows.append(row("%s %s" % (name, q), img, float(np.median(ts)), truth, region, flat))
             print(rows[-1], flush=True)
+    if a.eevee:   # the real-time peer: the truth frame by Eevee with its own sun shadows
+        img, secs = E.eevee_shadows(C.ROOT / "blend_scenes" / "atrium" / "atrium.blend", str(out / "eevee.exr"),
+                                    a.res, a.spp, TRUTH_SETUP, frame=FRAME)
+        rows.append(row("Eevee (its own shadows)", img, 1e3 * secs, truth, region, flat))
     head = ["method", "ms", "shadow MAE", "whole MAE", "whole MAE (unclamped)", "mean / truth", "Laplacian (flat)"]
     md = C.md_table(head, [[r[0], "" if r[1] is None else "%.0f" % r[1], "%.4f" % r[2], "%.4f" % r[3],
                             "%.4f" % r[4], "%.3f" % r[5], "%.4f" % r[6]] for r in rows])

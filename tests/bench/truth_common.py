@@ -199,11 +199,18 @@ def eevee(name, blend, out, res, spp, probes=False):
     render seconds); kept and reused like the Cycles renders (OUT.json holds the time).
     probes: with Eevee's own reflection probes too (EEVEE_PROBES; the bake's seconds are
     in OUT.json as bake_s, apart from the render's)."""
+    w, h = (int(x) for x in res.split("x"))
+    code = EEVEE_CODE % {"res": (w, h), "spp": spp, "out": out, "probes": EEVEE_PROBES if probes else ""}
+    return eevee_render(blend, out, truth_expr(name, code))
+
+
+def eevee_render(blend, out, expr):
+    """Runs `blender -b blend --python-expr expr` (a script that renders one EXR to `out` and
+    prints LIBFX_EEVEE {"render_s": ...}) unless out and its OUT.json are there already:
+    (linear RGB, render seconds)."""
     times = out + ".json"
     if not (os.path.exists(out) and os.path.exists(times)):
-        w, h = (int(x) for x in res.split("x"))
-        code = EEVEE_CODE % {"res": (w, h), "spp": spp, "out": out, "probes": EEVEE_PROBES if probes else ""}
-        p = subprocess.run(["nice", "-n", "5", BLENDER, "-b", str(blend), "--python-expr", truth_expr(name, code)],
+        p = subprocess.run(["nice", "-n", "5", BLENDER, "-b", str(blend), "--python-expr", expr],
                            capture_output=True, text=True)
         line = [x for x in p.stdout.splitlines() if x.startswith("LIBFX_EEVEE ")]
         if p.returncode or not line or not os.path.exists(out):

@@ -3,7 +3,7 @@
 
     LIBFX_LIBRARY=build/libfx/libfx.so LIBFX_CLI=build/libfx/libfx \\
         /usr/bin/python3 tests/bench/truth_shadows.py OUT_DIR [--res 480x270] [--spp 16] \\
-        [--runs 3] [--variants floor,wall,roof] [--configs NAME,...] [--docs docs]
+        [--runs 3] [--variants floor,wall,roof] [--configs NAME,...] [--docs docs] [--no-eevee]
 
 Per variant: the input (the Sun casts no Cycles shadow; rendered with the scene's recipe
 turned to apply light_group, so the passes hold everything every apply mode reads, the
@@ -13,7 +13,9 @@ each configuration of CONFIGS is the scene's recipe with those params) and the t
 seed 17 (the noise floor); `libfx run` at each preset. Region: the pixels the Sun's
 shadow changes (|input - truth| luminance above 2 % of the truth's 99th percentile, as
 bench_atrium.py). Noise: the mean |Laplacian| of the luminance over flat geometry
-(truth_common.flat_mask), libfx beside Cycles' own.
+(truth_common.flat_mask), libfx beside Cycles' own. The real-time peer: the truth scene
+rendered by Eevee Legacy with its own sun shadows (truth_eevee.py), its ms the whole render
+on this VM's software OpenGL.
 """
 import json
 import os
@@ -23,6 +25,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import truth_common as C  # noqa: E402
+import truth_eevee as E  # noqa: E402
 
 VARIANTS = ("floor", "wall", "roof")
 # vsm_shadows params over the scene's recipe; the first is the one the docs' strips show
@@ -52,7 +55,7 @@ def shadow_region(plain, truth):
 
 def main():
     configs = [c for c in os.environ.get("TRUTH_SHADOWS_CONFIGS", ",".join(CONFIGS)).split(",") if c]
-    a = C.parse_args(res="480x270", spp=16, variants=VARIANTS)
+    a = C.parse_args(res="480x270", spp=16, variants=VARIANTS, eevee=True)
     d = C.scene_dir("shadows")
     recipe = json.load(open(d / "recipe.json"))
     noop = C.noop_recipe(C.pathlib.Path(a.out))
@@ -79,6 +82,9 @@ def main():
                 rows = crow[:3]
                 first = outs
             rows += [[cname + " " + r[0][len("libfx "):]] + list(r[1:]) for r in crow[3:]]
+        if a.eevee:   # the real-time peer: Eevee's own sun shadows on the truth scene
+            img, secs = E.eevee_shadows(blend, p + "eevee.exr", a.res, a.spp, C.truth_expr("shadows"))
+            rows.append(C.error_row("Eevee (its own shadows)", img, 1e3 * secs, truth, region, flat))
         outs = first
         series[v] = rows[1:3] + [["libfx " + r[0][len(configs[0]) + 1:]] + list(r[1:]) for r in rows[3:]
                                  if r[0][len(configs[0]) + 1:] in C.PRESETS and r[0].startswith(configs[0] + " ")]
