@@ -7,6 +7,9 @@
 
 #include <cjson/cJSON.h>
 #include <limits.h>
+#ifdef __SSE2__
+#include <xmmintrin.h>
+#endif
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
@@ -326,28 +329,59 @@ static int index_match(float v, const int *idx, int n)
     return 0;
 }
 
-/* One Cryptomatte name of one type, the usual mask (a material, an object): rank 0 holds
- * the pixel's whole coverage in most pixels, so it is read first, without the general
- * loops; the same sums in the same order as crypto_coverage, so the same bits. Clamped to
- * [0, 1] as mask_rows does; returns the row's first and last x with coverage > 0. */
+/* The coverage of one pixel for one Cryptomatte name, clamped to [0, 1] as mask_rows
+ * does: rank 0 first, the later ranks only while the coverage seen is below 1 (the same
+ * sums in the same order as crypto_coverage, so the same bits). */
+static inline float crypto_pixel_one_id(const crypto_rank *ranks, int nranks, float id, size_t i)
+{
+    const float *p = ranks[0].data + i * 4;
+    float c = (p[0] == id ? p[1] : 0.0f) + (p[2] == id ? p[3] : 0.0f);
+    float seen = p[1] + p[3];
+    for (int r = 1; r < nranks && seen < 0.99999f; r++) {
+        const float *q = ranks[r].data + i * 4;
+        if (q[0] == id)
+            c += q[1];
+        if (q[2] == id)
+            c += q[3];
+        seen += q[1] + q[3];
+    }
+    return !(c >= 0.0f) ? 0.0f : c > 1.0f ? 1.0f : c;
+}
+
+/* One Cryptomatte name of one type, the usual mask (a material, an object), a row at a
+ * time; returns the row's first and last x with coverage > 0. With SSE2, four pixels per
+ * step from rank 0 (a transpose of their RGBA), the pixels whose rank 0 does not hold their
+ * whole coverage done one at a time; the same operations per pixel, so the same bits. */
 static void crypto_row_one_id(const crypto_rank *ranks, int nranks, float id, size_t i0, int w, float *row,
                               int *first, int *last)
 {
+    int f = -1, l = -1, x = 0;
+#ifdef __SSE2__
+    const __m128 vid = _mm_set1_ps(id), zero = _mm_setzero_ps(), one = _mm_set1_ps(1.0f);
+    const __m128 full = _mm_set1_ps(0.99999f);
     const float *p = ranks[0].data + i0 * 4;
-    int f = -1, l = -1;
-    for (int x = 0; x < w; x++, p += 4) {
-        float c = (p[0] == id ? p[1] : 0.0f) + (p[2] == id ? p[3] : 0.0f);
-        float seen = p[1] + p[3];
-        if (seen < 0.99999f)
-            for (int r = 1; r < nranks && seen < 0.99999f; r++) {
-                const float *q = ranks[r].data + (i0 + (size_t)x) * 4;
-                if (q[0] == id)
-                    c += q[1];
-                if (q[2] == id)
-                    c += q[3];
-                seen += q[1] + q[3];
-            }
-        c = !(c >= 0.0f) ? 0.0f : c > 1.0f ? 1.0f : c;
+    for (; x + 4 <= w; x += 4, p += 16) {
+        __m128 id0 = _mm_loadu_ps(p), cov0 = _mm_loadu_ps(p + 4);
+        __m128 id1 = _mm_loadu_ps(p + 8), cov1 = _mm_loadu_ps(p + 12);
+        _MM_TRANSPOSE4_PS(id0, cov0, id1, cov1); /* now: id0, cov0, id1, cov1 of four pixels */
+        __m128 c = _mm_add_ps(_mm_and_ps(_mm_cmpeq_ps(id0, vid), cov0), _mm_and_ps(_mm_cmpeq_ps(id1, vid), cov1));
+        const int partial = nranks > 1 ? _mm_movemask_ps(_mm_cmplt_ps(_mm_add_ps(cov0, cov1), full)) : 0;
+        c = _mm_and_ps(c, _mm_cmpge_ps(c, zero)); /* NaN and negatives: 0 (-0 stays, as below) */
+        c = _mm_min_ps(c, one);
+        _mm_storeu_ps(row + x, c);
+        for (int k = 0; partial && k < 4; k++)
+            if (partial & (1 << k))
+                row[x + k] = crypto_pixel_one_id(ranks, nranks, id, i0 + (size_t)(x + k));
+        int pos = _mm_movemask_ps(_mm_cmpgt_ps(_mm_loadu_ps(row + x), zero));
+        if (pos) {
+            if (f < 0)
+                f = x + __builtin_ctz((unsigned)pos);
+            l = x + 31 - __builtin_clz((unsigned)pos);
+        }
+    }
+#endif
+    for (; x < w; x++) {
+        float c = crypto_pixel_one_id(ranks, nranks, id, i0 + (size_t)x);
         row[x] = c;
         if (c > 0.0f) {
             if (f < 0)
