@@ -17,6 +17,7 @@ typedef struct aux_entry {
     char *key;
     fx_aux_view *av;
     fx_shadow_map sm;
+    float *pixels; /* a view kept as read: its colour and depth, copied out of its EXR */
     uint64_t bytes, last_use;
     int refs;
 } aux_entry;
@@ -33,6 +34,7 @@ struct fx_aux_cache {
 static void entry_free(aux_entry *e)
 {
     fx_mem_free(e->key);
+    fx_mem_free(e->pixels);
     fx_aux_view_free(e->av);
     fx_shadow_map_free(&e->sm);
     memset(e, 0, sizeof *e);
@@ -129,8 +131,26 @@ static fx_result entry_build(const fx_frame *f, const char *name, int bias, int 
         return r;
     fx_aux_view *av = e->av;
     if (filter == AUX_RAW_VIEW) {
-        e->bytes = (uint64_t)av->width * av->height * ((av->color ? 4 : 0) + (av->depth ? 1 : 0)) * sizeof(float) +
-                   sizeof *av;
+        /* Its pixels move out of the EXR's frame, which is freed: a frame kept here would
+         * keep its context alive (fx_context_free waits for the last frame), and with it
+         * this cache, which only the context's end frees. */
+        const size_t n = (size_t)av->width * av->height;
+        const size_t floats = (av->color ? 4 * n : 0) + (av->depth ? n : 0);
+        if (floats && !(e->pixels = fx_mem_alloc(floats * sizeof(float))))
+            return fx_fail(f->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for aux view '%s'", where, name);
+        float *q = e->pixels;
+        if (av->color) {
+            memcpy(q, av->color, 4 * n * sizeof(float));
+            av->color = q;
+            q += 4 * n;
+        }
+        if (av->depth) {
+            memcpy(q, av->depth, n * sizeof(float));
+            av->depth = q;
+        }
+        fx_frame_free(av->frame);
+        av->frame = NULL;
+        e->bytes = (uint64_t)floats * sizeof(float) + sizeof *av;
         return FX_OK;
     }
     r = fx_shadow_map_build(f->ctx, av->depth, av->width, av->height, av->view.cam.clip_start,
