@@ -61,12 +61,12 @@
 #include "scene/aux_view.h"
 
 #include <float.h>
-
-#define PLANAR_VIEWS_MAX 4 /* planar views per entry (the add-on's aux_views.PLANAR_MAX) */
 #include <math.h>
 #include <stdatomic.h>
 #include <stdio.h>
 #include <string.h>
+
+#define PLANAR_VIEWS_MAX 4 /* planar views per entry (the add-on's aux_views.PLANAR_MAX) */
 
 typedef struct ssr_params {
     float reflectivity;
@@ -1085,8 +1085,9 @@ static fx_result ssr_probe_load(const fx_effect_run *run, ssr_job *j, const ssr_
 /* Process stage 0 (planar_view): the entry's mirrored-camera views, one per plane
  * ("planar:<key>", then "planar:<key>#2", ... while the frame has them), as j->planar.
  * A missing or unusable view (not rendered: a curved mirror, or failed): a warning, the
- * trace serves its pixels. av[] receives the loaded views (freed by the caller). */
-static fx_result ssr_planar_load(const fx_effect_run *run, ssr_job *j, fx_aux_view *av[PLANAR_VIEWS_MAX])
+ * trace serves its pixels. pm[] receives the views, from the context's cache as the probe
+ * (released by the caller). */
+static fx_result ssr_planar_load(const fx_effect_run *run, ssr_job *j, fx_aux_map pm[PLANAR_VIEWS_MAX])
 {
     for (int k = 0; k < PLANAR_VIEWS_MAX; k++) {
         char name[FX_NAME_MAX];
@@ -1102,19 +1103,18 @@ static fx_result ssr_planar_load(const fx_effect_run *run, ssr_job *j, fx_aux_vi
             if (!has)
                 break;
         }
-        fx_result r = fx_aux_view_load(run->frame, name, run->where, &av[k]);
+        fx_result r = fx_aux_view_acquire(run->frame, name, run->where, &pm[k]);
         if (r == FX_ERR_OUT_OF_MEMORY)
             return r;
-        if (r || !av[k]->color || !av[k]->has_plane || av[k]->panorama) {
+        if (r || !pm[k].av->color || !pm[k].av->has_plane || pm[k].av->panorama) {
             char msg[1024];
             snprintf(msg, sizeof msg, "%s", r ? fx_context_error(run->ctx) : "it has no colour pass or no \"plane\"");
             fx_warn(run->ctx, "%s: no planar mirror view '%s' (%s): the trace and the fallback serve", run->where,
                     name, msg);
-            fx_aux_view_free(av[k]);
-            av[k] = NULL;
+            fx_aux_map_release(run->ctx, &pm[k]);
             continue;
         }
-        j->planar[j->planar_count++] = av[k];
+        j->planar[j->planar_count++] = pm[k].av;
     }
     return FX_OK;
 }
@@ -1142,21 +1142,18 @@ static fx_result ssr_process(const fx_effect_run *run)
     fx_pano pano;
     if (p->fallback == FALLBACK_PROBE && (r = ssr_probe_load(run, &j, &F, &probe_map, &pano)))
         return r;
-    fx_aux_view *planar_views[PLANAR_VIEWS_MAX] = { NULL };
-    if (p->planar_view && p->glossiness == 0.0f && p->bend == 0.0f && p->op != OP_CEL &&
-        (r = ssr_planar_load(run, &j, planar_views))) {
-        fx_aux_map_release(run->ctx, &probe_map);
-        for (int k = 0; k < PLANAR_VIEWS_MAX; k++)
-            fx_aux_view_free(planar_views[k]);
-        return r;
-    }
-
+    fx_aux_map planar_maps[PLANAR_VIEWS_MAX];
+    memset(planar_maps, 0, sizeof planar_maps);
     fx_mask *surfaces = NULL;
     float *blurred = NULL, *fin[2] = { NULL, NULL };
     const size_t frame_bytes = (size_t)F.w * F.h * 4 * sizeof(float);
     const size_t hits_bytes = (size_t)F.w * F.h * sizeof(cell_hit);
     fx_depth_pyramid pyr;
     memset(&pyr, 0, sizeof pyr);
+    if (p->planar_view && p->glossiness == 0.0f && p->bend == 0.0f && p->op != OP_CEL &&
+        (r = ssr_planar_load(run, &j, planar_maps)))
+        goto out; /* releases the probe and the views loaded so far */
+
     if (p->bounces > 1 && p->mirror_surfaces.spec) {
         r = fx_mask_build(run->ctx, p->mirror_surfaces.spec, run->frame, where, &surfaces);
         if (r)
@@ -1192,7 +1189,7 @@ out:
     fx_depth_pyramid_free(run->ctx, &pyr);
     fx_aux_map_release(run->ctx, &probe_map);
     for (int k = 0; k < PLANAR_VIEWS_MAX; k++)
-        fx_aux_view_free(planar_views[k]);
+        fx_aux_map_release(run->ctx, &planar_maps[k]);
     return r;
 }
 
