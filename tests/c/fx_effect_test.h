@@ -21,6 +21,18 @@ static inline fx_frame *et_frame(fx_context *ctx, int w, int h, const float *rgb
     return f;
 }
 
+/* An aux view's EXR as the add-on writes one (probe, planar view): Combined from rgba and
+ * a Depth pass from dep, w x h. */
+static inline void et_write_view(fx_context *ctx, const char *path, int w, int h, const float *rgba,
+                                 const float *dep)
+{
+    fx_frame *f = et_frame(ctx, w, h, rgba);
+    CHECK(f != NULL);
+    CHECK_OK(ctx, fx_frame_add_pass(f, "Depth", 1, dep));
+    CHECK_OK(ctx, fx_frame_write_exr(f, path, NULL));
+    fx_frame_free(f);
+}
+
 static inline const float *et_combined(const fx_frame *f)
 {
     float *d = NULL;

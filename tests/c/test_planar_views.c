@@ -85,10 +85,7 @@ static void write_view(fx_context *ctx, const char *path, float r, float g, floa
         rgba[i * 4] = r, rgba[i * 4 + 1] = g, rgba[i * 4 + 2] = b, rgba[i * 4 + 3] = 1;
         dep[i] = 5.0f;
     }
-    fx_frame *f = et_frame(ctx, W, H, rgba);
-    CHECK_OK(ctx, fx_frame_add_pass(f, "Depth", 1, dep));
-    CHECK_OK(ctx, fx_frame_write_exr(f, path, NULL));
-    fx_frame_free(f);
+    et_write_view(ctx, path, W, H, rgba, dep);
     free(rgba), free(dep);
 }
 

@@ -267,10 +267,7 @@ static void write_probe(fx_context *ctx, const char *path, const double pos[3], 
         if (mode == 2)
             rgba[i * 4 + i % 3] = i % 2 ? NAN : INFINITY;
     }
-    fx_frame *f = et_frame(ctx, w, h, rgba);
-    CHECK_OK(ctx, fx_frame_add_pass(f, "Depth", 1, dep));
-    CHECK_OK(ctx, fx_frame_write_exr(f, path, NULL));
-    fx_frame_free(f);
+    et_write_view(ctx, path, w, h, rgba, dep);
     free(rgba), free(dep);
 }
 
@@ -452,10 +449,7 @@ static void write_planar(fx_context *ctx, const char *path, float w2c_out[16], f
             room_colour(q, wall, rgba + i * 4);
             dep[i] = (float)((t0 + t) / sqrt(v[0] * v[0] + v[1] * v[1] + 1));
         }
-    fx_frame *f = et_frame(ctx, FW, FH, rgba);
-    CHECK_OK(ctx, fx_frame_add_pass(f, "Depth", 1, dep));
-    CHECK_OK(ctx, fx_frame_write_exr(f, path, NULL));
-    fx_frame_free(f);
+    et_write_view(ctx, path, FW, FH, rgba, dep);
     free(rgba), free(dep);
     memset(w2c_out, 0, 16 * sizeof(float));
     for (int i = 0; i < 3; i++) {
