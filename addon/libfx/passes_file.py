@@ -22,6 +22,7 @@ import atexit
 import os
 import re
 import shutil
+import threading
 import time
 
 import bpy
@@ -128,8 +129,32 @@ def _write(scene, img, path):
         compat.image_format_restore(settings, saved)
     if not os.path.exists(tmp):
         raise native.LibfxError("Blender wrote no passes file at %s" % tmp)
+    old = _set_aside(path)
     os.replace(tmp, path)
-    return path, time.perf_counter() - t0
+    secs = time.perf_counter() - t0
+    if old is not None:
+        _remove_later(old)
+    return path, secs
+
+
+def _set_aside(path):
+    """The previous frame's file at path (a kept passes file rendered again) renamed aside,
+    or None. Replacing it in place makes the file system free its blocks before the rename
+    returns: 0.1-0.3 s for the Greek bath's 290 MB, on the way to the result."""
+    if not os.path.exists(path):
+        return None
+    old = "%s.old-%d.exr" % (path[:-len(".exr")], os.getpid())
+    try:
+        os.replace(path, old)
+    except OSError:
+        return None   # replaced in place then, as before
+    return old
+
+
+def _remove_later(path):
+    """Unlinks path on a thread of its own (os.unlink releases the GIL); not a daemon thread,
+    so Blender's exit waits for it rather than leaving the file behind."""
+    threading.Thread(target=_remove_quietly, args=(path,), name="libfx unlink").start()
 
 
 def _remove_quietly(path):

@@ -151,3 +151,52 @@ def test_passes_not_kept_go_to_ram_when_there_is_room(blender, library, tmp_path
         assert not os.path.exists(mine)   # and this one's at exit
     else:
         assert all(row["path"] == r["beside"] for row in rows), rows
+
+
+#: A kept passes file rendered twice, the cube moved between the renders: the second render
+#: replaces the first's file (set aside and removed on a thread, off the way to the result).
+AGAIN_KEPT = T.PRELUDE + r"""
+import json, os, shutil
+from libfx import props, scene_setup
+s = bpy.context.scene
+s.render.filepath = %r
+s.render.resolution_x, s.render.resolution_y, s.render.resolution_percentage = 160, 90, 100
+s.render.engine = "CYCLES"
+s.cycles.samples = 1
+s.cycles.use_denoising = False
+s.libfx.keep_passes = True
+item = s.libfx.stack.add()
+item.effect = "gaussian_blur"
+props.effect_group(item).sigma = 2.0
+scene_setup.request_sync(s)
+stats = []
+for x in (0.0, 2.0):
+    bpy.data.objects["Cube"].location.x = x
+    bpy.ops.render.render()
+    path = scene_setup.passes_path(s, s.frame_current)
+    st = os.stat(path)
+    stats.append([st.st_ino, st.st_mtime_ns])
+    if x == 0.0:
+        shutil.copy(path, path + ".first.exr")
+print("KEPT " + json.dumps({"passes": scene_setup.passes_path(s, s.frame_current), "stats": stats}))
+"""
+
+
+def test_kept_passes_rendered_again_replace_the_file(blender, library, tmp_path):
+    import json
+    import os
+    import OpenImageIO as oiio
+    p = T.run_blender([], env=T.addon_env(library), python_expr=AGAIN_KEPT % str(tmp_path / "kept_"))
+    out = p.stdout + p.stderr
+    assert p.returncode == 0, out[-5000:]
+    assert not T.tracebacks(out), out[-5000:]
+    r = json.loads(next(l for l in out.splitlines() if l.startswith("KEPT "))[5:])
+    assert r["stats"][0] != r["stats"][1], r   # a new file each render
+    assert os.path.isfile(r["passes"]), r
+    # nothing set aside is left once Blender has exited
+    assert [f for f in os.listdir(tmp_path) if ".old-" in f] == [], os.listdir(tmp_path)
+    # the kept file is the second render's (the cube moved), not the first's
+    first, second = oiio.ImageBuf(r["passes"] + ".first.exr"), oiio.ImageBuf(r["passes"])
+    assert second.spec().width == 160 and second.spec().channelnames == first.spec().channelnames
+    a, b = first.get_pixels(oiio.FLOAT), second.get_pixels(oiio.FLOAT)
+    assert np.abs(a - b).max() > 0.1, "the passes file still holds the first render"
