@@ -463,21 +463,27 @@ def _to_ui(fn):
         _ui_queue.append(fn)
     try:
         if not bpy.app.timers.is_registered(_drain_ui):
-            bpy.app.timers.register(_drain_ui, first_interval=0.05)
+            bpy.app.timers.register(_drain_ui, first_interval=UI_FIRST_S)
     except Exception:
         pass
 
 
-#: How often a UI update Blender refused ("not allowed in this context") is tried again,
-#: 0.1 s apart: the refusal can outlast the render job by a moment (seen on 4.3).
-UI_RETRIES = 50
+#: The UI queue is first looked at this soon (F12's result waits for it: the timer is what
+#: stands between the stack's end and the image), then every UI_RETRY_S while the render
+#: job still runs or Blender refuses the update ("not allowed in this context"; the
+#: refusal can outlast the render job by a moment, seen on 4.3), at most UI_RETRIES times
+#: (5 s). A timer costs the main thread a function call: the event loop polls its timers
+#: every few milliseconds anyway.
+UI_FIRST_S = 0.005
+UI_RETRY_S = 0.02
+UI_RETRIES = 250
 
 
 def _drain_ui():
     # While the render job runs Blender refuses writes to data-blocks (an image's
     # name, a reload): try again when it has finished.
     if bpy.app.is_job_running("RENDER"):
-        return 0.1
+        return UI_RETRY_S
     with _lock:
         todo = list(_ui_queue)
         _ui_queue.clear()
@@ -494,7 +500,7 @@ def _drain_ui():
     if again:
         with _lock:
             _ui_queue[:0] = again
-        return 0.1
+        return UI_RETRY_S
     return None
 
 
