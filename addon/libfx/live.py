@@ -8,8 +8,9 @@ every change, straight into the "libfx Result" image (no disk round trip).
   at the *interactive setting* (draft preset and/or a proxy, ``settings.live_setting``),
   and once no change has come for ``SETTLE_S`` at the stack's own quality, full size.
 - One worker thread runs the library (ctypes releases the GIL), so Blender's UI thread
-  never waits for more than a pixel copy.  A newer change cancels a run in progress
-  between effects (the library's progress callback).  A recipe the library refuses
+  never waits for more than a pixel copy.  A newer change replaces a run still waiting
+  and cancels a final run in progress between effects (the library's progress callback);
+  an interactive run in progress finishes and shows, so that a drag keeps updating.  A recipe the library refuses
   leaves the last good image and puts the message in the panel.
 - Sequences: with kept passes files, a frame change loads that frame's passes (a few
   frames are cached) and shows its result.
@@ -231,7 +232,8 @@ class _Job:
 
 
 class _Worker:
-    """One thread, one job slot: a newer job replaces a waiting one and cancels a running one."""
+    """One thread, one job slot: a newer job replaces a waiting one (and cancels a running
+    final one, _obsolete)."""
 
     def __init__(self):
         self.cv = threading.Condition()
@@ -318,8 +320,14 @@ class _Worker:
                 self.cv.notify_all()
 
     def _obsolete(self, job):
+        """A newer change cancels a running final run (hundreds of ms), but not a running
+        interactive one: during a drag a change comes every few tens of ms, about what an
+        interactive run takes, so cancelling those would leave the image still until the
+        drag ends. The interactive run finishes and shows; the newest change runs next."""
         with self.cv:
-            return self.stop or (self.job is not None and self.job.generation > job.generation)
+            if self.stop:
+                return True
+            return self.job is not None and self.job.generation > job.generation and job.kind != "interactive"
 
 
 WORKER = _Worker()

@@ -76,6 +76,27 @@ res["shown_after_change"] = dict(live.session(scene).shown, timings=None)
 with open(os.path.join(os.path.dirname(out_path), "changed_recipe.json"), "w") as f:
     json.dump(recipe.to_recipe(scene), f)
 
+# 2b. A drag: a change that comes while an interactive run is in progress does not cancel
+# it (it shows, then the newest runs); one that comes during a final run cancels that. The
+# context lock, held here, keeps the first job in the worker's hands until the second is in.
+def overlapped(first_kind):
+    with libfx.render.ctx_lock():
+        first = live._make_job(scene, first_kind)
+        live.WORKER.submit(first)
+        end = time.monotonic() + 30
+        while live.WORKER.running is not first and time.monotonic() < end:
+            time.sleep(0.001)
+        second = live._make_job(scene, "interactive")
+        live.WORKER.submit(second)
+    live.WORKER.wait_idle(120)
+    with live.WORKER.cv:
+        outs, live.WORKER.results = live.WORKER.results, []
+    return [o["job"].generation - first.generation for o in outs if "pixels" in o]
+
+
+res["drag_interactive"] = overlapped("interactive")
+res["drag_final"] = overlapped("final")
+
 # 3. An invalid value keeps the last image and says why.
 g, gr = entry("god_rays")
 gr.fx_god_rays.light = "NoSuchLight"

@@ -96,6 +96,11 @@ def test_live_loop(blender, library, cli, tmp_path):
     assert 0 < mae < INTERACTIVE_MAE, mae
     assert abs(float(inter[..., :3].mean() - final[..., :3].mean())) < INTERACTIVE_MEAN
 
+    # A drag: a newer change lets a running interactive run finish and show (both shown, in
+    # order); it cancels a running final run (only the newer one shown).
+    assert r["drag_interactive"] == [0, 1], r["drag_interactive"]
+    assert r["drag_final"] == [1], r["drag_final"]
+
     # An invalid value: an error in the panel, the image kept; repaired: the error goes.
     assert any(c["error"] and "NoSuchLight" in c["error"] for c in r["invalid"]), r["invalid"]
     assert r["invalid_image_same"] and "NoSuchLight" in r["invalid_panel_error"]
