@@ -30,7 +30,8 @@ from . import native, recipe, render
 
 RESULT_IMAGE = render.RESULT_IMAGE
 
-DEBOUNCE_S = 0.02     # a burst of property updates (one drag step sets several) runs once
+DEBOUNCE_S = 0.0      # the run starts at the event loop's next timer pass: the property updates of
+                      # one drag step (several) have all come by then and run once
 SETTLE_S = 0.35       # no change for this long: the final run
 CACHE_FRAMES = 3      # held frames per scene while scrubbing a sequence
 BUDGET_MS = 100.0     # a change's interactive image within this (issue 13); AUTO keeps to it
@@ -554,7 +555,7 @@ def _submit_new(scene, kind):
     _submit(job)
 
 
-POLL_S = 0.01
+POLL_S = 0.005        # a finished run waits at most this for the main thread to show it
 
 
 def _submit(job):
