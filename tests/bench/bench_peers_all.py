@@ -947,7 +947,10 @@ def run_peers(exr_path, sidecar_path, width, height, runs, out_dir, blender_mode
         print("warning: no sidecar %s: no Sun Beams row" % sidecar, file=sys.stderr)
         sidecar = None
     ctx = {"scene": scene_name(exr_path), "exr": exr_path, "w": width, "h": height, "runs": runs, "out": out_dir,
-           "lib": Libfx(find_cli(), exr_path, sidecar, out_dir, threads=2, runs=min(runs, 3))}
+           # libfx's first frame: a median of 7 fresh processes (0.2-0.4 s each), since one
+           # first frame on this VM varies more than a warm one (the 16:21 run: the blur's
+           # first frame 13.0 ms here, 8.3 ms in bench_all's first-frame stage)
+           "lib": Libfx(find_cli(), exr_path, sidecar, out_dir, threads=2, runs=7)}
     # Glare Streaks and the cel chain on request (--only): streaks costs as much as Fog Glow and
     # has no libfx twin; the cel chain needs the light passes (DiffDir, DiffCol, GlossDir)
     modes = blender_modes or ["blur", "pixelate", "sobel", "laplace", "fog_glow", "sun_beams", "bw", "sepia",
