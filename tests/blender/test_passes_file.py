@@ -93,12 +93,11 @@ def test_passes_file_from_the_render_result(blender, library, tmp_path):
     assert "libfx passes" not in nodes and "libfx Render Layers" not in nodes, nodes
 
 
-#: Three renders of a small blurred cube, passes not kept: the first two with RAM to spare,
-#: the third with RAM "too small" (the room asked per pixel made huge). A folder left by a
-#: process that is gone waits in the RAM root. Prints where each passes file went.
-RAM = T.PRELUDE + r"""
+#: The default cube at 160x90 (Cycles, 1 sample) under a small blur; the output prefix is
+#: the script's %r.
+SMALL_BLURRED = T.PRELUDE + r"""
 import json, os
-from libfx import passes_file, props, render, scene_setup
+from libfx import props, scene_setup
 s = bpy.context.scene
 s.render.filepath = %r
 s.render.resolution_x, s.render.resolution_y, s.render.resolution_percentage = 160, 90, 100
@@ -109,6 +108,14 @@ item = s.libfx.stack.add()
 item.effect = "gaussian_blur"
 props.effect_group(item).sigma = 2.0
 scene_setup.request_sync(s)
+"""
+
+
+#: Three renders of a small blurred cube, passes not kept: the first two with RAM to spare,
+#: the third with RAM "too small" (the room asked per pixel made huge). A folder left by a
+#: process that is gone waits in the RAM root. Prints where each passes file went.
+RAM = SMALL_BLURRED + r"""
+from libfx import passes_file, render
 base = os.path.join(passes_file.RAM_ROOT, "libfx-passes-%%d" %% os.getuid())
 dead = os.path.join(base, "999999999")   # above any pid_max: no such process
 if os.path.isdir(passes_file.RAM_ROOT):
@@ -131,14 +138,20 @@ print("RAM " + json.dumps({"rows": rows, "pid": os.getpid(), "base": base,
 """
 
 
-def test_passes_not_kept_go_to_ram_when_there_is_room(blender, library, tmp_path):
+def _run_tagged(library, script, prefix, tag):
+    """Runs a scene script in `blender -b` (exit 0, no traceback) and returns the JSON it
+    printed after `tag` and a space."""
     import json
-    import os
-    p = T.run_blender([], env=T.addon_env(library), python_expr=RAM % str(tmp_path / "ram_"))
+    p = T.run_blender([], env=T.addon_env(library), python_expr=script % prefix)
     out = p.stdout + p.stderr
     assert p.returncode == 0, out[-5000:]
     assert not T.tracebacks(out), out[-5000:]
-    r = json.loads(next(l for l in out.splitlines() if l.startswith("RAM "))[4:])
+    return json.loads(next(l for l in out.splitlines() if l.startswith(tag + " "))[len(tag) + 1:])
+
+
+def test_passes_not_kept_go_to_ram_when_there_is_room(blender, library, tmp_path):
+    import os
+    r = _run_tagged(library, RAM, str(tmp_path / "ram_"), "RAM")
     rows = r["rows"]
     assert os.path.isfile(r["result"]), r
     for row in rows:   # never left behind: the result holds the passes
@@ -155,20 +168,9 @@ def test_passes_not_kept_go_to_ram_when_there_is_room(blender, library, tmp_path
 
 #: A kept passes file rendered twice, the cube moved between the renders: the second render
 #: replaces the first's file (set aside and removed on a thread, off the way to the result).
-AGAIN_KEPT = T.PRELUDE + r"""
-import json, os, shutil
-from libfx import props, scene_setup
-s = bpy.context.scene
-s.render.filepath = %r
-s.render.resolution_x, s.render.resolution_y, s.render.resolution_percentage = 160, 90, 100
-s.render.engine = "CYCLES"
-s.cycles.samples = 1
-s.cycles.use_denoising = False
+AGAIN_KEPT = SMALL_BLURRED + r"""
+import shutil
 s.libfx.keep_passes = True
-item = s.libfx.stack.add()
-item.effect = "gaussian_blur"
-props.effect_group(item).sigma = 2.0
-scene_setup.request_sync(s)
 stats = []
 for x in (0.0, 2.0):
     bpy.data.objects["Cube"].location.x = x
@@ -183,14 +185,9 @@ print("KEPT " + json.dumps({"passes": scene_setup.passes_path(s, s.frame_current
 
 
 def test_kept_passes_rendered_again_replace_the_file(blender, library, tmp_path):
-    import json
     import os
     import OpenImageIO as oiio
-    p = T.run_blender([], env=T.addon_env(library), python_expr=AGAIN_KEPT % str(tmp_path / "kept_"))
-    out = p.stdout + p.stderr
-    assert p.returncode == 0, out[-5000:]
-    assert not T.tracebacks(out), out[-5000:]
-    r = json.loads(next(l for l in out.splitlines() if l.startswith("KEPT "))[5:])
+    r = _run_tagged(library, AGAIN_KEPT, str(tmp_path / "kept_"), "KEPT")
     assert r["stats"][0] != r["stats"][1], r   # a new file each render
     assert os.path.isfile(r["passes"]), r
     # nothing set aside is left once Blender has exited
