@@ -156,14 +156,6 @@ static inline void wet_apply(const float *s, float *o, float gain, const float o
     o[3] = s[3];
 }
 
-/* FX_EFFECT_OWN_FINITE: a row's ROI span made finite while it is in cache (the stack's
- * own pass would read the whole output again; the same function: the same bits) */
-static inline void wet_finish_row(const fx_effect_run *run, int y)
-{
-    fx_effect_finish_row(run, run->dst + ((size_t)y * run->width + run->roi.x0) * 4,
-                         (size_t)(run->roi.x1 - run->roi.x0) * 4);
-}
-
 /* The lattice nodes' values (see WET_NODE) */
 static void wet_node_rows(void *user, int k0, int k1)
 {
@@ -508,7 +500,6 @@ static void wet_lattice_rows(void *user, int y0, int y1, int worker)
                     dbg[x] = wet;
             }
         }
-        wet_finish_row(run, y);
     }
 }
 
@@ -517,7 +508,7 @@ static void wet_rows(void *user, int y0, int y1)
     wet_job *j = user;
     const fx_effect_run *run = j->run;
     const fx_rect *roi = &run->roi;
-    for (int y = roi->y0 + y0; y < roi->y0 + y1; y++) {
+    for (int y = roi->y0 + y0; y < roi->y0 + y1; y++)
         for (int x = roi->x0; x < roi->x1; x++) {
             size_t i = (size_t)y * run->width + x;
             const float *s = run->src + 4 * i;
@@ -529,8 +520,6 @@ static void wet_rows(void *user, int y0, int y1)
             if (j->dbg)
                 j->dbg[i] = wet;
         }
-        wet_finish_row(run, y);
-    }
 }
 
 /* Lattice positions along one axis of the ROI [a, b) (b - a >= 2): every f-th pixel, the
@@ -616,7 +605,7 @@ const fx_effect_class fx_effect_wet_surfaces = {
     /* draft at least 3x faster than final (docs/effects/wet_surfaces.md) */
     .presets = {"{\"downsample\": 8}", "{\"downsample\": 3}", "{\"downsample\": 1}", "{\"downsample\": 1}"},
     .passes = wet_passes,
-    .flags = FX_EFFECT_NEEDS_CAMERA | FX_EFFECT_OWN_FINITE, /* every row through wet_finish_row */
+    .flags = FX_EFFECT_NEEDS_CAMERA,
     .aux_views = fx_aux_needs_rain_map, /* what is under cover */
     .halo = NULL,
     .validate = NULL,
