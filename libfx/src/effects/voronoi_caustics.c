@@ -723,14 +723,6 @@ static inline __attribute__((always_inline)) int position_at(const float *pq, fx
     return fabsf(P->x) <= 1e15f && fabsf(P->y) <= 1e15f && isfinite(P->z);
 }
 
-/* FX_EFFECT_OWN_FINITE: a row's ROI span made finite while it is in cache (the stack's
- * own pass would read the whole output again) */
-static inline void finish_row(const fx_effect_run *run, int y)
-{
-    fx_effect_finish_row(run, run->dst + ((size_t)y * run->width + run->roi.x0) * 4,
-                         (size_t)(run->roi.x1 - run->roi.x0) * 4);
-}
-
 static void caustics_rows(void *user, int begin, int end)
 {
     const caustics_job *j = user;
@@ -832,7 +824,6 @@ static void caustics_rows(void *user, int begin, int end)
                 shade_segment(j, run->src + i * 4, run->dst + i * 4, n, st, av, nz, sv, patterns);
             }
         }
-        finish_row(run, y);
     }
 }
 
@@ -944,7 +935,6 @@ static void caustics_rows_lattice(void *user, int begin, int end)
             size_t i = (size_t)y * w + xs;
             shade_segment(j, run->src + i * 4, run->dst + i * 4, n, st, av, nz, sv, patterns);
         }
-        finish_row(run, y);
     }
     fx_mem_free(colv);
 }
@@ -1096,7 +1086,6 @@ static void caustics_rows_gain(void *user, int begin, int end)
                 gain_pixel(j, x, y, col_t[x - x0], L, D, tint, &cache);
             L = R;
         }
-        finish_row(run, y);
     }
 }
 
@@ -1350,7 +1339,6 @@ const fx_effect_class fx_effect_voronoi_caustics = {
     },
     .passes = caustics_passes,
     .needs_camera = caustics_needs_camera,
-    .flags = FX_EFFECT_OWN_FINITE, /* every row through finish_row */
     .halo = NULL,
     .validate = caustics_validate,
     .process = caustics_process,
