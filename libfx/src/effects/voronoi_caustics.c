@@ -38,7 +38,9 @@
  * (exp in float without libm, the gain, the clamp) that the compiler vectorises. With the
  * Position pass and a lattice without lattice_shading (final, preview) the pattern pass is
  * caustics_rows_lattice: the lattice columns once per row, the searches of a segment in one
- * batch (fx_voronoi_table_grid_n); the same bits as caustics_rows. */
+ * batch (fx_voronoi_table_grid_n); the same bits as caustics_rows. With lattice_shading in
+ * that case (draft) the nodes hold the focus gain s itself and caustics_rows_gain
+ * interpolates it four pixels at a time, with the same surface test (no exp per pixel). */
 #include "core/effect.h"
 #include "core/parallel.h"
 #include "math/camera.h"
@@ -141,8 +143,10 @@ static const fx_param_def caustics_param_defs[] = {
               "get their own exact search (sharp lines); off: interpolated"),
     FX_P_BOOL(caustics_params, lattice_shading, "lattice_shading", 0,
               "Quality (downsample > 1): the whole effect (pattern, Fresnel, environment) shaded at "
-              "the lattice nodes and interpolated as a per-pixel gain and offset, without a per-pixel "
-              "surface test where a lattice cell's corners all have positions; off: per pixel"),
+              "the lattice nodes and interpolated as a per-pixel gain and offset; physical mode without "
+              "environment from the Position pass (draft) keeps the per-pixel surface test (a pixel "
+              "off its corners' surface gets its own search), other cases skip it where a lattice "
+              "cell's corners all have positions; off: per pixel"),
 };
 
 static double exponent_of(const caustics_params *p)
