@@ -452,7 +452,7 @@ static void wet_lattice_rows(void *user, int y0, int y1, int worker)
             int x = xs;
             if (smooth)
                 x = smooth_quads(&sc, an, far, depth, normal, col_t, src, dst, dbg, xs, xe);
-            else
+            else if (xe - xs >= 4) /* (narrower cells, downsample 2 and 3: a pixel at a time) */
                 x = partial_quads(j, c, ty, far, depth, normal, col_t, src, dst, dbg, xs, xe);
             for (; x < xe; x++) {
                 const float *s = src + 4 * (size_t)x;
