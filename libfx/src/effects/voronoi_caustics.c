@@ -38,7 +38,9 @@
  * (exp in float without libm, the gain, the clamp) that the compiler vectorises. With the
  * Position pass and a lattice without lattice_shading (final, preview) the pattern pass is
  * caustics_rows_lattice: the lattice columns once per row, the searches of a segment in one
- * batch (fx_voronoi_table_grid_n); the same bits as caustics_rows. */
+ * batch (fx_voronoi_table_grid_n); the same bits as caustics_rows. With lattice_shading in
+ * that case (draft) the nodes hold the focus gain s itself and caustics_rows_gain
+ * interpolates it four pixels at a time, with the same surface test (no exp per pixel). */
 #include "core/effect.h"
 #include "core/parallel.h"
 #include "math/camera.h"
@@ -141,8 +143,10 @@ static const fx_param_def caustics_param_defs[] = {
               "get their own exact search (sharp lines); off: interpolated"),
     FX_P_BOOL(caustics_params, lattice_shading, "lattice_shading", 0,
               "Quality (downsample > 1): the whole effect (pattern, Fresnel, environment) shaded at "
-              "the lattice nodes and interpolated as a per-pixel gain and offset, without a per-pixel "
-              "surface test where a lattice cell's corners all have positions; off: per pixel"),
+              "the lattice nodes and interpolated as a per-pixel gain and offset; physical mode without "
+              "environment from the Position pass (draft) keeps the per-pixel surface test (a pixel "
+              "off its corners' surface gets its own search), other cases skip it where a lattice "
+              "cell's corners all have positions; off: per pixel"),
 };
 
 static double exponent_of(const caustics_params *p)
@@ -232,6 +236,8 @@ typedef struct caustics_job {
     int *node_id;            /* nx * ny * 2: the node's nearest two points */
     int cx, cy;              /* lattice cells per row (nx - 1, at least 1) and rows */
     unsigned char *smooth;   /* cx * cy (refine): smooth_rows' flags of each lattice cell */
+    int gain_path;           /* lattice_shading, physical, no additive term, Position: the nodes
+                                hold the focus gain s (node[0]) and caustics_rows_gain shades */
 } caustics_job;
 
 static void evaluate(const caustics_job *j, double wx, double wy, fx_voronoi_hit *h)
@@ -408,6 +414,8 @@ static void cell_rows(void *user, int begin, int end)
     }
 }
 
+static inline float focus_s(const caustics_job *j, float a, float noise);
+
 /* The lattice nodes of rows [begin, end): a row's positions first, then (fast kinds, grid)
  * its searches as one batch (value_at's bits), then the noise and shading factors. */
 static void node_rows(void *user, int begin, int end)
@@ -467,7 +475,9 @@ static void node_rows(void *user, int begin, int end)
             if (isnan(q[2]))
                 continue;
             q[1] = noise_at(j, q[2], q[3], &cache);
-            if (j->p->lattice_shading) {
+            if (j->gain_path) {
+                q[0] = focus_s(j, q[0], q[1]);
+            } else if (j->p->lattice_shading) {
                 fx_vec3 P;
                 world_at(j, j->node_x[ni], j->node_y[nj], &P);
                 factors(j, (size_t)j->node_y[nj] * j->run->width + j->node_x[ni], P, q[0], q[1], q + 4, q + 5);
@@ -532,6 +542,8 @@ static inline void column_at(const caustics_job *j, int j0, int j1, float ty, in
         out[c] = a[c] * uy + b[c] * ty;
 }
 
+
+#define GAIN_TOL 0.1
 #define SEG 256 /* pixels per row segment: the shading pass's buffers */
 
 /* A segment pixel's state after the pattern pass */
@@ -931,6 +943,156 @@ static void caustics_rows_lattice(void *user, int begin, int end)
     fx_mem_free(colv);
 }
 
+/* The focus gain s = strength noise' (min(g / mean, 16) - 1), g = exp(-a / line_width): the
+ * operations of shade_segment's pattern pixels, one pixel. */
+static inline float focus_s(const caustics_job *j, float a, float noise)
+{
+    float x = -a * j->inv_lw;
+    x = x > -87.0f ? x : -87.0f;
+    x = x < 0.0f ? x : 0.0f;
+    float g = exp_neg(x) * j->inv_mean;
+    g = (g < (float)FOCUS_MAX ? g : (float)FOCUS_MAX) - 1.0f;
+    const float amp = j->p->strength * (0.4f + 1.2f * noise);
+    return amp * g;
+}
+
+/* out = src (1 + s tint) (s4: s in every lane), colour clamped to [0, FLT_MAX] (NaN to 0); alpha: src x (1 + s 0),
+ * the source's finite alpha bit for bit (lo's -FLT_MAX lane keeps it) */
+static inline __attribute__((always_inline)) void apply_gain(const float *src, float *dst, v4f s4, v4f tint)
+{
+    const v4f in = load4(src);
+    const v4f v = in * (1.0f + s4 * tint);
+    const v4f lo = {0.0f, 0.0f, 0.0f, -FLT_MAX}, hi = {FLT_MAX, FLT_MAX, FLT_MAX, FLT_MAX};
+#ifdef __SSE2__ /* maxps(v, lo) is lo for NaN (its second operand) */
+    const v4f r = _mm_min_ps(_mm_max_ps(v, lo), hi);
+#else
+    v4f r = (v4f)(((v4i)v & (v > lo)) | ((v4i)lo & ~(v > lo)));
+    r = (v4f)(((v4i)r & (r < hi)) | ((v4i)hi & ~(r < hi)));
+#endif
+    memcpy(dst, &r, sizeof r);
+}
+
+/* caustics_rows_gain's pixel x of row y in a lattice cell whose row-interpolated corners
+ * are L (left) and L + D (right), [s, noise, world x, world y], at weight t: no position or
+ * outside the mask: the source; its corners on its surface (interpolated world XY within a
+ * tenth of a cell of its own): s interpolated; else its own search, noise and s. */
+static __attribute__((noinline)) void gain_pixel(const caustics_job *j, int x, int y, float t, v4f L,
+                                                             v4f D, v4f tint, fx_noise_cache *cache)
+{
+    const fx_effect_run *run = j->run;
+    const size_t i = (size_t)y * run->width + x;
+    const float *pq = j->position + i * j->pos_channels;
+    const float px = pq[0], py = pq[1], pz = pq[2];
+    const int ok = fabsf(px) <= 1e15f && fabsf(py) <= 1e15f && isfinite(pz);
+    if ((run->mask && !(run->mask->coverage[i] > 0.0f)) || !ok) {
+        memcpy(run->dst + i * 4, run->src + i * 4, 4 * sizeof(float));
+        return;
+    }
+    const float tol = (float)(GAIN_TOL * j->cell);
+    const float wx = L[2] + t * D[2], wy = L[3] + t * D[3];
+    float s;
+    if (fabsf(wx - px) <= tol && fabsf(wy - py) <= tol) /* NaN corners fail */
+        s = L[0] + t * D[0];
+    else
+        s = focus_s(j, value_at(j, px, py, NULL), noise_at(j, px, py, cache));
+    apply_gain(run->src + i * 4, run->dst + i * 4, (v4f){s, s, s, s}, tint);
+}
+
+/* lattice_shading's path (draft) in physical mode without an additive term, from the
+ * Position pass: the nodes hold the focus gain s (focus_s of their pattern and noise); per
+ * row and lattice cell, the corners interpolated to the row, then four pixels at a time:
+ * their positions, validity and surface test as vectors, s interpolated and applied. A
+ * quad with any other pixel (no position, masked out, off the corners' surface: a
+ * silhouette, a step) goes a pixel at a time (gain_pixel: the same operations, lane by
+ * lane, so a pixel's bits do not depend on its quad). */
+static void caustics_rows_gain(void *user, int begin, int end)
+{
+    const caustics_job *j = user;
+    const fx_effect_run *run = j->run;
+    const int w = run->width, x0 = run->roi.x0, x1 = run->roi.x1, nx = j->nx, f = j->f, pc = j->pos_channels;
+    const int ncx = nx > 1 ? nx - 1 : 1;
+    const float tol = (float)(GAIN_TOL * j->cell);
+    const float *cov = run->mask ? run->mask->coverage : NULL;
+    const float *col_t = j->col_t;
+    const v4f tint = {j->p->tint[0], j->p->tint[1], j->p->tint[2], 0.0f};
+    const v4i absm = {0x7fffffff, 0x7fffffff, 0x7fffffff, 0x7fffffff};
+    const v4f big = {1e15f, 1e15f, 1e15f, 1e15f}, vtol = {tol, tol, tol, tol}, zero = {0.0f, 0.0f, 0.0f, 0.0f};
+    fx_noise_cache cache = {0};
+    for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++) {
+        int j0, j1;
+        float ty;
+        lattice_pos(j->node_y, j->ny, f, run->roi.y0, y, &j0, &j1, &ty);
+        const float uy = 1.0f - ty;
+        const float *a = j->nodes + (size_t)j0 * nx * 4, *b = j->nodes + (size_t)j1 * nx * 4;
+        v4f L = load4(a) * uy + load4(b) * ty;
+        for (int cc = 0; cc < ncx; cc++) {
+            const int i1 = nx > 1 ? cc + 1 : 0;
+            const v4f R = load4(a + 4 * i1) * uy + load4(b + 4 * i1) * ty;
+            const v4f D = R - L;
+            const int xs = x0 + cc * f, xe = cc == ncx - 1 ? x1 : xs + f;
+#ifdef __SSE2__
+#define BCAST(v, k) ((v4f)_mm_shuffle_ps((v), (v), _MM_SHUFFLE(k, k, k, k)))
+#else
+#define BCAST(v, k) ((v4f){(v)[k], (v)[k], (v)[k], (v)[k]})
+#endif
+            const v4f ls = BCAST(L, 0), ds = BCAST(D, 0), lx = BCAST(L, 2), dx = BCAST(D, 2);
+            const v4f ly = BCAST(L, 3), dy = BCAST(D, 3);
+            /* quads at xs, xs + 4, ...; a cell of 4 pixels or more ends with the quad at
+             * xe - 4 (overlapping: the same cell, so the same values written again) */
+            const int nquad = xe - xs >= 4 ? (xe - xs + 3) / 4 : 0;
+            for (int q = 0; q < nquad; q++) {
+                const int x = xs + 4 * q + 4 <= xe ? xs + 4 * q : xe - 4;
+                const size_t i = (size_t)y * w + x;
+                const v4f t4 = load4(col_t + (x - x0));
+                const float *pq = j->position + i * pc;
+                v4f px, py, pz;
+#ifdef __SSE2__
+                if (pc == 3) { /* x0 y0 z0 x1 | y1 z1 x2 y2 | z2 x3 y3 z3 */
+                    const __m128 p0 = _mm_loadu_ps(pq), p1 = _mm_loadu_ps(pq + 4), p2 = _mm_loadu_ps(pq + 8);
+                    const __m128 a02 = _mm_shuffle_ps(p0, p1, _MM_SHUFFLE(2, 0, 3, 0)); /* x0 x1 y1 x2 */
+                    const __m128 b23 = _mm_shuffle_ps(p1, p2, _MM_SHUFFLE(2, 1, 3, 2)); /* x2 y2 x3 y3 */
+                    px = (v4f)_mm_shuffle_ps(a02, b23, _MM_SHUFFLE(2, 0, 1, 0));        /* x0 x1 x2 x3 */
+                    const __m128 c01 = _mm_shuffle_ps(p0, p1, _MM_SHUFFLE(0, 0, 1, 1)); /* y0 y0 y1 y1 */
+                    py = (v4f)_mm_shuffle_ps(c01, b23, _MM_SHUFFLE(3, 1, 2, 0));        /* y0 y1 y2 y3 */
+                    const __m128 d01 = _mm_shuffle_ps(p0, p1, _MM_SHUFFLE(1, 1, 2, 2)); /* z0 z0 z1 z1 */
+                    const __m128 d23 = _mm_shuffle_ps(p2, p2, _MM_SHUFFLE(3, 3, 0, 0)); /* z2 z2 z3 z3 */
+                    pz = (v4f)_mm_shuffle_ps(d01, d23, _MM_SHUFFLE(2, 0, 2, 0));        /* z0 z1 z2 z3 */
+                } else
+#endif
+                {
+                    px = (v4f){pq[0], pq[pc], pq[2 * pc], pq[3 * pc]};
+                    py = (v4f){pq[1], pq[pc + 1], pq[2 * pc + 1], pq[3 * pc + 1]};
+                    pz = (v4f){pq[2], pq[pc + 2], pq[2 * pc + 2], pq[3 * pc + 2]};
+                }
+                const v4f wx = lx + t4 * dx, wy = ly + t4 * dy;
+                v4i ok = ((v4f)((v4i)px & absm) <= big) & ((v4f)((v4i)py & absm) <= big) & ((pz - pz) == zero) &
+                         ((v4f)((v4i)(wx - px) & absm) <= vtol) & ((v4f)((v4i)(wy - py) & absm) <= vtol);
+                if (cov)
+                    ok &= load4(cov + i) > zero;
+#ifdef __SSE2__
+                const int all = _mm_movemask_ps((__m128)ok) == 15;
+#else
+                const int all = ok[0] & ok[1] & ok[2] & ok[3];
+#endif
+                if (all) {
+                    const v4f s4 = ls + t4 * ds;
+                    apply_gain(run->src + i * 4, run->dst + i * 4, BCAST(s4, 0), tint);
+                    apply_gain(run->src + (i + 1) * 4, run->dst + (i + 1) * 4, BCAST(s4, 1), tint);
+                    apply_gain(run->src + (i + 2) * 4, run->dst + (i + 2) * 4, BCAST(s4, 2), tint);
+                    apply_gain(run->src + (i + 3) * 4, run->dst + (i + 3) * 4, BCAST(s4, 3), tint);
+                } else {
+                    for (int m = 0; m < 4; m++)
+                        gain_pixel(j, x + m, y, t4[m], L, D, tint, &cache);
+                }
+            }
+#undef BCAST
+            for (int x = nquad ? xe : xs; x < xe; x++)
+                gain_pixel(j, x, y, col_t[x - x0], L, D, tint, &cache);
+            L = R;
+        }
+    }
+}
+
 /* Mean of g over the tile at this time: a fixed lattice, independent of the camera. */
 typedef struct mean_job {
     const caustics_job *cj;
@@ -1109,7 +1271,7 @@ static int job_lattice(const fx_effect_run *run, const caustics_params *p, caust
     for (int c = 0; c < roi_w; c++)
         lattice_pos(j->node_x, j->nx, j->f, run->roi.x0, run->roi.x0 + c, &j->col_i0[c], &j->col_i1[c], &j->col_t[c]);
     size_t count = (size_t)j->nx * j->ny;
-    j->node_size = p->lattice_shading ? NODE_MAX : 4;
+    j->node_size = p->lattice_shading && !j->gain_path ? NODE_MAX : 4;
     j->nodes = fx_mem_alloc(count * j->node_size * sizeof(float));
     j->node_id = fx_mem_alloc(count * 2 * sizeof(int));
     if (!j->nodes || !j->node_id)
@@ -1145,6 +1307,7 @@ static fx_result caustics_process(const fx_effect_run *run)
         r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", run->where);
     } else {
         j.has_add = p->mode == MODE_SEED || (p->environment_strength > 0.0f && j.normal);
+        j.gain_path = p->downsample > 1 && p->lattice_shading && p->mode == MODE_PHYSICAL && !j.has_add && j.position;
         if (job_lattice(run, p, &j)) {
             r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", run->where);
         } else {
@@ -1154,7 +1317,10 @@ static fx_result caustics_process(const fx_effect_run *run)
             int lattice_path = j.nodes && !p->lattice_shading && p->mode == MODE_PHYSICAL && !j.has_add &&
                                j.position && j.node_size == 4;
             fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows),
-                            lattice_path ? caustics_rows_lattice : caustics_rows, &j);
+                            j.gain_path      ? caustics_rows_gain
+                            : lattice_path ? caustics_rows_lattice
+                                           : caustics_rows,
+                            &j);
         }
     }
     job_free(&j);

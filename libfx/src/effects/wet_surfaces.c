@@ -289,6 +289,26 @@ static inline __attribute__((always_inline)) void row_spans(const wet_job *j, we
     }
 }
 
+/* Three interleaved floats of four pixels (a Normal pass row at q) as three vectors */
+static inline __attribute__((always_inline)) void load3x4(const float *q, v4f *a, v4f *b, v4f *c)
+{
+#ifdef __SSE__
+    const __m128 p0 = _mm_loadu_ps(q), p1 = _mm_loadu_ps(q + 4), p2 = _mm_loadu_ps(q + 8);
+    const __m128 x01 = _mm_shuffle_ps(p0, p1, _MM_SHUFFLE(2, 0, 3, 0)); /* a0 a1 b1 a2 */
+    const __m128 x23 = _mm_shuffle_ps(p1, p2, _MM_SHUFFLE(2, 1, 3, 2)); /* a2 b2 a3 b3 */
+    *a = (v4f)_mm_shuffle_ps(x01, x23, _MM_SHUFFLE(2, 0, 1, 0));
+    const __m128 y01 = _mm_shuffle_ps(p0, p1, _MM_SHUFFLE(0, 0, 1, 1)); /* b0 b0 b1 b1 */
+    *b = (v4f)_mm_shuffle_ps(y01, x23, _MM_SHUFFLE(3, 1, 2, 0));
+    const __m128 z01 = _mm_shuffle_ps(p0, p1, _MM_SHUFFLE(1, 1, 2, 2)); /* c0 c0 c1 c1 */
+    const __m128 z23 = _mm_shuffle_ps(p2, p2, _MM_SHUFFLE(3, 3, 0, 0)); /* c2 c2 c3 c3 */
+    *c = (v4f)_mm_shuffle_ps(z01, z23, _MM_SHUFFLE(2, 0, 2, 0));
+#else
+    *a = (v4f){q[0], q[3], q[6], q[9]};
+    *b = (v4f){q[1], q[4], q[7], q[10]};
+    *c = (v4f){q[2], q[5], q[8], q[11]};
+#endif
+}
+
 /* A smooth cell's pixels [xs, xe) four at a time while all four lie on the cell's surface
  * (the same tests, lane by lane, as wet_lattice_rows' one-pixel loop: the same bits);
  * returns the first pixel not done. an: the cell's first corner's normal. */
@@ -303,16 +323,21 @@ static inline __attribute__((always_inline)) int smooth_quads(const wet_span *sc
     int x = xs;
     for (; x + 4 <= xe; x += 4) {
         const v4f d4 = ld4(depth + x), tx4 = ld4(col_t + x);
-        const float *q = normal + 3 * (size_t)x;
-        const v4f nx = {q[0], q[3], q[6], q[9]}, ny = {q[1], q[4], q[7], q[10]}, nz = {q[2], q[5], q[8], q[11]};
+        v4f nx, ny, nz;
+        load3x4(normal + 3 * (size_t)x, &nx, &ny, &nz);
         const v4f dz = wl1 + tx4 * wd1;
         const v4f nd = nx * V4(an0) + ny * V4(an1) + nz * V4(an2);
         const v4f nn = nx * nx + ny * ny + nz * nz;
         const v4f dd = (v4f)((v4i)(d4 - dz) & (v4i){0x7fffffff, 0x7fffffff, 0x7fffffff, 0x7fffffff}); /* |d - dz| */
         const v4i ok = (d4 > V4(0.0f)) & (d4 < V4(far)) & (dd <= V4(0.02f) * d4) & (nd > V4(0.0f)) &
                        (nd * nd >= V4(0.81f) * nn);
+#ifdef __SSE__
+        if (_mm_movemask_ps((__m128)ok) != 15)
+            break;
+#else
         if (!(ok[0] & ok[1] & ok[2] & ok[3]))
             break;
+#endif
         const v4f wet4 = wl0 + tx4 * wd0;
         for (int m = 0; m < 4; m++) {
             const float *s = src + 4 * (size_t)(x + m);
@@ -323,6 +348,65 @@ static inline __attribute__((always_inline)) int smooth_quads(const wet_span *sc
                 memcpy(o, s, 4 * sizeof(float)); /* dry: the source */
             if (dbg)
                 dbg[x + m] = wet4[m];
+        }
+    }
+    return x;
+}
+
+/* A cell that is not smooth: its pixels [xs, xe) four at a time through wet_partial's
+ * tests and sums with the four pixels in the lanes (the same operations per pixel in the
+ * same order: a corner that fails adds w = 0, which changes no sum: the same bits), while
+ * all four have a surface and a corner on it; returns the first pixel not done. */
+static inline __attribute__((always_inline)) int partial_quads(const wet_job *j, const float *const c[4], float ty,
+                                                               float far, const float *restrict depth,
+                                                               const float *restrict normal,
+                                                               const float *restrict col_t, const float *restrict src,
+                                                               float *restrict dst, float *restrict dbg, int xs, int xe)
+{
+    const v4f lim_f = V4(0.015f * (float)j->f), uy = V4(1.0f - ty), vy = V4(ty);
+    const v4i absm = {0x7fffffff, 0x7fffffff, 0x7fffffff, 0x7fffffff};
+    int x = xs;
+    for (; x + 4 <= xe; x += 4) {
+        const v4f d4 = ld4(depth + x), tx4 = ld4(col_t + x);
+        v4f nx, ny, nz;
+        load3x4(normal + 3 * (size_t)x, &nx, &ny, &nz);
+        const v4f nn = nx * nx + ny * ny + nz * nz;
+        const v4f lim = lim_f * d4;
+        const v4f ux = V4(1.0f) - tx4;
+        const v4f bw[4] = {ux * uy, tx4 * uy, ux * vy, tx4 * vy};
+        v4f sg = V4(0.0f), s0 = V4(0.0f), s1 = V4(0.0f), s2 = V4(0.0f), sw = V4(0.0f), ws = V4(0.0f);
+        for (int m = 0; m < 4; m++) {
+            const float *q = c[m];
+            const v4f dd = (v4f)((v4i)(d4 - V4(q[N_DEPTH])) & absm);
+            const v4f nd = nx * V4(q[N_NX]) + ny * V4(q[N_NX + 1]) + nz * V4(q[N_NX + 2]);
+            const v4i ok = (dd <= lim) & (nd > V4(0.0f)) & (nd * nd >= V4(0.81f) * nn);
+            const v4f w = (v4f)((v4i)(bw[m] + V4(1e-3f)) & ok);
+            sg = sg + w * V4(q[N_G]);
+            s0 = s0 + w * V4(q[N_O]);
+            s1 = s1 + w * V4(q[N_O + 1]);
+            s2 = s2 + w * V4(q[N_O + 2]);
+            sw = sw + w * V4(q[N_WET]);
+            ws = ws + w;
+        }
+        const v4i good = (d4 > V4(0.0f)) & (d4 < V4(far)) & (ws > V4(0.0f));
+#ifdef __SSE__
+        if (_mm_movemask_ps((__m128)good) != 15)
+            break;
+#else
+        if (!(good[0] & good[1] & good[2] & good[3]))
+            break;
+#endif
+        const v4f inv = V4(1.0f) / ws;
+        const v4f g = sg * inv, o0 = s0 * inv, o1 = s1 * inv, o2 = s2 * inv, wet = sw * inv;
+        for (int m = 0; m < 4; m++) {
+            const float *s = src + 4 * (size_t)(x + m);
+            float *o = dst + 4 * (size_t)(x + m);
+            if (wet[m] > 0.0f)
+                wet_apply4(s, o, (v4f){g[m], g[m], g[m], 1.0f}, (v4f){o0[m], o1[m], o2[m], 0.0f});
+            else
+                memcpy(o, s, 4 * sizeof(float)); /* dry: the source */
+            if (dbg)
+                dbg[x + m] = wet[m];
         }
     }
     return x;
@@ -368,6 +452,8 @@ static void wet_lattice_rows(void *user, int y0, int y1, int worker)
             int x = xs;
             if (smooth)
                 x = smooth_quads(&sc, an, far, depth, normal, col_t, src, dst, dbg, xs, xe);
+            else if (xe - xs >= 4) /* (narrower cells, downsample 2 and 3: a pixel at a time) */
+                x = partial_quads(j, c, ty, far, depth, normal, col_t, src, dst, dbg, xs, xe);
             for (; x < xe; x++) {
                 const float *s = src + 4 * (size_t)x;
                 float *o = dst + 4 * (size_t)x;
