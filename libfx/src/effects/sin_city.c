@@ -572,7 +572,8 @@ __attribute__((target("avx2"), noinline)) static int sc_row_avx2(const sc_job *j
                 if (soft_hue) {
                     __m256 t = _mm256_mul_ps(_mm256_sub_ps(dist, hh), ihs);
                     t = _mm256_min_ps(_mm256_max_ps(t, zero), one);
-                    ws = _mm256_sub_ps(one, _mm256_mul_ps(_mm256_mul_ps(t, t), _mm256_sub_ps(k3, _mm256_mul_ps(k2, t))));
+                    const __m256 t2 = _mm256_mul_ps(t, t), r3 = _mm256_sub_ps(k3, _mm256_mul_ps(k2, t));
+                    ws = _mm256_sub_ps(one, _mm256_mul_ps(t2, r3));
                 }
                 const __m256 w = _mm256_blendv_ps(ws, one, _mm256_cmp_ps(dist, hh, _CMP_LE_OQ));
                 k = _mm256_and_ps(_mm256_mul_ps(w, gate), ok);
@@ -664,14 +665,14 @@ FX_CLONES_VECTORIZE static void sc_rows(void *user, int begin, int end)
     const int nt = j->quantise ? q->n - 1 : 0;
     const int vec = nt < FX_LEVELS_VEC;
     float T[FX_LEVELS_VEC][SC_LANES];
-    sc_vk K; /* local: its address never escapes, so it stays in registers or the stack */
+    sc_vk K; /* a local copy: read once per block of rows, not through j after every store */
     sc_vk_init(j, &K);
 #ifdef SC_AVX2
     const int avx2 = __builtin_cpu_supports("avx2");
     int pre_off = 0; /* rows to go without the hue pretest */
     /* not in place, and a frame past the caches (8 MiB): stream the output (sc_row_avx2) */
-    const int big = run->dst != run->src &&
-                    (size_t)run->width * (size_t)(run->roi.y1 - run->roi.y0) * 4 * sizeof(float) >= ((size_t)8 << 20);
+    const int big = run->dst != run->src && (size_t)run->width * (size_t)(run->roi.y1 - run->roi.y0) * 4 *
+                                                    sizeof(float) >= ((size_t)8 << 20);
 #endif
     for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++) {
         const float *s = run->src + (size_t)y * run->width * 4;
@@ -694,9 +695,9 @@ FX_CLONES_VECTORIZE static void sc_rows(void *user, int begin, int end)
                 for (int t = 0; t < nt; t++)
                     for (int i = 0; i < SC_LANES; i++)
                         thrp[t][i] = T[t][order[i]];
-                /* the pretest costs about 30 instructions, a skip spares about 50: rows where it spared under
-                 * 3/8 of the chunks go without it for the next 8 rows (the bits are the
-                 * same either way) */
+                /* the pretest costs about 30 instructions, a skip spares about 50: a row
+                 * where it spared under 3/8 of the chunks is followed by 8 rows without it
+                 * (the bits are the same either way) */
                 const int use = K.pretest && pre_off == 0;
                 int skipped = 0;
                 const int x_start = x;
