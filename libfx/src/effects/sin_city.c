@@ -572,8 +572,8 @@ __attribute__((target("avx2"), noinline)) static int sc_row_avx2(const sc_job *j
                 if (soft_hue) {
                     __m256 t = _mm256_mul_ps(_mm256_sub_ps(dist, hh), ihs);
                     t = _mm256_min_ps(_mm256_max_ps(t, zero), one);
-                    const __m256 t2 = _mm256_mul_ps(t, t), r3 = _mm256_sub_ps(k3, _mm256_mul_ps(k2, t));
-                    ws = _mm256_sub_ps(one, _mm256_mul_ps(t2, r3));
+                    const __m256 tsq = _mm256_mul_ps(t, t), tr = _mm256_sub_ps(k3, _mm256_mul_ps(k2, t));
+                    ws = _mm256_sub_ps(one, _mm256_mul_ps(tsq, tr));
                 }
                 const __m256 w = _mm256_blendv_ps(ws, one, _mm256_cmp_ps(dist, hh, _CMP_LE_OQ));
                 k = _mm256_and_ps(_mm256_mul_ps(w, gate), ok);
