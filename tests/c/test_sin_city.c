@@ -217,6 +217,73 @@ static void test_extremes(fx_context *ctx)
     }
 }
 
+/* The whole-row paths (8-pixel chunks: the AVX2 rows with the division-free pretest that
+ * skips chunks surely outside the hue window or under the gate, and the vector-type chunks)
+ * against the same pixels run one by one (1x1 frames: the padded lane path, no pretest):
+ * the same bits, on colours placed at the pretest's margins (hues within a fraction of a
+ * degree of width/2 + softness, saturations at the gate's ramp ends, magnitudes 1e-25 to
+ * 1e4). */
+static void hsv_to_rgb(float h, float sat, float v, float *o)
+{
+    h = fmodf(h, 360.0f);
+    h = h < 0.0f ? h + 360.0f : h;
+    const float c = v * sat, hp = h / 60.0f, x = c * (1.0f - fabsf(fmodf(hp, 2.0f) - 1.0f)), m = v - c;
+    float r = 0, g = 0, b = 0;
+    if (hp < 1) r = c, g = x;
+    else if (hp < 2) r = x, g = c;
+    else if (hp < 3) g = c, b = x;
+    else if (hp < 4) g = x, b = c;
+    else if (hp < 5) r = x, b = c;
+    else r = c, b = x;
+    o[0] = r + m, o[1] = g + m, o[2] = b + m, o[3] = 1.0f;
+}
+
+static void test_pretest_margins(fx_context *ctx)
+{
+    static const struct { float hue, width, soft, minsat, satsoft; } ps[] = {
+        { 0, 30, 20, 0.3f, 0.15f }, { 0, 20, 10, 0.45f, 0.15f }, { 200, 0, 0.5f, 0, 0 },
+        { 359, 2, 1, 0.2f, 0 }, { 120, 60, 0, 0.05f, 0.3f }, { -30, 100, 5, 0.5f, 0.01f },
+    };
+    enum { W = 96, H = 8 };
+    float *px = malloc(sizeof(float) * 4 * W * H);
+    for (size_t k = 0; k < sizeof ps / sizeof ps[0]; k++) {
+        const float L = 0.5f * ps[k].width + ps[k].soft, g0 = ps[k].minsat - 0.5f * ps[k].satsoft;
+        for (int y = 0; y < H; y++)
+            for (int x = 0; x < W; x++) {
+                /* hue: the window's edges plus -0.3 .. 0.3 degrees; some lanes well inside */
+                const float dh = ((float)(x % 24) - 12.0f) * 0.025f;
+                const float side = (x / 24) % 2 ? 1.0f : -1.0f;
+                const float h = x % 7 == 0 ? ps[k].hue : ps[k].hue + side * (L + dh);
+                /* saturation at the gate's ends (and at its threshold), in steps of 1e-4 */
+                const float sats[8] = { g0 - 2e-4f, g0 - 1e-4f, g0, g0 + 1e-4f, ps[k].minsat,
+                                        ps[k].minsat + 0.5f * ps[k].satsoft, 0.9f, 1.0f };
+                float sat = sats[(x + y) % 8];
+                sat = sat < 0.0f ? 0.0f : sat > 1.0f ? 1.0f : sat;
+                const float mags[4] = { 1e-25f, 0.5f, 7.0f, 1e4f };
+                hsv_to_rgb(h, sat, mags[y % 4], px + 4 * ((size_t)y * W + x));
+            }
+        char params[256];
+        snprintf(params, sizeof params,
+                 "\"hue\":%g,\"hue_width\":%g,\"hue_softness\":%g,\"min_saturation\":%g,\"saturation_softness\":%g",
+                 ps[k].hue, ps[k].width, ps[k].soft, ps[k].minsat, ps[k].satsoft);
+        float *o = run_px(ctx, px, W, H, params, NULL);
+        CHECK(o != NULL);
+        int diff = 0;
+        for (int i = 0; o && i < W * H; i++) {
+            float *o1 = run_px(ctx, px + 4 * i, 1, 1, params, NULL);
+            CHECK(o1 != NULL);
+            if (o1 && memcmp(o1, o + 4 * i, 4 * sizeof(float)) != 0)
+                diff++;
+            free(o1);
+        }
+        if (diff)
+            fprintf(stderr, "test_pretest_margins: %s: %d pixels differ from their 1x1 runs\n", params, diff);
+        CHECK(diff == 0);
+        free(o);
+    }
+    free(px);
+}
+
 int main(void)
 {
     fx_context *c1 = NULL, *c2 = NULL;
@@ -227,6 +294,8 @@ int main(void)
     test_keep_object(c1);
     test_properties(c1, c2);
     test_extremes(c1);
+    test_pretest_margins(c1);
+    test_pretest_margins(c2);
     fx_context_free(c1);
     fx_context_free(c2);
     return tu_finish("test_sin_city");

@@ -178,6 +178,37 @@ static inline __attribute__((always_inline)) int any8(v8i m)
 #  define SHUF8I(a, i0, i1, i2, i3, i4, i5, i6, i7) __builtin_shuffle(a, (v8i){ i0, i1, i2, i3, i4, i5, i6, i7 })
 #endif
 
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && !defined(FX_NO_CLONES)
+#  include <immintrin.h>
+#  define EDGES_LIST_AVX2 1
+/* draw_row's pass 1 in AVX2: the chunks of 8 pixels from x to x_end (whole chunks) with a
+ * matte value other than 0 or a value whose exponent is all ones (Inf or NaN) go on the
+ * list; the same chunks as the vector loop (the largest masked exponent of the 32 values
+ * equals the all-ones one exactly when one of them does), with a test of the whole chunk
+ * instead of the lanes taken apart. Returns the list's length. */
+__attribute__((target("avx2"), noinline)) static int draw_list_avx2(const float *srow, const float *matte, int x,
+                                                                   int x_end, int *list)
+{
+    const __m256i expo = _mm256_set1_epi32(0x7f800000);
+    const __m256 zero = _mm256_setzero_ps();
+    int nl = 0;
+    for (; x < x_end; x += 8) {
+        const float *sp = srow + 4 * (size_t)x;
+        const __m256i e0 = _mm256_and_si256(_mm256_loadu_si256((const __m256i *)(const void *)sp), expo);
+        const __m256i e1 = _mm256_and_si256(_mm256_loadu_si256((const __m256i *)(const void *)(sp + 8)), expo);
+        const __m256i e2 = _mm256_and_si256(_mm256_loadu_si256((const __m256i *)(const void *)(sp + 16)), expo);
+        const __m256i e3 = _mm256_and_si256(_mm256_loadu_si256((const __m256i *)(const void *)(sp + 24)), expo);
+        const __m256i e = _mm256_max_epi32(_mm256_max_epi32(e0, e1), _mm256_max_epi32(e2, e3));
+        const __m256i any = _mm256_or_si256(_mm256_cmpeq_epi32(e, expo),
+                                            _mm256_castps_si256(_mm256_cmp_ps(_mm256_loadu_ps(matte + x), zero,
+                                                                              _CMP_NEQ_UQ)));
+        list[nl] = x;
+        nl += !_mm256_testz_si256(any, any);
+    }
+    return nl;
+}
+#endif
+
 /* d = s + a (t - s) per pixel; NaN -> 0, +-Inf -> +-FLT_MAX. Where a is 0 and the pixel is
  * finite (most pixels) d = s: eight such pixels in a row are not written at all in place (the
  * cache lines stay clean: no write back). Eight pixels at a time as four vectors of two
@@ -218,9 +249,18 @@ FX_CLONES static void draw_row(void *user, int y, const float *matte)
     enum { SEG = 256 }; /* chunks per list */
     int list[SEG];
     int x = roi->x0;
+#ifdef EDGES_LIST_AVX2
+    const int avx2 = __builtin_cpu_supports("avx2");
+#endif
     while (x < xe) {
         int nl = 0;
         const int x_end = x + 8 * SEG <= xe ? x + 8 * SEG : xe;
+#ifdef EDGES_LIST_AVX2
+        if (avx2) {
+            nl = draw_list_avx2(srow, matte, x, x_end, list);
+            x = x_end;
+        }
+#endif
         for (; x < x_end; x += 8) {
             const float *sp = srow + 4 * (size_t)x;
             v8i any = ld8f(matte + x) != S8(0.0f);
