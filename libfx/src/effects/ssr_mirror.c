@@ -184,7 +184,16 @@ typedef struct ssr_frame {
     const float *normal; /* world space */
     int nch;
     int w, h;
+    /* A per-pixel memo of the view-space normal and tangent plane (surface_get), filled
+     * on first use by whichever thread gets there (a rays' neighbours test the same
+     * pixels): state 0 unknown, 1 being filled, SURF_NONE, SURF_NORMAL (no plane),
+     * SURF_PLANE. Values are those the direct computation gives, so the same bits. */
+    _Atomic unsigned char *sstate;
+    float *snormal;   /* 3 per pixel */
+    double *splane_c; /* n . centre */
 } ssr_frame;
+
+enum { SURF_NONE = 2, SURF_NORMAL = 3, SURF_PLANE = 4 };
 
 static inline fx_vec3 view_pos_at(const ssr_frame *F, int x, int y, float *depth_out)
 {
@@ -195,15 +204,66 @@ static inline fx_vec3 view_pos_at(const ssr_frame *F, int x, int y, float *depth
     return fx_view_position(&F->view, ndc, d);
 }
 
-/* View-space unit normal at a pixel; 0 if there is none (background, NaN, zero). */
-static inline int view_normal_at(const ssr_frame *F, int x, int y, fx_vec3 *n)
+/* The surface of pixel (x, y), computed: its view-space unit normal (none for background,
+ * NaN, zero: SURF_NONE) and, for a perspective view, its tangent plane n . p = *c through
+ * the pixel's centre position (SURF_PLANE; SURF_NORMAL when that is not finite). */
+static int surface_compute(const ssr_frame *F, int x, int y, fx_vec3 *n, double *c)
 {
     const float *p = F->normal + ((size_t)y * F->w + x) * F->nch;
     fx_vec3 nw = fx_v3(p[0], p[1], p[2]);
     if (!(fx_v3_dot(nw, nw) > 0.01f) || !isfinite(fx_v3_dot(nw, nw))) /* |N| >= 0.1 (AA edges: ~0.5) */
-        return 0;
+        return SURF_NONE;
     *n = fx_v3_normalize_or(fx_world_dir_to_view(&F->view, nw), fx_v3(0, 0, 0));
-    return n->x != 0.0f || n->y != 0.0f || n->z != 0.0f;
+    if (!(n->x != 0.0f || n->y != 0.0f || n->z != 0.0f))
+        return SURF_NONE;
+    if (F->view.orthographic)
+        return SURF_NORMAL;
+    fx_vec3 ce = view_pos_at(F, x, y, NULL);
+    double nc = (double)n->x * ce.x + (double)n->y * ce.y + (double)n->z * ce.z;
+    if (!isfinite(nc))
+        return SURF_NORMAL;
+    *c = nc;
+    return SURF_PLANE;
+}
+
+/* surface_compute through the per-pixel memo. */
+static inline int surface_at_pixel(const ssr_frame *F, int x, int y, fx_vec3 *n, double *c)
+{
+    if (!F->sstate)
+        return surface_compute(F, x, y, n, c);
+    size_t i = (size_t)y * F->w + x;
+    unsigned char st = atomic_load_explicit(&F->sstate[i], memory_order_acquire);
+    if (st >= SURF_NONE) {
+        if (st >= SURF_NORMAL) {
+            const float *q = F->snormal + i * 3;
+            *n = fx_v3(q[0], q[1], q[2]);
+            if (st == SURF_PLANE)
+                *c = F->splane_c[i];
+        }
+        return st;
+    }
+    fx_vec3 nn = fx_v3(0, 0, 0);
+    double cc = 0.0;
+    int code = surface_compute(F, x, y, &nn, &cc);
+    *n = nn;
+    *c = cc;
+    unsigned char expect = 0;
+    /* one thread fills the entry; another arriving meanwhile computes its own copy */
+    if (st == 0 && atomic_compare_exchange_strong_explicit(&F->sstate[i], &expect, 1, memory_order_acquire,
+                                                           memory_order_relaxed)) {
+        float *q = F->snormal + i * 3;
+        q[0] = nn.x, q[1] = nn.y, q[2] = nn.z;
+        F->splane_c[i] = cc;
+        atomic_store_explicit(&F->sstate[i], (unsigned char)code, memory_order_release);
+    }
+    return code;
+}
+
+/* View-space unit normal at a pixel; 0 if there is none (background, NaN, zero). */
+static inline int view_normal_at(const ssr_frame *F, int x, int y, fx_vec3 *n)
+{
+    double c;
+    return surface_at_pixel(F, x, y, n, &c) >= SURF_NORMAL;
 }
 
 /* Tracer hits: a surface seen from behind (its normal along the ray) is not what a
@@ -221,13 +281,10 @@ static int surface_plane(const void *user, int x, int y, double plane[4])
 {
     const ssr_frame *F = user;
     fx_vec3 n;
-    if (F->view.orthographic || !view_normal_at(F, x, y, &n))
+    double c;
+    if (surface_at_pixel(F, x, y, &n, &c) != SURF_PLANE)
         return 0;
-    fx_vec3 c = view_pos_at(F, x, y, NULL);
-    double nc = (double)n.x * c.x + (double)n.y * c.y + (double)n.z * c.z;
-    if (!isfinite(nc))
-        return 0;
-    plane[0] = n.x, plane[1] = n.y, plane[2] = n.z, plane[3] = nc;
+    plane[0] = n.x, plane[1] = n.y, plane[2] = n.z, plane[3] = c;
     return 1;
 }
 
@@ -1128,6 +1185,17 @@ static fx_result ssr_process(const fx_effect_run *run)
     fx_result r = ssr_frame_init(run, &F);
     if (r)
         return r;
+    /* the surfaces' memo: plane constants, normals, states (zeroed: only these) */
+    const size_t npix = (size_t)F.w * F.h, surf_bytes = npix * (sizeof(double) + 3 * sizeof(float) + 1);
+    if ((r = fx_check_budget(run->ctx, surf_bytes, "the surfaces' memo")))
+        return r;
+    void *surf = fx_buffer_get(run->ctx, surf_bytes);
+    if (!surf)
+        return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the surfaces' memo", where);
+    F.splane_c = surf;
+    F.snormal = (float *)(F.splane_c + npix);
+    F.sstate = (_Atomic unsigned char *)(F.snormal + 3 * npix);
+    memset((void *)F.sstate, 0, npix);
     ssr_job j;
     memset(&j, 0, sizeof j);
     j.run = run;
@@ -1140,8 +1208,6 @@ static fx_result ssr_process(const fx_effect_run *run)
     fx_aux_map probe_map;
     memset(&probe_map, 0, sizeof probe_map);
     fx_pano pano;
-    if (p->fallback == FALLBACK_PROBE && (r = ssr_probe_load(run, &j, &F, &probe_map, &pano)))
-        return r;
     fx_aux_map planar_maps[PLANAR_VIEWS_MAX];
     memset(planar_maps, 0, sizeof planar_maps);
     fx_mask *surfaces = NULL;
@@ -1150,6 +1216,8 @@ static fx_result ssr_process(const fx_effect_run *run)
     const size_t hits_bytes = (size_t)F.w * F.h * sizeof(cell_hit);
     fx_depth_pyramid pyr;
     memset(&pyr, 0, sizeof pyr);
+    if (p->fallback == FALLBACK_PROBE && (r = ssr_probe_load(run, &j, &F, &probe_map, &pano)))
+        goto out;
     if (p->planar_view && p->glossiness == 0.0f && p->bend == 0.0f && p->op != OP_CEL &&
         (r = ssr_planar_load(run, &j, planar_maps)))
         goto out; /* releases the probe and the views loaded so far */
@@ -1182,6 +1250,7 @@ static fx_result ssr_process(const fx_effect_run *run)
     j.reuse_fin = j.fin && !j.dbg_hit && !j.dbg_xy && !j.dbg_len && !j.dbg_fb && !j.dbg_planar;
     fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), shade_rows, &j);
 out:
+    fx_buffer_put(run->ctx, surf, surf_bytes);
     fx_buffer_put(run->ctx, fin[0], 2 * frame_bytes);
     fx_buffer_put(run->ctx, j.cells, 2 * hits_bytes);
     fx_buffer_put(run->ctx, blurred, frame_bytes);
