@@ -142,8 +142,8 @@ static int test_span(const fx_ssr_scene *s, const line_state *L, fx_vec3 dir, co
      * the sample is missed: the linear march's longer spans catch more of them. */
     surface_memo memo = { -1, -1, { 0.0, { 0.0, 0.0, 0.0, 0.0 }, 0 } };
     if (!cand && s->surface_plane && d_cur >= sd && d_prev <= 2.0 * sd) {
-        double pp = surface_at(s, L, s_prev, ix, iy, &memo), pc = surface_at(s, L, s_cur, ix, iy, &memo);
-        cand = d_prev <= pp && d_cur >= pc;
+        /* the end's plane depth only when the start is in front (the same pixel: the memo) */
+        cand = d_prev <= surface_at(s, L, s_prev, ix, iy, &memo) && d_cur >= surface_at(s, L, s_cur, ix, iy, &memo);
     }
     if (!cand)
         return 0;
