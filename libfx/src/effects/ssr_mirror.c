@@ -374,6 +374,21 @@ static inline void probe_colour(const ssr_job *j, fx_vec3 o, fx_vec3 dir, float 
     fx_pano_trace(j->probe, &j->pst, o, dir, rgb);
 }
 
+/* The pixel (0..n-1) holding coordinate p: (int)clamp(floorf(p), 0, n - 1) without floorf
+ * (a long software sequence without SSE4.1): clamping first gives the same pixel, and
+ * truncation is floor for the clamped (non-negative) value; NaN goes the same way. */
+static inline int pixel_of(float p, int n)
+{
+    return (int)fx_clampf(p, 0.0f, (float)(n - 1));
+}
+
+/* floorf(v) as an int for finite |v| < 2^31 (the cell grid's coordinates). */
+static inline int floor_int(float v)
+{
+    int i = (int)v;
+    return (float)i > v ? i - 1 : i;
+}
+
 static inline int in_mask(const fx_mask *m, int w, int x, int y)
 {
     return !m || m->coverage[(size_t)y * w + x] > 0.0f;
@@ -480,7 +495,7 @@ static cell_hit resolve_hit(const ssr_job *j, int x, int y)
     cell_hit own = j->cells[(size_t)gy * j->ncx + gx];
     float fx = ((float)x + 0.5f) / (float)c - 0.5f - (float)j->cx0;
     float fy = ((float)y + 0.5f) / (float)c - 0.5f - (float)j->cy0;
-    int ax = (int)floorf(fx), ay = (int)floorf(fy);
+    int ax = floor_int(fx), ay = floor_int(fy);
     int agree = ax >= 0 && ay >= 0 && ax + 1 < j->ncx && ay + 1 < j->ncy;
     const cell_hit *q[4] = { NULL, NULL, NULL, NULL };
     if (agree) {
@@ -556,8 +571,8 @@ static inline int hit_on_own(const ssr_job *j, const cell_hit *h)
 {
     if (h->state != 1 || !(h->conf > 0.0f))
         return 0;
-    int hx = (int)fx_clampf(floorf(h->px), 0.0f, (float)(j->F->w - 1));
-    int hy = (int)fx_clampf(floorf(h->py), 0.0f, (float)(j->F->h - 1));
+    int hx = pixel_of(h->px, j->F->w);
+    int hy = pixel_of(h->py, j->F->h);
     return own_at(j, hx, hy);
 }
 
@@ -567,8 +582,8 @@ static inline int hit_bounces(const ssr_job *j, const cell_hit *h)
 {
     if (h->state != 1 || !(h->conf > 0.0f))
         return 0;
-    int hx = (int)fx_clampf(floorf(h->px), 0.0f, (float)(j->F->w - 1));
-    int hy = (int)fx_clampf(floorf(h->py), 0.0f, (float)(j->F->h - 1));
+    int hx = pixel_of(h->px, j->F->w);
+    int hy = pixel_of(h->py, j->F->h);
     return own_at(j, hx, hy) || (j->surfaces && j->surfaces->coverage[(size_t)hy * j->F->w + hx] > 0.5f);
 }
 
@@ -629,8 +644,8 @@ static void sample_lookup(const ssr_job *j, float px, float py, float rgb[3])
 static void ray_colour(const ssr_job *j, fx_vec3 ro, fx_vec3 rd, float px, float py, int left, float rgb[3])
 {
     const ssr_frame *F = j->F;
-    int hx = (int)fx_clampf(floorf(px), 0.0f, (float)(F->w - 1));
-    int hy = (int)fx_clampf(floorf(py), 0.0f, (float)(F->h - 1));
+    int hx = pixel_of(px, F->w);
+    int hy = pixel_of(py, F->h);
     int own = own_at(j, hx, hy);
     int other = !own && j->surfaces && j->surfaces->coverage[(size_t)hy * F->w + hx] > 0.5f;
     if (own && j->fin)
@@ -740,8 +755,8 @@ static void apply_operator(const ssr_job *j, float px, float py, float rgb[3])
                 rgb[k] *= s;
         }
         const ssr_frame *F = j->F;
-        int ix = (int)fx_clampf(floorf(px), 0.0f, (float)(F->w - 1));
-        int iy = (int)fx_clampf(floorf(py), 0.0f, (float)(F->h - 1));
+        int ix = pixel_of(px, F->w);
+        int iy = pixel_of(py, F->h);
         /* the shared depth edge operator (math/edge_ops: Sobel on ln depth, i.e. the
          * relative depth jump) on the 3x3 around the hit, borders replicated */
         float patch[9];
