@@ -1309,7 +1309,7 @@ const fx_effect_class fx_effect_ssr_mirror = {
     .param_count = FX_COUNT_OF(ssr_param_defs),
     .presets = {
         "{\"max_steps\": 48, \"stride\": 2, \"growth\": 1.08, \"refine\": 3, \"resolution_scale\": 0.25, "
-        "\"retrace_edges\": true}",
+        "\"retrace_edges\": false}",
         "{\"max_steps\": 96, \"stride\": 1.5, \"growth\": 1.04, \"refine\": 6, \"resolution_scale\": 0.5, "
         "\"retrace_edges\": true}",
         "{\"max_steps\": 96, \"stride\": 1.5, \"growth\": 1.04, \"refine\": 6, \"resolution_scale\": 1, "
