@@ -351,6 +351,16 @@ static int march_linear(const fx_ssr_scene *s, const fx_ssr_settings *st, const 
     const int w = L->w, h = L->h;
     const float *depth = s->depth;
     double s_prev = 0.0, d_prev = origin_depth;
+    /* Up to s_in (2 px short of the line's end) every step lies inside the frame, so the
+     * bounds test and the clamps below cannot act: x0 + dx s and y0 + dy s are monotone
+     * in s (rounding is monotone), so checking both ends of [0, s_in] proves it. */
+    double s_in = s_end - 2.0;
+    if (s_in > 0.0) {
+        double xe = x0 + dx * s_in, ye = y0 + dy * s_in;
+        if (!(x0 >= 0.0 && x0 < (double)w && xe >= 0.0 && xe < (double)w && y0 >= 0.0 && y0 < (double)h &&
+              ye >= 0.0 && ye < (double)h))
+            s_in = -1.0;
+    }
     int i = 0;
     while (i < max_steps) {
         double s_cur = s_prev + stride;
@@ -360,11 +370,16 @@ static int march_linear(const fx_ssr_scene *s, const fx_ssr_settings *st, const 
         double k = k0 + dk * s_cur, z = z0 + dz * s_cur;
         double d_cur = k > 0.0 ? -z / k : INFINITY;
         double x = x0 + dx * s_cur, y = y0 + dy * s_cur;
-        if (!(x > -1.0 && x < xlim && y > -1.0 && y < ylim))
-            break;
-        int ix = (int)x, iy = (int)y; /* as pixel_index */
-        ix = ix < 0 ? 0 : ix >= w ? w - 1 : ix;
-        iy = iy < 0 ? 0 : iy >= h ? h - 1 : iy;
+        int ix, iy;
+        if (s_cur <= s_in) {
+            ix = (int)x, iy = (int)y;
+        } else {
+            if (!(x > -1.0 && x < xlim && y > -1.0 && y < ylim))
+                break;
+            ix = (int)x, iy = (int)y; /* as pixel_index */
+            ix = ix < 0 ? 0 : ix >= w ? w - 1 : ix;
+            iy = iy < 0 ? 0 : iy >= h ? h - 1 : iy;
+        }
         float sdf = depth[(size_t)iy * w + ix];
         if (!fx_ssr_is_background(sdf)) {
             double sd = sdf;
