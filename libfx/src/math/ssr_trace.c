@@ -362,6 +362,31 @@ static int march_linear(const fx_ssr_scene *s, const fx_ssr_settings *st, const 
             s_in = -1.0;
     }
     int i = 0;
+    /* the steps inside the frame: no end clamp, bounds test or clamps */
+    while (i < max_steps) {
+        double s_cur = s_prev + stride;
+        if (!(s_cur <= s_in))
+            break; /* the loop below takes this step */
+        i++;
+        double k = k0 + dk * s_cur, z = z0 + dz * s_cur;
+        double d_cur = k > 0.0 ? -z / k : INFINITY;
+        int ix = (int)(x0 + dx * s_cur), iy = (int)(y0 + dy * s_cur);
+        float sdf = depth[(size_t)iy * w + ix];
+        if (!fx_ssr_is_background(sdf)) {
+            double sd = sdf;
+            double dmin = d_prev < d_cur ? d_prev : d_cur, dmax = d_prev < d_cur ? d_cur : d_prev;
+            int maybe = (dmax >= sd && dmin <= sd + thick) || (planes && d_cur >= sd && d_prev <= 2.0 * sd);
+            if (maybe && test_span(s, L, dir, o, thick, refine, s_prev, s_cur, d_prev, d_cur, ix, iy, out)) {
+                out->steps = i;
+                return 1;
+            }
+        }
+        s_prev = s_cur;
+        d_prev = d_cur;
+        stride *= growth;
+        if (stride > 1e7)
+            stride = 1e7;
+    }
     while (i < max_steps) {
         double s_cur = s_prev + stride;
         if (s_cur > s_end)
@@ -370,16 +395,11 @@ static int march_linear(const fx_ssr_scene *s, const fx_ssr_settings *st, const 
         double k = k0 + dk * s_cur, z = z0 + dz * s_cur;
         double d_cur = k > 0.0 ? -z / k : INFINITY;
         double x = x0 + dx * s_cur, y = y0 + dy * s_cur;
-        int ix, iy;
-        if (s_cur <= s_in) {
-            ix = (int)x, iy = (int)y;
-        } else {
-            if (!(x > -1.0 && x < xlim && y > -1.0 && y < ylim))
-                break;
-            ix = (int)x, iy = (int)y; /* as pixel_index */
-            ix = ix < 0 ? 0 : ix >= w ? w - 1 : ix;
-            iy = iy < 0 ? 0 : iy >= h ? h - 1 : iy;
-        }
+        if (!(x > -1.0 && x < xlim && y > -1.0 && y < ylim))
+            break;
+        int ix = (int)x, iy = (int)y; /* as pixel_index */
+        ix = ix < 0 ? 0 : ix >= w ? w - 1 : ix;
+        iy = iy < 0 ? 0 : iy >= h ? h - 1 : iy;
         float sdf = depth[(size_t)iy * w + ix];
         if (!fx_ssr_is_background(sdf)) {
             double sd = sdf;
