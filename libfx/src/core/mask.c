@@ -393,6 +393,60 @@ static void crypto_row_one_id(const crypto_rank *ranks, int nranks, float id, si
     *last = l;
 }
 
+/* Several Cryptomatte names of one type (a mask of a few materials): the rows of
+ * crypto_coverage, clamped as mask_rows does, with the pixels' rank 0 four at a time with
+ * SSE2. The same additions in the same order as crypto_coverage: a name that does not
+ * match adds +0, which changes no sum (a sum that starts at +0 is never -0). Pixels whose
+ * rank 0 does not hold their whole coverage go through crypto_coverage itself. Returns the
+ * row's first and last x with coverage > 0. */
+static void crypto_row_ids(const crypto_rank *ranks, int nranks, const float *ids, int nids, size_t i0, int w,
+                           float *row, int *first, int *last)
+{
+    int f = -1, l = -1, x = 0;
+#ifdef __SSE2__
+    const __m128 zero = _mm_setzero_ps(), one = _mm_set1_ps(1.0f), full = _mm_set1_ps(0.99999f);
+    const float *p = ranks[0].data + i0 * 4;
+    for (; x + 4 <= w; x += 4, p += 16) {
+        __m128 id0 = _mm_loadu_ps(p), cov0 = _mm_loadu_ps(p + 4);
+        __m128 id1 = _mm_loadu_ps(p + 8), cov1 = _mm_loadu_ps(p + 12);
+        _MM_TRANSPOSE4_PS(id0, cov0, id1, cov1); /* now: id0, cov0, id1, cov1 of four pixels */
+        __m128 c = zero;
+        for (int k = 0; k < nids; k++) {
+            const __m128 vid = _mm_set1_ps(ids[k]);
+            c = _mm_add_ps(c, _mm_and_ps(_mm_cmpeq_ps(id0, vid), cov0));
+            c = _mm_add_ps(c, _mm_and_ps(_mm_cmpeq_ps(id1, vid), cov1));
+        }
+        const int partial = nranks > 1 ? _mm_movemask_ps(_mm_cmplt_ps(_mm_add_ps(cov0, cov1), full)) : 0;
+        c = _mm_and_ps(c, _mm_cmpge_ps(c, zero)); /* NaN and negatives: 0 */
+        c = _mm_min_ps(c, one);
+        _mm_storeu_ps(row + x, c);
+        for (int k = 0; partial && k < 4; k++)
+            if (partial & (1 << k)) {
+                float v = 0.0f + crypto_coverage(ranks, nranks, ids, nids, i0 + (size_t)(x + k));
+                row[x + k] = !(v >= 0.0f) ? 0.0f : v > 1.0f ? 1.0f : v;
+            }
+        int pos = _mm_movemask_ps(_mm_cmpgt_ps(_mm_loadu_ps(row + x), zero));
+        if (pos) {
+            if (f < 0)
+                f = x + __builtin_ctz((unsigned)pos);
+            l = x + 31 - __builtin_clz((unsigned)pos);
+        }
+    }
+#endif
+    for (; x < w; x++) {
+        float v = 0.0f + crypto_coverage(ranks, nranks, ids, nids, i0 + (size_t)x);
+        v = !(v >= 0.0f) ? 0.0f : v > 1.0f ? 1.0f : v;
+        row[x] = v;
+        if (v > 0.0f) {
+            if (f < 0)
+                f = x;
+            l = x;
+        }
+    }
+    *first = f;
+    *last = l;
+}
+
 static void mask_rows(void *user, int y0, int y1)
 {
     mask_job *j = user;
@@ -401,6 +455,8 @@ static void mask_rows(void *user, int y0, int y1)
     /* one name of one Cryptomatte type and nothing else: crypto_row_one_id */
     const int one_obj = s->object_count == 1 && !s->material_count && !j->index_ob && !j->index_ma;
     const int one_mat = s->material_count == 1 && !s->object_count && !j->index_ob && !j->index_ma;
+    const int some_obj = s->object_count > 1 && !s->material_count && !j->index_ob && !j->index_ma;
+    const int some_mat = s->material_count > 1 && !s->object_count && !j->index_ob && !j->index_ma;
     for (int y = y0; y < y1; y++) {
         const size_t i0 = (size_t)y * j->w;
         float *row = j->cov + i0;
@@ -414,6 +470,15 @@ static void mask_rows(void *user, int y0, int y1)
             else
                 crypto_row_one_id(j->mat_ranks, j->mat_rank_count, j->mat_ids[0], i0, j->w, row,
                                   &j->row_first[y], &j->row_last[y]);
+            if (!has_rect && !s->invert)
+                continue;   /* the row's extent is known */
+        } else if (some_obj || some_mat) {
+            if (some_obj)
+                crypto_row_ids(j->obj_ranks, j->obj_rank_count, j->obj_ids, s->object_count, i0, j->w, row,
+                               &j->row_first[y], &j->row_last[y]);
+            else
+                crypto_row_ids(j->mat_ranks, j->mat_rank_count, j->mat_ids, s->material_count, i0, j->w, row,
+                               &j->row_first[y], &j->row_last[y]);
             if (!has_rect && !s->invert)
                 continue;   /* the row's extent is known */
         } else {

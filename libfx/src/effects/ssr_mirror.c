@@ -184,7 +184,16 @@ typedef struct ssr_frame {
     const float *normal; /* world space */
     int nch;
     int w, h;
+    /* A per-pixel memo of the view-space normal and tangent plane (surface_get), filled
+     * on first use by whichever thread gets there (a rays' neighbours test the same
+     * pixels): state 0 unknown, 1 being filled, SURF_NONE, SURF_NORMAL (no plane),
+     * SURF_PLANE. Values are those the direct computation gives, so the same bits. */
+    _Atomic unsigned char *sstate;
+    float *snormal;   /* 3 per pixel */
+    double *splane_c; /* n . centre */
 } ssr_frame;
+
+enum { SURF_NONE = 2, SURF_NORMAL = 3, SURF_PLANE = 4 };
 
 static inline fx_vec3 view_pos_at(const ssr_frame *F, int x, int y, float *depth_out)
 {
@@ -195,15 +204,66 @@ static inline fx_vec3 view_pos_at(const ssr_frame *F, int x, int y, float *depth
     return fx_view_position(&F->view, ndc, d);
 }
 
-/* View-space unit normal at a pixel; 0 if there is none (background, NaN, zero). */
-static inline int view_normal_at(const ssr_frame *F, int x, int y, fx_vec3 *n)
+/* The surface of pixel (x, y), computed: its view-space unit normal (none for background,
+ * NaN, zero: SURF_NONE) and, for a perspective view, its tangent plane n . p = *c through
+ * the pixel's centre position (SURF_PLANE; SURF_NORMAL when that is not finite). */
+static int surface_compute(const ssr_frame *F, int x, int y, fx_vec3 *n, double *c)
 {
     const float *p = F->normal + ((size_t)y * F->w + x) * F->nch;
     fx_vec3 nw = fx_v3(p[0], p[1], p[2]);
     if (!(fx_v3_dot(nw, nw) > 0.01f) || !isfinite(fx_v3_dot(nw, nw))) /* |N| >= 0.1 (AA edges: ~0.5) */
-        return 0;
+        return SURF_NONE;
     *n = fx_v3_normalize_or(fx_world_dir_to_view(&F->view, nw), fx_v3(0, 0, 0));
-    return n->x != 0.0f || n->y != 0.0f || n->z != 0.0f;
+    if (!(n->x != 0.0f || n->y != 0.0f || n->z != 0.0f))
+        return SURF_NONE;
+    if (F->view.orthographic)
+        return SURF_NORMAL;
+    fx_vec3 ce = view_pos_at(F, x, y, NULL);
+    double nc = (double)n->x * ce.x + (double)n->y * ce.y + (double)n->z * ce.z;
+    if (!isfinite(nc))
+        return SURF_NORMAL;
+    *c = nc;
+    return SURF_PLANE;
+}
+
+/* surface_compute through the per-pixel memo. */
+static inline int surface_at_pixel(const ssr_frame *F, int x, int y, fx_vec3 *n, double *c)
+{
+    if (!F->sstate)
+        return surface_compute(F, x, y, n, c);
+    size_t i = (size_t)y * F->w + x;
+    unsigned char st = atomic_load_explicit(&F->sstate[i], memory_order_acquire);
+    if (st >= SURF_NONE) {
+        if (st >= SURF_NORMAL) {
+            const float *q = F->snormal + i * 3;
+            *n = fx_v3(q[0], q[1], q[2]);
+            if (st == SURF_PLANE)
+                *c = F->splane_c[i];
+        }
+        return st;
+    }
+    fx_vec3 nn = fx_v3(0, 0, 0);
+    double cc = 0.0;
+    int code = surface_compute(F, x, y, &nn, &cc);
+    *n = nn;
+    *c = cc;
+    unsigned char expect = 0;
+    /* one thread fills the entry; another arriving meanwhile computes its own copy */
+    if (st == 0 && atomic_compare_exchange_strong_explicit(&F->sstate[i], &expect, 1, memory_order_acquire,
+                                                           memory_order_relaxed)) {
+        float *q = F->snormal + i * 3;
+        q[0] = nn.x, q[1] = nn.y, q[2] = nn.z;
+        F->splane_c[i] = cc;
+        atomic_store_explicit(&F->sstate[i], (unsigned char)code, memory_order_release);
+    }
+    return code;
+}
+
+/* View-space unit normal at a pixel; 0 if there is none (background, NaN, zero). */
+static inline int view_normal_at(const ssr_frame *F, int x, int y, fx_vec3 *n)
+{
+    double c;
+    return surface_at_pixel(F, x, y, n, &c) >= SURF_NORMAL;
 }
 
 /* Tracer hits: a surface seen from behind (its normal along the ray) is not what a
@@ -221,13 +281,10 @@ static int surface_plane(const void *user, int x, int y, double plane[4])
 {
     const ssr_frame *F = user;
     fx_vec3 n;
-    if (F->view.orthographic || !view_normal_at(F, x, y, &n))
+    double c;
+    if (surface_at_pixel(F, x, y, &n, &c) != SURF_PLANE)
         return 0;
-    fx_vec3 c = view_pos_at(F, x, y, NULL);
-    double nc = (double)n.x * c.x + (double)n.y * c.y + (double)n.z * c.z;
-    if (!isfinite(nc))
-        return 0;
-    plane[0] = n.x, plane[1] = n.y, plane[2] = n.z, plane[3] = nc;
+    plane[0] = n.x, plane[1] = n.y, plane[2] = n.z, plane[3] = c;
     return 1;
 }
 
@@ -315,6 +372,21 @@ typedef struct ssr_job {
 static inline void probe_colour(const ssr_job *j, fx_vec3 o, fx_vec3 dir, float rgb[3])
 {
     fx_pano_trace(j->probe, &j->pst, o, dir, rgb);
+}
+
+/* The pixel (0..n-1) holding coordinate p: (int)clamp(floorf(p), 0, n - 1) without floorf
+ * (a long software sequence without SSE4.1): clamping first gives the same pixel, and
+ * truncation is floor for the clamped (non-negative) value; NaN goes the same way. */
+static inline int pixel_of(float p, int n)
+{
+    return (int)fx_clampf(p, 0.0f, (float)(n - 1));
+}
+
+/* floorf(v) as an int for finite |v| < 2^31 (the cell grid's coordinates). */
+static inline int floor_int(float v)
+{
+    int i = (int)v;
+    return (float)i > v ? i - 1 : i;
 }
 
 static inline int in_mask(const fx_mask *m, int w, int x, int y)
@@ -423,7 +495,7 @@ static cell_hit resolve_hit(const ssr_job *j, int x, int y)
     cell_hit own = j->cells[(size_t)gy * j->ncx + gx];
     float fx = ((float)x + 0.5f) / (float)c - 0.5f - (float)j->cx0;
     float fy = ((float)y + 0.5f) / (float)c - 0.5f - (float)j->cy0;
-    int ax = (int)floorf(fx), ay = (int)floorf(fy);
+    int ax = floor_int(fx), ay = floor_int(fy);
     int agree = ax >= 0 && ay >= 0 && ax + 1 < j->ncx && ay + 1 < j->ncy;
     const cell_hit *q[4] = { NULL, NULL, NULL, NULL };
     if (agree) {
@@ -499,8 +571,8 @@ static inline int hit_on_own(const ssr_job *j, const cell_hit *h)
 {
     if (h->state != 1 || !(h->conf > 0.0f))
         return 0;
-    int hx = (int)fx_clampf(floorf(h->px), 0.0f, (float)(j->F->w - 1));
-    int hy = (int)fx_clampf(floorf(h->py), 0.0f, (float)(j->F->h - 1));
+    int hx = pixel_of(h->px, j->F->w);
+    int hy = pixel_of(h->py, j->F->h);
     return own_at(j, hx, hy);
 }
 
@@ -510,8 +582,8 @@ static inline int hit_bounces(const ssr_job *j, const cell_hit *h)
 {
     if (h->state != 1 || !(h->conf > 0.0f))
         return 0;
-    int hx = (int)fx_clampf(floorf(h->px), 0.0f, (float)(j->F->w - 1));
-    int hy = (int)fx_clampf(floorf(h->py), 0.0f, (float)(j->F->h - 1));
+    int hx = pixel_of(h->px, j->F->w);
+    int hy = pixel_of(h->py, j->F->h);
     return own_at(j, hx, hy) || (j->surfaces && j->surfaces->coverage[(size_t)hy * j->F->w + hx] > 0.5f);
 }
 
@@ -572,8 +644,8 @@ static void sample_lookup(const ssr_job *j, float px, float py, float rgb[3])
 static void ray_colour(const ssr_job *j, fx_vec3 ro, fx_vec3 rd, float px, float py, int left, float rgb[3])
 {
     const ssr_frame *F = j->F;
-    int hx = (int)fx_clampf(floorf(px), 0.0f, (float)(F->w - 1));
-    int hy = (int)fx_clampf(floorf(py), 0.0f, (float)(F->h - 1));
+    int hx = pixel_of(px, F->w);
+    int hy = pixel_of(py, F->h);
     int own = own_at(j, hx, hy);
     int other = !own && j->surfaces && j->surfaces->coverage[(size_t)hy * F->w + hx] > 0.5f;
     if (own && j->fin)
@@ -683,8 +755,8 @@ static void apply_operator(const ssr_job *j, float px, float py, float rgb[3])
                 rgb[k] *= s;
         }
         const ssr_frame *F = j->F;
-        int ix = (int)fx_clampf(floorf(px), 0.0f, (float)(F->w - 1));
-        int iy = (int)fx_clampf(floorf(py), 0.0f, (float)(F->h - 1));
+        int ix = pixel_of(px, F->w);
+        int iy = pixel_of(py, F->h);
         /* the shared depth edge operator (math/edge_ops: Sobel on ln depth, i.e. the
          * relative depth jump) on the 3x3 around the hit, borders replicated */
         float patch[9];
@@ -1128,6 +1200,17 @@ static fx_result ssr_process(const fx_effect_run *run)
     fx_result r = ssr_frame_init(run, &F);
     if (r)
         return r;
+    /* the surfaces' memo: plane constants, normals, states (zeroed: only these) */
+    const size_t npix = (size_t)F.w * F.h, surf_bytes = npix * (sizeof(double) + 3 * sizeof(float) + 1);
+    if ((r = fx_check_budget(run->ctx, surf_bytes, "the surfaces' memo")))
+        return r;
+    void *surf = fx_buffer_get(run->ctx, surf_bytes);
+    if (!surf)
+        return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the surfaces' memo", where);
+    F.splane_c = surf;
+    F.snormal = (float *)(F.splane_c + npix);
+    F.sstate = (_Atomic unsigned char *)(F.snormal + 3 * npix);
+    memset((void *)F.sstate, 0, npix);
     ssr_job j;
     memset(&j, 0, sizeof j);
     j.run = run;
@@ -1140,8 +1223,6 @@ static fx_result ssr_process(const fx_effect_run *run)
     fx_aux_map probe_map;
     memset(&probe_map, 0, sizeof probe_map);
     fx_pano pano;
-    if (p->fallback == FALLBACK_PROBE && (r = ssr_probe_load(run, &j, &F, &probe_map, &pano)))
-        return r;
     fx_aux_map planar_maps[PLANAR_VIEWS_MAX];
     memset(planar_maps, 0, sizeof planar_maps);
     fx_mask *surfaces = NULL;
@@ -1150,6 +1231,8 @@ static fx_result ssr_process(const fx_effect_run *run)
     const size_t hits_bytes = (size_t)F.w * F.h * sizeof(cell_hit);
     fx_depth_pyramid pyr;
     memset(&pyr, 0, sizeof pyr);
+    if (p->fallback == FALLBACK_PROBE && (r = ssr_probe_load(run, &j, &F, &probe_map, &pano)))
+        goto out;
     if (p->planar_view && p->glossiness == 0.0f && p->bend == 0.0f && p->op != OP_CEL &&
         (r = ssr_planar_load(run, &j, planar_maps)))
         goto out; /* releases the probe and the views loaded so far */
@@ -1182,6 +1265,7 @@ static fx_result ssr_process(const fx_effect_run *run)
     j.reuse_fin = j.fin && !j.dbg_hit && !j.dbg_xy && !j.dbg_len && !j.dbg_fb && !j.dbg_planar;
     fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), shade_rows, &j);
 out:
+    fx_buffer_put(run->ctx, surf, surf_bytes);
     fx_buffer_put(run->ctx, fin[0], 2 * frame_bytes);
     fx_buffer_put(run->ctx, j.cells, 2 * hits_bytes);
     fx_buffer_put(run->ctx, blurred, frame_bytes);
@@ -1225,7 +1309,7 @@ const fx_effect_class fx_effect_ssr_mirror = {
     .param_count = FX_COUNT_OF(ssr_param_defs),
     .presets = {
         "{\"max_steps\": 48, \"stride\": 2, \"growth\": 1.08, \"refine\": 3, \"resolution_scale\": 0.25, "
-        "\"retrace_edges\": true}",
+        "\"retrace_edges\": false}",
         "{\"max_steps\": 96, \"stride\": 1.5, \"growth\": 1.04, \"refine\": 6, \"resolution_scale\": 0.5, "
         "\"retrace_edges\": true}",
         "{\"max_steps\": 96, \"stride\": 1.5, \"growth\": 1.04, \"refine\": 6, \"resolution_scale\": 1, "

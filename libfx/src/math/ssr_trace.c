@@ -142,8 +142,8 @@ static int test_span(const fx_ssr_scene *s, const line_state *L, fx_vec3 dir, co
      * the sample is missed: the linear march's longer spans catch more of them. */
     surface_memo memo = { -1, -1, { 0.0, { 0.0, 0.0, 0.0, 0.0 }, 0 } };
     if (!cand && s->surface_plane && d_cur >= sd && d_prev <= 2.0 * sd) {
-        double pp = surface_at(s, L, s_prev, ix, iy, &memo), pc = surface_at(s, L, s_cur, ix, iy, &memo);
-        cand = d_prev <= pp && d_cur >= pc;
+        /* the end's plane depth only when the start is in front (the same pixel: the memo) */
+        cand = d_prev <= surface_at(s, L, s_prev, ix, iy, &memo) && d_cur >= surface_at(s, L, s_cur, ix, iy, &memo);
     }
     if (!cand)
         return 0;
@@ -351,7 +351,42 @@ static int march_linear(const fx_ssr_scene *s, const fx_ssr_settings *st, const 
     const int w = L->w, h = L->h;
     const float *depth = s->depth;
     double s_prev = 0.0, d_prev = origin_depth;
+    /* Up to s_in (2 px short of the line's end) every step lies inside the frame, so the
+     * bounds test and the clamps below cannot act: x0 + dx s and y0 + dy s are monotone
+     * in s (rounding is monotone), so checking both ends of [0, s_in] proves it. */
+    double s_in = s_end - 2.0;
+    if (s_in > 0.0) {
+        double xe = x0 + dx * s_in, ye = y0 + dy * s_in;
+        if (!(x0 >= 0.0 && x0 < (double)w && xe >= 0.0 && xe < (double)w && y0 >= 0.0 && y0 < (double)h &&
+              ye >= 0.0 && ye < (double)h))
+            s_in = -1.0;
+    }
     int i = 0;
+    /* the steps inside the frame: no end clamp, bounds test or clamps */
+    while (i < max_steps) {
+        double s_cur = s_prev + stride;
+        if (!(s_cur <= s_in))
+            break; /* the loop below takes this step */
+        i++;
+        double k = k0 + dk * s_cur, z = z0 + dz * s_cur;
+        double d_cur = k > 0.0 ? -z / k : INFINITY;
+        int ix = (int)(x0 + dx * s_cur), iy = (int)(y0 + dy * s_cur);
+        float sdf = depth[(size_t)iy * w + ix];
+        if (!fx_ssr_is_background(sdf)) {
+            double sd = sdf;
+            double dmin = d_prev < d_cur ? d_prev : d_cur, dmax = d_prev < d_cur ? d_cur : d_prev;
+            int maybe = (dmax >= sd && dmin <= sd + thick) || (planes && d_cur >= sd && d_prev <= 2.0 * sd);
+            if (maybe && test_span(s, L, dir, o, thick, refine, s_prev, s_cur, d_prev, d_cur, ix, iy, out)) {
+                out->steps = i;
+                return 1;
+            }
+        }
+        s_prev = s_cur;
+        d_prev = d_cur;
+        stride *= growth;
+        if (stride > 1e7)
+            stride = 1e7;
+    }
     while (i < max_steps) {
         double s_cur = s_prev + stride;
         if (s_cur > s_end)
