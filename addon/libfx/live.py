@@ -35,8 +35,12 @@ DEBOUNCE_S = 0.0      # the run starts at the event loop's next timer pass: the 
 SETTLE_S = 0.35       # no change for this long: the final run
 CACHE_FRAMES = 3      # held frames per scene while scrubbing a sequence
 BUDGET_MS = 100.0     # a change's interactive image within this (issue 13); AUTO keeps to it
-AUTO_UP_MS = 70.0     # an interactive run (library + pixels) slower than this: a quarter next
-AUTO_DOWN_MS = 20.0   # a quarter-size run faster than this: half next
+AUTO_UP_MS = 60.0     # an interactive run (library + pixels) slower than this: a quarter next (the
+                      # rest of BUDGET_MS is for Blender's side: property update, hand-off, image)
+# A quarter-size run faster than this: half next. A half-size run costs up to four quarter-size
+# ones, so this is a quarter of AUTO_UP_MS with room to spare (at a fixed 20 ms, a stack whose
+# quarter run took 18 ms would go back to a half run over the budget, and flip at every change).
+AUTO_DOWN_MS = AUTO_UP_MS / 4 * 0.7
 
 #: live_setting -> (proxy factor, quality or None for the stack's own); "AUTO": the factor
 #: follows the time the last interactive run took (Session.auto_factor).
@@ -93,9 +97,11 @@ _TRACE = bool(os.environ.get("LIBFX_LIVE_TRACE"))
 
 
 def trace(what):
-    """LIBFX_LIVE_TRACE=1: when each step of the loop happens (where a change's time goes)."""
+    """LIBFX_LIVE_TRACE=1: when each step of the loop happens (where a change's time goes), and
+    the calling thread's CPU time (busy or waiting)."""
     if _TRACE:
-        render.log("live trace %.3f %s" % (time.perf_counter(), what))
+        render.log("live trace %.4f %s [%s cpu %.4f]" % (time.perf_counter(), what, threading.current_thread().name,
+                                                         time.thread_time()))
 
 
 class Held:
@@ -573,6 +579,15 @@ def _poll():
     return None if WORKER.idle() and not WORKER.results else POLL_S
 
 
+def next_auto_factor(factor, ms):
+    """The AUTO setting's next proxy factor after an interactive run at `factor` took `ms`."""
+    if factor == 2 and ms > AUTO_UP_MS:
+        return 4
+    if factor == 4 and ms < AUTO_DOWN_MS:
+        return 2
+    return factor
+
+
 def _apply(out):
     job = out["job"]
     scene = bpy.data.scenes.get(job.scene_name)
@@ -587,12 +602,8 @@ def _apply(out):
         return
     s.error = None
     s.debug_passes = out["debug_passes"]
-    if job.kind == "interactive":   # AUTO: keep the next interactive run inside the budget
-        ms = out["ms"]["total"]
-        if ms > AUTO_UP_MS and job.factor == 2:
-            s.auto_factor = 4
-        elif ms < AUTO_DOWN_MS and job.factor == 4:
-            s.auto_factor = 2
+    if job.kind == "interactive" and job.factor in (2, 4):   # AUTO: the next run inside the budget
+        s.auto_factor = next_auto_factor(job.factor, out["ms"]["total"])
     show_pixels(out["pixels"], out["width"], out["height"])
     out["applied_at"] = time.perf_counter()
     trace("applied %s" % job.kind)

@@ -97,6 +97,11 @@ def overlapped(first_kind):
 res["drag_interactive"] = overlapped("interactive")
 res["drag_final"] = overlapped("final")
 
+# 2c. Auto Draft's proxy factor: over budget at 1/2 goes to 1/4; back to 1/2 only when a
+# quarter run leaves room for a half one (about four times as long) inside the budget.
+res["auto"] = [live.next_auto_factor(2, live.AUTO_UP_MS + 1), live.next_auto_factor(2, live.AUTO_UP_MS - 1),
+               live.next_auto_factor(4, live.AUTO_UP_MS / 4 - 0.5), live.next_auto_factor(4, live.AUTO_UP_MS / 8)]
+
 # 3. An invalid value keeps the last image and says why.
 g, gr = entry("god_rays")
 gr.fx_god_rays.light = "NoSuchLight"

@@ -101,6 +101,10 @@ def test_live_loop(blender, library, cli, tmp_path):
     assert r["drag_interactive"] == [0, 1], r["drag_interactive"]
     assert r["drag_final"] == [1], r["drag_final"]
 
+    # Auto Draft: a quarter run just under a quarter of the budget stays at a quarter (a half
+    # run would overrun it and the setting would flip on every change); a quick one goes back.
+    assert r["auto"] == [4, 2, 4, 2], r["auto"]
+
     # An invalid value: an error in the panel, the image kept; repaired: the error goes.
     assert any(c["error"] and "NoSuchLight" in c["error"] for c in r["invalid"]), r["invalid"]
     assert r["invalid_image_same"] and "NoSuchLight" in r["invalid_panel_error"]
