@@ -100,8 +100,10 @@ def trace(what):
     """LIBFX_LIVE_TRACE=1: when each step of the loop happens (where a change's time goes), and
     the calling thread's CPU time (busy or waiting)."""
     if _TRACE:
-        render.log("live trace %.4f %s [%s cpu %.4f]" % (time.perf_counter(), what, threading.current_thread().name,
-                                                         time.thread_time()))
+        import resource
+        faults = resource.getrusage(getattr(resource, "RUSAGE_THREAD", resource.RUSAGE_SELF)).ru_minflt
+        render.log("live trace %.4f %s [%s cpu %.4f, %d minor faults]" % (
+            time.perf_counter(), what, threading.current_thread().name, time.thread_time(), faults))
 
 
 class Held:
@@ -637,8 +639,11 @@ def result_image(w, h):
 
 def show_pixels(pixels, w, h):
     img = result_image(w, h)
+    trace("image ready")
     img.pixels.foreach_set(pixels)
+    trace("pixels set")
     img.update()
+    trace("image updated")
     _show_in_editor(img)
 
 
