@@ -348,6 +348,19 @@ static inline float crypto_pixel_one_id(const crypto_rank *ranks, int nranks, fl
     return !(c >= 0.0f) ? 0.0f : c > 1.0f ? 1.0f : c;
 }
 
+#ifdef __SSE2__
+/* The first and last x with coverage > 0, moved on by row[x .. x + 3]. */
+static inline void row_extent4(const float *row, int x, int *first, int *last)
+{
+    const int pos = _mm_movemask_ps(_mm_cmpgt_ps(_mm_loadu_ps(row + x), _mm_setzero_ps()));
+    if (pos) {
+        if (*first < 0)
+            *first = x + __builtin_ctz((unsigned)pos);
+        *last = x + 31 - __builtin_clz((unsigned)pos);
+    }
+}
+#endif
+
 /* One Cryptomatte name of one type, the usual mask (a material, an object), a row at a
  * time; returns the row's first and last x with coverage > 0. With SSE2, four pixels per
  * step from rank 0 (a transpose of their RGBA), the pixels whose rank 0 does not hold their
@@ -372,12 +385,7 @@ static void crypto_row_one_id(const crypto_rank *ranks, int nranks, float id, si
         for (int k = 0; partial && k < 4; k++)
             if (partial & (1 << k))
                 row[x + k] = crypto_pixel_one_id(ranks, nranks, id, i0 + (size_t)(x + k));
-        int pos = _mm_movemask_ps(_mm_cmpgt_ps(_mm_loadu_ps(row + x), zero));
-        if (pos) {
-            if (f < 0)
-                f = x + __builtin_ctz((unsigned)pos);
-            l = x + 31 - __builtin_clz((unsigned)pos);
-        }
+        row_extent4(row, x, &f, &l);
     }
 #endif
     for (; x < w; x++) {
@@ -425,12 +433,7 @@ static void crypto_row_ids(const crypto_rank *ranks, int nranks, const float *id
                 float v = 0.0f + crypto_coverage(ranks, nranks, ids, nids, i0 + (size_t)(x + k));
                 row[x + k] = !(v >= 0.0f) ? 0.0f : v > 1.0f ? 1.0f : v;
             }
-        int pos = _mm_movemask_ps(_mm_cmpgt_ps(_mm_loadu_ps(row + x), zero));
-        if (pos) {
-            if (f < 0)
-                f = x + __builtin_ctz((unsigned)pos);
-            l = x + 31 - __builtin_clz((unsigned)pos);
-        }
+        row_extent4(row, x, &f, &l);
     }
 #endif
     for (; x < w; x++) {

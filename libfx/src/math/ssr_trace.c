@@ -332,6 +332,21 @@ static int march_hiz(const fx_ssr_scene *s, const fx_ssr_settings *st, const lin
     return 0;
 }
 
+/* march_linear's step from s_prev to s_cur over pixel (ix, iy), whose depth sample is sdf:
+ * test_span's first test inline (most steps are no candidate), then test_span itself. */
+static inline __attribute__((always_inline)) int step_hits(const fx_ssr_scene *s, const line_state *L, fx_vec3 dir,
+                                                           const double o[3], double thick, int refine, int planes,
+                                                           float sdf, double s_prev, double s_cur, double d_prev,
+                                                           double d_cur, int ix, int iy, fx_ssr_hit *out)
+{
+    if (fx_ssr_is_background(sdf))
+        return 0;
+    const double sd = sdf;
+    const double dmin = d_prev < d_cur ? d_prev : d_cur, dmax = d_prev < d_cur ? d_cur : d_prev;
+    const int maybe = (dmax >= sd && dmin <= sd + thick) || (planes && d_cur >= sd && d_prev <= 2.0 * sd);
+    return maybe && test_span(s, L, dir, o, thick, refine, s_prev, s_cur, d_prev, d_cur, ix, iy, out);
+}
+
 /* Trace stage 2b, the linear march: strides growing by `growth`, each span tested. The
  * per-step work is test_span's first test, inline, on the line's coordinates unpermuted
  * once per ray (the same arithmetic as pixel_index and depth_at, so the same pixels and
@@ -371,15 +386,10 @@ static int march_linear(const fx_ssr_scene *s, const fx_ssr_settings *st, const 
         double k = k0 + dk * s_cur, z = z0 + dz * s_cur;
         double d_cur = k > 0.0 ? -z / k : INFINITY;
         int ix = (int)(x0 + dx * s_cur), iy = (int)(y0 + dy * s_cur);
-        float sdf = depth[(size_t)iy * w + ix];
-        if (!fx_ssr_is_background(sdf)) {
-            double sd = sdf;
-            double dmin = d_prev < d_cur ? d_prev : d_cur, dmax = d_prev < d_cur ? d_cur : d_prev;
-            int maybe = (dmax >= sd && dmin <= sd + thick) || (planes && d_cur >= sd && d_prev <= 2.0 * sd);
-            if (maybe && test_span(s, L, dir, o, thick, refine, s_prev, s_cur, d_prev, d_cur, ix, iy, out)) {
-                out->steps = i;
-                return 1;
-            }
+        if (step_hits(s, L, dir, o, thick, refine, planes, depth[(size_t)iy * w + ix], s_prev, s_cur, d_prev, d_cur,
+                      ix, iy, out)) {
+            out->steps = i;
+            return 1;
         }
         s_prev = s_cur;
         d_prev = d_cur;
@@ -400,15 +410,10 @@ static int march_linear(const fx_ssr_scene *s, const fx_ssr_settings *st, const 
         int ix = (int)x, iy = (int)y; /* as pixel_index */
         ix = ix < 0 ? 0 : ix >= w ? w - 1 : ix;
         iy = iy < 0 ? 0 : iy >= h ? h - 1 : iy;
-        float sdf = depth[(size_t)iy * w + ix];
-        if (!fx_ssr_is_background(sdf)) {
-            double sd = sdf;
-            double dmin = d_prev < d_cur ? d_prev : d_cur, dmax = d_prev < d_cur ? d_cur : d_prev;
-            int maybe = (dmax >= sd && dmin <= sd + thick) || (planes && d_cur >= sd && d_prev <= 2.0 * sd);
-            if (maybe && test_span(s, L, dir, o, thick, refine, s_prev, s_cur, d_prev, d_cur, ix, iy, out)) {
-                out->steps = i;
-                return 1;
-            }
+        if (step_hits(s, L, dir, o, thick, refine, planes, depth[(size_t)iy * w + ix], s_prev, s_cur, d_prev, d_cur,
+                      ix, iy, out)) {
+            out->steps = i;
+            return 1;
         }
         if (s_cur >= s_end)
             break;
