@@ -10,8 +10,8 @@ every change, straight into the "libfx Result" image (no disk round trip).
 - One worker thread runs the library (ctypes releases the GIL), so Blender's UI thread
   never waits for more than a pixel copy.  A newer change replaces a run still waiting
   and cancels a final run in progress between effects (the library's progress callback);
-  an interactive run in progress finishes and shows, so that a drag keeps updating.  A recipe the library refuses
-  leaves the last good image and puts the message in the panel.
+  an interactive run in progress finishes and shows, so that a drag keeps updating.  A
+  recipe the library refuses leaves the last good image and puts the message in the panel.
 - Sequences: with kept passes files, a frame change loads that frame's passes (a few
   frames are cached) and shows its result.
 

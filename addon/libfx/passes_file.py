@@ -140,7 +140,8 @@ def _write(scene, img, path):
 def _set_aside(path):
     """The previous frame's file at path (a kept passes file rendered again) renamed aside,
     or None. Replacing it in place makes the file system free its blocks before the rename
-    returns: 0.1-0.3 s for the Greek bath's 290 MB, on the way to the result."""
+    returns, on the way to the result: 63-337 ms for a 290 MB file (the Greek bath's passes
+    at 1080p) on this project's VM, 0.1-0.3 ms for the rename aside."""
     if not os.path.exists(path):
         return None
     old = "%s.old-%d.exr" % (path[:-len(".exr")], os.getpid())

@@ -472,8 +472,7 @@ def _to_ui(fn):
 #: stands between the stack's end and the image), then every UI_RETRY_S while the render
 #: job still runs or Blender refuses the update ("not allowed in this context"; the
 #: refusal can outlast the render job by a moment, seen on 4.3), at most UI_RETRIES times
-#: (5 s). A timer costs the main thread a function call: the event loop polls its timers
-#: every few milliseconds anyway.
+#: (5 s). Each pass costs the main thread one function call.
 UI_FIRST_S = 0.005
 UI_RETRY_S = 0.02
 UI_RETRIES = 250
