@@ -26,19 +26,6 @@ extern "C" {
 
 #define FX_PANO_PI 3.14159265358979323846f
 
-/* fx_atan2f (math/trig.h) for finite y and x: the same operations without its NaN and
- * infinity branches (the same bits for finite arguments). */
-static inline float fx_pano_atan2_finite(float y, float x)
-{
-    float ax = fabsf(x), ay = fabsf(y);
-    if (ax == 0.0f && ay == 0.0f)
-        return 0.0f;
-    float a = ay <= ax ? fx_atan_pos(ay / ax) : FX_TRIG_PI_2 - fx_atan_pos(ax / ay);
-    if (x < 0.0f)
-        a = FX_TRIG_PI - a;
-    return signbit(y) ? -a : a;
-}
-
 /* Probe-space direction (any non-zero length) -> continuous pixel coordinates (pixel
  * x's centre at x + 0.5): x in [0, w], y in [0, h]. A zero or non-finite direction
  * maps to the image's centre. */
@@ -51,10 +38,10 @@ static inline void fx_pano_dir_to_pixel(fx_vec3 d, int w, int h, float *px, floa
         return;
     }
     /* a finite length: every component is finite, so fx_atan2f and fx_acosf (the same bits
-     * on every libc) without their NaN and infinity branches; cy is clamped already */
-    float u = 0.5f - fx_pano_atan2_finite(-d.x, -d.z) / (2.0f * FX_PANO_PI);
+     * on every libc) without their NaN and infinity tests; cy is clamped already */
+    float u = 0.5f - fx_atan2f_finite(-d.x, -d.z) / (2.0f * FX_PANO_PI);
     float cy = fx_clampf(d.y / len, -1.0f, 1.0f);
-    float v = fx_pano_atan2_finite(sqrtf((1.0f - cy) * (1.0f + cy)), cy) / FX_PANO_PI;
+    float v = fx_atan2f_finite(sqrtf((1.0f - cy) * (1.0f + cy)), cy) / FX_PANO_PI;
     *px = fx_clampf(u, 0.0f, 1.0f) * (float)w;
     *py = fx_clampf(v, 0.0f, 1.0f) * (float)h;
 }

@@ -30,19 +30,27 @@ static inline float fx_atan_pos(float z)
     return base + (p * s * t + t);
 }
 
+/* atan2(y, x) in [-pi, pi] for finite y and x (callers that know them finite skip the
+ * NaN and infinity tests: the probe lookup); 0 for (0, 0). */
+static inline float fx_atan2f_finite(float y, float x)
+{
+    float ax = fabsf(x), ay = fabsf(y);
+    if (ax == 0.0f && ay == 0.0f)
+        return 0.0f;
+    float a = ay <= ax ? fx_atan_pos(ay / ax) : FX_TRIG_PI_2 - fx_atan_pos(ax / ay);
+    if (x < 0.0f)
+        a = FX_TRIG_PI - a;
+    return signbit(y) ? -a : a;
+}
+
 /* atan2(y, x) in [-pi, pi]; 0 for (0, 0); NaN in, NaN out. */
 static inline float fx_atan2f(float y, float x)
 {
     if (isnan(x) || isnan(y))
         return NAN;
-    float ax = fabsf(x), ay = fabsf(y);
-    if (ax == 0.0f && ay == 0.0f)
-        return 0.0f;
-    float a;
-    if (ay <= ax)
-        a = isinf(ax) ? (isinf(ay) ? FX_TRIG_PI_4 : 0.0f) : fx_atan_pos(ay / ax);
-    else
-        a = FX_TRIG_PI_2 - (isinf(ay) ? 0.0f : fx_atan_pos(ax / ay));
+    if (!isinf(x) && !isinf(y))
+        return fx_atan2f_finite(y, x);
+    float a = fabsf(y) <= fabsf(x) ? (isinf(y) ? FX_TRIG_PI_4 : 0.0f) : FX_TRIG_PI_2;
     if (x < 0.0f)
         a = FX_TRIG_PI - a;
     return signbit(y) ? -a : a;
