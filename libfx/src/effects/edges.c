@@ -139,7 +139,7 @@ static inline void draw_px(const float *srow, float *drow, const float *matte, i
     if (a == 0.0f) {
         /* no line: the pixel as it is (made finite) */
         const v4i ok = (s == s) & (s <= big) & (s >= -big);
-        if (ok[0] & ok[1] & ok[2] & ok[3]) {
+        if (all4(ok)) {
             if (!in_place)
                 st4(drow + 4 * (size_t)x, s);
             return;

@@ -43,6 +43,7 @@
  * interpolates it four pixels at a time, with the same surface test (no exp per pixel). */
 #include "core/effect.h"
 #include "core/parallel.h"
+#include "core/simd4.h"
 #include "math/camera.h"
 #include "math/voronoi.h"
 
@@ -580,15 +581,6 @@ static inline float exp_neg(float x)
     return q * scale;
 }
 
-typedef float v4f __attribute__((vector_size(16)));
-typedef int32_t v4i __attribute__((vector_size(16)));
-
-static inline v4f load4(const float *p)
-{
-    v4f v;
-    memcpy(&v, p, sizeof v);
-    return v;
-}
 
 /* physical mode without an additive term (no environment): out = src (1 + s tint) per
  * pixel of a segment, s from the pattern (a, noise) or given (lattice_shading), or src
@@ -615,15 +607,15 @@ static void shade_segment(const caustics_job *j, const float *restrict src, floa
 #ifdef __SSE2__
         const v4f vmean = {inv_mean, inv_mean, inv_mean, inv_mean}, vcap = {16.0f, 16.0f, 16.0f, 16.0f};
         for (; c + 4 <= n; c += 4) {
-            v4f g = load4(xs + c) * vmean;
+            v4f g = ld4(xs + c) * vmean;
             g = _mm_min_ps(g, vcap); /* g < 16 ? g : 16 (g is never NaN) */
             g = g - 1.0f;
-            const v4f amp = strength * (0.4f + 1.2f * load4(nz + c));
+            const v4f amp = strength * (0.4f + 1.2f * ld4(nz + c));
             const v4f sn = amp * g;
             v4i m;
             memcpy(&m, st + c, sizeof m);
             m = m == PX_PATTERN;
-            const v4i r = ((v4i)sn & m) | ((v4i)load4(sv + c) & ~m);
+            const v4i r = ((v4i)sn & m) | ((v4i)ld4(sv + c) & ~m);
             memcpy(sv + c, &r, sizeof r);
         }
 #endif
@@ -642,7 +634,7 @@ static void shade_segment(const caustics_job *j, const float *restrict src, floa
     const v4i alpha = {0, 0, 0, -1};
     for (int c = 0; c < n; c++) {
         const v4f sc = {sv[c], sv[c], sv[c], sv[c]};
-        const v4f in = load4(src + 4 * c);
+        const v4f in = ld4(src + 4 * c);
         const v4f gain = 1.0f + sc * tint;
         v4f v = in * gain;
 #ifdef __SSE2__ /* maxps(v, 0) is 0 for NaN (its second operand), minps(v, FLT_MAX) caps +inf */
@@ -873,7 +865,7 @@ static void caustics_rows_lattice(void *user, int begin, int end)
             const float uy = 1.0f - ty;
             const float *a = nodes + (size_t)j0 * nx * 4, *b = nodes + (size_t)j1 * nx * 4;
             for (int i = 0; i < nx; i++)
-                colv[i] = load4(a + 4 * i) * uy + load4(b + 4 * i) * ty;
+                colv[i] = ld4(a + 4 * i) * uy + ld4(b + 4 * i) * ty;
         }
         const unsigned char *srow = smooth_flags ? smooth_flags + (size_t)j0 * j->cx : NULL;
         const float *nrow = nodes + (size_t)j0 * nx * 4;
@@ -960,7 +952,7 @@ static inline float focus_s(const caustics_job *j, float a, float noise)
  * the source's finite alpha bit for bit (lo's -FLT_MAX lane keeps it) */
 static inline __attribute__((always_inline)) void apply_gain(const float *src, float *dst, v4f s4, v4f tint)
 {
-    const v4f in = load4(src);
+    const v4f in = ld4(src);
     const v4f v = in * (1.0f + s4 * tint);
     const v4f lo = {0.0f, 0.0f, 0.0f, -FLT_MAX}, hi = {FLT_MAX, FLT_MAX, FLT_MAX, FLT_MAX};
 #ifdef __SSE2__ /* maxps(v, lo) is lo for NaN (its second operand) */
@@ -1024,10 +1016,10 @@ static void caustics_rows_gain(void *user, int begin, int end)
         lattice_pos(j->node_y, j->ny, f, run->roi.y0, y, &j0, &j1, &ty);
         const float uy = 1.0f - ty;
         const float *a = j->nodes + (size_t)j0 * nx * 4, *b = j->nodes + (size_t)j1 * nx * 4;
-        v4f L = load4(a) * uy + load4(b) * ty;
+        v4f L = ld4(a) * uy + ld4(b) * ty;
         for (int cc = 0; cc < ncx; cc++) {
             const int i1 = nx > 1 ? cc + 1 : 0;
-            const v4f R = load4(a + 4 * i1) * uy + load4(b + 4 * i1) * ty;
+            const v4f R = ld4(a + 4 * i1) * uy + ld4(b + 4 * i1) * ty;
             const v4f D = R - L;
             const int xs = x0 + cc * f, xe = cc == ncx - 1 ? x1 : xs + f;
 #ifdef __SSE2__
@@ -1043,23 +1035,12 @@ static void caustics_rows_gain(void *user, int begin, int end)
             for (int q = 0; q < nquad; q++) {
                 const int x = xs + 4 * q + 4 <= xe ? xs + 4 * q : xe - 4;
                 const size_t i = (size_t)y * w + x;
-                const v4f t4 = load4(col_t + (x - x0));
+                const v4f t4 = ld4(col_t + (x - x0));
                 const float *pq = j->position + i * pc;
                 v4f px, py, pz;
-#ifdef __SSE2__
-                if (pc == 3) { /* x0 y0 z0 x1 | y1 z1 x2 y2 | z2 x3 y3 z3 */
-                    const __m128 p0 = _mm_loadu_ps(pq), p1 = _mm_loadu_ps(pq + 4), p2 = _mm_loadu_ps(pq + 8);
-                    const __m128 a02 = _mm_shuffle_ps(p0, p1, _MM_SHUFFLE(2, 0, 3, 0)); /* x0 x1 y1 x2 */
-                    const __m128 b23 = _mm_shuffle_ps(p1, p2, _MM_SHUFFLE(2, 1, 3, 2)); /* x2 y2 x3 y3 */
-                    px = (v4f)_mm_shuffle_ps(a02, b23, _MM_SHUFFLE(2, 0, 1, 0));        /* x0 x1 x2 x3 */
-                    const __m128 c01 = _mm_shuffle_ps(p0, p1, _MM_SHUFFLE(0, 0, 1, 1)); /* y0 y0 y1 y1 */
-                    py = (v4f)_mm_shuffle_ps(c01, b23, _MM_SHUFFLE(3, 1, 2, 0));        /* y0 y1 y2 y3 */
-                    const __m128 d01 = _mm_shuffle_ps(p0, p1, _MM_SHUFFLE(1, 1, 2, 2)); /* z0 z0 z1 z1 */
-                    const __m128 d23 = _mm_shuffle_ps(p2, p2, _MM_SHUFFLE(3, 3, 0, 0)); /* z2 z2 z3 z3 */
-                    pz = (v4f)_mm_shuffle_ps(d01, d23, _MM_SHUFFLE(2, 0, 2, 0));        /* z0 z1 z2 z3 */
-                } else
-#endif
-                {
+                if (pc == 3) {
+                    ld3x4(pq, &px, &py, &pz);
+                } else {
                     px = (v4f){pq[0], pq[pc], pq[2 * pc], pq[3 * pc]};
                     py = (v4f){pq[1], pq[pc + 1], pq[2 * pc + 1], pq[3 * pc + 1]};
                     pz = (v4f){pq[2], pq[pc + 2], pq[2 * pc + 2], pq[3 * pc + 2]};
@@ -1068,13 +1049,8 @@ static void caustics_rows_gain(void *user, int begin, int end)
                 v4i ok = ((v4f)((v4i)px & absm) <= big) & ((v4f)((v4i)py & absm) <= big) & ((pz - pz) == zero) &
                          ((v4f)((v4i)(wx - px) & absm) <= vtol) & ((v4f)((v4i)(wy - py) & absm) <= vtol);
                 if (cov)
-                    ok &= load4(cov + i) > zero;
-#ifdef __SSE2__
-                const int all = _mm_movemask_ps((__m128)ok) == 15;
-#else
-                const int all = ok[0] & ok[1] & ok[2] & ok[3];
-#endif
-                if (all) {
+                    ok &= ld4(cov + i) > zero;
+                if (all4(ok)) {
                     const v4f s4 = ls + t4 * ds;
                     apply_gain(run->src + i * 4, run->dst + i * 4, BCAST(s4, 0), tint);
                     apply_gain(run->src + (i + 1) * 4, run->dst + (i + 1) * 4, BCAST(s4, 1), tint);

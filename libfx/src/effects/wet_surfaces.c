@@ -289,26 +289,6 @@ static inline __attribute__((always_inline)) void row_spans(const wet_job *j, we
     }
 }
 
-/* Three interleaved floats of four pixels (a Normal pass row at q) as three vectors */
-static inline __attribute__((always_inline)) void load3x4(const float *q, v4f *a, v4f *b, v4f *c)
-{
-#ifdef __SSE__
-    const __m128 p0 = _mm_loadu_ps(q), p1 = _mm_loadu_ps(q + 4), p2 = _mm_loadu_ps(q + 8);
-    const __m128 x01 = _mm_shuffle_ps(p0, p1, _MM_SHUFFLE(2, 0, 3, 0)); /* a0 a1 b1 a2 */
-    const __m128 x23 = _mm_shuffle_ps(p1, p2, _MM_SHUFFLE(2, 1, 3, 2)); /* a2 b2 a3 b3 */
-    *a = (v4f)_mm_shuffle_ps(x01, x23, _MM_SHUFFLE(2, 0, 1, 0));
-    const __m128 y01 = _mm_shuffle_ps(p0, p1, _MM_SHUFFLE(0, 0, 1, 1)); /* b0 b0 b1 b1 */
-    *b = (v4f)_mm_shuffle_ps(y01, x23, _MM_SHUFFLE(3, 1, 2, 0));
-    const __m128 z01 = _mm_shuffle_ps(p0, p1, _MM_SHUFFLE(1, 1, 2, 2)); /* c0 c0 c1 c1 */
-    const __m128 z23 = _mm_shuffle_ps(p2, p2, _MM_SHUFFLE(3, 3, 0, 0)); /* c2 c2 c3 c3 */
-    *c = (v4f)_mm_shuffle_ps(z01, z23, _MM_SHUFFLE(2, 0, 2, 0));
-#else
-    *a = (v4f){q[0], q[3], q[6], q[9]};
-    *b = (v4f){q[1], q[4], q[7], q[10]};
-    *c = (v4f){q[2], q[5], q[8], q[11]};
-#endif
-}
-
 /* A smooth cell's pixels [xs, xe) four at a time while all four lie on the cell's surface
  * (the same tests, lane by lane, as wet_lattice_rows' one-pixel loop: the same bits);
  * returns the first pixel not done. an: the cell's first corner's normal. */
@@ -324,20 +304,15 @@ static inline __attribute__((always_inline)) int smooth_quads(const wet_span *sc
     for (; x + 4 <= xe; x += 4) {
         const v4f d4 = ld4(depth + x), tx4 = ld4(col_t + x);
         v4f nx, ny, nz;
-        load3x4(normal + 3 * (size_t)x, &nx, &ny, &nz);
+        ld3x4(normal + 3 * (size_t)x, &nx, &ny, &nz);
         const v4f dz = wl1 + tx4 * wd1;
         const v4f nd = nx * V4(an0) + ny * V4(an1) + nz * V4(an2);
         const v4f nn = nx * nx + ny * ny + nz * nz;
         const v4f dd = (v4f)((v4i)(d4 - dz) & (v4i){0x7fffffff, 0x7fffffff, 0x7fffffff, 0x7fffffff}); /* |d - dz| */
         const v4i ok = (d4 > V4(0.0f)) & (d4 < V4(far)) & (dd <= V4(0.02f) * d4) & (nd > V4(0.0f)) &
                        (nd * nd >= V4(0.81f) * nn);
-#ifdef __SSE__
-        if (_mm_movemask_ps((__m128)ok) != 15)
+        if (!all4(ok))
             break;
-#else
-        if (!(ok[0] & ok[1] & ok[2] & ok[3]))
-            break;
-#endif
         const v4f wet4 = wl0 + tx4 * wd0;
         for (int m = 0; m < 4; m++) {
             const float *s = src + 4 * (size_t)(x + m);
@@ -369,7 +344,7 @@ static inline __attribute__((always_inline)) int partial_quads(const wet_job *j,
     for (; x + 4 <= xe; x += 4) {
         const v4f d4 = ld4(depth + x), tx4 = ld4(col_t + x);
         v4f nx, ny, nz;
-        load3x4(normal + 3 * (size_t)x, &nx, &ny, &nz);
+        ld3x4(normal + 3 * (size_t)x, &nx, &ny, &nz);
         const v4f nn = nx * nx + ny * ny + nz * nz;
         const v4f lim = lim_f * d4;
         const v4f ux = V4(1.0f) - tx4;
@@ -389,13 +364,8 @@ static inline __attribute__((always_inline)) int partial_quads(const wet_job *j,
             ws = ws + w;
         }
         const v4i good = (d4 > V4(0.0f)) & (d4 < V4(far)) & (ws > V4(0.0f));
-#ifdef __SSE__
-        if (_mm_movemask_ps((__m128)good) != 15)
+        if (!all4(good))
             break;
-#else
-        if (!(good[0] & good[1] & good[2] & good[3]))
-            break;
-#endif
         const v4f inv = V4(1.0f) / ws;
         const v4f g = sg * inv, o0 = s0 * inv, o1 = s1 * inv, o2 = s2 * inv, wet = sw * inv;
         for (int m = 0; m < 4; m++) {
