@@ -619,12 +619,9 @@ static void shade_segment(const caustics_job *j, const float *restrict src, floa
             memcpy(sv + c, &r, sizeof r);
         }
 #endif
-        for (; c < n; c++) {
-            float g = xs[c] * inv_mean;
-            g = (g < (float)FOCUS_MAX ? g : (float)FOCUS_MAX) - 1.0f;
-            float amp = strength * (0.4f + 1.2f * nz[c]);
-            sv[c] = st[c] == PX_PATTERN ? amp * g : sv[c];
-        }
+        for (; c < n; c++)
+            if (st[c] == PX_PATTERN)
+                sv[c] = focus_s(j, av[c], nz[c]);
     }
     /* per pixel, its four channels as one vector: the gain (alpha's 1 + s 0 = 1: the same
      * product), the clamp to [0, FLT_MAX] (NaN to 0) by masks, alpha and copied pixels
