@@ -64,13 +64,24 @@ static void *alloc_huge(size_t n)
     return p;
 }
 
-void *fx_mem_alloc(size_t n)
+/* n bytes, from huge_from up as whole advised huge pages */
+static void *alloc_from(size_t n, size_t huge_from)
 {
     if (should_fail())
         return NULL;
-    if (n >= HUGE_PAGE)
+    if (n >= huge_from)
         return alloc_huge(n);
     return counted(malloc(n ? n : 1));
+}
+
+void *fx_mem_alloc(size_t n)
+{
+    return alloc_from(n, HUGE_PAGE);
+}
+
+void *fx_mem_alloc_whole(size_t n)
+{
+    return alloc_from(n, (size_t)256 << 10);
 }
 
 void *fx_mem_calloc(size_t count, size_t size)

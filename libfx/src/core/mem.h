@@ -11,6 +11,10 @@ extern "C" {
 
 /* Blocks of 2 MiB and more come huge-page aligned and advised (fewer first-touch faults). */
 void *fx_mem_alloc(size_t n);
+/* A buffer written whole as soon as it is allocated (the workers' scratch rows): from
+ * 256 KiB it takes whole advised huge pages, so a process's first frame pays one page fault
+ * per 2 MiB instead of 512; below that, as fx_mem_alloc. Freed with fx_mem_free. */
+void *fx_mem_alloc_whole(size_t n);
 void *fx_mem_calloc(size_t count, size_t size);
 void *fx_mem_realloc(void *p, size_t n);
 void fx_mem_free(void *p);

@@ -1554,13 +1554,8 @@ fx_result fx_blur_image_finite(fx_context *ctx, const float *src, float *dst, in
     res = fx_check_budget(ctx, tmp_bytes + scratch_total, where);
     if (res != FX_OK)
         goto out;
-    /* Between 256 KiB and 2 MiB (1080p at 2 workers: 1.7 MB) the scratch is asked for as a
-     * whole 2 MiB block: fx_mem_alloc then returns one advised huge page, a single
-     * first-touch fault instead of about 280 small ones on a process's first frame. */
-    size_t scratch_alloc = scratch_total + 64;
-    if (scratch_alloc >= ((size_t)256 << 10) && scratch_alloc < ((size_t)2 << 20))
-        scratch_alloc = (size_t)2 << 20;
-    void *scratch_raw = fx_mem_alloc(scratch_alloc);
+    /* 1080p at 2 workers: 1.7 MB, one huge page (a single first-touch fault, not ~280) */
+    void *scratch_raw = fx_mem_alloc_whole(scratch_total + 64);
     if (!scratch_raw || (!direct && !(tmp = fx_mem_alloc(tmp_bytes)))) {
         fx_mem_free(scratch_raw);
         scratch_raw = NULL;
