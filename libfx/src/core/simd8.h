@@ -41,6 +41,21 @@ static inline __attribute__((always_inline)) void fx_store8(float *p, v8f v)
     memcpy(p, &v, sizeof v);
 }
 
+/* Whether any lane, or every lane, of a comparison mask is set. */
+static inline __attribute__((always_inline)) int fx_any8(v8i m)
+{
+    uint64_t u[4];
+    memcpy(u, &m, sizeof u);
+    return (u[0] | u[1] | u[2] | u[3]) != 0;
+}
+
+static inline __attribute__((always_inline)) int fx_all8(v8i m)
+{
+    uint64_t u[4];
+    memcpy(u, &m, sizeof u);
+    return (u[0] & u[1] & u[2] & u[3]) == ~(uint64_t)0;
+}
+
 /* 8 pixels of 4 interleaved channels (32 floats at p) to 4 channel vectors. */
 static inline __attribute__((always_inline)) void fx_load8x4(const float *p, v8f out[4])
 {

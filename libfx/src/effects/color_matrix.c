@@ -169,10 +169,8 @@ FX_CLONES static void cm_rows(void *user, int begin, int end)
             /* |v| <= FLT_MAX is false for +-Inf and NaN */
             const v8i ok = ((v8f)((v8i)o[0] & abs_mask) <= big) & ((v8f)((v8i)o[1] & abs_mask) <= big) &
                            ((v8f)((v8i)o[2] & abs_mask) <= big) & ((v8f)((v8i)o[3] & abs_mask) <= big);
-            uint64_t w[4];
-            memcpy(w, &ok, sizeof w);
             fx_store8x4(d + 4 * (size_t)x, o);
-            if (__builtin_expect((w[0] & w[1] & w[2] & w[3]) != ~(uint64_t)0, 0)) {
+            if (__builtin_expect(!fx_all8(ok), 0)) {
                 for (int i = 0; i < 8; i++) {
                     const float px[4] = { p[0][i], p[1][i], p[2][i], p[3][i] };
                     slow |= cm_pixel(j, c, px, d + 4 * (size_t)(x + i));

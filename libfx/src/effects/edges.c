@@ -164,12 +164,6 @@ static inline __attribute__((always_inline)) v8f finite8(v8f v)
     return SEL8(v > S8(-FLT_MAX), v, S8(-FLT_MAX));
 }
 
-static inline __attribute__((always_inline)) int any8(v8i m)
-{
-    uint64_t u[4];
-    memcpy(u, &m, sizeof u);
-    return (u[0] | u[1] | u[2] | u[3]) != 0;
-}
 
 #define S8I(v) ((v8i){ (v), (v), (v), (v), (v), (v), (v), (v) })
 #if defined(__clang__)
@@ -267,7 +261,7 @@ FX_CLONES static void draw_row(void *user, int y, const float *matte)
             for (int k = 0; k < 4; k++)
                 any |= ((v8i)ld8f(sp + 8 * k) & expo) == expo; /* Inf or NaN */
             list[nl] = x;
-            nl += any8(any);
+            nl += fx_any8(any);
         }
         for (int i = 0; i < nl; i++) {
             const int xc = list[i];
@@ -279,7 +273,7 @@ FX_CLONES static void draw_row(void *user, int y, const float *matte)
                 inf[k] = ((v8i)s[k] & expo) == expo;
             }
             const v8f a8 = ld8f(matte + xc) * S8(op); /* the products draw_px takes, lane by lane */
-            const int finite = !any8(inf[0] | inf[1] | inf[2] | inf[3]);
+            const int finite = !fx_any8(inf[0] | inf[1] | inf[2] | inf[3]);
             const v8f pair[4] = { FX_SHUF8(a8, a8, 0, 0, 0, 0, 1, 1, 1, 1), FX_SHUF8(a8, a8, 2, 2, 2, 2, 3, 3, 3, 3),
                                   FX_SHUF8(a8, a8, 4, 4, 4, 4, 5, 5, 5, 5), FX_SHUF8(a8, a8, 6, 6, 6, 6, 7, 7, 7, 7) };
             if (finite) {

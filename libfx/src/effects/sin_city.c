@@ -238,9 +238,7 @@ static inline __attribute__((always_inline)) v8f keep_hue8(const sc_vk *K, v8f r
                     ((v8f)((v8i)(e - w360) & abs8) < lwd);
         maybe |= d < SPLAT(1e-30f); /* tiny d: products near underflow; the exact path */
         maybe &= ok & (K->soft_sat ? (d >= K->gate0 * mx) : (d >= K->ms * mx));
-        uint64_t mw[4];
-        memcpy(mw, &maybe, sizeof mw);
-        if (!(mw[0] | mw[1] | mw[2] | mw[3]))
+        if (!fx_any8(maybe))
             return zero;
     }
     const v8f imx = one / SEL(ok, mx, one);
@@ -308,9 +306,7 @@ static inline __attribute__((always_inline)) void sc_vec_chunk(const sc_job *j, 
      * the clamps are then identities and are skipped (the same bits). */
     const v8i bounded = ((v8f)((v8i)r & abs8) <= S8(1e30f)) & ((v8f)((v8i)g & abs8) <= S8(1e30f)) &
                         ((v8f)((v8i)b & abs8) <= S8(1e30f)) & ((v8f)((v8i)a & abs8) <= S8(1e30f));
-    uint64_t bw[4];
-    memcpy(bw, &bounded, sizeof bw);
-    const int guard = (bw[0] & bw[1] & bw[2] & bw[3]) != ~(uint64_t)0;
+    const int guard = !fx_all8(bounded);
     if (guard) {
         FIN8(r);
         FIN8(g);
