@@ -191,7 +191,12 @@ def tick():
             shoot(OUT)
             log("saved", OUT)
             scene = bpy.context.scene
-            scene.libfx.live_view = "SPLIT"
+            try:
+                scene.libfx.live_view = "SPLIT"
+            except (AttributeError, RuntimeError) as e:   # 4.3 refuses data writes a moment after a render
+                if "not allowed" not in str(e):
+                    raise
+                return 0.1
             state["phase"] = "split"
             state["gen"] = libfx.live.session(scene).shown.get("generation", -1)
             state["t_split"] = time.perf_counter()
