@@ -21,13 +21,13 @@ bl_info = {
 # dependency order so that no class of an old copy survives.
 if "native" in locals():
     import importlib
-    for _m in ("compat", "native", "catalog", "props", "recipe", "scene_setup", "aux_views", "render", "live", "ui"):
+    for _m in ("compat", "native", "catalog", "props", "recipe", "scene_setup", "aux_views", "render", "live", "views_job", "ui"):
         if _m in locals():
             importlib.reload(locals()[_m])
 
 import bpy  # noqa: E402
 
-from . import compat, native, catalog, props, recipe, scene_setup, aux_views, render, live, ui  # noqa: E402,F401
+from . import compat, native, catalog, props, recipe, scene_setup, aux_views, render, live, views_job, ui  # noqa: E402,F401
 
 _registered = []
 
@@ -64,6 +64,7 @@ def unregister():
         ui.UNSUPPORTED.clear()
         return
     render.unregister()
+    views_job.unregister()
     for cls in reversed(_registered):
         try:
             bpy.utils.unregister_class(cls)

@@ -4,6 +4,7 @@
         --frames 1-2 --output /path/prefix_ --resolution 320x180 --samples 4 \\
         [--recipe r.json] [--quality final] [--threads 0] [--skip-existing]
         [--keep-passes] [--passes-codec NONE|RLE|ZIP]
+    blender -b scene.blend --python addon/libfx/batch.py -- --views-only --frames 5 [--output P]
 
 Blender exits 0 even when a handler raises (GUIDE §3); this runner exits 1 if
 any frame's stack failed (the message names the frame and the effect), 2 on a
@@ -95,6 +96,10 @@ def parse_args(argv):
                          "which holds the same passes, is written)")
     ap.add_argument("--passes-codec", choices=("NONE", "RLE", "ZIP"),
                     help="EXR codec of the passes file (default: the scene's, NONE: fastest)")
+    ap.add_argument("--views-only", action="store_true",
+                    help="render only the extra views the stack reads (light views, rain map, probes, "
+                         "planar views) for --frames, beside the output, and exit: the panel's Render "
+                         "Views runs this in a background Blender so the UI never waits for Cycles")
     return ap.parse_args(argv)
 
 
@@ -321,6 +326,18 @@ def render_frames(fx, scene, frames, skip_existing):
     return failures, skipped
 
 
+def render_views(fx, scene, frames):
+    """--views-only: the aux views for the frames (as the panel's Render Views makes them for
+    the current frame); one line "libfx batch: views: N ready: names" on success, exit 1 when
+    a view fails to render."""
+    scene.frame_set(frames[0])
+    try:
+        views = fx.aux_views.prepare(scene, frames)
+    except Exception as e:   # a failed Cycles render, an unwritable folder
+        die("views: %s" % e, 1)
+    say("views: %d ready: %s" % (len(views), ", ".join(v["name"] for v in views)))
+
+
 def main():
     args = parse_args(_argv())
     frames, size = check_usage(args)
@@ -337,6 +354,9 @@ def main():
     say("scene '%s', frames %s, %dx%d, passes %s" % (
         scene.name, args.frames or "%d-%d" % (scene.frame_start, scene.frame_end),
         r.resolution_x, r.resolution_y, ", ".join(st.get("passes", []))))
+    if args.views_only:
+        render_views(fx, scene, frames)
+        return
     failures, skipped = render_frames(fx, scene, frames, args.skip_existing)
     if failures:
         die("%d of %d frame(s) failed:\n  %s" % (len(failures), len(frames), "\n  ".join(failures)), 1)

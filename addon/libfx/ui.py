@@ -6,7 +6,7 @@ import bpy
 from bpy.props import EnumProperty, IntProperty, StringProperty
 from bpy_extras.io_utils import ExportHelper, ImportHelper
 
-from . import aux_views, live, native, props, recipe, render, scene_setup
+from . import aux_views, live, native, props, recipe, render, scene_setup, views_job
 
 
 def _settings(context):
@@ -278,7 +278,19 @@ class LIBFX_OT_render_views(bpy.types.Operator):
     def poll(cls, context):
         return scene_setup.has_stack(context.scene) and bool(scene_setup.status(context.scene).get("aux_views"))
 
+    def invoke(self, context, event):
+        """From the panel: in a background Blender (views_job), the UI stays free."""
+        try:
+            views_job.start(context.scene)
+        except Exception as e:   # one job at a time; a file that cannot be copied
+            self.report({"ERROR"}, "libfx: views: %s" % e)
+            return {"CANCELLED"}
+        self.report({"INFO"}, "libfx: rendering the views of frame %d in the background"
+                    % context.scene.frame_current)
+        return {"FINISHED"}
+
     def execute(self, context):
+        """From a script (or headless): here, and done when it returns."""
         scene = context.scene
         try:
             views = aux_views.prepare(scene, [scene.frame_current])
@@ -513,6 +525,10 @@ def draw_stack(layout, context):
         row = layout.row()
         row.label(text="Views: " + ", ".join(st["aux_views"]), icon="LIGHT_SUN")
         row.operator(LIBFX_OT_render_views.bl_idname, text="Render Views", icon="RENDER_STILL")
+        vs = views_job.status_line()
+        if vs:
+            for i, line in enumerate(_wrap(vs, width)):
+                layout.label(text=line, icon=("TIME" if views_job.running() else "INFO") if i == 0 else "BLANK1")
 
     row = layout.row(align=True)
     row.operator(LIBFX_OT_recipe_import.bl_idname, icon="IMPORT", text="Import")
