@@ -19,7 +19,8 @@ In one Blender session per scene:
 - per effect of the stack, a change of its first look parameter: from setting the property
   (the update callback, the debounced run) to the updated image, at the interactive
   setting (1/2 proxy + draft, and 1/4 + draft) and at final; each the median of --runs
-  changes; plus the interactive image's error against the final one (MAE, PSNR over RGB).
+  changes (each to a value not set before: +-5 %, +-10 %, ... of the soft range); plus the
+  interactive image's error against the final one (MAE, PSNR over RGB).
 
 Writes OUT/bench_live.csv and prints a Markdown table.
 """
@@ -107,7 +108,9 @@ for setting in A["settings"]:
         base = getattr(group, knob.prop)
         ti, tf, errs, parts = [], [], [], []
         for r in range(A["runs"]):
-            step = (knob.soft_max - knob.soft_min) * 0.05 * (1 if r % 2 == 0 else -1)
+            # a value not seen before at every change, as a drag makes them (a value met
+            # again can hit a cache keyed by it: vsm_shadows' filtered light map)
+            step = (knob.soft_max - knob.soft_min) * 0.05 * (1 + r // 2) * (1 if r % 2 == 0 else -1)
             v = base + step
             v = max(knob.min, min(knob.max, v))
             if knob.type == "int":

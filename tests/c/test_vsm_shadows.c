@@ -745,15 +745,28 @@ static void test_cache(void)
     }
     long built, reused;
     fx_aux_cache_stats(cached, &built, &reused);
-    CHECK(built == 2 && reused == 4); /* one map per filter, frames 2 and 3 reuse it */
+    /* box: one map; Gaussian: the moments and their filtered copy; frames 2 and 3 reuse
+     * the filtered maps */
+    CHECK(built == 3 && reused == 4);
     fx_aux_cache_stats(plain, &built, &reused);
-    CHECK(built == 2 && reused == 0);
+    CHECK(built == 3 && reused == 0);
     /* pcf reads the unfiltered depth: another entry, same bits as uncached */
     float *p1 = run_vsm(cached, fc, "pcf", "box_sat", 5.0f, 0.3f, 0.01f);
     float *p2 = run_vsm(plain, fp, "pcf", "box_sat", 5.0f, 0.3f, 0.01f);
     CHECK(p1 && p2 && memcmp(p1, p2, N * N * 4 * sizeof(float)) == 0);
     free(p1);
     free(p2);
+    /* a new filter width (a slider moved in the live loop) filters the cached moments again:
+     * one build (the filtered copy), no read of the view, the bits of an uncached run */
+    fx_aux_cache_stats(cached, &built, &reused);
+    long b1 = built;
+    float *g1 = run_vsm(cached, fc, "vsm", "gaussian", 13.0f, 0.3f, 0.01f);
+    float *g2 = run_vsm(plain, fp, "vsm", "gaussian", 13.0f, 0.3f, 0.01f);
+    fx_aux_cache_stats(cached, &built, &reused);
+    CHECK(built == b1 + 1);
+    CHECK(g1 && g2 && memcmp(g1, g2, N * N * 4 * sizeof(float)) == 0);
+    free(g1);
+    free(g2);
     /* the view re-rendered to the same path: built again, and the new shadow shows */
     float *before = run_vsm(cached, fc, "vsm", "box_sat", 9.0f, 0.3f, 0.01f);
     for (int i = 0; i < N * N; i++)

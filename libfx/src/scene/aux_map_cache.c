@@ -121,11 +121,62 @@ void fx_aux_cache_stats(const fx_context *ctx, long *built, long *reused)
 
 /* filter value of an entry that keeps the view as read (fx_aux_view_acquire) */
 #define AUX_RAW_VIEW (-2)
+/* filter value of an entry holding a view's unfiltered moments at reduction level L, the
+ * base its filtered maps are made from: a new filter width (a slider moved in the live
+ * loop) then filters a copy of them instead of reading the view and making the moments
+ * again (the atrium's light view at the draft's level 2: 0.31 G -> 0.01 G instructions) */
+#define AUX_MOMENTS(level) (-16 - (level))
+#define AUX_MOMENTS_LEVEL(filter) (-16 - (filter))
+
+static fx_result acquire(const fx_frame *f, const char *name, int derivative_bias, int filter, float width,
+                         const char *where, fx_aux_map *out);
+
+/* Filtered maps made from the cached moments: those whose moments are made first and
+ * filtered after (fx_shadow_map_filter). The full-resolution box filters straight from the
+ * depth instead (box_from_depth: other bits), and keeps its old path. */
+static int from_moments(int filter)
+{
+    return !(FX_SHADOW_FILTER_LEVEL(filter) == 0 && FX_SHADOW_FILTER_KIND(filter) == FX_SHADOW_FILTER_BOX_SAT);
+}
+
+/* Entry e as a filtered copy of the view's moments entry. Its map has moments only (depth
+ * NULL): the VSM lookup reads nothing else. The same operations as making the moments in
+ * place and filtering them, so the same bits. */
+static fx_result entry_from_moments(const fx_frame *f, const char *name, int bias, int filter, float width,
+                                    const char *where, aux_entry *e)
+{
+    int level = FX_SHADOW_FILTER_LEVEL(filter);
+    level = level > FX_SHADOW_MAX_LEVEL ? FX_SHADOW_MAX_LEVEL : level;
+    fx_aux_map base;
+    fx_result r = acquire(f, name, bias, AUX_MOMENTS(level), 0.0f, where, &base);
+    if (r)
+        return r;
+    const size_t floats = (size_t)base.sm->mwidth * base.sm->mheight * 2;
+    e->av = fx_mem_alloc(sizeof *e->av);
+    float *m = fx_mem_alloc(floats * sizeof(float));
+    if (!e->av || !m) {
+        fx_mem_free(m);
+        fx_aux_map_release(f->ctx, &base);
+        return fx_fail(f->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for aux view '%s'", where, name);
+    }
+    *e->av = *base.av; /* its camera and name; no frame, depth or colour of its own */
+    e->av->frame = NULL;
+    e->av->depth = e->av->color = NULL;
+    e->sm = *base.sm;
+    e->sm.depth = NULL;
+    memcpy(m, base.sm->moments, floats * sizeof(float));
+    e->sm.moments = m;
+    fx_aux_map_release(f->ctx, &base);
+    e->bytes = (uint64_t)floats * sizeof(float) + sizeof *e->av;
+    return fx_shadow_map_filter(f->ctx, &e->sm, (fx_shadow_filter)filter, width, where);
+}
 
 /* Builds the map of entry e (key already set). */
 static fx_result entry_build(const fx_frame *f, const char *name, int bias, int filter, float width,
                              const char *where, aux_entry *e)
 {
+    if (filter >= 0 && width > 1.0f && from_moments(filter))
+        return entry_from_moments(f, name, bias, filter, width, where, e);
     fx_result r = fx_aux_view_load(f, name, where, &e->av);
     if (r)
         return r;
@@ -155,7 +206,13 @@ static fx_result entry_build(const fx_frame *f, const char *name, int bias, int 
     }
     r = fx_shadow_map_build(f->ctx, av->depth, av->width, av->height, av->view.cam.clip_start,
                             av->view.cam.clip_end, bias, &e->sm, where);
-    if (!r && filter >= 0 && width > 1.0f)
+    if (!r && filter <= AUX_MOMENTS(0))
+        /* width 1: the moments at the level, unfiltered */
+        r = fx_shadow_map_filter(f->ctx, &e->sm,
+                                 (fx_shadow_filter)FX_SHADOW_FILTER_WITH_LEVEL(FX_SHADOW_FILTER_BOX_SAT,
+                                                                               AUX_MOMENTS_LEVEL(filter)),
+                                 1.0f, where);
+    else if (!r && filter >= 0 && width > 1.0f)
         r = fx_shadow_map_filter(f->ctx, &e->sm, (fx_shadow_filter)filter, width, where);
     if (r)
         return r;
@@ -163,6 +220,13 @@ static fx_result entry_build(const fx_frame *f, const char *name, int bias, int 
     fx_frame_free(av->frame);
     av->frame = NULL;
     av->depth = NULL;
+    if (filter <= AUX_MOMENTS(0)) {
+        /* only the moments are copied out of a base: its normalised depth goes too */
+        fx_mem_free(e->sm.depth);
+        e->sm.depth = NULL;
+        e->bytes = (uint64_t)e->sm.mwidth * e->sm.mheight * 2 * sizeof(float) + sizeof *av;
+        return FX_OK;
+    }
     e->bytes = (uint64_t)av->width * av->height * 3 * sizeof(float) + sizeof *av;
     return FX_OK;
 }
@@ -182,7 +246,7 @@ static fx_result acquire(const fx_frame *f, const char *name, int derivative_bia
     struct fx_aux_cache *c = cache_of(ctx);
     if (c && cache_limit(ctx) > 0 && stat(path, &st) == 0) {
         char tail[160];
-        if (filter != AUX_RAW_VIEW && !(filter >= 0 && width > 1.0f)) {
+        if (filter != AUX_RAW_VIEW && filter > AUX_MOMENTS(0) && !(filter >= 0 && width > 1.0f)) {
             filter = -1;
             width = 0.0f;
         }
