@@ -5,7 +5,10 @@
  * batch the views do not change between frames. fx_aux_map_acquire returns that map built
  * once per context and reused while the view's key is the same: its sidecar entry (name,
  * path, matrices, clip range, signature), the file's size and modification time (ns), and
- * the build parameters (derivative bias, filter, width). Entries are LRU, bounded by
+ * the build parameters (derivative bias, filter, width). A filtered map made from moments
+ * (reduced levels, the Gaussian) is a filtered copy of the view's unfiltered moments, an
+ * entry of its own: a new width filters again without reading the view (a slider in the
+ * live loop). Entries are LRU, bounded by
  * fx_context_set_aux_cache (bytes; 0: no caching, each acquire builds a private map) and
  * freed with the context. The cache is touched only by the thread calling into the library
  * with the context (never by its workers), which the context's one-thread-at-a-time rule
@@ -19,7 +22,8 @@
 typedef struct fx_aux_map {
     const fx_aux_view *av;   /* its camera and name; av->depth is NULL (the raw depth is dropped)
                               * except from fx_aux_view_acquire */
-    const fx_shadow_map *sm; /* normalised depth; moments only when a filter asked for them */
+    const fx_shadow_map *sm; /* normalised depth; moments only when a filter asked for them;
+                              * a map filtered from moments has moments only (depth NULL) */
     int cached;              /* 1: came from (or went into) the cache; 0: private */
 } fx_aux_map;
 
