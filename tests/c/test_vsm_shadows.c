@@ -745,11 +745,11 @@ static void test_cache(void)
     }
     long built, reused;
     fx_aux_cache_stats(cached, &built, &reused);
-    /* box: one map; Gaussian: the moments and their filtered copy; frames 2 and 3 reuse
-     * the filtered maps */
-    CHECK(built == 3 && reused == 4);
+    /* each filter: the view's base (box: its normalised depth; Gaussian: its moments) and
+     * the filtered copy; frames 2 and 3 reuse the filtered maps */
+    CHECK(built == 4 && reused == 4);
     fx_aux_cache_stats(plain, &built, &reused);
-    CHECK(built == 3 && reused == 0);
+    CHECK(built == 4 && reused == 0);
     /* pcf reads the unfiltered depth: another entry, same bits as uncached */
     float *p1 = run_vsm(cached, fc, "pcf", "box_sat", 5.0f, 0.3f, 0.01f);
     float *p2 = run_vsm(plain, fp, "pcf", "box_sat", 5.0f, 0.3f, 0.01f);
@@ -767,6 +767,14 @@ static void test_cache(void)
     CHECK(g1 && g2 && memcmp(g1, g2, N * N * 4 * sizeof(float)) == 0);
     free(g1);
     free(g2);
+    /* the full-resolution box: from the cached normalised depth */
+    g1 = run_vsm(cached, fc, "vsm", "box_sat", 13.0f, 0.3f, 0.01f);
+    g2 = run_vsm(plain, fp, "vsm", "box_sat", 13.0f, 0.3f, 0.01f);
+    fx_aux_cache_stats(cached, &built, &reused);
+    CHECK(built == b1 + 2);
+    CHECK(g1 && g2 && memcmp(g1, g2, N * N * 4 * sizeof(float)) == 0);
+    free(g1);
+    free(g2);
     /* the view re-rendered to the same path: built again, and the new shadow shows */
     float *before = run_vsm(cached, fc, "vsm", "box_sat", 9.0f, 0.3f, 0.01f);
     for (int i = 0; i < N * N; i++)
@@ -777,7 +785,7 @@ static void test_cache(void)
     float *after = run_vsm(cached, fc, "vsm", "box_sat", 9.0f, 0.3f, 0.01f);
     float *after_ref = run_vsm(plain, fp, "vsm", "box_sat", 9.0f, 0.3f, 0.01f);
     fx_aux_cache_stats(cached, &built, &reused);
-    CHECK(built == b0 + 1);
+    CHECK(built == b0 + 2); /* the new file's base and its filtered map */
     CHECK(before && after && memcmp(before, after, N * N * 4 * sizeof(float)) != 0);
     CHECK(after && after_ref && memcmp(after, after_ref, N * N * 4 * sizeof(float)) == 0);
     free(before);
@@ -790,7 +798,7 @@ static void test_cache(void)
         free(o);
     }
     fx_aux_cache_stats(cached, &built, &reused);
-    CHECK(built == b0 + 3);
+    CHECK(built == b0 + 2 + 2 * 2);
     free(after);
     fx_frame_free(fc);
     fx_frame_free(fp);

@@ -122,9 +122,7 @@ void fx_aux_cache_stats(const fx_context *ctx, long *built, long *reused)
 /* filter value of an entry that keeps the view as read (fx_aux_view_acquire) */
 #define AUX_RAW_VIEW (-2)
 /* filter value of an entry holding a view's unfiltered moments at reduction level L, the
- * base its filtered maps are made from: a new filter width (a slider moved in the live
- * loop) then filters a copy of them instead of reading the view and making the moments
- * again (the atrium's light view at the draft's level 2: 0.31 G -> 0.01 G instructions) */
+ * base its filtered maps are made from (entry_from_base) */
 #define AUX_MOMENTS(level) (-16 - (level))
 #define AUX_MOMENTS_LEVEL(filter) (-16 - (filter))
 
@@ -133,50 +131,57 @@ static fx_result acquire(const fx_frame *f, const char *name, int derivative_bia
 
 /* Filtered maps made from the cached moments: those whose moments are made first and
  * filtered after (fx_shadow_map_filter). The full-resolution box filters straight from the
- * depth instead (box_from_depth: other bits), and keeps its old path. */
+ * depth instead (box_from_depth: other bits): it starts from the cached normalised depth. */
 static int from_moments(int filter)
 {
     return !(FX_SHADOW_FILTER_LEVEL(filter) == 0 && FX_SHADOW_FILTER_KIND(filter) == FX_SHADOW_FILTER_BOX_SAT);
 }
 
-/* Entry e as a filtered copy of the view's moments entry. Its map has moments only (depth
- * NULL): the VSM lookup reads nothing else. The same operations as making the moments in
- * place and filtering them, so the same bits. */
-static fx_result entry_from_moments(const fx_frame *f, const char *name, int bias, int filter, float width,
-                                    const char *where, aux_entry *e)
+/* Entry e (a filtered map) from the view's cached base entry: a copy of its unfiltered
+ * moments (then the map has moments only, depth NULL: the VSM lookup reads nothing else),
+ * or for the full-resolution box a copy of its normalised depth, then the filter. The same
+ * operations as building the map whole, so the same bits; a new width (a slider moved in
+ * the live loop) reads no view and makes no moments. */
+static fx_result entry_from_base(const fx_frame *f, const char *name, int bias, int filter, float width,
+                                 const char *where, aux_entry *e)
 {
     int level = FX_SHADOW_FILTER_LEVEL(filter);
     level = level > FX_SHADOW_MAX_LEVEL ? FX_SHADOW_MAX_LEVEL : level;
+    const int moments = from_moments(filter);
     fx_aux_map base;
-    fx_result r = acquire(f, name, bias, AUX_MOMENTS(level), 0.0f, where, &base);
+    fx_result r = acquire(f, name, bias, moments ? AUX_MOMENTS(level) : -1, 0.0f, where, &base);
     if (r)
         return r;
-    const size_t floats = (size_t)base.sm->mwidth * base.sm->mheight * 2;
+    const float *src = moments ? base.sm->moments : base.sm->depth;
+    const size_t floats = moments ? (size_t)base.sm->mwidth * base.sm->mheight * 2
+                                  : (size_t)base.sm->width * base.sm->height;
     e->av = fx_mem_alloc(sizeof *e->av);
-    float *m = fx_mem_alloc(floats * sizeof(float));
-    if (!e->av || !m) {
-        fx_mem_free(m);
+    float *copy = fx_mem_alloc(floats * sizeof(float));
+    if (!e->av || !copy) {
+        fx_mem_free(copy);
         fx_aux_map_release(f->ctx, &base);
         return fx_fail(f->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for aux view '%s'", where, name);
     }
     *e->av = *base.av; /* its camera and name; no frame, depth or colour of its own */
     e->av->frame = NULL;
     e->av->depth = e->av->color = NULL;
+    memcpy(copy, src, floats * sizeof(float));
     e->sm = *base.sm;
-    e->sm.depth = NULL;
-    memcpy(m, base.sm->moments, floats * sizeof(float));
-    e->sm.moments = m;
+    e->sm.depth = moments ? NULL : copy;
+    e->sm.moments = moments ? copy : NULL;
     fx_aux_map_release(f->ctx, &base);
-    e->bytes = (uint64_t)floats * sizeof(float) + sizeof *e->av;
-    return fx_shadow_map_filter(f->ctx, &e->sm, (fx_shadow_filter)filter, width, where);
+    r = fx_shadow_map_filter(f->ctx, &e->sm, (fx_shadow_filter)filter, width, where);
+    e->bytes = ((e->sm.depth ? (uint64_t)e->sm.width * e->sm.height : 0) +
+                (e->sm.moments ? (uint64_t)e->sm.mwidth * e->sm.mheight * 2 : 0)) * sizeof(float) + sizeof *e->av;
+    return r;
 }
 
 /* Builds the map of entry e (key already set). */
 static fx_result entry_build(const fx_frame *f, const char *name, int bias, int filter, float width,
                              const char *where, aux_entry *e)
 {
-    if (filter >= 0 && width > 1.0f && from_moments(filter))
-        return entry_from_moments(f, name, bias, filter, width, where, e);
+    if (filter >= 0 && width > 1.0f)
+        return entry_from_base(f, name, bias, filter, width, where, e);
     fx_result r = fx_aux_view_load(f, name, where, &e->av);
     if (r)
         return r;
