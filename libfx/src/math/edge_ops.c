@@ -1173,3 +1173,281 @@ typedef struct matte_copy {
     int w, x0, x1;
 } matte_copy;
 
+
+/* ---- the gradient: Blender's Filter node, type Sobel ----
+ * Per colour channel g = sqrt(gx^2 + gy^2) of the unnormalised 3x3 Sobel kernels, the
+ * neighbours clamped to the image (Blender's "extended" reads), mixed with the pixel as
+ * Blender's Factor mixes (c (1 - f) + g f: exactly g at f = 1), alpha kept. The sums in
+ * Blender's order (its loop over the 3x3 window, rows from the bottom (its y axis points
+ * up), zero weights skipped: adding +-0 changes no sum but a zero's sign, which squares
+ * away): P the row below, M the pixel's row, Q the row above, in libfx's top-down rows
+ *   gx = ((((P[-1] - P[+1]) + 2 M[-1]) - 2 M[+1]) + Q[-1]) - Q[+1]
+ *   gy = ((((P[-1] + 2 P[0]) + P[+1]) - Q[-1]) - 2 Q[0]) - Q[+1]
+ * in float, the same bits as Blender's CPU compositor on finite input. A pixel whose result
+ * is not finite (NaN or Inf in its neighbourhood, or an overflow) is redone in double from
+ * its neighbours made finite (NaN 0, +-Inf +-FLT_MAX), then clamped to +-FLT_MAX: NaN and
+ * Inf never reach the output, and the choice is a function of the pixel's neighbourhood
+ * alone (any band or thread count gives the same bits). */
+
+/* One channel's gradient: the taps at (columns) a = x - 1, c = x, b = x + 1, clamped. */
+static inline float grad_ch(const float *P, const float *M, const float *Q, size_t a, size_t c, size_t b)
+{
+    const float gx = ((((P[a] - P[b]) + 2.0f * M[a]) - 2.0f * M[b]) + Q[a]) - Q[b];
+    const float gy = ((((P[a] + 2.0f * P[c]) + P[b]) - Q[a]) - 2.0f * Q[c]) - Q[b];
+    return sqrtf(gx * gx + gy * gy);
+}
+
+static inline double finite_d(float v)
+{
+    return v == v ? (v < FLT_MAX ? (v > -FLT_MAX ? (double)v : -(double)FLT_MAX) : (double)FLT_MAX) : 0.0;
+}
+
+static inline float clamp_fd(double v)
+{
+    return v < (double)FLT_MAX ? (v > -(double)FLT_MAX ? (float)v : -FLT_MAX) : FLT_MAX;
+}
+
+/* The pixel from neighbours made finite, in double (see above): always finite. */
+static void grad_px_safe(const float *P, const float *M, const float *Q, int xm, int x, int xp, float fac,
+                         float *o)
+{
+    const size_t a = 4 * (size_t)xm, c = 4 * (size_t)x, b = 4 * (size_t)xp;
+    for (int k = 0; k < 3; k++) {
+        const double gx = ((((finite_d(P[a + k]) - finite_d(P[b + k])) + 2.0 * finite_d(M[a + k])) -
+                            2.0 * finite_d(M[b + k])) + finite_d(Q[a + k])) - finite_d(Q[b + k]);
+        const double gy = ((((finite_d(P[a + k]) + 2.0 * finite_d(P[c + k])) + finite_d(P[b + k])) -
+                            finite_d(Q[a + k])) - 2.0 * finite_d(Q[c + k])) - finite_d(Q[b + k]);
+        const double g = clamp_fd(sqrt(gx * gx + gy * gy));
+        o[k] = clamp_fd(finite_d(M[c + k]) * (1.0 - (double)fac) + g * (double)fac);
+    }
+    o[3] = (float)finite_d(M[c + 3]);
+}
+
+static inline int finite_f(float v)
+{
+    return v - v == 0.0f; /* false for NaN and +-Inf */
+}
+
+/* The pixel at column x (neighbours clamped to [0, w)) into o[4] (o may not alias M). */
+static inline void grad_px(const float *P, const float *M, const float *Q, int w, int x, float fac, float keep,
+                           float *o)
+{
+    const int xm = x > 0 ? x - 1 : 0, xp = x + 1 < w ? x + 1 : w - 1;
+    const size_t a = 4 * (size_t)xm, c = 4 * (size_t)x, b = 4 * (size_t)xp;
+    for (int k = 0; k < 3; k++)
+        o[k] = M[c + k] * keep + grad_ch(P + k, M + k, Q + k, a, c, b) * fac;
+    o[3] = M[c + 3];
+    if (!(finite_f(o[0]) && finite_f(o[1]) && finite_f(o[2]) && finite_f(o[3])))
+        grad_px_safe(P, M, Q, xm, x, xp, fac, o);
+}
+
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && !defined(FX_NO_CLONES)
+#  include <immintrin.h>
+#  define EDGE_GRAD_AVX2 1
+/* grad_px's operations on two pixels per register (lanes r g b a r g b a), columns [xa, xb)
+ * with 1 <= xa and xb <= w - 1 (no clamping), xb - xa even. Each result is stored one
+ * chunk late, after the next chunk's loads: out may be M (in place), whose pixel x - 1 the
+ * next chunk still reads. save (or NULL): M's values there, for the next row's P (in
+ * place). Returns where it stopped. */
+__attribute__((target("avx2"), noinline)) static int grad_row_avx2(const float *P, const float *M, const float *Q,
+                                                                  int w, int xa, int xb, float fac, float keep,
+                                                                  float *out, float *save)
+{
+    const __m256 f = _mm256_set1_ps(fac), kp = _mm256_set1_ps(keep);
+    const __m256i expo = _mm256_set1_epi32(0x7f800000);
+    int x = xa, prev = -1;
+    __m256 held = _mm256_setzero_ps();
+    for (; x + 2 <= xb; x += 2) {
+        const size_t c = 4 * (size_t)x;
+        const __m256 pa = _mm256_loadu_ps(P + c - 4), pc = _mm256_loadu_ps(P + c), pb = _mm256_loadu_ps(P + c + 4);
+        const __m256 ma = _mm256_loadu_ps(M + c - 4), mc = _mm256_loadu_ps(M + c), mb = _mm256_loadu_ps(M + c + 4);
+        const __m256 qa = _mm256_loadu_ps(Q + c - 4), qc = _mm256_loadu_ps(Q + c), qb = _mm256_loadu_ps(Q + c + 4);
+        if (prev >= 0)
+            _mm256_storeu_ps(out + 4 * (size_t)prev, held);
+        if (save)
+            _mm256_storeu_ps(save + c, mc);
+        const __m256 two = _mm256_set1_ps(2.0f);
+        const __m256 gx = _mm256_sub_ps(
+            _mm256_add_ps(_mm256_sub_ps(_mm256_add_ps(_mm256_sub_ps(pa, pb), _mm256_mul_ps(two, ma)),
+                                        _mm256_mul_ps(two, mb)), qa), qb);
+        const __m256 gy = _mm256_sub_ps(
+            _mm256_sub_ps(_mm256_sub_ps(_mm256_add_ps(_mm256_add_ps(pa, _mm256_mul_ps(two, pc)), pb), qa),
+                          _mm256_mul_ps(two, qc)), qb);
+        const __m256 g = _mm256_sqrt_ps(_mm256_add_ps(_mm256_mul_ps(gx, gx), _mm256_mul_ps(gy, gy)));
+        __m256 o = _mm256_add_ps(_mm256_mul_ps(mc, kp), _mm256_mul_ps(g, f));
+        o = _mm256_blend_ps(o, mc, 0x88); /* alpha kept */
+        const __m256i e = _mm256_and_si256(_mm256_castps_si256(o), expo);
+        if (__builtin_expect(!_mm256_testz_si256(_mm256_cmpeq_epi32(e, expo), _mm256_cmpeq_epi32(e, expo)), 0)) {
+            /* a non-finite lane: its pixel again through grad_px (which takes the safe path) */
+            float t[8];
+            _mm256_storeu_ps(t, o);
+            for (int k = 0; k < 2; k++)
+                if (!(finite_f(t[4 * k]) && finite_f(t[4 * k + 1]) && finite_f(t[4 * k + 2]) &&
+                      finite_f(t[4 * k + 3])))
+                    grad_px_safe(P, M, Q, x + k - 1, x + k, x + k + 1, fac, t + 4 * k);
+            o = _mm256_loadu_ps(t);
+        }
+        held = o;
+        prev = x;
+    }
+    if (prev >= 0)
+        _mm256_storeu_ps(out + 4 * (size_t)prev, held);
+    (void)w;
+    return x;
+}
+#endif
+
+/* Row y's columns [x0, x1) of the gradient into out (out may be M: see grad_row_avx2). */
+static void grad_row(const float *P, const float *M, const float *Q, int w, int x0, int x1, float fac,
+                     float *out, float *save)
+{
+    const float keep = 1.0f - fac;
+    /* the columns the vector loop leaves (the image's first and last, the odd one) go
+     * through grad_px into t first, from the row as it was */
+    int xa = x0 > 1 ? x0 : 1, xb = x1 < w - 1 ? x1 : w - 1;
+    if (xb < xa)
+        xa = xb = x1;
+    xb = xa + ((xb - xa) & ~1);
+    float t[4 * 4];
+    int tx[4], nt = 0;
+    for (int x = x0; x < xa; x++, nt++) {
+        grad_px(P, M, Q, w, x, fac, keep, t + 4 * nt);
+        tx[nt] = x;
+    }
+    for (int x = xb; x < x1; x++, nt++) {
+        grad_px(P, M, Q, w, x, fac, keep, t + 4 * nt);
+        tx[nt] = x;
+    }
+    if (save) {
+        /* the original values the vector loop does not save: [x0 - 1, xa) and [xb, x1 + 1) */
+        const int s0 = x0 > 0 ? x0 - 1 : 0, s1 = x1 < w ? x1 + 1 : w;
+        if (xa > s0)
+            memcpy(save + 4 * (size_t)s0, M + 4 * (size_t)s0, (size_t)(xa - s0) * 4 * sizeof(float));
+        if (s1 > xb)
+            memcpy(save + 4 * (size_t)xb, M + 4 * (size_t)xb, (size_t)(s1 - xb) * 4 * sizeof(float));
+    }
+    int x = xa;
+#ifdef EDGE_GRAD_AVX2
+    if (__builtin_cpu_supports("avx2"))
+        x = grad_row_avx2(P, M, Q, w, xa, xb, fac, keep, out, save);
+#endif
+    if (x < xb) {
+        /* baseline: one pixel per step, stored one step late (out may be M) */
+        float held[4];
+        int prev = -1;
+        for (; x < xb; x++) {
+            float o[4];
+            if (save)
+                memcpy(save + 4 * (size_t)x, M + 4 * (size_t)x, 4 * sizeof(float));
+            grad_px(P, M, Q, w, x, fac, keep, o);
+            if (prev >= 0)
+                memcpy(out + 4 * (size_t)prev, held, sizeof held);
+            memcpy(held, o, sizeof held);
+            prev = x;
+        }
+        if (prev >= 0)
+            memcpy(out + 4 * (size_t)prev, held, sizeof held);
+    }
+    for (int i = 0; i < nt; i++)
+        memcpy(out + 4 * (size_t)tx[i], t + 4 * i, 4 * sizeof(float));
+}
+
+typedef struct grad_job {
+    const float *src;
+    float *dst;
+    int w, h;
+    fx_rect roi;
+    float fac;
+    int band;          /* rows per band */
+    int in_place;      /* dst == src */
+    /* in place: the rows yb - 1 and yb of each inner band boundary yb = roi.y0 + k band
+     * (k = 1..bands-1) as they were, taken before the bands run (a band reads one row of
+     * each neighbour, which that band may have written already) */
+    float *saved;
+    float **ring;      /* in place: per worker, two rows (the row above as it was) */
+} grad_job;
+
+/* Row y of the source as it was: the saved copy when another band owns it. */
+static const float *grad_src_row(const grad_job *j, int y, int y0, int y1)
+{
+    const size_t rowf = 4 * (size_t)j->w;
+    const int yb = y < y0 ? y0 : y >= y1 ? y1 : -1; /* an inner boundary's row, or -1 */
+    if (j->in_place && yb > j->roi.y0 && yb < j->roi.y1)
+        return j->saved + ((size_t)((yb - j->roi.y0) / j->band - 1) * 2 + (y < y0 ? 0 : 1)) * rowf;
+    return j->src + (size_t)y * rowf;
+}
+
+static void grad_bands(void *user, int begin, int end, int worker)
+{
+    const grad_job *j = user;
+    const int w = j->w, h = j->h;
+    const size_t rowf = 4 * (size_t)w;
+    for (int band = begin; band < end; band++) {
+        const int y0 = j->roi.y0 + band * j->band;
+        const int y1 = y0 + j->band < j->roi.y1 ? y0 + j->band : j->roi.y1;
+        const float *above = NULL; /* in place: row y - 1 as it was (the ring) */
+        for (int y = y0; y < y1; y++) {
+            const int ya = y > 0 ? y - 1 : 0, yb = y + 1 < h ? y + 1 : h - 1;
+            const float *M = j->src + (size_t)y * rowf;
+            /* Q the row above, P the row below (see the block comment) */
+            const float *Q = ya == y ? M : above ? above : grad_src_row(j, ya, y0, y1);
+            const float *P = yb == y ? M : grad_src_row(j, yb, y0, y1);
+            float *save = j->in_place ? j->ring[worker] + (size_t)(y & 1) * rowf : NULL;
+            grad_row(P, M, Q, w, j->roi.x0, j->roi.x1, j->fac, j->dst + (size_t)y * rowf, save);
+            above = save;
+        }
+    }
+}
+
+fx_result fx_edge_gradient(fx_context *ctx, const float *src, float *dst, int w, int h, const fx_rect *roi_in,
+                           float factor, const char *where)
+{
+    fx_rect roi = roi_in ? grow(roi_in, 0, w, h) : (fx_rect){ 0, 0, w, h };
+    if (roi.x1 <= roi.x0 || roi.y1 <= roi.y0)
+        return FX_OK;
+    grad_job j;
+    memset(&j, 0, sizeof j);
+    j.src = src;
+    j.dst = dst;
+    j.w = w;
+    j.h = h;
+    j.roi = roi;
+    j.fac = factor;
+    j.in_place = dst == src;
+    const int workers = fx_parallel_workers(ctx);
+    const int rows = roi.y1 - roi.y0;
+    /* a few bands per worker for balance; in place each inner boundary costs two saved
+     * rows, so not many more (the bits do not depend on the bands) */
+    int bands = workers > 1 ? 4 * workers : 1;
+    if (bands > (rows + 15) / 16)
+        bands = (rows + 15) / 16;
+    if (bands < 1)
+        bands = 1;
+    j.band = (rows + bands - 1) / bands;
+    bands = (rows + j.band - 1) / j.band;
+    const size_t rowf = 4 * (size_t)w;
+    fx_result r = FX_OK;
+    if (j.in_place) {
+        if (bands > 1 && !(j.saved = fx_mem_alloc((size_t)(bands - 1) * 2 * rowf * sizeof(float))))
+            r = fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the gradient rows", where);
+        if (!r && !(j.ring = fx_mem_calloc((size_t)workers, sizeof *j.ring)))
+            r = fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the gradient rows", where);
+        for (int i = 0; !r && i < workers; i++)
+            if (!(j.ring[i] = fx_mem_alloc(2 * rowf * sizeof(float))))
+                r = fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the gradient rows", where);
+        for (int k = 1; !r && k < bands; k++) {
+            const int yb = roi.y0 + k * j.band;
+            float *sv = j.saved + (size_t)(k - 1) * 2 * rowf;
+            memcpy(sv, src + (size_t)(yb - 1) * rowf, rowf * sizeof(float));
+            memcpy(sv + rowf, src + (size_t)yb * rowf, rowf * sizeof(float));
+        }
+    }
+    if (!r)
+        fx_parallel_for_worker(ctx, bands, 1, grad_bands, &j);
+    if (j.ring)
+        for (int i = 0; i < workers; i++)
+            fx_mem_free(j.ring[i]);
+    fx_mem_free(j.ring);
+    fx_mem_free(j.saved);
+    return r;
+}
