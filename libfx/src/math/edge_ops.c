@@ -1208,9 +1208,9 @@ static inline float clamp_fd(double v)
 }
 
 /* The pixel from neighbours made finite, in double (see above): always finite. */
-static void grad_px_safe(const float *P, const float *M, const float *Q, int xm, int x, int xp, float fac,
-                         float *o)
+static void grad_px_safe(const float *P, const float *M, const float *Q, int w, int x, float fac, float *o)
 {
+    const int xm = x > 0 ? x - 1 : 0, xp = x + 1 < w ? x + 1 : w - 1;
     const size_t a = 4 * (size_t)xm, c = 4 * (size_t)x, b = 4 * (size_t)xp;
     for (int k = 0; k < 3; k++) {
         const double gx = ((((finite_d(P[a + k]) - finite_d(P[b + k])) + 2.0 * finite_d(M[a + k])) -
@@ -1218,91 +1218,104 @@ static void grad_px_safe(const float *P, const float *M, const float *Q, int xm,
         const double gy = ((((finite_d(P[a + k]) + 2.0 * finite_d(P[c + k])) + finite_d(P[b + k])) -
                             finite_d(Q[a + k])) - 2.0 * finite_d(Q[c + k])) - finite_d(Q[b + k]);
         const double g = clamp_fd(sqrt(gx * gx + gy * gy));
-        o[k] = clamp_fd(finite_d(M[c + k]) * (1.0 - (double)fac) + g * (double)fac);
+        o[k] = clamp_fd(fac == 1.0f ? g : finite_d(M[c + k]) * (1.0 - (double)fac) + g * (double)fac);
     }
     o[3] = (float)finite_d(M[c + 3]);
 }
 
-static inline int finite_f(float v)
+static inline int finite4f(const float *o)
 {
-    return v - v == 0.0f; /* false for NaN and +-Inf */
+    return o[0] - o[0] == 0.0f && o[1] - o[1] == 0.0f && o[2] - o[2] == 0.0f && o[3] - o[3] == 0.0f;
 }
 
-/* The pixel at column x (neighbours clamped to [0, w)) into o[4] (o may not alias M). */
+/* The pixel at column x (neighbours clamped to [0, w)) into o[4] (o may not alias M). At
+ * factor 1 the colour is g itself (c 0 + g in Blender: the same bits for a finite c). */
 static inline void grad_px(const float *P, const float *M, const float *Q, int w, int x, float fac, float keep,
                            float *o)
 {
     const int xm = x > 0 ? x - 1 : 0, xp = x + 1 < w ? x + 1 : w - 1;
     const size_t a = 4 * (size_t)xm, c = 4 * (size_t)x, b = 4 * (size_t)xp;
-    for (int k = 0; k < 3; k++)
-        o[k] = M[c + k] * keep + grad_ch(P + k, M + k, Q + k, a, c, b) * fac;
+    for (int k = 0; k < 3; k++) {
+        const float g = grad_ch(P + k, M + k, Q + k, a, c, b);
+        o[k] = fac == 1.0f ? g : M[c + k] * keep + g * fac;
+    }
     o[3] = M[c + 3];
-    if (!(finite_f(o[0]) && finite_f(o[1]) && finite_f(o[2]) && finite_f(o[3])))
-        grad_px_safe(P, M, Q, xm, x, xp, fac, o);
+    if (!finite4f(o))
+        grad_px_safe(P, M, Q, w, x, fac, o);
 }
 
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && !defined(FX_NO_CLONES)
 #  include <immintrin.h>
 #  define EDGE_GRAD_AVX2 1
-/* grad_px's operations on two pixels per register (lanes r g b a r g b a), columns [xa, xb)
- * with 1 <= xa and xb <= w - 1 (no clamping), xb - xa even. Each result is stored one
- * chunk late, after the next chunk's loads: out may be M (in place), whose pixel x - 1 the
- * next chunk still reads. save (or NULL): M's values there, for the next row's P (in
- * place). Returns where it stopped. */
-__attribute__((target("avx2"), noinline)) static int grad_row_avx2(const float *P, const float *M, const float *Q,
-                                                                  int w, int xa, int xb, float fac, float keep,
-                                                                  float *out, float *save)
+/* grad_px's operations on two pixels (lanes r g b a r g b a) at column x (no clamping);
+ * *bad collects the exponent bits (all ones: NaN or Inf). */
+__attribute__((target("avx2"), always_inline)) static inline __m256 grad2_avx2(const float *P, const float *M,
+                                                                                const float *Q, size_t c, __m256 f,
+                                                                                __m256 kp, int unit, int save_it,
+                                                                                float *save, __m256i *bad)
+{
+    const __m256 pa = _mm256_loadu_ps(P + c - 4), pc = _mm256_loadu_ps(P + c), pb = _mm256_loadu_ps(P + c + 4);
+    const __m256 ma = _mm256_loadu_ps(M + c - 4), mc = _mm256_loadu_ps(M + c), mb = _mm256_loadu_ps(M + c + 4);
+    const __m256 qa = _mm256_loadu_ps(Q + c - 4), qc = _mm256_loadu_ps(Q + c), qb = _mm256_loadu_ps(Q + c + 4);
+    if (save_it)
+        _mm256_storeu_ps(save + c, mc);
+    /* 2 v as a product (v + v is the same value): additions are the scarce port */
+    const __m256 two = _mm256_set1_ps(2.0f);
+    const __m256 gx = _mm256_sub_ps(
+        _mm256_add_ps(_mm256_sub_ps(_mm256_add_ps(_mm256_sub_ps(pa, pb), _mm256_mul_ps(two, ma)), _mm256_mul_ps(two, mb)),
+                      qa), qb);
+    const __m256 gy = _mm256_sub_ps(
+        _mm256_sub_ps(_mm256_sub_ps(_mm256_add_ps(_mm256_add_ps(pa, _mm256_mul_ps(two, pc)), pb), qa),
+                      _mm256_mul_ps(two, qc)), qb);
+    const __m256 g = _mm256_sqrt_ps(_mm256_add_ps(_mm256_mul_ps(gx, gx), _mm256_mul_ps(gy, gy)));
+    const __m256 o = _mm256_blend_ps(unit ? g : _mm256_add_ps(_mm256_mul_ps(mc, kp), _mm256_mul_ps(g, f)), mc,
+                                     0x88); /* alpha kept */
+    *bad = _mm256_max_epi32(*bad, _mm256_and_si256(_mm256_castps_si256(o), _mm256_set1_epi32(0x7f800000)));
+    return o;
+}
+
+/* The loop over [xa, xb) (xb - xa even, >= 2): each result stored one chunk late, after the
+ * next chunk's loads (out may be M: in place, the next chunk still reads pixel x - 1).
+ * Returns non-zero when a value came out NaN or Inf. */
+__attribute__((target("avx2"), always_inline)) static inline int grad_loop_avx2(const float *P, const float *M,
+                                                                                 const float *Q, int xa, int xb,
+                                                                                 float fac, float keep, float *out,
+                                                                                 float *save, int unit, int save_it)
 {
     const __m256 f = _mm256_set1_ps(fac), kp = _mm256_set1_ps(keep);
-    const __m256i expo = _mm256_set1_epi32(0x7f800000);
-    int x = xa, prev = -1;
-    __m256 held = _mm256_setzero_ps();
-    for (; x + 2 <= xb; x += 2) {
-        const size_t c = 4 * (size_t)x;
-        const __m256 pa = _mm256_loadu_ps(P + c - 4), pc = _mm256_loadu_ps(P + c), pb = _mm256_loadu_ps(P + c + 4);
-        const __m256 ma = _mm256_loadu_ps(M + c - 4), mc = _mm256_loadu_ps(M + c), mb = _mm256_loadu_ps(M + c + 4);
-        const __m256 qa = _mm256_loadu_ps(Q + c - 4), qc = _mm256_loadu_ps(Q + c), qb = _mm256_loadu_ps(Q + c + 4);
-        if (prev >= 0)
-            _mm256_storeu_ps(out + 4 * (size_t)prev, held);
-        if (save)
-            _mm256_storeu_ps(save + c, mc);
-        const __m256 two = _mm256_set1_ps(2.0f);
-        const __m256 gx = _mm256_sub_ps(
-            _mm256_add_ps(_mm256_sub_ps(_mm256_add_ps(_mm256_sub_ps(pa, pb), _mm256_mul_ps(two, ma)),
-                                        _mm256_mul_ps(two, mb)), qa), qb);
-        const __m256 gy = _mm256_sub_ps(
-            _mm256_sub_ps(_mm256_sub_ps(_mm256_add_ps(_mm256_add_ps(pa, _mm256_mul_ps(two, pc)), pb), qa),
-                          _mm256_mul_ps(two, qc)), qb);
-        const __m256 g = _mm256_sqrt_ps(_mm256_add_ps(_mm256_mul_ps(gx, gx), _mm256_mul_ps(gy, gy)));
-        __m256 o = _mm256_add_ps(_mm256_mul_ps(mc, kp), _mm256_mul_ps(g, f));
-        o = _mm256_blend_ps(o, mc, 0x88); /* alpha kept */
-        const __m256i e = _mm256_and_si256(_mm256_castps_si256(o), expo);
-        if (__builtin_expect(!_mm256_testz_si256(_mm256_cmpeq_epi32(e, expo), _mm256_cmpeq_epi32(e, expo)), 0)) {
-            /* a non-finite lane: its pixel again through grad_px (which takes the safe path) */
-            float t[8];
-            _mm256_storeu_ps(t, o);
-            for (int k = 0; k < 2; k++)
-                if (!(finite_f(t[4 * k]) && finite_f(t[4 * k + 1]) && finite_f(t[4 * k + 2]) &&
-                      finite_f(t[4 * k + 3])))
-                    grad_px_safe(P, M, Q, x + k - 1, x + k, x + k + 1, fac, t + 4 * k);
-            o = _mm256_loadu_ps(t);
-        }
+    __m256i bad = _mm256_setzero_si256();
+    __m256 held = grad2_avx2(P, M, Q, 4 * (size_t)xa, f, kp, unit, save_it, save, &bad);
+    int x = xa + 2;
+    for (; x < xb; x += 2) {
+        const __m256 o = grad2_avx2(P, M, Q, 4 * (size_t)x, f, kp, unit, save_it, save, &bad);
+        _mm256_storeu_ps(out + 4 * (size_t)(x - 2), held);
         held = o;
-        prev = x;
     }
-    if (prev >= 0)
-        _mm256_storeu_ps(out + 4 * (size_t)prev, held);
-    (void)w;
-    return x;
+    _mm256_storeu_ps(out + 4 * (size_t)(x - 2), held);
+    const __m256i e = _mm256_cmpeq_epi32(bad, _mm256_set1_epi32(0x7f800000));
+    return !_mm256_testz_si256(e, e);
+}
+
+/* The four loops (factor 1 or not, in place or not). */
+__attribute__((target("avx2"), noinline)) static int grad_row_avx2(const float *P, const float *M, const float *Q,
+                                                                  int xa, int xb, float fac, float keep, float *out,
+                                                                  float *save)
+{
+    if (fac == 1.0f)
+        return save ? grad_loop_avx2(P, M, Q, xa, xb, fac, keep, out, save, 1, 1)
+                    : grad_loop_avx2(P, M, Q, xa, xb, fac, keep, out, save, 1, 0);
+    return save ? grad_loop_avx2(P, M, Q, xa, xb, fac, keep, out, save, 0, 1)
+                : grad_loop_avx2(P, M, Q, xa, xb, fac, keep, out, save, 0, 0);
 }
 #endif
 
-/* Row y's columns [x0, x1) of the gradient into out (out may be M: see grad_row_avx2). */
+/* Row y's columns [x0, x1) of the gradient into out; out may be M (in place), then save
+ * gets M's values in [x0 - 1, x1 + 1) (clamped) as they were, for the next row. */
 static void grad_row(const float *P, const float *M, const float *Q, int w, int x0, int x1, float fac,
                      float *out, float *save)
 {
     const float keep = 1.0f - fac;
-    /* the columns the vector loop leaves (the image's first and last, the odd one) go
+    /* the columns the vector loop leaves (the image's first and last, an odd one) go
      * through grad_px into t first, from the row as it was */
     int xa = x0 > 1 ? x0 : 1, xb = x1 < w - 1 ? x1 : w - 1;
     if (xb < xa)
@@ -1318,38 +1331,46 @@ static void grad_row(const float *P, const float *M, const float *Q, int w, int 
         grad_px(P, M, Q, w, x, fac, keep, t + 4 * nt);
         tx[nt] = x;
     }
+    const float *Morig = M;
     if (save) {
-        /* the original values the vector loop does not save: [x0 - 1, xa) and [xb, x1 + 1) */
+        /* the values the loops below do not save: [x0 - 1, xa) and [xb, x1 + 1) */
         const int s0 = x0 > 0 ? x0 - 1 : 0, s1 = x1 < w ? x1 + 1 : w;
         if (xa > s0)
             memcpy(save + 4 * (size_t)s0, M + 4 * (size_t)s0, (size_t)(xa - s0) * 4 * sizeof(float));
         if (s1 > xb)
             memcpy(save + 4 * (size_t)xb, M + 4 * (size_t)xb, (size_t)(s1 - xb) * 4 * sizeof(float));
+        Morig = save;
     }
-    int x = xa;
+    int bad = 0;
+    if (xb > xa) {
 #ifdef EDGE_GRAD_AVX2
-    if (__builtin_cpu_supports("avx2"))
-        x = grad_row_avx2(P, M, Q, w, xa, xb, fac, keep, out, save);
+        if (__builtin_cpu_supports("avx2"))
+            bad = grad_row_avx2(P, M, Q, xa, xb, fac, keep, out, save);
+        else
 #endif
-    if (x < xb) {
-        /* baseline: one pixel per step, stored one step late (out may be M) */
-        float held[4];
-        int prev = -1;
-        for (; x < xb; x++) {
-            float o[4];
-            if (save)
-                memcpy(save + 4 * (size_t)x, M + 4 * (size_t)x, 4 * sizeof(float));
-            grad_px(P, M, Q, w, x, fac, keep, o);
-            if (prev >= 0)
-                memcpy(out + 4 * (size_t)prev, held, sizeof held);
-            memcpy(held, o, sizeof held);
-            prev = x;
+        {
+            /* baseline: one pixel per step, stored one step late (out may be M) */
+            float held[4];
+            for (int x = xa; x < xb; x++) {
+                float o[4];
+                if (save)
+                    memcpy(save + 4 * (size_t)x, M + 4 * (size_t)x, 4 * sizeof(float));
+                grad_px(P, M, Q, w, x, fac, keep, o);
+                if (x > xa)
+                    memcpy(out + 4 * (size_t)(x - 1), held, sizeof held);
+                memcpy(held, o, sizeof held);
+            }
+            memcpy(out + 4 * (size_t)(xb - 1), held, sizeof held);
         }
-        if (prev >= 0)
-            memcpy(out + 4 * (size_t)prev, held, sizeof held);
     }
     for (int i = 0; i < nt; i++)
         memcpy(out + 4 * (size_t)tx[i], t + 4 * i, 4 * sizeof(float));
+    if (bad)
+        /* rare: NaN or Inf came out (a non-finite input or an overflow); those pixels again
+         * from the row as it was (save, in place) */
+        for (int x = xa; x < xb; x++)
+            if (!finite4f(out + 4 * (size_t)x))
+                grad_px_safe(P == M ? Morig : P, Morig, Q == M ? Morig : Q, w, x, fac, out + 4 * (size_t)x);
 }
 
 typedef struct grad_job {
