@@ -1247,51 +1247,63 @@ static inline void grad_px(const float *P, const float *M, const float *Q, int w
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && !defined(FX_NO_CLONES)
 #  include <immintrin.h>
 #  define EDGE_GRAD_AVX2 1
-/* grad_px's operations on two pixels (lanes r g b a r g b a) at column x (no clamping);
- * *bad collects the exponent bits (all ones: NaN or Inf). */
-__attribute__((target("avx2"), always_inline)) static inline __m256 grad2_avx2(const float *P, const float *M,
-                                                                                const float *Q, size_t c, __m256 f,
-                                                                                __m256 kp, int unit, int save_it,
-                                                                                float *save, __m256i *bad)
+/* The left taps of a chunk are the right taps of the chunk before it (pixels x - 1, x):
+ * carried in registers, not loaded again (P's, Q's and 2 M's). */
+typedef struct grad_carry {
+    __m256 pa, ma2, qa;
+} grad_carry;
+
+/* grad_px's operations on two pixels (lanes r g b a r g b a) at columns x, x + 1 (c = 4 x; no
+ * clamping); *bad collects the exponent bits (all ones: NaN or Inf). Reads columns x to
+ * x + 2 only (the carry holds x - 1): out may be M (in place), stored at once. */
+__attribute__((target("avx2"), always_inline)) static inline void grad2_avx2(const float *P, const float *M,
+                                                                              const float *Q, size_t c, __m256 f,
+                                                                              __m256 kp, __m256 two, int unit,
+                                                                              float *out, float *save, grad_carry *k,
+                                                                              __m256i *bad)
 {
-    const __m256 pa = _mm256_loadu_ps(P + c - 4), pc = _mm256_loadu_ps(P + c), pb = _mm256_loadu_ps(P + c + 4);
-    const __m256 ma = _mm256_loadu_ps(M + c - 4), mc = _mm256_loadu_ps(M + c), mb = _mm256_loadu_ps(M + c + 4);
-    const __m256 qa = _mm256_loadu_ps(Q + c - 4), qc = _mm256_loadu_ps(Q + c), qb = _mm256_loadu_ps(Q + c + 4);
-    if (save_it)
-        _mm256_storeu_ps(save + c, mc);
-    /* 2 v as a product (v + v is the same value): additions are the scarce port */
-    const __m256 two = _mm256_set1_ps(2.0f);
+    const __m256 pc = _mm256_loadu_ps(P + c), pb = _mm256_loadu_ps(P + c + 4);
+    const __m256 mc = _mm256_loadu_ps(M + c), mb2 = _mm256_mul_ps(two, _mm256_loadu_ps(M + c + 4));
+    const __m256 qc = _mm256_loadu_ps(Q + c), qb = _mm256_loadu_ps(Q + c + 4);
+    /* 2 v as a product (v + v is the same value): the adder ports are the busy ones */
     const __m256 gx = _mm256_sub_ps(
-        _mm256_add_ps(_mm256_sub_ps(_mm256_add_ps(_mm256_sub_ps(pa, pb), _mm256_mul_ps(two, ma)), _mm256_mul_ps(two, mb)),
-                      qa), qb);
+        _mm256_add_ps(_mm256_sub_ps(_mm256_add_ps(_mm256_sub_ps(k->pa, pb), k->ma2), mb2), k->qa), qb);
     const __m256 gy = _mm256_sub_ps(
-        _mm256_sub_ps(_mm256_sub_ps(_mm256_add_ps(_mm256_add_ps(pa, _mm256_mul_ps(two, pc)), pb), qa),
+        _mm256_sub_ps(_mm256_sub_ps(_mm256_add_ps(_mm256_add_ps(k->pa, _mm256_mul_ps(two, pc)), pb), k->qa),
                       _mm256_mul_ps(two, qc)), qb);
     const __m256 g = _mm256_sqrt_ps(_mm256_add_ps(_mm256_mul_ps(gx, gx), _mm256_mul_ps(gy, gy)));
     const __m256 o = _mm256_blend_ps(unit ? g : _mm256_add_ps(_mm256_mul_ps(mc, kp), _mm256_mul_ps(g, f)), mc,
                                      0x88); /* alpha kept */
     *bad = _mm256_max_epi32(*bad, _mm256_and_si256(_mm256_castps_si256(o), _mm256_set1_epi32(0x7f800000)));
-    return o;
+    if (save)
+        _mm256_storeu_ps(save + c, mc);
+    _mm256_storeu_ps(out + c, o);
+    k->pa = pb;
+    k->ma2 = mb2;
+    k->qa = qb;
 }
 
-/* The loop over [xa, xb) (xb - xa even, >= 2): each result stored one chunk late, after the
- * next chunk's loads (out may be M: in place, the next chunk still reads pixel x - 1).
- * Returns non-zero when a value came out NaN or Inf. */
+/* The loop over [xa, xb) (xb - xa even, >= 2), two chunks per step. Returns non-zero when a
+ * value came out NaN or Inf. */
 __attribute__((target("avx2"), always_inline)) static inline int grad_loop_avx2(const float *P, const float *M,
                                                                                  const float *Q, int xa, int xb,
                                                                                  float fac, float keep, float *out,
-                                                                                 float *save, int unit, int save_it)
+                                                                                 float *save, int unit)
 {
     const __m256 f = _mm256_set1_ps(fac), kp = _mm256_set1_ps(keep);
+    __m256 two = _mm256_set1_ps(2.0f);
+    __asm__("" : "+x"(two)); /* an opaque 2: gcc would turn 2 v into v + v, on the adders */
     __m256i bad = _mm256_setzero_si256();
-    __m256 held = grad2_avx2(P, M, Q, 4 * (size_t)xa, f, kp, unit, save_it, save, &bad);
-    int x = xa + 2;
-    for (; x < xb; x += 2) {
-        const __m256 o = grad2_avx2(P, M, Q, 4 * (size_t)x, f, kp, unit, save_it, save, &bad);
-        _mm256_storeu_ps(out + 4 * (size_t)(x - 2), held);
-        held = o;
+    const size_t c0 = 4 * (size_t)xa;
+    grad_carry k = { _mm256_loadu_ps(P + c0 - 4), _mm256_mul_ps(two, _mm256_loadu_ps(M + c0 - 4)),
+                     _mm256_loadu_ps(Q + c0 - 4) };
+    int x = xa;
+    for (; x + 4 <= xb; x += 4) {
+        grad2_avx2(P, M, Q, 4 * (size_t)x, f, kp, two, unit, out, save, &k, &bad);
+        grad2_avx2(P, M, Q, 4 * (size_t)x + 8, f, kp, two, unit, out, save, &k, &bad);
     }
-    _mm256_storeu_ps(out + 4 * (size_t)(x - 2), held);
+    if (x < xb)
+        grad2_avx2(P, M, Q, 4 * (size_t)x, f, kp, two, unit, out, save, &k, &bad);
     const __m256i e = _mm256_cmpeq_epi32(bad, _mm256_set1_epi32(0x7f800000));
     return !_mm256_testz_si256(e, e);
 }
@@ -1302,10 +1314,10 @@ __attribute__((target("avx2"), noinline)) static int grad_row_avx2(const float *
                                                                   float *save)
 {
     if (fac == 1.0f)
-        return save ? grad_loop_avx2(P, M, Q, xa, xb, fac, keep, out, save, 1, 1)
-                    : grad_loop_avx2(P, M, Q, xa, xb, fac, keep, out, save, 1, 0);
-    return save ? grad_loop_avx2(P, M, Q, xa, xb, fac, keep, out, save, 0, 1)
-                : grad_loop_avx2(P, M, Q, xa, xb, fac, keep, out, save, 0, 0);
+        return save ? grad_loop_avx2(P, M, Q, xa, xb, fac, keep, out, save, 1)
+                    : grad_loop_avx2(P, M, Q, xa, xb, fac, keep, out, NULL, 1);
+    return save ? grad_loop_avx2(P, M, Q, xa, xb, fac, keep, out, save, 0)
+                : grad_loop_avx2(P, M, Q, xa, xb, fac, keep, out, NULL, 0);
 }
 #endif
 
@@ -1438,8 +1450,9 @@ fx_result fx_edge_gradient(fx_context *ctx, const float *src, float *dst, int w,
     const int workers = fx_parallel_workers(ctx);
     const int rows = roi.y1 - roi.y0;
     /* a few bands per worker for balance; in place each inner boundary costs two saved
-     * rows, so not many more (the bits do not depend on the bands) */
-    int bands = workers > 1 ? 4 * workers : 1;
+     * rows (and fresh pages for them), so two per worker there (the bits do not depend on
+     * the bands) */
+    int bands = workers > 1 ? (j.in_place ? 2 : 4) * workers : 1;
     if (bands > (rows + 15) / 16)
         bands = (rows + 15) / 16;
     if (bands < 1)
