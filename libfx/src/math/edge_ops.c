@@ -12,6 +12,7 @@
 #include "math/srgb_lut.h"
 #include "math/trig.h"
 #include "core/simd8.h"
+#include "core/simd4.h"
 
 typedef uint32_t v8ui __attribute__((vector_size(32)));
 #define S8I(v) ((v8i){ (v), (v), (v), (v), (v), (v), (v), (v) })
@@ -1321,14 +1322,54 @@ __attribute__((target("avx2"), noinline)) static int grad_row_avx2(const float *
 }
 #endif
 
-/* Row y's columns [x0, x1) of the gradient into out; out may be M (in place), then save
- * gets M's values in [x0 - 1, x1 + 1) (clamped) as they were, for the next row. */
+/* The baseline (no AVX2, or FX_NO_CLONES): grad2_avx2's loop one pixel per 4-lane vector
+ * (core/simd4.h), the same operations lane by lane, so the same bits. */
+static inline v4f sqrt4(v4f v)
+{
+#ifdef __SSE__
+    return (v4f)_mm_sqrt_ps((__m128)v);
+#else
+    return (v4f){ sqrtf(v[0]), sqrtf(v[1]), sqrtf(v[2]), sqrtf(v[3]) };
+#endif
+}
+
+static int grad_row_v4(const float *P, const float *M, const float *Q, int xa, int xb, float fac, float keep,
+                       float *out, float *save)
+{
+    const v4i alpha = { 0, 0, 0, -1 }, expo = { 0x7f800000, 0x7f800000, 0x7f800000, 0x7f800000 };
+    const v4f two = V4(2.0f);
+    v4i bad = { 0, 0, 0, 0 };
+    const size_t c0 = 4 * (size_t)xa;
+    v4f pa = ld4(P + c0 - 4), ma2 = two * ld4(M + c0 - 4), qa = ld4(Q + c0 - 4);
+    for (int x = xa; x < xb; x++) {
+        const size_t c = 4 * (size_t)x;
+        const v4f pc = ld4(P + c), pb = ld4(P + c + 4), mc = ld4(M + c), mb2 = two * ld4(M + c + 4);
+        const v4f qc = ld4(Q + c), qb = ld4(Q + c + 4);
+        const v4f gx = ((((pa - pb) + ma2) - mb2) + qa) - qb;
+        const v4f gy = ((((pa + two * pc) + pb) - qa) - two * qc) - qb;
+        const v4f g = sqrt4(gx * gx + gy * gy);
+        const v4f o = sel4(alpha, mc, fac == 1.0f ? g : mc * V4(keep) + g * V4(fac));
+        bad |= ((v4i)o & expo) == expo;
+        if (save)
+            st4(save + c, mc);
+        st4(out + c, o);
+        /* one pixel per step: the next pixel's left taps are this one's centre */
+        pa = pc;
+        ma2 = two * mc;
+        qa = qc;
+    }
+    return (bad[0] | bad[1] | bad[2] | bad[3]) != 0;
+}
+
+/* Row y's columns [x0, x1) of the gradient into out; out may be M (in place: the vector
+ * loops read columns x to x + 2 for pixel x, the left taps carried), then save gets M's
+ * values in [x0 - 1, x1 + 1) (clamped) as they were, for the next row's Q. */
 static void grad_row(const float *P, const float *M, const float *Q, int w, int x0, int x1, float fac,
                      float *out, float *save)
 {
     const float keep = 1.0f - fac;
-    /* the columns the vector loop leaves (the image's first and last, an odd one) go
-     * through grad_px into t first, from the row as it was */
+    /* the columns the vector loops leave (the image's first and last, where the taps clamp,
+     * and an odd one) go through grad_px into t first, from the row as it was */
     int xa = x0 > 1 ? x0 : 1, xb = x1 < w - 1 ? x1 : w - 1;
     if (xb < xa)
         xa = xb = x1;
@@ -1360,20 +1401,7 @@ static void grad_row(const float *P, const float *M, const float *Q, int w, int 
             bad = grad_row_avx2(P, M, Q, xa, xb, fac, keep, out, save);
         else
 #endif
-        {
-            /* baseline: one pixel per step, stored one step late (out may be M) */
-            float held[4];
-            for (int x = xa; x < xb; x++) {
-                float o[4];
-                if (save)
-                    memcpy(save + 4 * (size_t)x, M + 4 * (size_t)x, 4 * sizeof(float));
-                grad_px(P, M, Q, w, x, fac, keep, o);
-                if (x > xa)
-                    memcpy(out + 4 * (size_t)(x - 1), held, sizeof held);
-                memcpy(held, o, sizeof held);
-            }
-            memcpy(out + 4 * (size_t)(xb - 1), held, sizeof held);
-        }
+            bad = grad_row_v4(P, M, Q, xa, xb, fac, keep, out, save);
     }
     for (int i = 0; i < nt; i++)
         memcpy(out + 4 * (size_t)tx[i], t + 4 * i, 4 * sizeof(float));
