@@ -1,7 +1,8 @@
 /* edges: outlines from colour luminance, relative depth jumps, normal angles and object /
  * material ID boundaries (the seed's Laplace M4/M8, Sobel, sparse 7x7), drawn over the
- * image or output as a matte. The operators live in math/edge_ops.c (shared with
- * cel_shading and the cel/edge mirror). docs/effects/edges.md. */
+ * image or output as a matte; or (output gradient) the colour's Sobel gradient as Blender's
+ * Filter node gives it. The operators live in math/edge_ops.c (shared with cel_shading and
+ * the cel/edge mirror). docs/effects/edges.md. */
 #include "core/effect.h"
 #include "core/parallel.h"
 #include "math/edge_ops.h"
@@ -380,7 +381,8 @@ static fx_result edges_validate(const void *params, char *err, size_t err_size)
 
 const fx_effect_class fx_effect_edges = {
     .name = "edges",
-    .doc = "Outlines from luminance, relative depth, normals and object/material IDs (Sobel, Laplace, sparse 7x7)",
+    .doc = "Outlines from luminance, relative depth, normals and object/material IDs (Sobel, Laplace, sparse 7x7), "
+           "or the colour's Sobel gradient (Blender's Filter Sobel)",
     .params_size = sizeof(edges_params),
     .params = edges_param_defs,
     .param_count = FX_COUNT_OF(edges_param_defs),
