@@ -674,9 +674,9 @@ def blender_peers(ctx, modes, log):
                      "(libfx cells: centre sample); where the size does not divide by %d Blender rounds the "
                      "small image and re-centres it, so its grid shifts by up to half a cell: most of the "
                      "error then" % (PIXEL_CELL, PIXEL_CELL)),
-        "sobel": ("edges", "blender Filter SOBEL", None,
-                  "same 3x3 Sobel kernel; Blender outputs the per-channel gradient magnitude, libfx edges draws "
-                  "thresholded lines of the sRGB luminance (operator=sobel): not the same image, no error figure"),
+        "sobel": ("edges", "blender Filter SOBEL", {"output": "gradient"},
+                  "the same job: per-channel Sobel magnitude, borders extended, alpha kept (factor 1; at other "
+                  "factors 3.4 clamps the mix at 0, 5.2 does not)"),
         "laplace": ("edges", "blender Filter LAPLACE", None,
                     "Laplace 3x3 (8-neighbour) like edges operator=laplace8; Blender outputs the filtered colour, "
                     "libfx lines: not the same image, no error figure"),
@@ -776,8 +776,9 @@ def blender5_peers(ctx, log):
                       "sigma = size/3; the error column says how close the recursive filter is"),
         "pixelate": ("pixelate", "Pixelate size=%d" % PIXEL_CELL, {"mode": "cells", "cell_size": PIXEL_CELL},
                      "one node with a Size input in Blender 5"),
-        "sobel": ("edges", "Filter Sobel", None, "Blender outputs the gradient magnitude, libfx thresholded lines "
-                  "of the luminance (operator=sobel): timed only"),
+        "sobel": ("edges", "Filter Sobel", {"output": "gradient"},
+                  "the same job: per-channel Sobel magnitude, borders extended, alpha kept, Blender's sums in its "
+                  "order (bit-identical on finite input)"),
         "sun_beams": ("god_rays", "Glare Sun Beams size=%g threshold=0" % SUN_RAY_LENGTH, None,
                       "source = the sidecar's sun; smears every pixel, god_rays only sky and bright pixels: "
                       "timed only"),

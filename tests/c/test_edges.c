@@ -543,6 +543,115 @@ static void test_fast_path(fx_context *ctx)
     fx_frame_free(f);
 }
 
+/* output gradient (Blender's Filter Sobel; the numpy reference is in
+ * tests/python/test_edges_gradient.py): raw NaN / Inf / FLT_MAX / denormal colour give finite
+ * output without the stack's non-finite warning; the bits do not depend on the thread count
+ * or on in place (consumed input) vs a separate buffer; pixels whose 3x3 neighbourhood is
+ * finite and small get the float formula in Blender's order; a mask keeps what it leaves. */
+static float grad_ref(const float *px, int w, int h, int x, int y, int k)
+{
+#define T(dx, dy) px[((size_t)(y + (dy) < 0 ? 0 : y + (dy) >= h ? h - 1 : y + (dy)) * w + \
+                      (x + (dx) < 0 ? 0 : x + (dx) >= w ? w - 1 : x + (dx))) * 4 + k]
+    /* P the row below, Q the row above (Blender's order) */
+    const float gx = ((((T(-1, 1) - T(1, 1)) + 2.0f * T(-1, 0)) - 2.0f * T(1, 0)) + T(-1, -1)) - T(1, -1);
+    const float gy = ((((T(-1, 1) + 2.0f * T(0, 1)) + T(1, 1)) - T(-1, -1)) - 2.0f * T(0, -1)) - T(1, -1);
+#undef T
+    return sqrtf(gx * gx + gy * gy);
+}
+
+static void test_gradient(fx_context *c1, fx_context *c2)
+{
+    const int w = 67, h = 90; /* several bands at 2 threads: the in-place saved rows */
+    float *px = malloc((size_t)w * h * 4 * sizeof(float));
+    uint32_t st = 777u;
+    const float bad[] = { NAN, INFINITY, -INFINITY, FLT_MAX, -FLT_MAX, 1e38f, 1e-40f, -0.0f };
+    for (int i = 0; i < w * h * 4; i++) {
+        st = st * 1664525u + 1013904223u;
+        px[i] = (float)(st >> 8) * (1.0f / 16777216.0f) * 3.0f - 1.0f;
+        if (i / 4 / w >= 60 && (st >> 27) < 3) /* the lower third: extremes here and there */
+            px[i] = bad[(st >> 5) % 8];
+    }
+    fx_frame *f = et_frame(c1, w, h, px);
+    const char *ps[] = { "\"output\":\"gradient\"", "\"output\":\"gradient\",\"opacity\":0.35" };
+    for (int k = 0; k < 2; k++) {
+        float *ref = NULL;
+        for (int t = 0; t < 2; t++)
+            for (int consume = 0; consume < 2; consume++) {
+                fx_context *ctx = t ? c2 : c1;
+                fx_stack *s = NULL;
+                fx_frame *out = NULL;
+                CHECK_OK(ctx, fx_stack_new(ctx, &s));
+                CHECK_OK(ctx, fx_stack_load_json(s, recipe(ps[k], NULL)));
+                const int before = fx_context_warning_count(ctx);
+                if (consume) {
+                    fx_frame *in = et_frame(ctx, w, h, px);
+                    CHECK_OK(ctx, fx_stack_run_consume(s, in, 0, &out));
+                } else {
+                    CHECK_OK(ctx, fx_stack_run(s, f, &out));
+                }
+                int warned = 0;
+                for (int i = before; i < fx_context_warning_count(ctx); i++)
+                    warned |= tu_contains(fx_context_warning(ctx, i), "non-finite");
+                CHECK(!warned);
+                const float *o = out ? et_combined(out) : NULL;
+                CHECK(o && tu_all_finite(o, (size_t)w * h * 4));
+                if (o && !ref) {
+                    ref = malloc((size_t)w * h * 4 * sizeof(float));
+                    memcpy(ref, o, (size_t)w * h * 4 * sizeof(float));
+                } else if (o) {
+                    CHECK(memcmp(o, ref, (size_t)w * h * 4 * sizeof(float)) == 0);
+                }
+                fx_frame_free(out);
+                fx_stack_free(s);
+            }
+        /* the upper part (no extremes within reach): the formula, alpha kept */
+        int same = ref != NULL;
+        const float fac = k ? 0.35f : 1.0f;
+        for (int y = 0; same && y < 58; y++)
+            for (int x = 0; x < w; x++)
+                for (int c = 0; c < 4; c++) {
+                    const float *p = px + ((size_t)y * w + x) * 4;
+                    const float want = c == 3 ? p[3] : k ? p[c] * (1.0f - fac) + grad_ref(px, w, h, x, y, c) * fac
+                                                         : grad_ref(px, w, h, x, y, c);
+                    if (memcmp(&want, &ref[((size_t)y * w + x) * 4 + c], sizeof want) != 0) {
+                        fprintf(stderr, "gradient %d (%d,%d,%d): %.9g want %.9g\n", k, x, y, c,
+                                (double)ref[((size_t)y * w + x) * 4 + c], (double)want);
+                        same = 0;
+                    }
+                }
+        CHECK(same);
+        free(ref);
+    }
+    /* a mask: outside as the input (made finite by the stack, as an empty stack does), inside
+     * as without one; opacity 0: the identity */
+    float *keep = run_pass(c1, f, "{\"version\":1,\"effects\":[]}", NULL);
+    float *all = run_pass(c2, f, recipe("\"output\":\"gradient\"", NULL), NULL);
+    float *m = run_pass(c2, f, recipe("\"output\":\"gradient\"", "{\"rect\":[5,7,40,30]}"), NULL);
+    int ok = keep && all && m;
+    for (int y = 0; ok && y < h; y++)
+        for (int x = 0; x < w; x++) {
+            const size_t i = ((size_t)y * w + x) * 4;
+            const int in = x >= 5 && x < 45 && y >= 7 && y < 37;
+            ok &= memcmp(m + i, in ? all + i : keep + i, 4 * sizeof(float)) == 0;
+        }
+    CHECK(ok);
+    free(all);
+    free(m);
+    /* opacity 0: the identity (the finite rows bit for bit; the stack makes the rest finite) */
+    m = run_pass(c1, f, recipe("\"output\":\"gradient\",\"opacity\":0", NULL), NULL);
+    CHECK(m && memcmp(m, px, (size_t)w * 60 * 4 * sizeof(float)) == 0 && tu_all_finite(m, (size_t)w * h * 4));
+    free(m);
+    free(keep);
+    /* an operator other than sobel: refused, naming the parameter */
+    fx_stack *s = NULL;
+    CHECK_OK(c1, fx_stack_new(c1, &s));
+    CHECK(fx_stack_load_json(s, recipe("\"output\":\"gradient\",\"operator\":\"laplace4\"", NULL)) == FX_ERR_BAD_PARAM);
+    CHECK(tu_contains(fx_context_error(c1), "operator"));
+    fx_stack_free(s);
+    fx_frame_free(f);
+    free(px);
+}
+
 int main(void)
 {
     test_srgb_lut();
@@ -558,6 +667,7 @@ int main(void)
     test_in_place(c1, c2);
     test_fast_path(c1);
     test_fast_path(c2);
+    test_gradient(c1, c2);
     fx_context_free(c1);
     fx_context_free(c2);
     return tu_finish("test_edges");

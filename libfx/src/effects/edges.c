@@ -1,7 +1,8 @@
 /* edges: outlines from colour luminance, relative depth jumps, normal angles and object /
  * material ID boundaries (the seed's Laplace M4/M8, Sobel, sparse 7x7), drawn over the
- * image or output as a matte. The operators live in math/edge_ops.c (shared with
- * cel_shading and the cel/edge mirror). docs/effects/edges.md. */
+ * image or output as a matte; or (output gradient) the colour's Sobel gradient as Blender's
+ * Filter node gives it. The operators live in math/edge_ops.c (shared with cel_shading and
+ * the cel/edge mirror). docs/effects/edges.md. */
 #include "core/effect.h"
 #include "core/parallel.h"
 #include "math/edge_ops.h"
@@ -26,12 +27,12 @@ typedef struct edges_params {
     float opacity;
 } edges_params;
 
-enum { OUT_OVER = 0, OUT_MATTE };
+enum { OUT_OVER = 0, OUT_MATTE, OUT_GRADIENT };
 
 static const char *const op_items[] = FX_EDGE_OPERATOR_ITEMS;
 static const char *const id_items[] = { "cryptomatte", "index" };
 static const char *const depth_mode_items[] = FX_EDGE_DEPTH_MODE_ITEMS;
-static const char *const out_items[] = { "over", "matte" };
+static const char *const out_items[] = { "over", "matte", "gradient" };
 static const float black4[4] = { 0, 0, 0, 1 };
 
 static const fx_param_def edges_param_defs[] = {
@@ -65,7 +66,10 @@ static const fx_param_def edges_param_defs[] = {
     FX_P_FLOATS(edges_params, line_color, "line_color", 4, black4, -65504.0, 65504.0, "color",
                 "Line colour (RGBA) for output over"),
     FX_P_ENUM(edges_params, output, "output", OUT_OVER, out_items,
-              "over: lines drawn over the image; matte: the edge matte as gray (alpha 1)"),
+              "over: lines drawn over the image; matte: the edge matte as gray (alpha 1); gradient: "
+              "Blender's Filter node (Sobel): per colour channel sqrt(gx^2 + gy^2) of the unnormalised "
+              "Sobel kernels, borders extended, alpha kept (operator sobel only; edge sources, "
+              "thresholds and lines do not apply)"),
     FX_P_FLOAT(edges_params, opacity, "opacity", 1.0, 0.0, 1.0, 0.0, 1.0, "factor",
                "Strength of the effect; 0 is the identity"),
 };
@@ -91,6 +95,8 @@ static void settings_of(const edges_params *p, fx_edge_settings *s)
 
 static fx_pass_set edges_passes(const void *params)
 {
+    if (((const edges_params *)params)->output == OUT_GRADIENT)
+        return 0; /* the colour alone */
     fx_edge_settings s;
     settings_of(params, &s);
     return ((const edges_params *)params)->opacity > 0.0f ? fx_edge_passes(&s) : 0;
@@ -100,6 +106,8 @@ static int edges_halo(const void *params, int width, int height)
 {
     (void)width;
     (void)height;
+    if (((const edges_params *)params)->output == OUT_GRADIENT)
+        return 1; /* the 3x3 kernels */
     fx_edge_settings s;
     settings_of(params, &s);
     return fx_edge_halo(&s);
@@ -310,6 +318,8 @@ FX_CLONES static void draw_row(void *user, int y, const float *matte)
 static int edges_identity(const void *params)
 {
     const edges_params *p = params;
+    if (p->output == OUT_GRADIENT)
+        return !(p->opacity > 0.0f); /* the gradient needs no edge source */
     return !(p->opacity > 0.0f) || !(p->luminance || p->depth || p->normal || p->object_id || p->material_id);
 }
 
@@ -318,6 +328,10 @@ static fx_result edges_process(const fx_effect_run *run)
     const edges_params *p = run->params;
     const fx_rect *roi = &run->roi;
     const char *where = run->where;
+    if (p->output == OUT_GRADIENT)
+        /* factor = opacity, as Blender's Factor; on a proxy the same gradient of the proxy's
+         * pixels (a sharp edge keeps its height; see docs/effects/edges.md) */
+        return fx_edge_gradient(run->ctx, run->src, run->dst, run->width, run->height, roi, p->opacity, where);
     fx_edge_settings s;
     settings_of(p, &s);
     const float opacity = proxy_adjust(run, p, &s);
@@ -342,6 +356,8 @@ static fx_result edges_process(const fx_effect_run *run)
  * edge engine can take the luminance of the rows where its bands meet first: a small halo. */
 static int edges_in_place(const void *params)
 {
+    if (((const edges_params *)params)->output == OUT_GRADIENT)
+        return 1; /* fx_edge_gradient keeps the rows it still reads */
     fx_edge_settings s;
     settings_of(params, &s);
     return fx_edge_halo(&s) <= FX_EDGE_IN_PLACE_MAX_HALO;
@@ -355,12 +371,18 @@ static fx_result edges_validate(const void *params, char *err, size_t err_size)
             snprintf(err, err_size, "line_color[%d] is not finite", i);
             return FX_ERR_BAD_PARAM;
         }
+    if (p->output == OUT_GRADIENT && p->op != FX_EDGE_SOBEL) {
+        snprintf(err, err_size, "operator must be sobel for output gradient (Blender's Filter Sobel), not %s",
+                 op_items[p->op]);
+        return FX_ERR_BAD_PARAM;
+    }
     return FX_OK;
 }
 
 const fx_effect_class fx_effect_edges = {
     .name = "edges",
-    .doc = "Outlines from luminance, relative depth, normals and object/material IDs (Sobel, Laplace, sparse 7x7)",
+    .doc = "Outlines from luminance, relative depth, normals and object/material IDs (Sobel, Laplace, sparse 7x7), "
+           "or the colour's Sobel gradient (Blender's Filter Sobel)",
     .params_size = sizeof(edges_params),
     .params = edges_param_defs,
     .param_count = FX_COUNT_OF(edges_param_defs),

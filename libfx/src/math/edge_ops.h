@@ -118,6 +118,15 @@ fx_result fx_edge_matte_rows(fx_context *ctx, const fx_edge_sources *src, const 
                              const fx_rect *roi, float *strengths, fx_edge_row_fn emit, void *user,
                              const char *where);
 
+/* Blender's compositor Filter node, type Sobel, with Factor `factor` (the edges effect's
+ * output gradient; docs/effects/edges.md): per colour channel the magnitude sqrt(gx^2 + gy^2)
+ * of the unnormalised 3x3 Sobel kernels, neighbours clamped to the image, mixed as
+ * c (1 - factor) + g factor, alpha kept; the same bits as Blender 5.2's CPU compositor on
+ * finite input, finite for any input. Rows and columns of roi (NULL: the frame) of dst,
+ * nothing else; dst may be src (in place: each pixel read before it is written). */
+fx_result fx_edge_gradient(fx_context *ctx, const float *src, float *dst, int width, int height, const fx_rect *roi,
+                           float factor, const char *where);
+
 #ifdef __cplusplus
 }
 #endif
