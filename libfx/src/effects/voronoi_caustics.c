@@ -44,6 +44,8 @@
 #include "core/effect.h"
 #include "core/parallel.h"
 #include "core/simd4.h"
+#include "core/simd8.h"
+#include "math/clones.h"
 #include "math/camera.h"
 #include "math/voronoi.h"
 
@@ -961,12 +963,12 @@ static inline __attribute__((always_inline)) void apply_gain(const float *src, f
     memcpy(dst, &r, sizeof r);
 }
 
-/* caustics_rows_gain's pixel x of row y in a lattice cell whose row-interpolated corners
- * are L (left) and L + D (right), [s, noise, world x, world y], at weight t: no position or
- * outside the mask: the source; its corners on its surface (interpolated world XY within a
- * tenth of a cell of its own): s interpolated; else its own search, noise and s. */
-static __attribute__((noinline)) void gain_pixel(const caustics_job *j, int x, int y, float t, v4f L,
-                                                             v4f D, v4f tint, fx_noise_cache *cache)
+/* caustics_rows_gain's pixel x of row y whose corners, interpolated to it, give s and world
+ * XY (wx, wy): no position or outside the mask: the source; its corners on its surface
+ * (interpolated world XY within a tenth of a cell of its own): s; else its own search,
+ * noise and s. */
+static __attribute__((noinline)) void gain_pixel(const caustics_job *j, int x, int y, float s, float wx, float wy,
+                                                 v4f tint, fx_noise_cache *cache)
 {
     const fx_effect_run *run = j->run;
     const size_t i = (size_t)y * run->width + x;
@@ -978,92 +980,182 @@ static __attribute__((noinline)) void gain_pixel(const caustics_job *j, int x, i
         return;
     }
     const float tol = (float)(GAIN_TOL * j->cell);
-    const float wx = L[2] + t * D[2], wy = L[3] + t * D[3];
-    float s;
-    if (fabsf(wx - px) <= tol && fabsf(wy - py) <= tol) /* NaN corners fail */
-        s = L[0] + t * D[0];
-    else
+    if (!(fabsf(wx - px) <= tol && fabsf(wy - py) <= tol)) /* NaN corners fail */
         s = focus_s(j, value_at(j, px, py, NULL), noise_at(j, px, py, cache));
     apply_gain(run->src + i * 4, run->dst + i * 4, (v4f){s, s, s, s}, tint);
 }
 
+#define GAIN_CHUNK 1024 /* pixels of a row per pass of caustics_rows_gain's general path */
+
+/* caustics_rows_gain's constants, and its eight pixels at a time. */
+typedef struct gain_ctx {
+    const caustics_job *j;
+    const float *cov;
+    int pc;
+    v4f tint;
+    v8f t0, t1, t2, vtol;
+} gain_ctx;
+
+/* Pixels x .. x + 7 of row y with their s, world x and y interpolated from their corners:
+ * positions, validity, mask and surface test, then out = src (1 + s tint) clamped, by
+ * apply_gain's operations lane by lane (colour in [0, FLT_MAX], NaN to 0; alpha in
+ * [-FLT_MAX, FLT_MAX], NaN to -FLT_MAX); the pixels that fail the test (no position,
+ * masked out, off their corners' surface: a silhouette, a step) are then redone one at a
+ * time by gain_pixel (the same operations: no pixel's bits depend on its neighbours). */
+static inline __attribute__((always_inline)) void gain_octet(const gain_ctx *g, int x, int y, v8f s8, v8f wx,
+                                                             v8f wy, fx_noise_cache *cache)
+{
+    const caustics_job *j = g->j;
+    const fx_effect_run *run = j->run;
+    const int pc = g->pc;
+    const v8i absm = {0x7fffffff, 0x7fffffff, 0x7fffffff, 0x7fffffff, 0x7fffffff, 0x7fffffff, 0x7fffffff, 0x7fffffff};
+    const v8f big = S8(1e15f), zero = S8(0.0f), one = S8(1.0f), fmax = S8(FLT_MAX), amin = S8(-FLT_MAX);
+    const size_t i = (size_t)y * run->width + x;
+    const float *pq = j->position + i * pc;
+    v8f px, py, pz;
+    if (pc == 3) {
+        const v8f m0 = fx_load8(pq), m1 = fx_load8(pq + 8), m2 = fx_load8(pq + 16);
+        const v8f ux = FX_SHUF8(m0, m1, 0, 3, 6, 9, 12, 15, 0, 0);
+        const v8f uy = FX_SHUF8(m0, m1, 1, 4, 7, 10, 13, 0, 0, 0);
+        const v8f uz = FX_SHUF8(m0, m1, 2, 5, 8, 11, 14, 0, 0, 0);
+        px = FX_SHUF8(ux, m2, 0, 1, 2, 3, 4, 5, 10, 13);
+        py = FX_SHUF8(uy, m2, 0, 1, 2, 3, 4, 8, 11, 14);
+        pz = FX_SHUF8(uz, m2, 0, 1, 2, 3, 4, 9, 12, 15);
+    } else if (pc == 4) {
+        v8f m[4];
+        fx_load8x4(pq, m);
+        px = m[0];
+        py = m[1];
+        pz = m[2];
+    } else { /* other channel counts (not written by Blender) */
+        float q[3][8];
+        for (int ch = 0; ch < 3; ch++)
+            for (int l = 0; l < 8; l++)
+                q[ch][l] = pq[(size_t)l * pc + ch];
+        px = fx_load8(q[0]);
+        py = fx_load8(q[1]);
+        pz = fx_load8(q[2]);
+    }
+    v8i ok = ((v8f)((v8i)px & absm) <= big) & ((v8f)((v8i)py & absm) <= big) & ((pz - pz) == zero) &
+             ((v8f)((v8i)(wx - px) & absm) <= g->vtol) & ((v8f)((v8i)(wy - py) & absm) <= g->vtol);
+    if (g->cov)
+        ok &= fx_load8(g->cov + i) > zero;
+    v8f p[4];
+    fx_load8x4(run->src + i * 4, p);
+    v8f o[4] = {p[0] * (one + s8 * g->t0), p[1] * (one + s8 * g->t1), p[2] * (one + s8 * g->t2),
+                p[3] * (one + s8 * zero)};
+    for (int ch = 0; ch < 3; ch++) {
+        const v8f m = (v8f)((v8i)o[ch] & (o[ch] > zero));
+        o[ch] = SEL8(m < fmax, m, fmax);
+    }
+    o[3] = SEL8(o[3] > amin, o[3], amin);
+    o[3] = SEL8(o[3] < fmax, o[3], fmax);
+    fx_store8x4(run->dst + i * 4, o);
+    if (!fx_all8(ok))
+        for (int l = 0; l < 8; l++)
+            if (!ok[l])
+                gain_pixel(j, x + l, y, s8[l], wx[l], wy[l], g->tint, cache);
+}
+
 /* lattice_shading's path (draft) in physical mode without an additive term, from the
- * Position pass: the nodes hold the focus gain s (focus_s of their pattern and noise); per
- * row and lattice cell, the corners interpolated to the row, then four pixels at a time:
- * their positions, validity and surface test as vectors, s interpolated and applied. A
- * quad with any other pixel (no position, masked out, off the corners' surface: a
- * silhouette, a step) goes a pixel at a time (gain_pixel: the same operations, lane by
- * lane, so a pixel's bits do not depend on its quad). */
-static void caustics_rows_gain(void *user, int begin, int end)
+ * Position pass: the nodes hold the focus gain s (focus_s of their pattern and noise); a
+ * pixel's s and world XY are its corners' bilinear interpolation (row first: L and R, the
+ * lattice cell's columns at this row; then L + t (R - L)), then gain_octet. FX_CLONES: one
+ * AVX2 register per channel where the CPU has it. downsample 4 (the draft): per row, the
+ * columns' s, x, y as arrays, and eight pixels (two lattice cells) take theirs by constant
+ * shuffles; the row's last cell (up to 5 pixels) and other downsamples: per chunk of whole
+ * cells, the pixels' values into arrays four at a time, then eight pixels at a time. */
+FX_CLONES static void caustics_rows_gain(void *user, int begin, int end)
 {
     const caustics_job *j = user;
     const fx_effect_run *run = j->run;
-    const int w = run->width, x0 = run->roi.x0, x1 = run->roi.x1, nx = j->nx, f = j->f, pc = j->pos_channels;
+    const int x0 = run->roi.x0, x1 = run->roi.x1, nx = j->nx, f = j->f;
     const int ncx = nx > 1 ? nx - 1 : 1;
-    const float tol = (float)(GAIN_TOL * j->cell);
-    const float *cov = run->mask ? run->mask->coverage : NULL;
+    const int per_chunk = (GAIN_CHUNK - 1) / f; /* cells: each has at most f + 1 pixels */
     const float *col_t = j->col_t;
-    const v4f tint = {j->p->tint[0], j->p->tint[1], j->p->tint[2], 0.0f};
-    const v4i absm = {0x7fffffff, 0x7fffffff, 0x7fffffff, 0x7fffffff};
-    const v4f big = {1e15f, 1e15f, 1e15f, 1e15f}, vtol = {tol, tol, tol, tol}, zero = {0.0f, 0.0f, 0.0f, 0.0f};
+    const float tol = (float)(GAIN_TOL * j->cell);
+    const gain_ctx g = {j, run->mask ? run->mask->coverage : NULL, j->pos_channels,
+                        {j->p->tint[0], j->p->tint[1], j->p->tint[2], 0.0f},
+                        S8(j->p->tint[0]), S8(j->p->tint[1]), S8(j->p->tint[2]), S8(tol)};
     fx_noise_cache cache = {0};
+    /* downsample 4: the row's columns (8 more for the last octet's loads) */
+    const int quick = f == 4 && nx > 1;
+    float *cols = quick ? fx_mem_alloc((size_t)3 * (nx + 8) * sizeof(float)) : NULL;
+    float *cs = cols, *cx = cols ? cols + nx + 8 : NULL, *cy = cols ? cols + 2 * (nx + 8) : NULL;
+    float sv[GAIN_CHUNK], xv[GAIN_CHUNK], yv[GAIN_CHUNK];
     for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++) {
         int j0, j1;
         float ty;
         lattice_pos(j->node_y, j->ny, f, run->roi.y0, y, &j0, &j1, &ty);
         const float uy = 1.0f - ty;
         const float *a = j->nodes + (size_t)j0 * nx * 4, *b = j->nodes + (size_t)j1 * nx * 4;
-        v4f L = ld4(a) * uy + ld4(b) * ty;
-        for (int cc = 0; cc < ncx; cc++) {
-            const int i1 = nx > 1 ? cc + 1 : 0;
-            const v4f R = ld4(a + 4 * i1) * uy + ld4(b + 4 * i1) * ty;
-            const v4f D = R - L;
-            const int xs = x0 + cc * f, xe = cc == ncx - 1 ? x1 : xs + f;
-#ifdef __SSE2__
-#define BCAST(v, k) ((v4f)_mm_shuffle_ps((v), (v), _MM_SHUFFLE(k, k, k, k)))
-#else
-#define BCAST(v, k) ((v4f){(v)[k], (v)[k], (v)[k], (v)[k]})
-#endif
-            const v4f ls = BCAST(L, 0), ds = BCAST(D, 0), lx = BCAST(L, 2), dx = BCAST(D, 2);
-            const v4f ly = BCAST(L, 3), dy = BCAST(D, 3);
-            /* quads at xs, xs + 4, ...; a cell of 4 pixels or more ends with the quad at
-             * xe - 4 (overlapping: the same cell, so the same values written again) */
-            const int nquad = xe - xs >= 4 ? (xe - xs + 3) / 4 : 0;
-            for (int q = 0; q < nquad; q++) {
-                const int x = xs + 4 * q + 4 <= xe ? xs + 4 * q : xe - 4;
-                const size_t i = (size_t)y * w + x;
-                const v4f t4 = ld4(col_t + (x - x0));
-                const float *pq = j->position + i * pc;
-                v4f px, py, pz;
-                if (pc == 3) {
-                    ld3x4(pq, &px, &py, &pz);
-                } else {
-                    px = (v4f){pq[0], pq[pc], pq[2 * pc], pq[3 * pc]};
-                    py = (v4f){pq[1], pq[pc + 1], pq[2 * pc + 1], pq[3 * pc + 1]};
-                    pz = (v4f){pq[2], pq[pc + 2], pq[2 * pc + 2], pq[3 * pc + 2]};
-                }
-                const v4f wx = lx + t4 * dx, wy = ly + t4 * dy;
-                v4i ok = ((v4f)((v4i)px & absm) <= big) & ((v4f)((v4i)py & absm) <= big) & ((pz - pz) == zero) &
-                         ((v4f)((v4i)(wx - px) & absm) <= vtol) & ((v4f)((v4i)(wy - py) & absm) <= vtol);
-                if (cov)
-                    ok &= ld4(cov + i) > zero;
-                if (all4(ok)) {
-                    const v4f s4 = ls + t4 * ds;
-                    apply_gain(run->src + i * 4, run->dst + i * 4, BCAST(s4, 0), tint);
-                    apply_gain(run->src + (i + 1) * 4, run->dst + (i + 1) * 4, BCAST(s4, 1), tint);
-                    apply_gain(run->src + (i + 2) * 4, run->dst + (i + 2) * 4, BCAST(s4, 2), tint);
-                    apply_gain(run->src + (i + 3) * 4, run->dst + (i + 3) * 4, BCAST(s4, 3), tint);
-                } else {
-                    for (int m = 0; m < 4; m++)
-                        gain_pixel(j, x + m, y, t4[m], L, D, tint, &cache);
-                }
+        int cfirst = 0; /* the first lattice cell left to the general path */
+        if (cols) {
+            const v8f uy8 = S8(uy), ty8 = S8(ty);
+            int i = 0;
+            for (; i + 8 <= nx; i += 8) { /* ld4(a) uy + ld4(b) ty, channel by channel */
+                v8f na[4], nb[4];
+                fx_load8x4(a + 4 * i, na);
+                fx_load8x4(b + 4 * i, nb);
+                fx_store8(cs + i, na[0] * uy8 + nb[0] * ty8);
+                fx_store8(cx + i, na[2] * uy8 + nb[2] * ty8);
+                fx_store8(cy + i, na[3] * uy8 + nb[3] * ty8);
             }
-#undef BCAST
-            for (int x = nquad ? xe : xs; x < xe; x++)
-                gain_pixel(j, x, y, col_t[x - x0], L, D, tint, &cache);
-            L = R;
+            for (; i < nx; i++) {
+                cs[i] = a[4 * i] * uy + b[4 * i] * ty;
+                cx[i] = a[4 * i + 2] * uy + b[4 * i + 2] * ty;
+                cy[i] = a[4 * i + 3] * uy + b[4 * i + 3] * ty;
+            }
+            /* octets of two cells of 4 pixels (the last cell, x1 - 1's, may be longer) */
+            for (; cfirst + 2 < ncx; cfirst += 2) {
+                const int x = x0 + 4 * cfirst;
+                const v8f t = fx_load8(col_t + (x - x0));
+                const v8f vs = fx_load8(cs + cfirst), vx = fx_load8(cx + cfirst), vy = fx_load8(cy + cfirst);
+                const v8f ls = FX_SHUF8(vs, vs, 0, 0, 0, 0, 1, 1, 1, 1), rs = FX_SHUF8(vs, vs, 1, 1, 1, 1, 2, 2, 2, 2);
+                const v8f lx = FX_SHUF8(vx, vx, 0, 0, 0, 0, 1, 1, 1, 1), rx = FX_SHUF8(vx, vx, 1, 1, 1, 1, 2, 2, 2, 2);
+                const v8f ly = FX_SHUF8(vy, vy, 0, 0, 0, 0, 1, 1, 1, 1), ry = FX_SHUF8(vy, vy, 1, 1, 1, 1, 2, 2, 2, 2);
+                gain_octet(&g, x, y, ls + t * (rs - ls), lx + t * (rx - lx), ly + t * (ry - ly), &cache);
+            }
+        }
+        for (int cc0 = cfirst; cc0 < ncx; cc0 += per_chunk) {
+            const int cc1 = cc0 + per_chunk < ncx ? cc0 + per_chunk : ncx;
+            const int xa = x0 + cc0 * f, xb = cc1 == ncx ? x1 : x0 + cc1 * f, n = xb - xa;
+            /* the pixels' s, world x, y (four at a time: a cell of 4 pixels or more ends
+             * with the quad at xe - 4, overlapping: the same values written again) */
+            v4f L = ld4(a + 4 * cc0) * uy + ld4(b + 4 * cc0) * ty;
+            for (int cc = cc0; cc < cc1; cc++) {
+                const int i1 = nx > 1 ? cc + 1 : 0;
+                const v4f R = ld4(a + 4 * i1) * uy + ld4(b + 4 * i1) * ty;
+                const v4f D = R - L;
+                const int xs = x0 + cc * f, xe = cc == ncx - 1 ? x1 : xs + f;
+                const v4f ls = V4(L[0]), ds = V4(D[0]), lx = V4(L[2]), dx = V4(D[2]), ly = V4(L[3]), dy = V4(D[3]);
+                const int nquad = xe - xs >= 4 ? (xe - xs + 3) / 4 : 0;
+                for (int q = 0; q < nquad; q++) {
+                    const int x = xs + 4 * q + 4 <= xe ? xs + 4 * q : xe - 4;
+                    const v4f t4 = ld4(col_t + (x - x0));
+                    st4(sv + (x - xa), ls + t4 * ds);
+                    st4(xv + (x - xa), lx + t4 * dx);
+                    st4(yv + (x - xa), ly + t4 * dy);
+                }
+                for (int x = nquad ? xe : xs; x < xe; x++) {
+                    const float t = col_t[x - x0];
+                    sv[x - xa] = L[0] + t * D[0];
+                    xv[x - xa] = L[2] + t * D[2];
+                    yv[x - xa] = L[3] + t * D[3];
+                }
+                L = R;
+            }
+            /* eight pixels at a time (a chunk of 8 or more ends with the octet at n - 8) */
+            const int noct = n >= 8 ? (n + 7) / 8 : 0;
+            for (int k = 0; k < noct; k++) {
+                const int c = 8 * k + 8 <= n ? 8 * k : n - 8;
+                gain_octet(&g, xa + c, y, fx_load8(sv + c), fx_load8(xv + c), fx_load8(yv + c), &cache);
+            }
+            for (int c = noct ? n : 0; c < n; c++)
+                gain_pixel(j, xa + c, y, sv[c], xv[c], yv[c], g.tint, &cache);
         }
     }
+    fx_mem_free(cols);
 }
 
 /* Mean of g over the tile at this time: a fixed lattice, independent of the camera. */
