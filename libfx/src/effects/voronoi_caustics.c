@@ -963,12 +963,57 @@ static inline __attribute__((always_inline)) void apply_gain(const float *src, f
     memcpy(dst, &r, sizeof r);
 }
 
+#define GAIN_QUEUE 128 /* caustics_rows_gain's pixels waiting for their own search */
+
+/* caustics_rows_gain's pixels off their corners' surface, searched in batches: the
+ * searches of fx_voronoi_table_grid_n (value_at's bits), then noise and s one pixel after
+ * the other in short loops (no long dependency chain per pixel). */
+typedef struct gain_queue {
+    int n;
+    size_t at[GAIN_QUEUE]; /* pixel index */
+    float px[GAIN_QUEUE], py[GAIN_QUEUE];
+    double qx[GAIN_QUEUE], qy[GAIN_QUEUE], f1[GAIN_QUEUE], f2[GAIN_QUEUE]; /* gain_flush's */
+    fx_noise_cache cache;
+} gain_queue;
+
+static __attribute__((noinline)) void gain_flush(const caustics_job *j, gain_queue *q)
+{
+    const fx_effect_run *run = j->run;
+    const v4f tint = {j->p->tint[0], j->p->tint[1], j->p->tint[2], 0.0f};
+    const int n = q->n;
+    float a[GAIN_QUEUE], sv[GAIN_QUEUE];
+    if (j->table.kind && j->p->method == METHOD_GRID) {
+        double *qx = q->qx, *qy = q->qy, *f1 = q->f1, *f2 = q->f2;
+        for (int k = 0; k < n; k++) {
+            qx[k] = (double)q->px[k] * j->inv_cell_d;
+            qy[k] = (double)q->py[k] * j->inv_cell_d;
+        }
+        fx_voronoi_table_grid_n(&j->table, n, qx, qy, f1, f2, NULL, NULL);
+        for (int k = 0; k < n; k++) {
+            const double v = f2[k] - f1[k];
+            a[k] = !(v >= 0.0) ? 0.0f : v > 1e30 ? 1e30f : (float)v;
+        }
+    } else {
+        for (int k = 0; k < n; k++)
+            a[k] = value_at(j, q->px[k], q->py[k], NULL);
+    }
+    for (int k = 0; k < n; k++)
+        sv[k] = noise_at(j, q->px[k], q->py[k], &q->cache);
+    for (int k = 0; k < n; k++)
+        sv[k] = focus_s(j, a[k], sv[k]);
+    for (int k = 0; k < n; k++) {
+        const float sk = sv[k];
+        apply_gain(run->src + q->at[k] * 4, run->dst + q->at[k] * 4, (v4f){sk, sk, sk, sk}, tint);
+    }
+    q->n = 0;
+}
+
 /* caustics_rows_gain's pixel x of row y whose corners, interpolated to it, give s and world
  * XY (wx, wy): no position or outside the mask: the source; its corners on its surface
- * (interpolated world XY within a tenth of a cell of its own): s; else its own search,
- * noise and s. */
+ * (interpolated world XY within a tenth of a cell of its own): s; else queued for its own
+ * search, noise and s (gain_flush). */
 static __attribute__((noinline)) void gain_pixel(const caustics_job *j, int x, int y, float s, float wx, float wy,
-                                                 v4f tint, fx_noise_cache *cache)
+                                                 gain_queue *q)
 {
     const fx_effect_run *run = j->run;
     const size_t i = (size_t)y * run->width + x;
@@ -980,9 +1025,16 @@ static __attribute__((noinline)) void gain_pixel(const caustics_job *j, int x, i
         return;
     }
     const float tol = (float)(GAIN_TOL * j->cell);
-    if (!(fabsf(wx - px) <= tol && fabsf(wy - py) <= tol)) /* NaN corners fail */
-        s = focus_s(j, value_at(j, px, py, NULL), noise_at(j, px, py, cache));
-    apply_gain(run->src + i * 4, run->dst + i * 4, (v4f){s, s, s, s}, tint);
+    if (fabsf(wx - px) <= tol && fabsf(wy - py) <= tol) { /* NaN corners fail */
+        const v4f tint = {j->p->tint[0], j->p->tint[1], j->p->tint[2], 0.0f};
+        apply_gain(run->src + i * 4, run->dst + i * 4, (v4f){s, s, s, s}, tint);
+        return;
+    }
+    if (q->n == GAIN_QUEUE)
+        gain_flush(j, q);
+    q->at[q->n] = i;
+    q->px[q->n] = px;
+    q->py[q->n++] = py;
 }
 
 #define GAIN_CHUNK 1024 /* pixels of a row per pass of caustics_rows_gain's general path */
@@ -1003,7 +1055,7 @@ typedef struct gain_ctx {
  * masked out, off their corners' surface: a silhouette, a step) are then redone one at a
  * time by gain_pixel (the same operations: no pixel's bits depend on its neighbours). */
 static inline __attribute__((always_inline)) void gain_octet(const gain_ctx *g, int x, int y, v8f s8, v8f wx,
-                                                             v8f wy, fx_noise_cache *cache)
+                                                             v8f wy, gain_queue *q)
 {
     const caustics_job *j = g->j;
     const fx_effect_run *run = j->run;
@@ -1054,7 +1106,7 @@ static inline __attribute__((always_inline)) void gain_octet(const gain_ctx *g, 
     if (!fx_all8(ok))
         for (int l = 0; l < 8; l++)
             if (!ok[l])
-                gain_pixel(j, x + l, y, s8[l], wx[l], wy[l], g->tint, cache);
+                gain_pixel(j, x + l, y, s8[l], wx[l], wy[l], q);
 }
 
 /* lattice_shading's path (draft) in physical mode without an additive term, from the
@@ -1077,7 +1129,9 @@ FX_CLONES static void caustics_rows_gain(void *user, int begin, int end)
     const gain_ctx g = {j, run->mask ? run->mask->coverage : NULL, j->pos_channels,
                         {j->p->tint[0], j->p->tint[1], j->p->tint[2], 0.0f},
                         S8(j->p->tint[0]), S8(j->p->tint[1]), S8(j->p->tint[2]), S8(tol)};
-    fx_noise_cache cache = {0};
+    gain_queue q;
+    q.n = 0;
+    memset(&q.cache, 0, sizeof q.cache);
     /* downsample 4: the row's columns (8 more for the last octet's loads) */
     const int quick = f == 4 && nx > 1;
     float *cols = quick ? fx_mem_alloc((size_t)3 * (nx + 8) * sizeof(float)) : NULL;
@@ -1114,7 +1168,7 @@ FX_CLONES static void caustics_rows_gain(void *user, int begin, int end)
                 const v8f ls = FX_SHUF8(vs, vs, 0, 0, 0, 0, 1, 1, 1, 1), rs = FX_SHUF8(vs, vs, 1, 1, 1, 1, 2, 2, 2, 2);
                 const v8f lx = FX_SHUF8(vx, vx, 0, 0, 0, 0, 1, 1, 1, 1), rx = FX_SHUF8(vx, vx, 1, 1, 1, 1, 2, 2, 2, 2);
                 const v8f ly = FX_SHUF8(vy, vy, 0, 0, 0, 0, 1, 1, 1, 1), ry = FX_SHUF8(vy, vy, 1, 1, 1, 1, 2, 2, 2, 2);
-                gain_octet(&g, x, y, ls + t * (rs - ls), lx + t * (rx - lx), ly + t * (ry - ly), &cache);
+                gain_octet(&g, x, y, ls + t * (rs - ls), lx + t * (rx - lx), ly + t * (ry - ly), &q);
             }
         }
         for (int cc0 = cfirst; cc0 < ncx; cc0 += per_chunk) {
@@ -1149,11 +1203,13 @@ FX_CLONES static void caustics_rows_gain(void *user, int begin, int end)
             const int noct = n >= 8 ? (n + 7) / 8 : 0;
             for (int k = 0; k < noct; k++) {
                 const int c = 8 * k + 8 <= n ? 8 * k : n - 8;
-                gain_octet(&g, xa + c, y, fx_load8(sv + c), fx_load8(xv + c), fx_load8(yv + c), &cache);
+                gain_octet(&g, xa + c, y, fx_load8(sv + c), fx_load8(xv + c), fx_load8(yv + c), &q);
             }
             for (int c = noct ? n : 0; c < n; c++)
-                gain_pixel(j, xa + c, y, sv[c], xv[c], yv[c], g.tint, &cache);
+                gain_pixel(j, xa + c, y, sv[c], xv[c], yv[c], &q);
         }
+        if (q.n)
+            gain_flush(j, &q);
     }
     fx_mem_free(cols);
 }
