@@ -40,7 +40,8 @@
  * caustics_rows_lattice: the lattice columns once per row, the searches of a segment in one
  * batch (fx_voronoi_table_grid_n); the same bits as caustics_rows. With lattice_shading in
  * that case (draft) the nodes hold the focus gain s itself and caustics_rows_gain
- * interpolates it four pixels at a time, with the same surface test (no exp per pixel). */
+ * interpolates it eight pixels at a time (an AVX2 clone where the CPU has one), with the
+ * same surface test (no exp per pixel); the pixels that fail it are searched in batches. */
 #include "core/effect.h"
 #include "core/parallel.h"
 #include "core/simd4.h"
