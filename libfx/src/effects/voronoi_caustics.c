@@ -242,6 +242,8 @@ typedef struct caustics_job {
     unsigned char *smooth;   /* cx * cy (refine): smooth_rows' flags of each lattice cell */
     int gain_path;           /* lattice_shading, physical, no additive term, Position: the nodes
                                 hold the focus gain s (node[0]) and caustics_rows_gain shades */
+    int wide;                /* the CPU has AVX2: FX_CLONES runs caustics_rows_gain's AVX2 clone,
+                                which takes its eight-lane path (gain_octet8) */
 } caustics_job;
 
 static void evaluate(const caustics_job *j, double wx, double wy, fx_voronoi_hit *h)
@@ -1040,22 +1042,78 @@ static __attribute__((noinline)) void gain_pixel(const caustics_job *j, int x, i
 
 #define GAIN_CHUNK 1024 /* pixels of a row per pass of caustics_rows_gain's general path */
 
+/* Two four-lane vectors as one of eight lanes (a register pair in the baseline clone, one
+ * AVX register in the AVX2 clone), and lane k of a four-lane vector in every lane. */
+static inline __attribute__((always_inline)) v8f cat8(v4f a, v4f b)
+{
+    return (v8f){a[0], a[1], a[2], a[3], b[0], b[1], b[2], b[3]};
+}
+#ifdef __SSE2__
+#define BCAST4(v, k) ((v4f)_mm_shuffle_ps((v), (v), _MM_SHUFFLE(k, k, k, k)))
+#else
+#define BCAST4(v, k) ((v4f){(v)[k], (v)[k], (v)[k], (v)[k]})
+#endif
+
 /* caustics_rows_gain's constants, and its eight pixels at a time. */
 typedef struct gain_ctx {
     const caustics_job *j;
     const float *cov;
     int pc;
-    v4f tint;
-    v8f t0, t1, t2, vtol;
+    v4f tint, vtol;
 } gain_ctx;
 
-/* Pixels x .. x + 7 of row y with their s, world x and y interpolated from their corners:
+/* Pixels x .. x + 7 of row y with their s, world x and y interpolated from their corners,
+ * four at a time (the baseline clone compares eight lanes one by one): positions,
+ * validity, mask and surface test, then apply_gain per pixel; the pixels that fail the test
+ * (no position, masked out, off their corners' surface: a silhouette, a step) are then
+ * redone one at a time by gain_pixel (the same operations: no pixel's bits depend on its
+ * neighbours). */
+static inline __attribute__((always_inline)) void gain_octet4(const gain_ctx *g, int x, int y, v8f s8, v8f wx8,
+                                                             v8f wy8, gain_queue *q)
+{
+    const caustics_job *j = g->j;
+    const fx_effect_run *run = j->run;
+    const int pc = g->pc;
+    const v4i absm = {0x7fffffff, 0x7fffffff, 0x7fffffff, 0x7fffffff};
+    const v4f big = V4(1e15f), zero = V4(0.0f), vtol = g->vtol;
+    for (int h = 0; h < 2; h++) {
+        const v4f s4 = h ? (v4f){s8[4], s8[5], s8[6], s8[7]} : (v4f){s8[0], s8[1], s8[2], s8[3]};
+        const v4f wx = h ? (v4f){wx8[4], wx8[5], wx8[6], wx8[7]} : (v4f){wx8[0], wx8[1], wx8[2], wx8[3]};
+        const v4f wy = h ? (v4f){wy8[4], wy8[5], wy8[6], wy8[7]} : (v4f){wy8[0], wy8[1], wy8[2], wy8[3]};
+        const size_t i = (size_t)y * run->width + x + 4 * h;
+        const float *pq = j->position + i * pc;
+        v4f px, py, pz;
+        if (pc == 3) {
+            ld3x4(pq, &px, &py, &pz);
+        } else {
+            px = (v4f){pq[0], pq[pc], pq[2 * pc], pq[3 * pc]};
+            py = (v4f){pq[1], pq[pc + 1], pq[2 * pc + 1], pq[3 * pc + 1]};
+            pz = (v4f){pq[2], pq[pc + 2], pq[2 * pc + 2], pq[3 * pc + 2]};
+        }
+        v4i ok = ((v4f)((v4i)px & absm) <= big) & ((v4f)((v4i)py & absm) <= big) & ((pz - pz) == zero) &
+                 ((v4f)((v4i)(wx - px) & absm) <= vtol) & ((v4f)((v4i)(wy - py) & absm) <= vtol);
+        if (g->cov)
+            ok &= ld4(g->cov + i) > zero;
+        const float *src = run->src + i * 4;
+        float *dst = run->dst + i * 4;
+        apply_gain(src, dst, BCAST4(s4, 0), g->tint);
+        apply_gain(src + 4, dst + 4, BCAST4(s4, 1), g->tint);
+        apply_gain(src + 8, dst + 8, BCAST4(s4, 2), g->tint);
+        apply_gain(src + 12, dst + 12, BCAST4(s4, 3), g->tint);
+        if (!all4(ok))
+            for (int l = 0; l < 4; l++)
+                if (!ok[l])
+                    gain_pixel(j, x + 4 * h + l, y, s4[l], wx[l], wy[l], q);
+    }
+}
+
+/* gain_octet4 in eight lanes (the AVX2 clone; the baseline clone would compare lane by lane):
  * positions, validity, mask and surface test, then out = src (1 + s tint) clamped, by
  * apply_gain's operations lane by lane (colour in [0, FLT_MAX], NaN to 0; alpha in
  * [-FLT_MAX, FLT_MAX], NaN to -FLT_MAX); the pixels that fail the test (no position,
  * masked out, off their corners' surface: a silhouette, a step) are then redone one at a
  * time by gain_pixel (the same operations: no pixel's bits depend on its neighbours). */
-static inline __attribute__((always_inline)) void gain_octet(const gain_ctx *g, int x, int y, v8f s8, v8f wx,
+static inline __attribute__((always_inline)) void gain_octet8(const gain_ctx *g, int x, int y, v8f s8, v8f wx,
                                                              v8f wy, gain_queue *q)
 {
     const caustics_job *j = g->j;
@@ -1063,6 +1121,7 @@ static inline __attribute__((always_inline)) void gain_octet(const gain_ctx *g, 
     const int pc = g->pc;
     const v8i absm = {0x7fffffff, 0x7fffffff, 0x7fffffff, 0x7fffffff, 0x7fffffff, 0x7fffffff, 0x7fffffff, 0x7fffffff};
     const v8f big = S8(1e15f), zero = S8(0.0f), one = S8(1.0f), fmax = S8(FLT_MAX), amin = S8(-FLT_MAX);
+    const v8f vtol8 = S8(g->vtol[0]);
     const size_t i = (size_t)y * run->width + x;
     const float *pq = j->position + i * pc;
     v8f px, py, pz;
@@ -1090,12 +1149,12 @@ static inline __attribute__((always_inline)) void gain_octet(const gain_ctx *g, 
         pz = fx_load8(q[2]);
     }
     v8i ok = ((v8f)((v8i)px & absm) <= big) & ((v8f)((v8i)py & absm) <= big) & ((pz - pz) == zero) &
-             ((v8f)((v8i)(wx - px) & absm) <= g->vtol) & ((v8f)((v8i)(wy - py) & absm) <= g->vtol);
+             ((v8f)((v8i)(wx - px) & absm) <= vtol8) & ((v8f)((v8i)(wy - py) & absm) <= vtol8);
     if (g->cov)
         ok &= fx_load8(g->cov + i) > zero;
     v8f p[4];
     fx_load8x4(run->src + i * 4, p);
-    v8f o[4] = {p[0] * (one + s8 * g->t0), p[1] * (one + s8 * g->t1), p[2] * (one + s8 * g->t2),
+    v8f o[4] = {p[0] * (one + s8 * S8(g->tint[0])), p[1] * (one + s8 * S8(g->tint[1])), p[2] * (one + s8 * S8(g->tint[2])),
                 p[3] * (one + s8 * zero)};
     for (int ch = 0; ch < 3; ch++) {
         const v8f m = (v8f)((v8i)o[ch] & (o[ch] > zero));
@@ -1128,8 +1187,7 @@ FX_CLONES static void caustics_rows_gain(void *user, int begin, int end)
     const float *col_t = j->col_t;
     const float tol = (float)(GAIN_TOL * j->cell);
     const gain_ctx g = {j, run->mask ? run->mask->coverage : NULL, j->pos_channels,
-                        {j->p->tint[0], j->p->tint[1], j->p->tint[2], 0.0f},
-                        S8(j->p->tint[0]), S8(j->p->tint[1]), S8(j->p->tint[2]), S8(tol)};
+                        {j->p->tint[0], j->p->tint[1], j->p->tint[2], 0.0f}, V4(tol)};
     gain_queue q;
     q.n = 0;
     memset(&q.cache, 0, sizeof q.cache);
@@ -1146,30 +1204,53 @@ FX_CLONES static void caustics_rows_gain(void *user, int begin, int end)
         const float *a = j->nodes + (size_t)j0 * nx * 4, *b = j->nodes + (size_t)j1 * nx * 4;
         int cfirst = 0; /* the first lattice cell left to the general path */
         if (cols) {
-            const v8f uy8 = S8(uy), ty8 = S8(ty);
             int i = 0;
-            for (; i + 8 <= nx; i += 8) { /* ld4(a) uy + ld4(b) ty, channel by channel */
-                v8f na[4], nb[4];
-                fx_load8x4(a + 4 * i, na);
-                fx_load8x4(b + 4 * i, nb);
-                fx_store8(cs + i, na[0] * uy8 + nb[0] * ty8);
-                fx_store8(cx + i, na[2] * uy8 + nb[2] * ty8);
-                fx_store8(cy + i, na[3] * uy8 + nb[3] * ty8);
+            if (j->wide) { /* eight nodes at a time: ld4(a) uy + ld4(b) ty, channel by channel */
+                const v8f uy8 = S8(uy), ty8 = S8(ty);
+                for (; i + 8 <= nx; i += 8) {
+                    v8f na[4], nb[4];
+                    fx_load8x4(a + 4 * i, na);
+                    fx_load8x4(b + 4 * i, nb);
+                    fx_store8(cs + i, na[0] * uy8 + nb[0] * ty8);
+                    fx_store8(cx + i, na[2] * uy8 + nb[2] * ty8);
+                    fx_store8(cy + i, na[3] * uy8 + nb[3] * ty8);
+                }
             }
-            for (; i < nx; i++) {
-                cs[i] = a[4 * i] * uy + b[4 * i] * ty;
-                cx[i] = a[4 * i + 2] * uy + b[4 * i + 2] * ty;
-                cy[i] = a[4 * i + 3] * uy + b[4 * i + 3] * ty;
+            for (; i < nx; i++) { /* the general path's L, channel by channel */
+                const v4f c = ld4(a + 4 * i) * uy + ld4(b + 4 * i) * ty;
+                cs[i] = c[0];
+                cx[i] = c[2];
+                cy[i] = c[3];
             }
             /* octets of two cells of 4 pixels (the last cell, x1 - 1's, may be longer) */
             for (; cfirst + 2 < ncx; cfirst += 2) {
                 const int x = x0 + 4 * cfirst;
                 const v8f t = fx_load8(col_t + (x - x0));
-                const v8f vs = fx_load8(cs + cfirst), vx = fx_load8(cx + cfirst), vy = fx_load8(cy + cfirst);
-                const v8f ls = FX_SHUF8(vs, vs, 0, 0, 0, 0, 1, 1, 1, 1), rs = FX_SHUF8(vs, vs, 1, 1, 1, 1, 2, 2, 2, 2);
-                const v8f lx = FX_SHUF8(vx, vx, 0, 0, 0, 0, 1, 1, 1, 1), rx = FX_SHUF8(vx, vx, 1, 1, 1, 1, 2, 2, 2, 2);
-                const v8f ly = FX_SHUF8(vy, vy, 0, 0, 0, 0, 1, 1, 1, 1), ry = FX_SHUF8(vy, vy, 1, 1, 1, 1, 2, 2, 2, 2);
-                gain_octet(&g, x, y, ls + t * (rs - ls), lx + t * (rx - lx), ly + t * (ry - ly), &q);
+                v8f ls, rs, lx, rx, ly, ry;
+                if (j->wide) { /* one permute per vector in the AVX2 clone */
+                    const v8f vs = fx_load8(cs + cfirst), vx = fx_load8(cx + cfirst), vy = fx_load8(cy + cfirst);
+                    ls = FX_SHUF8(vs, vs, 0, 0, 0, 0, 1, 1, 1, 1);
+                    rs = FX_SHUF8(vs, vs, 1, 1, 1, 1, 2, 2, 2, 2);
+                    lx = FX_SHUF8(vx, vx, 0, 0, 0, 0, 1, 1, 1, 1);
+                    rx = FX_SHUF8(vx, vx, 1, 1, 1, 1, 2, 2, 2, 2);
+                    ly = FX_SHUF8(vy, vy, 0, 0, 0, 0, 1, 1, 1, 1);
+                    ry = FX_SHUF8(vy, vy, 1, 1, 1, 1, 2, 2, 2, 2);
+                } else { /* broadcasts: the baseline clone has no eight-lane shuffles */
+                    const v4f s0 = V4(cs[cfirst]), s1 = V4(cs[cfirst + 1]), s2 = V4(cs[cfirst + 2]);
+                    const v4f p0 = V4(cx[cfirst]), p1 = V4(cx[cfirst + 1]), p2 = V4(cx[cfirst + 2]);
+                    const v4f q0 = V4(cy[cfirst]), q1 = V4(cy[cfirst + 1]), q2 = V4(cy[cfirst + 2]);
+                    ls = cat8(s0, s1);
+                    rs = cat8(s1, s2);
+                    lx = cat8(p0, p1);
+                    rx = cat8(p1, p2);
+                    ly = cat8(q0, q1);
+                    ry = cat8(q1, q2);
+                }
+                const v8f sv8 = ls + t * (rs - ls), xv8 = lx + t * (rx - lx), yv8 = ly + t * (ry - ly);
+                if (j->wide)
+                    gain_octet8(&g, x, y, sv8, xv8, yv8, &q);
+                else
+                    gain_octet4(&g, x, y, sv8, xv8, yv8, &q);
             }
         }
         for (int cc0 = cfirst; cc0 < ncx; cc0 += per_chunk) {
@@ -1204,7 +1285,10 @@ FX_CLONES static void caustics_rows_gain(void *user, int begin, int end)
             const int noct = n >= 8 ? (n + 7) / 8 : 0;
             for (int k = 0; k < noct; k++) {
                 const int c = 8 * k + 8 <= n ? 8 * k : n - 8;
-                gain_octet(&g, xa + c, y, fx_load8(sv + c), fx_load8(xv + c), fx_load8(yv + c), &q);
+                if (j->wide)
+                    gain_octet8(&g, xa + c, y, fx_load8(sv + c), fx_load8(xv + c), fx_load8(yv + c), &q);
+                else
+                    gain_octet4(&g, xa + c, y, fx_load8(sv + c), fx_load8(xv + c), fx_load8(yv + c), &q);
             }
             for (int c = noct ? n : 0; c < n; c++)
                 gain_pixel(j, xa + c, y, sv[c], xv[c], yv[c], &q);
@@ -1289,6 +1373,11 @@ static void job_init(const fx_effect_run *run, const caustics_params *p, caustic
     j->far_gap = p->mode == MODE_PHYSICAL && exponent_of(p) >= 1.0 ? (float)(10.0 * p->line_width) : 0.0f;
     j->wave = (float)sin(2.0 * j->time);
     j->has_view = fx_view_init(&j->view, run->frame);
+#if defined(__GNUC__) && (defined(__x86_64__) || defined(__i386__)) && !defined(FX_NO_CLONES)
+    /* the condition under which FX_CLONES's resolver picks the AVX2 clone (either path: the
+     * same bits) */
+    j->wide = __builtin_cpu_supports("avx2") != 0;
+#endif
 }
 
 /* Process stage 2: the passes the parameters read (Position or Depth, Normal) and the
