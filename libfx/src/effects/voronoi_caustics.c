@@ -1373,9 +1373,13 @@ static void job_init(const fx_effect_run *run, const caustics_params *p, caustic
     j->far_gap = p->mode == MODE_PHYSICAL && exponent_of(p) >= 1.0 ? (float)(10.0 * p->line_width) : 0.0f;
     j->wave = (float)sin(2.0 * j->time);
     j->has_view = fx_view_init(&j->view, run->frame);
-#if defined(__GNUC__) && (defined(__x86_64__) || defined(__i386__)) && !defined(FX_NO_CLONES)
-    /* the condition under which FX_CLONES's resolver picks the AVX2 clone (either path: the
-     * same bits) */
+    /* caustics_rows_gain's eight-lane path where its code is AVX2 code: the whole build
+     * targets AVX2, or FX_CLONES (math/clones.h: gcc on x86) has made an AVX2 clone, which
+     * its resolver picks under this condition. Either path gives the same bits. */
+#if defined(__AVX2__)
+    j->wide = 1;
+#elif defined(__GNUC__) && !defined(__clang__) && (defined(__x86_64__) || defined(__i386__)) && \
+    !defined(FX_NO_CLONES)
     j->wide = __builtin_cpu_supports("avx2") != 0;
 #endif
 }
