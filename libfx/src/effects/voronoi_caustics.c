@@ -40,10 +40,13 @@
  * caustics_rows_lattice: the lattice columns once per row, the searches of a segment in one
  * batch (fx_voronoi_table_grid_n); the same bits as caustics_rows. With lattice_shading in
  * that case (draft) the nodes hold the focus gain s itself and caustics_rows_gain
- * interpolates it four pixels at a time, with the same surface test (no exp per pixel). */
+ * interpolates it eight pixels at a time (an AVX2 clone where the CPU has one), with the
+ * same surface test (no exp per pixel); the pixels that fail it are searched in batches. */
 #include "core/effect.h"
 #include "core/parallel.h"
 #include "core/simd4.h"
+#include "core/simd8.h"
+#include "math/clones.h"
 #include "math/camera.h"
 #include "math/voronoi.h"
 
@@ -239,6 +242,8 @@ typedef struct caustics_job {
     unsigned char *smooth;   /* cx * cy (refine): smooth_rows' flags of each lattice cell */
     int gain_path;           /* lattice_shading, physical, no additive term, Position: the nodes
                                 hold the focus gain s (node[0]) and caustics_rows_gain shades */
+    int wide;                /* the CPU has AVX2: FX_CLONES runs caustics_rows_gain's AVX2 clone,
+                                which takes its eight-lane path (gain_octet8) */
 } caustics_job;
 
 static void evaluate(const caustics_job *j, double wx, double wy, fx_voronoi_hit *h)
@@ -961,12 +966,57 @@ static inline __attribute__((always_inline)) void apply_gain(const float *src, f
     memcpy(dst, &r, sizeof r);
 }
 
-/* caustics_rows_gain's pixel x of row y in a lattice cell whose row-interpolated corners
- * are L (left) and L + D (right), [s, noise, world x, world y], at weight t: no position or
- * outside the mask: the source; its corners on its surface (interpolated world XY within a
- * tenth of a cell of its own): s interpolated; else its own search, noise and s. */
-static __attribute__((noinline)) void gain_pixel(const caustics_job *j, int x, int y, float t, v4f L,
-                                                             v4f D, v4f tint, fx_noise_cache *cache)
+#define GAIN_QUEUE 128 /* caustics_rows_gain's pixels waiting for their own search */
+
+/* caustics_rows_gain's pixels off their corners' surface, searched in batches: the
+ * searches of fx_voronoi_table_grid_n (value_at's bits), then noise and s one pixel after
+ * the other in short loops (no long dependency chain per pixel). */
+typedef struct gain_queue {
+    int n;
+    size_t at[GAIN_QUEUE]; /* pixel index */
+    float px[GAIN_QUEUE], py[GAIN_QUEUE];
+    double qx[GAIN_QUEUE], qy[GAIN_QUEUE], f1[GAIN_QUEUE], f2[GAIN_QUEUE]; /* gain_flush's */
+    fx_noise_cache cache;
+} gain_queue;
+
+static __attribute__((noinline)) void gain_flush(const caustics_job *j, gain_queue *q)
+{
+    const fx_effect_run *run = j->run;
+    const v4f tint = {j->p->tint[0], j->p->tint[1], j->p->tint[2], 0.0f};
+    const int n = q->n;
+    float a[GAIN_QUEUE], sv[GAIN_QUEUE];
+    if (j->table.kind && j->p->method == METHOD_GRID) {
+        double *qx = q->qx, *qy = q->qy, *f1 = q->f1, *f2 = q->f2;
+        for (int k = 0; k < n; k++) {
+            qx[k] = (double)q->px[k] * j->inv_cell_d;
+            qy[k] = (double)q->py[k] * j->inv_cell_d;
+        }
+        fx_voronoi_table_grid_n(&j->table, n, qx, qy, f1, f2, NULL, NULL);
+        for (int k = 0; k < n; k++) {
+            const double v = f2[k] - f1[k];
+            a[k] = !(v >= 0.0) ? 0.0f : v > 1e30 ? 1e30f : (float)v;
+        }
+    } else {
+        for (int k = 0; k < n; k++)
+            a[k] = value_at(j, q->px[k], q->py[k], NULL);
+    }
+    for (int k = 0; k < n; k++)
+        sv[k] = noise_at(j, q->px[k], q->py[k], &q->cache);
+    for (int k = 0; k < n; k++)
+        sv[k] = focus_s(j, a[k], sv[k]);
+    for (int k = 0; k < n; k++) {
+        const float sk = sv[k];
+        apply_gain(run->src + q->at[k] * 4, run->dst + q->at[k] * 4, (v4f){sk, sk, sk, sk}, tint);
+    }
+    q->n = 0;
+}
+
+/* caustics_rows_gain's pixel x of row y whose corners, interpolated to it, give s and world
+ * XY (wx, wy): no position or outside the mask: the source; its corners on its surface
+ * (interpolated world XY within a tenth of a cell of its own): s; else queued for its own
+ * search, noise and s (gain_flush). */
+static __attribute__((noinline)) void gain_pixel(const caustics_job *j, int x, int y, float s, float wx, float wy,
+                                                 gain_queue *q)
 {
     const fx_effect_run *run = j->run;
     const size_t i = (size_t)y * run->width + x;
@@ -978,92 +1028,275 @@ static __attribute__((noinline)) void gain_pixel(const caustics_job *j, int x, i
         return;
     }
     const float tol = (float)(GAIN_TOL * j->cell);
-    const float wx = L[2] + t * D[2], wy = L[3] + t * D[3];
-    float s;
-    if (fabsf(wx - px) <= tol && fabsf(wy - py) <= tol) /* NaN corners fail */
-        s = L[0] + t * D[0];
-    else
-        s = focus_s(j, value_at(j, px, py, NULL), noise_at(j, px, py, cache));
-    apply_gain(run->src + i * 4, run->dst + i * 4, (v4f){s, s, s, s}, tint);
+    if (fabsf(wx - px) <= tol && fabsf(wy - py) <= tol) { /* NaN corners fail */
+        const v4f tint = {j->p->tint[0], j->p->tint[1], j->p->tint[2], 0.0f};
+        apply_gain(run->src + i * 4, run->dst + i * 4, (v4f){s, s, s, s}, tint);
+        return;
+    }
+    if (q->n == GAIN_QUEUE)
+        gain_flush(j, q);
+    q->at[q->n] = i;
+    q->px[q->n] = px;
+    q->py[q->n++] = py;
+}
+
+#define GAIN_CHUNK 1024 /* pixels of a row per pass of caustics_rows_gain's general path */
+
+/* Two four-lane vectors as one of eight lanes (a register pair in the baseline clone, one
+ * AVX register in the AVX2 clone), and lane k of a four-lane vector in every lane. */
+static inline __attribute__((always_inline)) v8f cat8(v4f a, v4f b)
+{
+    return (v8f){a[0], a[1], a[2], a[3], b[0], b[1], b[2], b[3]};
+}
+#ifdef __SSE2__
+#define BCAST4(v, k) ((v4f)_mm_shuffle_ps((v), (v), _MM_SHUFFLE(k, k, k, k)))
+#else
+#define BCAST4(v, k) ((v4f){(v)[k], (v)[k], (v)[k], (v)[k]})
+#endif
+
+/* caustics_rows_gain's constants, and its eight pixels at a time. */
+typedef struct gain_ctx {
+    const caustics_job *j;
+    const float *cov;
+    int pc;
+    v4f tint, vtol;
+} gain_ctx;
+
+/* Pixels x .. x + 7 of row y with their s, world x and y interpolated from their corners,
+ * four at a time (the baseline clone compares eight lanes one by one): positions,
+ * validity, mask and surface test, then apply_gain per pixel; the pixels that fail the test
+ * (no position, masked out, off their corners' surface: a silhouette, a step) are then
+ * redone one at a time by gain_pixel (the same operations: no pixel's bits depend on its
+ * neighbours). */
+static inline __attribute__((always_inline)) void gain_octet4(const gain_ctx *g, int x, int y, v8f s8, v8f wx8,
+                                                             v8f wy8, gain_queue *q)
+{
+    const caustics_job *j = g->j;
+    const fx_effect_run *run = j->run;
+    const int pc = g->pc;
+    const v4i absm = {0x7fffffff, 0x7fffffff, 0x7fffffff, 0x7fffffff};
+    const v4f big = V4(1e15f), zero = V4(0.0f), vtol = g->vtol;
+    for (int h = 0; h < 2; h++) {
+        const v4f s4 = h ? (v4f){s8[4], s8[5], s8[6], s8[7]} : (v4f){s8[0], s8[1], s8[2], s8[3]};
+        const v4f wx = h ? (v4f){wx8[4], wx8[5], wx8[6], wx8[7]} : (v4f){wx8[0], wx8[1], wx8[2], wx8[3]};
+        const v4f wy = h ? (v4f){wy8[4], wy8[5], wy8[6], wy8[7]} : (v4f){wy8[0], wy8[1], wy8[2], wy8[3]};
+        const size_t i = (size_t)y * run->width + x + 4 * h;
+        const float *pq = j->position + i * pc;
+        v4f px, py, pz;
+        if (pc == 3) {
+            ld3x4(pq, &px, &py, &pz);
+        } else {
+            px = (v4f){pq[0], pq[pc], pq[2 * pc], pq[3 * pc]};
+            py = (v4f){pq[1], pq[pc + 1], pq[2 * pc + 1], pq[3 * pc + 1]};
+            pz = (v4f){pq[2], pq[pc + 2], pq[2 * pc + 2], pq[3 * pc + 2]};
+        }
+        v4i ok = ((v4f)((v4i)px & absm) <= big) & ((v4f)((v4i)py & absm) <= big) & ((pz - pz) == zero) &
+                 ((v4f)((v4i)(wx - px) & absm) <= vtol) & ((v4f)((v4i)(wy - py) & absm) <= vtol);
+        if (g->cov)
+            ok &= ld4(g->cov + i) > zero;
+        const float *src = run->src + i * 4;
+        float *dst = run->dst + i * 4;
+        apply_gain(src, dst, BCAST4(s4, 0), g->tint);
+        apply_gain(src + 4, dst + 4, BCAST4(s4, 1), g->tint);
+        apply_gain(src + 8, dst + 8, BCAST4(s4, 2), g->tint);
+        apply_gain(src + 12, dst + 12, BCAST4(s4, 3), g->tint);
+        if (!all4(ok))
+            for (int l = 0; l < 4; l++)
+                if (!ok[l])
+                    gain_pixel(j, x + 4 * h + l, y, s4[l], wx[l], wy[l], q);
+    }
+}
+
+/* gain_octet4 in eight lanes (the AVX2 clone; the baseline clone would compare lane by lane):
+ * positions, validity, mask and surface test, then out = src (1 + s tint) clamped, by
+ * apply_gain's operations lane by lane (colour in [0, FLT_MAX], NaN to 0; alpha in
+ * [-FLT_MAX, FLT_MAX], NaN to -FLT_MAX); the pixels that fail the test (no position,
+ * masked out, off their corners' surface: a silhouette, a step) are then redone one at a
+ * time by gain_pixel (the same operations: no pixel's bits depend on its neighbours). */
+static inline __attribute__((always_inline)) void gain_octet8(const gain_ctx *g, int x, int y, v8f s8, v8f wx,
+                                                             v8f wy, gain_queue *q)
+{
+    const caustics_job *j = g->j;
+    const fx_effect_run *run = j->run;
+    const int pc = g->pc;
+    const v8i absm = {0x7fffffff, 0x7fffffff, 0x7fffffff, 0x7fffffff, 0x7fffffff, 0x7fffffff, 0x7fffffff, 0x7fffffff};
+    const v8f big = S8(1e15f), zero = S8(0.0f), one = S8(1.0f), fmax = S8(FLT_MAX), amin = S8(-FLT_MAX);
+    const v8f vtol8 = S8(g->vtol[0]);
+    const size_t i = (size_t)y * run->width + x;
+    const float *pq = j->position + i * pc;
+    v8f px, py, pz;
+    if (pc == 3) {
+        const v8f m0 = fx_load8(pq), m1 = fx_load8(pq + 8), m2 = fx_load8(pq + 16);
+        const v8f ux = FX_SHUF8(m0, m1, 0, 3, 6, 9, 12, 15, 0, 0);
+        const v8f uy = FX_SHUF8(m0, m1, 1, 4, 7, 10, 13, 0, 0, 0);
+        const v8f uz = FX_SHUF8(m0, m1, 2, 5, 8, 11, 14, 0, 0, 0);
+        px = FX_SHUF8(ux, m2, 0, 1, 2, 3, 4, 5, 10, 13);
+        py = FX_SHUF8(uy, m2, 0, 1, 2, 3, 4, 8, 11, 14);
+        pz = FX_SHUF8(uz, m2, 0, 1, 2, 3, 4, 9, 12, 15);
+    } else if (pc == 4) {
+        v8f m[4];
+        fx_load8x4(pq, m);
+        px = m[0];
+        py = m[1];
+        pz = m[2];
+    } else { /* other channel counts (not written by Blender) */
+        float q[3][8];
+        for (int ch = 0; ch < 3; ch++)
+            for (int l = 0; l < 8; l++)
+                q[ch][l] = pq[(size_t)l * pc + ch];
+        px = fx_load8(q[0]);
+        py = fx_load8(q[1]);
+        pz = fx_load8(q[2]);
+    }
+    v8i ok = ((v8f)((v8i)px & absm) <= big) & ((v8f)((v8i)py & absm) <= big) & ((pz - pz) == zero) &
+             ((v8f)((v8i)(wx - px) & absm) <= vtol8) & ((v8f)((v8i)(wy - py) & absm) <= vtol8);
+    if (g->cov)
+        ok &= fx_load8(g->cov + i) > zero;
+    v8f p[4];
+    fx_load8x4(run->src + i * 4, p);
+    v8f o[4] = {p[0] * (one + s8 * S8(g->tint[0])), p[1] * (one + s8 * S8(g->tint[1])), p[2] * (one + s8 * S8(g->tint[2])),
+                p[3] * (one + s8 * zero)};
+    for (int ch = 0; ch < 3; ch++) {
+        const v8f m = (v8f)((v8i)o[ch] & (o[ch] > zero));
+        o[ch] = SEL8(m < fmax, m, fmax);
+    }
+    o[3] = SEL8(o[3] > amin, o[3], amin);
+    o[3] = SEL8(o[3] < fmax, o[3], fmax);
+    fx_store8x4(run->dst + i * 4, o);
+    if (!fx_all8(ok))
+        for (int l = 0; l < 8; l++)
+            if (!ok[l])
+                gain_pixel(j, x + l, y, s8[l], wx[l], wy[l], q);
 }
 
 /* lattice_shading's path (draft) in physical mode without an additive term, from the
- * Position pass: the nodes hold the focus gain s (focus_s of their pattern and noise); per
- * row and lattice cell, the corners interpolated to the row, then four pixels at a time:
- * their positions, validity and surface test as vectors, s interpolated and applied. A
- * quad with any other pixel (no position, masked out, off the corners' surface: a
- * silhouette, a step) goes a pixel at a time (gain_pixel: the same operations, lane by
- * lane, so a pixel's bits do not depend on its quad). */
-static void caustics_rows_gain(void *user, int begin, int end)
+ * Position pass: the nodes hold the focus gain s (focus_s of their pattern and noise); a
+ * pixel's s and world XY are its corners' bilinear interpolation (row first: L and R, the
+ * lattice cell's columns at this row; then L + t (R - L)), then gain_octet. FX_CLONES: one
+ * AVX2 register per channel where the CPU has it. downsample 4 (the draft): per row, the
+ * columns' s, x, y as arrays, and eight pixels (two lattice cells) take theirs by constant
+ * shuffles; the row's last cell (up to 5 pixels) and other downsamples: per chunk of whole
+ * cells, the pixels' values into arrays four at a time, then eight pixels at a time. */
+FX_CLONES static void caustics_rows_gain(void *user, int begin, int end)
 {
     const caustics_job *j = user;
     const fx_effect_run *run = j->run;
-    const int w = run->width, x0 = run->roi.x0, x1 = run->roi.x1, nx = j->nx, f = j->f, pc = j->pos_channels;
+    const int x0 = run->roi.x0, x1 = run->roi.x1, nx = j->nx, f = j->f;
     const int ncx = nx > 1 ? nx - 1 : 1;
-    const float tol = (float)(GAIN_TOL * j->cell);
-    const float *cov = run->mask ? run->mask->coverage : NULL;
+    const int per_chunk = (GAIN_CHUNK - 1) / f; /* cells: each has at most f + 1 pixels */
     const float *col_t = j->col_t;
-    const v4f tint = {j->p->tint[0], j->p->tint[1], j->p->tint[2], 0.0f};
-    const v4i absm = {0x7fffffff, 0x7fffffff, 0x7fffffff, 0x7fffffff};
-    const v4f big = {1e15f, 1e15f, 1e15f, 1e15f}, vtol = {tol, tol, tol, tol}, zero = {0.0f, 0.0f, 0.0f, 0.0f};
-    fx_noise_cache cache = {0};
+    const float tol = (float)(GAIN_TOL * j->cell);
+    const gain_ctx g = {j, run->mask ? run->mask->coverage : NULL, j->pos_channels,
+                        {j->p->tint[0], j->p->tint[1], j->p->tint[2], 0.0f}, V4(tol)};
+    gain_queue q;
+    q.n = 0;
+    memset(&q.cache, 0, sizeof q.cache);
+    /* downsample 4: the row's columns (8 more for the last octet's loads) */
+    const int quick = f == 4 && nx > 1;
+    float *cols = quick ? fx_mem_alloc((size_t)3 * (nx + 8) * sizeof(float)) : NULL;
+    float *cs = cols, *cx = cols ? cols + nx + 8 : NULL, *cy = cols ? cols + 2 * (nx + 8) : NULL;
+    float sv[GAIN_CHUNK], xv[GAIN_CHUNK], yv[GAIN_CHUNK];
     for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++) {
         int j0, j1;
         float ty;
         lattice_pos(j->node_y, j->ny, f, run->roi.y0, y, &j0, &j1, &ty);
         const float uy = 1.0f - ty;
         const float *a = j->nodes + (size_t)j0 * nx * 4, *b = j->nodes + (size_t)j1 * nx * 4;
-        v4f L = ld4(a) * uy + ld4(b) * ty;
-        for (int cc = 0; cc < ncx; cc++) {
-            const int i1 = nx > 1 ? cc + 1 : 0;
-            const v4f R = ld4(a + 4 * i1) * uy + ld4(b + 4 * i1) * ty;
-            const v4f D = R - L;
-            const int xs = x0 + cc * f, xe = cc == ncx - 1 ? x1 : xs + f;
-#ifdef __SSE2__
-#define BCAST(v, k) ((v4f)_mm_shuffle_ps((v), (v), _MM_SHUFFLE(k, k, k, k)))
-#else
-#define BCAST(v, k) ((v4f){(v)[k], (v)[k], (v)[k], (v)[k]})
-#endif
-            const v4f ls = BCAST(L, 0), ds = BCAST(D, 0), lx = BCAST(L, 2), dx = BCAST(D, 2);
-            const v4f ly = BCAST(L, 3), dy = BCAST(D, 3);
-            /* quads at xs, xs + 4, ...; a cell of 4 pixels or more ends with the quad at
-             * xe - 4 (overlapping: the same cell, so the same values written again) */
-            const int nquad = xe - xs >= 4 ? (xe - xs + 3) / 4 : 0;
-            for (int q = 0; q < nquad; q++) {
-                const int x = xs + 4 * q + 4 <= xe ? xs + 4 * q : xe - 4;
-                const size_t i = (size_t)y * w + x;
-                const v4f t4 = ld4(col_t + (x - x0));
-                const float *pq = j->position + i * pc;
-                v4f px, py, pz;
-                if (pc == 3) {
-                    ld3x4(pq, &px, &py, &pz);
-                } else {
-                    px = (v4f){pq[0], pq[pc], pq[2 * pc], pq[3 * pc]};
-                    py = (v4f){pq[1], pq[pc + 1], pq[2 * pc + 1], pq[3 * pc + 1]};
-                    pz = (v4f){pq[2], pq[pc + 2], pq[2 * pc + 2], pq[3 * pc + 2]};
-                }
-                const v4f wx = lx + t4 * dx, wy = ly + t4 * dy;
-                v4i ok = ((v4f)((v4i)px & absm) <= big) & ((v4f)((v4i)py & absm) <= big) & ((pz - pz) == zero) &
-                         ((v4f)((v4i)(wx - px) & absm) <= vtol) & ((v4f)((v4i)(wy - py) & absm) <= vtol);
-                if (cov)
-                    ok &= ld4(cov + i) > zero;
-                if (all4(ok)) {
-                    const v4f s4 = ls + t4 * ds;
-                    apply_gain(run->src + i * 4, run->dst + i * 4, BCAST(s4, 0), tint);
-                    apply_gain(run->src + (i + 1) * 4, run->dst + (i + 1) * 4, BCAST(s4, 1), tint);
-                    apply_gain(run->src + (i + 2) * 4, run->dst + (i + 2) * 4, BCAST(s4, 2), tint);
-                    apply_gain(run->src + (i + 3) * 4, run->dst + (i + 3) * 4, BCAST(s4, 3), tint);
-                } else {
-                    for (int m = 0; m < 4; m++)
-                        gain_pixel(j, x + m, y, t4[m], L, D, tint, &cache);
+        int cfirst = 0; /* the first lattice cell left to the general path */
+        if (cols) {
+            int i = 0;
+            if (j->wide) { /* eight nodes at a time: ld4(a) uy + ld4(b) ty, channel by channel */
+                const v8f uy8 = S8(uy), ty8 = S8(ty);
+                for (; i + 8 <= nx; i += 8) {
+                    v8f na[4], nb[4];
+                    fx_load8x4(a + 4 * i, na);
+                    fx_load8x4(b + 4 * i, nb);
+                    fx_store8(cs + i, na[0] * uy8 + nb[0] * ty8);
+                    fx_store8(cx + i, na[2] * uy8 + nb[2] * ty8);
+                    fx_store8(cy + i, na[3] * uy8 + nb[3] * ty8);
                 }
             }
-#undef BCAST
-            for (int x = nquad ? xe : xs; x < xe; x++)
-                gain_pixel(j, x, y, col_t[x - x0], L, D, tint, &cache);
-            L = R;
+            for (; i < nx; i++) { /* the general path's L, channel by channel */
+                const v4f c = ld4(a + 4 * i) * uy + ld4(b + 4 * i) * ty;
+                cs[i] = c[0];
+                cx[i] = c[2];
+                cy[i] = c[3];
+            }
+            /* octets of two cells of 4 pixels (the last cell, x1 - 1's, may be longer) */
+            for (; cfirst + 2 < ncx; cfirst += 2) {
+                const int x = x0 + 4 * cfirst;
+                const v8f t = fx_load8(col_t + (x - x0));
+                v8f ls, rs, lx, rx, ly, ry;
+                if (j->wide) { /* one permute per vector in the AVX2 clone */
+                    const v8f vs = fx_load8(cs + cfirst), vx = fx_load8(cx + cfirst), vy = fx_load8(cy + cfirst);
+                    ls = FX_SHUF8(vs, vs, 0, 0, 0, 0, 1, 1, 1, 1);
+                    rs = FX_SHUF8(vs, vs, 1, 1, 1, 1, 2, 2, 2, 2);
+                    lx = FX_SHUF8(vx, vx, 0, 0, 0, 0, 1, 1, 1, 1);
+                    rx = FX_SHUF8(vx, vx, 1, 1, 1, 1, 2, 2, 2, 2);
+                    ly = FX_SHUF8(vy, vy, 0, 0, 0, 0, 1, 1, 1, 1);
+                    ry = FX_SHUF8(vy, vy, 1, 1, 1, 1, 2, 2, 2, 2);
+                } else { /* broadcasts: the baseline clone has no eight-lane shuffles */
+                    const v4f s0 = V4(cs[cfirst]), s1 = V4(cs[cfirst + 1]), s2 = V4(cs[cfirst + 2]);
+                    const v4f p0 = V4(cx[cfirst]), p1 = V4(cx[cfirst + 1]), p2 = V4(cx[cfirst + 2]);
+                    const v4f q0 = V4(cy[cfirst]), q1 = V4(cy[cfirst + 1]), q2 = V4(cy[cfirst + 2]);
+                    ls = cat8(s0, s1);
+                    rs = cat8(s1, s2);
+                    lx = cat8(p0, p1);
+                    rx = cat8(p1, p2);
+                    ly = cat8(q0, q1);
+                    ry = cat8(q1, q2);
+                }
+                const v8f sv8 = ls + t * (rs - ls), xv8 = lx + t * (rx - lx), yv8 = ly + t * (ry - ly);
+                if (j->wide)
+                    gain_octet8(&g, x, y, sv8, xv8, yv8, &q);
+                else
+                    gain_octet4(&g, x, y, sv8, xv8, yv8, &q);
+            }
         }
+        for (int cc0 = cfirst; cc0 < ncx; cc0 += per_chunk) {
+            const int cc1 = cc0 + per_chunk < ncx ? cc0 + per_chunk : ncx;
+            const int xa = x0 + cc0 * f, xb = cc1 == ncx ? x1 : x0 + cc1 * f, n = xb - xa;
+            /* the pixels' s, world x, y (four at a time: a cell of 4 pixels or more ends
+             * with the quad at xe - 4, overlapping: the same values written again) */
+            v4f L = ld4(a + 4 * cc0) * uy + ld4(b + 4 * cc0) * ty;
+            for (int cc = cc0; cc < cc1; cc++) {
+                const int i1 = nx > 1 ? cc + 1 : 0;
+                const v4f R = ld4(a + 4 * i1) * uy + ld4(b + 4 * i1) * ty;
+                const v4f D = R - L;
+                const int xs = x0 + cc * f, xe = cc == ncx - 1 ? x1 : xs + f;
+                const v4f ls = V4(L[0]), ds = V4(D[0]), lx = V4(L[2]), dx = V4(D[2]), ly = V4(L[3]), dy = V4(D[3]);
+                const int nquad = xe - xs >= 4 ? (xe - xs + 3) / 4 : 0;
+                for (int q = 0; q < nquad; q++) {
+                    const int x = xs + 4 * q + 4 <= xe ? xs + 4 * q : xe - 4;
+                    const v4f t4 = ld4(col_t + (x - x0));
+                    st4(sv + (x - xa), ls + t4 * ds);
+                    st4(xv + (x - xa), lx + t4 * dx);
+                    st4(yv + (x - xa), ly + t4 * dy);
+                }
+                for (int x = nquad ? xe : xs; x < xe; x++) {
+                    const float t = col_t[x - x0];
+                    sv[x - xa] = L[0] + t * D[0];
+                    xv[x - xa] = L[2] + t * D[2];
+                    yv[x - xa] = L[3] + t * D[3];
+                }
+                L = R;
+            }
+            /* eight pixels at a time (a chunk of 8 or more ends with the octet at n - 8) */
+            const int noct = n >= 8 ? (n + 7) / 8 : 0;
+            for (int k = 0; k < noct; k++) {
+                const int c = 8 * k + 8 <= n ? 8 * k : n - 8;
+                if (j->wide)
+                    gain_octet8(&g, xa + c, y, fx_load8(sv + c), fx_load8(xv + c), fx_load8(yv + c), &q);
+                else
+                    gain_octet4(&g, xa + c, y, fx_load8(sv + c), fx_load8(xv + c), fx_load8(yv + c), &q);
+            }
+            for (int c = noct ? n : 0; c < n; c++)
+                gain_pixel(j, xa + c, y, sv[c], xv[c], yv[c], &q);
+        }
+        if (q.n)
+            gain_flush(j, &q);
     }
+    fx_mem_free(cols);
 }
 
 /* Mean of g over the tile at this time: a fixed lattice, independent of the camera. */
@@ -1140,6 +1373,15 @@ static void job_init(const fx_effect_run *run, const caustics_params *p, caustic
     j->far_gap = p->mode == MODE_PHYSICAL && exponent_of(p) >= 1.0 ? (float)(10.0 * p->line_width) : 0.0f;
     j->wave = (float)sin(2.0 * j->time);
     j->has_view = fx_view_init(&j->view, run->frame);
+    /* caustics_rows_gain's eight-lane path where its code is AVX2 code: the whole build
+     * targets AVX2, or FX_CLONES (math/clones.h: gcc on x86) has made an AVX2 clone, which
+     * its resolver picks under this condition. Either path gives the same bits. */
+#if defined(__AVX2__)
+    j->wide = 1;
+#elif defined(__GNUC__) && !defined(__clang__) && (defined(__x86_64__) || defined(__i386__)) && \
+    !defined(FX_NO_CLONES)
+    j->wide = __builtin_cpu_supports("avx2") != 0;
+#endif
 }
 
 /* Process stage 2: the passes the parameters read (Position or Depth, Normal) and the
