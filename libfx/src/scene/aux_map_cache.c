@@ -122,14 +122,19 @@ void fx_aux_cache_stats(const fx_context *ctx, long *built, long *reused)
 /* filter value of an entry that keeps the view as read (fx_aux_view_acquire) */
 #define AUX_RAW_VIEW (-2)
 
-/* Builds the map of entry e (key already set). */
+/* Builds the map of entry e (key already set). keep_frame: a view kept as read stays in
+ * its EXR's frame (an entry that cannot go into the cache: released within the run). */
 static fx_result entry_build(const fx_frame *f, const char *name, int bias, int filter, float width,
-                             const char *where, aux_entry *e)
+                             const char *where, int keep_frame, aux_entry *e)
 {
     fx_result r = fx_aux_view_load(f, name, where, &e->av);
     if (r)
         return r;
     fx_aux_view *av = e->av;
+    if (filter == AUX_RAW_VIEW && keep_frame) {
+        e->bytes = (uint64_t)av->width * av->height * 5 * sizeof(float) + sizeof *av;
+        return FX_OK;
+    }
     if (filter == AUX_RAW_VIEW) {
         /* Its pixels move out of the EXR's frame, which is freed: a frame kept here would
          * keep its context alive (fx_context_free waits for the last frame), and with it
@@ -214,7 +219,8 @@ static fx_result acquire(const fx_frame *f, const char *name, int derivative_bia
     }
     aux_entry tmp;
     memset(&tmp, 0, sizeof tmp);
-    r = entry_build(f, name, derivative_bias, filter, width, where, &tmp);
+    /* without a key (no caching) the entry is private: the copy out of the frame is skipped */
+    r = entry_build(f, name, derivative_bias, filter, width, where, !key, &tmp);
     if (r) {
         entry_free(&tmp);
         fx_mem_free(key);
