@@ -1,6 +1,7 @@
 /* Equirectangular probe lookups (math/panorama.h). */
 #include "math/panorama.h"
 #include "core/simd4.h"
+#include "math/clones.h"
 
 #include <float.h>
 
@@ -112,7 +113,9 @@ static inline v4i in_front4(const fx_pano *p, fx_vec3 po, fx_vec3 pd, v4f t, v4f
     return ~(dist >= D);
 }
 
-int fx_pano_trace(const fx_pano *p, const fx_pano_trace_settings *st, fx_vec3 o, fx_vec3 dir, float rgb[3])
+/* an AVX2 clone: VEX's three-operand forms drop the register copies of the selects */
+FX_CLONES int fx_pano_trace(const fx_pano *p, const fx_pano_trace_settings *st, fx_vec3 o, fx_vec3 dir,
+                            float rgb[3])
 {
     fx_vec3 po = fx_m4_point(p->to_probe, o);
     fx_vec3 pd = fx_m4_dir(p->to_probe, dir);
