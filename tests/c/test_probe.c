@@ -191,6 +191,92 @@ static void test_parallax(void)
     free(rgba), free(dep);
 }
 
+/* The march one step at a time, as fx_pano_trace did before it took four steps at once
+ * (its lanes must give these bits: the same texel per step, the same crossing). */
+static int ref_in_front(const fx_pano *p, fx_vec3 q, float *gap)
+{
+    float dist = sqrtf(fx_v3_dot(q, q));
+    float D = fx_pano_depth(p, q);
+    *gap = dist - D;
+    return !(dist >= D);
+}
+
+static int ref_trace(const fx_pano *p, const fx_pano_trace_settings *st, fx_vec3 o, fx_vec3 dir, float rgb[3])
+{
+    fx_vec3 po = fx_m4_point(p->to_probe, o);
+    fx_vec3 pd = fx_m4_dir(p->to_probe, dir);
+    if (!isfinite(po.x + po.y + po.z + pd.x + pd.y + pd.z)) {
+        fx_pano_color(p, fx_v3(0.0f, 0.0f, -1.0f), rgb);
+        return 0;
+    }
+    pd = fx_v3_normalize_or(pd, fx_v3(0.0f, 0.0f, -1.0f));
+    float gap, prev_t = 0.0f, t = st->t0;
+    int prev_front = ref_in_front(p, po, &gap);
+    for (int k = 0; k < st->steps; k++, t *= st->growth) {
+        int front = ref_in_front(p, fx_v3_add(po, fx_v3_scale(pd, t)), &gap);
+        if (prev_front && !front && gap <= st->thickness + (t - prev_t)) {
+            float lo = prev_t, hi = t;
+            for (int r = 0; r < st->refine; r++) {
+                float mid = 0.5f * (lo + hi), gm;
+                if (ref_in_front(p, fx_v3_add(po, fx_v3_scale(pd, mid)), &gm))
+                    lo = mid;
+                else
+                    hi = mid;
+            }
+            fx_pano_color(p, fx_v3_add(po, fx_v3_scale(pd, hi)), rgb);
+            return 1;
+        }
+        prev_front = front;
+        prev_t = t;
+    }
+    fx_pano_color(p, pd, rgb);
+    return 0;
+}
+
+/* fx_pano_trace gives the one-step march's bits: rays from inside and outside the room,
+ * along the axes and the poles (atan2's special cases), step counts not a multiple of
+ * four, thin and thick surfaces, and a depth with holes (background and zero texels). */
+static void test_trace_bits(void)
+{
+    const int w = 128, h = 64;
+    const double pos[3] = { -0.4, 0.7, 1.2 };
+    float *rgba = malloc((size_t)w * h * 4 * sizeof(float)), *dep = malloc((size_t)w * h * sizeof(float));
+    render_probe(pos, w, h, rgba, dep);
+    for (int i = 0; i < w * h; i += 37)
+        dep[i] = i % 2 ? 1e10f : 0.0f;
+    fx_pano p = { rgba, dep, w, h, { 0 } };
+    w2c(pos, p.to_probe);
+    static const int steps[] = { 1, 2, 3, 5, 48, 63 };
+    static const float thick[] = { 0.0f, 0.05f, 2.0f };
+    unsigned s = 777;
+    int n = 0, same = 0, hits = 0;
+    for (int k = 0; k < 3000; k++) {
+        float v[7];
+        for (int i = 0; i < 7; i++) {
+            s = s * 1664525u + 1013904223u;
+            v[i] = (float)((s >> 8) / 16777216.0);
+        }
+        fx_vec3 o = fx_v3(-4.0f + 8.0f * v[0], -4.0f + 8.0f * v[1], -1.0f + 5.0f * v[2]);
+        fx_vec3 d = fx_v3(v[3] - 0.5f, v[4] - 0.5f, v[5] - 0.5f);
+        if (k % 10 == 0) /* along an axis, through the probe's centre, or zero */
+            d = k % 40 == 0 ? fx_v3(0, 0, v[3] - 0.5f) : k % 40 == 10 ? fx_v3(v[3] - 0.5f, 0, 0)
+                : k % 40 == 20 ? fx_v3(0, v[3] - 0.5f, 0) : fx_v3(0, 0, 0);
+        if (k % 7 == 0)
+            o = fx_v3((float)pos[0], (float)pos[1], (float)pos[2]);
+        fx_pano_trace_settings st =
+            fx_pano_trace_setup(steps[k % 6], k % 9, 0.02f, k % 5 == 0 ? 3.0f : 100.0f, thick[k % 3]);
+        float a[3], b[3];
+        int ha = fx_pano_trace(&p, &st, o, d, a), hb = ref_trace(&p, &st, o, d, b);
+        same += ha == hb && memcmp(a, b, sizeof a) == 0;
+        hits += ha;
+        n++;
+    }
+    printf("probe march, %d rays: %d with the one-step march's bits (%d hits)\n", n, same, hits);
+    CHECK(same == n);
+    CHECK(hits > 300);
+    free(rgba), free(dep);
+}
+
 /* ---- end to end ---- */
 
 static const double CAM[3] = { 0.0, -1.5, 1.5 };
@@ -564,6 +650,7 @@ int main(void)
     fx_context_new(&ctx, 2);
     test_conventions();
     test_parallax();
+    test_trace_bits();
     test_end_to_end(ctx);
     test_planar(ctx);
     fx_context_free(ctx);

@@ -1,5 +1,9 @@
 /* Equirectangular probe lookups (math/panorama.h). */
 #include "math/panorama.h"
+#include "core/simd4.h"
+#include "math/clones.h"
+
+#include <float.h>
 
 void fx_pano_color(const fx_pano *p, fx_vec3 d, float rgb[3])
 {
@@ -39,7 +43,79 @@ fx_pano_trace_settings fx_pano_trace_setup(int steps, int refine, float min_dist
     return st;
 }
 
-int fx_pano_trace(const fx_pano *p, const fx_pano_trace_settings *st, fx_vec3 o, fx_vec3 dir, float rgb[3])
+/* Four march steps at once: the lanes of in_front for the points po + t pd, with the same
+ * IEEE operations as the scalar path (fx_pano_depth, fx_atan2f_finite; ISO C contracts
+ * nothing and there is no FMA), so the same texel and the same bits per lane. Branches
+ * become selects: every lane computes each branch's operands and one division takes the
+ * chosen ones (x / 1 and 0 + x are exact, so the untaken forms change no bit). */
+static inline v4f atan_pos4(v4f z)
+{
+    const v4i big = z > V4(2.414213562f), mid = ~big & (z > V4(0.414213562f));
+    v4f base = sel4(big, V4(FX_TRIG_PI_2), sel4(mid, V4(FX_TRIG_PI_4), V4(0.0f)));
+    v4f num = sel4(big, V4(-1.0f), sel4(mid, z - V4(1.0f), z));
+    v4f den = sel4(big, z, sel4(mid, z + V4(1.0f), V4(1.0f)));
+    v4f t = num / den;
+    v4f s = t * t;
+    v4f p = ((V4(8.05374449538e-2f) * s - V4(1.38776856032e-1f)) * s + V4(1.99777106478e-1f)) * s -
+            V4(3.33329491539e-1f);
+    return base + (p * s * t + t);
+}
+
+static inline v4f atan2_finite4(v4f y, v4f x)
+{
+    const v4i sign = (v4i)V4(-0.0f);
+    v4f ax = (v4f)((v4i)x & ~sign), ay = (v4f)((v4i)y & ~sign);
+    v4i swap = ~(ay <= ax);
+    v4f a = atan_pos4(sel4(swap, ax, ay) / sel4(swap, ay, ax));
+    a = sel4(swap, V4(FX_TRIG_PI_2) - a, a);
+    a = sel4(x < V4(0.0f), V4(FX_TRIG_PI) - a, a);
+    a = (v4f)((v4i)a ^ ((v4i)y & sign));
+    return sel4((ax == V4(0.0f)) & (ay == V4(0.0f)), V4(0.0f), a);
+}
+
+static inline v4f sqrt4(v4f v)
+{
+#ifdef __SSE__
+    return (v4f)_mm_sqrt_ps((__m128)v);
+#else
+    return (v4f){ sqrtf(v[0]), sqrtf(v[1]), sqrtf(v[2]), sqrtf(v[3]) };
+#endif
+}
+
+/* fx_clampf lane by lane */
+static inline v4f clamp4(v4f v, float lo, float hi)
+{
+    return sel4(v < V4(lo), V4(lo), sel4(v > V4(hi), V4(hi), v));
+}
+
+/* front: lanes in front of the surface (all ones), gap: dist - D, for q = po + t pd */
+static inline v4i in_front4(const fx_pano *p, fx_vec3 po, fx_vec3 pd, v4f t, v4f *gap)
+{
+    v4f qx = V4(po.x) + V4(pd.x) * t, qy = V4(po.y) + V4(pd.y) * t, qz = V4(po.z) + V4(pd.z) * t;
+    v4f dist = sqrt4(qx * qx + qy * qy + qz * qz);
+    const float fw = (float)p->w, fh = (float)p->h;
+    v4f u = V4(0.5f) - atan2_finite4(-qx, -qz) / V4(2.0f * FX_PANO_PI);
+    v4f cy = clamp4(qy / dist, -1.0f, 1.0f);
+    v4f v = atan2_finite4(sqrt4((V4(1.0f) - cy) * (V4(1.0f) + cy)), cy) / V4(FX_PANO_PI);
+    v4i ok = (dist > V4(1e-30f)) & (dist <= V4(FLT_MAX)); /* fx_pano_dir_to_pixel's test */
+    v4f px = sel4(ok, clamp4(u, 0.0f, 1.0f) * V4(fw), V4(0.5f * fw));
+    v4f py = sel4(ok, clamp4(v, 0.0f, 1.0f) * V4(fh), V4(0.5f * fh));
+    v4i x = __builtin_convertvector(px, v4i), y = __builtin_convertvector(py, v4i);
+    float d[4];
+    for (int k = 0; k < 4; k++) {
+        int xx = x[k] < 0 ? 0 : x[k] >= p->w ? p->w - 1 : x[k];
+        int yy = y[k] < 0 ? 0 : y[k] >= p->h ? p->h - 1 : y[k];
+        d[k] = p->depth[(size_t)yy * p->w + xx];
+    }
+    v4f D = ld4(d);
+    D = sel4((D > V4(0.0f)) & (D < V4(6.0e4f)), D, V4(INFINITY));
+    *gap = dist - D;
+    return ~(dist >= D);
+}
+
+/* an AVX2 clone: VEX's three-operand forms drop the register copies of the selects */
+FX_CLONES int fx_pano_trace(const fx_pano *p, const fx_pano_trace_settings *st, fx_vec3 o, fx_vec3 dir,
+                            float rgb[3])
 {
     fx_vec3 po = fx_m4_point(p->to_probe, o);
     fx_vec3 pd = fx_m4_dir(p->to_probe, dir);
@@ -49,26 +125,40 @@ int fx_pano_trace(const fx_pano *p, const fx_pano_trace_settings *st, fx_vec3 o,
     }
     pd = fx_v3_normalize_or(pd, fx_v3(0.0f, 0.0f, -1.0f));
     const int steps = st->steps;
-    const float t0 = st->t0, g = st->growth;
+    const float g = st->growth;
     float gap;
     int prev_front = in_front(p, po, &gap);
-    float prev_t = 0.0f, t = t0;
-    for (int k = 0; k < steps; k++, t *= g) {
-        int front = in_front(p, fx_v3_add(po, fx_v3_scale(pd, t)), &gap);
-        if (prev_front && !front && gap <= st->thickness + (t - prev_t)) {
-            float lo = prev_t, hi = t;
-            for (int r = 0; r < st->refine; r++) {
-                float mid = 0.5f * (lo + hi), gm;
-                if (in_front(p, fx_v3_add(po, fx_v3_scale(pd, mid)), &gm))
-                    lo = mid;
-                else
-                    hi = mid;
-            }
-            fx_pano_color(p, fx_v3_add(po, fx_v3_scale(pd, hi)), rgb);
-            return 1;
+    float prev_t = 0.0f, t = st->t0;
+    for (int k0 = 0; k0 < steps; k0 += 4) {
+        /* t_k = t_{k-1} g as the one-step loop multiplied it */
+        float ts[4];
+        for (int l = 0; l < 4; l++, t *= g)
+            ts[l] = t;
+        v4f gaps;
+        v4i front = in_front4(p, po, pd, ld4(ts), &gaps);
+        const int n = steps - k0 < 4 ? steps - k0 : 4;
+        if (n == 4 && all4(front)) {
+            prev_front = 1; /* no crossing: every step in front */
+            prev_t = ts[3];
+            continue;
         }
-        prev_front = front;
-        prev_t = t;
+        for (int l = 0; l < n; l++) {
+            const float tl = ts[l];
+            if (prev_front && !front[l] && gaps[l] <= st->thickness + (tl - prev_t)) {
+                float lo = prev_t, hi = tl;
+                for (int r = 0; r < st->refine; r++) {
+                    float mid = 0.5f * (lo + hi), gm;
+                    if (in_front(p, fx_v3_add(po, fx_v3_scale(pd, mid)), &gm))
+                        lo = mid;
+                    else
+                        hi = mid;
+                }
+                fx_pano_color(p, fx_v3_add(po, fx_v3_scale(pd, hi)), rgb);
+                return 1;
+            }
+            prev_front = front[l] != 0;
+            prev_t = tl;
+        }
     }
     fx_pano_color(p, pd, rgb);
     return 0;

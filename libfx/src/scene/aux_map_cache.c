@@ -176,9 +176,10 @@ static fx_result entry_from_base(const fx_frame *f, const char *name, int bias, 
     return r;
 }
 
-/* Builds the map of entry e (key already set). */
+/* Builds the map of entry e (key already set). keep_frame: a view kept as read stays in
+ * its EXR's frame (an entry that cannot go into the cache: released within the run). */
 static fx_result entry_build(const fx_frame *f, const char *name, int bias, int filter, float width,
-                             const char *where, aux_entry *e)
+                             const char *where, int keep_frame, aux_entry *e)
 {
     if (filter >= 0 && width > 1.0f)
         return entry_from_base(f, name, bias, filter, width, where, e);
@@ -186,6 +187,10 @@ static fx_result entry_build(const fx_frame *f, const char *name, int bias, int 
     if (r)
         return r;
     fx_aux_view *av = e->av;
+    if (filter == AUX_RAW_VIEW && keep_frame) {
+        e->bytes = (uint64_t)av->width * av->height * 5 * sizeof(float) + sizeof *av;
+        return FX_OK;
+    }
     if (filter == AUX_RAW_VIEW) {
         /* Its pixels move out of the EXR's frame, which is freed: a frame kept here would
          * keep its context alive (fx_context_free waits for the last frame), and with it
@@ -283,7 +288,8 @@ static fx_result acquire(const fx_frame *f, const char *name, int derivative_bia
     }
     aux_entry tmp;
     memset(&tmp, 0, sizeof tmp);
-    r = entry_build(f, name, derivative_bias, filter, width, where, &tmp);
+    /* without a key (no caching) the entry is private: the copy out of the frame is skipped */
+    r = entry_build(f, name, derivative_bias, filter, width, where, !key, &tmp);
     if (r) {
         entry_free(&tmp);
         fx_mem_free(key);

@@ -4,14 +4,37 @@
 #include "core/frame.h"
 #include "core/mem.h"
 #include "core/mem_failures.h"
+#include "core/parallel.h"
+#include "core/simd4.h"
 #include "io/exr_read.h"
 #include "scene/aux_view.h"
 #include "scene/camera_json.h"
 
 #include <cjson/cJSON.h>
+#include <float.h>
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
+
+typedef struct half_range_job {
+    float *data;
+    size_t row; /* floats per row */
+} half_range_job;
+
+/* Non-finite values to 0, the rest clamped to +-65504 (the half-float range). */
+static void half_range_rows(void *user, int begin, int end)
+{
+    const half_range_job *j = user;
+    float *q = j->data + (size_t)begin * j->row, *e = j->data + (size_t)end * j->row;
+    for (; q + 4 <= e; q += 4) {
+        v4f v = ld4(q);
+        v4f a = (v4f)((v4i)v & ~(v4i)V4(-0.0f)); /* |v| <= FLT_MAX: false for NaN and +-Inf */
+        v = (v4f)((v4i)v & (a <= V4(FLT_MAX)));
+        st4(q, max4(min4(v, V4(65504.0f)), V4(-65504.0f)));
+    }
+    for (; q < e; q++)
+        *q = !isfinite(*q) ? 0.0f : *q > 65504.0f ? 65504.0f : *q < -65504.0f ? -65504.0f : *q;
+}
 
 void fx_aux_view_free(fx_aux_view *v)
 {
@@ -154,10 +177,9 @@ fx_result fx_aux_view_load(const fx_frame *f, const char *name, const char *wher
      * turns +-Inf into +-FLT_MAX, which a blend would overflow) */
     fx_pass *c = fx_frame_find_pass(av->frame, "Combined");
     if (c && c->channels == 4) {
-        size_t n = (size_t)av->width * av->height * 4;
-        for (size_t k = 0; k < n; k++)
-            c->data[k] = !isfinite(c->data[k]) ? 0.0f : c->data[k] > 65504.0f ? 65504.0f
-                         : c->data[k] < -65504.0f ? -65504.0f : c->data[k];
+        /* a probe's colour is read whole before the first mirror pixel can use it: on
+         * the context's threads, four floats at a time */
+        fx_parallel_for(ctx, av->height, 16, half_range_rows, &(half_range_job){ c->data, (size_t)av->width * 4 });
         av->color = c->data;
     } else if (av->panorama) {
         fx_result rr = fx_fail(ctx, FX_ERR_MISSING_PASS, "%s: probe '%s' (%s) has no RGBA colour (Combined/Image) pass",
