@@ -416,7 +416,7 @@ static inline __attribute__((always_inline)) v4f comp4(v4f s, v4f g, int screen)
  * each twice. */
 FX_CLONES
 static void coarse_row(const int *restrict cx, const float *restrict wt, const float *restrict row2, int cw,
-                       const float *restrict src, float *restrict dst, int xa, int xb, int screen)
+                       const float *src, float *dst, int xa, int xb, int screen) /* dst may be src */
 {
     const int last = cw - 1;
     int x = xa;
@@ -653,8 +653,8 @@ const fx_effect_class fx_effect_bloom = {
     .validate = NULL,
     .process = bloom_process,
     .identity = bloom_identity,
-    /* the composite writes finite4() of every pixel. (Not FX_EFFECT_IN_PLACE, though it
-     * could be: tests/python/test_cli_no_data_loss.py's out-of-memory case counts on bloom
-     * needing a second frame-sized buffer.) */
-    .flags = FX_EFFECT_OWN_FINITE,
+    /* the composite writes finite4() of every pixel; in place: the pyramid is built before
+     * the composite, which reads each pixel of the image just before writing it (on a
+     * consumed frame no fresh frame-sized output: a process's first frame) */
+    .flags = FX_EFFECT_OWN_FINITE | FX_EFFECT_IN_PLACE,
 };
