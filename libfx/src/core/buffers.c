@@ -6,7 +6,11 @@
 #include <string.h>
 
 #define BUFFER_MIN ((size_t)1 << 20) /* smaller ones are cheap to map: plain fx_mem */
-#define BUFFER_SLOTS 6               /* a few frames' passes plus an effect's spare */
+/* A whole frame's buffers (its passes, the stack's two images, the effects' planes): the
+ * greek bath's stack puts 17 back per 1080p frame (7 of 33 MB, 4 of 25 MB, ...); with 6 slots
+ * most were evicted and every frame faulted them in afresh (~900 minor faults and their
+ * zeroing per warm frame). The byte cap below bounds what is held. */
+#define BUFFER_SLOTS 32
 #define BUFFER_MAX_BYTES ((uint64_t)1 << 30)
 
 typedef struct fx_buffer_slot {
