@@ -6,7 +6,7 @@
  *
  * Prints one line per frame: "frame N: run_ms R user U sys S minflt F effects_ms E" (U, S:
  * CPU ms of every thread) (E: the stack's
- * per-effect timings summed), then per effect its ms and minor faults (taken at the stack's
+ * per-effect timings summed), the read's ms and faults, then per effect its ms and minor faults (taken at the stack's
  * progress calls, which come before each effect). Under callgrind, `--toggle-collect=fx_stack_run_consume
  * --dump-after=fx_stack_run_consume` gives the instructions of each frame's run. */
 #include "libfx/fx.h"
@@ -85,10 +85,14 @@ int main(int argc, char **argv)
         ro.size = sizeof ro;
         ro.stack = s;
         fx_frame *in = NULL, *out = NULL;
+        long r0 = minflt();
+        double tr = now_ms();
         if (fx_frame_read_exr(ctx, argv[1], &ro, &in) || fx_frame_apply_sidecar_file(in, argv[2])) {
             fprintf(stderr, "%s\n", fx_context_error(ctx));
             return 1;
         }
+        tr = now_ms() - tr;
+        long read_flt = minflt() - r0;
         fx_context_set_progress(ctx, on_progress, NULL);
         stage_count = 0;
         double u0, s0, u1, s1;
@@ -108,6 +112,7 @@ int main(int argc, char **argv)
         int n = 0;
         printf("frame %d: run_ms %.2f user %.1f sys %.1f minflt %ld effects_ms %.2f", k + 1, t1 - t0, u1 - u0, s1 - s0,
                f1 - f0, effects_ms(s, each, &n));
+        printf(" read_ms %.2f read_flt %ld", tr, read_flt);
         for (int i = 0; i < n; i++)
             printf(" | %.2f ms %ld flt", each[i], i < stage_count ? stage_flt[i + 1] - stage_flt[i] : -1L);
         printf("\n");
