@@ -36,6 +36,7 @@ static void cpu_ms(double *user, double *sys)
 
 #define MAX_FX 64
 static long stage_flt[MAX_FX + 1];
+static double stage_cpu[MAX_FX + 1]; /* user + sys ms, every thread */
 static int stage_count;
 
 /* the stack reports "... (k of n)" before effect k */
@@ -44,8 +45,12 @@ static int on_progress(void *user, const char *stage, double fraction)
     (void)user;
     (void)fraction;
     const char *o = strstr(stage, " of ");
-    if (o && o > stage && stage[strlen(stage) - 1] == ')' && stage_count < MAX_FX)
+    if (o && o > stage && stage[strlen(stage) - 1] == ')' && stage_count < MAX_FX) {
+        double u, sy;
+        cpu_ms(&u, &sy);
+        stage_cpu[stage_count] = u + sy;
         stage_flt[stage_count++] = minflt();
+    }
     return 0;
 }
 
@@ -108,13 +113,15 @@ int main(int argc, char **argv)
         cpu_ms(&u1, &s1);
         fx_context_set_progress(ctx, NULL, NULL);
         stage_flt[stage_count] = f1;
+        stage_cpu[stage_count] = u1 + s1;
         double each[MAX_FX];
         int n = 0;
         printf("frame %d: run_ms %.2f user %.1f sys %.1f minflt %ld effects_ms %.2f", k + 1, t1 - t0, u1 - u0, s1 - s0,
                f1 - f0, effects_ms(s, each, &n));
         printf(" read_ms %.2f read_flt %ld", tr, read_flt);
         for (int i = 0; i < n; i++)
-            printf(" | %.2f ms %ld flt", each[i], i < stage_count ? stage_flt[i + 1] - stage_flt[i] : -1L);
+            printf(" | %.2f ms %ld flt %.1f cpu", each[i], i < stage_count ? stage_flt[i + 1] - stage_flt[i] : -1L,
+                   i < stage_count ? stage_cpu[i + 1] - stage_cpu[i] : -1.0);
         printf("\n");
         if (outp) {
             fx_write_options wo;

@@ -522,7 +522,7 @@ static fx_result bloom_process(const fx_effect_run *run)
     j.inv_4k = 1.0f / (4.0f * (p->threshold * p->knee + 1e-5f) + 1e-5f);
     fx_result r = FX_OK;
     unsigned char *pyramid = NULL;
-    size_t pyramid_bytes = 0;
+    size_t pyramid_bytes = 0, pyramid_capacity = 0;
     if (p->mode == MODE_SEED) {
         double lum = p->scene_luminance;
         if (!(lum > 0.0)) {
@@ -547,7 +547,8 @@ static fx_result bloom_process(const fx_effect_run *run)
     /* Every stored level in one block from the context's buffer store: the same size frame
      * after frame, already mapped; and one block of huge pages (core/mem.h) where levels of
      * their own took 4 KiB pages below 2 MiB: a process's first 1080p frame faulted ~680
-     * pages for levels 2-7. Each level starts on a 64-byte boundary. */
+     * pages for levels 2-7. Each level starts on a 64-byte boundary; every level is
+     * written whole before it is read, so a recycled block's old contents never show. */
     size_t at[MAX_LEVELS + 1] = { 0 };
     int lw = w, lh = h;
     for (int l = 1; l <= j.nlev; l++) {
@@ -560,7 +561,9 @@ static fx_result bloom_process(const fx_effect_run *run)
             pyramid_bytes += ((size_t)lw * lh * 4 * sizeof(float) + 63) & ~(size_t)63;
     }
     if (pyramid_bytes) {
-        pyramid = fx_buffer_get(run->ctx, pyramid_bytes);
+        /* (or a larger idle buffer of the frame: in a stack, a process's first frame then
+         * zeroes no fresh 12 MB, which on these VMs took up to ~13 ms of CPU) */
+        pyramid = fx_buffer_get_at_least(run->ctx, pyramid_bytes, &pyramid_capacity);
         if (!pyramid) {
             r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the pyramid (%zu bytes)", where,
                         pyramid_bytes);
@@ -635,7 +638,7 @@ out:
     fx_mem_free(j.cw);
     fx_mem_free(j.tx[0]);
     fx_mem_free(j.tx[1]);
-    fx_buffer_put(run->ctx, pyramid, pyramid_bytes);
+    fx_buffer_put(run->ctx, pyramid, pyramid_capacity);
     return r;
 }
 
