@@ -205,6 +205,49 @@ static void test_extremes(fx_context *ctx)
     }
 }
 
+/* In place (a consumed frame: the output is the input's buffer, FX_EFFECT_IN_PLACE) equals
+ * the separate-buffer run bit for bit, for 1 and 2 threads, every fine_level (coarse's
+ * composite runs two pixels per vector), both composites and the seed's pass, on a width
+ * off the vectors' multiples, with bright pixels over 1. */
+static void test_in_place(fx_context *c1, fx_context *c2)
+{
+    const int w = 83, h = 61;
+    const char *params[] = { "\"radius\":16", "\"radius\":16,\"fine_level\":\"fast\"",
+                             "\"radius\":32,\"fine_level\":\"coarse\",\"composite\":\"screen\"",
+                             "\"radius\":8,\"fine_level\":\"coarse\"", "\"mode\":\"seed\",\"radius\":1" };
+    for (int k = 0; k < 5; k++)
+        for (int t = 0; t < 2; t++) {
+            fx_context *ctx = t ? c2 : c1;
+            fx_frame *f = tu_pattern_frame(ctx, w, h, 23 + k);
+            float *px = NULL;
+            fx_frame_pass(f, "Combined", &px, NULL);
+            for (int i = 0; i < w * h; i += 7)
+                px[4 * i + i % 3] = 6.0f; /* bright pixels */
+            char buf[512];
+            snprintf(buf, sizeof buf, "{\"version\":1,\"effects\":[{\"effect\":\"bloom\",\"params\":{%s}}]}",
+                     params[k]);
+            fx_stack *s = NULL;
+            CHECK_OK(ctx, fx_stack_new(ctx, &s));
+            CHECK_OK(ctx, fx_stack_load_json(s, buf));
+            /* a copy whose Combined is not handed out writable: the stack may consume it */
+            fx_frame *g = NULL;
+            fx_frame_new(ctx, w, h, &g);
+            CHECK_OK(ctx, fx_frame_add_pass(g, "Combined", 4, px));
+            float *sep = et_run(ctx, s, g);
+            const float *given = NULL;
+            fx_frame_pass_read(g, "Combined", &given, NULL);
+            fx_frame *out = NULL;
+            CHECK_OK(ctx, fx_stack_run_consume(s, g, 0, &out));
+            const float *ip = out ? et_combined(out) : NULL;
+            CHECK(sep && ip && memcmp(sep, ip, (size_t)w * h * 4 * sizeof(float)) == 0);
+            CHECK(ip == given); /* written over the consumed input: no second buffer */
+            fx_frame_free(out);
+            fx_frame_free(f);
+            free(sep);
+            fx_stack_free(s);
+        }
+}
+
 int main(void)
 {
     fx_context *c1 = NULL, *c2 = NULL;
@@ -213,6 +256,7 @@ int main(void)
     test_energy(c1);
     test_properties(c1, c2);
     test_extremes(c1);
+    test_in_place(c1, c2);
     fx_context_free(c1);
     fx_context_free(c2);
     return tu_finish("test_bloom");

@@ -6,7 +6,11 @@
 #include <string.h>
 
 #define BUFFER_MIN ((size_t)1 << 20) /* smaller ones are cheap to map: plain fx_mem */
-#define BUFFER_SLOTS 6               /* a few frames' passes plus an effect's spare */
+/* A whole frame's buffers (its passes, the stack's two images, the effects' planes): the
+ * greek bath's stack puts 17 back per 1080p frame (7 of 33 MB, 4 of 25 MB, ...); with 6 slots
+ * most were evicted and every frame faulted them in afresh (~900 minor faults and their
+ * zeroing per warm frame). The byte cap below bounds what is held. */
+#define BUFFER_SLOTS 32
 #define BUFFER_MAX_BYTES ((uint64_t)1 << 30)
 
 typedef struct fx_buffer_slot {
@@ -14,22 +18,48 @@ typedef struct fx_buffer_slot {
     size_t bytes;
 } fx_buffer_slot;
 
+/* A held buffer of exactly `bytes`, or with slack > 1 the smallest of [bytes, slack x bytes]
+ * (taken out of the store; its size in *got), or NULL. */
+static void *take(fx_context *ctx, size_t bytes, size_t slack, size_t *got)
+{
+    void *p = NULL;
+    pthread_mutex_lock(&ctx->lock);
+    int best = -1;
+    for (int i = 0; i < ctx->buffer_count; i++) {
+        const size_t b = ctx->buffers[i].bytes;
+        if (b == bytes) {
+            best = i;
+            break;
+        }
+        if (slack > 1 && b > bytes && b / slack <= bytes && (best < 0 || b < ctx->buffers[best].bytes))
+            best = i;
+    }
+    if (best >= 0) {
+        p = ctx->buffers[best].p;
+        *got = ctx->buffers[best].bytes;
+        ctx->buffers[best] = ctx->buffers[--ctx->buffer_count];
+    }
+    pthread_mutex_unlock(&ctx->lock);
+    return p;
+}
+
 void *fx_buffer_get(fx_context *ctx, size_t bytes)
 {
-    if (ctx && bytes >= BUFFER_MIN) {
-        void *p = NULL;
-        pthread_mutex_lock(&ctx->lock);
-        for (int i = 0; i < ctx->buffer_count; i++)
-            if (ctx->buffers[i].bytes == bytes) {
-                p = ctx->buffers[i].p;
-                ctx->buffers[i] = ctx->buffers[--ctx->buffer_count];
-                break;
-            }
-        pthread_mutex_unlock(&ctx->lock);
-        if (p)
-            return p;
+    size_t got = 0;
+    void *p = ctx && bytes >= BUFFER_MIN ? take(ctx, bytes, 1, &got) : NULL;
+    return p ? p : fx_mem_alloc(bytes);
+}
+
+void *fx_buffer_get_at_least(fx_context *ctx, size_t bytes, size_t *capacity)
+{
+    size_t got = 0;
+    void *p = ctx && bytes >= BUFFER_MIN ? take(ctx, bytes, 4, &got) : NULL;
+    if (!p) {
+        p = fx_mem_alloc(bytes);
+        got = bytes;
     }
-    return fx_mem_alloc(bytes);
+    *capacity = p ? got : 0;
+    return p;
 }
 
 void fx_buffer_put(fx_context *ctx, void *p, size_t bytes)

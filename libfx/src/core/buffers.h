@@ -16,6 +16,11 @@ extern "C" {
 #endif
 
 void *fx_buffer_get(fx_context *ctx, size_t bytes);
+/* A buffer of at least `bytes` for a caller that can use a bigger one: exactly that size if
+ * held, else the smallest held one up to 4x as big (already mapped: a process's first frame
+ * need not fault in a fresh one while a larger buffer of the frame sits idle), else a new
+ * one. *capacity: its real size, to give back to fx_buffer_put (0 on failure). */
+void *fx_buffer_get_at_least(fx_context *ctx, size_t bytes, size_t *capacity);
 void fx_buffer_put(fx_context *ctx, void *p, size_t bytes);
 void fx_buffers_free(fx_context *ctx);
 

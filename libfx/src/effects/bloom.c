@@ -416,7 +416,7 @@ static inline __attribute__((always_inline)) v4f comp4(v4f s, v4f g, int screen)
  * each twice. */
 FX_CLONES
 static void coarse_row(const int *restrict cx, const float *restrict wt, const float *restrict row2, int cw,
-                       const float *restrict src, float *restrict dst, int xa, int xb, int screen)
+                       const float *src, float *dst, int xa, int xb, int screen) /* dst may be src */
 {
     const int last = cw - 1;
     int x = xa;
@@ -521,6 +521,8 @@ static fx_result bloom_process(const fx_effect_run *run)
     j.exposure = 1.0f;
     j.inv_4k = 1.0f / (4.0f * (p->threshold * p->knee + 1e-5f) + 1e-5f);
     fx_result r = FX_OK;
+    unsigned char *pyramid = NULL;
+    size_t pyramid_bytes = 0, pyramid_capacity = 0;
     if (p->mode == MODE_SEED) {
         double lum = p->scene_luminance;
         if (!(lum > 0.0)) {
@@ -542,21 +544,33 @@ static fx_result bloom_process(const fx_effect_run *run)
     j.nlev = levels_for(p, w, h);
     j.coarse = p->fine_level == FINE_COARSE && j.nlev >= 2;
     j.self = 1.0f;
+    /* Every stored level in one block from the context's buffer store: the same size frame
+     * after frame, already mapped; and one block of huge pages (core/mem.h) where levels of
+     * their own took 4 KiB pages below 2 MiB: a process's first 1080p frame faulted ~680
+     * pages for levels 2-7. Each level starts on a 64-byte boundary; every level is
+     * written whole before it is read, so a recycled block's old contents never show. */
+    size_t at[MAX_LEVELS + 1] = { 0 };
     int lw = w, lh = h;
     for (int l = 1; l <= j.nlev; l++) {
         lw = (lw + 1) / 2;
         lh = (lh + 1) / 2;
         j.lv[l].w = lw;
         j.lv[l].h = lh;
-        /* from the context's buffer store: the same sizes frame after frame, already mapped
-         * (a fresh 1080p level 1 is 8 MB of page faults and zeroing per run) */
-        if (l == 1 && j.coarse)
-            continue; /* never stored */
-        j.lv[l].px = fx_buffer_get(run->ctx, (size_t)lw * lh * 4 * sizeof(float));
-        if (!j.lv[l].px) {
-            r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for pyramid level %d", where, l);
+        at[l] = pyramid_bytes;
+        if (!(l == 1 && j.coarse)) /* coarse: level 1 is never stored */
+            pyramid_bytes += ((size_t)lw * lh * 4 * sizeof(float) + 63) & ~(size_t)63;
+    }
+    if (pyramid_bytes) {
+        /* (or a larger idle buffer of the frame: in a stack, a process's first frame then
+         * zeroes no fresh 12 MB, which on these VMs took up to ~13 ms of CPU) */
+        pyramid = fx_buffer_get_at_least(run->ctx, pyramid_bytes, &pyramid_capacity);
+        if (!pyramid) {
+            r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the pyramid (%zu bytes)", where,
+                        pyramid_bytes);
             goto out;
         }
+        for (int l = j.coarse ? 2 : 1; l <= j.nlev; l++)
+            j.lv[l].px = (float *)(pyramid + at[l]);
     }
     for (int l = j.coarse ? 2 : 1; l <= j.nlev; l++) {
         j.from = l - 1;
@@ -624,8 +638,7 @@ out:
     fx_mem_free(j.cw);
     fx_mem_free(j.tx[0]);
     fx_mem_free(j.tx[1]);
-    for (int l = 1; l <= MAX_LEVELS; l++)
-        fx_buffer_put(run->ctx, j.lv[l].px, (size_t)j.lv[l].w * j.lv[l].h * 4 * sizeof(float));
+    fx_buffer_put(run->ctx, pyramid, pyramid_capacity);
     return r;
 }
 
@@ -643,8 +656,8 @@ const fx_effect_class fx_effect_bloom = {
     .validate = NULL,
     .process = bloom_process,
     .identity = bloom_identity,
-    /* the composite writes finite4() of every pixel. (Not FX_EFFECT_IN_PLACE, though it
-     * could be: tests/python/test_cli_no_data_loss.py's out-of-memory case counts on bloom
-     * needing a second frame-sized buffer.) */
-    .flags = FX_EFFECT_OWN_FINITE,
+    /* the composite writes finite4() of every pixel; in place: the pyramid is built before
+     * the composite, which reads each pixel of the image just before writing it (on a
+     * consumed frame no fresh frame-sized output: a process's first frame) */
+    .flags = FX_EFFECT_OWN_FINITE | FX_EFFECT_IN_PLACE,
 };

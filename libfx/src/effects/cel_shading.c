@@ -458,4 +458,8 @@ const fx_effect_class fx_effect_cel_shading = {
     .validate = cel_validate,
     .process = cel_process,
     .identity = cel_identity,
+    /* each pixel's shading reads only that pixel of the image (the outlines come from depth
+     * and normals, never the colour): on a consumed frame the stack writes over the input
+     * instead of faulting in a fresh frame-sized buffer (a process's first frame) */
+    .flags = FX_EFFECT_IN_PLACE,
 };
