@@ -1170,7 +1170,7 @@ static inline __attribute__((always_inline)) void gain_octet8(const gain_ctx *g,
     o[3] = SEL8(o[3] > amin, o[3], amin);
     o[3] = SEL8(o[3] < fmax, o[3], fmax);
     const int all = fx_all8(ok);
-    if (!all) /* a failing pixel keeps its source here: in place, gain_pixel reads it */
+    if (!all && run->dst == run->src) /* in place: a failing pixel keeps its source for gain_pixel */
         for (int ch = 0; ch < 4; ch++)
             o[ch] = SEL8(ok, o[ch], p[ch]);
     fx_store8x4(run->dst + i * 4, o);
