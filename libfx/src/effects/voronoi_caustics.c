@@ -1061,6 +1061,7 @@ typedef struct gain_ctx {
     const caustics_job *j;
     const float *cov;
     int pc;
+    int in_place; /* dst == src */
     v4f tint, vtol;
 } gain_ctx;
 
@@ -1170,7 +1171,7 @@ static inline __attribute__((always_inline)) void gain_octet8(const gain_ctx *g,
     o[3] = SEL8(o[3] > amin, o[3], amin);
     o[3] = SEL8(o[3] < fmax, o[3], fmax);
     const int all = fx_all8(ok);
-    if (!all && run->dst == run->src) /* in place: a failing pixel keeps its source for gain_pixel */
+    if (!all && g->in_place) /* in place: a failing pixel keeps its source for gain_pixel */
         for (int ch = 0; ch < 4; ch++)
             o[ch] = SEL8(ok, o[ch], p[ch]);
     fx_store8x4(run->dst + i * 4, o);
@@ -1197,7 +1198,7 @@ FX_CLONES static void caustics_rows_gain(void *user, int begin, int end)
     const int per_chunk = (GAIN_CHUNK - 1) / f; /* cells: each has at most f + 1 pixels */
     const float *col_t = j->col_t;
     const float tol = (float)(GAIN_TOL * j->cell);
-    const gain_ctx g = {j, run->mask ? run->mask->coverage : NULL, j->pos_channels,
+    const gain_ctx g = {j, run->mask ? run->mask->coverage : NULL, j->pos_channels, run->dst == run->src,
                         {j->p->tint[0], j->p->tint[1], j->p->tint[2], 0.0f}, V4(tol)};
     gain_queue q;
     q.n = 0;
