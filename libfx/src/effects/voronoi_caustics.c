@@ -1500,10 +1500,11 @@ static int job_lattice(const fx_effect_run *run, const caustics_params *p, caust
         lattice_pos(j->node_x, j->nx, j->f, run->roi.x0, run->roi.x0 + c, &j->col_i0[c], &j->col_i1[c], &j->col_t[c]);
     size_t count = (size_t)j->nx * j->ny;
     j->node_size = p->lattice_shading && !j->gain_path ? NODE_MAX : 4;
-    /* node_rows writes both whole at once: from 256 KiB whole huge pages, so a process's
-     * first frame pays a fault per 2 MiB, not 512 (the draft's 2 + 1 MB: 760 faults) */
-    j->nodes = fx_mem_alloc_whole(count * j->node_size * sizeof(float));
-    j->node_id = fx_mem_alloc_whole(count * 2 * sizeof(int));
+    /* plain fx_mem_alloc: huge pages (fx_mem_alloc_whole) cut a process's first draft frame
+     * from 904 to 146 faults but cost every warm fx_stack_run 0.4-0.5 ms; the buffer store
+     * evicted frame buffers (docs/effects/voronoi_caustics.md, "In place") */
+    j->nodes = fx_mem_alloc(count * j->node_size * sizeof(float));
+    j->node_id = fx_mem_alloc(count * 2 * sizeof(int));
     if (!j->nodes || !j->node_id)
         return -1;
     if (run->mask) {
