@@ -648,6 +648,80 @@ static void test_wet_downsample(fx_context *ctx)
     fx_frame_free(f);
 }
 
+/* In place (a consumed frame: rain writes over the input's Combined, FX_EFFECT_IN_PLACE)
+ * equals the separate-buffer run bit for bit, the debug pass too; without a mask no second
+ * buffer (the output is the input's). A mask runs on a second buffer (the blend needs the
+ * old pixels): the same bits all the same. */
+static int consume_equal(fx_context *ctx, fx_frame *f, const char *params, const char *mask, int debug)
+{
+    char buf[1024];
+    snprintf(buf, sizeof buf, "{\"version\":1,\"effects\":[{\"effect\":\"rain\",\"params\":{%s}%s%s}]}", params,
+             mask ? ",\"mask\":" : "", mask ? mask : "");
+    fx_stack *s = NULL;
+    CHECK_OK(ctx, fx_stack_new(ctx, &s));
+    CHECK_OK(ctx, fx_stack_load_json(s, buf));
+    fx_stack_set_debug_outputs(s, debug);
+    fx_frame *sep = NULL, *out = NULL;
+    CHECK_OK(ctx, fx_stack_run(s, f, &sep));
+    const float *given = NULL; /* read-only: a pass handed out writable is never consumed */
+    fx_frame_pass_read(f, "Combined", &given, NULL);
+    CHECK_OK(ctx, fx_stack_run_consume(s, f, 0, &out));
+    const float *a = et_combined(sep), *b = et_combined(out);
+    int ok = a && b && memcmp(a, b, (size_t)N * N * 4 * sizeof(float)) == 0 && (mask || b == given);
+    if (debug) {
+        float *da = NULL, *db = NULL;
+        int ca = 0, cb = 0;
+        ok &= fx_frame_pass(sep, "fx0_rain_streaks", &da, &ca) == FX_OK &&
+              fx_frame_pass(out, "fx0_rain_streaks", &db, &cb) == FX_OK && ca == 1 && cb == 1 &&
+              memcmp(da, db, (size_t)N * N * sizeof(float)) == 0;
+    }
+    fx_frame_free(sep);
+    fx_frame_free(out);
+    fx_stack_free(s);
+    return ok;
+}
+
+static void test_rain_in_place(fx_context *mctx)
+{
+    fx_camera mc;
+    const char *base = "\"density\": 0.8, \"streak_length\": 30.0, \"streak_width\": 2.0";
+    /* params, roofed map (camera under cover), Cryptomatte ranks (9: the whole-frame cover
+     * mask instead of the lazy reads), mask, debug outputs */
+    struct { const char *params; int roofed, ranks; const char *mask; int debug; } cases[] = {
+        { "\"cover_material\": \"\", \"downsample\": 1", 0, 0, NULL, 0 },
+        { "\"cover_material\": \"\", \"downsample\": 4", 0, 0, NULL, 0 },
+        { "\"cover_material\": \"\", \"downsample\": 3, \"wind_angle\": -35, \"layers\": 2", 0, 0, NULL, 1 },
+        { "\"cover_material\": \"Rain_Cover\", \"downsample\": 4", 1, 2, NULL, 0 },
+        { "\"cover_material\": \"Rain_Cover\", \"downsample\": 4", 1, 9, NULL, 1 },
+        { "\"cover_material\": \"Rain_Cover\", \"downsample\": 1", 1, 2, NULL, 0 },
+        { "\"cover_material\": \"\", \"downsample\": 1", 0, 0, "{\"rect\": [5, 9, 40, 30]}", 0 },
+        { "\"cover_material\": \"\", \"downsample\": 4", 0, 0, "{\"rect\": [5, 9, 40, 30]}", 1 },
+    };
+    for (int roofed = 0; roofed <= 1; roofed++) {
+        /* one map at a time: each rain_map call empties the maps' directory */
+        const char *map = rain_map(mctx, roofed ? 100.0f : -100.0f, roofed ? 50.0f : 0.0f, &mc,
+                                   roofed ? "roofed_ip" : "open_ip");
+        for (int t = 1; t <= 2; t++) {
+            fx_context *ctx = NULL;
+            fx_context_new(&ctx, t);
+            for (int k = 0; k < (int)(sizeof cases / sizeof cases[0]); k++) {
+                if (cases[k].roofed != roofed)
+                    continue;
+                fx_frame *f = street_frame(ctx, 3.0f, map, &mc, 10);
+                if (cases[k].ranks)
+                    add_crypto(f, cases[k].ranks);
+                char params[512];
+                snprintf(params, sizeof params, "%s, %s", base, cases[k].params);
+                int ok = consume_equal(ctx, f, params, cases[k].mask, cases[k].debug);
+                if (!ok)
+                    fprintf(stderr, "rain in place differs: threads %d, case %d\n", t, k);
+                CHECK(ok);
+            }
+            fx_context_free(ctx);
+        }
+    }
+}
+
 int main(void)
 {
     fx_context *ctx = NULL;
@@ -659,6 +733,7 @@ int main(void)
     test_rain_layers_extremes(ctx);
     test_rain_downsample(ctx);
     test_wet_downsample(ctx);
+    test_rain_in_place(ctx);
     fx_context_free(ctx);
     return tu_finish("test_rain");
 }

@@ -341,6 +341,11 @@ const fx_effect_class fx_effect_pixelate = {
     .params = pixelate_param_defs,
     .param_count = FX_COUNT_OF(pixelate_param_defs),
     .presets = { NULL, NULL, NULL, NULL },
+    /* in place (dst == src: no mask) for every parameter set: a row of cells is one work
+     * item, its colours (centre samples or averages, read only from its own cells: a clamped
+     * centre stays inside its cell) all computed before any of its pixels is written, and
+     * cells never overlap, so no item reads a pixel another writes */
+    .flags = FX_EFFECT_IN_PLACE,
     .passes = pixelate_passes,
     .needs_camera = pixelate_needs_camera,
     .halo = pixelate_halo,

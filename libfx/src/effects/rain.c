@@ -433,7 +433,8 @@ static void rain_composite_rows(void *user, int y0, int y1)
             if (!(l0[a0] | l0[b0] | l1[a1] | l1[b1])) { /* no streak near: the source */
                 if (j->dbg)
                     j->dbg[i] = 0.0f;
-                memcpy(o, s, 4 * sizeof(float));
+                if (o != s) /* in place: already the source */
+                    memcpy(o, s, 4 * sizeof(float));
                 continue;
             }
             const float *a = g0 + 4 * a0, *b = g0 + 4 * b0, *c = g1 + 4 * a1, *e = g1 + 4 * b1;
@@ -558,7 +559,12 @@ const fx_effect_class fx_effect_rain = {
     .presets = {"{\"layers\": 3, \"downsample\": 16}", "{\"layers\": 3, \"downsample\": 4}",
                 "{\"layers\": 3, \"downsample\": 1}", "{\"layers\": 3, \"downsample\": 1}"},
     .passes = rain_passes,
-    .flags = FX_EFFECT_NEEDS_CAMERA,
+    /* in place (dst == src) for every parameter set: an output pixel reads only its own
+     * colour pixel, just before writing it; the streaks are a hash pattern, and the depth
+     * test, the rain map and the cover quads read Depth and Cryptomatte, never the colour.
+     * On a consumed frame no fresh frame-sized output, and (downsample > 1) the pixels with
+     * no streak near are not copied */
+    .flags = FX_EFFECT_NEEDS_CAMERA | FX_EFFECT_IN_PLACE,
     .aux_views = fx_aux_needs_rain_map, /* what is under cover */
     .halo = NULL,
     .validate = rain_validate,

@@ -589,8 +589,9 @@ static inline float exp_neg(float x)
 
 /* physical mode without an additive term (no environment): out = src (1 + s tint) per
  * pixel of a segment, s from the pattern (a, noise) or given (lattice_shading), or src
- * copied; loops without calls or branches (auto-vectorised). */
-static void shade_segment(const caustics_job *j, const float *restrict src, float *restrict dst, int n,
+ * copied; loops without calls or branches (auto-vectorised). src and dst may be the same
+ * pixels (in place: each is read just before it is written), hence no restrict. */
+static void shade_segment(const caustics_job *j, const float *src, float *dst, int n,
                           const int32_t *restrict st, const float *restrict av, const float *restrict nz,
                           float *restrict sv, int patterns)
 {
@@ -766,7 +767,7 @@ static void caustics_rows(void *user, int begin, int end)
                     if (seg_shade) {
                         st[c] = PX_COPY;
                         sv[c] = av[c] = nz[c] = 0.0f;
-                    } else {
+                    } else if (run->dst != run->src) { /* in place: already the source */
                         memcpy(run->dst + i * 4, run->src + i * 4, 4 * sizeof(float));
                     }
                     continue;
@@ -1024,7 +1025,8 @@ static __attribute__((noinline)) void gain_pixel(const caustics_job *j, int x, i
     const float px = pq[0], py = pq[1], pz = pq[2];
     const int ok = fabsf(px) <= 1e15f && fabsf(py) <= 1e15f && isfinite(pz);
     if ((run->mask && !(run->mask->coverage[i] > 0.0f)) || !ok) {
-        memcpy(run->dst + i * 4, run->src + i * 4, 4 * sizeof(float));
+        if (run->dst != run->src) /* in place: already the source */
+            memcpy(run->dst + i * 4, run->src + i * 4, 4 * sizeof(float));
         return;
     }
     const float tol = (float)(GAIN_TOL * j->cell);
@@ -1059,14 +1061,15 @@ typedef struct gain_ctx {
     const caustics_job *j;
     const float *cov;
     int pc;
+    int in_place; /* dst == src */
     v4f tint, vtol;
 } gain_ctx;
 
 /* Pixels x .. x + 7 of row y with their s, world x and y interpolated from their corners,
  * four at a time (the baseline clone compares eight lanes one by one): positions,
  * validity, mask and surface test, then apply_gain per pixel; the pixels that fail the test
- * (no position, masked out, off their corners' surface: a silhouette, a step) are then
- * redone one at a time by gain_pixel (the same operations: no pixel's bits depend on its
+ * (no position, masked out, off their corners' surface: a silhouette, a step) are instead
+ * done one at a time by gain_pixel (the same operations: no pixel's bits depend on its
  * neighbours). */
 static inline __attribute__((always_inline)) void gain_octet4(const gain_ctx *g, int x, int y, v8f s8, v8f wx8,
                                                              v8f wy8, gain_queue *q)
@@ -1096,14 +1099,18 @@ static inline __attribute__((always_inline)) void gain_octet4(const gain_ctx *g,
             ok &= ld4(g->cov + i) > zero;
         const float *src = run->src + i * 4;
         float *dst = run->dst + i * 4;
-        apply_gain(src, dst, BCAST4(s4, 0), g->tint);
-        apply_gain(src + 4, dst + 4, BCAST4(s4, 1), g->tint);
-        apply_gain(src + 8, dst + 8, BCAST4(s4, 2), g->tint);
-        apply_gain(src + 12, dst + 12, BCAST4(s4, 3), g->tint);
-        if (!all4(ok))
+        if (all4(ok)) {
+            apply_gain(src, dst, BCAST4(s4, 0), g->tint);
+            apply_gain(src + 4, dst + 4, BCAST4(s4, 1), g->tint);
+            apply_gain(src + 8, dst + 8, BCAST4(s4, 2), g->tint);
+            apply_gain(src + 12, dst + 12, BCAST4(s4, 3), g->tint);
+        } else { /* a failing pixel is not written here: in place, gain_pixel reads its source */
             for (int l = 0; l < 4; l++)
-                if (!ok[l])
+                if (ok[l])
+                    apply_gain(src + 4 * l, dst + 4 * l, (v4f){s4[l], s4[l], s4[l], s4[l]}, g->tint);
+                else
                     gain_pixel(j, x + 4 * h + l, y, s4[l], wx[l], wy[l], q);
+        }
     }
 }
 
@@ -1111,8 +1118,9 @@ static inline __attribute__((always_inline)) void gain_octet4(const gain_ctx *g,
  * positions, validity, mask and surface test, then out = src (1 + s tint) clamped, by
  * apply_gain's operations lane by lane (colour in [0, FLT_MAX], NaN to 0; alpha in
  * [-FLT_MAX, FLT_MAX], NaN to -FLT_MAX); the pixels that fail the test (no position,
- * masked out, off their corners' surface: a silhouette, a step) are then redone one at a
- * time by gain_pixel (the same operations: no pixel's bits depend on its neighbours). */
+ * masked out, off their corners' surface: a silhouette, a step) keep their source and are
+ * then done one at a time by gain_pixel (the same operations: no pixel's bits depend on its
+ * neighbours). */
 static inline __attribute__((always_inline)) void gain_octet8(const gain_ctx *g, int x, int y, v8f s8, v8f wx,
                                                              v8f wy, gain_queue *q)
 {
@@ -1162,8 +1170,12 @@ static inline __attribute__((always_inline)) void gain_octet8(const gain_ctx *g,
     }
     o[3] = SEL8(o[3] > amin, o[3], amin);
     o[3] = SEL8(o[3] < fmax, o[3], fmax);
+    const int all = fx_all8(ok);
+    if (!all && g->in_place) /* in place: a failing pixel keeps its source for gain_pixel */
+        for (int ch = 0; ch < 4; ch++)
+            o[ch] = SEL8(ok, o[ch], p[ch]);
     fx_store8x4(run->dst + i * 4, o);
-    if (!fx_all8(ok))
+    if (!all)
         for (int l = 0; l < 8; l++)
             if (!ok[l])
                 gain_pixel(j, x + l, y, s8[l], wx[l], wy[l], q);
@@ -1186,7 +1198,7 @@ FX_CLONES static void caustics_rows_gain(void *user, int begin, int end)
     const int per_chunk = (GAIN_CHUNK - 1) / f; /* cells: each has at most f + 1 pixels */
     const float *col_t = j->col_t;
     const float tol = (float)(GAIN_TOL * j->cell);
-    const gain_ctx g = {j, run->mask ? run->mask->coverage : NULL, j->pos_channels,
+    const gain_ctx g = {j, run->mask ? run->mask->coverage : NULL, j->pos_channels, run->dst == run->src,
                         {j->p->tint[0], j->p->tint[1], j->p->tint[2], 0.0f}, V4(tol)};
     gain_queue q;
     q.n = 0;
@@ -1281,16 +1293,17 @@ FX_CLONES static void caustics_rows_gain(void *user, int begin, int end)
                 }
                 L = R;
             }
-            /* eight pixels at a time (a chunk of 8 or more ends with the octet at n - 8) */
-            const int noct = n >= 8 ? (n + 7) / 8 : 0;
+            /* eight pixels at a time, the rest one at a time (an octet overlapping the one
+             * before would read, in place, pixels that one wrote) */
+            const int noct = n / 8;
             for (int k = 0; k < noct; k++) {
-                const int c = 8 * k + 8 <= n ? 8 * k : n - 8;
+                const int c = 8 * k;
                 if (j->wide)
                     gain_octet8(&g, xa + c, y, fx_load8(sv + c), fx_load8(xv + c), fx_load8(yv + c), &q);
                 else
                     gain_octet4(&g, xa + c, y, fx_load8(sv + c), fx_load8(xv + c), fx_load8(yv + c), &q);
             }
-            for (int c = noct ? n : 0; c < n; c++)
+            for (int c = 8 * noct; c < n; c++)
                 gain_pixel(j, xa + c, y, sv[c], xv[c], yv[c], &q);
         }
         if (q.n)
@@ -1487,6 +1500,9 @@ static int job_lattice(const fx_effect_run *run, const caustics_params *p, caust
         lattice_pos(j->node_x, j->nx, j->f, run->roi.x0, run->roi.x0 + c, &j->col_i0[c], &j->col_i1[c], &j->col_t[c]);
     size_t count = (size_t)j->nx * j->ny;
     j->node_size = p->lattice_shading && !j->gain_path ? NODE_MAX : 4;
+    /* plain fx_mem_alloc: huge pages (fx_mem_alloc_whole) cut a process's first draft frame
+     * from 904 to 146 faults but cost every warm fx_stack_run 0.4-0.5 ms; the buffer store
+     * evicted frame buffers (docs/effects/voronoi_caustics.md, "In place") */
     j->nodes = fx_mem_alloc(count * j->node_size * sizeof(float));
     j->node_id = fx_mem_alloc(count * 2 * sizeof(int));
     if (!j->nodes || !j->node_id)
@@ -1556,6 +1572,12 @@ const fx_effect_class fx_effect_voronoi_caustics = {
         "{\"downsample\": 2, \"distance\": \"fast\", \"refine\": true, \"lattice_shading\": false}",
         "{\"downsample\": 1, \"distance\": \"exact\", \"refine\": true, \"lattice_shading\": false}",
     },
+    /* in place (dst == src: no mask) for every parameter set: an output pixel reads only its
+     * own colour pixel, just before writing it (the pattern, noise and shading come from
+     * Position or Depth, Normal and the environment image); caustics_rows_gain writes no
+     * pixel it defers to gain_pixel / gain_flush, and its octets never overlap. On a
+     * consumed frame no fresh frame-sized output buffer */
+    .flags = FX_EFFECT_IN_PLACE,
     .passes = caustics_passes,
     .needs_camera = caustics_needs_camera,
     .halo = NULL,
