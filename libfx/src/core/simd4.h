@@ -4,6 +4,7 @@
 #define LIBFX_CORE_SIMD4_H
 
 #include <float.h>
+#include <math.h>
 #include <stdint.h>
 #include <string.h>
 #ifdef __SSE__
@@ -58,6 +59,16 @@ static inline v4f max4(v4f a, v4f b)
 static inline v4f clamp4_pos(v4f v, v4f hi)
 {
     return min4((v4f)((v4i)v & (v > V4(0.0f))), hi);
+}
+
+/* correctly rounded square root of each lane (sqrtf's value) */
+static inline v4f sqrt4(v4f v)
+{
+#ifdef __SSE__
+    return (v4f)_mm_sqrt_ps((__m128)v);
+#else
+    return (v4f){ sqrtf(v[0]), sqrtf(v[1]), sqrtf(v[2]), sqrtf(v[3]) };
+#endif
 }
 
 /* NaN -> 0, +-Inf -> +-FLT_MAX */

@@ -1331,15 +1331,6 @@ __attribute__((target("avx2"), noinline)) static int grad_row_avx2(const float *
 
 /* The baseline (no AVX2, or FX_NO_CLONES): grad2_avx2's loop one pixel per 4-lane vector
  * (core/simd4.h), the same operations lane by lane, so the same bits. */
-static inline v4f sqrt4(v4f v)
-{
-#ifdef __SSE__
-    return (v4f)_mm_sqrt_ps((__m128)v);
-#else
-    return (v4f){ sqrtf(v[0]), sqrtf(v[1]), sqrtf(v[2]), sqrtf(v[3]) };
-#endif
-}
-
 static int grad_row_v4(const float *P, const float *M, const float *Q, int xa, int xb, float fac, float keep,
                        float *out, float *save)
 {

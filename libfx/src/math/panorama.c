@@ -73,15 +73,6 @@ static inline v4f atan2_finite4(v4f y, v4f x)
     return sel4((ax == V4(0.0f)) & (ay == V4(0.0f)), V4(0.0f), a);
 }
 
-static inline v4f sqrt4(v4f v)
-{
-#ifdef __SSE__
-    return (v4f)_mm_sqrt_ps((__m128)v);
-#else
-    return (v4f){ sqrtf(v[0]), sqrtf(v[1]), sqrtf(v[2]), sqrtf(v[3]) };
-#endif
-}
-
 /* fx_clampf lane by lane */
 static inline v4f clamp4(v4f v, float lo, float hi)
 {
