@@ -1,4 +1,4 @@
-/* Helpers shared by the effect tests (test_gaussian_blur, test_color_matrix, test_pixelate):
+/* Helpers shared by the effect tests (test_gaussian_blur, test_color_matrix, test_pixelate, ...):
  * run one effect through the public stack API on a frame built from pixels. Header-only
  * (static functions) so each test stays one CTest executable. */
 #ifndef LIBFX_FX_EFFECT_TEST_H
@@ -72,6 +72,26 @@ static inline float *et_run(fx_context *ctx, fx_stack *s, const fx_frame *in)
         memcpy(copy, d, n * sizeof(float));
     fx_frame_free(out);
     return copy;
+}
+
+/* In place: s run on f as the CLI and the add-on run it (fx_stack_run_consume, which takes f)
+ * gives the bits of the run that keeps its input (et_run), and with `shared` writes over f's
+ * own Combined (no second frame-sized buffer). f's Combined must not have been handed out
+ * writable (such a pass is never consumed). 1 when both hold. */
+static inline int et_in_place_equal(fx_context *ctx, fx_stack *s, fx_frame *f, int shared)
+{
+    const size_t n = (size_t)fx_frame_width(f) * fx_frame_height(f) * 4;
+    float *sep = et_run(ctx, s, f);
+    const float *given = NULL;
+    fx_frame_pass_read(f, "Combined", &given, NULL);
+    fx_frame *out = NULL;
+    if (fx_stack_run_consume(s, f, 0, &out) != FX_OK)
+        fprintf(stderr, "fx_stack_run_consume: %s\n", fx_context_error(ctx));
+    const float *ip = out ? et_combined(out) : NULL;
+    const int ok = sep && ip && memcmp(sep, ip, n * sizeof(float)) == 0 && (!shared || ip == given);
+    fx_frame_free(out);
+    free(sep);
+    return ok;
 }
 
 /* Runs one effect with the given params (the inside of a JSON object, e.g. "\"sigma\": 2")
