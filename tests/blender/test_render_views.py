@@ -12,14 +12,19 @@ import addon_testlib as T
 
 BLEND = T.SCENES_DIR / "atrium" / "atrium.blend"
 
-SCRIPT = T.PRELUDE + r"""
-from libfx import render, scene_setup
+# the atrium at 96x54, 1 sample; the script is formatted with the output prefix
+SETUP = T.PRELUDE + r"""
+import os, time
+from libfx import render, scene_setup, views_job
 render.on_load_post()
 s = bpy.context.scene
 s.render.filepath = %r
 s.render.resolution_x, s.render.resolution_y, s.render.resolution_percentage = 96, 54, 100
 s.cycles.samples = 1
 scene_setup.sync(s)
+"""
+
+SCRIPT = SETUP + r"""
 views = scene_setup.status(s).get("aux_views")
 assert views == ["light:Sun", "rain_map"], views
 bpy.ops.render.render()
@@ -45,15 +50,7 @@ def test_render_views_then_render(blender, library, tmp_path):
     assert any(tmp_path.glob("a_libfx.[0-9]*.exr"))   # the result of the second render
 
 
-BACKGROUND = T.PRELUDE + r"""
-import os, time
-from libfx import render, scene_setup, views_job
-render.on_load_post()
-s = bpy.context.scene
-s.render.filepath = %r
-s.render.resolution_x, s.render.resolution_y, s.render.resolution_percentage = 96, 54, 100
-s.cycles.samples = 1
-scene_setup.sync(s)
+BACKGROUND = SETUP + r"""
 prefix = scene_setup.output_prefix(s)
 job = views_job.start(s)
 # start() hands the renders to another Blender and returns: nothing is rendered yet here
