@@ -458,6 +458,45 @@ static void test_shared_pixels(void)
     fx_context_free(ctx);
 }
 
+/* Adds to f the data passes stack s needs that f lacks (finite, varied values: a position
+ * on a plane, a depth, a normal, colours), so that an effect needing more than Combined runs.
+ * 0 when s needs something this cannot make (a camera, Cryptomatte): the caller says so. */
+static int add_needed_passes(fx_context *ctx, fx_frame *f, const fx_stack *s)
+{
+    char *json = NULL;
+    CHECK_OK(ctx, fx_stack_required_passes(s, &json));
+    cJSON *root = json ? cJSON_Parse(json) : NULL;
+    fx_free(json);
+    const cJSON *passes = cJSON_GetObjectItem(root, "passes");
+    int ok = root && !cJSON_IsTrue(cJSON_GetObjectItem(root, "camera"));
+    const int w = fx_frame_width(f), h = fx_frame_height(f);
+    const cJSON *it = NULL;
+    cJSON_ArrayForEach(it, passes)
+    {
+        const char *name = cJSON_GetStringValue(it);
+        float *have = NULL;
+        if (!ok || !name || fx_frame_pass(f, name, &have, NULL) == FX_OK)
+            continue;
+        const int ch = strcmp(name, "Depth") == 0 ? 1 : strncmp(name, "Crypto", 6) == 0 ? 0 : 3;
+        if (!ch) {
+            ok = 0;
+            break;
+        }
+        float *d = malloc((size_t)w * h * ch * sizeof(float));
+        for (int i = 0; d && i < w * h; i++)
+            for (int c = 0; c < ch; c++)
+                d[(size_t)i * ch + c] = ch == 1 ? 2.0f + 0.01f * (float)(i % w)
+                                      : strcmp(name, "Position") == 0 ? (c == 0 ? 0.1f * (float)(i % w)
+                                                                          : c == 1 ? 0.1f * (float)(i / w) : 0.0f)
+                                      : strcmp(name, "Normal") == 0 ? (c == 2 ? 1.0f : 0.0f)
+                                                                    : 0.25f + 0.5f * (float)c / 3.0f;
+        CHECK(d && fx_frame_add_pass(f, name, ch, d) == FX_OK);
+        free(d);
+    }
+    cJSON_Delete(root);
+    return ok;
+}
+
 /* Effects that keep their output finite themselves (the stack then skips its scan) must
  * do so for a Combined built through the API, which the reader never sanitised: NaN and
  * +-Inf in a third of the pixels, through the effect and through its identity path. */
@@ -478,23 +517,28 @@ static void test_own_finite_effects(void)
         if (!(cls->flags & FX_EFFECT_OWN_FINITE))
             continue;
         flagged++;
-        const char *variants[2] = {"{}", "{\"mix\": 0}"};
-        for (int v = 0; v < 2; v++) {
+        /* the defaults, the identity, and every preset (other code paths: caustics' draft) */
+        const char *variants[5] = {"{}", "{\"mix\": 0}", "{}", "{}", "{}"};
+        const char *quality[5] = {"final", "final", "draft", "preview", "reference"};
+        for (int v = 0; v < 5; v++) {
             if (v == 1 && !fx_effect_find_param(cls, "mix"))
                 continue;
             char json[256];
-            snprintf(json, sizeof json, "{\"version\": 1, \"effects\": [{\"effect\": \"%s\", \"params\": %s}]}",
-                     cls->name, variants[v]);
+            snprintf(json, sizeof json,
+                     "{\"version\": 1, \"quality\": \"%s\", \"effects\": [{\"effect\": \"%s\", \"params\": %s}]}",
+                     quality[v], cls->name, variants[v]);
             fx_stack *s = NULL;
             fx_stack_new(ctx, &s);
             CHECK_OK(ctx, fx_stack_load_json(s, json));
+            if (!add_needed_passes(ctx, f, s))
+                fprintf(stderr, "  %s: needs what this test cannot make (a camera, Cryptomatte)\n", cls->name);
             fx_context_clear_warnings(ctx);
             fx_frame *out = NULL;
             CHECK_OK(ctx, fx_stack_run(s, f, &out));
             const float *o = NULL;
             CHECK_OK(ctx, fx_frame_pass_read(out, "Combined", &o, NULL));
             if (!tu_all_finite(o, (size_t)w * h * 4))
-                fprintf(stderr, "  %s %s: non-finite output\n", cls->name, variants[v]);
+                fprintf(stderr, "  %s %s at %s: non-finite output\n", cls->name, variants[v], quality[v]);
             CHECK(tu_all_finite(o, (size_t)w * h * 4));
             if (v == 1) /* the identity copies the NaN: replaced, and reported */
                 CHECK(fx_context_warning_count(ctx) > 0);

@@ -722,6 +722,15 @@ static inline __attribute__((always_inline)) int position_at(const float *pq, fx
     return fabsf(P->x) <= 1e15f && fabsf(P->y) <= 1e15f && isfinite(P->z);
 }
 
+/* Row y of dst is done: its NaN/Inf (an overflowing gain, or a non-finite source pixel of a
+ * frame built through the API) replaced and counted while the row is in cache, so the stack
+ * need not read the whole output again (FX_EFFECT_OWN_FINITE). */
+static inline void finish_row(const fx_effect_run *run, int y)
+{
+    fx_effect_finish_row(run, run->dst + ((size_t)y * run->width + run->roi.x0) * 4,
+                         (size_t)(run->roi.x1 - run->roi.x0) * 4);
+}
+
 static void caustics_rows(void *user, int begin, int end)
 {
     const caustics_job *j = user;
@@ -823,6 +832,7 @@ static void caustics_rows(void *user, int begin, int end)
                 shade_segment(j, run->src + i * 4, run->dst + i * 4, n, st, av, nz, sv, patterns);
             }
         }
+        finish_row(run, y);
     }
 }
 
@@ -934,6 +944,7 @@ static void caustics_rows_lattice(void *user, int begin, int end)
             size_t i = (size_t)y * w + xs;
             shade_segment(j, run->src + i * 4, run->dst + i * 4, n, st, av, nz, sv, patterns);
         }
+        finish_row(run, y);
     }
     fx_mem_free(colv);
 }
@@ -1308,6 +1319,7 @@ FX_CLONES static void caustics_rows_gain(void *user, int begin, int end)
         }
         if (q.n)
             gain_flush(j, &q);
+        finish_row(run, y);
     }
     fx_mem_free(cols);
 }
@@ -1577,7 +1589,7 @@ const fx_effect_class fx_effect_voronoi_caustics = {
      * Position or Depth, Normal and the environment image); caustics_rows_gain writes no
      * pixel it defers to gain_pixel / gain_flush, and its octets never overlap. On a
      * consumed frame no fresh frame-sized output buffer */
-    .flags = FX_EFFECT_IN_PLACE,
+    .flags = FX_EFFECT_IN_PLACE | FX_EFFECT_OWN_FINITE,
     .passes = caustics_passes,
     .needs_camera = caustics_needs_camera,
     .halo = NULL,
