@@ -32,16 +32,21 @@ class ViewsJob:
         self.started = time.monotonic()
         self.result = None           # (ok, message) once the child has exited
         self._dir = tempfile.mkdtemp(prefix="libfx_views_", dir=bpy.app.tempdir or None)
-        blend = os.path.join(self._dir, "scene.blend")
-        # A copy of the file as it is now, unsaved changes included (relative paths are
-        # remapped to the copy's folder by Blender); the open file is left as it was.
-        bpy.ops.wm.save_as_mainfile(filepath=blend, copy=True, check_existing=False)
-        runner = os.path.join(os.path.dirname(os.path.abspath(__file__)), "batch.py")
-        self.command = [bpy.app.binary_path, "-b", blend, "--scene", scene.name, "--python", runner, "--",
-                        "--views-only", "--frames", str(frame), "--output", scene_setup.output_prefix(scene)]
-        self._log = open(os.path.join(self._dir, "log.txt"), "w+", encoding="utf-8", errors="replace")
-        self.proc = subprocess.Popen(self.command, stdout=self._log, stderr=subprocess.STDOUT,
-                                     stdin=subprocess.DEVNULL)
+        self._log = None
+        try:
+            blend = os.path.join(self._dir, "scene.blend")
+            # A copy of the file as it is now, unsaved changes included (relative paths are
+            # remapped to the copy's folder by Blender); the open file is left as it was.
+            bpy.ops.wm.save_as_mainfile(filepath=blend, copy=True, check_existing=False)
+            runner = os.path.join(os.path.dirname(os.path.abspath(__file__)), "batch.py")
+            self.command = [bpy.app.binary_path, "-b", blend, "--scene", scene.name, "--python", runner, "--",
+                            "--views-only", "--frames", str(frame), "--output", scene_setup.output_prefix(scene)]
+            self._log = open(os.path.join(self._dir, "log.txt"), "w+", encoding="utf-8", errors="replace")
+            self.proc = subprocess.Popen(self.command, stdout=self._log, stderr=subprocess.STDOUT,
+                                         stdin=subprocess.DEVNULL)
+        except BaseException:
+            self._close()   # no copy or log left behind
+            raise
 
     def poll(self):
         """None while the child runs; then (ok, message), the message naming the views
@@ -73,7 +78,7 @@ class ViewsJob:
         self._close()
 
     def _close(self):
-        if not self._log.closed:
+        if self._log is not None and not self._log.closed:
             self._log.close()
         for name in ("scene.blend", "scene.blend1", "log.txt"):
             try:
