@@ -53,8 +53,13 @@ for scene in greek_bath atrium mirror_room; do
   for pair in "before:$out/libfx_passes.$f.exr" "after:$out/libfx.$f.exr"; do
     name=${pair%%:*} exr=${pair#*:}
     [ -s "$exr" ] || { echo "demo: $scene did not produce $exr" >&2; exit 1; }
-    oiiotool "$exr" --ch "R=Combined.R,G=Combined.G,B=Combined.B" --colorconvert linear sRGB \
-      -d uint8 -o "$out/$name.png"
+    # the Combined pass's channels as the file names them: "Combined.R" in libfx's result,
+    # "<view layer>.Combined.R" in the passes file the add-on writes from the Render Result
+    ch=$(oiiotool --info -v "$exr" | sed -n 's/^ *channel list: //p' | head -1 | tr ',' '\n' |
+         sed 's/^ *//' | grep -m1 'Combined\.R$' || true)
+    [ -n "$ch" ] || { echo "demo: $exr has no Combined pass" >&2; exit 1; }
+    c=${ch%R}
+    oiiotool "$exr" --ch "R=${c}R,G=${c}G,B=${c}B" --colorconvert linear sRGB -d uint8 -o "$out/$name.png"
   done
   oiiotool "$out/before.png" "$out/after.png" --mosaic 2x1 -o "$out/before_after.png"
   printf "demo: %s done in %s s: %s\n" "$scene" "$(awk -v a="$start" -v b="$(date +%s.%N)" "BEGIN{printf \"%.1f\", b-a}")" "$out/before_after.png"
