@@ -6,6 +6,7 @@
 #ifndef LIBFX_CORE_SIMD8_H
 #define LIBFX_CORE_SIMD8_H
 
+#include <float.h>
 #include <stdint.h>
 #include <string.h>
 
@@ -19,6 +20,7 @@ typedef float v8f __attribute__((vector_size(32)));
 typedef int32_t v8i __attribute__((vector_size(32)));
 
 #define S8(v) ((v8f){ (v), (v), (v), (v), (v), (v), (v), (v) })
+#define S8I(v) ((v8i){ (v), (v), (v), (v), (v), (v), (v), (v) })
 /* m ? a : b, lane by lane (m from a vector comparison: all ones or zero) */
 #define SEL8(m, a, b) ((v8f)(((v8i)(a) & (m)) | ((v8i)(b) & ~(m))))
 
@@ -39,6 +41,14 @@ static inline __attribute__((always_inline)) v8f fx_load8(const float *p)
 static inline __attribute__((always_inline)) void fx_store8(float *p, v8f v)
 {
     memcpy(p, &v, sizeof v);
+}
+
+/* NaN -> +0, +-Inf -> +-FLT_MAX, lane by lane (finite4's operations on 8 lanes: the same bits) */
+static inline __attribute__((always_inline)) v8f fx_finite8(v8f v)
+{
+    v = (v8f)((v8i)v & (v == v));
+    v = SEL8(v < S8(FLT_MAX), v, S8(FLT_MAX));
+    return SEL8(v > S8(-FLT_MAX), v, S8(-FLT_MAX));
 }
 
 /* Whether any lane, or every lane, of a comparison mask is set. */

@@ -97,12 +97,6 @@ typedef struct bloom_job {
     double *row_sums;
 } bloom_job;
 
-static inline float finite_or(float v)
-{
-    v = v == v ? v : 0.0f;
-    return v > FLT_MAX ? FLT_MAX : v < -FLT_MAX ? -FLT_MAX : v;
-}
-
 static inline float clamp_in(float v, float hi)
 {
     return v > 0.0f ? (v < hi ? v : hi) : 0.0f; /* NaN -> 0 */
@@ -382,23 +376,16 @@ typedef struct coarse_comp {
     float **scratch; /* per worker: level 2's width x 8 floats */
 } coarse_comp;
 
-static inline __attribute__((always_inline)) v8f finite8(v8f v)
-{
-    v = (v8f)((v8i)v & (v == v)); /* NaN -> +0 */
-    v = SEL8(v < S8(FLT_MAX), v, S8(FLT_MAX));
-    return SEL8(v > S8(-FLT_MAX), v, S8(-FLT_MAX));
-}
-
 /* dst = finite(finite(src) + glow), screen: glow x (1 - clamp(src, 0, 1)) */
 static inline __attribute__((always_inline)) v8f comp8(v8f s, v8f g, int screen)
 {
-    s = finite8(s);
+    s = fx_finite8(s);
     if (screen) {
         v8f s01 = SEL8(s > S8(0.0f), s, S8(0.0f));
         s01 = SEL8(s01 < S8(1.0f), s01, S8(1.0f));
         g *= S8(1.0f) - s01;
     }
-    return finite8(s + g);
+    return fx_finite8(s + g);
 }
 
 static inline __attribute__((always_inline)) v4f comp4(v4f s, v4f g, int screen)

@@ -136,12 +136,6 @@ typedef struct cel_job {
     int n;
 } cel_job;
 
-static inline float finite_or(float v)
-{
-    v = v == v ? v : 0.0f;
-    return v > FLT_MAX ? FLT_MAX : v < -FLT_MAX ? -FLT_MAX : v;
-}
-
 /* The ramp q(t), t = lighting / white: band floor(t N) with smooth steps of width soft. */
 /* The ramp at t: values[0] plus each band step, smoothed over band_softness around the
  * edges k/n (a smoothstep without a division: (t - lo) / softness, clamped). */
@@ -177,13 +171,6 @@ static inline v4f load3(const float *p, int ch) /* 3 channels (of ch >= 3), lane
  * matte: the row's outline matte (indexed by x), or NULL. */
 /* 8 pixels in lanes (math/simd8.h; an AVX2 clone beside the baseline, no FMA: the same
  * bits): the statement of cel_row_diffuse_px below, lane by lane, with selects. */
-static inline __attribute__((always_inline)) v8f finite8(v8f v)
-{
-    v = SEL8(v == v, v, S8(0.0f));
-    v = SEL8(v > S8(FLT_MAX), S8(FLT_MAX), v);
-    return SEL8(v < S8(-FLT_MAX), S8(-FLT_MAX), v);
-}
-
 static inline __attribute__((always_inline)) v8f ramp_q8(const cel_job *j, v8f t)
 {
     const int n = j->n;
@@ -267,11 +254,11 @@ FX_CLONES static void cel_row_diffuse(const cel_job *j, int y, const float *matt
         else
             gather8x3(cp, dc, col);
         for (int ch = 0; ch < 4; ch++)
-            c[ch] = finite8(c[ch]);
+            c[ch] = fx_finite8(c[ch]);
         for (int ch = 0; ch < 3; ch++) {
-            l3[ch] = finite8(l3[ch]);
+            l3[ch] = fx_finite8(l3[ch]);
             l3[ch] = SEL8(l3[ch] > S8(0.0f), l3[ch], S8(0.0f));
-            col[ch] = finite8(col[ch]);
+            col[ch] = fx_finite8(col[ch]);
         }
         const v8f l = S8(FX_LUMA_R) * l3[0] + S8(FX_LUMA_G) * l3[1] + S8(FX_LUMA_B) * l3[2];
         const v8f l_c = SEL8(l < S8(1e30f), l, S8(1e30f));
@@ -295,7 +282,7 @@ FX_CLONES static void cel_row_diffuse(const cel_job *j, int y, const float *matt
                 o[ch] += e * (S8(p->outline_color[ch]) - o[ch]);
         }
         for (int ch = 0; ch < 4; ch++)
-            o[ch] = finite8(c[ch] + S8(mix) * (o[ch] - c[ch]));
+            o[ch] = fx_finite8(c[ch] + S8(mix) * (o[ch] - c[ch]));
         if (!matte)
             o[3] = c[3];
         fx_store8x4(run->dst + (row + x) * 4, o);
@@ -320,11 +307,11 @@ static void cel_row(void *user, int y, const float *matte)
             size_t i = (size_t)y * run->width + x;
             const float *s = run->src + i * 4;
             float *d = run->dst + i * 4;
-            float c[3] = { finite_or(s[0]), finite_or(s[1]), finite_or(s[2]) };
+            float c[3] = { fx_finitef(s[0]), fx_finitef(s[1]), fx_finitef(s[2]) };
             float o[3] = { c[0], c[1], c[2] };
             {
                 const float *nn = j->normal + i * 3;
-                fx_vec3 n = fx_v3_normalize_or(fx_v3(finite_or(nn[0]), finite_or(nn[1]), finite_or(nn[2])), fx_v3(0, 0, 0));
+                fx_vec3 n = fx_v3_normalize_or(fx_v3(fx_finitef(nn[0]), fx_finitef(nn[1]), fx_finitef(nn[2])), fx_v3(0, 0, 0));
                 if (fx_v3_dot(n, n) > 0.5f) {
                     float l = fx_saturate(fx_v3_dot(n, j->to_light));
                     float q = ramp_q(j, l * inv_white) * p->white;
@@ -339,9 +326,9 @@ static void cel_row(void *user, int y, const float *matte)
                     o[k] += e * (p->outline_color[k] - o[k]);
             }
             for (int k = 0; k < 3; k++)
-                d[k] = finite_or(c[k] + p->mix * (o[k] - c[k]));
-            float a = finite_or(s[3]);
-            d[3] = matte ? finite_or(a + p->mix * (matte[x] * j->outline_weight) * (p->outline_color[3] - a)) : a;
+                d[k] = fx_finitef(c[k] + p->mix * (o[k] - c[k]));
+            float a = fx_finitef(s[3]);
+            d[3] = matte ? fx_finitef(a + p->mix * (matte[x] * j->outline_weight) * (p->outline_color[3] - a)) : a;
         }
     }
 }

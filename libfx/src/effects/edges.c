@@ -164,16 +164,7 @@ static inline __attribute__((always_inline)) v8f ld8f(const float *p)
     return v;
 }
 
-/* finite4's operations on 8 lanes: NaN -> +0, then clamped to +-FLT_MAX (the same bits) */
-static inline __attribute__((always_inline)) v8f finite8(v8f v)
-{
-    v = (v8f)((v8i)v & (v == v));
-    v = SEL8(v < S8(FLT_MAX), v, S8(FLT_MAX));
-    return SEL8(v > S8(-FLT_MAX), v, S8(-FLT_MAX));
-}
 
-
-#define S8I(v) ((v8i){ (v), (v), (v), (v), (v), (v), (v), (v) })
 #if defined(__clang__)
 #  define SHUF8I(a, i0, i1, i2, i3, i4, i5, i6, i7) __builtin_shufflevector(a, a, i0, i1, i2, i3, i4, i5, i6, i7)
 #else
@@ -285,7 +276,7 @@ FX_CLONES static void draw_row(void *user, int y, const float *matte)
             const v8f pair[4] = { FX_SHUF8(a8, a8, 0, 0, 0, 0, 1, 1, 1, 1), FX_SHUF8(a8, a8, 2, 2, 2, 2, 3, 3, 3, 3),
                                   FX_SHUF8(a8, a8, 4, 4, 4, 4, 5, 5, 5, 5), FX_SHUF8(a8, a8, 6, 6, 6, 6, 7, 7, 7, 7) };
             if (finite) {
-                /* finite pixels: s + a (lc - s) is finite (a in [0, 1], |lc| <= 65504), finite8
+                /* finite pixels: s + a (lc - s) is finite (a in [0, 1], |lc| <= 65504), fx_finite8
                  * would leave it as it is */
                 for (int k = 0; k < 4; k++) {
                     const v8f a = pair[k];
@@ -296,7 +287,7 @@ FX_CLONES static void draw_row(void *user, int y, const float *matte)
             }
             for (int k = 0; k < 4; k++) {
                 const v8f a = pair[k]; /* pixels 2k and 2k + 1's opacities, four lanes each */
-                const v8f t = finite8(s[k] + a * (lc8 - s[k]));
+                const v8f t = fx_finite8(s[k] + a * (lc8 - s[k]));
                 /* a pixel stays as it is where a is 0 and its four values are finite */
                 v8i keep = a == S8(0.0f);
                 if (!finite) {

@@ -197,13 +197,6 @@ static inline __attribute__((always_inline)) float keep_weight(const sc_job *j, 
 #  pragma GCC diagnostic ignored "-Wpsabi"
 #endif
 
-static inline __attribute__((always_inline)) float clampf_finite(float v) /* NaN -> 0, +-Inf -> +-FLT_MAX, branch-free */
-{
-    v = v == v ? v : 0.0f;
-    v = v < FLT_MAX ? v : FLT_MAX;
-    return v > -FLT_MAX ? v : -FLT_MAX;
-}
-
 /* The hue window's weights of 8 lanes (finite colours), in vector registers throughout.
  * With pretest, a chunk whose lanes all surely weigh 0 (saturation surely under the gate,
  * or hue surely beyond the window; margins far above the rounding of the exact path) skips
@@ -385,10 +378,10 @@ static inline __attribute__((always_inline)) void sc_lanes_chunk(const sc_job *j
         cp = cp ? tcov : NULL;
     }
     for (int i = 0; i < SC_LANES; i++) {
-        R[i] = clampf_finite(sp[4 * i]);
-        G[i] = clampf_finite(sp[4 * i + 1]);
-        B[i] = clampf_finite(sp[4 * i + 2]);
-        A[i] = clampf_finite(sp[4 * i + 3]);
+        R[i] = fx_finitef(sp[4 * i]);
+        G[i] = fx_finitef(sp[4 * i + 1]);
+        B[i] = fx_finitef(sp[4 * i + 2]);
+        A[i] = fx_finitef(sp[4 * i + 3]);
     }
     for (int i = 0; i < SC_LANES; i++)
         Y[i] = lum ? fx_luminance(R[i], G[i], B[i])
@@ -446,9 +439,9 @@ static inline __attribute__((always_inline)) void sc_lanes_chunk(const sc_job *j
             P2[i] = B[i] + mix * (P2[i] - B[i]);
         }
     for (int i = 0; i < SC_LANES; i++) {
-        P0[i] = clampf_finite(P0[i]);
-        P1[i] = clampf_finite(P1[i]);
-        P2[i] = clampf_finite(P2[i]);
+        P0[i] = fx_finitef(P0[i]);
+        P1[i] = fx_finitef(P1[i]);
+        P2[i] = fx_finitef(P2[i]);
     }
     /* direct stores (a staging buffer read back wider than written stalls store forwarding) */
     float *dp = d + 4 * (size_t)x;

@@ -15,7 +15,6 @@
 #include "core/simd4.h"
 
 typedef uint32_t v8ui __attribute__((vector_size(32)));
-#define S8I(v) ((v8i){ (v), (v), (v), (v), (v), (v), (v), (v) })
 #include "math/vec.h"
 #include "core/frame.h"
 #include "core/mem.h"
@@ -1198,9 +1197,10 @@ static inline float grad_ch(const float *P, const float *M, const float *Q, size
     return sqrtf(gx * gx + gy * gy);
 }
 
+/* fx_finitef's value, for the sums in double */
 static inline double finite_d(float v)
 {
-    return v == v ? (v < FLT_MAX ? (v > -FLT_MAX ? (double)v : -(double)FLT_MAX) : (double)FLT_MAX) : 0.0;
+    return fx_finitef(v);
 }
 
 static inline float clamp_fd(double v)

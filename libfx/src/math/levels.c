@@ -3,6 +3,7 @@
 
 #include "math/color.h"
 #include "core/simd4.h"
+#include "core/simd8.h"
 #include "math/clones.h"
 
 #include <float.h>
@@ -92,29 +93,6 @@ float fx_levels_apply_reference(const fx_levels *q, float v, int x, int y)
     return q->value[k];
 }
 
-/* GCC vector extensions, only inside always-inline helpers and the row kernel: no vector
- * crosses a call, so GCC's ABI note for 32-byte vectors does not apply. */
-#if defined(__GNUC__) && !defined(__clang__)
-#  pragma GCC diagnostic ignored "-Wpsabi"
-#endif
-
-typedef float v8f __attribute__((vector_size(32)));
-typedef int32_t v8i __attribute__((vector_size(32)));
-
-static inline __attribute__((always_inline)) v8f sel8(v8i m, v8f a, v8f b)
-{
-    return (v8f)(((v8i)a & m) | ((v8i)b & ~m));
-}
-
-static inline __attribute__((always_inline)) v8f finite8(v8f v)
-{
-    const v8f big = { FLT_MAX, FLT_MAX, FLT_MAX, FLT_MAX, FLT_MAX, FLT_MAX, FLT_MAX, FLT_MAX };
-    const v8f nbig = -big, zero = { 0 };
-    v = sel8(v == v, v, zero);
-    v = sel8(v > big, big, v);
-    return sel8(v < nbig, nbig, v);
-}
-
 /* One pixel (4 lanes): the tail of a row. */
 static inline void pixel4(const fx_levels *q, const float *sp, float *dp, int ph, int gray, float mix)
 {
@@ -177,15 +155,15 @@ void fx_levels_rgba_row(const fx_levels *q, const float *src, float *dst, int x0
             for (int j = 0; j < nt; j++) {
                 v8f tj;
                 memcpy(&tj, t[j], sizeof tj);
-                o = sel8(u >= tj, val[j + 1], o);
+                o = SEL8(u >= tj, val[j + 1], o);
             }
-            o = sel8(hdr & (u >= one), sel8(v < top, v, top), o);
+            o = SEL8(hdr & (u >= one), SEL8(v < top, v, top), o);
             if (mix < 1.0f) {
                 o = s + mix8 * (o - s);
-                o = sel8(alpha, s, o);
-                o = finite8(o);
+                o = SEL8(alpha, s, o);
+                o = fx_finite8(o);
             } else {
-                o = sel8(alpha, finite8(s), o); /* o is finite already */
+                o = SEL8(alpha, fx_finite8(s), o); /* o is finite already */
             }
             memcpy(dst + 4 * (size_t)x, &o, sizeof o);
         }

@@ -3,6 +3,7 @@
 #ifndef LIBFX_MATH_VEC_H
 #define LIBFX_MATH_VEC_H
 
+#include <float.h>
 #include <math.h>
 #include <string.h>
 
@@ -43,6 +44,13 @@ static inline fx_vec3 fx_v3_reflect(fx_vec3 i, fx_vec3 n)
 
 static inline float fx_clampf(float v, float lo, float hi) { return v < lo ? lo : v > hi ? hi : v; }
 static inline float fx_saturate(float v) { return fx_clampf(v, 0.0f, 1.0f); }
+/* NaN -> 0, +-Inf -> +-FLT_MAX (branch-free: compiles to selects) */
+static inline float fx_finitef(float v)
+{
+    v = v == v ? v : 0.0f;
+    v = v < FLT_MAX ? v : FLT_MAX;
+    return v > -FLT_MAX ? v : -FLT_MAX;
+}
 static inline float fx_lerpf(float a, float b, float t) { return a + (b - a) * t; }
 static inline float fx_smoothstep(float e0, float e1, float x)
 {
