@@ -43,51 +43,26 @@ fx_pano_trace_settings fx_pano_trace_setup(int steps, int refine, float min_dist
     return st;
 }
 
-/* Four march steps at once: the lanes of in_front for the points po + t pd, with the same
- * IEEE operations as the scalar path (fx_pano_depth, fx_atan2f_finite; ISO C contracts
- * nothing and there is no FMA), so the same texel and the same bits per lane. Branches
- * become selects: every lane computes each branch's operands and one division takes the
- * chosen ones (x / 1 and 0 + x are exact, so the untaken forms change no bit). */
-static inline v4f atan_pos4(v4f z)
-{
-    const v4i big = z > V4(2.414213562f), mid = ~big & (z > V4(0.414213562f));
-    v4f base = sel4(big, V4(FX_TRIG_PI_2), sel4(mid, V4(FX_TRIG_PI_4), V4(0.0f)));
-    v4f num = sel4(big, V4(-1.0f), sel4(mid, z - V4(1.0f), z));
-    v4f den = sel4(big, z, sel4(mid, z + V4(1.0f), V4(1.0f)));
-    v4f t = num / den;
-    v4f s = t * t;
-    v4f p = ((V4(8.05374449538e-2f) * s - V4(1.38776856032e-1f)) * s + V4(1.99777106478e-1f)) * s -
-            V4(3.33329491539e-1f);
-    return base + (p * s * t + t);
-}
-
-static inline v4f atan2_finite4(v4f y, v4f x)
-{
-    const v4i sign = (v4i)V4(-0.0f);
-    v4f ax = (v4f)((v4i)x & ~sign), ay = (v4f)((v4i)y & ~sign);
-    v4i swap = ~(ay <= ax);
-    v4f a = atan_pos4(sel4(swap, ax, ay) / sel4(swap, ay, ax));
-    a = sel4(swap, V4(FX_TRIG_PI_2) - a, a);
-    a = sel4(x < V4(0.0f), V4(FX_TRIG_PI) - a, a);
-    a = (v4f)((v4i)a ^ ((v4i)y & sign));
-    return sel4((ax == V4(0.0f)) & (ay == V4(0.0f)), V4(0.0f), a);
-}
-
 /* fx_clampf lane by lane */
 static inline v4f clamp4(v4f v, float lo, float hi)
 {
     return sel4(v < V4(lo), V4(lo), sel4(v > V4(hi), V4(hi), v));
 }
 
-/* front: lanes in front of the surface (all ones), gap: dist - D, for q = po + t pd */
+/* Four march steps at once: the lanes of in_front for the points po + t pd, with the same
+ * IEEE operations as the scalar path (fx_pano_depth, fx_atan2f_finite; ISO C contracts
+ * nothing and there is no FMA), so the same texel and the same bits per lane. Branches
+ * become selects: every lane computes each branch's operands and one division takes the
+ * chosen ones (x / 1 and 0 + x are exact, so the untaken forms change no bit; math/trig.h's
+ * fx_atan2f_finite4). front: the lanes in front of the surface (all ones); gap: dist - D. */
 static inline v4i in_front4(const fx_pano *p, fx_vec3 po, fx_vec3 pd, v4f t, v4f *gap)
 {
     v4f qx = V4(po.x) + V4(pd.x) * t, qy = V4(po.y) + V4(pd.y) * t, qz = V4(po.z) + V4(pd.z) * t;
     v4f dist = sqrt4(qx * qx + qy * qy + qz * qz);
     const float fw = (float)p->w, fh = (float)p->h;
-    v4f u = V4(0.5f) - atan2_finite4(-qx, -qz) / V4(2.0f * FX_PANO_PI);
+    v4f u = V4(0.5f) - fx_atan2f_finite4(-qx, -qz) / V4(2.0f * FX_PANO_PI);
     v4f cy = clamp4(qy / dist, -1.0f, 1.0f);
-    v4f v = atan2_finite4(sqrt4((V4(1.0f) - cy) * (V4(1.0f) + cy)), cy) / V4(FX_PANO_PI);
+    v4f v = fx_atan2f_finite4(sqrt4((V4(1.0f) - cy) * (V4(1.0f) + cy)), cy) / V4(FX_PANO_PI);
     v4i ok = (dist > V4(1e-30f)) & (dist <= V4(FLT_MAX)); /* fx_pano_dir_to_pixel's test */
     v4f px = sel4(ok, clamp4(u, 0.0f, 1.0f) * V4(fw), V4(0.5f * fw));
     v4f py = sel4(ok, clamp4(v, 0.0f, 1.0f) * V4(fh), V4(0.5f * fh));
