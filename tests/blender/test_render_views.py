@@ -40,8 +40,7 @@ print("VIEWS OK")
 
 
 def test_render_views_then_render(blender, library, tmp_path):
-    if not BLEND.is_file():
-        pytest.skip("no atrium.blend")
+    assert BLEND.is_file(), "%s is committed beside make_atrium.py" % BLEND
     p = T.run_blender([], env=T.addon_env(library), blend=BLEND, python_expr=SCRIPT % str(tmp_path / "a_"),
                       timeout=400)
     out = p.stdout + p.stderr
