@@ -3,10 +3,11 @@
  *
  * Steps: open and summarise the header (exr_common.c), choose the layer and view,
  * plan which channels feed which pass slots (exr_channels.c), allocate the passes
- * (budget-checked), decode only the planned channels of each part (OpenEXRCore;
- * DWAA/DWAB parts through OpenEXR's C++ reader, exr_dwa_fallback.cpp), then replace
- * non-finite values and attach camera, time and metadata. The frame is the union of
- * the used parts' data windows; pixels a part does not cover keep the fill value. */
+ * (budget-checked), decode only the planned channels of each part (OpenEXRCore; with
+ * an OpenEXRCore older than 3.1.13, DWAA/DWAB parts through OpenEXR's C++ reader,
+ * exr_dwa_fallback.cpp), then replace non-finite values and attach camera, time and
+ * metadata. The frame is the union of the used parts' data windows; pixels a part does
+ * not cover keep the fill value. */
 #include "io/exr_read.h"
 
 #include "core/context.h"
@@ -18,7 +19,9 @@
 #include "io/exr_camera.h"
 #include "io/exr_channels.h"
 #include "io/exr_common.h"
+#ifdef LIBFX_DWA_CXX_READER
 #include "io/exr_dwa_fallback.h"
+#endif
 
 #include <errno.h>
 #include <fcntl.h>
@@ -408,6 +411,8 @@ static fx_result decode_core_part(reader *rd, int p)
     return result;
 }
 
+#ifdef LIBFX_DWA_CXX_READER
+/* OpenEXRCore before 3.1.13 cannot decode DWA: such parts go through the C++ reader. */
 static fx_result decode_dwa_part(reader *rd, int p)
 {
     fx_exr_file *f = rd->f;
@@ -437,6 +442,8 @@ static fx_result decode_dwa_part(reader *rd, int p)
         return fx_fail(rd->ctx, FX_ERR_BAD_FILE, "'%s': part %d (DWA, OpenEXR C++ reader): %s", f->path, p, err);
     return FX_OK;
 }
+
+#endif
 
 static int part_is_dwa(const fx_exr_part *pt)
 {
@@ -678,7 +685,11 @@ static fx_result decode_parts(reader *rd, int any_dwa)
             used |= rd->dest[f->parts[p].first_chan + c].base != NULL;
         if (!used)
             continue;
+#ifdef LIBFX_DWA_CXX_READER
         r = part_is_dwa(&f->parts[p]) ? decode_dwa_part(rd, p) : decode_core_part(rd, p);
+#else
+        r = decode_core_part(rd, p);
+#endif
     }
     return r;
 }
