@@ -7,12 +7,11 @@
  * Batch semantics: the first failing frame stops the run (non-zero exit) unless
  * --keep-going; Ctrl-C cancels cleanly (no partial file) with exit 130. */
 #include "cli.h"
+#include "os.h"
 
 #include <errno.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/stat.h>
-#include <unistd.h>
 
 typedef struct run_opts {
     const char *stack_path, *sidecar_path, *layer, *view, *quality, *png, *in, *out, *compression;
@@ -303,14 +302,14 @@ done:
  * unless --force. */
 static int check_outputs(const run_opts *o, const run_item *items, int count)
 {
-    struct stat *ins = calloc((size_t)count, sizeof *ins);
+    cli_os_stat *ins = calloc((size_t)count, sizeof *ins);
     if (!ins) {
         cli_error("out of memory");
         return CLI_EXIT_PROCESS;
     }
     for (int i = 0; i < count; i++)
-        if (stat(items[i].in, &ins[i]) != 0)
-            ins[i].st_ino = 0, ins[i].st_dev = 0;
+        if (cli_os_stat_path(items[i].in, &ins[i]) != 0)
+            ins[i].ino = 0, ins[i].dev = 0;
     int rc = 0;
     for (int i = 0; i < count && !rc; i++) {
         const char *outs[2] = { items[i].out, items[i].png };
@@ -322,10 +321,10 @@ static int check_outputs(const run_opts *o, const run_item *items, int count)
             if (!outs[k])
                 continue;
             rc = cli_check_output(outs[k], items[i].in, o->force);
-            struct stat st;
-            if (!rc && count > 1 && stat(outs[k], &st) == 0) { /* another frame's input? */
+            cli_os_stat st;
+            if (!rc && count > 1 && cli_os_stat_path(outs[k], &st) == 0) { /* another frame's input? */
                 for (int j = 0; j < count; j++)
-                    if (ins[j].st_ino && ins[j].st_dev == st.st_dev && ins[j].st_ino == st.st_ino) {
+                    if (ins[j].ino && ins[j].dev == st.dev && ins[j].ino == st.ino) {
                         cli_error("refusing to write '%s': it is the input file '%s'", outs[k],
                                   items[j].in);
                         rc = CLI_EXIT_OUTPUT;
@@ -504,7 +503,7 @@ int cli_cmd_run(int argc, char **argv)
         goto done;
     cli_install_sigint();
 
-    int tty = !o.quiet && isatty(STDERR_FILENO);
+    int tty = !o.quiet && cli_os_stderr_is_tty();
     int summaries = !o.quiet && !tty && job.sequence;
     cli_progress_init(&job.progress, count, tty, summaries);
     int failed = 0, first_rc = 0;

@@ -1,5 +1,6 @@
 /* `libfx`: the command-line door onto the library. Dispatch, --help, --version. */
 #include "cli.h"
+#include "os.h"
 
 #include <string.h>
 
@@ -142,6 +143,7 @@ static const struct {
 
 int main(int argc, char **argv)
 {
+    cli_os_utf8_args(&argc, &argv);
     if (fx_abi_version() != FX_ABI_VERSION) {
         cli_error("this tool was built for libfx ABI %d but the loaded library has ABI %d",
                   FX_ABI_VERSION, fx_abi_version());

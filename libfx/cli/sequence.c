@@ -3,8 +3,8 @@
  * Only the file-name part is a pattern; '#' and '%' in folder names are literal.
  * Negative frame numbers are not matched. */
 #include "cli.h"
+#include "os.h"
 
-#include <dirent.h>
 #include <errno.h>
 #include <stdlib.h>
 #include <string.h>
@@ -68,7 +68,7 @@ static int find_spec(const char *name, size_t *len, int *width, int *malformed)
 int cli_pattern_parse(const char *path, cli_pattern *out, char *err, size_t err_size)
 {
     memset(out, 0, sizeof *out);
-    const char *slash = strrchr(path, '/');
+    const char *slash = cli_os_last_separator(path);
     const char *name = slash ? slash + 1 : path;
     size_t len = 0;
     int width = 0, malformed = 0;
@@ -159,15 +159,15 @@ int cli_pattern_expand(const cli_pattern *p, long first, long last, cli_seq_item
 {
     *items = NULL;
     *count = 0;
-    DIR *dir = opendir(p->dir);
+    cli_os_dir *dir = cli_os_opendir(p->dir);
     if (!dir)
         return -1;
     cli_seq_item *list = NULL;
     int n = 0, cap = 0;
-    struct dirent *e;
-    while ((e = readdir(dir)) != NULL) {
+    const char *entry;
+    while ((entry = cli_os_readdir(dir)) != NULL) {
         long frame;
-        if (!match_name(p, e->d_name, &frame) || frame < first || frame > last)
+        if (!match_name(p, entry, &frame) || frame < first || frame > last)
             continue;
         if (n == cap) {
             int ncap = cap ? cap * 2 : 64;
@@ -183,14 +183,14 @@ int cli_pattern_expand(const cli_pattern *p, long first, long last, cli_seq_item
             goto oom;
         n++;
     }
-    closedir(dir);
+    cli_os_closedir(dir);
     if (n > 1)
         qsort(list, (size_t)n, sizeof *list, by_frame);
     *items = list;
     *count = n;
     return 0;
 oom:
-    closedir(dir);
+    cli_os_closedir(dir);
     cli_seq_free(list, n);
     errno = ENOMEM;
     return -1;

@@ -1,5 +1,6 @@
 /* Messages, exit codes, option parsing, numbers, paths, JSON printing and Ctrl-C. */
 #include "cli.h"
+#include "os.h"
 
 #include <errno.h>
 #include <limits.h>
@@ -8,9 +9,6 @@
 #include <stdarg.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/stat.h>
-#include <time.h>
-#include <unistd.h>
 
 /* ---- exit codes ---------------------------------------------------------- */
 
@@ -238,22 +236,22 @@ int cli_parse_double(const char *cmd, const char *opt, const char *s, double lo,
 
 int cli_same_file(const char *a, const char *b)
 {
-    struct stat sa, sb;
-    if (stat(a, &sa) != 0 || stat(b, &sb) != 0)
+    cli_os_stat sa, sb;
+    if (cli_os_stat_path(a, &sa) != 0 || cli_os_stat_path(b, &sb) != 0)
         return 0;
-    return sa.st_dev == sb.st_dev && sa.st_ino == sb.st_ino;
+    return sa.dev == sb.dev && sa.ino == sb.ino;
 }
 
 int cli_file_exists(const char *path)
 {
-    struct stat st;
-    return stat(path, &st) == 0;
+    cli_os_stat st;
+    return cli_os_stat_path(path, &st) == 0;
 }
 
 /* The folder part of a path ("." for a bare name), in buf. */
 static void dir_of(const char *path, char *buf, size_t size)
 {
-    const char *slash = strrchr(path, '/');
+    const char *slash = cli_os_last_separator(path);
     if (!slash) {
         snprintf(buf, size, ".");
     } else if (slash == path) {
@@ -269,14 +267,14 @@ static void dir_of(const char *path, char *buf, size_t size)
 
 int cli_check_output(const char *path, const char *input, int force)
 {
-    struct stat st;
+    cli_os_stat st;
     char dir[PATH_MAX];
     if (input && cli_same_file(path, input)) {
         cli_error("refusing to write '%s': it is the input file '%s'", path, input);
         return CLI_EXIT_OUTPUT;
     }
-    if (stat(path, &st) == 0) {
-        if (S_ISDIR(st.st_mode)) {
+    if (cli_os_stat_path(path, &st) == 0) {
+        if (st.is_dir) {
             cli_error("cannot write '%s': it is a directory", path);
             return CLI_EXIT_OUTPUT;
         }
@@ -286,15 +284,15 @@ int cli_check_output(const char *path, const char *input, int force)
         }
     }
     dir_of(path, dir, sizeof dir);
-    if (stat(dir, &st) != 0) {
+    if (cli_os_stat_path(dir, &st) != 0) {
         cli_error("cannot write '%s': directory '%s' does not exist", path, dir);
         return CLI_EXIT_OUTPUT;
     }
-    if (!S_ISDIR(st.st_mode)) {
+    if (!st.is_dir) {
         cli_error("cannot write '%s': '%s' is not a directory", path, dir);
         return CLI_EXIT_OUTPUT;
     }
-    if (access(dir, W_OK | X_OK) != 0) {
+    if (!cli_os_dir_writable(dir)) {
         cli_error("cannot write '%s': directory '%s' is not writable", path, dir);
         return CLI_EXIT_OUTPUT;
     }
@@ -411,13 +409,7 @@ static void on_sigint(int sig)
 
 void cli_install_sigint(void)
 {
-    struct sigaction sa;
-    memset(&sa, 0, sizeof sa);
-    sa.sa_handler = on_sigint;
-    sigemptyset(&sa.sa_mask);
-    sa.sa_flags = SA_RESETHAND;
-    sigaction(SIGINT, &sa, NULL);
-    sigaction(SIGTERM, &sa, NULL);
+    cli_os_catch_interrupt(on_sigint);
 }
 
 int cli_interrupted(void)
@@ -427,7 +419,5 @@ int cli_interrupted(void)
 
 double cli_now(void)
 {
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
+    return cli_os_now();
 }

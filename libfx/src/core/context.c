@@ -3,11 +3,11 @@
 #include "core/context.h"
 #include "core/mem.h"
 #include "core/parallel.h"
+#include "core/platform.h"
 
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <unistd.h>
 
 #ifndef LIBFX_VERSION
 #define LIBFX_VERSION "0.0.0"
@@ -57,10 +57,8 @@ fx_result fx_context_new(fx_context **out, int threads)
     fx_context *c = fx_mem_calloc(1, sizeof *c);
     if (!c)
         return FX_ERR_OUT_OF_MEMORY;
-    if (threads <= 0) {
-        long n = sysconf(_SC_NPROCESSORS_ONLN);
-        threads = n > 0 ? (int)n : 1;
-    }
+    if (threads <= 0)
+        threads = fx_os_cpu_count();
     if (threads > 256)
         threads = 256;
     c->threads = threads;

@@ -1,16 +1,15 @@
 /* Every allocation of the library goes through these, so tests can make the Nth one
  * fail (allocation-failure injection) and check for clean errors without leaks. */
-#define _DEFAULT_SOURCE /* madvise(MADV_HUGEPAGE) */
 #include "libfx/fx.h"
 #include "core/mem.h"
 #include "core/mem_failures.h"
+#include "core/platform.h"
 
 #include <cjson/cJSON.h>
 #include <stdatomic.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/mman.h>
 
 static atomic_long fail_countdown; /* 0: never fail */
 static atomic_ulong failed_count;  /* allocations that returned NULL, injected or real */
@@ -55,13 +54,7 @@ static void *alloc_huge(size_t n)
     if (n > SIZE_MAX - HUGE_PAGE)
         return counted(NULL);
     size_t rounded = (n + HUGE_PAGE - 1) & ~(HUGE_PAGE - 1);
-    void *p = NULL;
-    if (posix_memalign(&p, HUGE_PAGE, rounded) != 0)
-        return counted(NULL);
-#ifdef MADV_HUGEPAGE
-    (void)madvise(p, rounded, MADV_HUGEPAGE); /* a hint: without THP the pages stay small */
-#endif
-    return p;
+    return counted(fx_os_alloc_pages(rounded, HUGE_PAGE));
 }
 
 /* n bytes, from huge_from up as whole advised huge pages */

@@ -6,6 +6,7 @@
 #include "core/mem_failures.h"
 #include "core/parallel.h"
 #include "core/params.h"
+#include "core/platform.h"
 
 #include <cjson/cJSON.h>
 #include <errno.h>
@@ -15,7 +16,6 @@
 #include <stdint.h>
 #include <stdio.h>
 #include <string.h>
-#include <time.h>
 
 #define RECIPE_VERSION 1
 #define LABEL_MAX 128
@@ -918,9 +918,7 @@ static fx_rect rect_union(fx_rect a, fx_rect b)
 
 static double now_ms(void)
 {
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return ts.tv_sec * 1e3 + ts.tv_nsec / 1e6;
+    return fx_os_now_ms();
 }
 
 float *fx_effect_debug_pass(const fx_effect_run *run, const char *name, int channels, fx_result *result)

@@ -2,6 +2,7 @@
 #include "core/textfile.h"
 #include "core/context.h"
 #include "core/mem.h"
+#include "core/platform.h"
 
 #include <errno.h>
 #include <stdio.h>
@@ -11,7 +12,7 @@ fx_result fx_read_text_file(const fx_context *ctx, const char *path, size_t max_
                             char **out)
 {
     *out = NULL;
-    FILE *fp = fopen(path, "rb");
+    FILE *fp = fx_os_fopen(path, "rb");
     if (!fp)
         return fx_fail(ctx, FX_ERR_IO, "cannot open %s '%s': %s", what, path, strerror(errno));
     char *buf = NULL;

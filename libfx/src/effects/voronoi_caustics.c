@@ -1403,8 +1403,7 @@ static void job_init(const fx_effect_run *run, const caustics_params *p, caustic
      * its resolver picks under this condition. Either path gives the same bits. */
 #if defined(__AVX2__)
     j->wide = 1;
-#elif defined(__GNUC__) && !defined(__clang__) && (defined(__x86_64__) || defined(__i386__)) && \
-    !defined(FX_NO_CLONES)
+#elif defined(FX_CLONES_AVX2)
     j->wide = __builtin_cpu_supports("avx2") != 0;
 #endif
 }

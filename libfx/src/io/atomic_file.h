@@ -1,5 +1,6 @@
 /* Writing output files safely: never over the input, always through a temporary file
- * in the destination's folder renamed into place (atomic on POSIX file systems). */
+ * in the destination's folder renamed into place (atomic on POSIX file systems; on
+ * Windows MoveFileExW replacing the old file, core/platform.h). */
 #ifndef LIBFX_IO_ATOMIC_FILE_H
 #define LIBFX_IO_ATOMIC_FILE_H
 

@@ -3,6 +3,7 @@
 
 #include "core/mask.h"
 #include "core/mem.h"
+#include "core/platform.h"
 
 #include <errno.h>
 #include <stdio.h>
@@ -40,13 +41,12 @@ static void copy_n(char *dst, size_t cap, const char *src, size_t n)
  * refused: a header must not make us read arbitrary files. */
 static char *load_sidecar(fx_context *ctx, const char *exr_path, const char *rel)
 {
-    if (!rel[0] || rel[0] == '/' || strstr(rel, "..")) {
+    if (!rel[0] || fx_os_path_is_absolute(rel) || strstr(rel, "..")) {
         fx_warn(ctx, "'%s': Cryptomatte sidecar manifest '%s' ignored (only relative paths beside the file)",
                 exr_path, rel);
         return NULL;
     }
-    const char *slash = strrchr(exr_path, '/');
-    size_t dir = slash ? (size_t)(slash - exr_path + 1) : 0;
+    size_t dir = fx_os_dir_length(exr_path);
     size_t len = dir + strlen(rel) + 1;
     char *full = fx_mem_alloc(len);
     if (!full)
@@ -54,7 +54,7 @@ static char *load_sidecar(fx_context *ctx, const char *exr_path, const char *rel
     memcpy(full, exr_path, dir);
     strcpy(full + dir, rel);
     char *text = NULL;
-    FILE *fp = fopen(full, "rb");
+    FILE *fp = fx_os_fopen(full, "rb");
     if (!fp) {
         fx_warn(ctx, "'%s': cannot open its Cryptomatte sidecar manifest '%s': %s", exr_path, full,
                 strerror(errno));

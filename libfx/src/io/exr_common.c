@@ -4,13 +4,13 @@
 #include "io/cryptomatte_meta.h"
 #include "core/frame.h"
 #include "core/mem.h"
+#include "core/platform.h"
 
 #include <errno.h>
 #include <limits.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <string.h>
-#include <sys/stat.h>
 
 /* OpenEXR reports through a callback (default: print to stderr). libfx never prints:
  * keep the calling thread's last message for our own error text. Thread-local rather
@@ -231,14 +231,14 @@ fx_result fx_exr_file_open(fx_context *ctx, const char *path, fx_exr_file *f)
 {
     memset(f, 0, sizeof *f);
     f->path = path;
-    struct stat st;
-    if (stat(path, &st) != 0)
+    fx_os_stat st;
+    if (fx_os_stat_path(path, &st) != 0)
         return fx_fail(ctx, FX_ERR_IO, "cannot open '%s': %s", path, strerror(errno));
-    if (S_ISDIR(st.st_mode))
+    if (st.is_dir)
         return fx_fail(ctx, FX_ERR_IO, "cannot open '%s': %s", path, strerror(EISDIR));
-    if (st.st_size == 0)
+    if (st.size == 0)
         return fx_fail(ctx, FX_ERR_BAD_FILE, "'%s' is empty (0 bytes): not an EXR file", path);
-    FILE *probe = fopen(path, "rb");
+    FILE *probe = fx_os_fopen(path, "rb");
     if (!probe)
         return fx_fail(ctx, FX_ERR_IO, "cannot open '%s': %s", path, strerror(errno));
     unsigned char magic[4] = {0};

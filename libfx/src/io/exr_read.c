@@ -15,6 +15,7 @@
 #include "core/mem.h"
 #include "core/parallel.h"
 #include "core/passes.h"
+#include "core/platform.h"
 #include "io/cryptomatte_meta.h"
 #include "io/exr_camera.h"
 #include "io/exr_channels.h"
@@ -24,13 +25,11 @@
 #endif
 
 #include <errno.h>
-#include <fcntl.h>
 #include <limits.h>
 #include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <unistd.h>
 
 /* Where one planned channel lands. */
 typedef struct chan_dest {
@@ -104,7 +103,7 @@ typedef struct decode_job {
     int reported;                  /* chunks done at the last progress report (worker 0) */
     fx_exr_job_error err;
     /* Uncompressed parts whose decoded channels are all float (see raw_chunk): */
-    int raw_fd;                    /* >= 0: read the chunks' bytes with pread */
+    fx_os_file raw_fd;             /* != FX_OS_NO_FILE: read the chunks' bytes with pread */
     size_t raw_line;               /* bytes of one scanline of all channels */
     size_t *raw_off;               /* per part channel: its byte offset in a scanline */
 } decode_job;
@@ -154,10 +153,8 @@ static void raw_chunk(decode_job *j, int k, const exr_chunk_info_t *ci, int x0, 
                 end++;
             size_t want = (size_t)(end - c) * row, got = 0;
             while (got < want) {
-                ssize_t n = pread(j->raw_fd, (char *)scratch + got, want - got,
-                                  (off_t)(line + j->raw_off[c] + got));
-                if (n < 0 && errno == EINTR)
-                    continue;
+                long long n = fx_os_pread(j->raw_fd, (char *)scratch + got, want - got,
+                                          line + j->raw_off[c] + got);
                 if (n <= 0) {
                     fx_exr_job_fail(&j->err, k, n < 0 ? FX_ERR_IO : FX_ERR_BAD_FILE, "'%s': %s: %s", rd->f->path,
                                     what, n < 0 ? strerror(errno) : "the file ends inside the chunk");
@@ -211,7 +208,7 @@ static void decode_chunk(decode_job *j, int k, int worker)
         fx_exr_job_fail_exr(&j->err, k, f->path, rv, what);
         return;
     }
-    if (j->raw_fd >= 0) {
+    if (j->raw_fd != FX_OS_NO_FILE) {
         if (ci.width != (int64_t)pt->dw[2] - pt->dw[0] + 1 || ci.height <= 0 || ci.height > j->chh ||
             y0 + (int64_t)ci.height - 1 > pt->dw[3]) {
             fx_exr_job_fail(&j->err, k, FX_ERR_BAD_FILE, "'%s': %s: chunk of %dx%d outside the data window",
@@ -379,14 +376,14 @@ static fx_result decode_core_part(reader *rd, int p)
     }
     atomic_init(&j.done, 0);
     fx_exr_job_error_init(&j.err);
-    j.raw_fd = -1;
+    j.raw_fd = FX_OS_NO_FILE;
     if (raw_part_ok(rd, pt) && (j.raw_off = fx_mem_calloc((size_t)pt->channel_count + 1, sizeof *j.raw_off))) {
         for (int c = 0; c < pt->channel_count; c++) {
             int type = f->chans[pt->first_chan + c].type;
             j.raw_off[c] = j.raw_line;
             j.raw_line += (size_t)pw * (type == EXR_PIXEL_HALF ? 2u : 4u);
         }
-        j.raw_fd = open(f->path, O_RDONLY | O_CLOEXEC); /* < 0: OpenEXRCore's path after all */
+        j.raw_fd = fx_os_open_read(f->path); /* none: OpenEXRCore's path after all */
     }
 
     /* One chunk per task (a chunk is thousands of pixels); tasks are taken in
@@ -402,8 +399,7 @@ static fx_result decode_core_part(reader *rd, int p)
         if (j.have_dec[w])
             exr_decoding_destroy(f->exr, &j.dec[w]);
     fx_exr_job_error_destroy(&j.err);
-    if (j.raw_fd >= 0)
-        close(j.raw_fd);
+    fx_os_close(j.raw_fd);
     fx_mem_free(j.raw_off);
     fx_mem_free(j.have_dec);
     fx_mem_free(j.dec);

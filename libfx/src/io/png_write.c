@@ -8,6 +8,7 @@
 #include "core/context.h"
 #include "core/frame.h"
 #include "core/mem.h"
+#include "core/platform.h"
 #include "io/atomic_file.h"
 
 #include <errno.h>
@@ -128,7 +129,7 @@ fx_result fx_frame_write_png(const fx_frame *f, const char *path, const char *pa
         return r;
     }
     png_job job = {path, ""};
-    FILE *fp = fopen(tmp, "wb");
+    FILE *fp = fx_os_fopen(tmp, "wb");
     if (!fp) {
         r = fx_fail(ctx, FX_ERR_IO, "cannot write '%s': %s", path, strerror(errno));
     } else {

@@ -2,10 +2,10 @@
 #include "core/context.h"
 #include "core/frame.h"
 #include "core/mem.h"
+#include "core/platform.h"
 #include "scene/aux_map.h"
 
 #include <cjson/cJSON.h>
-#include <sys/stat.h>
 #include <stddef.h>
 #include <stdio.h>
 #include <string.h>
@@ -251,10 +251,10 @@ static fx_result acquire(const fx_frame *f, const char *name, int derivative_bia
     char *entry = fx_aux_view_entry(f, name, where, path, sizeof path, &r);
     if (!entry)
         return r;
-    struct stat st;
+    fx_os_stat st;
     char *key = NULL;
     struct fx_aux_cache *c = cache_of(ctx);
-    if (c && cache_limit(ctx) > 0 && stat(path, &st) == 0) {
+    if (c && cache_limit(ctx) > 0 && fx_os_stat_path(path, &st) == 0) {
         char tail[160];
         if (filter != AUX_RAW_VIEW && filter > AUX_MOMENTS(0) && !(filter >= 0 && width > 1.0f)) {
             filter = -1;
@@ -262,9 +262,9 @@ static fx_result acquire(const fx_frame *f, const char *name, int derivative_bia
         }
         /* device + inode too: writers replace the file (temp + rename), which gives it a new
          * inode even when size and the coarse mtime clock are the same */
-        int n = snprintf(tail, sizeof tail, "|%llu:%llu|%lld|%lld.%09ld|%d|%d|%.9g", (unsigned long long)st.st_dev,
-                         (unsigned long long)st.st_ino, (long long)st.st_size, (long long)st.st_mtim.tv_sec,
-                         (long)st.st_mtim.tv_nsec, derivative_bias ? 1 : 0, filter, (double)width);
+        int n = snprintf(tail, sizeof tail, "|%llu:%llu|%lld|%lld.%09ld|%d|%d|%.9g", (unsigned long long)st.dev,
+                         (unsigned long long)st.ino, (long long)st.size, (long long)st.mtime_sec,
+                         st.mtime_nsec, derivative_bias ? 1 : 0, filter, (double)width);
         size_t len = strlen(entry);
         key = fx_mem_alloc(len + (size_t)n + 1);
         if (key) {
