@@ -16,7 +16,10 @@
 #include <stddef.h>
 #include <stdio.h>
 
-#if defined(__GNUC__)
+#if defined(__MINGW32__)
+/* MinGW's stdio is the C99 one in C11 mode (__USE_MINGW_ANSI_STDIO), not msvcrt's: %zu works */
+#  define CLI_PRINTF(a, b) __attribute__((format(gnu_printf, a, b)))
+#elif defined(__GNUC__)
 #  define CLI_PRINTF(a, b) __attribute__((format(printf, a, b)))
 #else
 #  define CLI_PRINTF(a, b)

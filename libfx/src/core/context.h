@@ -13,7 +13,10 @@
 extern "C" {
 #endif
 
-#if defined(__GNUC__)
+#if defined(__MINGW32__)
+/* MinGW's stdio is the C99 one in C11 mode (__USE_MINGW_ANSI_STDIO), not msvcrt's: %zu works */
+#  define FX_PRINTF(a, b) __attribute__((format(gnu_printf, a, b)))
+#elif defined(__GNUC__)
 #  define FX_PRINTF(a, b) __attribute__((format(printf, a, b)))
 #else
 #  define FX_PRINTF(a, b)
