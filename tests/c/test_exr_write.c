@@ -2,6 +2,7 @@
  * metadata, Cryptomatte), refusals (output == input, unwritable folder), and ZIP/ZIPS
  * through libdeflate (io/exr_zip.c) decoding to the same values as OpenEXR's zlib. */
 #include "testutil.h"
+#include "testos.h"
 #include "io/exr_write.h"
 #include "io/exr_zip.h"
 
@@ -236,15 +237,15 @@ static void test_refusals(fx_context *ctx, const char *dir)
     /* a hard link is the same file too */
     char link_path[600];
     snprintf(link_path, sizeof link_path, "%s/hardlink.exr", dir);
-    if (link(in, link_path) == 0) {
+    if (tu_hardlink(in, link_path) == 0) {
         CHECK_FAIL(ctx, fx_frame_write_exr(g, link_path, &same), FX_ERR_INVALID_ARGUMENT, "refusing");
-        unlink(link_path);
+        remove(link_path);
     }
 
     /* unwritable folder: FX_ERR_IO naming the path, nothing left behind */
     char ro[600], out[700];
     snprintf(ro, sizeof ro, "%s/readonly", dir);
-    mkdir(ro, 0500);
+    tu_mkdir(ro, 0500);
     snprintf(out, sizeof out, "%s/out.exr", ro);
     if (access(ro, W_OK) != 0) { /* root ignores permissions */
         CHECK_FAIL(ctx, fx_frame_write_exr(g, out, &wo), FX_ERR_IO, out);

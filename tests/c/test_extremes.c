@@ -16,19 +16,18 @@
  *    1e10/1e11/65504, zero-length and non-unit normals; 1x1, 1xN, Nx1 frames;
  *    singular/huge/NaN camera matrices (NaN refused); lights behind and at the camera.
  *  - Every case: no crash, every float of every output pass finite (debug outputs on),
- *    a wall limit per case (SIGALRM names the case that hangs), or a clear error.
+ *    a wall limit per case (a watchdog names the case that hangs), or a clear error.
  *  - A few reference-quality cases.
  *  - Every preset on 1/2 and 1/4 proxies (fx_frame_reduce) of the hostile odd frames.
  */
 #include "fx_scene_test.h"
 
 #include "core/internal.h"
+#include "testos.h"
 
 #include <float.h>
 #include <math.h>
-#include <signal.h>
 #include <stdint.h>
-#include <time.h>
 #include <unistd.h>
 
 /* Hard per-case limit (the process exits naming the case) and the soft one that is
@@ -39,9 +38,8 @@
 static char current_case[512];
 static int runs_ok, runs_refused;
 
-static void on_alarm(int sig)
+static void on_alarm(void)
 {
-    (void)sig;
     static const char msg[] = "\ntest_extremes: case over the wall limit (hang?): ";
     if (write(2, msg, sizeof msg - 1) < 0 || write(2, current_case, strlen(current_case)) < 0 ||
         write(2, "\n", 1) < 0) { /* nothing more to do */ }
@@ -50,9 +48,7 @@ static void on_alarm(int sig)
 
 static double now_s(void)
 {
-    struct timespec t;
-    clock_gettime(CLOCK_MONOTONIC, &t);
-    return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
+    return tu_now();
 }
 
 /* ---- running one case ------------------------------------------------------------- */
@@ -94,12 +90,12 @@ static fx_result run_case_keep(fx_context *ctx, fx_stack *s, const fx_frame *f, 
                                fx_frame **keep)
 {
     fx_context_clear_warnings(ctx);
-    alarm(CASE_HARD_LIMIT_S);
+    tu_alarm(CASE_HARD_LIMIT_S, on_alarm);
     double t0 = now_s();
     fx_frame *out = NULL;
     fx_result r = fx_stack_run(s, f, &out);
     double dt = now_s() - t0;
-    alarm(0);
+    tu_alarm(0, on_alarm);
     tu_checks++;
     if (dt > CASE_SOFT_LIMIT_S) {
         tu_failures++;
@@ -624,10 +620,6 @@ static void cameras_reference_all(fx_context *ctx, fx_frame *hostile)
 
 int main(void)
 {
-    struct sigaction sa;
-    memset(&sa, 0, sizeof sa);
-    sa.sa_handler = on_alarm;
-    sigaction(SIGALRM, &sa, NULL);
     double t_start = now_s();
 
     fx_context *ctx = NULL;

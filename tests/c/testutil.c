@@ -1,11 +1,10 @@
 #include "testutil.h"
+#include "testos.h"
 
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/stat.h>
-#include <unistd.h>
 
 int tu_checks, tu_failures;
 
@@ -70,12 +69,18 @@ int tu_all_finite(const float *a, size_t n)
 const char *tu_tmpdir(const char *name)
 {
     static char path[512];
-    snprintf(path, sizeof path, "/tmp/libfx-test-%s-%d", name, (int)getpid());
-    char cmd[600];
-    snprintf(cmd, sizeof cmd, "rm -rf '%s'", path);
-    if (system(cmd) != 0) { /* best effort */ }
-    mkdir(path, 0700);
+    snprintf(path, sizeof path, "%s/libfx-test-%s-%ld", tu_temp_root(), name, tu_pid());
+    tu_rmtree(path);
+    tu_mkdir(path, 0700);
     return path;
+}
+
+int tu_file_exists(const char *path)
+{
+    FILE *fp = fopen(path, "rb");
+    if (fp)
+        fclose(fp);
+    return fp != NULL;
 }
 
 char *tu_slurp(const char *path, size_t *len)

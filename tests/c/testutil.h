@@ -53,7 +53,9 @@ double tu_max_abs_diff(const float *a, const float *b, size_t n);
 int tu_all_finite(const float *a, size_t n);
 /* A whole file, NUL-terminated, malloc'ed (len may be NULL); NULL if unreadable. */
 char *tu_slurp(const char *path, size_t *len);
-/* A fresh empty directory under /tmp for this test; returns its path (static storage). */
+int tu_file_exists(const char *path); /* can be opened for reading */
+/* A fresh empty directory under /tmp (Windows: its temporary folder) for this test;
+ * returns its path (static storage). */
 const char *tu_tmpdir(const char *name);
 
 #endif
