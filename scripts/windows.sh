@@ -16,6 +16,16 @@ deps=${LIBFX_DEPS:-/var/cache/libfx-deps}/windows-x64
 export WINEPREFIX=${WINEPREFIX:-$here/$build/wineprefix}
 export WINEDEBUG=-all
 WINE=/usr/lib/wine/wine64
+WINESERVER=/usr/lib/wine/wineserver
+# CLI tests that cannot mean anything under Wine (the rest of tests/python/test_cli*.py runs):
+EXCLUDED_CLI_TESTS=(
+  # caps the child's address space with RLIMIT_AS: under Wine that caps Wine's own Unix
+  # process, which aborts reserving its address space (virtual_init) before libfx runs
+  tests/python/test_cli_no_data_loss.py::test_out_of_memory
+  # Unix permission bits, the CLI run as `nobody` (setpriv): nobody cannot use the Wine
+  # prefix, and Windows folders are guarded by ACLs, not mode bits
+  tests/python/test_cli_errors.py::test_unwritable_output_directory
+)
 
 packages=(
   cmake gcc-mingw-w64-x86-64 g++-mingw-w64-x86-64 binutils-mingw-w64-x86-64  # the cross toolchain
@@ -102,7 +112,8 @@ ctest_under_wine() {
 
 cli_tests_under_wine() {
   LIBFX_CLI="$here/tests/platform/wine_cli.sh" LIBFX_WINDOWS_CLI="$here/$build/libfx/libfx.exe" \
-    /usr/bin/python3 -m pytest -q -p no:cacheprovider tests/python/test_cli*.py
+    /usr/bin/python3 -m pytest -q -p no:cacheprovider "${EXCLUDED_CLI_TESTS[@]/#/--deselect=}" \
+    tests/python/test_cli*.py
 }
 
 step "configure + build ($build)" configure_and_build
@@ -110,6 +121,10 @@ if [ $failed -eq 0 ]; then
   step "libfx.dll imports only system DLLs" check_imports "$build/libfx/libfx.dll" ""
   step "libfx.exe imports only system DLLs + libfx.dll" check_imports "$build/libfx/libfx.exe" libfx.dll
   step "libfx.dll exports exactly fx.h's API" check_exports
+  # One Wine server for every test program, started before any of them (it exits a minute
+  # after the last one): each of the hundreds of CLI runs would otherwise start and load
+  # its own (seconds each). Exit status 2: one is running already, which serves as well.
+  "$WINESERVER" -p60 || true
   "$WINE" wineboot -i >/dev/null 2>&1 || true   # the Wine prefix, once, before parallel tests
   step "C tests (ctest under Wine)" ctest_under_wine
   step "CLI tests (pytest tests/python/test_cli*.py under Wine)" cli_tests_under_wine
