@@ -34,10 +34,31 @@ const char *tu_temp_root(void)
     return root;
 }
 
+static wchar_t *widen(const char *s)
+{
+    int n = MultiByteToWideChar(CP_UTF8, 0, s, -1, NULL, 0);
+    wchar_t *w = n > 0 ? malloc((size_t)n * sizeof *w) : NULL;
+    if (w)
+        MultiByteToWideChar(CP_UTF8, 0, s, -1, w, n);
+    return w;
+}
+
+FILE *tu_fopen(const char *path, const char *mode)
+{
+    wchar_t *w = widen(path), *m = widen(mode);
+    FILE *fp = w && m ? _wfopen(w, m) : NULL;
+    free(w);
+    free(m);
+    return fp;
+}
+
 int tu_mkdir(const char *path, int mode)
 {
     (void)mode;
-    return _mkdir(path);
+    wchar_t *w = widen(path);
+    int r = w ? _wmkdir(w) : -1;
+    free(w);
+    return r;
 }
 
 void tu_rmtree(const char *path)
@@ -113,6 +134,11 @@ long tu_pid(void)
 const char *tu_temp_root(void)
 {
     return "/tmp";
+}
+
+FILE *tu_fopen(const char *path, const char *mode)
+{
+    return fopen(path, mode);
 }
 
 int tu_mkdir(const char *path, int mode)

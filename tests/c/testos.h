@@ -6,6 +6,10 @@
 long tu_pid(void);
 /* The folder for scratch files: "/tmp", or Windows' temporary folder (GetTempPath). */
 const char *tu_temp_root(void);
+#include <stdio.h>
+
+/* UTF-8 paths (on Windows through _wfopen / _wmkdir: the narrow calls take the ANSI code page) */
+FILE *tu_fopen(const char *path, const char *mode);
 int tu_mkdir(const char *path, int mode); /* mode: POSIX permissions, ignored on Windows */
 void tu_rmtree(const char *path);         /* best effort */
 int tu_hardlink(const char *from, const char *to);

@@ -77,7 +77,7 @@ const char *tu_tmpdir(const char *name)
 
 int tu_file_exists(const char *path)
 {
-    FILE *fp = fopen(path, "rb");
+    FILE *fp = tu_fopen(path, "rb");
     if (fp)
         fclose(fp);
     return fp != NULL;
@@ -85,7 +85,7 @@ int tu_file_exists(const char *path)
 
 char *tu_slurp(const char *path, size_t *len)
 {
-    FILE *fp = fopen(path, "rb");
+    FILE *fp = tu_fopen(path, "rb");
     if (!fp)
         return NULL;
     fseek(fp, 0, SEEK_END);

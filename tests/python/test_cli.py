@@ -344,3 +344,31 @@ def test_debug_outputs_option(run, tmp_path):
     r = run("run", "--stack", recipe, "--debug-outputs", src, "-o", debug)
     assert r.returncode == EXIT_OK, r.stderr
     assert len(read_exr(debug)) >= len(read_exr(plain))
+
+
+def test_non_ascii_paths(run, tmp_path):
+    """UTF-8 file names in the arguments: folder and files outside ASCII (an emoji is a
+    UTF-16 surrogate pair on Windows), written under exactly those names; an output that
+    exists is replaced with --force, and the input is never overwritten."""
+    folder = tmp_path / "déjà-αβ-日本"
+    folder.mkdir()
+    src = make_frame(folder / "plän-€.exr")
+    recipe = write_recipe(folder / "réglage.json", [{"effect": "pixelate"}])
+    out, png = folder / "sortie-🎬.exr", folder / "aperçu.png"
+    r = run("run", "--stack", recipe, src, "-o", out, "--png", png)
+    assert r.returncode == EXIT_OK, r.stderr
+    assert sorted(p.name for p in folder.iterdir()) == sorted(
+        ["plän-€.exr", "réglage.json", "sortie-🎬.exr", "aperçu.png"])  # no temporary file left
+    first = combined(read_exr(out))
+    assert np.abs(first - combined(read_exr(src))).max() > 1e-3
+    blur = write_recipe(folder / "flou.json", [{"effect": "gaussian_blur", "params": {"sigma": 2.0}}])
+    old = combined(read_exr(src))
+    r = run("run", "--force", "--stack", blur, out, "-o", src)   # replaces an existing file
+    assert r.returncode == EXIT_OK, r.stderr
+    assert np.abs(combined(read_exr(src)) - old).max() > 1e-3
+    before = out.read_bytes()
+    r = run("run", "--force", "--stack", recipe, out, "-o", out)
+    assert r.returncode != EXIT_OK and "input" in r.stderr
+    assert out.read_bytes() == before
+    r = run("info", folder / "ø.exr")
+    assert r.returncode != EXIT_OK and "ø.exr" in r.stderr
