@@ -4,6 +4,9 @@
 # libfx.exe import only Windows' own DLLs and that the DLL exports exactly the fx_* API of
 # fx.h, then runs the C tests (CTest, through the toolchain's Wine emulator) and the CLI
 # tests (tests/python/test_cli*.py with LIBFX_CLI=tests/platform/wine_cli.sh).
+# With LIBFX_BITS_INPUTS=DIR (tests/matrix/make_bits_inputs.sh DIR: Blender renders) it also
+# dumps every recipe and effect preset with the Linux build (build/) and the Windows one and
+# checks that they give the same bits (tests/matrix/test_same_bits.py).
 # Debian 12, as root or with sudo; installs missing packages. Exit status non-zero on any
 # failure, with a summary either way.
 #   bash scripts/windows.sh
@@ -129,6 +132,16 @@ start_wine() {
   "$WINE" cmd /c exit </dev/null >/dev/null 2>&1            # its system processes, no pipes
 }
 
+same_bits_as_linux() {
+  local out=$here/$build/bits
+  rm -rf "$out"
+  [ -x build/libfx/libfx ] || { echo "no Linux build in build/ (bash scripts/setup.sh)" >&2; return 1; }
+  bash tests/matrix/bits_dump.sh "$here/build/libfx/libfx" "$LIBFX_BITS_INPUTS" "$out/linux" >/dev/null &&
+    LIBFX_WINDOWS_CLI="$here/$build/libfx/libfx.exe" bash tests/matrix/bits_dump.sh \
+      "$here/tests/platform/wine_cli.sh" "$LIBFX_BITS_INPUTS" "$out/windows" >/dev/null &&
+    LIBFX_BITS_DIRS="$out/linux $out/windows" /usr/bin/python3 -m pytest -q -p no:cacheprovider tests/matrix
+}
+
 step "configure + build ($build)" configure_and_build
 if [ $failed -eq 0 ]; then
   step "libfx.dll imports only system DLLs" check_imports "$build/libfx/libfx.dll" ""
@@ -137,6 +150,9 @@ if [ $failed -eq 0 ]; then
   start_wine
   step "C tests (ctest under Wine)" ctest_under_wine
   step "CLI tests (pytest tests/python/test_cli*.py under Wine)" cli_tests_under_wine
+  if [ -n "${LIBFX_BITS_INPUTS:-}" ]; then
+    step "same bits as the Linux build (tests/matrix)" same_bits_as_linux
+  fi
 fi
 
 echo "== windows: summary ($(( $(date +%s) - t0 )) s)"
