@@ -69,10 +69,11 @@ step() {  # name, command...: runs it, records the outcome
 }
 
 configure_and_build() {
+  mkdir -p "$build"
   cmake -B "$build" -S . -DCMAKE_TOOLCHAIN_FILE=cmake/mingw-w64-x86_64.cmake \
     -DLIBFX_SELF_CONTAINED=ON -DLIBFX_DEPS_PREFIX="$deps" -DLIBFX_BUILD_BENCH=OFF \
-    -DCMAKE_BUILD_TYPE=Release >"$build.configure.log" 2>&1 \
-    || { tail -20 "$build.configure.log"; return 1; }
+    -DCMAKE_BUILD_TYPE=Release >"$build/configure.log" 2>&1 \
+    || { tail -20 "$build/configure.log"; return 1; }
   cmake --build "$build" -j2 2>&1 | grep -E "error|warning|Error" ; [ "${PIPESTATUS[0]}" -eq 0 ]
 }
 
