@@ -172,7 +172,9 @@ def wheel_package_dirs():
             spec = importlib.machinery.PathFinder.find_spec("libfx", [entry or os.curdir])
         except (ImportError, OSError, ValueError):
             continue
-        for d in (spec.submodule_search_locations or []) if spec is not None else []:
+        if spec is None or spec.origin is None or not spec.submodule_search_locations:
+            continue                  # not there, a module, or a namespace package (a plain folder)
+        for d in spec.submodule_search_locations:
             if not _same_dir(d, _HERE) and not any(_same_dir(d, o) for o in out):
                 out.append(d)
     return out
