@@ -307,6 +307,19 @@ def test_installs_the_way_this_blender_installs(blender, library, tmp_path):
         wheel_pkg = os.path.join("site-packages", "libfx")
         assert wheel_pkg + os.sep + os.path.join("lib", "libfx.so.2") in lib_path, line
         assert wheel_pkg in top_file and top_file != addon_file, line
+        # the installed batch.py under --factory-startup (the extension not enabled by
+        # the preferences) enables it as bl_ext.user_default.libfx, not as a top-level libfx
+        installed_batch = os.path.join(os.path.dirname(addon_file), "batch.py")
+        probe = ("import runpy\n"
+                 "g = runpy.run_path(%r, run_name='batch_under_test')\n"
+                 "mod = g['enable_addon']()\n"
+                 "import libfx\n"
+                 "print('ENABLED', mod.__name__, mod.native.library_path(), libfx.__file__)\n" % installed_batch)
+        p = subprocess.run([T.blender_path(), "-b", "--factory-startup", "--python-exit-code", "3",
+                            "--python-expr", probe], capture_output=True, text=True, timeout=300, env=env)
+        out = _ok(p, "the installed batch.py under --factory-startup")
+        name, lib2, top2 = next(l for l in out.splitlines() if l.startswith("ENABLED")).split()[1:4]
+        assert name == module and lib2 == lib_path and top2 == top_file, (name, lib2, top2)
     assert (tmp_path / "inst_libfx.0001.exr").is_file()
 
 
