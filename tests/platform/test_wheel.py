@@ -181,3 +181,30 @@ if __name__ == "__main__":   # python3 tests/platform/test_wheel.py WHEEL...
     if len(sys.argv) > 1:
         os.environ["LIBFX_WHEEL"] = os.pathsep.join(sys.argv[1:])
     sys.exit(pytest.main(["-q", "-p", "no:cacheprovider", __file__]))
+
+
+WINE = "/usr/lib/wine/wine64"   # Debian's wine64 (GUIDE §3c): not on PATH
+
+
+@pytest.mark.parametrize("wheel", [w for w in WHEELS if w.name.endswith("-win_amd64.whl")] or
+                         [pytest.param(None, marks=pytest.mark.skip(reason="no win_amd64 wheel given"))])
+def test_windows_wheel_tool_and_dll_run_under_wine(wheel, tmp_path):
+    """No Windows Python here: the wheel's libfx.exe, loading the wheel's libfx.dll from
+    libfx/lib/, blurs an EXR under wine: the DLL the Windows users get is a working one."""
+    if not os.path.exists(WINE):
+        pytest.skip("wine64 is not installed (apt-get install wine64)")
+    if not INPUT.is_file():
+        pytest.skip("the shared EXR corpus is absent (%s)" % INPUT)
+    with zipfile.ZipFile(wheel) as z:
+        if "libfx/bin/libfx.exe" not in z.namelist():
+            pytest.skip("this Windows wheel was built without the command-line tool (--cli)")
+        z.extractall(tmp_path / "w")
+    pkg = tmp_path / "w" / "libfx"
+    recipe = tmp_path / "blur.json"
+    recipe.write_text(json.dumps({"version": 1, "effects": [{"effect": "gaussian_blur", "params": {"sigma": 4.0}}]}))
+    out = tmp_path / "blurred.exr"
+    env = dict(os.environ, WINEDEBUG="-all", WINEPATH="Z:" + str(pkg / "lib").replace("/", "\\"))
+    p = subprocess.run([WINE, str(pkg / "bin" / "libfx.exe"), "run", "--stack", str(recipe), str(INPUT),
+                        "-o", str(out)], capture_output=True, text=True, env=env, timeout=300)
+    assert p.returncode == 0, p.stdout + p.stderr
+    _pixels_changed_but_mean_kept(INPUT, out)
