@@ -189,3 +189,42 @@ def test_the_installed_wheel_package_is_found_after_a_same_named_package(monkeyp
     assert paths.index(want) < min(i for i, p in enumerate(paths) if os.sep + "build" in p), paths
     assert native.load() is not None, native.load_error()
     assert native.library_path() == want
+
+
+def test_a_library_built_for_a_newer_glibc_says_which_version(tmp_path):
+    """This tree's library (built against the host's glibc, 2.36 on Debian 12) loaded on
+    Debian 11 (glibc 2.31, the bullseye root of scripts/blender_roots.sh), its other
+    dependencies copied beside it: the loader's 'version `GLIBC_2.3x' not found'."""
+    import shutil
+    import subprocess
+    real = _real()
+    try:
+        root = subprocess.run(["bash", str(REPO / "scripts" / "blender_roots.sh"), "--path", "bullseye"],
+                              capture_output=True, text=True, timeout=60).stdout.strip()
+    except OSError:
+        root = ""
+    if not root or not os.path.isfile(os.path.join(root, ".libfx-root-complete")):
+        pytest.skip("no Debian 11 root (bash scripts/blender_roots.sh bullseye)")
+    work = REPO / "out" / "glibc-test"          # in_root.sh sees only the work tree
+    shutil.rmtree(str(work), ignore_errors=True)
+    (work / "deps").mkdir(parents=True)
+    lib = work / "libfx.so.2"
+    shutil.copy(str(real), str(lib))
+    ldd = subprocess.run(["ldd", str(real)], capture_output=True, text=True).stdout
+    system = ("libc.so", "libm.so", "ld-linux", "libstdc++", "libgcc_s", "libpthread", "libdl", "librt")
+    for line in ldd.splitlines():
+        parts = line.split("=>")
+        if len(parts) == 2 and parts[1].split() and not any(s in parts[0] for s in system):
+            shutil.copy(os.path.realpath(parts[1].split()[0]), str(work / "deps" / parts[0].strip()))
+    code = ("import sys; sys.path.insert(0, %r); import native\n"
+            "print(native.load() is not None); print(native.load_error())" % str(REPO / "addon" / "libfx"))
+    try:
+        p = subprocess.run(["bash", str(REPO / "scripts" / "in_root.sh"), "bullseye", "env",
+                            "LD_LIBRARY_PATH=%s" % (work / "deps"), "LIBFX_LIBRARY=%s" % lib,
+                            "python3", "-c", code], capture_output=True, text=True, timeout=120)
+        assert p.returncode == 0, p.stdout + p.stderr
+        loaded, why = p.stdout.splitlines()[:2]
+        assert loaded == "False" and str(lib) in why, p.stdout
+        assert "version `GLIBC_2.3" in why and "not found" in why, why
+    finally:
+        shutil.rmtree(str(work), ignore_errors=True)
