@@ -177,7 +177,11 @@ def wheel_package_dirs():
         for d in spec.submodule_search_locations:
             if not _same_dir(d, _HERE) and not any(_same_dir(d, o) for o in out):
                 out.append(d)
-    return out
+    # an installed distribution (pip's or Blender's wheel install leaves libfx-<v>.dist-info
+    # beside the package) before a bare same-named package such as a legacy add-on
+    import glob
+    return sorted(out, key=lambda d: not glob.glob(os.path.join(glob.escape(os.path.dirname(d)),
+                                                                "libfx-*.dist-info")))
 
 
 def candidate_paths():

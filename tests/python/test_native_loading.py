@@ -171,10 +171,15 @@ def test_the_installed_wheel_package_is_found_after_a_same_named_package(monkeyp
     real = _real()
     first = tmp_path / "addons" / "libfx"
     wheel = tmp_path / "site-packages" / "libfx"
-    first.mkdir(parents=True)
+    (first / "lib").mkdir(parents=True)
     (first / "__init__.py").write_text("")
+    # a bare package earlier on the path with a broken library of its own: the installed
+    # distribution (the one with libfx-<v>.dist-info beside it) goes first
+    B.truncated(real, first / "lib")
+    (first / "lib" / "libfx-truncated.so.2").rename(first / "lib" / "libfx.so.2")
     (wheel / "lib").mkdir(parents=True)
     (wheel / "__init__.py").write_text("")
+    (wheel.parent / "libfx-0.1.0.dist-info").mkdir()
     shutil.copy(str(real), str(wheel / "lib" / "libfx.so.2"))
     native = fresh_native()
     monkeypatch.delenv("LIBFX_LIBRARY", raising=False)
@@ -187,6 +192,7 @@ def test_the_installed_wheel_package_is_found_after_a_same_named_package(monkeyp
     # the package's own lib/ comes first; the wheel's before the build directories
     assert paths[0] == os.path.join(native._HERE, "lib", native.library_name())
     assert paths.index(want) < min(i for i, p in enumerate(paths) if os.sep + "build" in p), paths
+    assert paths.index(want) < paths.index(str(first / "lib" / "libfx.so.2")), paths
     assert native.load() is not None, native.load_error()
     assert native.library_path() == want
 
