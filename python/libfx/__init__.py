@@ -64,19 +64,30 @@ def _recipe_text(recipe):
     return recipe
 
 
-def run(recipe, in_exr, out_exr, quality=None, threads=0, keep_passes=False):
+def run(recipe, in_exr, out_exr, quality=None, threads=0, keep_passes=False, sidecar=None):
     """Runs ``recipe`` (dict, JSON text or .json path) on the EXR ``in_exr`` and writes
     ``out_exr`` as `libfx run --stack recipe in -o out` does: the library decodes only
     the passes the stack needs (all of them with ``keep_passes``), writes to a temporary
-    file and renames it. ``quality``: a preset name for the whole stack. Returns the
-    list of the library's warnings; raises LibfxError (its message names the file, pass
-    or parameter) on failure."""
+    file and renames it. ``quality``: a preset name for the whole stack; ``sidecar``: the
+    scene sidecar (camera, lights, time) as a dict or the path of its .json, as
+    `libfx run --sidecar` takes it (docs/recipes.md). Returns the list of the library's
+    warnings; raises LibfxError (its message names the file, pass or parameter) on
+    failure."""
     with Context(threads) as ctx:
         stack = Stack(ctx, _recipe_text(recipe))
         try:
             if quality:
                 stack.set_quality(quality)
             frame = Frame.read(ctx, os.fspath(in_exr), None if keep_passes else stack)
+            if sidecar is not None:
+                if not isinstance(sidecar, dict):
+                    with open(sidecar, "r", encoding="utf-8") as f:
+                        sidecar = json.load(f)
+                try:
+                    frame.apply_sidecar(sidecar)
+                except BaseException:
+                    frame.close()
+                    raise
             out = stack.run_consume(frame, keep_passes=keep_passes)
             try:
                 out.write_exr(os.fspath(out_exr), input_path=os.fspath(in_exr))

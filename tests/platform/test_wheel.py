@@ -153,9 +153,30 @@ with libfx.Context() as ctx:
     with zipfile.ZipFile(wheel) as z:
         has_cli = any(n.startswith("libfx/bin/") for n in z.namelist())
     if has_cli:
-        p = subprocess.run([str(venv / "bin" / "libfx"), "list"], capture_output=True, text=True,
-                           env=env, cwd=str(tmp_path), timeout=120)
+        tool = str(venv / "bin" / "libfx")
+        p = subprocess.run([tool, "list"], capture_output=True, text=True, env=env, cwd=str(tmp_path), timeout=120)
         assert p.returncode == 0 and "gaussian_blur" in p.stdout, p.stdout + p.stderr
+        # one engine, two doors: the tool's `run` writes the bytes libfx.run() wrote, and
+        # a sidecar given to libfx.run() puts the camera into the output as --sidecar does
+        recipe = tmp_path / "blur.json"
+        recipe.write_text(json.dumps({"version": 1, "quality": "final",
+                                      "effects": [{"effect": "gaussian_blur", "params": {"sigma": 4.0}}]}))
+        by_tool = tmp_path / "by_tool.exr"
+        p = subprocess.run([tool, "run", "--stack", str(recipe), str(INPUT), "-o", str(by_tool)],
+                           capture_output=True, text=True, env=env, cwd=str(tmp_path), timeout=300)
+        assert p.returncode == 0, p.stdout + p.stderr
+        assert by_tool.read_bytes() == out.read_bytes(), "libfx.run() and `libfx run` differ"
+        side = {"world_to_camera": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, -5], [0, 0, 0, 1]],
+                "projection": [[1.5, 0, 0, 0], [0, 2.0, 0, 0], [0, 0, -1.002, -0.2002], [0, 0, -1, 0]],
+                "clip_start": 0.1, "clip_end": 100.0, "frame": 3, "fps": 24}
+        p = subprocess.run([py, "-c", "import json, sys, libfx\n"
+                            "libfx.run(json.loads(sys.argv[1]), sys.argv[2], 'cam.exr', sidecar=json.loads(sys.argv[3]))",
+                            recipe.read_text(), str(INPUT), json.dumps(side)],
+                           capture_output=True, text=True, env=env, cwd=str(tmp_path), timeout=300)
+        assert p.returncode == 0, p.stdout + p.stderr
+        p = subprocess.run([tool, "info", "--compact", str(tmp_path / "cam.exr")], capture_output=True,
+                           text=True, env=env, cwd=str(tmp_path), timeout=120)
+        assert p.returncode == 0 and json.loads(p.stdout)["camera"] is True, p.stdout + p.stderr
 
 
 def _pixels_changed_but_mean_kept(src, dst):
