@@ -12,8 +12,11 @@ missing from an older library: that feature is off (``has()``) and
 """
 
 import ctypes
+import glob
+import importlib.machinery
 import json
 import os
+import struct
 import sys
 import threading
 
@@ -163,7 +166,6 @@ def wheel_package_dirs():
     path finder one sys.path entry at a time, without importing anything, so a
     same-named package earlier on the path (the legacy add-on is a top-level
     ``libfx`` too) cannot hide the wheel."""
-    import importlib.machinery
     out = []
     for entry in list(sys.path):
         if not isinstance(entry, str):
@@ -179,7 +181,6 @@ def wheel_package_dirs():
                 out.append(d)
     # an installed distribution (pip's or Blender's wheel install leaves libfx-<v>.dist-info
     # beside the package) before a bare same-named package such as a legacy add-on
-    import glob
     return sorted(out, key=lambda d: not glob.glob(os.path.join(glob.escape(os.path.dirname(d)),
                                                                 "libfx-*.dist-info")))
 
@@ -205,7 +206,7 @@ def candidate_paths():
 
 def describe_file(path):
     """What kind of binary ``path`` is, from its first bytes ("ELF 64-bit x86-64",
-    "Windows PE x86-64 DLL", "Mach-O 64-bit arm64", "an empty file", ...), or None."""
+    "Windows PE x86-64 DLL", "Mach-O", "an empty file", ...), or None."""
     try:
         with open(path, "rb") as f:
             head = f.read(64)
@@ -239,7 +240,6 @@ def elf_truncation(path):
     """Why the ELF file at ``path`` is shorter than its own headers say (a copy cut
     short), or None.  glibc's loader maps such a file and the process dies of SIGBUS
     when it touches the missing pages, so this is checked before loading."""
-    import struct
     try:
         size = os.path.getsize(path)
         with open(path, "rb") as f:
