@@ -27,6 +27,12 @@ export LIBFX_CLI="$PWD/build/libfx/libfx" LIBFX_LIBRARY="$PWD/build/libfx/libfx.
 # Two runs: each folder has its own conftest.py.
 echo "== Python tests (CLI, interop)"
 /usr/bin/python3 -m pytest -q -p no:cacheprovider tests/python || status=1
+echo "== The Python wheel (a development wheel of build/, installed with pip into a fresh venv)"
+rm -rf out/wheel-dev
+/usr/bin/python3 scripts/build_wheel.py --platform linux-x64 --library build/libfx/libfx.so.2 \
+    --cli build/libfx/libfx --dev --out out/wheel-dev >/dev/null \
+  && LIBFX_WHEEL="$PWD/out/wheel-dev" /usr/bin/python3 -m pytest -q -p no:cacheprovider tests/platform \
+  || status=1
 echo "== Blender tests (add-on, scenes; headless) on every supported Blender"
 # Debian 12's Blender 3.4 here, 4.3 and 5.x in Debian roots made (or reused) by
 # scripts/blender_roots.sh; then the same-bits check across those builds.
