@@ -113,6 +113,16 @@ step linux-x64-same-bits same_bits linux-x64 build-linux-x64/libfx/libfx
 step windows-x64 bash scripts/windows.sh
 step windows-x64-same-bits same_bits windows-x64 tests/platform/wine_cli.sh
 
+# The packages of the two release libraries (wheels, per-platform extensions, legacy zips),
+# then the linux-x64 extension where none of libfx's dependencies are installed.
+rm -rf out/dist
+step packages bash scripts/package.sh build-linux-x64/libfx/libfx.so.2 build-windows-x64/libfx/libfx.dll \
+  out/dist --linux-cli build-linux-x64/libfx/libfx --windows-cli build-windows-x64/libfx/libfx.exe
+for suite in trixie unstable; do
+  step "extension-$suite" bash tests/platform/extension_in_root.sh "$suite" \
+    "$(ls out/dist/libfx-*-linux_x64.zip 2>/dev/null | head -1)" "out/platforms/ext-$suite"
+done
+
 echo "== platforms summary"
 printf '  %s\n' "${summary[@]}"
 exit $status

@@ -31,7 +31,8 @@ RUNTIME='^(libopenexr-3|libimath-3|libcjson1|libpng16-16|libdeflate0)'
 echo "== $suite, step 1: Blender with the extension, no development packages"
 IN_ROOT_OVERLAY=$ovl/a bash scripts/in_root.sh "$suite" env HOME="$out/home" ZIP="$zip" OUT="$out" DEV="$DEV" bash -c '
   set -euo pipefail
-  dpkg --purge --force-depends $DEV >/dev/null 2>&1
+  export PATH=/usr/sbin:/sbin:$PATH   # dpkg wants ldconfig
+  dpkg --purge --force-depends $DEV >"$OUT/purge-a.log" 2>&1 || { cat "$OUT/purge-a.log" >&2; exit 1; }
   for p in $DEV; do
     ! dpkg-query -W -f="\${Status}" "$p" 2>/dev/null | grep -q "install ok installed" \
       || { echo "still installed: $p" >&2; exit 1; }
@@ -47,15 +48,23 @@ IN_ROOT_OVERLAY=$ovl/a bash scripts/in_root.sh "$suite" env HOME="$out/home" ZIP
   blender -b blend_scenes/mirror_room/mirror_room.blend --python-exit-code 2 --python "$ext/batch.py" -- \
     --keep-passes --frames 1 --output "$OUT/mr_" --resolution 320x180 --samples 4 >"$OUT/render.log" 2>&1 \
     || { tail -40 "$OUT/render.log" >&2; exit 1; }
-  grep -m1 -i "libfx.*library\|loaded libfx" "$OUT/render.log" || true
+  # the add-on Blender registered took its library from the wheel Blender installed
+  blender -b --python-expr "import importlib; n = importlib.import_module(\"bl_ext.user_default.libfx.native\"); \
+n.load(); print(\"LIBFX-LIBRARY\", n.library_path())" 2>/dev/null | grep "^LIBFX-LIBRARY" >"$OUT/library.txt" || true
+  [ "$(cat "$OUT/library.txt")" = "LIBFX-LIBRARY $lib" ] \
+    || { echo "the add-on loaded \"$(cat "$OUT/library.txt")\", not the wheel'"'"'s $lib" >&2; exit 1; }
+  echo "the add-on loads $lib"
   python3 tests/platform/check_mirror_room.py "$OUT/mr_"
 '
 
 echo "== $suite, step 2: no OpenEXR, Imath, cJSON, libpng or libdeflate at all"
-IN_ROOT_OVERLAY=$ovl/b bash scripts/in_root.sh "$suite" env HOME="$out/home" RUNTIME="$RUNTIME" DEV="$DEV" bash -c '
+src=$(cd .. && pwd)/shared/exr-corpus/openexr-images/TestImages/GrayRampsHorizontal.exr
+IN_ROOT_OVERLAY=$ovl/b bash scripts/in_root.sh "$suite" env HOME="$out/home" RUNTIME="$RUNTIME" DEV="$DEV" \
+    SRC="$src" OUT="$out" bash -c '
   set -euo pipefail
+  export PATH=/usr/sbin:/sbin:$PATH
   gone=$(dpkg-query -W -f="\${Package}\n" | grep -E "$RUNTIME" | tr "\n" " ")
-  dpkg --purge --force-depends $DEV $gone >/dev/null 2>&1
+  dpkg --purge --force-depends $DEV $gone >"$OUT/purge-b.log" 2>&1 || { cat "$OUT/purge-b.log" >&2; exit 1; }
   left=$(dpkg-query -W -f="\${Package} \${Status}\n" | grep -E "$RUNTIME" | grep "install ok installed" || true)
   [ -z "$left" ] || { echo "still installed: $left" >&2; exit 1; }
   ! ls /usr/lib/x86_64-linux-gnu/ | grep -E "^lib(OpenEXR|Imath|cjson|png16|deflate)" \
@@ -67,13 +76,16 @@ IN_ROOT_OVERLAY=$ovl/b bash scripts/in_root.sh "$suite" env HOME="$out/home" RUN
     echo "libfx needs more than glibc (above)" >&2; exit 1
   fi
   site=$(dirname "$(dirname "$(dirname "$lib")")")
-  python3 - "$site" <<PY
-import sys, os
+  python3 - "$site" "$OUT" <<PY
+import os, sys
 sys.path.insert(0, sys.argv[1])
-import libfx.native as native
-lib = native.load()
-assert lib is not None, native.load_error()
-print("plain python: loaded", native.library_path() if hasattr(native, "library_path") else lib)
+import libfx
+src = "$SRC"
+dst = os.path.join(sys.argv[2], "blur.exr")
+libfx.run({"version": 1, "effects": [{"effect": "gaussian_blur", "params": {"sigma": 3}}]}, src, dst)
+assert os.path.getsize(dst) > 0
+print("plain python %s: libfx %s from %s blurred %s" % (sys.version.split()[0], libfx.version(),
+                                                     libfx.library_path(), os.path.basename(src)))
 PY
 '
 echo "extension_in_root: $suite passed"
