@@ -90,15 +90,7 @@ def test_unloadable_library_batch_exits_2_and_panel_shows_the_loaders_reason(ble
     assert not T.tracebacks(proc.stdout + proc.stderr)
     assert not list(tmp_path.glob("o_*"))
     # the panel: the same text, wrapped into labels under "libfx library unavailable"
-    script = T.PRELUDE + """
-class L:
-    def __init__(s): s.labels = []
-    def __getattr__(s, n): return lambda *a, **k: s
-    def label(s, text='', **k): s.labels.append(text)
-    def box(s): return s
-    def row(s, **k): return s
-    def column(s, **k): return s
-lay = L()
+    script = T.PRELUDE + T.FAKE_LAYOUT + """
 libfx.ui.draw_stack(lay, bpy.context)
 i = lay.labels.index('libfx library unavailable')
 lines = libfx.ui._wrap(libfx.native.load_error(), libfx.ui._chars(bpy.context))

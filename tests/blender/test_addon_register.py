@@ -48,14 +48,7 @@ assert not cat.ok and 'No such file' in cat.error and '/nonexistent/libfx.so' in
 assert cat.error == libfx.native.load_error()
 assert hasattr(bpy.types.Scene, 'libfx') and hasattr(bpy.types, 'LIBFX_PT_output')
 # the panel draws exactly the loader's message, wrapped (a fake layout records the labels)
-class L:
-    def __init__(s): s.labels = []
-    def __getattr__(s, n): return lambda *a, **k: s
-    def label(s, text='', **k): s.labels.append(text)
-    def box(s): return s
-    def row(s, **k): return s
-    def column(s, **k): return s
-lay = L()
+""" + T.FAKE_LAYOUT + """
 libfx.ui.draw_stack(lay, bpy.context)
 i = lay.labels.index('libfx library unavailable')
 width = libfx.ui._chars(bpy.context)
