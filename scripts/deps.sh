@@ -35,7 +35,7 @@ PINS=(
 )
 SUITE=trixie
 # Bump when the build recipe below changes: a prefix built by another recipe is rebuilt.
-RECIPE=1
+RECIPE=2
 
 stamp() { printf '%s\n' "${PINS[@]}" "recipe $RECIPE" | sha256sum | cut -c1-16; }
 
@@ -140,9 +140,11 @@ build_here() {
       && cmake --install "$work/$name" >>"$work/$name.log" 2>&1 \
       || { echo "deps: $target: $name failed; the end of its log:" >&2; tail -30 "$work/$name.log" >&2; return 1; }
   }
-  # zlib: only its static target (Debian's dfsg tarball has no win32/ resource file, which
-  # the shared library's target needs), installed by hand under the name FindZLIB takes.
+  # zlib: only its static target, installed by hand under the name FindZLIB takes.
+  # Debian's dfsg tarball dropped win32/, whose resource file the shared target lists
+  # (CMake 3.18 wants it to exist even unbuilt): an empty one stands in.
   echo "deps: $target: building zlib"
+  [ -e "$src/zlib/win32/zlib1.rc" ] || { mkdir -p "$src/zlib/win32" && : >"$src/zlib/win32/zlib1.rc"; }
   { cmake -S "$src/zlib" -B "$work/zlib" "${cm[@]}" -DZLIB_BUILD_EXAMPLES=OFF \
       && cmake --build "$work/zlib" --target zlibstatic -j"$jobs"; } >"$work/zlib.log" 2>&1 \
     || { echo "deps: $target: zlib failed; the end of its log:" >&2; tail -30 "$work/zlib.log" >&2; return 1; }
@@ -155,6 +157,12 @@ build_here() {
   one cjson -DENABLE_CJSON_TEST=OFF -DENABLE_CJSON_UTILS=OFF -DBUILD_SHARED_AND_STATIC_LIBS=OFF \
     -DENABLE_TARGET_EXPORT=ON -DENABLE_CUSTOM_COMPILER_FLAGS=OFF
   one imath -DBUILD_TESTING=OFF -DPYTHON=OFF
+  # OpenEXR's 3.1.12 and 3.1.13 tarballs still call themselves 3.1.11 in project(); the
+  # version matters (libfx takes OpenEXRCore's own DWA decoder from 3.1.13 on, which has
+  # the channel-classifier fix), so it is set to the release's number.
+  sed -i 's/^project(OpenEXR VERSION 3\.1\.11 /project(OpenEXR VERSION 3.1.13 /' "$src/openexr/CMakeLists.txt"
+  grep -q '^project(OpenEXR VERSION 3.1.13 ' "$src/openexr/CMakeLists.txt" \
+    || { echo "deps: openexr: expected the 3.1.13 tarball's project() line" >&2; return 1; }
   one openexr -DBUILD_TESTING=OFF -DOPENEXR_BUILD_TOOLS=OFF -DOPENEXR_INSTALL_TOOLS=OFF \
     -DOPENEXR_INSTALL_EXAMPLES=OFF -DOPENEXR_INSTALL_PKG_CONFIG=OFF
   # No shared library may be found in place of a static one.

@@ -5,6 +5,10 @@
 # when the command ends, however it ends, and runs in parallel do not meet.
 #
 #   bash scripts/in_root.sh unstable blender --version
+#
+# With IN_ROOT_OVERLAY=DIR the root is the lower layer of an overlay whose changes go to
+# DIR (DIR/upper, DIR/work): a throw-away copy of the root (scripts/platforms.sh strips
+# packages from such copies) that leaves the root itself untouched.
 set -euo pipefail
 here=$(cd "$(dirname "$0")/.." && pwd)
 suite=${1:?usage: in_root.sh SUITE COMMAND...}
@@ -15,10 +19,18 @@ root=$(bash "$here/scripts/blender_roots.sh" --path "$suite")
   exit 2
 }
 shared=$(cd "$here/.." && pwd)/shared
+overlay=${IN_ROOT_OVERLAY:-}
+[ -z "$overlay" ] || { mkdir -p "$overlay/upper" "$overlay/work" "$overlay/merged"; overlay=$(cd "$overlay" && pwd); }
 export IN_ROOT_ROOT="$root" IN_ROOT_HERE="$here" IN_ROOT_SHARED="$shared" IN_ROOT_SUITE="$suite"
+export IN_ROOT_OVERLAY="$overlay"
 exec unshare --mount --propagation private bash -c '
   set -e
   r=$IN_ROOT_ROOT
+  if [ -n "$IN_ROOT_OVERLAY" ]; then
+    o=$IN_ROOT_OVERLAY
+    mount -t overlay overlay -o "lowerdir=$r,upperdir=$o/upper,workdir=$o/work" "$o/merged"
+    r=$o/merged
+  fi
   for d in proc sys dev; do mount --rbind "/$d" "$r/$d"; done
   mkdir -p "$r$IN_ROOT_HERE"
   mount --bind "$IN_ROOT_HERE" "$r$IN_ROOT_HERE"

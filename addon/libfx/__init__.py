@@ -1,6 +1,6 @@
 """libfx: render effects over Blender's passes, applied after F12 and batch renders.
 
-The effects live in the C library (libfx.so, bound in native.py); this add-on
+The effects live in the C library (libfx.so.2 / libfx.dll, bound in native.py); this add-on
 builds its UI from the library's own descriptions, enables the passes the
 stack needs, writes them from the Render Result to one EXR (passes_file.py) and
 runs the stack after each rendered frame.  See docs/addon.md.

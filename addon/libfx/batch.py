@@ -114,6 +114,19 @@ def enable_addon():
                 return mod
     here = os.path.dirname(os.path.abspath(__file__))
     parent = os.path.dirname(here)
+    # An installed 4.2+ extension not enabled in this session (--factory-startup): enable
+    # it as Blender names it, bl_ext.<repository>.libfx, so that a top-level 'libfx'
+    # stays the wheel that carries its library, not this add-on put on sys.path.
+    repo = sys.modules.get("bl_ext." + os.path.basename(parent))
+    if repo is not None and any(os.path.realpath(p) == os.path.realpath(parent)
+                                for p in getattr(repo, "__path__", [])):
+        import addon_utils
+        name = "%s.%s" % (repo.__name__, os.path.basename(here))
+        mod = addon_utils.enable(name, default_set=False)
+        if mod is None:
+            die("cannot enable the extension %s (see the messages above)" % name)
+        mod.render.on_load_post()
+        return mod
     if parent not in sys.path:
         sys.path.insert(0, parent)
     import libfx  # noqa: the package this file lives in

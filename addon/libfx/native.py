@@ -1,4 +1,4 @@
-"""The only ctypes file of the add-on: finds libfx.so, binds the public C API
+"""The only ctypes file of the add-on: finds the libfx library, binds the public C API
 (libfx/include/libfx/fx.h) and wraps it in a few small Python classes.
 
 Nothing here imports bpy, so the module can be used by plain Python tools and
@@ -12,8 +12,12 @@ missing from an older library: that feature is off (``has()``) and
 """
 
 import ctypes
+import glob
+import importlib.machinery
 import json
 import os
+import struct
+import sys
 import threading
 
 #: The ABI this module was written for (FX_ABI_VERSION in fx.h).
@@ -129,19 +133,157 @@ _load_error = None
 _tried = False
 
 
-def candidate_paths():
-    """Where the library is looked for, in order."""
+def library_name(platform=None):
+    """The file name of libfx's shared library (ABI_VERSION is its SOVERSION) on
+    ``platform`` (a sys.platform value; this one by default)."""
+    platform = sys.platform if platform is None else platform
+    if platform.startswith(("win", "cygwin", "msys")):
+        return "libfx.dll"
+    if platform == "darwin":
+        return "libfx.%d.dylib" % ABI_VERSION
+    return "libfx.so.%d" % ABI_VERSION
+
+
+def _dev_names():
+    """Names a development build also answers to (the unversioned link name)."""
+    name = library_name()
+    unversioned = {"libfx.so.%d" % ABI_VERSION: "libfx.so",
+                   "libfx.%d.dylib" % ABI_VERSION: "libfx.dylib"}.get(name)
+    return [name] + ([unversioned] if unversioned else [])
+
+
+def _same_dir(a, b):
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return os.path.normcase(os.path.abspath(a)) == os.path.normcase(os.path.abspath(b))
+
+
+def wheel_package_dirs():
+    """The directories of the ``libfx`` packages importable from sys.path other than
+    the one this file lives in: the libfx wheel (pip-installed, or installed by Blender
+    4.2+ from the extension's wheels/ into its site-packages).  Found with importlib's
+    path finder one sys.path entry at a time, without importing anything, so a
+    same-named package earlier on the path (the legacy add-on is a top-level
+    ``libfx`` too) cannot hide the wheel."""
     out = []
+    for entry in list(sys.path):
+        if not isinstance(entry, str):
+            continue
+        try:
+            spec = importlib.machinery.PathFinder.find_spec("libfx", [entry or os.curdir])
+        except (ImportError, OSError, ValueError):
+            continue
+        if spec is None or spec.origin is None or not spec.submodule_search_locations:
+            continue                  # not there, a module, or a namespace package (a plain folder)
+        for d in spec.submodule_search_locations:
+            if not _same_dir(d, _HERE) and not any(_same_dir(d, o) for o in out):
+                out.append(d)
+    # an installed distribution (pip's or Blender's wheel install leaves libfx-<v>.dist-info
+    # beside the package) before a bare same-named package such as a legacy add-on
+    return sorted(out, key=lambda d: not glob.glob(os.path.join(glob.escape(os.path.dirname(d)),
+                                                                "libfx-*.dist-info")))
+
+
+def candidate_paths():
+    """Where the library is looked for, in order: $LIBFX_LIBRARY alone when set; the
+    package's own lib/ (the legacy add-on zip, the wheel); the installed libfx wheel's
+    lib/ (the 4.2+ extension, whose library comes in its platform's wheel); the
+    source tree's build directories."""
     env = os.environ.get("LIBFX_LIBRARY")
     if env:
         return [env]  # an explicit choice is never second-guessed
-    out.append(os.path.join(_HERE, "lib", "libfx.so.2"))       # installed zip
-    out.append(os.path.join(_HERE, "lib", "libfx.so"))
+    name = library_name()
+    out = [os.path.join(_HERE, "lib", name)]
+    for d in wheel_package_dirs():
+        out.append(os.path.join(d, "lib", name))
     root = os.path.dirname(os.path.dirname(_HERE))              # source tree
     for build in ("build", "build-addon"):
-        out.append(os.path.join(root, build, "libfx", "libfx.so.2"))
-        out.append(os.path.join(root, build, "libfx", "libfx.so"))
+        for n in _dev_names():
+            out.append(os.path.join(root, build, "libfx", n))
     return out
+
+
+def describe_file(path):
+    """What kind of binary ``path`` is, from its first bytes ("ELF 64-bit x86-64",
+    "Windows PE x86-64 DLL", "Mach-O", "an empty file", ...), or None."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(64)
+            if head[:2] == b"MZ" and len(head) >= 64:
+                f.seek(int.from_bytes(head[60:64], "little"))
+                pe = f.read(6)
+            else:
+                pe = b""
+    except OSError:
+        return None
+    if not head:
+        return "an empty file"
+    if head[:4] == b"\x7fELF" and len(head) >= 20:
+        bits = {1: "32-bit", 2: "64-bit"}.get(head[4], "?-bit")
+        order = "little" if head[5] == 1 else "big"
+        machine = int.from_bytes(head[18:20], order)
+        arch = {3: "i386", 62: "x86-64", 183: "aarch64", 40: "arm", 243: "riscv",
+                21: "ppc64", 22: "s390"}.get(machine, "machine %d" % machine)
+        return "ELF %s %s" % (bits, arch)
+    if pe[:4] == b"PE\0\0":
+        machine = int.from_bytes(pe[4:6], "little")
+        arch = {0x8664: "x86-64", 0x14c: "i386", 0xaa64: "arm64"}.get(machine, "machine 0x%x" % machine)
+        return "Windows PE %s DLL" % arch
+    magic = int.from_bytes(head[:4], "little")
+    if magic in (0xfeedfacf, 0xfeedface, 0xcafebabe, 0xbebafeca):
+        return "Mach-O"
+    return "not a shared library (starts with %r)" % head[:8]
+
+
+def elf_truncation(path):
+    """Why the ELF file at ``path`` is shorter than its own headers say (a copy cut
+    short), or None.  glibc's loader maps such a file and the process dies of SIGBUS
+    when it touches the missing pages, so this is checked before loading."""
+    try:
+        size = os.path.getsize(path)
+        with open(path, "rb") as f:
+            head = f.read(64)
+            if head[:4] != b"\x7fELF" or len(head) < 52 or head[4] not in (1, 2):
+                return None
+            e = "<" if head[5] == 1 else ">"
+            if head[4] == 2:
+                if len(head) < 64:
+                    return None
+                phoff, shoff = struct.unpack_from(e + "QQ", head, 32)
+                phentsize, phnum, shentsize, shnum = struct.unpack_from(e + "HHHH", head, 54)
+                ph_fmt, ph_at = e + "QQQQ", 8                 # offset, vaddr, paddr, filesz
+            else:
+                phoff, shoff = struct.unpack_from(e + "II", head, 28)
+                phentsize, phnum, shentsize, shnum = struct.unpack_from(e + "HHHH", head, 42)
+                ph_fmt, ph_at = e + "IIII", 4
+            need = max(phoff + phentsize * phnum, shoff + shentsize * shnum if shoff else 0)
+            if need <= size:
+                f.seek(phoff)
+                table = f.read(phentsize * phnum)
+                for i in range(phnum):
+                    off, _, _, filesz = struct.unpack_from(ph_fmt, table, i * phentsize + ph_at)
+                    need = max(need, off + filesz)
+    except (OSError, struct.error):
+        return None
+    if need > size:
+        return "the file is truncated: %d bytes, its ELF headers need %d" % (size, need)
+    return None
+
+
+def _open(path):
+    """ctypes.CDLL(path); on Windows the library's folder also serves its dependencies."""
+    if sys.platform.startswith("win") and hasattr(os, "add_dll_directory"):
+        d = os.path.dirname(os.path.abspath(path))
+        if d not in _dll_dirs:
+            try:
+                _dll_dirs[d] = os.add_dll_directory(d)
+            except OSError:
+                pass
+    return ctypes.CDLL(path)
+
+
+_dll_dirs = {}
 
 
 def _bind(lib, signatures):
@@ -186,22 +328,32 @@ def load():
             return _lib
         _tried = True
         tried = []
+        explicit = bool(os.environ.get("LIBFX_LIBRARY"))
         for path in candidate_paths():
-            if not os.path.exists(path):
+            if not os.path.exists(path) and not explicit:
                 tried.append(path)
                 continue
             try:
-                lib = ctypes.CDLL(path)
+                short = elf_truncation(path)
+                if short:
+                    raise OSError(short)
+                lib = _open(path)
             except OSError as e:
-                _load_error = "libfx library at %s cannot be loaded: %s" % (path, e)
+                # the loader's own words (missing file, GLIBC version, ELF class...)
+                # and what the file is, naming the file
+                kind = describe_file(path)
+                _load_error = ("libfx library %s%s cannot be loaded: %s%s"
+                               % (path, " (LIBFX_LIBRARY)" if explicit else "", e,
+                                  " [the file is %s]" % kind if kind else ""))
                 return None
             _load_error = _check(lib, path)
             if _load_error is not None:
                 return None
             _lib, _lib_path = lib, path
             return lib
-        _load_error = ("libfx library not found (set LIBFX_LIBRARY or install the add-on zip "
-                       "that contains lib/libfx.so.2); looked in: " + ", ".join(tried))
+        _load_error = ("libfx library not found: no %s in the add-on, an installed libfx "
+                       "wheel or a build directory (install the package for this platform "
+                       "or set LIBFX_LIBRARY); looked in: %s" % (library_name(), ", ".join(tried)))
         return None
 
 

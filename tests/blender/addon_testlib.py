@@ -116,6 +116,18 @@ PRELUDE = (
     "import libfx\n"
     "libfx.register()\n" % str(ADDON_DIR))
 
+# Script text: a fake panel layout that records the labels ui.draw_stack() draws, in `lay`.
+FAKE_LAYOUT = """
+class L:
+    def __init__(s): s.labels = []
+    def __getattr__(s, n): return lambda *a, **k: s
+    def label(s, text='', **k): s.labels.append(text)
+    def box(s): return s
+    def row(s, **k): return s
+    def column(s, **k): return s
+lay = L()
+"""
+
 
 def need_oiio():
     if oiio is None:

@@ -1,7 +1,16 @@
-"""Failures make batch runs exit non-zero with a message naming the frame and the effect."""
+"""Failures make batch runs exit non-zero with a message naming the frame and the effect,
+and a library that cannot load makes them exit 2 with the loader's own reason."""
+import importlib.util
 import json
+import os
+import sys
+
+import pytest
 
 import addon_testlib as T
+
+sys.path.insert(0, str(T.REPO / "tests" / "python"))
+import broken_libraries as B  # noqa: E402
 
 WORKBENCH = "import bpy\nbpy.context.scene.render.engine = 'BLENDER_WORKBENCH'\n"
 
@@ -39,5 +48,56 @@ def test_batch_without_library_exits_nonzero(blender, tmp_path):
     proc = T.run_blender([], env={"LIBFX_LIBRARY": "/nonexistent/libfx.so"}, python=T.BATCH,
                          script_args=["--frames", "1", "--output", tmp_path / "o_"])
     assert proc.returncode == 2, proc.stdout[-2000:] + proc.stderr[-2000:]
-    assert "libfx library not found" in proc.stderr
+    assert "/nonexistent/libfx.so" in proc.stderr and "No such file or directory" in proc.stderr
     assert not T.tracebacks(proc.stdout + proc.stderr)
+
+
+def _plain_python_error(path):
+    """native.load_error() for ``path`` in this (non-Blender) Python: the same module."""
+    spec = importlib.util.spec_from_file_location("native_for_errors", T.ADDON_DIR / "libfx" / "native.py")
+    native = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(native)
+    old = os.environ.get("LIBFX_LIBRARY")
+    os.environ["LIBFX_LIBRARY"] = path
+    try:
+        assert native.load() is None
+        return native.load_error()
+    finally:
+        if old is None:
+            del os.environ["LIBFX_LIBRARY"]
+        else:
+            os.environ["LIBFX_LIBRARY"] = old
+
+
+BROKEN = {   # how the library is broken -> (make it, the loader's words it must show)
+    "truncated": (lambda lib, d: B.truncated(lib, d), "the file is truncated: 4096 bytes"),
+    "32-bit": (lambda lib, d: B.elf32(d), "wrong ELF class: ELFCLASS32"),
+    "windows-dll": (lambda lib, d: B.windows_dll(d), "invalid ELF header"),
+    "missing": (lambda lib, d: B.missing(d), "No such file or directory"),
+}
+
+
+@pytest.mark.parametrize("kind", sorted(BROKEN))
+def test_unloadable_library_batch_exits_2_and_panel_shows_the_loaders_reason(blender, library, tmp_path, kind):
+    make, words = BROKEN[kind]
+    path = make(library, tmp_path)
+    message = _plain_python_error(path)
+    assert path in message and words in message, message
+    proc = T.run_blender([], env={"LIBFX_LIBRARY": path}, python=T.BATCH,
+                         script_args=["--frames", "1", "--output", tmp_path / "o_"])
+    assert proc.returncode == 2, proc.stdout[-2000:] + proc.stderr[-2000:]
+    assert "libfx batch: error: " + message in proc.stderr, (message, proc.stderr[-2000:])
+    assert not T.tracebacks(proc.stdout + proc.stderr)
+    assert not list(tmp_path.glob("o_*"))
+    # the panel: the same text, wrapped into labels under "libfx library unavailable"
+    script = T.PRELUDE + T.FAKE_LAYOUT + """
+libfx.ui.draw_stack(lay, bpy.context)
+i = lay.labels.index('libfx library unavailable')
+lines = libfx.ui._wrap(libfx.native.load_error(), libfx.ui._chars(bpy.context))
+assert lay.labels[i + 1:i + 1 + len(lines)] == lines, lay.labels
+print('PANEL ' + json.dumps(lines))
+"""
+    proc = T.run_blender([], env={"LIBFX_LIBRARY": path}, python_expr=script)
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
+    shown = json.loads(next(l for l in proc.stdout.splitlines() if l.startswith("PANEL "))[6:])
+    assert "".join(shown).replace(" ", "") == message.replace(" ", ""), (shown, message)

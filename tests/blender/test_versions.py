@@ -10,6 +10,7 @@ import os
 import re
 import shutil
 import subprocess
+import zipfile
 
 import numpy as np
 import pytest
@@ -241,20 +242,34 @@ def _installed_env(home):
 
 
 def test_installs_the_way_this_blender_installs(blender, library, tmp_path):
-    """4.2+: the extension built by Blender's own `extension build`, installed with
-    `extension install-file`; 3.4-4.1: the legacy add-on zip. Then, in a fresh
-    Blender with that user profile and no LIBFX_LIBRARY, the installed add-on (and
-    its bundled library) registers headless and renders."""
+    """4.2+: the library packed in a wheel (scripts/build_wheel.py), the extension built
+    by Blender's own `extension build --split-platforms` around it, the linux-x64 zip
+    installed with `extension install-file`; 3.4-4.1: the legacy add-on zip. Then, in
+    a fresh Blender with that user profile and no LIBFX_LIBRARY, the installed add-on
+    registers headless, loads its library (from the wheel Blender installed, on 4.2+)
+    and renders; a top-level `import libfx` there is the wheel, not the add-on."""
     home = tmp_path / "home"
     home.mkdir()
     env = _installed_env(home)
     build = library.parent.parent
-    if blender_version() >= (4, 2, 0):
-        p = subprocess.run(["bash", str(T.REPO / "scripts" / "build_extension.sh"), str(build), str(tmp_path)],
+    extension = blender_version() >= (4, 2, 0)
+    if extension:
+        p = subprocess.run(["/usr/bin/python3", str(T.REPO / "scripts" / "build_wheel.py"),
+                            "--platform", "linux-x64", "--library", str(library.resolve()),
+                            "--out", str(tmp_path / "wheels"), "--dev"],
+                           capture_output=True, text=True, timeout=300)
+        assert p.returncode == 0, (p.stdout + p.stderr)[-4000:]
+        wheel = p.stdout.strip().splitlines()[-1]
+        p = subprocess.run(["bash", str(T.REPO / "scripts" / "build_extension.sh"), str(tmp_path / "ext"), wheel],
                            capture_output=True, text=True, timeout=300,
                            env=dict(env, BLENDER=T.blender_path()))
         assert p.returncode == 0, (p.stdout + p.stderr)[-4000:]
         package = p.stdout.strip().splitlines()[-1]
+        assert package.endswith("-linux_x64.zip"), package
+        with zipfile.ZipFile(package) as z:
+            names = z.namelist()
+        assert "wheels/" + os.path.basename(wheel) in names, names
+        assert not any(n.startswith("lib/") for n in names), names     # the library is in the wheel
         p = subprocess.run([T.blender_path(), "--command", "extension", "install-file", package,
                             "-r", "user_default", "--enable"], capture_output=True, text=True,
                            timeout=300, env=env)
@@ -274,7 +289,9 @@ def test_installs_the_way_this_blender_installs(blender, library, tmp_path):
     where = ("import sys, bpy\n"
              "mod = sys.modules.get(%r)\n"
              "assert mod is not None and hasattr(bpy.types.Scene, 'libfx'), sorted(sys.modules)\n"
-             "print('INSTALLED AT', mod.__file__, mod.native.library_path())\n" % module)
+             "assert mod.native.load() is not None, mod.native.load_error()\n"
+             "import libfx as top\n"
+             "print('INSTALLED AT', mod.__file__, mod.native.library_path(), top.__file__)\n" % module)
     prefix = tmp_path / "inst_"
     cmd = [T.blender_path(), "-b", str(T.SCENES_DIR / "mirror_room" / "mirror_room.blend"),
            "--python-exit-code", "3", "--python-expr", where, "--python", str(T.BATCH), "--",
@@ -282,7 +299,27 @@ def test_installs_the_way_this_blender_installs(blender, library, tmp_path):
     p = subprocess.run(cmd, capture_output=True, text=True, timeout=300, env=env)
     out = _ok(p, "render with the installed add-on")
     line = next(l for l in out.splitlines() if l.startswith("INSTALLED AT"))
-    assert str(home) in line.split()[2] and str(home) in line.split()[3], line
+    addon_file, lib_path, top_file = line.split()[2:5]
+    assert str(home) in addon_file and str(home) in lib_path, line
+    if extension:
+        # the library is the wheel's, installed by Blender into its site-packages, and a
+        # top-level `import libfx` is that wheel, not the add-on (bl_ext.user_default.libfx)
+        wheel_pkg = os.path.join("site-packages", "libfx")
+        assert wheel_pkg + os.sep + os.path.join("lib", "libfx.so.2") in lib_path, line
+        assert wheel_pkg in top_file and top_file != addon_file, line
+        # the installed batch.py under --factory-startup (the extension not enabled by
+        # the preferences) enables it as bl_ext.user_default.libfx, not as a top-level libfx
+        installed_batch = os.path.join(os.path.dirname(addon_file), "batch.py")
+        probe = ("import runpy\n"
+                 "g = runpy.run_path(%r, run_name='batch_under_test')\n"
+                 "mod = g['enable_addon']()\n"
+                 "import libfx\n"
+                 "print('ENABLED', mod.__name__, mod.native.library_path(), libfx.__file__)\n" % installed_batch)
+        p = subprocess.run([T.blender_path(), "-b", "--factory-startup", "--python-exit-code", "3",
+                            "--python-expr", probe], capture_output=True, text=True, timeout=300, env=env)
+        out = _ok(p, "the installed batch.py under --factory-startup")
+        name, lib2, top2 = next(l for l in out.splitlines() if l.startswith("ENABLED")).split()[1:4]
+        assert name == module and lib2 == lib_path and top2 == top_file, (name, lib2, top2)
     assert (tmp_path / "inst_libfx.0001.exr").is_file()
 
 

@@ -806,22 +806,22 @@ static int derf_vertical(const fx_deriche_sec *p, const float *in, size_t stride
     return 1;
 }
 
-/* Two RGBA pixels (rows a and b) as one v8f, and back. */
+/* Two RGBA pixels (rows a and b) as one v8f, and back. Halves by memcpy rather than
+ * __builtin_shufflevector, which gcc has only from 12 (the release build uses gcc 10). */
 static inline __attribute__((always_inline)) v8f ld2px(const float *a, const float *b)
 {
-    v4f lo, hi;
-    memcpy(&lo, a, sizeof lo);
-    memcpy(&hi, b, sizeof hi);
-    return __builtin_shufflevector(lo, hi, 0, 1, 2, 3, 4, 5, 6, 7);
+    v8f v;
+    memcpy(&v, a, 4 * sizeof(float));
+    memcpy((char *)&v + 4 * sizeof(float), b, 4 * sizeof(float));
+    return v;
 }
 
 static inline __attribute__((always_inline)) void st2px(float *a, float *b, v8f v)
 {
-    v4f lo = __builtin_shufflevector(v, v, 0, 1, 2, 3), hi = __builtin_shufflevector(v, v, 4, 5, 6, 7);
     if (a)
-        memcpy(a, &lo, sizeof lo);
+        memcpy(a, &v, 4 * sizeof(float));
     if (b)
-        memcpy(b, &hi, sizeof hi);
+        memcpy(b, (const char *)&v + 4 * sizeof(float), 4 * sizeof(float));
 }
 
 /* Horizontal, RGBA: HF_ROWS rows at once, rows 2q and 2q+1 in one v8f (as deriche_rows4:
