@@ -9,8 +9,14 @@
 # checks that they give the same bits (tests/matrix/test_same_bits.py).
 # Debian 12, as root or with sudo; installs missing packages. Exit status non-zero on any
 # failure, with a summary either way.
-#   bash scripts/windows.sh
+# With LIBFX_BITS_INPUTS=DIR (tests/matrix/make_bits_inputs.sh), also the same-bits check
+# against the Linux build in build/, for the DLL's AVX2 copy and (LIBFX_CPU=baseline) its
+# baseline one.
+#   bash scripts/windows.sh            # all of it
+#   bash scripts/windows.sh --build    # build and the import/export checks only
 set -uo pipefail
+only_build=0
+[ "${1:-}" = "--build" ] && only_build=1
 cd "$(dirname "$0")/.."
 here=$PWD
 build=${LIBFX_WINDOWS_BUILD_DIR:-build-windows-x64}
@@ -140,7 +146,10 @@ same_bits_as_linux() {
   bash tests/matrix/bits_dump.sh "$here/build/libfx/libfx" "$LIBFX_BITS_INPUTS" "$out/linux" >/dev/null &&
     LIBFX_WINDOWS_CLI="$here/$build/libfx/libfx.exe" bash tests/matrix/bits_dump.sh \
       "$here/tests/platform/wine_cli.sh" "$LIBFX_BITS_INPUTS" "$out/windows" >/dev/null &&
-    LIBFX_BITS_DIRS="$out/linux $out/windows" /usr/bin/python3 -m pytest -q -p no:cacheprovider tests/matrix
+    LIBFX_CPU=baseline LIBFX_WINDOWS_CLI="$here/$build/libfx/libfx.exe" bash tests/matrix/bits_dump.sh \
+      "$here/tests/platform/wine_cli.sh" "$LIBFX_BITS_INPUTS" "$out/windows-baseline" >/dev/null &&
+    LIBFX_BITS_DIRS="$out/linux $out/windows $out/windows-baseline" \
+      /usr/bin/python3 -m pytest -q -p no:cacheprovider tests/matrix
 }
 
 step "configure + build ($build)" configure_and_build
@@ -148,6 +157,8 @@ if [ $failed -eq 0 ]; then
   step "libfx.dll imports only system DLLs" check_imports "$build/libfx/libfx.dll" ""
   step "libfx.exe imports only system DLLs + libfx.dll" check_imports "$build/libfx/libfx.exe" libfx.dll
   step "libfx.dll exports exactly fx.h's API" check_exports
+fi
+if [ $failed -eq 0 ] && [ $only_build = 0 ]; then
   start_wine
   step "C tests (ctest under Wine)" ctest_under_wine
   step "CLI tests (pytest tests/python/test_cli*.py under Wine)" cli_tests_under_wine
