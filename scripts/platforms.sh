@@ -75,7 +75,7 @@ check_linux_deps() {
 smoke_on_glibc_231() {
   local in=out/matrix/bits_inputs/greek_bath/libfx_passes.0001.exr
   [ -f "$in" ] || bash tests/matrix/make_bits_inputs.sh out/matrix/bits_inputs || return 1
-  mkdir -p "$logs/smoke"
+  rm -rf "$logs/smoke" && mkdir -p "$logs/smoke"
   printf '{"version": 1, "effects": [{"effect": "gaussian_blur", "params": {"sigma": 4}}]}\n' >"$logs/smoke/blur.json"
   bash scripts/in_root.sh bullseye bash -c "ldd --version | head -1 \
     && build-linux-x64/libfx/libfx run --stack $logs/smoke/blur.json $in -o $logs/smoke/blur.exr \
