@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # The release builds and their checks: a self-contained libfx for every artist's machine.
 #
-#   linux-x64    built in the Debian 11 root (glibc 2.31, gcc 10) against the static
-#                dependencies scripts/deps.sh made: needs only glibc >= 2.31
+#   linux-x64    built against the Debian 11 root as sysroot (glibc 2.31) with this machine's
+#                gcc 12, and the static dependencies scripts/deps.sh made in that root:
+#                needs only glibc >= 2.31
 #   windows-x64  cross-built with MinGW-w64, run under Wine (scripts/windows.sh)
 #
 # then the Python wheels and the per-platform Blender extensions (scripts/package.sh),
@@ -39,13 +40,25 @@ step() {  # step NAME COMMAND...: runs, logs to $logs/NAME.log, records the outc
   return $rc
 }
 
+# The Debian 11 root is the sysroot; the compiler is this machine's gcc, the development
+# build's own (gcc 10 in the root made ssr_mirror 5-20 % and sin_city 30 % slower:
+# docs/platforms.md).
 build_linux() {
   bash scripts/deps.sh linux-x64 || return 1
-  local prefix
-  prefix=$(bash scripts/deps.sh --prefix linux-x64)
-  bash scripts/in_root.sh bullseye bash -c "cmake -B build-linux-x64 -S . -DCMAKE_BUILD_TYPE=Release \
-      -DLIBFX_SELF_CONTAINED=ON -DLIBFX_DEPS_PREFIX=$prefix -DLIBFX_BUILD_BENCH=OFF >/dev/null \
-    && cmake --build build-linux-x64 -j$(nproc)"
+  local root prefix
+  root=$(bash scripts/blender_roots.sh --path bullseye)
+  prefix=$root$(bash scripts/deps.sh --prefix linux-x64)
+  # Debian 11's library links are absolute (libpthread.so -> /lib/...): used as a sysroot
+  # they must resolve inside the root, not on this machine
+  local l t
+  while IFS= read -r l; do
+    t=$(readlink "$l")
+    [ -e "$root$t" ] && ln -sfn "$(realpath --relative-to="$(dirname "$l")" "$root$t")" "$l"
+  done < <(find "$root/lib64" "$root/usr/lib/x86_64-linux-gnu" -maxdepth 1 -type l -lname '/*')
+  cmake -B build-linux-x64 -S . -DCMAKE_TOOLCHAIN_FILE=cmake/linux-x64-sysroot.cmake \
+      -DLIBFX_SYSROOT="$root" -DCMAKE_BUILD_TYPE=Release -DLIBFX_SELF_CONTAINED=ON \
+      -DLIBFX_DEPS_PREFIX="$prefix" -DLIBFX_BUILD_BENCH=OFF >/dev/null \
+    && cmake --build build-linux-x64 -j"$(nproc)"
 }
 
 # What the linux library and CLI need at run time: glibc alone, nothing newer than 2.31,
@@ -54,12 +67,14 @@ check_linux_deps() {
   local f bad=0 newest
   for f in build-linux-x64/libfx/libfx.so.2 build-linux-x64/libfx/libfx; do
     echo "-- $f"
+    [ -f "$f" ] || { echo "no $f"; return 1; }
     ldd "$f"
     if ldd "$f" | grep -vE 'linux-vdso|ld-linux-x86-64|lib(c|m|pthread|dl|fx)\.so'; then
       echo "$f needs more than glibc (above)"; bad=1
     fi
     newest=$(objdump -T "$f" | grep -o 'GLIBC_[0-9.]*' | sort -uV | tail -1)
     echo "newest glibc symbol version: $newest"
+    [ -n "$newest" ] || { echo "$f has no glibc symbol versions?"; bad=1; }
     printf '%s\n%s\n' "$newest" GLIBC_2.31 | sort -V -C || { echo "$f needs $newest > GLIBC_2.31"; bad=1; }
   done
   local foreign
