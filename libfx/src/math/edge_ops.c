@@ -10,6 +10,7 @@
 #include "core/parallel.h"
 #include "math/color.h"
 #include "math/srgb_lut.h"
+#include "math/log.h"
 #include "math/trig.h"
 #include "core/simd8.h"
 #include "core/simd4.h"
@@ -354,7 +355,7 @@ static void depth_row(const float *d, int planar, int x0, int x1, float *out)
         float v = d[x];
         v = v > FX_EDGE_NEAR_DEPTH ? (v < FX_EDGE_FAR_DEPTH ? v : FX_EDGE_FAR_DEPTH)
                                    : (v == v ? FX_EDGE_NEAR_DEPTH : FX_EDGE_FAR_DEPTH);
-        out[x] = planar ? 1.0f / v : logf(v);
+        out[x] = planar ? 1.0f / v : fx_logf_pos(v);
     }
 }
 
