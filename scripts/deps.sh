@@ -52,18 +52,7 @@ if [ "${1:-}" = "--prefix" ]; then
   exit 0
 fi
 
-as_root() { if [ "$(id -u)" -eq 0 ]; then "$@"; else sudo "$@"; fi; }
-
-need_packages() {
-  local missing=() p
-  for p in "$@"; do
-    dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
-  done
-  [ ${#missing[@]} -eq 0 ] && return 0
-  echo "deps: installing ${missing[*]}"
-  as_root apt-get update -qq
-  DEBIAN_FRONTEND=noninteractive as_root apt-get install -y -qq "${missing[@]}" >/dev/null
-}
+source scripts/apt_missing.sh
 
 # The deb-src mirror: the one the machine's own deb entries name.
 mirror() {
@@ -77,7 +66,7 @@ mirror() {
 fetch_sources() {
   local src=$CACHE/src apt=$CACHE/apt
   if [ -f "$src/.complete-$(stamp)" ]; then return 0; fi
-  need_packages dpkg-dev
+  apt_install_missing dpkg-dev
   rm -rf "$src" && mkdir -p "$src/dl" "$apt/lists/partial" "$apt/cache/archives/partial"
   echo "deb-src [check-valid-until=no] $(mirror) $SUITE main" >"$apt/sources.list"
   local o=(-o Dir::Etc::SourceList="$apt/sources.list" -o Dir::Etc::SourceParts=/dev/null
@@ -191,7 +180,7 @@ for t in "${targets[@]}"; do
         echo "deps: $t: reusing $prefix"
         continue
       fi
-      need_packages gcc-mingw-w64-x86-64 g++-mingw-w64-x86-64 cmake
+      apt_install_missing gcc-mingw-w64-x86-64 g++-mingw-w64-x86-64 cmake
       fetch_sources
       t0=$SECONDS
       build_here "$t" "$prefix" "$CACHE/src"

@@ -20,17 +20,8 @@ packages=(
   mmdebstrap                                # makes the Debian 13 / unstable roots holding Blender 4.3 / 5.x
   valgrind                                  # callgrind: instruction counts (bench_ir.py, bench_trade)
 )
-missing=()
-for p in "${packages[@]}"; do
-  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
-done
-if [ ${#missing[@]} -gt 0 ]; then
-  echo "setup: installing ${missing[*]}"
-  SUDO=""
-  [ "$(id -u)" -eq 0 ] || SUDO=sudo
-  $SUDO apt-get update -qq
-  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${missing[@]}"
-fi
+source scripts/apt_missing.sh
+apt_install_missing "${packages[@]}"
 
 build=${LIBFX_BUILD_DIR:-build}
 cmake -B "$build" -S . -DCMAKE_BUILD_TYPE=Release >/dev/null

@@ -42,17 +42,8 @@ packages=(
   openimageio-tools                                          # oiiotool: test_exr_dwa's host fixture
   python3-pytest python3-numpy python3-openimageio           # the CLI tests
 )
-missing=()
-for p in "${packages[@]}"; do
-  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
-done
-if [ ${#missing[@]} -gt 0 ]; then
-  echo "windows: installing ${missing[*]}"
-  SUDO=""
-  [ "$(id -u)" -eq 0 ] || SUDO=sudo
-  $SUDO apt-get update -qq
-  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${missing[@]}" || exit 1
-fi
+source scripts/apt_missing.sh
+apt_install_missing "${packages[@]}" || exit 1
 
 # The dependencies are built once per machine and reused (scripts/deps.sh keeps the cache).
 if [ ! -f "$deps/.libfx-deps-complete" ]; then

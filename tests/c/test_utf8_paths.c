@@ -4,6 +4,7 @@
  * (core/platform.c); there the C runtime's narrow fopen would not find these files. */
 #include "testutil.h"
 #include "testos.h"
+#include "core/platform.h"
 
 #include <stdio.h>
 #include <string.h>
@@ -65,7 +66,7 @@ int main(void)
     CHECK(tu_file_exists(png));
 
     /* a recipe read from a file, and a missing file's error naming it */
-    FILE *fp = tu_fopen(recipe, "wb");
+    FILE *fp = fx_os_fopen(recipe, "wb");
     CHECK(fp != NULL);
     if (fp) {
         fputs("{\"version\": 1, \"effects\": [{\"effect\": \"pixelate\"}]}", fp);

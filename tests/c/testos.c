@@ -11,11 +11,6 @@
 #include <windows.h>
 #include <direct.h>
 
-long tu_pid(void)
-{
-    return (long)GetCurrentProcessId();
-}
-
 const char *tu_temp_root(void)
 {
     static char root[MAX_PATH * 3];
@@ -41,15 +36,6 @@ static wchar_t *widen(const char *s)
     if (w)
         MultiByteToWideChar(CP_UTF8, 0, s, -1, w, n);
     return w;
-}
-
-FILE *tu_fopen(const char *path, const char *mode)
-{
-    wchar_t *w = widen(path), *m = widen(mode);
-    FILE *fp = w && m ? _wfopen(w, m) : NULL;
-    free(w);
-    free(m);
-    return fp;
 }
 
 int tu_mkdir(const char *path, int mode)
@@ -88,14 +74,6 @@ int tu_hardlink(const char *from, const char *to)
     return CreateHardLinkA(to, from, NULL) ? 0 : -1;
 }
 
-double tu_now(void)
-{
-    LARGE_INTEGER f, t;
-    QueryPerformanceFrequency(&f);
-    QueryPerformanceCounter(&t);
-    return (double)t.QuadPart / (double)f.QuadPart;
-}
-
 static void (*alarm_handler)(void);
 static HANDLE alarm_timer;
 
@@ -123,22 +101,11 @@ void tu_alarm(unsigned seconds, void (*handler)(void))
 
 #include <signal.h>
 #include <sys/stat.h>
-#include <time.h>
 #include <unistd.h>
-
-long tu_pid(void)
-{
-    return (long)getpid();
-}
 
 const char *tu_temp_root(void)
 {
     return "/tmp";
-}
-
-FILE *tu_fopen(const char *path, const char *mode)
-{
-    return fopen(path, mode);
 }
 
 int tu_mkdir(const char *path, int mode)
@@ -156,13 +123,6 @@ void tu_rmtree(const char *path)
 int tu_hardlink(const char *from, const char *to)
 {
     return link(from, to);
-}
-
-double tu_now(void)
-{
-    struct timespec t;
-    clock_gettime(CLOCK_MONOTONIC, &t);
-    return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
 }
 
 static void (*alarm_handler)(void);

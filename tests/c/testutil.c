@@ -1,5 +1,6 @@
 #include "testutil.h"
 #include "testos.h"
+#include "core/platform.h"
 
 #include <math.h>
 #include <stdint.h>
@@ -69,7 +70,7 @@ int tu_all_finite(const float *a, size_t n)
 const char *tu_tmpdir(const char *name)
 {
     static char path[512];
-    snprintf(path, sizeof path, "%s/libfx-test-%s-%ld", tu_temp_root(), name, tu_pid());
+    snprintf(path, sizeof path, "%s/libfx-test-%s-%ld", tu_temp_root(), name, fx_os_pid());
     tu_rmtree(path);
     tu_mkdir(path, 0700);
     return path;
@@ -77,7 +78,7 @@ const char *tu_tmpdir(const char *name)
 
 int tu_file_exists(const char *path)
 {
-    FILE *fp = tu_fopen(path, "rb");
+    FILE *fp = fx_os_fopen(path, "rb");
     if (fp)
         fclose(fp);
     return fp != NULL;
@@ -85,7 +86,7 @@ int tu_file_exists(const char *path)
 
 char *tu_slurp(const char *path, size_t *len)
 {
-    FILE *fp = tu_fopen(path, "rb");
+    FILE *fp = fx_os_fopen(path, "rb");
     if (!fp)
         return NULL;
     fseek(fp, 0, SEEK_END);
