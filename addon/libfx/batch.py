@@ -4,6 +4,8 @@
         --frames 1-2 --output /path/prefix_ --resolution 320x180 --samples 4 \\
         [--recipe r.json] [--quality final] [--threads 0] [--skip-existing]
         [--keep-passes] [--passes-codec NONE|RLE|ZIP]
+    blender -b scene.blend --python addon/libfx/batch.py -- --check --frames 1-12 --output P \\
+        [--contact-sheet P_sheet.png]
     blender -b scene.blend --python addon/libfx/batch.py -- --views-only --frames 5 [--output P]
 
 Blender exits 0 even when a handler raises (GUIDE §3); this runner exits 1 if
@@ -35,6 +37,7 @@ Per frame it writes, beside the output prefix:
 
 import argparse
 import glob
+import importlib
 import os
 import sys
 
@@ -46,31 +49,18 @@ def _argv():
     return argv[argv.index("--") + 1:] if "--" in argv else []
 
 
-def parse_frame_list(text):
-    """'1-3', '1,3,5-7', '2..4' (Blender's notation) -> frames in order, each once.
-    Raises ValueError naming the bad part. Needs no scene: checked before any set-up."""
-    def number(s, part):
-        try:
-            return int(s)
-        except ValueError:
-            raise ValueError("'%s' is not a frame or a range A-B (e.g. 1-8 or 1,3,5-7)" % part) from None
+def _load_frames():
+    """frames.py beside this file, loaded by path: the runner runs as a script, before
+    the add-on package (and with it bpy's registration) is imported."""
+    import importlib.util
+    spec = importlib.util.spec_from_file_location(
+        "libfx_batch_frames", os.path.join(os.path.dirname(os.path.abspath(__file__)), "frames.py"))
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
 
-    frames = []
-    for part in text.replace("..", "-").split(","):
-        part = part.strip()
-        if not part:
-            continue
-        if "-" in part[1:]:   # part[0] may be a minus sign
-            a, b = part[1:].split("-", 1)
-            lo, hi = number(part[0] + a, part), number(b, part)
-            if hi < lo:
-                raise ValueError("range '%s' runs backwards" % part)
-            frames.extend(range(lo, hi + 1))
-        else:
-            frames.append(number(part, part))
-    if not frames:
-        raise ValueError("'%s' names no frame" % text)
-    return list(dict.fromkeys(frames))
+
+parse_frame_list = _load_frames().parse_frame_list
 
 
 def parse_frames(text, scene):
@@ -100,6 +90,13 @@ def parse_args(argv):
                     help="render only the extra views the stack reads (light views, rain map, probes, "
                          "planar views) for --frames, beside the output, and exit: the panel's Render "
                          "Views runs this in a background Blender so the UI never waits for Cycles")
+    ap.add_argument("--check", action="store_true",
+                    help="render nothing: check that every frame of --frames has complete results "
+                         "(the test --skip-existing makes); one line per frame that has not, exit 1 "
+                         "if any (a farm's final job runs this)")
+    ap.add_argument("--contact-sheet", metavar="PNG",
+                    help="with --check, when every frame is complete: write the frames' results "
+                         "as thumbnails on one PNG (at most 48, evenly spaced)")
     return ap.parse_args(argv)
 
 
@@ -196,6 +193,8 @@ def discard(paths):
 def check_usage(args):
     """The options that need no scene, checked before anything renders (a farm's wrong
     command must fail at once): (frames or None for the scene's range, (w, h) or None)."""
+    if args.contact_sheet and not args.check:
+        die("--contact-sheet goes with --check (the sheet is made once every frame is complete)")
     frames = None
     if args.frames is not None:
         try:
@@ -339,6 +338,29 @@ def render_frames(fx, scene, frames, skip_existing):
     return failures, skipped
 
 
+def check_frames(fx, scene, frames, sheet):
+    """--check: exits 1 listing each frame whose results are not complete (nothing is
+    rendered or removed); when all are, writes the contact sheet if asked and returns."""
+    with_image = fx.scene_setup.writes_image(scene)
+    with fx.native.Context(0) as ctx:
+        incomplete = []
+        for frame in frames:
+            why = unfinished(fx, ctx, result_files(fx, scene, frame, with_image)[0])
+            if why is not None:
+                incomplete.append("frame %d: %s" % (frame, why))
+        if incomplete:
+            die("check: %d of %d frame(s) incomplete:\n  %s"
+                % (len(incomplete), len(frames), "\n  ".join(incomplete)), 1)
+        say("check: all %d frame(s) complete" % len(frames))
+        if sheet:
+            mod = importlib.import_module(fx.__name__ + ".contact_sheet")
+            try:
+                shown = mod.write(fx, ctx, scene, frames, sheet)
+            except (OSError, RuntimeError, fx.native.LibfxError) as e:
+                die("contact sheet %s: %s" % (sheet, e), 1)
+            say("contact sheet: %d frame(s) -> %s" % (len(shown), sheet))
+
+
 def render_views(fx, scene, frames):
     """--views-only: the aux views for the frames (as the panel's Render Views makes them for
     the current frame); one line "libfx batch: views: N ready: names" on success, exit 1 when
@@ -360,9 +382,12 @@ def main():
     if loaded and not args.recipe:
         die("scene '%s': %s" % (scene.name, loaded))
     apply_overrides(fx, scene, args, size)
-    st = check_scene(fx, scene, args)
     if frames is None:
         frames = parse_frames(None, scene)
+    if args.check:
+        check_frames(fx, scene, frames, args.contact_sheet)
+        return
+    st = check_scene(fx, scene, args)
     r = scene.render
     say("scene '%s', frames %s, %dx%d, passes %s" % (
         scene.name, args.frames or "%d-%d" % (scene.frame_start, scene.frame_end),
