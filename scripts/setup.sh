@@ -17,6 +17,7 @@ packages=(
   libopencv-imgproc-dev                     # OpenCV's GaussianBlur as the benchmark's peer
   clang libclang-rt-14-dev                  # the fuzz target (libFuzzer is in libclang-rt)
   nodejs                                    # runs the Flamenco job type (farm/flamenco) in its test
+  munge slurmctld slurmd slurm-client       # a one-node Slurm cluster for the farm test (tests/farm)
   mmdebstrap                                # makes the Debian 13 / unstable roots holding Blender 4.3 / 5.x
   valgrind                                  # callgrind: instruction counts (bench_ir.py, bench_trade)
 )

@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # Sets everything up and runs every test: the C tests (CTest), the same C tests and
 # the damaged-file corpus under AddressSanitizer + UBSan, the Python tests of the
-# CLI, the headless Blender tests of the add-on and scenes on Blender 3.4, 4.3
-# and 5.x (scripts/blender_matrix.sh), and the release builds for every artist's
+# CLI, a shot on a one-node Slurm cluster (tests/farm), the headless Blender tests
+# of the add-on and scenes on Blender 3.4, 4.3 and 5.x (scripts/blender_matrix.sh), and the release builds for every artist's
 # machine with their packages (scripts/platforms.sh: self-contained linux-x64 from
 # Debian 11, windows-x64 under Wine, wheels, per-platform extensions).
 set -euo pipefail
@@ -27,6 +27,8 @@ export LIBFX_CLI="$PWD/build/libfx/libfx" LIBFX_LIBRARY="$PWD/build/libfx/libfx.
 # Two runs: each folder has its own conftest.py.
 echo "== Python tests (CLI, interop)"
 /usr/bin/python3 -m pytest -q -p no:cacheprovider tests/python || status=1
+echo "== Farm: shots through the batch runner on a one-node Slurm cluster (tests/farm)"
+/usr/bin/python3 -m pytest -q -p no:cacheprovider tests/farm || status=1
 echo "== The Python wheel (a development wheel of build/, installed with pip into a fresh venv)"
 rm -rf out/wheel-dev
 /usr/bin/python3 scripts/build_wheel.py --platform linux-x64 --library build/libfx/libfx.so.2 \
