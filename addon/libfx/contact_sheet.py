@@ -5,13 +5,16 @@ complete (the farm's final job, docs/farm.md). Thumbnails come from each result'
 Combined pass through the library (resampled by fx_frame_read_pixels), in frame order,
 left to right and top to bottom; the sheet goes through the scene's view transform like
 a render, and is written to a temporary name and renamed, so a sheet exists only whole.
+Plain buffers, no numpy: the farm's final job should not depend on which Python packages
+a node's Blender happens to see.
 """
 
+import array
+import ctypes
 import math
 import os
 
 import bpy
-import numpy as np
 
 # A sheet of a 2,000-frame shot shows an even sample: at most this many thumbnails.
 MAX_THUMBS = 48
@@ -42,20 +45,26 @@ def write(fx, ctx, scene, frames, path):
     cols = min(COLUMNS, len(shown))
     rows = math.ceil(len(shown) / cols)
     sw, sh = cols * tw + (cols + 1) * GAP, rows * th + (rows + 1) * GAP
-    sheet = np.zeros((sh, sw, 4), np.float32)
-    sheet[..., 3] = 1.0
-    thumb = np.empty((th, tw, 4), np.float32)
+    # Rows bottom-up, as Blender stores an image; thumbnails read bottom-up to match.
+    sheet = array.array("f", [0.0, 0.0, 0.0, 1.0]) * (sw * sh)
+    dst = memoryview(sheet)
+    thumb = (ctypes.c_float * (tw * th * 4))()
+    src = memoryview(thumb).cast("B").cast("f")
     for i, frame in enumerate(shown):
         f = fx.native.Frame.read(ctx, fx.scene_setup.result_paths(scene, frame)["exr"])
         try:
-            f.read_pixels("Combined", tw, th, thumb, bottom_up=False)
+            f.read_pixels("Combined", tw, th, thumb, bottom_up=True)
         finally:
             f.close()
         r, c = divmod(i, cols)
-        y, x = GAP + r * (th + GAP), GAP + c * (tw + GAP)
-        sheet[y:y + th, x:x + tw] = thumb
-    sheet[..., 3] = 1.0
-    _save_png(scene, np.ascontiguousarray(sheet[::-1]), sw, sh, path)
+        y0 = sh - GAP - (r + 1) * th - r * GAP   # the thumbnail's bottom row in the sheet
+        x0 = GAP + c * (tw + GAP)
+        for y in range(th):
+            at = ((y0 + y) * sw + x0) * 4
+            dst[at:at + tw * 4] = src[y * tw * 4:(y + 1) * tw * 4]
+    for k in range(3, len(sheet), 4):
+        sheet[k] = 1.0
+    _save_png(scene, sheet, sw, sh, path)
     return shown
 
 
@@ -68,7 +77,7 @@ def _save_png(scene, pixels, width, height, path):
     d, name = os.path.split(os.path.abspath(path))
     tmp = os.path.join(d, ".%s.tmp-%d.png" % (name, os.getpid()))
     try:
-        img.pixels.foreach_set(pixels.ravel())
+        img.pixels.foreach_set(pixels)
         settings.file_format, settings.color_mode, settings.color_depth = "PNG", "RGB", "8"
         img.save_render(tmp, scene=scene)
         os.replace(tmp, path)
