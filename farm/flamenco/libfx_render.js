@@ -9,6 +9,10 @@
 // The runner exits 0 when every frame of the chunk has its result, 1 when a frame's
 // stack failed, 2 on a usage/setup error, so Flamenco marks the task failed and can
 // re-queue it; --skip-existing makes the re-run render only the frames still missing.
+// A last task, libfx-check, runs once every chunk has succeeded: the runner's own
+// completeness check over the whole range (`batch.py --check`), which also writes the
+// shot's contact sheet, <prefix>libfx.contact_sheet.png (the Slurm submitter's final job
+// runs the same command: farm/slurm/libfx_slurm.py).
 //
 // Globals provided by the Manager's job compiler: author, path, frameChunker, print.
 
@@ -65,10 +69,16 @@ function compileJob(job) {
     const settings = job.settings;
     checkSettings(settings);
     const chunks = frameChunker(settings.frames, settings.chunk_size);
-    for (const chunk of chunks) {
-        job.addTask(libfxChunkTask(settings, chunk));
+    const chunkTasks = chunks.map((chunk) => libfxChunkTask(settings, chunk));
+    for (const task of chunkTasks) {
+        job.addTask(task);
     }
-    print(`libfx: ${chunks.length} chunk(s) of at most ${settings.chunk_size} frame(s)`);
+    const check = libfxCheckTask(settings, chunks.join(","));
+    for (const task of chunkTasks) {
+        check.addDependency(task);
+    }
+    job.addTask(check);
+    print(`libfx: ${chunks.length} chunk(s) of at most ${settings.chunk_size} frame(s), then libfx-check`);
 }
 
 // Rejects settings that would make every task fail, at submission instead.
@@ -100,7 +110,19 @@ function libfxRunnerArgs(settings, chunk) {
 }
 
 function libfxChunkTask(settings, chunk) {
-    const task = author.Task(`libfx-${chunk}`, "blender");
+    return libfxRunnerTask(settings, `libfx-${chunk}`, libfxRunnerArgs(settings, chunk));
+}
+
+// Every frame of the job has a complete result (the runner decides, reading each back),
+// then the contact sheet; exit 1 names each frame that has not.
+function libfxCheckTask(settings, frames) {
+    return libfxRunnerTask(settings, "libfx-check", [
+        "--check", "--frames", frames, "--output", settings.output_prefix,
+        "--contact-sheet", settings.output_prefix + "libfx.contact_sheet.png"]);
+}
+
+function libfxRunnerTask(settings, name, runnerArgs) {
+    const task = author.Task(name, "blender");
     const addonDir = settings.addon_dir || "{libfx_addon}";
     const command = author.Command("blender-render", {
         exe: "{blender}",
@@ -110,7 +132,7 @@ function libfxChunkTask(settings, chunk) {
         // --python-exit-code: a runner that cannot even be opened (wrong addon_dir)
         // must fail the task; Blender would otherwise exit 0.
         args: ["--python-exit-code", "2", "--python", path.join(addonDir, "batch.py"), "--"]
-            .concat(libfxRunnerArgs(settings, chunk)),
+            .concat(runnerArgs),
     });
     task.addCommand(command);
     return task;

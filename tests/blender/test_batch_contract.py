@@ -349,7 +349,14 @@ def test_flamenco_job_type_chunks_and_commands(blender, library, tmp_path):
         assert "error" not in job, job
         wanted = sorted(set(explode(frames.replace("..", "-").replace(" ", ""))))
         covered = []
-        for task in job["tasks"]:
+        *chunk_tasks, check = job["tasks"]
+        # The last task checks the whole range once every chunk is done.
+        assert check["name"] == "libfx-check" and check["deps"] == [t["name"] for t in chunk_tasks]
+        check_runner = check["commands"][0]["parameters"]["args"][5:]
+        assert check_runner[0] == "--check" and check_runner[3:5] == ["--output", prefix]
+        assert sorted(explode(check_runner[2])) == wanted
+        assert check_runner[5:] == ["--contact-sheet", prefix + "libfx.contact_sheet.png"]
+        for task in chunk_tasks:
             assert task["type"] == "blender" and len(task["commands"]) == 1
             cmd = task["commands"][0]
             assert cmd["name"] == "blender-render"
@@ -367,7 +374,7 @@ def test_flamenco_job_type_chunks_and_commands(blender, library, tmp_path):
             assert len(chunk) <= chunk_size
             covered += chunk
         assert sorted(covered) == wanted, (frames, chunk_size)   # every frame exactly once
-        assert len(job["tasks"]) == -(-len(wanted) // chunk_size)
+        assert len(chunk_tasks) == -(-len(wanted) // chunk_size)
 
     assert "resolution" in got["jobs"][len(cases)]["error"]
     opt = got["jobs"][len(cases) + 1]["tasks"][0]["commands"][0]["parameters"]
@@ -382,10 +389,15 @@ def test_flamenco_job_type_chunks_and_commands(blender, library, tmp_path):
     # with Flamenco's default blenderArgs.
     variables = {"blender": T.blender_path(), "blenderArgs": "-b -y",
                  "libfx_addon": str(T.REPO / "addon" / "libfx")}
-    tasks = got["jobs"][0]["tasks"]
+    *tasks, check = got["jobs"][0]["tasks"]
     assert [explode(t["commands"][0]["parameters"]["args"][6]) for t in tasks] == [[1, 2], [3]]
     env = dict(os.environ, **T.addon_env(library))
     out = tmp_path / "farm"
+    # Before the chunks: the check task fails, naming the missing frames, and writes no sheet.
+    p = subprocess.run(worker_argv(check["commands"][0], variables), capture_output=True, text=True,
+                       timeout=240, env=env)
+    assert p.returncode == 1 and "check: 3 of 3 frame(s) incomplete" in p.stderr, out_text(p)
+    assert not (out / "shot_libfx.contact_sheet.png").exists()
     for i, task in enumerate(tasks):
         argv = worker_argv(task["commands"][0], variables)
         p = subprocess.run(argv, capture_output=True, text=True, timeout=240, env=env)
@@ -393,6 +405,10 @@ def test_flamenco_job_type_chunks_and_commands(blender, library, tmp_path):
         assert sorted(int(m) for m in re.findall(r"^shot_libfx\.(\d{4})\.exr$", "\n".join(
             x.name for x in out.iterdir()), re.M)) == ([1, 2] if i == 0 else [1, 2, 3])
     assert leftovers(out) == []
+    p = subprocess.run(worker_argv(check["commands"][0], variables), capture_output=True, text=True,
+                       timeout=240, env=env)
+    assert p.returncode == 0 and "check: all 3 frame(s) complete" in p.stdout, out_text(p)
+    assert (out / "shot_libfx.contact_sheet.png").stat().st_size > 0
 
     # A wrong add-on path on a worker fails the task instead of exiting 0 with nothing done.
     bad = worker_argv(tasks[1]["commands"][0], dict(variables, libfx_addon="/nonexistent/libfx"))
