@@ -213,34 +213,60 @@ def pixels(res):
     return w * h
 
 
+def median(values):
+    v = sorted(values)
+    n = len(v)
+    return v[n // 2] if n % 2 else (v[n // 2 - 1] + v[n // 2]) / 2
+
+
+def medians_by_resolution(rows):
+    """One point per measured (resolution, samples): the medians of its repeats, so a run
+    slowed by other work on a shared machine does not tilt the fit."""
+    groups = {}
+    for r in rows:
+        groups.setdefault((r["res"], int(r["samples"])), []).append(r)
+    out = []
+    for (res, spp), rs in sorted(groups.items()):
+        out.append({"res": res, "samples": spp, "frames": int(rs[0]["frames"]), "cpus": int(rs[0]["cpus"]),
+                    **{k: median(float(r[k]) for r in rs)
+                       for k in ("per_frame_s", "fixed_s", "skip_all_s", "peak_rss_mb")}})
+    return out
+
+
 def size_task(args, nframes_per_chunk, rows):
-    """--cpus-per-task, --mem (MB) and --time (minutes) for one chunk, with how they were
-    derived. Per-frame time is fitted as a + b * pixels * samples over the measured runs
-    (Cycles' path tracing grows with both), scaled by measured cores / task cores; peak
-    memory as a + b * pixels; the fixed cost per chunk is the measured median."""
+    """--cpus-per-task, --mem (MB) and --time (minutes) for one chunk, the final job's
+    check time per frame (s), and how they were derived. Per-frame time is fitted as
+    a + b * pixels * samples over the measured points (Cycles' path tracing grows with
+    both), scaled by measured cores / task cores; peak memory as a + b * pixels; the
+    fixed cost per chunk is the measured median."""
     scene, rs = scene_model(rows, args.blend)
-    cpus_measured = int(rs[0]["cpus"])
+    pts = medians_by_resolution(rs)
+    if len({pixels(p["res"]) for p in pts}) < 2:
+        raise Refused("--sizing %s: scene %s was measured at one resolution; the fit needs two "
+                      "(farm/measure_chunk_cost.sh 960x540,1920x1080 ...)" % (args.sizing, scene))
+    cpus_measured = pts[0]["cpus"]
     cpus = args.cpus_per_task or cpus_measured
-    res = args.resolution or max((r["res"] for r in rs), key=pixels)
-    spp = args.samples or int(max(rs, key=lambda r: int(r["samples"]))["samples"])
-    work = pixels(res) * spp
-    a, b = fit_line([pixels(r["res"]) * int(r["samples"]) for r in rs], [float(r["per_frame_s"]) for r in rs])
-    per_frame = args.frame_seconds or (a + b * work) * cpus_measured / cpus
-    fixed = sorted(float(r["fixed_s"]) for r in rs)[len(rs) // 2]
+    res = args.resolution or max((p["res"] for p in pts), key=pixels)
+    spp = args.samples or max(p["samples"] for p in pts)
+    a, b = fit_line([pixels(p["res"]) * p["samples"] for p in pts], [p["per_frame_s"] for p in pts])
+    per_frame = args.frame_seconds or (a + b * pixels(res) * spp) * cpus_measured / cpus
+    fixed = median(p["fixed_s"] for p in pts)
     expected_s = fixed + nframes_per_chunk * per_frame
     minutes = args.time or max(MIN_TIME_MIN, math.ceil(TIME_MARGIN * expected_s / 60.0))
-    ma, mb = fit_line([pixels(r["res"]) for r in rs], [float(r["peak_rss_mb"]) for r in rs])
-    mem = args.mem or int(math.ceil(MEM_MARGIN * (ma + mb * pixels(res)) / 64.0) * 64)
+    ma, mb = fit_line([pixels(p["res"]) for p in pts], [p["peak_rss_mb"] for p in pts])
+    peak = ma + mb * pixels(res)
+    mem = args.mem or int(math.ceil(MEM_MARGIN * peak / 64.0) * 64)
+    # The final job starts Blender once and reads every result back: a --skip-existing
+    # pass over a finished chunk measures exactly that, start + frames x read(pixels).
+    sa, sb = fit_line([pixels(p["res"]) for p in pts], [p["skip_all_s"] for p in pts])
+    check = (max(sa, 0.0), sb * pixels(res) / pts[0]["frames"])
     how = ("sized from %s (%s, measured on %d cores): %.1f s per frame at %s and %d samples%s, "
            "%.1f s fixed per chunk -> %.0f s per %d-frame chunk; --time %d min (%.0fx), "
            "--mem %d MB (%.1fx the fitted peak of %.0f MB)" % (
                os.path.basename(args.sizing), scene, cpus_measured, per_frame, res, spp,
                " (--frame-seconds)" if args.frame_seconds else " on %d cores" % cpus,
-               fixed, expected_s, nframes_per_chunk, minutes, TIME_MARGIN, mem, MEM_MARGIN, ma + mb * pixels(res)))
-    # The final job reads every result back once: a --skip-existing pass over a finished
-    # chunk measures exactly that (with Blender's start), per frame, scaled by pixels.
-    check_s = max(float(r["skip_all_s"]) / int(r["frames"]) * pixels(res) / pixels(r["res"]) for r in rs)
-    return cpus, mem, minutes, check_s, how
+               fixed, expected_s, nframes_per_chunk, minutes, TIME_MARGIN, mem, MEM_MARGIN, peak))
+    return cpus, mem, minutes, check, how
 
 
 # ---------------------------------------------------------------- the job scripts
@@ -357,7 +383,13 @@ def main(argv=None):
         return 2
     fr = load_frames_module(args.addon)
     chunk_frames = fr.chunks(frames, args.chunk)
-    cpus, mem, minutes, check_s, how = size_task(args, max(len(c) for c in chunk_frames), read_sizing(args.sizing))
+    try:
+        cpus, mem, minutes, check, how = size_task(args, max(len(c) for c in chunk_frames),
+                                                   read_sizing(args.sizing))
+    except Refused as e:
+        print("libfx_slurm: error: %s" % e, file=sys.stderr)
+        return 2
+    final_minutes = max(MIN_TIME_MIN, math.ceil(TIME_MARGIN * (check[0] + len(frames) * check[1]) / 60))
     logdir = os.path.abspath(args.output) + "slurm"
     os.makedirs(logdir, exist_ok=True)
     write_script(os.path.join(logdir, "chunk.sh"), chunk_script(args, chunk_frames, logdir, fr))
@@ -373,7 +405,7 @@ def main(argv=None):
             os.path.join(logdir, "chunk.sh")], args.dry_run)
         final = sbatch(["sbatch"] + common + [
             "--dependency", "afterany:%s" % array, "--cpus-per-task", "1", "--mem", str(mem),
-            "--time", str(max(MIN_TIME_MIN, math.ceil(TIME_MARGIN * check_s * len(frames) / 60))),
+            "--time", str(final_minutes),
             "--output", os.path.join(logdir, "slurm-%j.out"), os.path.join(logdir, "final.sh")], args.dry_run)
     except RuntimeError as e:
         print("libfx_slurm: error: %s" % e, file=sys.stderr)

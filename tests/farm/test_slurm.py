@@ -22,6 +22,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from datetime import datetime
 
 import numpy as np
 import OpenImageIO as oiio
@@ -133,6 +134,13 @@ def last_attempt(text):
     return text[text.rindex("== libfx slurm: job"):]
 
 
+def attempt_seconds(text):
+    """Wall seconds of one attempt, from its header's and its exit line's time stamps."""
+    stamps = re.findall(r"^== libfx slurm: .* at (\S+?)(?::? frames .*)?$", text, re.M)
+    t = [datetime.fromisoformat(s.rstrip(":")) for s in stamps]
+    return (t[-1] - t[0]).total_seconds()
+
+
 # ---------------------------------------------------------------- refused before queueing
 
 def test_bad_input_refused_before_queueing(cluster, tmp_path):
@@ -236,7 +244,9 @@ def test_shot_cancelled_then_resubmitted_is_bit_identical(cluster):
             assert not diff, "frame %d's header differs: %s" % (f, diff)
     record = {"frames": FRAMES, "chunks": FRAMES // CHUNK, "first_submission_s": round(first_wall, 1),
               "cancelled_after_s": round(cancelled_at - t0, 1), "frames_lost": len(missing),
-              "resubmission_s": round(second_wall, 1)}
+              "resubmission_s": round(second_wall, 1),
+              "resubmitted_chunk_s": {"%d-%d" % (a, a + 2): attempt_seconds(last_attempt(chunk_log(out, a, a + 2)))
+                                      for a in (1, 4, 7, 10)}}
     print("\nslurm shot record: " + json.dumps(record))
     with open(os.path.join(ROOT, "out", "slurm_record.json") if os.path.isdir(os.path.join(ROOT, "out"))
               else os.devnull, "w") as f:
