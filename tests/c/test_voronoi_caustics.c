@@ -574,6 +574,7 @@ static void test_lattice_accuracy(fx_context *ctx)
      * final for d = 1.5 and 2, and finite (the default quality: final) */
     {
         fx_frame *fs = small_frame(ctx, 300, 7, 5);
+        CHECK(fs != NULL);
         const char *exps[] = {"1.5", "2"};
         for (int e = 0; fs && e < 2; e++) {
             char pg[256], pb[256];
@@ -600,6 +601,7 @@ static void test_lattice_accuracy(fx_context *ctx)
      * to the ROI (its first and last pixels are nodes), so these pixels are lattice nodes:
      * exactly the every-pixel result */
     fx_frame *f = small_frame(ctx, 64, 37, 0);
+    CHECK(f != NULL);
     const char *rects[] = {"{\"rect\": [5, 7, 1, 1]}", "{\"rect\": [63, 36, 1, 1]}", "{\"rect\": [30, 11, 2, 2]}"};
     const int rx[] = {5, 63, 30}, ry[] = {7, 36, 11}, rw[] = {1, 1, 2}, rh[] = {1, 1, 2};
     for (int r = 0; f && r < 3; r++) {
@@ -623,6 +625,7 @@ static void test_lattice_accuracy(fx_context *ctx)
     const char *qs[] = {"\"downsample\": 2", "\"downsample\": 2, \"refine\": false",
                         "\"downsample\": 4, \"refine\": false, \"lattice_shading\": true"};
     double mae[3] = {0, 0, 0};
+    CHECK(pf && ref);
     for (int q = 0; pf && ref && q < 3; q++) {
         float *o = run_caustics(ctx, pf, "position", qs[q]);
         CHECK(o != NULL);
