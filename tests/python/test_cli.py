@@ -334,16 +334,27 @@ def test_camera_sidecar_is_written_to_the_output(run, tmp_path):
 
 
 def test_debug_outputs_option(run, tmp_path):
-    """--debug-outputs turns the stack's debug passes on; today's three effects add none,
-    so this checks the option runs and never removes a pass."""
+    """--debug-outputs adds the stack's debug passes (edges: fx0_edges_strengths, RGBA, and
+    fx0_edges_matte, one channel), named by effect position and name; without it they are
+    absent, and the passes both files hold carry the same pixels."""
     src = make_frame(tmp_path / "in.exr")
-    recipe = write_recipe(tmp_path / "r.json",
-                          [{"effect": "pixelate", "mask": {"object_index": 1}}])
+    recipe = write_recipe(tmp_path / "r.json", [{"effect": "edges"}])
     plain, debug = tmp_path / "plain.exr", tmp_path / "debug.exr"
-    assert run("run", "--stack", recipe, src, "-o", plain).returncode == EXIT_OK
+    r = run("run", "--stack", recipe, src, "-o", plain)
+    assert r.returncode == EXIT_OK, r.stderr
     r = run("run", "--stack", recipe, "--debug-outputs", src, "-o", debug)
     assert r.returncode == EXIT_OK, r.stderr
-    assert len(read_exr(debug)) >= len(read_exr(plain))
+    p, d = read_exr(plain), read_exr(debug)
+    debug_only = sorted(n for n in d if n not in p)
+    assert [n for n in debug_only if "fx0_edges_strengths." in n] and \
+        [n for n in debug_only if "fx0_edges_matte." in n], debug_only
+    assert len([n for n in debug_only if "fx0_edges_strengths." in n]) == 4, debug_only
+    assert len([n for n in debug_only if "fx0_edges_matte." in n]) == 1, debug_only
+    assert not [n for n in p if "fx0_" in n], sorted(p)
+    for name in p:
+        np.testing.assert_array_equal(p[name], d[name], err_msg=name)
+    matte = d[[n for n in debug_only if "fx0_edges_matte." in n][0]]
+    assert np.all(np.isfinite(matte)) and matte.max() > 0.0 and matte.min() >= 0.0
 
 
 def test_non_ascii_paths(run, tmp_path):
