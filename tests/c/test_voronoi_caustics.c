@@ -392,8 +392,23 @@ static void test_extremes_and_mask(fx_context *ctx)
         }
         float *o = run_caustics(ctx, f, "position", exps[i]);
         int ok = o && tu_all_finite(o, (size_t)W * H * 4);
-        for (size_t k = 0; ok && k < (size_t)W * H * 4; k++)
-            ok = o[k] >= 0.0f && o[k] < 100.0f;
+        /* physical mode (the entries without seed or environment), defaults strength 0.6,
+         * tint (0.8, 0.95, 1): out = 0.5 (1 + 0.6 noise' (r - 1) tint_k), noise' = 0.4 +
+         * 1.2 noise with noise in [0, 1] (so [0.4, 1.6]), r = min(g / mean, 16) in [0, 16]:
+         * channel k in [0.5 (1 - 0.96 tint_k), 0.5 (1 + 14.4 tint_k)], alpha untouched (1).
+         * Seed and environment add terms this does not bound: there only finite and in
+         * [0, 100). */
+        const int physical = !strstr(exps[i], "seed") && !strstr(exps[i], "environment");
+        const double tint[3] = {0.8, 0.95, 1.0}, slack = 1e-5;
+        for (size_t k = 0; ok && k < (size_t)W * H * 4; k++) {
+            const int c = (int)(k % 4);
+            if (!physical)
+                ok = o[k] >= 0.0f && o[k] < 100.0f;
+            else if (c == 3)
+                ok = o[k] == 1.0f;
+            else
+                ok = o[k] >= 0.5 * (1.0 - 0.96 * tint[c]) - slack && o[k] <= 0.5 * (1.0 + 14.4 * tint[c]) + slack;
+        }
         if (!ok)
             fprintf(stderr, "extreme %s: not finite/bounded\n", exps[i]);
         CHECK(ok);
