@@ -10,6 +10,7 @@ packages=(
   libdeflate-dev                            # ZIP EXR writes ~3x faster (optional at build time)
   openimageio-tools python3-openimageio     # oiiotool/idiff and OIIO from Python, for tests and comparisons
   python3-numpy python3-pytest              # Python tests (run with /usr/bin/python3)
+  universal-ctags                           # the function-length check (tests/check_function_length.py)
   python3-venv                              # the wheel test: pip install into a fresh venv (tests/platform)
   python3-matplotlib python3-pil            # plots and GIF flip-books in docs/
   blender                                   # Debian's Blender 3.4: the add-on, scenes and renders

@@ -41,6 +41,7 @@ packages=(
   wine64                                                     # runs the tests (Debian 12's Wine 8.0)
   openimageio-tools                                          # oiiotool: test_exr_dwa's host fixture
   python3-pytest python3-numpy python3-openimageio           # the CLI tests
+  universal-ctags                                            # ctest's function-length check
 )
 source scripts/apt_missing.sh
 apt_install_missing "${packages[@]}" || exit 1

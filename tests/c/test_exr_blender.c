@@ -121,7 +121,9 @@ int main(void)
      * default camera's location (7.3589, -6.9258, 4.9583). */
     float *z = NULL, *pos = NULL;
     int cz = 0, cp = 0;
-    if (fx_frame_pass(r, "Depth", &z, &cz) == FX_OK && fx_frame_pass(r, "Position", &pos, &cp) == FX_OK) {
+    CHECK_OK(ctx, fx_frame_pass(r, "Depth", &z, &cz));
+    CHECK_OK(ctx, fx_frame_pass(r, "Position", &pos, &cp));
+    if (z && pos) {
         double max_radial_gap = 0;
         int hits = 0;
         for (int i = 0; i < 64 * 36; i++) {

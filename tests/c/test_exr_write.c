@@ -175,8 +175,9 @@ static void test_round_trip(fx_context *ctx, const char *dir)
         same_pass(ctx, f, g, "IndexOB", 1);
         float *a = NULL, *b = NULL;
         int na = 0, nb = 0;
-        fx_frame_pass(f, "Combined", &a, &na);
-        fx_frame_pass(g, "Combined", &b, &nb);
+        CHECK_OK(ctx, fx_frame_pass(f, "Combined", &a, &na));
+        CHECK_OK(ctx, fx_frame_pass(g, "Combined", &b, &nb));
+        CHECK(a && b);
         /* skip pixel 0 (values half cannot hold); the rest is within half's precision */
         double md = 0;
         for (size_t i = 4; a && b && i < (size_t)37 * 23 * 4; i++) {

@@ -42,6 +42,7 @@ static void test_impulse_exact(fx_context *ctx)
     CHECK_OK(ctx, fx_stack_set_enum(s, 0, "kernel", "paper_5x5"));
     o = et_run(ctx, s, f);
     static const int K[25] = { 1, 4, 7, 4, 1, 4, 16, 26, 16, 4, 7, 26, 41, 26, 7, 4, 16, 26, 16, 4, 1, 4, 7, 4, 1 };
+    CHECK(o != NULL);
     if (o) {
         double err = 0, outside = 0;
         for (int y = 0; y < h; y++)

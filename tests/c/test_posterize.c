@@ -172,9 +172,21 @@ static void test_extremes(fx_context *ctx)
     }
 }
 
+/* The value of level k of n written out from the sRGB standard (IEC 61966-2-1's decoding,
+ * white 1) or linear steps: not the library's table. */
+static double level_value(int k, int n, int srgb)
+{
+    const double e = (double)k / (n - 1);
+    if (!srgb)
+        return e;
+    return e <= 0.04045 ? e / 12.92 : pow((e + 0.055) / 1.055, 2.4);
+}
+
 /* The threshold quantiser (SIMD chain for N <= 16, binary search above, 2-pixel and
- * 1-pixel paths) against the formula floor(enc(u) N + dither d) in double: equal except
- * within 1e-6 of a band edge, for every Bayer phase. */
+ * 1-pixel paths) against the formula written out here in double: band k = floor(enc(u) N
+ * + dither d) clamped to [0, N - 1], value level_value(k), u >= 1 kept (keep_hdr), u <= 0
+ * level 0. Equal to the float of that value (within 2 ulp) except within 1e-6 of a band
+ * edge, for every Bayer phase. */
 static void test_quantiser_exact(void)
 {
     const int ns[] = { 2, 3, 4, 6, 16, 17, 64, 256 };
@@ -206,8 +218,12 @@ static void test_quantiser_exact(void)
                                 if (fabs(e - floor(e + 0.5)) < 1e-6 * n)
                                     continue;
                                 checked++;
-                                float want = fx_levels_apply_reference(q, v, x, y);
-                                bad += dst[4 * x + c] != want || fx_levels_apply(q, v, x, y) != want;
+                                const double kf = floor(e);
+                                const int k = kf < 0.0 ? 0 : kf > n - 1 ? n - 1 : (int)kf;
+                                const double want = v >= 1.0f ? (double)v : v <= 0.0f ? 0.0 : level_value(k, n, sp == 0);
+                                const double tol = 2.0 * FLT_EPSILON * want;
+                                bad += !(fabs(dst[4 * x + c] - want) <= tol) ||
+                                       !(fabs(fx_levels_apply(q, v, x, y) - want) <= tol);
                             }
                     }
             }

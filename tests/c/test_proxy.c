@@ -261,6 +261,7 @@ static void test_nonfinite(fx_context *ctx)
     fx_frame *o = NULL;
     CHECK_OK(ctx, fx_frame_reduce(f, 2, &o));
     const float *oc = o ? pass_of(o, "Combined", NULL) : NULL;
+    CHECK(oc != NULL);
     if (oc) {
         CHECK(tu_all_finite(oc, 8));
         CHECK(oc[0] == 1.0f && oc[1] == 1.0f && oc[2] == 1.0f); /* finite ones only */

@@ -336,6 +336,7 @@ static void test_splashes_downsample(fx_context *ctx)
             float *e = et_run_effect(ctx, "rain_splashes", f, exact, NULL);
             float *m = et_run_effect(ctx, "rain_splashes", f, params, "{\"rect\":[5,9,30,40]}");
             CHECK(o && o2 && memcmp(o, o2, N * N * 4 * sizeof(float)) == 0);
+            CHECK(e != NULL);
             const float *src = et_combined(f);
             CHECK(m && et_outside_equal(m, src, N, N, 5, 9, 30, 40));
             for (int y = 0; o && e && y < N; y++)

@@ -392,8 +392,23 @@ static void test_extremes_and_mask(fx_context *ctx)
         }
         float *o = run_caustics(ctx, f, "position", exps[i]);
         int ok = o && tu_all_finite(o, (size_t)W * H * 4);
-        for (size_t k = 0; ok && k < (size_t)W * H * 4; k++)
-            ok = o[k] >= 0.0f && o[k] < 100.0f;
+        /* physical mode (the entries without seed or environment), defaults strength 0.6,
+         * tint (0.8, 0.95, 1): out = 0.5 (1 + 0.6 noise' (r - 1) tint_k), noise' = 0.4 +
+         * 1.2 noise with noise in [0, 1] (so [0.4, 1.6]), r = min(g / mean, 16) in [0, 16]:
+         * channel k in [0.5 (1 - 0.96 tint_k), 0.5 (1 + 14.4 tint_k)], alpha untouched (1).
+         * Seed and environment add terms this does not bound: there only finite and in
+         * [0, 100). */
+        const int physical = !strstr(exps[i], "seed") && !strstr(exps[i], "environment");
+        const double tint[3] = {0.8, 0.95, 1.0}, slack = 1e-5;
+        for (size_t k = 0; ok && k < (size_t)W * H * 4; k++) {
+            const int c = (int)(k % 4);
+            if (!physical)
+                ok = o[k] >= 0.0f && o[k] < 100.0f;
+            else if (c == 3)
+                ok = o[k] == 1.0f;
+            else
+                ok = o[k] >= 0.5 * (1.0 - 0.96 * tint[c]) - slack && o[k] <= 0.5 * (1.0 + 14.4 * tint[c]) + slack;
+        }
         if (!ok)
             fprintf(stderr, "extreme %s: not finite/bounded\n", exps[i]);
         CHECK(ok);
@@ -574,6 +589,7 @@ static void test_lattice_accuracy(fx_context *ctx)
      * final for d = 1.5 and 2, and finite (the default quality: final) */
     {
         fx_frame *fs = small_frame(ctx, 300, 7, 5);
+        CHECK(fs != NULL);
         const char *exps[] = {"1.5", "2"};
         for (int e = 0; fs && e < 2; e++) {
             char pg[256], pb[256];
@@ -600,6 +616,7 @@ static void test_lattice_accuracy(fx_context *ctx)
      * to the ROI (its first and last pixels are nodes), so these pixels are lattice nodes:
      * exactly the every-pixel result */
     fx_frame *f = small_frame(ctx, 64, 37, 0);
+    CHECK(f != NULL);
     const char *rects[] = {"{\"rect\": [5, 7, 1, 1]}", "{\"rect\": [63, 36, 1, 1]}", "{\"rect\": [30, 11, 2, 2]}"};
     const int rx[] = {5, 63, 30}, ry[] = {7, 36, 11}, rw[] = {1, 1, 2}, rh[] = {1, 1, 2};
     for (int r = 0; f && r < 3; r++) {
@@ -623,6 +640,7 @@ static void test_lattice_accuracy(fx_context *ctx)
     const char *qs[] = {"\"downsample\": 2", "\"downsample\": 2, \"refine\": false",
                         "\"downsample\": 4, \"refine\": false, \"lattice_shading\": true"};
     double mae[3] = {0, 0, 0};
+    CHECK(pf && ref);
     for (int q = 0; pf && ref && q < 3; q++) {
         float *o = run_caustics(ctx, pf, "position", qs[q]);
         CHECK(o != NULL);

@@ -276,6 +276,7 @@ static void test_bleeding(fx_context *ctx)
     float bleeds[3] = {0.0f, 0.3f, 0.6f};
     for (int b = 0; b < 3; b++) {
         float *o = run_vsm(ctx, f, "vsm", "box_sat", 15.0f, bleeds[b], 0.01f);
+        CHECK(o != NULL);
         leak[b] = 0;
         for (int i = 0; o && i < N * N; i++)
             leak[b] = fmaxf(leak[b], o[4 * i]);
@@ -562,6 +563,7 @@ static void test_share_modes(fx_context *ctx)
             /* screen_downsample 2: the same in a uniform shadow */
             c.downsample = 2;
             o = run_share(ctx, &c, &r);
+            CHECK(o != NULL);
             if (o)
                 CHECK(fabs((4.0 - o[mid]) - want) < 1e-4);
             free(o);

@@ -48,7 +48,9 @@ int tu_contains(const char *haystack, const char *needle);
 int tu_finish(const char *name);
 /* A w x h frame with a Combined pass filled by a smooth colourful pattern (seeded). */
 fx_frame *tu_pattern_frame(fx_context *ctx, int w, int h, unsigned seed);
-/* Max |a-b| over n floats, and whether every value is finite. */
+/* Max |a-b| over n floats (+inf when either buffer holds a NaN anywhere, or an infinity
+ * against a finite value; equal values, infinities included, differ by 0), and whether
+ * every value is finite. */
 double tu_max_abs_diff(const float *a, const float *b, size_t n);
 int tu_all_finite(const float *a, size_t n);
 /* A whole file, NUL-terminated, malloc'ed (len may be NULL); NULL if unreadable. */

@@ -112,9 +112,21 @@ def _numbers(obj):
 
 
 def test_info_corpus_multipart(run, corpus):
-    r = run("info", corpus / "openexr-images" / "Beachball" / "multipart.0001.exr")
+    """info lists every part of a multipart file with its name and channel count, as
+    OpenImageIO reads them (its subimages)."""
+    path = corpus / "openexr-images" / "Beachball" / "multipart.0001.exr"
+    r = run("info", path)
     assert r.returncode == EXIT_OK, r.stderr
-    json.loads(r.stdout)
+    info = json.loads(r.stdout)
+    assert info["multipart"] is True
+    oiio = pytest.importorskip("OpenImageIO")
+    inp = oiio.ImageInput.open(str(path))
+    want = []
+    while inp.seek_subimage(len(want), 0):
+        want.append((inp.spec().getattribute("name"), inp.spec().nchannels))
+    inp.close()
+    assert len(want) == 10
+    assert [(p["name"], p["channels"]) for p in info["parts"]] == want
 
 
 def test_passes_union_with_mask(run, tmp_path):
@@ -280,9 +292,20 @@ def test_quality_option_and_verbose_timings(run, tmp_path):
 def test_other_layer_names_and_layer_option(run, tmp_path):
     rgba = np.random.RandomState(3).rand(16, 20, 4).astype(np.float32)
     src = write_exr(tmp_path / "in.exr", {"Combined": (rgba, "RGBA")}, layer="My.Layer 1")
-    recipe = write_recipe(tmp_path / "r.json", [{"effect": "pixelate"}])
+    recipe = write_recipe(tmp_path / "r.json", [{"effect": "pixelate", "params": {"mode": "cells", "cell_size": 4}}])
     r = run("run", "--stack", recipe, "--layer", "My.Layer 1", src, "-o", tmp_path / "o.exr")
     assert r.returncode == EXIT_OK, r.stderr
+    # the layer (dots and a space in its name) was read: the same result as the same pixels
+    # under Blender's usual layer name, and pixelated (not the input passed through)
+    plain = write_exr(tmp_path / "plain.exr", {"Combined": (rgba, "RGBA")})
+    r = run("run", "--stack", recipe, plain, "-o", tmp_path / "p.exr")
+    assert r.returncode == EXIT_OK, r.stderr
+    got, want = combined(read_exr(tmp_path / "o.exr")), combined(read_exr(tmp_path / "p.exr"))
+    np.testing.assert_array_equal(got, want)
+    assert np.abs(got - rgba).max() > 0.05
+    # a layer the file does not have is refused by name
+    r = run("run", "--stack", recipe, "--layer", "Nope", src, "-o", tmp_path / "n.exr")
+    assert r.returncode != EXIT_OK and "Nope" in r.stderr
 
 
 def test_nan_inf_corpus_file_gives_finite_output_and_a_warning(run, corpus, tmp_path):
@@ -312,10 +335,16 @@ def test_corpus_files_run(run, corpus, tmp_path, name):
 
 def test_processed_file_can_be_processed_again(run, tmp_path):
     src = make_frame(tmp_path / "in.exr")
-    recipe = write_recipe(tmp_path / "r.json", [{"effect": "pixelate"}])
+    recipe = write_recipe(tmp_path / "r.json", [{"effect": "pixelate", "params": {"mode": "cells", "cell_size": 4}}])
     assert run("run", "--stack", recipe, src, "-o", tmp_path / "a.exr").returncode == EXIT_OK
     r = run("run", "--stack", recipe, tmp_path / "a.exr", "-o", tmp_path / "b.exr")
     assert r.returncode == EXIT_OK, r.stderr
+    # the second run read the first's output: pixelate of a pixelated frame is that frame
+    # (each cell is already its own mean), and the first run did change the input
+    a, b = combined(read_exr(tmp_path / "a.exr")), combined(read_exr(tmp_path / "b.exr"))
+    assert np.abs(a - combined(read_exr(src))).max() > 0.05
+    np.testing.assert_allclose(b, a, rtol=0, atol=1e-6)
+    assert sorted(read_exr(tmp_path / "b.exr")) == sorted(read_exr(tmp_path / "a.exr"))
 
 
 def test_camera_sidecar_is_written_to_the_output(run, tmp_path):
@@ -334,16 +363,27 @@ def test_camera_sidecar_is_written_to_the_output(run, tmp_path):
 
 
 def test_debug_outputs_option(run, tmp_path):
-    """--debug-outputs turns the stack's debug passes on; today's three effects add none,
-    so this checks the option runs and never removes a pass."""
+    """--debug-outputs adds the stack's debug passes (edges: fx0_edges_strengths, RGBA, and
+    fx0_edges_matte, one channel), named by effect position and name; without it they are
+    absent, and the passes both files hold carry the same pixels."""
     src = make_frame(tmp_path / "in.exr")
-    recipe = write_recipe(tmp_path / "r.json",
-                          [{"effect": "pixelate", "mask": {"object_index": 1}}])
+    recipe = write_recipe(tmp_path / "r.json", [{"effect": "edges"}])
     plain, debug = tmp_path / "plain.exr", tmp_path / "debug.exr"
-    assert run("run", "--stack", recipe, src, "-o", plain).returncode == EXIT_OK
+    r = run("run", "--stack", recipe, src, "-o", plain)
+    assert r.returncode == EXIT_OK, r.stderr
     r = run("run", "--stack", recipe, "--debug-outputs", src, "-o", debug)
     assert r.returncode == EXIT_OK, r.stderr
-    assert len(read_exr(debug)) >= len(read_exr(plain))
+    p, d = read_exr(plain), read_exr(debug)
+    debug_only = sorted(n for n in d if n not in p)
+    assert [n for n in debug_only if "fx0_edges_strengths." in n] and \
+        [n for n in debug_only if "fx0_edges_matte." in n], debug_only
+    assert len([n for n in debug_only if "fx0_edges_strengths." in n]) == 4, debug_only
+    assert len([n for n in debug_only if "fx0_edges_matte." in n]) == 1, debug_only
+    assert not [n for n in p if "fx0_" in n], sorted(p)
+    for name in p:
+        np.testing.assert_array_equal(p[name], d[name], err_msg=name)
+    matte = d[[n for n in debug_only if "fx0_edges_matte." in n][0]]
+    assert np.all(np.isfinite(matte)) and matte.max() > 0.0 and matte.min() >= 0.0
 
 
 def test_non_ascii_paths(run, tmp_path):

@@ -9,8 +9,8 @@ import tempfile
 
 import pytest
 
-from conftest import (EXIT_INPUT, EXIT_OK, EXIT_OUTPUT, EXIT_USAGE, make_frame, write_exr,
-                      write_recipe)
+from conftest import (EXIT_INPUT, EXIT_OK, EXIT_OUTPUT, EXIT_USAGE, combined, make_frame, read_exr,
+                      write_exr, write_recipe)
 
 import numpy as np
 
@@ -67,9 +67,19 @@ def test_flag_with_value_is_a_usage_error(run, tmp_path, recipe, frame):
     assert r.returncode == EXIT_USAGE and "--force" in one_error_line(r)
 
 
-def test_options_after_positionals_and_equals_form(run, tmp_path, recipe, frame):
+def test_options_after_positionals_and_equals_form(run, tmp_path, frame):
+    recipe = write_recipe(tmp_path / "cells.json", [{"effect": "pixelate", "params": {"mode": "cells", "cell_size": 4}}])
     r = run("run", frame, f"--stack={recipe}", "--threads=1", "-o", tmp_path / "o.exr")
     assert r.returncode == EXIT_OK, r.stderr
+    # the options were taken: the same file as the usual order and form writes, and the
+    # recipe ran (the output is not the input)
+    r = run("run", "--stack", recipe, "--threads", "1", frame, "-o", tmp_path / "usual.exr")
+    assert r.returncode == EXIT_OK, r.stderr
+    got, want = read_exr(tmp_path / "o.exr"), read_exr(tmp_path / "usual.exr")
+    assert sorted(got) == sorted(want)
+    for name in want:
+        np.testing.assert_array_equal(got[name], want[name], err_msg=name)
+    assert np.abs(combined(got) - combined(read_exr(frame))).max() > 0.05
 
 
 # ---- input errors (3) ------------------------------------------------------------------

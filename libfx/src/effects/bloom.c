@@ -495,10 +495,127 @@ static int bloom_identity(const void *params)
     return !(p->intensity > 0.0f);
 }
 
+/* mode seed: the exposure taking the scene's luminance (given, or the frame's log-average)
+ * to middle grey. */
+static fx_result bloom_seed_exposure(const fx_effect_run *run, bloom_job *j)
+{
+    const bloom_params *p = j->p;
+    const int w = run->width, h = run->height;
+    double lum = p->scene_luminance;
+    if (!(lum > 0.0)) {
+        j->row_sums = fx_mem_alloc((size_t)h * sizeof(double));
+        if (!j->row_sums)
+            return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", run->where);
+        fx_parallel_for(run->ctx, h, fx_grain_for(run->ctx, h), luminance_rows, j);
+        double acc = 0.0;
+        for (int y = 0; y < h; y++) /* in order: the same sum for any thread count */
+            acc += j->row_sums[y];
+        fx_mem_free(j->row_sums);
+        j->row_sums = NULL;
+        lum = exp(acc / ((double)w * h)) - 1e-6;
+    }
+    lum = lum > 1e-6 ? lum : 1e-6;
+    double e = p->middle_grey / lum;
+    j->exposure = (float)(e < 1e30 ? e : 1e30);
+    return FX_OK;
+}
+
+/* The levels' sizes, and where each stored level starts in one block (at[l]); returns the
+ * block's size. Every stored level in one block from the context's buffer store: the same
+ * size frame after frame, already mapped; and one block of huge pages (core/mem.h) where
+ * levels of their own took 4 KiB pages below 2 MiB: a process's first 1080p frame faulted
+ * ~680 pages for levels 2-7. Each level starts on a 64-byte boundary; every level is
+ * written whole before it is read, so a recycled block's old contents never show. */
+static size_t bloom_layout(bloom_job *j, int w, int h, size_t at[MAX_LEVELS + 1])
+{
+    size_t bytes = 0;
+    int lw = w, lh = h;
+    for (int l = 1; l <= j->nlev; l++) {
+        lw = (lw + 1) / 2;
+        lh = (lh + 1) / 2;
+        j->lv[l].w = lw;
+        j->lv[l].h = lh;
+        at[l] = bytes;
+        if (!(l == 1 && j->coarse)) /* coarse: level 1 is never stored */
+            bytes += ((size_t)lw * lh * 4 * sizeof(float) + 63) & ~(size_t)63;
+    }
+    return bytes;
+}
+
+/* Down the pyramid (the bright pass into level 1, each level halving the one above;
+ * coarse: level 2 straight from the frame), then each level blurred in place. */
+static fx_result bloom_pyramid_down(const fx_effect_run *run, bloom_job *j)
+{
+    for (int l = j->coarse ? 2 : 1; l <= j->nlev; l++) {
+        j->from = l - 1;
+        j->to = l;
+        fx_parallel_for(run->ctx, j->lv[l].h, fx_grain_for(run->ctx, j->lv[l].h),
+                        l == 2 && j->coarse ? down2_rows : down_rows, j);
+    }
+    /* extended-box cascade (3 passes): cost independent of sigma, and at the small per-level
+     * sigmas (~1.25) several times cheaper than the exact FIR recursive switches to */
+    fx_blur_spec spec = { j->p->level_sigma, FX_BLUR_BOX, 3 };
+    fx_result r = FX_OK;
+    for (int l = j->p->fine_level != FINE_FULL ? 2 : 1; l <= j->nlev && !r; l++)
+        r = fx_blur_image(run->ctx, j->lv[l].px, j->lv[l].px, j->lv[l].w, j->lv[l].h, 4, &spec, NULL, run->where);
+    return r;
+}
+
+/* Up the pyramid: each level plus the tent upsampling of the one below it, coarsest first
+ * (j->tx holds the taps). */
+static void bloom_pyramid_up(const fx_effect_run *run, bloom_job *j)
+{
+    /* coarse: level 2 stands in for level 1 too (its own glow counts twice: the same energy) */
+    if (j->coarse && j->nlev == 2) {
+        float *q = j->lv[2].px;
+        for (size_t i = 0, n = (size_t)j->lv[2].w * j->lv[2].h * 4; i < n; i++)
+            q[i] *= 2.0f;
+    }
+    for (int l = j->nlev - 1; l >= (j->coarse ? 2 : 1); l--) {
+        j->from = l + 1;
+        j->to = l;
+        j->self = j->coarse && l == 2 ? 2.0f : 1.0f;
+        tent_columns(&j->lv[l + 1], j->lv[l].w, j->tx[0], j->tx[1]);
+        fx_parallel_for(run->ctx, j->lv[l].h, fx_grain_for(run->ctx, j->lv[l].h), up_rows, j);
+    }
+}
+
+/* fine_level coarse: level 2 upsampled 4x straight into the frame (composite_coarse_rows),
+ * each worker with a row of scratch. */
+static fx_result bloom_composite_coarse(const fx_effect_run *run, bloom_job *j)
+{
+    const int w = run->width;
+    int workers = fx_parallel_workers(run->ctx);
+    coarse_comp cc = { j, fx_mem_alloc((size_t)workers * sizeof(float *)) };
+    j->cx = fx_mem_alloc((size_t)w * sizeof(int));
+    j->cw = fx_mem_alloc((size_t)w * sizeof(float));
+    if (cc.scratch)
+        memset(cc.scratch, 0, (size_t)workers * sizeof(float *));
+    int ok = cc.scratch && j->cx && j->cw;
+    for (int k = 0; ok && k < workers; k++)
+        ok = (cc.scratch[k] = fx_mem_alloc((size_t)j->lv[2].w * 8 * sizeof(float))) != NULL;
+    fx_result r = FX_OK;
+    if (ok) {
+        for (int x = 0; x < w; x++) {
+            float u = ((float)x + 0.5f) * 0.25f - 0.5f;
+            u = u > 0.0f ? (u < (float)(j->lv[2].w - 1) ? u : (float)(j->lv[2].w - 1)) : 0.0f;
+            j->cx[x] = (int)u;
+            j->cw[x] = u - (float)j->cx[x];
+        }
+        int rows = run->roi.y1 - run->roi.y0;
+        fx_parallel_for_worker(run->ctx, rows, fx_grain_for(run->ctx, rows), composite_coarse_rows, &cc);
+    } else {
+        r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", run->where);
+    }
+    for (int k = 0; cc.scratch && k < workers; k++)
+        fx_mem_free(cc.scratch[k]);
+    fx_mem_free(cc.scratch);
+    return r;
+}
+
 static fx_result bloom_process(const fx_effect_run *run)
 {
     const bloom_params *p = run->params;
-    const fx_rect *roi = &run->roi;
     const int w = run->width, h = run->height;
     const char *where = run->where;
     bloom_job j;
@@ -507,120 +624,42 @@ static fx_result bloom_process(const fx_effect_run *run)
     j.p = p;
     j.exposure = 1.0f;
     j.inv_4k = 1.0f / (4.0f * (p->threshold * p->knee + 1e-5f) + 1e-5f);
-    fx_result r = FX_OK;
-    unsigned char *pyramid = NULL;
-    size_t pyramid_bytes = 0, pyramid_capacity = 0;
-    if (p->mode == MODE_SEED) {
-        double lum = p->scene_luminance;
-        if (!(lum > 0.0)) {
-            j.row_sums = fx_mem_alloc((size_t)h * sizeof(double));
-            if (!j.row_sums)
-                return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
-            fx_parallel_for(run->ctx, h, fx_grain_for(run->ctx, h), luminance_rows, &j);
-            double acc = 0.0;
-            for (int y = 0; y < h; y++) /* in order: the same sum for any thread count */
-                acc += j.row_sums[y];
-            fx_mem_free(j.row_sums);
-            j.row_sums = NULL;
-            lum = exp(acc / ((double)w * h)) - 1e-6;
-        }
-        lum = lum > 1e-6 ? lum : 1e-6;
-        double e = p->middle_grey / lum;
-        j.exposure = (float)(e < 1e30 ? e : 1e30);
-    }
+    fx_result r = p->mode == MODE_SEED ? bloom_seed_exposure(run, &j) : FX_OK;
+    if (r)
+        return r;
     j.nlev = levels_for(p, w, h);
     j.coarse = p->fine_level == FINE_COARSE && j.nlev >= 2;
     j.self = 1.0f;
-    /* Every stored level in one block from the context's buffer store: the same size frame
-     * after frame, already mapped; and one block of huge pages (core/mem.h) where levels of
-     * their own took 4 KiB pages below 2 MiB: a process's first 1080p frame faulted ~680
-     * pages for levels 2-7. Each level starts on a 64-byte boundary; every level is
-     * written whole before it is read, so a recycled block's old contents never show. */
-    size_t at[MAX_LEVELS + 1] = { 0 };
-    int lw = w, lh = h;
-    for (int l = 1; l <= j.nlev; l++) {
-        lw = (lw + 1) / 2;
-        lh = (lh + 1) / 2;
-        j.lv[l].w = lw;
-        j.lv[l].h = lh;
-        at[l] = pyramid_bytes;
-        if (!(l == 1 && j.coarse)) /* coarse: level 1 is never stored */
-            pyramid_bytes += ((size_t)lw * lh * 4 * sizeof(float) + 63) & ~(size_t)63;
-    }
+    size_t at[MAX_LEVELS + 1] = { 0 }, pyramid_capacity = 0;
+    const size_t pyramid_bytes = bloom_layout(&j, w, h, at);
+    unsigned char *pyramid = NULL;
     if (pyramid_bytes) {
         /* (or a larger idle buffer of the frame: in a stack, a process's first frame then
          * zeroes no fresh 12 MB, which on these VMs took up to ~13 ms of CPU) */
         pyramid = fx_buffer_get_at_least(run->ctx, pyramid_bytes, &pyramid_capacity);
-        if (!pyramid) {
-            r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the pyramid (%zu bytes)", where,
-                        pyramid_bytes);
-            goto out;
-        }
+        if (!pyramid)
+            return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the pyramid (%zu bytes)", where,
+                           pyramid_bytes);
         for (int l = j.coarse ? 2 : 1; l <= j.nlev; l++)
             j.lv[l].px = (float *)(pyramid + at[l]);
     }
-    for (int l = j.coarse ? 2 : 1; l <= j.nlev; l++) {
-        j.from = l - 1;
-        j.to = l;
-        fx_parallel_for(run->ctx, j.lv[l].h, fx_grain_for(run->ctx, j.lv[l].h), l == 2 && j.coarse ? down2_rows : down_rows,
-                        &j);
-    }
-    /* extended-box cascade (3 passes): cost independent of sigma, and at the small per-level
-     * sigmas (~1.25) several times cheaper than the exact FIR recursive switches to */
-    fx_blur_spec spec = { p->level_sigma, FX_BLUR_BOX, 3 };
-    for (int l = p->fine_level != FINE_FULL ? 2 : 1; l <= j.nlev && !r; l++)
-        r = fx_blur_image(run->ctx, j.lv[l].px, j.lv[l].px, j.lv[l].w, j.lv[l].h, 4, &spec, NULL, where);
+    r = bloom_pyramid_down(run, &j);
     if (!r && j.nlev > 0) {
         j.tx[0] = fx_mem_alloc((size_t)w * sizeof(int));
         j.tx[1] = fx_mem_alloc((size_t)w * sizeof(int));
         if (!j.tx[0] || !j.tx[1])
             r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
     }
-    /* coarse: level 2 stands in for level 1 too (its own glow counts twice: the same energy) */
-    if (!r && j.coarse && j.nlev == 2) {
-        float *q = j.lv[2].px;
-        for (size_t i = 0, n = (size_t)j.lv[2].w * j.lv[2].h * 4; i < n; i++)
-            q[i] *= 2.0f;
-    }
-    for (int l = j.nlev - 1; l >= (j.coarse ? 2 : 1) && !r; l--) {
-        j.from = l + 1;
-        j.to = l;
-        j.self = j.coarse && l == 2 ? 2.0f : 1.0f;
-        tent_columns(&j.lv[l + 1], j.lv[l].w, j.tx[0], j.tx[1]);
-        fx_parallel_for(run->ctx, j.lv[l].h, fx_grain_for(run->ctx, j.lv[l].h), up_rows, &j);
-    }
+    if (!r)
+        bloom_pyramid_up(run, &j);
     if (!r && j.coarse) {
-        int workers = fx_parallel_workers(run->ctx);
-        coarse_comp cc = { &j, fx_mem_alloc((size_t)workers * sizeof(float *)) };
-        j.cx = fx_mem_alloc((size_t)w * sizeof(int));
-        j.cw = fx_mem_alloc((size_t)w * sizeof(float));
-        if (cc.scratch)
-            memset(cc.scratch, 0, (size_t)workers * sizeof(float *));
-        int ok = cc.scratch && j.cx && j.cw;
-        for (int k = 0; ok && k < workers; k++)
-            ok = (cc.scratch[k] = fx_mem_alloc((size_t)j.lv[2].w * 8 * sizeof(float))) != NULL;
-        if (ok) {
-            for (int x = 0; x < w; x++) {
-                float u = ((float)x + 0.5f) * 0.25f - 0.5f;
-                u = u > 0.0f ? (u < (float)(j.lv[2].w - 1) ? u : (float)(j.lv[2].w - 1)) : 0.0f;
-                j.cx[x] = (int)u;
-                j.cw[x] = u - (float)j.cx[x];
-            }
-            int rows = roi->y1 - roi->y0;
-            fx_parallel_for_worker(run->ctx, rows, fx_grain_for(run->ctx, rows), composite_coarse_rows, &cc);
-        } else {
-            r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
-        }
-        for (int k = 0; cc.scratch && k < workers; k++)
-            fx_mem_free(cc.scratch[k]);
-        fx_mem_free(cc.scratch);
+        r = bloom_composite_coarse(run, &j);
     } else if (!r) {
         if (j.nlev > 0)
             tent_columns(&j.lv[1], w, j.tx[0], j.tx[1]);
-        int rows = roi->y1 - roi->y0;
+        int rows = run->roi.y1 - run->roi.y0;
         fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), composite_rows, &j);
     }
-out:
     fx_mem_free(j.cx);
     fx_mem_free(j.cw);
     fx_mem_free(j.tx[0]);

@@ -456,6 +456,182 @@ static inline __attribute__((always_inline)) void sc_lanes_chunk(const sc_job *j
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && !defined(FX_NO_CLONES)
 #  include <immintrin.h>
 #  define SC_AVX2 1
+/* sc_row_avx2's parts: AVX2 target code inlined into it (an always_inline callee with the
+ * caller's target), so the row stays one loop with its constants in registers. */
+#  define SC_AVX2_PART static inline __attribute__((target("avx2"), always_inline))
+
+/* sc_row_avx2's constants, made once per row from the job's (sc_vk) and held in locals. */
+typedef struct sc8_const {
+    __m256 zero, one, absm, c0, c1, c2;
+    __m256 ms, iss, hc, hh, ihs, ks, mix, iw, gate0, lw, off_r, off_g, off_b;
+    __m256 k60, k120, k240, k360, k180, k3, k2, khalf, tiny, tiny30, top;
+    __m256i big, perm;
+} sc8_const;
+
+SC_AVX2_PART void sc8_const_init(const sc_vk *K, sc8_const *c)
+{
+    c->zero = _mm256_setzero_ps();
+    c->one = _mm256_set1_ps(1.0f);
+    c->absm = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fffffff));
+    c->big = _mm256_set1_epi32(0x7149f2ca); /* the bits of 1e30f */
+    c->perm = _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7);
+    c->c0 = K->lum ? _mm256_set1_ps(FX_LUMA_R) : _mm256_set1_ps(1.0f / 3.0f);
+    c->c1 = K->lum ? _mm256_set1_ps(FX_LUMA_G) : _mm256_set1_ps(1.0f / 3.0f);
+    c->c2 = K->lum ? _mm256_set1_ps(FX_LUMA_B) : _mm256_set1_ps(1.0f / 3.0f);
+    c->ms = K->ms, c->iss = K->iss, c->hc = K->hc, c->hh = K->hh, c->ihs = K->ihs, c->ks = K->ks, c->mix = K->mix;
+    c->iw = K->inv_white, c->gate0 = K->gate0, c->lw = K->lw;
+    c->off_r = K->off_r, c->off_g = K->off_g, c->off_b = K->off_b;
+    c->k60 = _mm256_set1_ps(60.0f), c->k120 = _mm256_set1_ps(120.0f), c->k240 = _mm256_set1_ps(240.0f);
+    c->k360 = _mm256_set1_ps(360.0f), c->k180 = _mm256_set1_ps(180.0f), c->k3 = _mm256_set1_ps(3.0f);
+    c->k2 = _mm256_set1_ps(2.0f), c->khalf = _mm256_set1_ps(0.5f), c->tiny = _mm256_set1_ps(1e-20f);
+    c->tiny30 = _mm256_set1_ps(1e-30f), c->top = _mm256_set1_ps(3.4e38f);
+}
+
+/* Eight pixels' channels from q (lanes in the order 0 2 4 6 1 3 5 7); 0 when a value is
+ * beyond +-1e30 or NaN (the OR of the magnitudes' bits bounds them all): then nothing. */
+SC_AVX2_PART int sc8_load(const sc8_const *c, const float *q, __m256 *r, __m256 *g, __m256 *b, __m256 *a)
+{
+    const __m256 m0 = _mm256_loadu_ps(q), m1 = _mm256_loadu_ps(q + 8);
+    const __m256 m2 = _mm256_loadu_ps(q + 16), m3 = _mm256_loadu_ps(q + 24);
+    const __m256i ob = _mm256_castps_si256(
+        _mm256_and_ps(_mm256_or_ps(_mm256_or_ps(m0, m1), _mm256_or_ps(m2, m3)), c->absm));
+    if (!_mm256_testz_si256(_mm256_cmpgt_epi32(ob, c->big), _mm256_cmpgt_epi32(ob, c->big)))
+        return 0;
+    const __m256 t0 = _mm256_unpacklo_ps(m0, m1), t1 = _mm256_unpackhi_ps(m0, m1);
+    const __m256 t2 = _mm256_unpacklo_ps(m2, m3), t3 = _mm256_unpackhi_ps(m2, m3);
+    *r = _mm256_castpd_ps(_mm256_unpacklo_pd(_mm256_castps_pd(t0), _mm256_castps_pd(t2)));
+    *g = _mm256_castpd_ps(_mm256_unpackhi_pd(_mm256_castps_pd(t0), _mm256_castps_pd(t2)));
+    *b = _mm256_castpd_ps(_mm256_unpacklo_pd(_mm256_castps_pd(t1), _mm256_castps_pd(t3)));
+    *a = _mm256_castpd_ps(_mm256_unpackhi_pd(_mm256_castps_pd(t1), _mm256_castps_pd(t3)));
+    return 1;
+}
+
+/* The gray y quantised to the levels (thresholds thrp, in the lanes' order); HDR kept,
+ * clamped to 3.4e38. */
+SC_AVX2_PART __m256 sc8_quantise(const sc8_const *c, const sc_vk *K, const v8f *thrp, __m256 y)
+{
+    const __m256 u = _mm256_mul_ps(y, c->iw);
+    __m256 o = c->zero;
+    for (int t = 0; t < K->nt; t++)
+        o = _mm256_blendv_ps(o, K->val[t], _mm256_cmp_ps(u, thrp[t], _CMP_GE_OQ));
+    return _mm256_blendv_ps(o, _mm256_min_ps(y, c->top), _mm256_cmp_ps(u, c->one, _CMP_GE_OQ));
+}
+
+/* The hue keep's view of eight colours: over the non-negative channels, the max, the
+ * max - min, which channel is the max, the hue's numerator in its sector, and whether
+ * the hue is defined at all (ok). */
+typedef struct sc8_hue {
+    __m256 mx, dd, num, ok, isr, isg;
+} sc8_hue;
+
+SC_AVX2_PART sc8_hue sc8_hue_of(const sc8_const *c, __m256 r, __m256 g, __m256 b)
+{
+    sc8_hue h;
+    const __m256 rp = _mm256_max_ps(r, c->zero), gp = _mm256_max_ps(g, c->zero), bp = _mm256_max_ps(b, c->zero);
+    h.mx = _mm256_max_ps(_mm256_max_ps(rp, gp), bp);
+    const __m256 mn = _mm256_min_ps(_mm256_min_ps(rp, gp), bp);
+    h.dd = _mm256_sub_ps(h.mx, mn);
+    h.ok = _mm256_and_ps(_mm256_cmp_ps(h.mx, c->tiny, _CMP_GT_OQ), _mm256_cmp_ps(h.dd, c->zero, _CMP_GT_OQ));
+    h.isr = _mm256_cmp_ps(h.mx, rp, _CMP_EQ_OQ);
+    h.isg = _mm256_cmp_ps(h.mx, gp, _CMP_EQ_OQ);
+    h.num = _mm256_blendv_ps(_mm256_sub_ps(rp, gp), _mm256_sub_ps(bp, rp), h.isg);
+    h.num = _mm256_blendv_ps(h.num, _mm256_sub_ps(gp, bp), h.isr);
+    return h;
+}
+
+/* The hue window's pretest (keep_hue8): 1 when no lane can be kept (the hue surely outside
+ * the window, or the saturation surely under the gate), so the chunk is gray. */
+SC_AVX2_PART int sc8_pretest_gray(const sc8_const *c, const sc8_hue *h, int soft_sat)
+{
+    const __m256 off = _mm256_blendv_ps(_mm256_blendv_ps(c->off_b, c->off_g, h->isg), c->off_r, h->isr);
+    const __m256 e = _mm256_add_ps(_mm256_mul_ps(c->k60, h->num), _mm256_mul_ps(off, h->dd));
+    const __m256 lwd = _mm256_mul_ps(c->lw, h->dd), w360 = _mm256_mul_ps(c->k360, h->dd);
+    __m256 maybe = _mm256_or_ps(
+        _mm256_or_ps(_mm256_cmp_ps(_mm256_and_ps(e, c->absm), lwd, _CMP_LT_OQ),
+                     _mm256_cmp_ps(_mm256_and_ps(_mm256_add_ps(e, w360), c->absm), lwd, _CMP_LT_OQ)),
+        _mm256_or_ps(_mm256_cmp_ps(_mm256_and_ps(_mm256_sub_ps(e, w360), c->absm), lwd, _CMP_LT_OQ),
+                     _mm256_cmp_ps(h->dd, c->tiny30, _CMP_LT_OQ)));
+    const __m256 gt = soft_sat ? _mm256_cmp_ps(h->dd, _mm256_mul_ps(c->gate0, h->mx), _CMP_GE_OQ)
+                               : _mm256_cmp_ps(h->dd, _mm256_mul_ps(c->ms, h->mx), _CMP_GE_OQ);
+    maybe = _mm256_and_ps(_mm256_and_ps(maybe, h->ok), gt);
+    return _mm256_testz_si256(_mm256_castps_si256(maybe), _mm256_castps_si256(maybe));
+}
+
+/* The keep weight of the hue window: the saturation gate (soft or hard) times the hue's
+ * weight (1 within hue_width / 2 of the centre, a smoothstep down over hue_softness). */
+SC_AVX2_PART __m256 sc8_hue_weight(const sc8_const *c, const sc8_hue *h, int soft_sat, int soft_hue)
+{
+    const __m256 imx = _mm256_div_ps(c->one, _mm256_blendv_ps(c->one, h->mx, h->ok));
+    __m256 gate;
+    if (soft_sat) {
+        gate = _mm256_add_ps(_mm256_mul_ps(_mm256_sub_ps(_mm256_mul_ps(h->dd, imx), c->ms), c->iss), c->khalf);
+        gate = _mm256_min_ps(_mm256_max_ps(gate, c->zero), c->one);
+    } else {
+        gate = _mm256_and_ps(_mm256_cmp_ps(h->dd, _mm256_mul_ps(c->ms, h->mx), _CMP_GE_OQ), c->one);
+    }
+    const __m256 s60 = _mm256_div_ps(c->k60, _mm256_blendv_ps(c->one, h->dd, h->ok));
+    const __m256 ns = _mm256_mul_ps(h->num, s60);
+    __m256 hue = _mm256_blendv_ps(_mm256_add_ps(ns, c->k240), _mm256_add_ps(ns, c->k120), h->isg);
+    hue = _mm256_blendv_ps(hue, ns, h->isr);
+    __m256 dist = _mm256_and_ps(_mm256_sub_ps(hue, c->hc), c->absm);
+    dist = _mm256_blendv_ps(dist, _mm256_sub_ps(dist, c->k360), _mm256_cmp_ps(dist, c->k360, _CMP_GE_OQ));
+    dist = _mm256_blendv_ps(dist, _mm256_sub_ps(c->k360, dist), _mm256_cmp_ps(dist, c->k180, _CMP_GT_OQ));
+    __m256 ws = c->zero;
+    if (soft_hue) {
+        __m256 t = _mm256_mul_ps(_mm256_sub_ps(dist, c->hh), c->ihs);
+        t = _mm256_min_ps(_mm256_max_ps(t, c->zero), c->one);
+        const __m256 tsq = _mm256_mul_ps(t, t), tr = _mm256_sub_ps(c->k3, _mm256_mul_ps(c->k2, t));
+        ws = _mm256_sub_ps(c->one, _mm256_mul_ps(tsq, tr));
+    }
+    const __m256 w = _mm256_blendv_ps(ws, c->one, _mm256_cmp_ps(dist, c->hh, _CMP_LE_OQ));
+    return _mm256_and_ps(_mm256_mul_ps(w, gate), h->ok);
+}
+
+/* Eight pixels' keep weight k (keep hue): the hue window's, unless the pretest spares the
+ * chunk (*nskip counts it), times keep_strength and the keep coverage (cov + x, if cov). */
+SC_AVX2_PART __m256 sc8_keep(const sc8_const *c, const sc_vk *K, __m256 r, __m256 g, __m256 b, int pretest,
+                            const float *cov, int x, int *nskip)
+{
+    const sc8_hue h = sc8_hue_of(c, r, g, b);
+    __m256 k = c->zero;
+    int skip = 0;
+    if (pretest) {
+        skip = sc8_pretest_gray(c, &h, K->soft_sat);
+        *nskip += skip;
+    }
+    if (!skip)
+        k = sc8_hue_weight(c, &h, K->soft_sat, K->soft_hue);
+    k = _mm256_mul_ps(k, c->ks);
+    if (cov) {
+        const __m256 cv = _mm256_permutevar8x32_ps(_mm256_loadu_ps(cov + x), c->perm);
+        k = _mm256_and_ps(_mm256_mul_ps(k, cv), _mm256_cmp_ps(cv, c->zero, _CMP_GT_OQ));
+    }
+    return k;
+}
+
+/* Back to pixels (lane pairs (r g) and (b a), then their 64-bit halves) and stored at o;
+ * stream: non-temporal stores. */
+SC_AVX2_PART void sc8_store(float *o, __m256 p0, __m256 p1, __m256 p2, __m256 a, int stream)
+{
+    const __m256 u0 = _mm256_unpacklo_ps(p0, p1), u1 = _mm256_unpackhi_ps(p0, p1);
+    const __m256 u2 = _mm256_unpacklo_ps(p2, a), u3 = _mm256_unpackhi_ps(p2, a);
+    const __m256 o0 = _mm256_castpd_ps(_mm256_unpacklo_pd(_mm256_castps_pd(u0), _mm256_castps_pd(u2)));
+    const __m256 o1 = _mm256_castpd_ps(_mm256_unpackhi_pd(_mm256_castps_pd(u0), _mm256_castps_pd(u2)));
+    const __m256 o2 = _mm256_castpd_ps(_mm256_unpacklo_pd(_mm256_castps_pd(u1), _mm256_castps_pd(u3)));
+    const __m256 o3 = _mm256_castpd_ps(_mm256_unpackhi_pd(_mm256_castps_pd(u1), _mm256_castps_pd(u3)));
+    if (stream) {
+        _mm256_stream_ps(o, o0);
+        _mm256_stream_ps(o + 8, o1);
+        _mm256_stream_ps(o + 16, o2);
+        _mm256_stream_ps(o + 24, o3);
+    } else {
+        _mm256_storeu_ps(o, o0);
+        _mm256_storeu_ps(o + 8, o1);
+        _mm256_storeu_ps(o + 16, o2);
+        _mm256_storeu_ps(o + 24, o3);
+    }
+}
+
 /* sc_vec_chunk's hue and gray path in AVX2 intrinsics: the same operations lane by lane
  * (max/min are the selects SEL(a > b, a, b) and SEL(a < b, a, b), no FMA: the same bits),
  * with a shorter transpose that leaves the lanes in the order 0 2 4 6 1 3 5 7 (the dither
@@ -470,136 +646,32 @@ __attribute__((target("avx2"), noinline)) static int sc_row_avx2(const sc_job *j
                                                                 const float *cov, int x0, int x1, int pretest,
                                                                 int stream, int *skipped)
 {
-    const __m256 zero = _mm256_setzero_ps(), one = _mm256_set1_ps(1.0f);
-    const __m256 absm = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fffffff));
-    const __m256i big = _mm256_set1_epi32(0x7149f2ca); /* the bits of 1e30f */
-    const __m256i perm = _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7);
-    const int quantise = K->quantise, nt = K->nt, keep = K->keep, mixing = K->mixing;
-    const int soft_sat = K->soft_sat, soft_hue = K->soft_hue;
+    sc8_const c;
+    sc8_const_init(K, &c);
+    const int quantise = K->quantise, keep = K->keep, mixing = K->mixing;
     int nskip = 0;
-    const int lum = K->lum;
-    const __m256 c0 = lum ? _mm256_set1_ps(FX_LUMA_R) : _mm256_set1_ps(1.0f / 3.0f);
-    const __m256 c1 = lum ? _mm256_set1_ps(FX_LUMA_G) : _mm256_set1_ps(1.0f / 3.0f);
-    const __m256 c2 = lum ? _mm256_set1_ps(FX_LUMA_B) : _mm256_set1_ps(1.0f / 3.0f);
-    const __m256 ms = K->ms, iss = K->iss, hc = K->hc, hh = K->hh, ihs = K->ihs, ks = K->ks, mix = K->mix;
-    const __m256 iw = K->inv_white, gate0 = K->gate0, lw = K->lw;
-    const __m256 off_r = K->off_r, off_g = K->off_g, off_b = K->off_b;
-    const __m256 k60 = _mm256_set1_ps(60.0f), k120 = _mm256_set1_ps(120.0f), k240 = _mm256_set1_ps(240.0f);
-    const __m256 k360 = _mm256_set1_ps(360.0f), k180 = _mm256_set1_ps(180.0f), k3 = _mm256_set1_ps(3.0f);
-    const __m256 k2 = _mm256_set1_ps(2.0f), khalf = _mm256_set1_ps(0.5f), tiny = _mm256_set1_ps(1e-20f);
-    const __m256 tiny30 = _mm256_set1_ps(1e-30f), top = _mm256_set1_ps(3.4e38f);
     int x = x0;
     for (; x + 8 <= x1; x += 8) {
-        const float *q = s + 4 * (size_t)x;
-        const __m256 m0 = _mm256_loadu_ps(q), m1 = _mm256_loadu_ps(q + 8);
-        const __m256 m2 = _mm256_loadu_ps(q + 16), m3 = _mm256_loadu_ps(q + 24);
-        /* every |value| <= 1e30 and none NaN: the OR of the magnitudes' bits bounds them all */
-        const __m256i ob = _mm256_castps_si256(
-            _mm256_and_ps(_mm256_or_ps(_mm256_or_ps(m0, m1), _mm256_or_ps(m2, m3)), absm));
-        if (!_mm256_testz_si256(_mm256_cmpgt_epi32(ob, big), _mm256_cmpgt_epi32(ob, big))) {
+        __m256 r, g, b, a;
+        if (!sc8_load(&c, s + 4 * (size_t)x, &r, &g, &b, &a)) {
             sc_vec_chunk(j, K, s, d, cov, x);
             continue;
         }
-        const __m256 t0 = _mm256_unpacklo_ps(m0, m1), t1 = _mm256_unpackhi_ps(m0, m1);
-        const __m256 t2 = _mm256_unpacklo_ps(m2, m3), t3 = _mm256_unpackhi_ps(m2, m3);
-        const __m256 r = _mm256_castpd_ps(_mm256_unpacklo_pd(_mm256_castps_pd(t0), _mm256_castps_pd(t2)));
-        const __m256 g = _mm256_castpd_ps(_mm256_unpackhi_pd(_mm256_castps_pd(t0), _mm256_castps_pd(t2)));
-        const __m256 b = _mm256_castpd_ps(_mm256_unpacklo_pd(_mm256_castps_pd(t1), _mm256_castps_pd(t3)));
-        const __m256 a = _mm256_castpd_ps(_mm256_unpackhi_pd(_mm256_castps_pd(t1), _mm256_castps_pd(t3)));
         /* the mean's r * (1/3) + ...: the same products (multiplication commutes) */
-        __m256 y = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(c0, r), _mm256_mul_ps(c1, g)), _mm256_mul_ps(c2, b));
-        if (quantise) {
-            const __m256 u = _mm256_mul_ps(y, iw);
-            __m256 o = zero;
-            for (int t = 0; t < nt; t++)
-                o = _mm256_blendv_ps(o, K->val[t], _mm256_cmp_ps(u, thrp[t], _CMP_GE_OQ));
-            y = _mm256_blendv_ps(o, _mm256_min_ps(y, top), _mm256_cmp_ps(u, one, _CMP_GE_OQ));
-        }
-        __m256 k = zero;
-        if (keep) {
-            const __m256 rp = _mm256_max_ps(r, zero), gp = _mm256_max_ps(g, zero), bp = _mm256_max_ps(b, zero);
-            const __m256 mx = _mm256_max_ps(_mm256_max_ps(rp, gp), bp);
-            const __m256 mn = _mm256_min_ps(_mm256_min_ps(rp, gp), bp);
-            const __m256 dd = _mm256_sub_ps(mx, mn);
-            const __m256 ok = _mm256_and_ps(_mm256_cmp_ps(mx, tiny, _CMP_GT_OQ), _mm256_cmp_ps(dd, zero, _CMP_GT_OQ));
-            const __m256 isr = _mm256_cmp_ps(mx, rp, _CMP_EQ_OQ), isg = _mm256_cmp_ps(mx, gp, _CMP_EQ_OQ);
-            __m256 num = _mm256_blendv_ps(_mm256_sub_ps(rp, gp), _mm256_sub_ps(bp, rp), isg);
-            num = _mm256_blendv_ps(num, _mm256_sub_ps(gp, bp), isr);
-            int skip = 0;
-            if (pretest) {
-                const __m256 off = _mm256_blendv_ps(_mm256_blendv_ps(off_b, off_g, isg), off_r, isr);
-                const __m256 e = _mm256_add_ps(_mm256_mul_ps(k60, num), _mm256_mul_ps(off, dd));
-                const __m256 lwd = _mm256_mul_ps(lw, dd), w360 = _mm256_mul_ps(k360, dd);
-                __m256 maybe = _mm256_or_ps(
-                    _mm256_or_ps(_mm256_cmp_ps(_mm256_and_ps(e, absm), lwd, _CMP_LT_OQ),
-                                 _mm256_cmp_ps(_mm256_and_ps(_mm256_add_ps(e, w360), absm), lwd, _CMP_LT_OQ)),
-                    _mm256_or_ps(_mm256_cmp_ps(_mm256_and_ps(_mm256_sub_ps(e, w360), absm), lwd, _CMP_LT_OQ),
-                                 _mm256_cmp_ps(dd, tiny30, _CMP_LT_OQ)));
-                const __m256 gt = soft_sat ? _mm256_cmp_ps(dd, _mm256_mul_ps(gate0, mx), _CMP_GE_OQ)
-                                           : _mm256_cmp_ps(dd, _mm256_mul_ps(ms, mx), _CMP_GE_OQ);
-                maybe = _mm256_and_ps(_mm256_and_ps(maybe, ok), gt);
-                skip = _mm256_testz_si256(_mm256_castps_si256(maybe), _mm256_castps_si256(maybe));
-                nskip += skip;
-            }
-            if (!skip) {
-                const __m256 imx = _mm256_div_ps(one, _mm256_blendv_ps(one, mx, ok));
-                __m256 gate;
-                if (soft_sat) {
-                    gate = _mm256_add_ps(_mm256_mul_ps(_mm256_sub_ps(_mm256_mul_ps(dd, imx), ms), iss), khalf);
-                    gate = _mm256_min_ps(_mm256_max_ps(gate, zero), one);
-                } else {
-                    gate = _mm256_and_ps(_mm256_cmp_ps(dd, _mm256_mul_ps(ms, mx), _CMP_GE_OQ), one);
-                }
-                const __m256 s60 = _mm256_div_ps(k60, _mm256_blendv_ps(one, dd, ok));
-                const __m256 ns = _mm256_mul_ps(num, s60);
-                __m256 h = _mm256_blendv_ps(_mm256_add_ps(ns, k240), _mm256_add_ps(ns, k120), isg);
-                h = _mm256_blendv_ps(h, ns, isr);
-                __m256 dist = _mm256_and_ps(_mm256_sub_ps(h, hc), absm);
-                dist = _mm256_blendv_ps(dist, _mm256_sub_ps(dist, k360), _mm256_cmp_ps(dist, k360, _CMP_GE_OQ));
-                dist = _mm256_blendv_ps(dist, _mm256_sub_ps(k360, dist), _mm256_cmp_ps(dist, k180, _CMP_GT_OQ));
-                __m256 ws = zero;
-                if (soft_hue) {
-                    __m256 t = _mm256_mul_ps(_mm256_sub_ps(dist, hh), ihs);
-                    t = _mm256_min_ps(_mm256_max_ps(t, zero), one);
-                    const __m256 tsq = _mm256_mul_ps(t, t), tr = _mm256_sub_ps(k3, _mm256_mul_ps(k2, t));
-                    ws = _mm256_sub_ps(one, _mm256_mul_ps(tsq, tr));
-                }
-                const __m256 w = _mm256_blendv_ps(ws, one, _mm256_cmp_ps(dist, hh, _CMP_LE_OQ));
-                k = _mm256_and_ps(_mm256_mul_ps(w, gate), ok);
-            }
-            k = _mm256_mul_ps(k, ks);
-            if (cov) {
-                const __m256 c = _mm256_permutevar8x32_ps(_mm256_loadu_ps(cov + x), perm);
-                k = _mm256_and_ps(_mm256_mul_ps(k, c), _mm256_cmp_ps(c, zero, _CMP_GT_OQ));
-            }
-        }
-        const __m256 k1 = _mm256_sub_ps(one, k), ky = _mm256_mul_ps(k1, y);
+        __m256 y = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(c.c0, r), _mm256_mul_ps(c.c1, g)),
+                                 _mm256_mul_ps(c.c2, b));
+        if (quantise)
+            y = sc8_quantise(&c, K, thrp, y);
+        const __m256 k = keep ? sc8_keep(&c, K, r, g, b, pretest, cov, x, &nskip) : c.zero;
+        const __m256 k1 = _mm256_sub_ps(c.one, k), ky = _mm256_mul_ps(k1, y);
         __m256 p0 = _mm256_add_ps(_mm256_mul_ps(k, r), ky), p1 = _mm256_add_ps(_mm256_mul_ps(k, g), ky);
         __m256 p2 = _mm256_add_ps(_mm256_mul_ps(k, b), ky);
         if (mixing) {
-            p0 = _mm256_add_ps(r, _mm256_mul_ps(mix, _mm256_sub_ps(p0, r)));
-            p1 = _mm256_add_ps(g, _mm256_mul_ps(mix, _mm256_sub_ps(p1, g)));
-            p2 = _mm256_add_ps(b, _mm256_mul_ps(mix, _mm256_sub_ps(p2, b)));
+            p0 = _mm256_add_ps(r, _mm256_mul_ps(c.mix, _mm256_sub_ps(p0, r)));
+            p1 = _mm256_add_ps(g, _mm256_mul_ps(c.mix, _mm256_sub_ps(p1, g)));
+            p2 = _mm256_add_ps(b, _mm256_mul_ps(c.mix, _mm256_sub_ps(p2, b)));
         }
-        /* back to pixels: lane pairs (r g) and (b a), then their 64-bit halves */
-        const __m256 u0 = _mm256_unpacklo_ps(p0, p1), u1 = _mm256_unpackhi_ps(p0, p1);
-        const __m256 u2 = _mm256_unpacklo_ps(p2, a), u3 = _mm256_unpackhi_ps(p2, a);
-        float *o = d + 4 * (size_t)x;
-        const __m256 o0 = _mm256_castpd_ps(_mm256_unpacklo_pd(_mm256_castps_pd(u0), _mm256_castps_pd(u2)));
-        const __m256 o1 = _mm256_castpd_ps(_mm256_unpackhi_pd(_mm256_castps_pd(u0), _mm256_castps_pd(u2)));
-        const __m256 o2 = _mm256_castpd_ps(_mm256_unpacklo_pd(_mm256_castps_pd(u1), _mm256_castps_pd(u3)));
-        const __m256 o3 = _mm256_castpd_ps(_mm256_unpackhi_pd(_mm256_castps_pd(u1), _mm256_castps_pd(u3)));
-        if (stream) {
-            _mm256_stream_ps(o, o0);
-            _mm256_stream_ps(o + 8, o1);
-            _mm256_stream_ps(o + 16, o2);
-            _mm256_stream_ps(o + 24, o3);
-        } else {
-            _mm256_storeu_ps(o, o0);
-            _mm256_storeu_ps(o + 8, o1);
-            _mm256_storeu_ps(o + 16, o2);
-            _mm256_storeu_ps(o + 24, o3);
-        }
+        sc8_store(d + 4 * (size_t)x, p0, p1, p2, a, stream);
     }
     if (stream)
         _mm_sfence(); /* the streamed stores visible before the pool's join */

@@ -1192,6 +1192,95 @@ static inline __attribute__((always_inline)) void gain_octet8(const gain_ctx *g,
                 gain_pixel(j, x + l, y, s8[l], wx[l], wy[l], q);
 }
 
+/* caustics_rows_gain's parts, inlined into each of its clones. */
+#define GAIN_PART static inline __attribute__((always_inline))
+
+/* downsample 4: the row's columns' s, world x and y (cs, cx, cy), each node's value at this
+ * row (ld4(a) uy + ld4(b) ty), eight nodes at a time where the clone is wide. */
+GAIN_PART void gain_row_columns(const caustics_job *j, const float *a, const float *b, float uy, float ty, float *cs,
+                                float *cx, float *cy)
+{
+    const int nx = j->nx;
+    int i = 0;
+    if (j->wide) { /* eight nodes at a time: ld4(a) uy + ld4(b) ty, channel by channel */
+        const v8f uy8 = S8(uy), ty8 = S8(ty);
+        for (; i + 8 <= nx; i += 8) {
+            v8f na[4], nb[4];
+            fx_load8x4(a + 4 * i, na);
+            fx_load8x4(b + 4 * i, nb);
+            fx_store8(cs + i, na[0] * uy8 + nb[0] * ty8);
+            fx_store8(cx + i, na[2] * uy8 + nb[2] * ty8);
+            fx_store8(cy + i, na[3] * uy8 + nb[3] * ty8);
+        }
+    }
+    for (; i < nx; i++) { /* the general path's L, channel by channel */
+        const v4f c = ld4(a + 4 * i) * uy + ld4(b + 4 * i) * ty;
+        cs[i] = c[0];
+        cx[i] = c[2];
+        cy[i] = c[3];
+    }
+}
+
+/* downsample 4: octets of two cells of 4 pixels from the row's columns (cs, cx, cy), all
+ * but the row's last cell (x1 - 1's, which may be longer). Returns the first cell left to
+ * the general path. */
+GAIN_PART int gain_row_octets(const gain_ctx *g, int y, const float *cs, const float *cx, const float *cy,
+                              gain_queue *q)
+{
+    const caustics_job *j = g->j;
+    const int x0 = j->run->roi.x0, ncx = j->nx > 1 ? j->nx - 1 : 1;
+    const float *col_t = j->col_t;
+    int cfirst = 0;
+    for (; cfirst + 2 < ncx; cfirst += 2) {
+        const int x = x0 + 4 * cfirst;
+        const v8f t = fx_load8(col_t + (x - x0));
+        v8f ls, rs, lx, rx, ly, ry;
+        if (j->wide) { /* one permute per vector in the AVX2 clone */
+            const v8f vs = fx_load8(cs + cfirst), vx = fx_load8(cx + cfirst), vy = fx_load8(cy + cfirst);
+            ls = FX_SHUF8(vs, vs, 0, 0, 0, 0, 1, 1, 1, 1);
+            rs = FX_SHUF8(vs, vs, 1, 1, 1, 1, 2, 2, 2, 2);
+            lx = FX_SHUF8(vx, vx, 0, 0, 0, 0, 1, 1, 1, 1);
+            rx = FX_SHUF8(vx, vx, 1, 1, 1, 1, 2, 2, 2, 2);
+            ly = FX_SHUF8(vy, vy, 0, 0, 0, 0, 1, 1, 1, 1);
+            ry = FX_SHUF8(vy, vy, 1, 1, 1, 1, 2, 2, 2, 2);
+        } else { /* broadcasts: the baseline clone has no eight-lane shuffles */
+            const v4f s0 = V4(cs[cfirst]), s1 = V4(cs[cfirst + 1]), s2 = V4(cs[cfirst + 2]);
+            const v4f p0 = V4(cx[cfirst]), p1 = V4(cx[cfirst + 1]), p2 = V4(cx[cfirst + 2]);
+            const v4f q0 = V4(cy[cfirst]), q1 = V4(cy[cfirst + 1]), q2 = V4(cy[cfirst + 2]);
+            ls = cat8(s0, s1);
+            rs = cat8(s1, s2);
+            lx = cat8(p0, p1);
+            rx = cat8(p1, p2);
+            ly = cat8(q0, q1);
+            ry = cat8(q1, q2);
+        }
+        const v8f sv8 = ls + t * (rs - ls), xv8 = lx + t * (rx - lx), yv8 = ly + t * (ry - ly);
+        if (j->wide)
+            gain_octet8(g, x, y, sv8, xv8, yv8, q);
+        else
+            gain_octet4(g, x, y, sv8, xv8, yv8, q);
+    }
+    return cfirst;
+}
+
+/* The n pixels from xa of row y with their values in sv, xv, yv: eight at a time, the rest
+ * one at a time (an octet overlapping the one before would read, in place, pixels that one
+ * wrote). */
+GAIN_PART void gain_chunk(const gain_ctx *g, int xa, int y, int n, const float *sv, const float *xv, const float *yv,
+                          gain_queue *q)
+{
+    const int noct = n / 8, wide = g->j->wide;
+    for (int k = 0; k < noct; k++) {
+        const int c = 8 * k;
+        if (wide)
+            gain_octet8(g, xa + c, y, fx_load8(sv + c), fx_load8(xv + c), fx_load8(yv + c), q);
+        else
+            gain_octet4(g, xa + c, y, fx_load8(sv + c), fx_load8(xv + c), fx_load8(yv + c), q);
+    }
+    for (int c = 8 * noct; c < n; c++)
+        gain_pixel(g->j, xa + c, y, sv[c], xv[c], yv[c], q);
+}
+
 /* lattice_shading's path (draft) in physical mode without an additive term, from the
  * Position pass: the nodes hold the focus gain s (focus_s of their pattern and noise); a
  * pixel's s and world XY are its corners' bilinear interpolation (row first: L and R, the
@@ -1227,58 +1316,12 @@ FX_CLONES static void caustics_rows_gain(void *user, int begin, int end)
         const float *a = j->nodes + (size_t)j0 * nx * 4, *b = j->nodes + (size_t)j1 * nx * 4;
         int cfirst = 0; /* the first lattice cell left to the general path */
         if (cols) {
-            int i = 0;
-            if (j->wide) { /* eight nodes at a time: ld4(a) uy + ld4(b) ty, channel by channel */
-                const v8f uy8 = S8(uy), ty8 = S8(ty);
-                for (; i + 8 <= nx; i += 8) {
-                    v8f na[4], nb[4];
-                    fx_load8x4(a + 4 * i, na);
-                    fx_load8x4(b + 4 * i, nb);
-                    fx_store8(cs + i, na[0] * uy8 + nb[0] * ty8);
-                    fx_store8(cx + i, na[2] * uy8 + nb[2] * ty8);
-                    fx_store8(cy + i, na[3] * uy8 + nb[3] * ty8);
-                }
-            }
-            for (; i < nx; i++) { /* the general path's L, channel by channel */
-                const v4f c = ld4(a + 4 * i) * uy + ld4(b + 4 * i) * ty;
-                cs[i] = c[0];
-                cx[i] = c[2];
-                cy[i] = c[3];
-            }
-            /* octets of two cells of 4 pixels (the last cell, x1 - 1's, may be longer) */
-            for (; cfirst + 2 < ncx; cfirst += 2) {
-                const int x = x0 + 4 * cfirst;
-                const v8f t = fx_load8(col_t + (x - x0));
-                v8f ls, rs, lx, rx, ly, ry;
-                if (j->wide) { /* one permute per vector in the AVX2 clone */
-                    const v8f vs = fx_load8(cs + cfirst), vx = fx_load8(cx + cfirst), vy = fx_load8(cy + cfirst);
-                    ls = FX_SHUF8(vs, vs, 0, 0, 0, 0, 1, 1, 1, 1);
-                    rs = FX_SHUF8(vs, vs, 1, 1, 1, 1, 2, 2, 2, 2);
-                    lx = FX_SHUF8(vx, vx, 0, 0, 0, 0, 1, 1, 1, 1);
-                    rx = FX_SHUF8(vx, vx, 1, 1, 1, 1, 2, 2, 2, 2);
-                    ly = FX_SHUF8(vy, vy, 0, 0, 0, 0, 1, 1, 1, 1);
-                    ry = FX_SHUF8(vy, vy, 1, 1, 1, 1, 2, 2, 2, 2);
-                } else { /* broadcasts: the baseline clone has no eight-lane shuffles */
-                    const v4f s0 = V4(cs[cfirst]), s1 = V4(cs[cfirst + 1]), s2 = V4(cs[cfirst + 2]);
-                    const v4f p0 = V4(cx[cfirst]), p1 = V4(cx[cfirst + 1]), p2 = V4(cx[cfirst + 2]);
-                    const v4f q0 = V4(cy[cfirst]), q1 = V4(cy[cfirst + 1]), q2 = V4(cy[cfirst + 2]);
-                    ls = cat8(s0, s1);
-                    rs = cat8(s1, s2);
-                    lx = cat8(p0, p1);
-                    rx = cat8(p1, p2);
-                    ly = cat8(q0, q1);
-                    ry = cat8(q1, q2);
-                }
-                const v8f sv8 = ls + t * (rs - ls), xv8 = lx + t * (rx - lx), yv8 = ly + t * (ry - ly);
-                if (j->wide)
-                    gain_octet8(&g, x, y, sv8, xv8, yv8, &q);
-                else
-                    gain_octet4(&g, x, y, sv8, xv8, yv8, &q);
-            }
+            gain_row_columns(j, a, b, uy, ty, cs, cx, cy);
+            cfirst = gain_row_octets(&g, y, cs, cx, cy, &q);
         }
         for (int cc0 = cfirst; cc0 < ncx; cc0 += per_chunk) {
             const int cc1 = cc0 + per_chunk < ncx ? cc0 + per_chunk : ncx;
-            const int xa = x0 + cc0 * f, xb = cc1 == ncx ? x1 : x0 + cc1 * f, n = xb - xa;
+            const int xa = x0 + cc0 * f, xb = cc1 == ncx ? x1 : x0 + cc1 * f;
             /* the pixels' s, world x, y (four at a time: a cell of 4 pixels or more ends
              * with the quad at xe - 4, overlapping: the same values written again) */
             v4f L = ld4(a + 4 * cc0) * uy + ld4(b + 4 * cc0) * ty;
@@ -1289,8 +1332,8 @@ FX_CLONES static void caustics_rows_gain(void *user, int begin, int end)
                 const int xs = x0 + cc * f, xe = cc == ncx - 1 ? x1 : xs + f;
                 const v4f ls = V4(L[0]), ds = V4(D[0]), lx = V4(L[2]), dx = V4(D[2]), ly = V4(L[3]), dy = V4(D[3]);
                 const int nquad = xe - xs >= 4 ? (xe - xs + 3) / 4 : 0;
-                for (int q = 0; q < nquad; q++) {
-                    const int x = xs + 4 * q + 4 <= xe ? xs + 4 * q : xe - 4;
+                for (int k = 0; k < nquad; k++) {
+                    const int x = xs + 4 * k + 4 <= xe ? xs + 4 * k : xe - 4;
                     const v4f t4 = ld4(col_t + (x - x0));
                     st4(sv + (x - xa), ls + t4 * ds);
                     st4(xv + (x - xa), lx + t4 * dx);
@@ -1304,18 +1347,7 @@ FX_CLONES static void caustics_rows_gain(void *user, int begin, int end)
                 }
                 L = R;
             }
-            /* eight pixels at a time, the rest one at a time (an octet overlapping the one
-             * before would read, in place, pixels that one wrote) */
-            const int noct = n / 8;
-            for (int k = 0; k < noct; k++) {
-                const int c = 8 * k;
-                if (j->wide)
-                    gain_octet8(&g, xa + c, y, fx_load8(sv + c), fx_load8(xv + c), fx_load8(yv + c), &q);
-                else
-                    gain_octet4(&g, xa + c, y, fx_load8(sv + c), fx_load8(xv + c), fx_load8(yv + c), &q);
-            }
-            for (int c = 8 * noct; c < n; c++)
-                gain_pixel(j, xa + c, y, sv[c], xv[c], yv[c], &q);
+            gain_chunk(&g, xa, y, xb - xa, sv, xv, yv, &q);
         }
         if (q.n)
             gain_flush(j, &q);

@@ -861,10 +861,118 @@ static void vsm_rows(void *user, int y0, int y1)
     }
 }
 
+/* apply other than combined: the light the view belongs to (its radiance colour * energy /
+ * pi and the direction towards it) and the passes the removal reads: DiffCol, GlossCol for
+ * sun_direct and light_group, the light group's Combined for light_group. */
+static fx_result vsm_light_inputs(const fx_effect_run *run, vsm_job *j)
+{
+    const vsm_params *p = j->p;
+    const char *where = run->where;
+    fx_light light;
+    fx_result r = fx_frame_find_light(run->frame, j->av->name + 6, where, &light);
+    if (r)
+        return r;
+    fx_pass *dc = fx_frame_find_pass(run->frame, "DiffCol");
+    if (!dc || dc->channels < 3)
+        return fx_fail(run->ctx, FX_ERR_MISSING_PASS, "%s: apply %s needs the DiffCol pass", where,
+                       apply_items[p->apply]);
+    j->diffcol = dc->data;
+    static const char *const extra[2] = {"GlossCol", "Combined_" FX_LIGHT_GROUP_NAME};
+    for (int e = 0; e < 2 && p->apply >= APPLY_SUN_DIRECT; e++) {
+        if (e == 1 && p->apply != APPLY_LIGHT_GROUP)
+            break;
+        fx_pass *ps = fx_frame_find_pass(run->frame, extra[e]);
+        if (!ps || ps->channels < 3)
+            return fx_fail(run->ctx, FX_ERR_MISSING_PASS, "%s: apply %s needs the %s pass%s", where,
+                           apply_items[p->apply], extra[e],
+                           e ? " (the light group '" FX_LIGHT_GROUP_NAME "' holding the light: the add-on "
+                               "makes it; else use apply sun_direct)"
+                             : "");
+        if (e == 0)
+            j->glosscol = ps->data;
+        else
+            j->group = ps->data;
+    }
+    float e = light.energy * 0.318309886f /* 1/pi */;
+    j->sun_rad = fx_v3(light.color.x * e, light.color.y * e, light.color.z * e);
+    j->to_light = fx_v3_scale(light.direction, -1.0f);
+    if (light.type != FX_LIGHT_SUN)
+        fx_warn(run->ctx, "%s: light '%s' is not a sun: %s treats it as one", where, light.name,
+                apply_items[p->apply]);
+    return FX_OK;
+}
+
+/* screen_downsample f > 1: the lo grid (lw x lh texels: visibility, alpha, depth, normal,
+ * the ratio factors with remove_as ratio) and the per-column lookups, in one block from the
+ * context's buffer store (no fresh pages frame after frame), filled by lo_rows and
+ * lo_flag_rows. *block and *bytes: the block, for fx_buffer_put (NULL when out of memory). */
+static fx_result vsm_lo_grid(const fx_effect_run *run, vsm_job *j, float **block, size_t *bytes)
+{
+    const fx_rect *roi = &run->roi;
+    const int rows = roi->y1 - roi->y0, cols = roi->x1 - roi->x0;
+    j->lw = (cols + j->f - 1) / j->f;
+    j->lh = rows / j->f + (rows % j->f ? 1 : 0);
+    const size_t lo_n = (size_t)j->lw * j->lh;
+    j->lo_factor = j->general && j->p->remove_as == REMOVE_RATIO;
+    const size_t per = j->lo_factor ? 9 : 6; /* floats per lo texel */
+    *bytes = lo_n * per * sizeof(float) + (size_t)cols * 2 * sizeof(float) + lo_n;
+    float *lo = *block = fx_buffer_get(run->ctx, *bytes);
+    if (!lo)
+        return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", run->where);
+    j->lo_v = lo;
+    j->lo_a = lo + lo_n;
+    j->lo_d = lo + 2 * lo_n;
+    j->lo_n = lo + 3 * lo_n;
+    j->lo_F = j->lo_factor ? lo + 6 * lo_n : NULL;
+    j->col_tx = lo + per * lo_n;
+    j->col_X0 = (int *)(j->col_tx + cols);
+    j->lo_flags = (unsigned char *)(j->col_X0 + cols);
+    for (int x = roi->x0; x < roi->x1; x++) {
+        /* the lo texel coordinate of column x (lo texel X sits at pixel f X + f / 2) */
+        float u = (float)(x - roi->x0 - j->f / 2) * (1.0f / (float)j->f);
+        u = u > 0.0f ? (u < (float)(j->lw - 1) ? u : (float)(j->lw - 1)) : 0.0f;
+        j->col_X0[x - roi->x0] = (int)u;
+        j->col_tx[x - roi->x0] = u - (float)(int)u;
+    }
+    fx_parallel_for(run->ctx, j->lh, fx_grain_for(run->ctx, j->lh), lo_rows, j);
+    fx_parallel_for(run->ctx, j->lh, fx_grain_for(run->ctx, j->lh), lo_flag_rows, j);
+    return FX_OK;
+}
+
+/* bounce_reach (light_group): the visibility of every pixel first (with screen_downsample,
+ * the lo texels'), then its surroundings' mean (a Gaussian of v m over one of m), which the
+ * removal reads. *block and *bytes: the (v m, m) buffer, for fx_buffer_put. */
+static fx_result vsm_bounce(const fx_effect_run *run, vsm_job *j, float **block, size_t *bytes)
+{
+    const int vm_lo = j->f > 1, rows = run->roi.y1 - run->roi.y0;
+    *bytes = (vm_lo ? (size_t)j->lw * j->lh : (size_t)run->width * run->height) * 2 * sizeof(float);
+    float *vm = *block = fx_buffer_get(run->ctx, *bytes);
+    if (!vm)
+        return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", run->where);
+    memset(vm, 0, *bytes);
+    j->vm = vm;
+    j->vm_lo = vm_lo;
+    double sigma = j->p->bounce_reach * (double)run->width;
+    if (vm_lo) {
+        for (size_t k = 0; k < (size_t)j->lw * j->lh; k++) {
+            const int has = j->lo_d[k] > 0.0f;
+            vm[2 * k] = has ? fx_saturate(j->lo_v[k]) : 0.0f;
+            vm[2 * k + 1] = has ? 1.0f : 0.0f;
+        }
+        sigma /= (double)j->f;
+    } else {
+        j->vis_only = 1;
+        fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), vsm_rows, j);
+        j->vis_only = 0;
+    }
+    fx_blur_spec bs = {sigma, FX_BLUR_RECURSIVE, 3};
+    return fx_blur_image(run->ctx, vm, vm, vm_lo ? j->lw : run->width, vm_lo ? j->lh : run->height, 2, &bs,
+                         vm_lo ? NULL : &run->roi, run->where);
+}
+
 static fx_result vsm_process(const fx_effect_run *run)
 {
     const vsm_params *p = run->params;
-    const fx_rect *roi = &run->roi;
     const char *where = run->where;
     vsm_job j;
     memset(&j, 0, sizeof j);
@@ -889,141 +997,38 @@ static fx_result vsm_process(const fx_effect_run *run)
                                      &map);
     if (r)
         return r;
-    const fx_aux_view *av = map.av;
-    j.av = av;
+    /* from here on, every way out goes through done: (the buffers and the map given back) */
+    float *lo = NULL, *vm = NULL;
+    size_t lo_bytes = 0, vm_bytes = 0;
+    j.av = map.av;
     j.general = !(p->apply == APPLY_COMBINED || (p->apply == APPLY_SUN_DIFFUSE && p->remove_as == REMOVE_DIFFERENCE));
-    if (p->apply != APPLY_COMBINED) {
-        fx_light light;
-        if ((r = fx_frame_find_light(run->frame, av->name + 6, where, &light))) {
-            fx_aux_map_release(run->ctx, &map);
-            return r;
-        }
-        fx_pass *dc = fx_frame_find_pass(run->frame, "DiffCol");
-        if (!dc || dc->channels < 3) {
-            fx_aux_map_release(run->ctx, &map);
-            return fx_fail(run->ctx, FX_ERR_MISSING_PASS, "%s: apply %s needs the DiffCol pass", where,
-                           apply_items[p->apply]);
-        }
-        j.diffcol = dc->data;
-        static const char *const extra[2] = {"GlossCol", "Combined_" FX_LIGHT_GROUP_NAME};
-        for (int e = 0; e < 2 && p->apply >= APPLY_SUN_DIRECT; e++) {
-            if (e == 1 && p->apply != APPLY_LIGHT_GROUP)
-                break;
-            fx_pass *ps = fx_frame_find_pass(run->frame, extra[e]);
-            if (!ps || ps->channels < 3) {
-                fx_aux_map_release(run->ctx, &map);
-                return fx_fail(run->ctx, FX_ERR_MISSING_PASS,
-                               "%s: apply %s needs the %s pass%s", where, apply_items[p->apply], extra[e],
-                               e ? " (the light group '" FX_LIGHT_GROUP_NAME "' holding the light: the add-on "
-                                   "makes it; else use apply sun_direct)"
-                                 : "");
-            }
-            if (e == 0)
-                j.glosscol = ps->data;
-            else
-                j.group = ps->data;
-        }
-        float e = light.energy * 0.318309886f /* 1/pi */;
-        j.sun_rad = fx_v3(light.color.x * e, light.color.y * e, light.color.z * e);
-        j.to_light = fx_v3_scale(light.direction, -1.0f);
-        if (light.type != FX_LIGHT_SUN)
-            fx_warn(run->ctx, "%s: light '%s' is not a sun: %s treats it as one", where, light.name,
-                    apply_items[p->apply]);
-    }
-    const fx_shadow_map *sm = map.sm;
-    j.sm = sm;
-    float ms = fx_shadow_map_norm_dist(sm, p->min_std);
+    if (p->apply != APPLY_COMBINED && (r = vsm_light_inputs(run, &j)))
+        goto done;
+    j.sm = map.sm;
+    float ms = fx_shadow_map_norm_dist(j.sm, p->min_std);
     j.min_var = ms * ms > 1e-12f ? ms * ms : 1e-12f;
-    j.eps = fx_shadow_map_norm_dist(sm, p->depth_bias);
+    j.eps = fx_shadow_map_norm_dist(j.sm, p->depth_bias);
     j.pcf_radius = (int)lrintf((p->filter_size - 1.0f) * 0.5f);
     j.vis_out = fx_effect_debug_pass(run, "visibility", 1, &r);
-    if (!j.vis_out && r) {
-        fx_aux_map_release(run->ctx, &map);
-        return r;
-    }
-    int rows = roi->y1 - roi->y0;
+    if (!j.vis_out && r)
+        goto done;
     j.f = p->screen_downsample > 1 ? p->screen_downsample : 1;
-    float *lo = NULL;
-    size_t lo_n = 0, lo_bytes = 0;
-    if (j.f > 1) {
-        j.lw = (roi->x1 - roi->x0 + j.f - 1) / j.f;
-        j.lh = rows / j.f + (rows % j.f ? 1 : 0);
-        /* one block from the context's buffer store (no fresh pages frame after frame) */
-        lo_n = (size_t)j.lw * j.lh;
-        j.lo_factor = j.general && p->remove_as == REMOVE_RATIO;
-        const size_t per = j.lo_factor ? 9 : 6; /* floats per lo texel */
-        lo_bytes = lo_n * per * sizeof(float) + (size_t)(roi->x1 - roi->x0) * 2 * sizeof(float) + lo_n;
-        lo = fx_buffer_get(run->ctx, lo_bytes);
-        if (!lo) {
-            fx_aux_map_release(run->ctx, &map);
-            return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
-        }
-        j.lo_v = lo;
-        j.lo_a = lo + lo_n;
-        j.lo_d = lo + 2 * lo_n;
-        j.lo_n = lo + 3 * lo_n;
-        j.lo_F = j.lo_factor ? lo + 6 * lo_n : NULL;
-        j.col_tx = lo + per * lo_n;
-        j.col_X0 = (int *)(j.col_tx + (roi->x1 - roi->x0));
-        j.lo_flags = (unsigned char *)(j.col_X0 + (roi->x1 - roi->x0));
-        for (int x = roi->x0; x < roi->x1; x++) {
-            /* the lo texel coordinate of column x (lo texel X sits at pixel f X + f / 2) */
-            float u = (float)(x - roi->x0 - j.f / 2) * (1.0f / (float)j.f);
-            u = u > 0.0f ? (u < (float)(j.lw - 1) ? u : (float)(j.lw - 1)) : 0.0f;
-            j.col_X0[x - roi->x0] = (int)u;
-            j.col_tx[x - roi->x0] = u - (float)(int)u;
-        }
-        fx_parallel_for(run->ctx, j.lh, fx_grain_for(run->ctx, j.lh), lo_rows, &j);
-        fx_parallel_for(run->ctx, j.lh, fx_grain_for(run->ctx, j.lh), lo_flag_rows, &j);
-    }
-    float *vm = NULL;
-    const int vm_lo = j.f > 1;
-    const size_t vm_bytes = (vm_lo ? (size_t)j.lw * j.lh : (size_t)run->width * run->height) * 2 * sizeof(float);
-    if (p->apply == APPLY_LIGHT_GROUP && p->bounce_reach > 0.0f && p->bounce_loss > 0.0f) {
-        /* bounce_reach: the visibility of every pixel first (with screen_downsample, the lo
-         * texels'), then its surroundings' mean (a Gaussian of v m over one of m), then the
-         * removal */
-        vm = fx_buffer_get(run->ctx, vm_bytes);
-        if (!vm) {
-            fx_buffer_put(run->ctx, lo, lo_bytes);
-            fx_aux_map_release(run->ctx, &map);
-            return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
-        }
-        memset(vm, 0, vm_bytes);
-        j.vm = vm;
-        j.vm_lo = vm_lo;
-        double sigma = p->bounce_reach * (double)run->width;
-        if (vm_lo) {
-            for (size_t k = 0; k < (size_t)j.lw * j.lh; k++) {
-                const int has = j.lo_d[k] > 0.0f;
-                vm[2 * k] = has ? fx_saturate(j.lo_v[k]) : 0.0f;
-                vm[2 * k + 1] = has ? 1.0f : 0.0f;
-            }
-            sigma /= (double)j.f;
-        } else {
-            j.vis_only = 1;
-            fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), vsm_rows, &j);
-            j.vis_only = 0;
-        }
-        fx_blur_spec bs = {sigma, FX_BLUR_RECURSIVE, 3};
-        r = fx_blur_image(run->ctx, vm, vm, vm_lo ? j.lw : run->width, vm_lo ? j.lh : run->height, 2, &bs,
-                          vm_lo ? NULL : roi, where);
-        if (r) {
-            fx_buffer_put(run->ctx, vm, vm_bytes);
-            fx_buffer_put(run->ctx, lo, lo_bytes);
-            fx_aux_map_release(run->ctx, &map);
-            return r;
-        }
-    }
+    if (j.f > 1 && (r = vsm_lo_grid(run, &j, &lo, &lo_bytes)))
+        goto done;
+    if (p->apply == APPLY_LIGHT_GROUP && p->bounce_reach > 0.0f && p->bounce_loss > 0.0f &&
+        (r = vsm_bounce(run, &j, &vm, &vm_bytes)))
+        goto done;
     if (j.lo_factor) {
         /* the lo texels' ratio factors (reading the blurred bounce visibility) */
         fx_parallel_for(run->ctx, j.lh, fx_grain_for(run->ctx, j.lh), lo_factor_rows, &j);
     }
+    const int rows = run->roi.y1 - run->roi.y0;
     fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), vsm_rows, &j);
+done:
     fx_buffer_put(run->ctx, vm, vm_bytes);
     fx_buffer_put(run->ctx, lo, lo_bytes);
     fx_aux_map_release(run->ctx, &map);
-    return FX_OK;
+    return r;
 }
 
 /* The light's depth view, by the light's name ("" = the scene's first sun). */
