@@ -400,7 +400,10 @@ def main(argv=None):
         len(frames), len(chunk_frames), args.chunk, how))
     try:
         array = sbatch(["sbatch"] + common + [
-            "--array", "0-%d" % (len(chunk_frames) - 1), "--requeue", "--cpus-per-task", str(cpus), "--mem", str(mem),
+            # --requeue: a task whose node fails runs again by itself (and resumes: the
+            # runner skips finished frames); append: Slurm's note of why stays after it.
+            "--array", "0-%d" % (len(chunk_frames) - 1), "--requeue", "--open-mode", "append",
+            "--cpus-per-task", str(cpus), "--mem", str(mem),
             "--time", str(minutes), "--output", os.path.join(logdir, "slurm-%A_%a.out"),
             os.path.join(logdir, "chunk.sh")], args.dry_run)
         final = sbatch(["sbatch"] + common + [

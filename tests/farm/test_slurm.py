@@ -8,6 +8,7 @@ generated slurm.conf, loopback only), driven by farm/slurm/libfx_slurm.py.
   the 12 results read back whole and equal, bit for bit, one batch.py run of the frames;
 - a chunk whose frames fail (a recipe naming a missing light): its task exits 1, the final
   job exits 1 naming each frame with the runner's reason, and writes no contact sheet;
+- the node marked down mid-chunk: Slurm requeues the task, which resumes and finishes;
 - the cluster stops and leaves no process and no file.
 
 Needs root, Blender, the built library (LIBFX_LIBRARY, default build/libfx/libfx.so) and
@@ -277,3 +278,30 @@ def test_failing_chunk_is_reported_by_the_final_job(cluster):
     for frame in (1, 2):
         assert re.search(r"frame %d: .*is missing; chunk 0001-0002 \(job %s_0 on \S+\) exit 1: "
                          r"frame %d: effect \d+ \(god_rays\): .*NoSuchLamp" % (frame, array, frame), report), report
+
+
+# ---------------------------------------------------------------- a node that goes down
+
+def test_node_failure_requeues_the_chunk_which_resumes(cluster):
+    """The node marked down mid-chunk (as slurmctld marks a node that stops answering):
+    Slurm kills the task; the array's --requeue puts it back, and once the node returns
+    the new attempt skips the finished frame and completes the shot, with no re-submission
+    (Slurm holds a requeued job about two minutes before it starts again)."""
+    env, _, scratch = cluster
+    node = sh("sinfo", "-h", "-N", "-o", "%N", env=env).stdout.split()[0]
+    out = os.path.join(scratch, "node", "n_")
+    array, final, _ = submit(env, out, frames="1-3")
+    deadline = time.time() + 600
+    while not os.path.exists(result(out, 1)):
+        assert time.time() < deadline, "frame 1 never appeared: %s" % queued(env, array, final)
+        time.sleep(0.2)
+    sh("scontrol", "update", "nodename=" + node, "state=down", "reason=libfx test: node lost", env=env)
+    wait_done(env, [array, final], timeout=900)
+    assert exit_code(env, final) == 0, open(out + "slurm/final.log").read()
+    log = chunk_log(out, 1, 3)
+    assert log.count("== libfx slurm: job %s_0" % array) == 2, log
+    assert "NODE FAILURE" in open(out + "slurm/slurm-%s_0.out" % array).read()
+    again = last_attempt(log)
+    assert "frame 1: exists, skipped" in again and "3 frame(s) done: 2 rendered, 1 skipped" in again, again
+    for f in (1, 2, 3):
+        pixels_and_header(result(out, f))
