@@ -70,14 +70,23 @@ def cluster():
     assert not os.path.exists(state), "the cluster's folder was not removed"
 
 
-def submit(env, out, *extra, frames="1-%d" % FRAMES, check=True):
-    p = sh(sys.executable, SUBMIT, BLEND, "--frames", frames, "--chunk", str(CHUNK), "--output", out,
+def submit(env, out, *extra, frames="1-%d" % FRAMES, check=True, blend=BLEND, chunk=CHUNK):
+    p = sh(sys.executable, SUBMIT, blend, "--frames", frames, "--chunk", str(chunk), "--output", out,
            "--blender", BLENDER, "--addon", ADDON, "--library", LIBRARY, *RUN, *extra, env=env, check=check)
     if not check:
         return p
-    m = re.search(r"ARRAY_JOB=(\d+) FINAL_JOB=(\d+)", p.stdout)
+    m = re.search(r"VIEWS_JOB=(\d+) ARRAY_JOB=(\d+) FINAL_JOB=(\d+)", p.stdout)
     assert m, p.stdout
-    return m.group(1), m.group(2), p.stdout
+    views, array, final = m.groups()
+    return Shot(views, array, final, p.stdout)
+
+
+class Shot:
+    """The job ids of one submission and what the submitter printed."""
+
+    def __init__(self, views, array, final, text):
+        self.views, self.array, self.final, self.text = views, array, final, text
+        self.jobs = [views, array, final]
 
 
 def queued(env, *jobs):
@@ -190,16 +199,18 @@ def test_shot_cancelled_then_resubmitted_is_bit_identical(cluster):
 
     out = os.path.join(scratch, "shot", "bath_")
     t0 = time.time()
-    array, final, text = submit(env, out)
-    assert "12 frame(s) in 4 chunk(s) of up to 3" in text, text
+    shot = submit(env, out)
+    array, final = shot.array, shot.final
+    assert "12 frame(s) in 4 chunk(s) of up to 3" in shot.text, shot.text
     # Cancel chunk 4-6 once its first frame is written: frames 5 and 6 are then unfinished.
     deadline = time.time() + 600
     while not os.path.exists(result(out, 4)):
-        assert time.time() < deadline, "frame 4 never appeared: %s" % queued(env, array, final)
+        assert time.time() < deadline, "frame 4 never appeared: %s" % queued(env, *shot.jobs)
         time.sleep(0.2)
     sh("scancel", "%s_1" % array, env=env)
     cancelled_at = time.time()
-    wait_done(env, [array, final])
+    wait_done(env, shot.jobs)
+    assert exit_code(env, shot.views) == 0
     first_wall = time.time() - t0
 
     assert exit_code(env, final) == 1, "the final job passed a shot with a cancelled chunk"
@@ -219,15 +230,24 @@ def test_shot_cancelled_then_resubmitted_is_bit_identical(cluster):
     assert os.path.exists(result(out, FRAMES))
 
     t1 = time.time()
-    array2, final2, _ = submit(env, out)
-    wait_done(env, [array2, final2])
+    shot2 = submit(env, out)
+    array2, final2 = shot2.array, shot2.final
+    wait_done(env, shot2.jobs)
     second_wall = time.time() - t1
     assert exit_code(env, final2) == 0, open(out + "slurm/final.log").read()
     for i in range(4):
         assert exit_code(env, "%s_%d" % (array2, i)) == 0
-    sheet = oiio.ImageInput.open(out + "libfx.contact_sheet.png")
-    assert sheet and sheet.spec().width > 0
-    sheet.close()
+    # The sheet: 12 thumbnails of 160x90 in 2 rows of 6, 4-pixel black gaps around them.
+    sheet = oiio.ImageBuf(out + "libfx.contact_sheet.png").get_pixels(oiio.FLOAT)
+    assert sheet.shape[:2] == (2 * 90 + 3 * 4, 6 * 160 + 7 * 4), sheet.shape
+    gaps = np.ones(sheet.shape[:2], bool)
+    for r in range(2):
+        for c in range(6):
+            y, x = 4 + r * 94, 4 + c * 164
+            cell = sheet[y:y + 90, x:x + 160, :3]
+            assert cell.mean() > 0.2 and (cell > 0).mean() > 0.99, (r, c, cell.mean())
+            gaps[y:y + 90, x:x + 160] = False
+    assert sheet[gaps][:, :3].max() == 0.0
     # The re-run rendered only what was missing: the cancelled chunk skipped frame 4,
     # the finished chunks skipped everything.
     again = last_attempt(chunk_log(out, 4, 6))
@@ -267,8 +287,9 @@ def test_failing_chunk_is_reported_by_the_final_job(cluster):
     with open(bad, "w") as f:
         json.dump(recipe, f)
     out = os.path.join(scratch, "failing", "f_")
-    array, final, _ = submit(env, out, "--recipe", bad, frames="1-2")
-    wait_done(env, [array, final])
+    shot = submit(env, out, "--recipe", bad, frames="1-2")
+    array, final = shot.array, shot.final
+    wait_done(env, shot.jobs)
     assert exit_code(env, "%s_0" % array) == 1
     assert exit_code(env, final) == 1
     assert not os.path.exists(out + "libfx.contact_sheet.png")
@@ -278,6 +299,27 @@ def test_failing_chunk_is_reported_by_the_final_job(cluster):
     for frame in (1, 2):
         assert re.search(r"frame %d: .*is missing; chunk 0001-0002 \(job %s_0 on \S+\) exit 1: "
                          r"frame %d: effect \d+ \(god_rays\): .*NoSuchLamp" % (frame, array, frame), report), report
+
+
+# ---------------------------------------------------------------- auxiliary views once
+
+def test_views_job_renders_the_aux_views_once_for_every_chunk(cluster):
+    """The atrium's stack reads the Sun's light view and the rain map: the views job
+    renders them once, before the chunks, and no chunk renders its own."""
+    env, _, scratch = cluster
+    out = os.path.join(scratch, "atrium", "a_")
+    shot = submit(env, out, frames="1-2", chunk=1,
+                  blend=os.path.join(ROOT, "blend_scenes", "atrium", "atrium.blend"))
+    wait_done(env, shot.jobs)
+    assert [exit_code(env, j) for j in (shot.views, shot.array + "_0", shot.array + "_1", shot.final)] == [0] * 4
+    with open(out + "slurm/views.log") as f:
+        views = f.read()
+    assert "libfx batch: views: 2 ready: light:Sun, rain_map" in views, views
+    assert len(re.findall(r"aux view '[^']+' rendered", views)) == 2, views
+    for frame in (1, 2):
+        log = chunk_log(out, frame, frame)
+        assert not re.search(r"aux view '[^']+' rendered", log), log
+        assert len(re.findall(r"aux view '[^']+' reused", log)) == 2, log
 
 
 # ---------------------------------------------------------------- a node that goes down
@@ -290,13 +332,14 @@ def test_node_failure_requeues_the_chunk_which_resumes(cluster):
     env, _, scratch = cluster
     node = sh("sinfo", "-h", "-N", "-o", "%N", env=env).stdout.split()[0]
     out = os.path.join(scratch, "node", "n_")
-    array, final, _ = submit(env, out, frames="1-3")
+    shot = submit(env, out, frames="1-3")
+    array, final = shot.array, shot.final
     deadline = time.time() + 600
     while not os.path.exists(result(out, 1)):
-        assert time.time() < deadline, "frame 1 never appeared: %s" % queued(env, array, final)
+        assert time.time() < deadline, "frame 1 never appeared: %s" % queued(env, *shot.jobs)
         time.sleep(0.2)
     sh("scontrol", "update", "nodename=" + node, "state=down", "reason=libfx test: node lost", env=env)
-    wait_done(env, [array, final], timeout=900)
+    wait_done(env, shot.jobs, timeout=900)
     assert exit_code(env, final) == 0, open(out + "slurm/final.log").read()
     log = chunk_log(out, 1, 3)
     assert log.count("== libfx slurm: job %s_0" % array) == 2, log
