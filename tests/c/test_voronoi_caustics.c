@@ -750,8 +750,8 @@ static void test_in_place(void)
 }
 
 /* ---- an independent reference: the pattern evaluated directly at every pixel ----
- * From the documented definitions (docs/effects/voronoi_caustics.md, math/hash.h's
- * definition of the hash), written out here with no library call: a G x G grid of cells
+ * From the documented definitions (docs/effects/voronoi_caustics.md, the hash's definition in math/hash.h,
+ * tu_ref_hash4 in testutil.c), written out here with no library call: a G x G grid of cells
  * (G = round(sqrt(points))), cell size tile_size / G, one point per cell at (cx + 0.5 +
  * 0.44 sin(2 pi h1 + w1 t), cy + 0.5 + 0.44 sin(2 pi h2 + w2 t)), w = speed (0.6 + 0.8 h),
  * h1..h4 the cell's hash lowbias32-combined from (cx, cy, seed, 0x5eed) and its three
@@ -764,30 +764,6 @@ static void test_in_place(void)
  *    the tile. With noise_scale 1e9 the noise is one constant over the frame (the frame
  *    lies inside one noise cell, at its corner), so noise' is a single unknown amp in
  *    [0.4, 1.6] strength: it is fitted (least squares) and everything else must match. */
-static uint32_t ref_lowbias32(uint32_t x)
-{
-    x ^= x >> 16;
-    x *= 0x7feb352dU;
-    x ^= x >> 15;
-    x *= 0x846ca68bU;
-    x ^= x >> 16;
-    return x;
-}
-
-static uint32_t ref_hash4(int32_t a, int32_t b, int32_t c, int32_t d)
-{
-    const int32_t v[3] = {b, c, d};
-    uint32_t h = ref_lowbias32((uint32_t)a);
-    for (int k = 0; k < 3; k++)
-        h = ref_lowbias32(h ^ ((uint32_t)v[k] + 0x9e3779b9U + (h << 6) + (h >> 2)));
-    return h;
-}
-
-static double ref_unit(uint32_t h)
-{
-    return (double)(h >> 8) / 16777216.0;
-}
-
 typedef struct ref_vor {
     int G;
     double px[64], py[64]; /* G <= 8 */
@@ -800,9 +776,9 @@ static void ref_points(ref_vor *v, int points, int seed, double t, double speed,
     v->d = d;
     for (int cy = 0; cy < v->G; cy++)
         for (int cx = 0; cx < v->G; cx++) {
-            uint32_t h = ref_hash4(cx, cy, seed, 0x5eed);
-            double h1 = ref_unit(h), h2 = ref_unit(ref_lowbias32(h ^ 0x1234567u));
-            double h3 = ref_unit(ref_lowbias32(h ^ 0x89abcdefu)), h4 = ref_unit(ref_lowbias32(h + 77u));
+            uint32_t h = tu_ref_hash4(cx, cy, seed, 0x5eed);
+            double h1 = tu_ref_unit(h), h2 = tu_ref_unit(tu_ref_hash_u32(h ^ 0x1234567u));
+            double h3 = tu_ref_unit(tu_ref_hash_u32(h ^ 0x89abcdefu)), h4 = tu_ref_unit(tu_ref_hash_u32(h + 77u));
             v->px[cy * v->G + cx] = cx + 0.5 + 0.44 * sin(2 * M_PI * h1 + speed * (0.6 + 0.8 * h3) * t);
             v->py[cy * v->G + cx] = cy + 0.5 + 0.44 * sin(2 * M_PI * h2 + speed * (0.6 + 0.8 * h4) * t);
         }
