@@ -507,6 +507,107 @@ static void test_splashes_reference(fx_context *ctx)
     CHECK(lit > 100); /* rings in the frames */
 }
 
+/* ---- rain (streaks) against an independent reference ----
+ * The documented model (docs/effects/rain.md, the effect's definition) in double: frame
+ * pixel centre (x, y) in pattern space of layer l (scale s = near / d_l, k = (height /
+ * 720) s): u = (x cos w - y sin w) / k, v = (x sin w + y cos w) / k - t speed s; cells
+ * 14 x 1.5 streak_length; cell (i, j) of layer l holds a streak when unit(h = hash4(i, j,
+ * l, seed)) < density, at x0 = (i + 0.15 + 0.7 unit(h1)) 14, from y0 = (j + unit(h2)) 1.5
+ * length, of length length (0.7 + 0.6 unit(h3)) (h1, h2, h3 successive lowbias32 of h);
+ * at a = (v - y0) / len in (0, 1) its value is (1 - |u - x0| / we) (width / we) 4 a (1 - a),
+ * we = max(width, 1 / k) (drawn at least a pixel wide, dimmer); a layer shows the largest
+ * of its streaks where the scene's depth is beyond d_l (and the point is exposed: the map
+ * here is open), weighted 0.5 + 0.5 s; out = src + brightness colour sum. The layers' points below the
+ * ground are under cover (the map is the ground plane). */
+static double ref_streaks(double x, double y, int h, double t, const double *d, int layers, double depth)
+{
+    const double len = 12.0, width = 3.0, density = 0.6, speed = 1800.0, wind = 10.0 * 3.14159265358979323846 / 180.0;
+    const int seed = 9;
+    double sum = 0;
+    for (int l = 0; l < layers; l++) {
+        if (!(depth > d[l]))
+            continue;
+        double sc = d[0] / d[l], k = h / 720.0 * sc;
+        double u = (x * cos(wind) - y * sin(wind)) / k, v = (x * sin(wind) + y * cos(wind)) / k - t * speed * sc;
+        double we = fmax(width, 1.0 / k), best = 0;
+        int ci = (int)floor(u / 14.0), cj = (int)floor(v / (1.5 * len));
+        for (int j = cj - 2; j <= cj; j++)
+            for (int i = ci - 4; i <= ci + 4; i++) {
+                uint32_t h0 = tu_ref_hash4(i, j, l, seed);
+                if (tu_ref_unit(h0) >= density)
+                    continue;
+                uint32_t h1 = tu_ref_hash_u32(h0), h2 = tu_ref_hash_u32(h1), h3 = tu_ref_hash_u32(h2);
+                double x0 = (i + 0.15 + 0.7 * tu_ref_unit(h1)) * 14.0, y0 = (j + tu_ref_unit(h2)) * 1.5 * len;
+                double a = (v - y0) / (len * (0.7 + 0.6 * tu_ref_unit(h3)));
+                double across = 1.0 - fabs(u - x0) / we;
+                if (a > 0 && a < 1 && across > 0)
+                    best = fmax(best, across * (width / we) * 4 * a * (1 - a));
+            }
+        sum += best * (0.5 + 0.5 * sc);
+    }
+    return sum;
+}
+
+static void test_rain_reference(fx_context *ctx)
+{
+    enum { RW = 96, RH = 240 };
+    fx_camera mc;
+    const char *open_map = rain_map(ctx, -100.0f, 3.0f, &mc, "open_sky_streaks");
+    const double dist[3] = {2.0, 5.0, 12.0};
+    const float color[3] = {0.8f, 0.85f, 0.9f};
+    float *rgba = malloc((size_t)RW * RH * 4 * sizeof(float)), *dep = malloc((size_t)RW * RH * sizeof(float));
+    for (int i = 0; i < RW * RH; i++) {
+        for (int c = 0; c < 3; c++)
+            rgba[4 * i + c] = 0.1f * (c + 1);
+        rgba[4 * i + 3] = 1.0f;
+        /* a wall at 3.5 m on the left third (the near layer only), one at 8 m in the middle
+         * (near and mid), sky on the right */
+        int x = i % RW;
+        dep[i] = x < RW / 3 ? 3.5f : x < 2 * RW / 3 ? 8.0f : 1e10f;
+    }
+    int lit = 0;
+    for (int fr = 1; fr <= 3; fr++) {
+        fx_frame *f = et_frame(ctx, RW, RH, rgba);
+        fx_frame_add_pass(f, "Depth", 1, dep);
+        float w2c[16] = {1, 0, 0, 0, 0, 0, 1, -1, 0, -1, 0, -10, 0, 0, 0, 1};
+        fx_camera cam;
+        ortho(&cam, w2c, 5.0f, 0.1f, 100.0f);
+        fx_frame_set_camera(f, &cam);
+        fx_frame_set_time(f, 7 * fr, 24.0);
+        CHECK_OK(ctx, fx_frame_set_aux_view(f, "rain_map", open_map, &mc));
+        float *o = et_run_effect(ctx, "rain", f,
+                                 "\"cover_material\": \"\", \"density\": 0.6, \"streak_length\": 12.0, "
+                                 "\"streak_width\": 3.0, \"brightness\": 0.7, \"seed\": 9",
+                                 NULL);
+        double e = o ? 0 : INFINITY, peak = 0;
+        for (int y = 0; o && y < RH; y++)
+            for (int x = 0; x < RW; x++) {
+                const int i = y * RW + x;
+                /* the layers' points lie at height z = 1 + 5 (1 - 2 (y + 0.5) / RH) (the camera at
+                 * z = 1, 5 m half height): below the ground (z < 0: the open map's floor is
+                 * above them) they are under cover; a band of the map's depth bias left out */
+                double z = 1.0 + 5.0 * (1.0 - 2.0 * (y + 0.5) / RH);
+                if (fabs(z) < 0.2)
+                    continue;
+                double sum = z > 0 ? ref_streaks(x + 0.5, y + 0.5, RH, 7 * fr / 24.0, dist, 3, dep[i]) : 0.0;
+                peak = fmax(peak, sum);
+                lit += sum > 0.1;
+                for (int c = 0; c < 3; c++)
+                    e = fmax(e, fabs(o[4 * i + c] - (rgba[4 * i + c] + 0.7 * sum * color[c])));
+                e = fmax(e, fabs(o[4 * i + 3] - rgba[4 * i + 3]));
+            }
+        fprintf(stderr, "rain reference frame %d: max error %.2e (peak streak sum %.3f)\n", 7 * fr, e, peak);
+        /* float pattern coordinates: u, v of ~1e3 carry ~1e-4 of rounding, a streak's edge
+         * (slope 1 / we per pattern pixel) moves by that: 1e-4 of a value <= ~1.3 */
+        CHECK(e < 2e-4);
+        free(o);
+        fx_frame_free(f);
+    }
+    CHECK(lit > 500);
+    free(rgba);
+    free(dep);
+}
+
 /* The rain map goes through the context's cache (scene/aux_map.h): a stack of wet_surfaces,
  * rain_splashes and rain over frames 1..4 in one context builds the map once (plus the
  * filtered copy for the soft edges) and gives the same bits as a context without cache. */
@@ -858,6 +959,7 @@ int main(void)
     test_splashes_and_wet(ctx);
     test_splashes_downsample(ctx);
     test_splashes_reference(ctx);
+    test_rain_reference(ctx);
     test_cache();
     test_rain_layers_extremes(ctx);
     test_rain_downsample(ctx);
