@@ -608,6 +608,70 @@ static void test_rain_reference(fx_context *ctx)
     free(dep);
 }
 
+/* ---- wet_surfaces on a hand-worked input ----
+ * docs/effects/wet_surfaces.md: w = wetness x exposure x facing, facing = lerp(wall_wetness,
+ * 1, smoothstep(0, up_threshold, N.z)) for N.z >= 0 and wall_wetness (1 - smoothstep(0,
+ * 0.3, -N.z)) facing down; out = src (1 - darken w) + w specular F sky_color, F = 0.02 +
+ * 0.98 (1 - clamp(N.V, 0, 1))^5. The frame: a plane at z = 1 seen straight down by an
+ * orthographic camera (V = +Z, so N.V = N.z), the open rain map's ground at z = 0 (exposure
+ * 1 everywhere), column x with the unit normal (sqrt(1 - nz^2), 0, nz), nz from -0.5 to 1. */
+static double ref_smooth(double e0, double e1, double x)
+{
+    double t = fmin(fmax((x - e0) / (e1 - e0), 0.0), 1.0);
+    return t * t * (3 - 2 * t);
+}
+
+static void test_wet_reference(fx_context *ctx)
+{
+    fx_camera mc;
+    const char *open_map = rain_map(ctx, -100.0f, 3.0f, &mc, "open_sky_wet");
+    float *rgba = malloc(N * N * 4 * sizeof(float)), *d = malloc(N * N * sizeof(float));
+    float *nrm = malloc(N * N * 3 * sizeof(float));
+    for (int i = 0; i < N * N; i++) {
+        const double nz = -0.5 + 1.5 * (i % N) / (N - 1.0);
+        for (int c = 0; c < 3; c++)
+            rgba[4 * i + c] = 0.2f + 0.1f * c + 0.002f * (i / N);
+        rgba[4 * i + 3] = 0.9f;
+        d[i] = 9.0f;
+        nrm[3 * i] = (float)sqrt(1 - nz * nz);
+        nrm[3 * i + 1] = 0.0f;
+        nrm[3 * i + 2] = (float)nz;
+    }
+    fx_frame *f = et_frame(ctx, N, N, rgba);
+    fx_frame_add_pass(f, "Depth", 1, d);
+    fx_frame_add_pass(f, "Normal", 3, nrm);
+    float w2c[16] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, -10, 0, 0, 0, 1};
+    fx_camera cam;
+    ortho(&cam, w2c, 5.0f, 0.1f, 100.0f);
+    fx_frame_set_camera(f, &cam);
+    CHECK_OK(ctx, fx_frame_set_aux_view(f, "rain_map", open_map, &mc));
+    const double wetness = 0.9, darken = 0.3, specular = 1.2, wall = 0.4, up = 0.7, sky[3] = {0.5, 0.6, 0.7};
+    {
+        float *o = et_run_effect(ctx, "wet_surfaces", f,
+                                 "\"wetness\": 0.9, \"darken\": 0.3, \"specular\": 1.2, \"wall_wetness\": 0.4, "
+                                 "\"up_threshold\": 0.7, \"sky_color\": [0.5, 0.6, 0.7], \"edge_softness\": 0.0, "
+                                 "\"downsample\": 1",
+                                 NULL);
+        double e = o ? 0 : INFINITY;
+        for (int i = 0; o && i < N * N; i++) {
+            const double nz = nrm[3 * i + 2];
+            const double facing = nz >= 0 ? wall + (1 - wall) * ref_smooth(0, up, nz)
+                                          : wall * (1 - ref_smooth(0, 0.3, -nz));
+            const double w = wetness * facing, F = 0.02 + 0.98 * pow(1 - fmin(fmax(nz, 0), 1), 5);
+            for (int c = 0; c < 3; c++)
+                e = fmax(e, fabs(o[4 * i + c] - (rgba[4 * i + c] * (1 - darken * w) + w * specular * F * sky[c])));
+            e = fmax(e, fabs(o[4 * i + 3] - rgba[4 * i + 3]));
+        }
+        fprintf(stderr, "wet_surfaces reference: max error %.2e\n", e);
+        CHECK(e < 2e-6); /* float arithmetic on values <= ~1 (downsample 1: every pixel exact) */
+        free(o);
+    }
+    fx_frame_free(f);
+    free(rgba);
+    free(d);
+    free(nrm);
+}
+
 /* The rain map goes through the context's cache (scene/aux_map.h): a stack of wet_surfaces,
  * rain_splashes and rain over frames 1..4 in one context builds the map once (plus the
  * filtered copy for the soft edges) and gives the same bits as a context without cache. */
@@ -960,6 +1024,7 @@ int main(void)
     test_splashes_downsample(ctx);
     test_splashes_reference(ctx);
     test_rain_reference(ctx);
+    test_wet_reference(ctx);
     test_cache();
     test_rain_layers_extremes(ctx);
     test_rain_downsample(ctx);
