@@ -9,10 +9,14 @@ runs (Cycles renders these fixed-seed scenes bit for bit on one machine; libfx i
 bit-identical for any thread count), so the spread seen is 0. The margins are for what
 this machine cannot show: another CPU's Cycles kernels and float rounding. They are:
   - an error (MAE) may grow to measured x 1.15 + 0.002;
-  - a ratio of means (output / truth, added light / truth's) may move by 10 % of itself;
+  - a ratio of means (output / truth, added light / truth's) and the caustics' contrast
+    (4x4 box) may move by 5 % of itself (another CPU's Cycles is another noise
+    realisation: the truth at another seed moves these by 0.1-1.2 % against the truth:
+    mean / truth 1.000-1.008, god rays' added light 1.012, caustics' contrast 0.9 %);
   - the correlation of god rays' added light with the truth's may fall by 0.03, the
-    centroid of that light may move 1.5 px farther;
-  - the caustics' contrast (4x4 box) may move by 10 % of itself.
+    centroid of that light may move 1.5 px farther.
+(The first try had 10 % for the ratios: vsm_shadows' bleed reduction fixed at 0.8 moved the
+atrium's mean / truth by 8.5 % and passed; with 5 % it fails.)
 An error that falls is not a failure (update the numbers when a change improves them).
 
 Only on Blender 3.x: 4.x and 5.x render the scenes differently (other Cycles, other
@@ -83,7 +87,7 @@ def mae_ok(got, measured):
 
 
 def ratio_ok(got, measured):
-    return abs(got - measured) <= 0.10 * abs(measured)
+    return abs(got - measured) <= 0.05 * abs(measured)
 
 
 # ---- running the scripts ----
