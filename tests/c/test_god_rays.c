@@ -411,7 +411,7 @@ static void test_methods_converge(fx_context *ctx)
                  * polar's error (interpolation across lines at the shafts' edges) grows about
                  * linearly with it, so er <= f ec, plus 2 % of the peak for the resampling
                  * not commuting exactly with the blur (its kernel stretches along the lines).
-                 * Measured (2026-12-02): er / ec 1.2-2.0 over these 9 cases, er <= 0.25 peak
+                 * Measured (2026-12-02): er / ec 1.14-1.98 over these 9 cases, er <= 0.25 peak
                  * where ec = 0.19 peak (decay 0.9, peak 0.38). The old check, ed < 0.5 peak
                  * (ed measured 0.07-0.38 peak), failed a quarter-pixel shift of the upsampling in
                  * 1 case of 9 at 0.505 peak; this one fails it in 4, a half-pixel shift in 7 (old:
