@@ -323,6 +323,44 @@ static double max_rays_diff(const float *a, const float *b, const float *img, do
     return m;
 }
 
+/* What the reduced path implies: the reference rays box-averaged over f x f cells (the
+ * reduced map's cells) and interpolated back bilinearly at the reduced texel centres
+ * ((x + 0.5) / f - 0.5, clamped to the edge texels): the resampling alone, no polar error.
+ * Returns max |(down - img) - that| over RGB. */
+static double reduced_resampling_error(const float *down, const float *ref, const float *img, int f)
+{
+    int lw = (W + f - 1) / f, lh = (H + f - 1) / f;
+    double *lo = calloc((size_t)lw * lh * 3, sizeof(double));
+    for (int Y = 0; Y < lh; Y++)
+        for (int X = 0; X < lw; X++) {
+            int n = 0;
+            for (int y = Y * f; y < Y * f + f && y < H; y++)
+                for (int x = X * f; x < X * f + f && x < W; x++, n++)
+                    for (int ch = 0; ch < 3; ch++) {
+                        size_t i = ((size_t)y * W + x) * 4 + ch;
+                        lo[((size_t)Y * lw + X) * 3 + ch] += ref[i] - img[i];
+                    }
+            for (int ch = 0; ch < 3; ch++)
+                lo[((size_t)Y * lw + X) * 3 + ch] /= n;
+        }
+    double e = 0;
+    for (int y = 0; y < H; y++)
+        for (int x = 0; x < W; x++) {
+            double u = fmin(fmax((x + 0.5) / f - 0.5, 0), lw - 1), v = fmin(fmax((y + 0.5) / f - 0.5, 0), lh - 1);
+            int X0 = (int)u, Y0 = (int)v, X1 = X0 + 1 < lw ? X0 + 1 : X0, Y1 = Y0 + 1 < lh ? Y0 + 1 : Y0;
+            double tx = u - X0, ty = v - Y0;
+            for (int ch = 0; ch < 3; ch++) {
+                const double *L = lo;
+                double a = L[((size_t)Y0 * lw + X0) * 3 + ch] * (1 - tx) + L[((size_t)Y0 * lw + X1) * 3 + ch] * tx;
+                double b = L[((size_t)Y1 * lw + X0) * 3 + ch] * (1 - tx) + L[((size_t)Y1 * lw + X1) * 3 + ch] * tx;
+                size_t i = ((size_t)y * W + x) * 4 + ch;
+                e = fmax(e, fabs((down[i] - img[i]) - (a * (1 - ty) + b * ty)));
+            }
+        }
+    free(lo);
+    return e;
+}
+
 static void test_methods_converge(fx_context *ctx)
 {
     float *img = calloc((size_t)W * H * 4, sizeof(float));
@@ -364,13 +402,187 @@ static void test_methods_converge(fx_context *ctx)
                 CHECK(ec < 0.25 * peak);
                 double ed = max_rays_diff(down, ref, img, &peak);
                 fprintf(stderr, "  polar downsample 2: %.4f of peak\n", ed);
-                CHECK(ed < 0.5 * peak); /* max error: shaft edges soften by ~2 px on 8 px stripes */
+                /* The bound the parameters imply. downsample f = 2 runs the coarse polar
+                 * (resolution 1, levels 2) on the f x f box means with the light at L / f and
+                 * interpolates the rays back bilinearly, so against the reference resampled
+                 * the same way (box means, bilinear at (x + 0.5) / f - 0.5: what is left is the
+                 * polar's own error) it errs as the coarse polar at full size would with lines
+                 * f times farther apart: the line spacing is f / resolution full pixels and the
+                 * polar's error (interpolation across lines at the shafts' edges) grows about
+                 * linearly with it, so er <= f ec, plus 2 % of the peak for the resampling
+                 * not commuting exactly with the blur (its kernel stretches along the lines).
+                 * Measured (2026-12-02): er / ec 1.14-1.98 over these 9 cases, er <= 0.25 peak
+                 * where ec = 0.19 peak (decay 0.9, peak 0.38). The old check, ed < 0.5 peak
+                 * (ed measured 0.07-0.38 peak), failed a quarter-pixel shift of the upsampling in
+                 * 1 case of 9 at 0.505 peak; this one fails it in 4, a half-pixel shift in 7 (old:
+                 * 2), the reduced light at 1.1 L / f in 6 (old: 1). */
+                double er = reduced_resampling_error(down, ref, img, 2);
+                fprintf(stderr, "  from the resampled reference %.4f of peak (bound %.4f)\n", er / peak,
+                        (2.0 * ec + 0.02 * peak) / peak);
+                CHECK(er <= 2.0 * ec + 0.02 * peak);
             }
             free(down);
             free(ref);
             free(fine);
             free(coarse);
         }
+    free(img);
+}
+
+/* ---- an independent reference: the documented model evaluated naively in double ----
+ * docs/effects/god_rays.md: occlusion (luminance) occ = c * smoothstep(threshold,
+ * threshold + knee, lum(c)) * min(1, max_source / lum(c)), lum = Rec.709 weights;
+ * rays(p) = 100 weight exposure / N * sum_{i<N} decay^(100 i / N) occ~(p - i density (p - L) / N)
+ * (the naive method; occ~ the bilinear interpolation of occ at pixel centres x + 0.5,
+ * zero outside the image), whose N -> infinity limit is the integral both methods compute;
+ * output = src + rays (add) or src + rays (1 - clamp(src, 0, 1)) (screen), alpha kept. */
+
+static double ref_smoothstep(double e0, double e1, double x)
+{
+    double t = (x - e0) / (e1 - e0);
+    t = t < 0 ? 0 : t > 1 ? 1 : t;
+    return t * t * (3 - 2 * t);
+}
+
+/* occ of the test image (double, 3 channels) for threshold, knee, max_source */
+static double *ref_occlusion(const float *img, double thr, double knee, double max_src)
+{
+    double *occ = calloc((size_t)W * H * 3, sizeof(double));
+    for (int i = 0; i < W * H; i++) {
+        const float *c = img + (size_t)i * 4;
+        double l = 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2];
+        double k = ref_smoothstep(thr, thr + knee, l) * (l > max_src ? max_src / l : 1.0);
+        for (int ch = 0; ch < 3; ch++)
+            occ[(size_t)i * 3 + ch] = c[ch] * k;
+    }
+    return occ;
+}
+
+static void ref_bilinear(const double *occ, double x, double y, double wt, double acc[3])
+{
+    double fx = x - 0.5, fy = y - 0.5;
+    int x0 = (int)floor(fx), y0 = (int)floor(fy);
+    for (int j = 0; j < 2; j++)
+        for (int i = 0; i < 2; i++) {
+            int xi = x0 + i, yi = y0 + j;
+            if (xi < 0 || yi < 0 || xi >= W || yi >= H)
+                continue;
+            double wgt = wt * (i ? fx - x0 : 1 - (fx - x0)) * (j ? fy - y0 : 1 - (fy - y0));
+            for (int ch = 0; ch < 3; ch++)
+                acc[ch] += wgt * occ[((size_t)yi * W + xi) * 3 + ch];
+        }
+}
+
+/* the rays (3 channels per pixel) by the documented N-sample sum */
+static double *ref_rays(const double *occ, rset r, int n)
+{
+    double *rays = calloc((size_t)W * H * 3, sizeof(double));
+    double lx = r.lx * W, ly = r.ly * H, scale = 100.0 * r.weight * r.exposure;
+    for (int y = 0; y < H; y++)
+        for (int x = 0; x < W; x++) {
+            double px = x + 0.5, py = y + 0.5, acc[3] = {0, 0, 0};
+            for (int i = 0; i < n; i++) {
+                double t = (double)i / n;
+                ref_bilinear(occ, px - t * r.density * (px - lx), py - t * r.density * (py - ly),
+                             pow(r.decay, 100.0 * t), acc);
+            }
+            for (int ch = 0; ch < 3; ch++)
+                rays[((size_t)y * W + x) * 3 + ch] = acc[ch] * scale / n;
+        }
+    return rays;
+}
+
+/* max |out - expected| over RGB and |alpha change|, relative to the peak of the rays */
+static double ref_error(const float *o, const float *img, const double *rays, int screen, double *peak)
+{
+    double e = 0, pk = 0;
+    for (int i = 0; i < W * H; i++) {
+        for (int ch = 0; ch < 3; ch++) {
+            double s = img[(size_t)i * 4 + ch], rv = rays[(size_t)i * 3 + ch];
+            double want = s + rv * (screen ? 1.0 - (s < 0 ? 0 : s > 1 ? 1 : s) : 1.0);
+            e = fmax(e, fabs(o[(size_t)i * 4 + ch] - want));
+            pk = fmax(pk, rv);
+        }
+        e = fmax(e, fabs(o[(size_t)i * 4 + 3] - img[(size_t)i * 4 + 3]));
+    }
+    *peak = pk;
+    return pk > 0 ? e / pk : INFINITY;
+}
+
+/* A coloured sky band with a hole, a sun disc brighter than max_source, pixels inside the
+ * knee (lum 0.9) and below the threshold (lum 0.5); threshold 0.8, knee 0.25, max_source 8. */
+static float *ref_image(void)
+{
+    float *img = malloc((size_t)W * H * 4 * sizeof(float));
+    for (int y = 0; y < H; y++)
+        for (int x = 0; x < W; x++) {
+            float *q = img + ((size_t)y * W + x) * 4;
+            double d = hypot(x + 0.5 - 60, y + 0.5 - 12);
+            float r = 0.2f, g = 0.2f, b = 0.2f;
+            if (d < 5)
+                r = 30.0f, g = 24.0f, b = 12.0f; /* lum ~ 24: scaled down to 8 */
+            else if (y < 22 && !(x >= 20 && x < 30))
+                r = 1.6f + 0.01f * x, g = 1.3f, b = 0.9f + 0.02f * y;
+            else if (y < 30)
+                r = g = b = (x % 4 < 2) ? 0.9f : 0.5f; /* in the knee / below the threshold */
+            q[0] = r, q[1] = g, q[2] = b;
+            q[3] = 0.75f;
+        }
+    return img;
+}
+
+static void test_reference_formula(fx_context *ctx)
+{
+    float *img = ref_image();
+    double *occ = ref_occlusion(img, 0.8, 0.25, 8.0);
+    const float lights[][2] = {{0.45f, 0.2f}, {0.3f, -0.4f}, {1.4f, 0.6f}};
+    for (int li = 0; li < 3; li++) {
+        rset r = defaults();
+        r.lx = lights[li][0];
+        r.ly = lights[li][1];
+        r.decay = 0.96;
+        r.density = 0.8;
+        r.weight = 1.3;
+        /* naive at N = 100 and N = 37 against the documented sum at the same N: the same
+         * arithmetic up to float rounding of the output (1e-6 of values <= ~10) */
+        const int ns[2] = {100, 37};
+        for (int k = 0; k < 2; k++) {
+            r.samples = ns[k];
+            double *rays = ref_rays(occ, r, ns[k]);
+            float *o = run_rays(ctx, img, r);
+            double peak = 0, e = o ? ref_error(o, img, rays, 0, &peak) : INFINITY;
+            fprintf(stderr, "reference: light %g,%g naive %d: max error %.2e of peak %.3f\n", r.lx, r.ly, ns[k], e,
+                    peak);
+            CHECK(peak > 0.5 && e < 1e-5);
+            free(o);
+            free(rays);
+        }
+        /* the limit (N = 4000: the sum's own error O(decay mass / N) < 1e-3 of the peak)
+         * against polar at 8 lines per pixel / 8 levels (documented: 0.05-0.06 % of the peak
+         * from naive 2000) and the screen composite */
+        double *lim = ref_rays(occ, r, 4000);
+        r.method = "polar";
+        r.polar_res = 8;
+        r.levels = 8;
+        float *o = run_rays(ctx, img, r);
+        double peak = 0, e = o ? ref_error(o, img, lim, 0, &peak) : INFINITY;
+        fprintf(stderr, "reference: light %g,%g polar 8/8: max error %.2e of peak\n", r.lx, r.ly, e);
+        CHECK(e < 2.5e-3);
+        free(o);
+        r.method = "naive";
+        r.samples = 2000;
+        fx_frame *f = et_frame(ctx, W, H, img);
+        fx_stack *s = rays_stack(ctx, r);
+        o = s && f && fx_stack_set_enum(s, 0, "composite", "screen") == FX_OK ? et_run(ctx, s, f) : NULL;
+        e = o ? ref_error(o, img, lim, 1, &peak) : INFINITY;
+        fprintf(stderr, "reference: light %g,%g naive 2000 screen: max error %.2e of peak\n", r.lx, r.ly, e);
+        CHECK(e < 2.5e-3);
+        free(o);
+        fx_stack_free(s);
+        fx_frame_free(f);
+        free(lim);
+    }
+    free(occ);
     free(img);
 }
 
@@ -474,6 +686,7 @@ int main(void)
     test_scene_light(ctx);
     test_extremes(ctx);
     test_methods_converge(ctx);
+    test_reference_formula(ctx);
     test_threads();
     test_fused_equals_buffered(ctx);
     test_sky_skip(ctx);

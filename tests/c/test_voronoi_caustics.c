@@ -749,6 +749,191 @@ static void test_in_place(void)
     }
 }
 
+/* ---- an independent reference: the pattern evaluated directly at every pixel ----
+ * From the documented definitions (docs/effects/voronoi_caustics.md, the hash's definition in math/hash.h,
+ * tu_ref_hash4 in testutil.c), written out here with no library call: a G x G grid of cells
+ * (G = round(sqrt(points))), cell size tile_size / G, one point per cell at (cx + 0.5 +
+ * 0.44 sin(2 pi h1 + w1 t), cy + 0.5 + 0.44 sin(2 pi h2 + w2 t)), w = speed (0.6 + 0.8 h),
+ * h1..h4 the cell's hash lowbias32-combined from (cx, cy, seed, 0x5eed) and its three
+ * re-hashes; the tile repeats; distances are the plain Minkowski (|dx|^d + |dy|^d)^(1/d)
+ * in cell units; F1, F2 the nearest and second nearest point's distances.
+ *  - seed mode at time 0 (sin(2 time) = 0: no colour term): out = src (1 - clamp(0.5
+ *    strength ln(1 + F1), 0, 1));
+ *  - physical: out = src (1 + strength noise' (min(g / mean(g), 16) - 1) tint), g =
+ *    exp(-(F2 - F1) / line_width), mean(g) over the 64 x 64 lattice ((c + 0.5) G / 64) of
+ *    the tile. With noise_scale 1e9 the noise is one constant over the frame (the frame
+ *    lies inside one noise cell, at its corner), so noise' is a single unknown amp in
+ *    [0.4, 1.6] strength: it is fitted (least squares) and everything else must match. */
+typedef struct ref_vor {
+    int G;
+    double px[64], py[64]; /* G <= 8 */
+    double d;
+} ref_vor;
+
+static void ref_points(ref_vor *v, int points, int seed, double t, double speed, double d)
+{
+    v->G = (int)floor(sqrt((double)points) + 0.5);
+    v->d = d;
+    for (int cy = 0; cy < v->G; cy++)
+        for (int cx = 0; cx < v->G; cx++) {
+            uint32_t h = tu_ref_hash4(cx, cy, seed, 0x5eed);
+            double h1 = tu_ref_unit(h), h2 = tu_ref_unit(tu_ref_hash_u32(h ^ 0x1234567u));
+            double h3 = tu_ref_unit(tu_ref_hash_u32(h ^ 0x89abcdefu)), h4 = tu_ref_unit(tu_ref_hash_u32(h + 77u));
+            v->px[cy * v->G + cx] = cx + 0.5 + 0.44 * sin(2 * M_PI * h1 + speed * (0.6 + 0.8 * h3) * t);
+            v->py[cy * v->G + cx] = cy + 0.5 + 0.44 * sin(2 * M_PI * h2 + speed * (0.6 + 0.8 * h4) * t);
+        }
+}
+
+/* F1, F2 at (x, y) in cell units: every point's nearest periodic image */
+static void ref_f12(const ref_vor *v, double x, double y, double *f1, double *f2)
+{
+    double G = v->G;
+    x -= G * floor(x / G);
+    y -= G * floor(y / G);
+    *f1 = *f2 = INFINITY;
+    for (int k = 0; k < v->G * v->G; k++) {
+        double best = INFINITY;
+        for (int oy = -1; oy <= 1; oy++)
+            for (int ox = -1; ox <= 1; ox++) {
+                double dx = fabs(x - (v->px[k] + ox * G)), dy = fabs(y - (v->py[k] + oy * G));
+                double dist = isinf(v->d) ? fmax(dx, dy) : pow(pow(dx, v->d) + pow(dy, v->d), 1.0 / v->d);
+                best = fmin(best, dist);
+            }
+        if (best < *f1) {
+            *f2 = *f1;
+            *f1 = best;
+        } else if (best < *f2) {
+            *f2 = best;
+        }
+    }
+}
+
+#define RW 64
+#define RH 48
+/* A flat floor: Position = (0.05 x + 0.013, 0.05 y + 0.021, 0) (two tiles of 1.6 across),
+ * colour (0.5, 0.4, 0.3, 1) */
+static fx_frame *ref_floor(fx_context *ctx, double frame)
+{
+    float *rgba = malloc((size_t)RW * RH * 4 * sizeof(float)), *pos = malloc((size_t)RW * RH * 3 * sizeof(float));
+    for (int i = 0; i < RW * RH; i++) {
+        pos[i * 3] = (float)(0.05 * (i % RW) + 0.013);
+        pos[i * 3 + 1] = (float)(0.05 * (i / RW) + 0.021);
+        pos[i * 3 + 2] = 0.0f;
+        rgba[i * 4] = 0.5f, rgba[i * 4 + 1] = 0.4f, rgba[i * 4 + 2] = 0.3f, rgba[i * 4 + 3] = 1.0f;
+    }
+    fx_frame *f = et_frame(ctx, RW, RH, rgba);
+    if (f && fx_frame_add_pass(f, "Position", 3, pos) != FX_OK) {
+        fx_frame_free(f);
+        f = NULL;
+    }
+    if (f)
+        fx_frame_set_time(f, frame, 24.0);
+    free(rgba);
+    free(pos);
+    return f;
+}
+
+static float *ref_run(fx_context *ctx, double frame, const char *quality, const char *params)
+{
+    char recipe[1024];
+    snprintf(recipe, sizeof recipe,
+             "{\"version\": 1, \"quality\": \"%s\", \"effects\": [{\"effect\": \"voronoi_caustics\", \"params\": "
+             "{\"points\": 16, \"tile_size\": 1.6, %s}}]}",
+             quality, params);
+    fx_frame *f = ref_floor(ctx, frame);
+    fx_stack *s = NULL;
+    float *o = NULL;
+    if (f && fx_stack_new(ctx, &s) == FX_OK && fx_stack_load_json(s, recipe) == FX_OK)
+        o = et_run(ctx, s, f);
+    else
+        fprintf(stderr, "reference recipe: %s\n", fx_context_error(ctx));
+    fx_stack_free(s);
+    fx_frame_free(f);
+    return o;
+}
+
+static void test_reference_seed_mode(fx_context *ctx)
+{
+    const double ds[3] = {1.5, 1.0, INFINITY};
+    const char *metric[3] = {"\"exponent\": 1.5", "\"exponent\": 1.0", "\"metric\": \"chebyshev\""};
+    const float src[3] = {0.5f, 0.4f, 0.3f};
+    for (int k = 0; k < 3; k++) {
+        ref_vor v;
+        ref_points(&v, 16, 7, 0.0, 1.0, ds[k]);
+        char params[256];
+        snprintf(params, sizeof params, "\"mode\": \"seed\", \"strength\": 1.0, \"seed\": 7, %s", metric[k]);
+        {
+            float *o = ref_run(ctx, 0.0, "reference", params);
+            double e = INFINITY, fmin1 = INFINITY, fmax1 = 0;
+            if (o) {
+                e = 0;
+                for (int i = 0; i < RW * RH; i++) {
+                    double f1, f2;
+                    ref_f12(&v, (0.05 * (i % RW) + 0.013) / 0.4, (0.05 * (i / RW) + 0.021) / 0.4, &f1, &f2);
+                    double a = fmin(fmax(0.5 * log1p(f1), 0), 1);
+                    fmin1 = fmin(fmin1, f1);
+                    fmax1 = fmax(fmax1, f1);
+                    for (int ch = 0; ch < 3; ch++)
+                        e = fmax(e, fabs(o[(size_t)i * 4 + ch] - src[ch] * (1 - a)));
+                    e = fmax(e, fabs(o[(size_t)i * 4 + 3] - 1.0));
+                }
+            }
+            fprintf(stderr, "reference seed mode d %g: max error %.2e (F1 %.3f..%.3f)\n", ds[k], e, fmin1, fmax1);
+            /* the reference preset: double all through, a float output of values ~0.5 */
+            CHECK(e < 1e-6);
+            CHECK(fmax1 > 0.4); /* the pattern spans a range of F1 (not a constant) */
+            free(o);
+        }
+    }
+}
+
+static void test_reference_physical_mode(fx_context *ctx)
+{
+    const double frame = 30.0, t = frame / 24.0, lw = 0.15, strength = 0.5; /* amp < 1: nothing clamped at 0 */
+    const float src[3] = {0.5f, 0.4f, 0.3f}, tint[3] = {0.8f, 0.95f, 1.0f};
+    ref_vor v;
+    ref_points(&v, 16, 3, t, 1.7, 2.0);
+    /* mean(g) over the 64 x 64 lattice of the tile */
+    double mean = 0;
+    for (int r = 0; r < 64; r++)
+        for (int c = 0; c < 64; c++) {
+            double f1, f2;
+            ref_f12(&v, (c + 0.5) * v.G / 64.0, (r + 0.5) * v.G / 64.0, &f1, &f2);
+            mean += exp(-(f2 - f1) / lw) / 4096.0;
+        }
+    float *o = ref_run(ctx, frame, "reference",
+                       "\"mode\": \"physical\", \"strength\": 0.5, \"line_width\": 0.15, \"seed\": 3, \"speed\": 1.7, "
+                       "\"exponent\": 2.0, \"noise_scale\": 1e9");
+    CHECK(o != NULL);
+    if (!o)
+        return;
+    /* out / (src tint) - 1 / tint = amp x, x = min(g / mean, 16) - 1: fit amp, then the residual */
+    double *x = malloc((size_t)RW * RH * sizeof(double)), sxy = 0, sxx = 0;
+    for (int i = 0; i < RW * RH; i++) {
+        double f1, f2;
+        ref_f12(&v, (0.05 * (i % RW) + 0.013) / 0.4, (0.05 * (i / RW) + 0.021) / 0.4, &f1, &f2);
+        x[i] = fmin(exp(-(f2 - f1) / lw) / mean, 16.0) - 1.0;
+        for (int ch = 0; ch < 3; ch++) {
+            double y = (o[(size_t)i * 4 + ch] / src[ch] - 1.0) / tint[ch];
+            sxy += x[i] * y;
+            sxx += x[i] * x[i];
+        }
+    }
+    double amp = sxy / sxx, e = 0, xmax = 0;
+    for (int i = 0; i < RW * RH; i++) {
+        xmax = fmax(xmax, x[i]);
+        for (int ch = 0; ch < 3; ch++)
+            e = fmax(e, fabs(o[(size_t)i * 4 + ch] - fmax(0.0, src[ch] * (1.0 + amp * x[i] * tint[ch]))));
+    }
+    fprintf(stderr, "reference physical mode: mean(g) %.4f, fitted noise' %.4f, max error %.2e (focus up to %.2f)\n",
+            mean, amp / strength, e, xmax + 1);
+    CHECK(amp >= 0.4 * strength && amp <= 1.6 * strength);
+    CHECK(xmax > 2.0); /* bright lines in the frame */
+    CHECK(e < 1e-5);   /* float arithmetic on values <= ~4 */
+    free(x);
+    free(o);
+}
+
 int main(void)
 {
     fx_context *ctx = NULL;
@@ -762,6 +947,8 @@ int main(void)
     test_extremes_and_mask(ctx);
     test_lattice(ctx);
     test_in_place();
+    test_reference_seed_mode(ctx);
+    test_reference_physical_mode(ctx);
     fx_context_free(ctx);
     return tu_finish("test_voronoi_caustics");
 }

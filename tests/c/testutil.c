@@ -108,3 +108,27 @@ char *tu_slurp(const char *path, size_t *len)
         *len = b ? (size_t)n : 0;
     return b;
 }
+
+uint32_t tu_ref_hash_u32(uint32_t x)
+{
+    x ^= x >> 16;
+    x *= 0x7feb352dU;
+    x ^= x >> 15;
+    x *= 0x846ca68bU;
+    x ^= x >> 16;
+    return x;
+}
+
+uint32_t tu_ref_hash4(int32_t a, int32_t b, int32_t c, int32_t d)
+{
+    const int32_t v[3] = {b, c, d};
+    uint32_t h = tu_ref_hash_u32((uint32_t)a);
+    for (int k = 0; k < 3; k++)
+        h = tu_ref_hash_u32(h ^ ((uint32_t)v[k] + 0x9e3779b9U + (h << 6) + (h >> 2)));
+    return h;
+}
+
+double tu_ref_unit(uint32_t h)
+{
+    return (double)(h >> 8) / 16777216.0;
+}

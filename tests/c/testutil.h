@@ -6,6 +6,7 @@
 #include "libfx/fx.h"
 
 #include <stddef.h>
+#include <stdint.h>
 #include <stdio.h>
 
 extern int tu_checks, tu_failures;
@@ -59,5 +60,11 @@ int tu_file_exists(const char *path); /* can be opened for reading */
 /* A fresh empty directory under /tmp (Windows: its temporary folder) for this test;
  * returns its path (static storage). */
 const char *tu_tmpdir(const char *name);
+/* The effects' documented hash (libfx/src/math/hash.h), written out again for the
+ * independent references of the tests (they must not call the library's code): lowbias32,
+ * a boost-style combine of (a, b, c, d), and the top 24 bits as a unit double. */
+uint32_t tu_ref_hash_u32(uint32_t x);
+uint32_t tu_ref_hash4(int32_t a, int32_t b, int32_t c, int32_t d);
+double tu_ref_unit(uint32_t h);
 
 #endif

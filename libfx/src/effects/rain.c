@@ -127,11 +127,18 @@ typedef struct rain_job {
  * Consecutive pixels of a row mostly fall in the same cells (a cell is 14 x 60 pattern
  * pixels, 1.5 to 9 frame pixels per pattern pixel), so the hashes are computed once per
  * cell change: the same values as per pixel, bit for bit. */
+/* Columns of cells a streak can reach into at most: a streak of cell ci + r lies at least
+ * (|r| - 0.85) cells from any point of cell ci, so a streak drawn we wide reaches r up to
+ * we / cw + 0.85; 3 covers we up to 3.15 cells (a pixel 44 near-layer pattern pixels wide:
+ * the far layer of a frame under ~100 lines at the defaults). Wider is clipped. */
+#define RAIN_MAX_REACH 3
+#define RAIN_SLOTS (2 * (2 * RAIN_MAX_REACH + 1))
+
 typedef struct cell_cache {
     int ci, cj, valid;
     int n;
-    float x0[6], y0[6], len[6];
-    int has[6];
+    float x0[RAIN_SLOTS], y0[RAIN_SLOTS], len[RAIN_SLOTS];
+    int has[RAIN_SLOTS];
 } cell_cache;
 
 /* The streak of cell (cx, cy) of a layer into slot k */
@@ -188,6 +195,10 @@ static float streak(const rain_job *j, float x, float y, int layer, float scale,
     float best = 0.0f;
     float wmin = footprint / k, we = p->width > wmin ? p->width : wmin;
     int reach = we > 0.15f * cw ? 1 : 0; /* wide streaks reach into the next columns */
+    if (we > 1.15f * cw) { /* and beyond them (a pixel wider than a cell: far layers at low resolution) */
+        float r = floorf(we / cw + 0.85f);
+        reach = r < (float)RAIN_MAX_REACH ? (int)r : RAIN_MAX_REACH;
+    }
     if (!cc->valid || cc->ci != ci || cc->cj != cj)
         cells_fill(j, cc, ci, cj, layer, reach);
     for (int c = 0; c < cc->n; c++) {
