@@ -370,7 +370,8 @@ def render_views(fx, scene, frames):
         views = fx.aux_views.prepare(scene, frames)
     except Exception as e:   # a failed Cycles render, an unwritable folder
         die("views: %s" % e, 1)
-    say("views: %d ready: %s" % (len(views), ", ".join(v["name"] for v in views)))
+    say("views: %d ready: %s" % (len(views), ", ".join(v["name"] for v in views)) if views
+        else "views: none (the stack reads no auxiliary view)")
 
 
 def main():

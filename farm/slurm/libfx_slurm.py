@@ -266,7 +266,10 @@ def size_task(args, nframes_per_chunk, rows):
                os.path.basename(args.sizing), scene, cpus_measured, per_frame, res, spp,
                " (--frame-seconds)" if args.frame_seconds else " on %d cores" % cpus,
                fixed, expected_s, nframes_per_chunk, minutes, TIME_MARGIN, mem, MEM_MARGIN, peak))
-    return cpus, mem, minutes, check, how
+    return {"cpus": cpus, "mem": mem, "minutes": minutes, "how": how,
+            # the views job: one Blender start and the auxiliary views, the fixed cost
+            "views_minutes": max(MIN_TIME_MIN, math.ceil(TIME_MARGIN * fixed / 60.0)),
+            "check": check}
 
 
 # ---------------------------------------------------------------- the job scripts
@@ -313,6 +316,27 @@ rc=$?
 echo "== libfx slurm: chunk $frames exit $rc at $(date -Iseconds)"
 exit $rc
 """.format(lists=lists, labels=labels, logdir=shlex.quote(logdir), lib=lib, cmd=cmd_text)
+
+
+def views_script(args, frames, logdir, fr):
+    """The views job: the auxiliary views the stack reads (light views, rain map, probes,
+    planar views) for the whole shot, rendered once beside the output before the chunks,
+    which then find them ready instead of each rendering its own (batch.py --views-only).
+    A stack that reads none costs one Blender start."""
+    cmd = blender_command(args, ["--views-only", "--frames", fr.format_frame_list(frames),
+                                 "--output", os.path.abspath(args.output)] + runner_options(args))
+    lib = "export LIBFX_LIBRARY=%s\n" % shlex.quote(os.path.abspath(args.library)) if args.library else ""
+    return """#!/bin/bash
+# The shot's auxiliary views (written by farm/slurm/libfx_slurm.py): before the chunks.
+set -u
+exec >>{log} 2>&1
+echo "== libfx slurm: views job $SLURM_JOB_ID on $(hostname) at $(date -Iseconds)"
+{lib}{cmd}
+rc=$?
+echo "== libfx slurm: views exit $rc at $(date -Iseconds)"
+exit $rc
+""".format(log=shlex.quote(os.path.join(logdir, "views.log")), lib=lib,
+           cmd=" ".join(shlex.quote(c) for c in cmd))
 
 
 def final_script(args, frames, chunk_frames, logdir, fr):
@@ -366,56 +390,67 @@ def sbatch(argv, dry_run):
     return p.stdout.strip().split(";")[0]
 
 
+def job_name(args):
+    return args.job_name or os.path.basename(args.output.rstrip("_.-/")) \
+        or os.path.splitext(os.path.basename(args.blend))[0]
+
+
+def submit_jobs(args, name, frames, chunk_frames, size, logdir):
+    """views -> chunks (array) -> final, each after the one before whatever its fate
+    (afterany): chunks render a view themselves if the views job failed, and the final
+    job reports whatever happened. Returns the three job ids."""
+    common = ["--job-name", name, "--parsable"] + (["--partition", args.partition] if args.partition else []) \
+        + args.sbatch_arg
+    views = sbatch(["sbatch"] + common + [
+        "--cpus-per-task", str(size["cpus"]), "--mem", str(size["mem"]), "--time", str(size["views_minutes"]),
+        "--output", os.path.join(logdir, "slurm-%j.out"), os.path.join(logdir, "views.sh")], args.dry_run)
+    array = sbatch(["sbatch"] + common + [
+        "--dependency", "afterany:%s" % views,
+        # --requeue: a task whose node fails runs again by itself (and resumes: the
+        # runner skips finished frames); append: Slurm's note of why stays after it.
+        "--array", "0-%d" % (len(chunk_frames) - 1), "--requeue", "--open-mode", "append",
+        "--cpus-per-task", str(size["cpus"]), "--mem", str(size["mem"]), "--time", str(size["minutes"]),
+        "--output", os.path.join(logdir, "slurm-%A_%a.out"), os.path.join(logdir, "chunk.sh")], args.dry_run)
+    start, per_frame = size["check"]
+    final = sbatch(["sbatch"] + common + [
+        "--dependency", "afterany:%s" % array, "--cpus-per-task", "1", "--mem", str(size["mem"]),
+        "--time", str(max(MIN_TIME_MIN, math.ceil(TIME_MARGIN * (start + len(frames) * per_frame) / 60))),
+        "--output", os.path.join(logdir, "slurm-%j.out"), os.path.join(logdir, "final.sh")], args.dry_run)
+    return views, array, final
+
+
 def main(argv=None):
     args = parse_args(sys.argv[1:] if argv is None else argv)
     try:
         frames = check_input(args)
         if not os.path.isfile(args.sizing):
             raise Refused("--sizing %s: no such file" % args.sizing)
-        name = args.job_name or os.path.basename(args.output.rstrip("_.-/")) \
-            or os.path.splitext(os.path.basename(args.blend))[0]
+        name = job_name(args)
         busy = [] if args.dry_run else jobs_in_flight(name)
         if busy:
             raise Refused("jobs of '%s' are still queued or running (%s): let them finish or scancel "
                           "them before submitting the shot again" % (name, ", ".join(busy)))
+        fr = load_frames_module(args.addon)
+        chunk_frames = fr.chunks(frames, args.chunk)
+        size = size_task(args, max(len(c) for c in chunk_frames), read_sizing(args.sizing))
     except Refused as e:
         print("libfx_slurm: error: %s" % e, file=sys.stderr)
         return 2
-    fr = load_frames_module(args.addon)
-    chunk_frames = fr.chunks(frames, args.chunk)
-    try:
-        cpus, mem, minutes, check, how = size_task(args, max(len(c) for c in chunk_frames),
-                                                   read_sizing(args.sizing))
-    except Refused as e:
-        print("libfx_slurm: error: %s" % e, file=sys.stderr)
-        return 2
-    final_minutes = max(MIN_TIME_MIN, math.ceil(TIME_MARGIN * (check[0] + len(frames) * check[1]) / 60))
     logdir = os.path.abspath(args.output) + "slurm"
     os.makedirs(logdir, exist_ok=True)
+    write_script(os.path.join(logdir, "views.sh"), views_script(args, frames, logdir, fr))
     write_script(os.path.join(logdir, "chunk.sh"), chunk_script(args, chunk_frames, logdir, fr))
     write_script(os.path.join(logdir, "final.sh"), final_script(args, frames, chunk_frames, logdir, fr))
-    common = ["--job-name", name, "--parsable"] + (["--partition", args.partition] if args.partition else []) \
-        + args.sbatch_arg
     print("libfx_slurm: %d frame(s) in %d chunk(s) of up to %d; %s" % (
-        len(frames), len(chunk_frames), args.chunk, how))
+        len(frames), len(chunk_frames), args.chunk, size["how"]))
     try:
-        array = sbatch(["sbatch"] + common + [
-            # --requeue: a task whose node fails runs again by itself (and resumes: the
-            # runner skips finished frames); append: Slurm's note of why stays after it.
-            "--array", "0-%d" % (len(chunk_frames) - 1), "--requeue", "--open-mode", "append",
-            "--cpus-per-task", str(cpus), "--mem", str(mem),
-            "--time", str(minutes), "--output", os.path.join(logdir, "slurm-%A_%a.out"),
-            os.path.join(logdir, "chunk.sh")], args.dry_run)
-        final = sbatch(["sbatch"] + common + [
-            "--dependency", "afterany:%s" % array, "--cpus-per-task", "1", "--mem", str(mem),
-            "--time", str(final_minutes),
-            "--output", os.path.join(logdir, "slurm-%j.out"), os.path.join(logdir, "final.sh")], args.dry_run)
+        views, array, final = submit_jobs(args, name, frames, chunk_frames, size, logdir)
     except RuntimeError as e:
         print("libfx_slurm: error: %s" % e, file=sys.stderr)
         return 1
-    print("libfx_slurm: submitted array job %s (chunks) and job %s (check, contact sheet); "
-          "logs in %s" % (array, final, logdir))
-    print("ARRAY_JOB=%s FINAL_JOB=%s" % (array, final))
+    print("libfx_slurm: submitted job %s (auxiliary views), array job %s (chunks) and job %s "
+          "(check, contact sheet); logs in %s" % (views, array, final, logdir))
+    print("VIEWS_JOB=%s ARRAY_JOB=%s FINAL_JOB=%s" % (views, array, final))
     return 0
 
 
