@@ -8,6 +8,7 @@ generated slurm.conf, loopback only), driven by farm/slurm/libfx_slurm.py.
   the 12 results read back whole and equal, bit for bit, one batch.py run of the frames;
 - a chunk whose frames fail (a recipe naming a missing light): its task exits 1, the final
   job exits 1 naming each frame with the runner's reason, and writes no contact sheet;
+- the views job renders the atrium's light view and rain map once; the chunks reuse them;
 - the node marked down mid-chunk: Slurm requeues the task, which resumes and finishes;
 - the cluster stops and leaves no process and no file.
 
