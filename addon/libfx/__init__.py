@@ -3,7 +3,9 @@
 The effects live in the C library (libfx.so.2 / libfx.dll, bound in native.py); this add-on
 builds its UI from the library's own descriptions, enables the passes the
 stack needs, writes them from the Render Result to one EXR (passes_file.py) and
-runs the stack after each rendered frame.  See docs/addon.md.
+runs the stack after each rendered frame.  See docs/addon.md; its modules stand in
+layers that only look down (docs/architecture.md, "The add-on's layers";
+tests/check_addon_layers.py checks it), changes go up through hooks.py.
 """
 
 bl_info = {
@@ -18,16 +20,27 @@ bl_info = {
 }
 
 # Reload guard (F3 > Reload Scripts, or register() twice): reload submodules in
-# dependency order so that no class of an old copy survives.
+# dependency order, bottom layer first, so that no class of an old copy survives
+# (tests/check_addon_layers.py checks that this list names every module, in order).
 if "native" in locals():
     import importlib
-    for _m in ("compat", "native", "catalog", "props", "recipe", "scene_setup", "aux_views", "render", "live", "views_job", "ui"):
+    for _m in ("log", "hooks", "native", "compat", "catalog",
+               "recipe_json", "sessions",
+               "props", "recipe", "scene_setup", "passes_file", "aux_views", "sidecars",
+               "shared_context", "worker", "ui_queue", "results",
+               "live", "pipeline", "views_job",
+               "handlers", "operators", "ui", "render"):
         if _m in locals():
             importlib.reload(locals()[_m])
 
 import bpy  # noqa: E402
 
-from . import compat, native, catalog, props, recipe, scene_setup, aux_views, render, live, views_job, ui  # noqa: E402,F401
+from . import (log, hooks, native, compat, catalog,  # noqa: E402,F401
+               recipe_json, sessions,
+               props, recipe, scene_setup, passes_file, aux_views, sidecars,
+               shared_context, worker, ui_queue, results,
+               live, pipeline, views_job,
+               handlers, operators, ui, render)
 
 _registered = []
 
@@ -40,20 +53,22 @@ def register():
         # Only a panel that says so: the rest of the add-on speaks an API this Blender
         # may not have.
         print("libfx: " + problem)
-        ui.UNSUPPORTED[:] = [problem]
+        ui.set_unsupported(problem)
         for cls in ui.unsupported_classes:
             bpy.utils.register_class(cls)
             _registered.append(cls)
         return
-    ui.UNSUPPORTED.clear()
+    ui.set_unsupported(None)
     cat = catalog.Catalog.load()
     if not cat.ok:
         print("libfx: " + cat.error)
     props.register(cat)
-    for cls in ui.classes:
+    for cls in operators.classes + ui.classes:
         bpy.utils.register_class(cls)
         _registered.append(cls)
-    render.register()
+    ui.register()
+    live.register()
+    handlers.register()
 
 
 def unregister():
@@ -61,10 +76,13 @@ def unregister():
         for cls in reversed(_registered):
             bpy.utils.unregister_class(cls)
         _registered.clear()
-        ui.UNSUPPORTED.clear()
+        ui.set_unsupported(None)
         return
-    render.unregister()
+    handlers.unregister()
+    live.unregister()
+    shared_context.free()
     views_job.unregister()
+    ui.unregister()
     for cls in reversed(_registered):
         try:
             bpy.utils.unregister_class(cls)
@@ -73,3 +91,4 @@ def unregister():
     _registered.clear()
     props.unregister()
     scene_setup.forget()
+    hooks.clear()

@@ -52,19 +52,20 @@ import time
 import bpy
 from mathutils import Euler, Matrix, Vector
 
-from . import compat, native, scene_setup
+from . import compat, native, recipe, scene_setup
+from .log import log
 
 AUX_SCENE = "libfx aux view"
-BUSY = {"on": False}   # the render handlers ignore renders made here
+BUSY = {"on": False}   # while an aux view renders here (busy())
 
 
-def log(msg):
-    print("libfx: " + msg, flush=True)
+def busy():
+    """Whether an aux view is rendering now: the render handlers ignore its renders."""
+    return BUSY["on"]
 
 
 def needed(scene):
     """[{"name", "kind", "light"?}] the scene's stack needs (library's answer)."""
-    from . import recipe
     if not scene_setup.has_stack(scene) or native.load() is None:
         return []
     if not native.has("aux_views"):

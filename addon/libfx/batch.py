@@ -107,7 +107,7 @@ def enable_addon():
         for name in sorted(sys.modules):
             mod = sys.modules[name]
             if (name == "libfx" or (name.startswith("bl_ext.") and name.endswith(".libfx"))) \
-                    and hasattr(mod, "render"):
+                    and hasattr(mod, "handlers"):
                 return mod
     here = os.path.dirname(os.path.abspath(__file__))
     parent = os.path.dirname(here)
@@ -122,14 +122,14 @@ def enable_addon():
         mod = addon_utils.enable(name, default_set=False)
         if mod is None:
             die("cannot enable the extension %s (see the messages above)" % name)
-        mod.render.on_load_post()
+        mod.handlers.on_load_post()
         return mod
     if parent not in sys.path:
         sys.path.insert(0, parent)
     import libfx  # noqa: the package this file lives in
     libfx.register()
     # The .blend was loaded before the add-on existed: import its recipe text now.
-    libfx.render.on_load_post()
+    libfx.handlers.on_load_post()
     return libfx
 
 
@@ -275,7 +275,7 @@ def render_frame(fx, scene, frame, files, paths, span):
     not (the frame's results are removed then)."""
     # From here until it succeeds the frame has no result: never an older one.
     discard(paths)
-    fx.render.RESULTS.pop((scene.name, frame), None)
+    fx.results.forget(scene.name, frame)
     # Auxiliary views (light view, rain map) only when the stack needs them; reused
     # while light and geometry do not move.
     try:
@@ -283,8 +283,7 @@ def render_frame(fx, scene, frame, files, paths, span):
         aux = fx.aux_views.prepare(scene, span)
     except Exception as e:
         return "frame %d: auxiliary views: %s" % (frame, e)
-    with fx.render._lock:
-        fx.render.AUX[(scene.name, frame)] = aux
+    fx.sidecars.set_aux(scene.name, frame, aux)
     # A one-frame animation: Blender numbers the file (a still would not) and
     # frame_change_post gives this frame's scene sidecar.
     scene.frame_start = scene.frame_end = frame
@@ -293,7 +292,7 @@ def render_frame(fx, scene, frame, files, paths, span):
     except RuntimeError as e:
         discard(paths)
         return "frame %d: Blender's render failed: %s" % (frame, str(e).strip())
-    rec = fx.render.RESULTS.get((scene.name, frame))
+    rec = fx.results.get(scene.name, frame)
     failed = None
     if rec is None:
         failed = "frame %d: the stack did not run (no render_post)" % frame

@@ -1,13 +1,13 @@
 """Live look-dev: the rendered frame's passes stay in memory and the stack re-runs on
 every change, straight into the "libfx Result" image (no disk round trip).
 
-- A **session** per scene holds the decoded passes of one rendered frame (a libfx frame,
+- A **session** per scene (sessions.py, the model) holds the decoded passes of one rendered frame (a libfx frame,
   kept after F12 or read from a passes file) and, lazily, its 1/2 and 1/4 proxies.
 - A change to the stack (parameter, mask, order, enabled flag, quality) calls
   ``changed(scene)``.  It is debounced through ``bpy.app.timers``: the stack first runs
   at the *interactive setting* (draft preset and/or a proxy, ``settings.live_setting``),
   and once no change has come for ``SETTLE_S`` at the stack's own quality, full size.
-- One worker thread runs the library (ctypes releases the GIL), so Blender's UI thread
+- One worker thread (worker.py) runs the library (ctypes releases the GIL), so Blender's UI thread
   never waits for more than a pixel copy.  A newer change replaces a run still waiting
   and cancels a final run in progress between effects (the library's progress callback);
   an interactive run in progress finishes and shows, so that a drag keeps updating.  A
@@ -17,24 +17,30 @@ every change, straight into the "libfx Result" image (no disk round trip).
 
 Nothing here is needed for batch renders; ``flush()`` lets headless tests and the
 benchmark drive the loop without an event loop.
+
+It hears of changes through hooks ("live_changed", "view_changed"; the handlers call
+``changed`` for "stack_changed") and tells the UI through hooks ("status_changed",
+"result_shown", "result_replaced"): it redraws no editor itself.
 """
 
 import os
 import threading
 import time
-from collections import OrderedDict
 
 import bpy
 
-from . import native, recipe, render
+from . import hooks, native, recipe, scene_setup, sessions, shared_context, sidecars, ui_queue
+from .log import log as _log
+from .log import trace
+from .sessions import SETTINGS
+from .worker import WORKER
 
-RESULT_IMAGE = render.RESULT_IMAGE
+RESULT_IMAGE = "libfx Result"
 
 DEBOUNCE_S = 0.0      # the run starts at the event loop's next timer pass: the property updates of
                       # one drag step (several) have all come by then and run once
 SETTLE_S = 0.35       # no change for this long: the final run
-CACHE_FRAMES = 3      # held frames per scene while scrubbing a sequence
-BUDGET_MS = 100.0     # a change's interactive image within this (issue 13); AUTO keeps to it
+BUDGET_MS = sessions.BUDGET_MS   # a change's interactive image within this (issue 13); AUTO keeps to it
 AUTO_UP_MS = 60.0     # an interactive run (library + pixels) slower than this: a quarter next (the
                       # rest of BUDGET_MS is for Blender's side: property update, hand-off, image)
 # A quarter-size run faster than this: half next. A half-size run costs up to four quarter-size
@@ -42,33 +48,7 @@ AUTO_UP_MS = 60.0     # an interactive run (library + pixels) slower than this: 
 # quarter run took 18 ms would go back to a half run over the budget, and flip at every change).
 AUTO_DOWN_MS = AUTO_UP_MS / 4 * 0.7
 
-#: live_setting -> (proxy factor, quality or None for the stack's own); "AUTO": the factor
-#: follows the time the last interactive run took (Session.auto_factor).
-SETTINGS = {
-    "AUTO": ("auto", "draft"),
-    "HALF_DRAFT": (2, "draft"),
-    "QUARTER_DRAFT": (4, "draft"),
-    "HALF": (2, None),
-    "DRAFT": (1, "draft"),
-    "FINAL_ONLY": (None, None),
-}
-SETTING_ITEMS = [
-    ("AUTO", "Auto Draft", "While values change: draft preset at half resolution, or a quarter when "
-     "half takes longer than the budget of %d ms" % BUDGET_MS, 5),
-    ("HALF_DRAFT", "1/2 Draft", "While values change: half resolution, draft preset", 0),
-    ("QUARTER_DRAFT", "1/4 Draft", "While values change: quarter resolution, draft preset", 1),
-    ("HALF", "1/2", "While values change: half resolution, the stack's quality", 2),
-    ("DRAFT", "Draft", "While values change: full resolution, draft preset", 3),
-    ("FINAL_ONLY", "Final Only", "Run only the final setting, after the change settles", 4),
-]
-VIEW_ITEMS = [
-    ("RESULT", "Result", "The stack's result", 0),
-    ("BEFORE", "Before", "The plain render (the passes' Combined)", 1),
-    ("SPLIT", "Split", "Plain render left of the split line, result right of it", 2),
-]
-
-_lock = threading.Lock()
-SESSIONS = {}        # scene name -> Session
+_lock = threading.Lock()   # the buffers below
 _free_buffers = []   # display-sized float32 arrays given back after the image took their pixels
 
 
@@ -86,94 +66,18 @@ def _give_buffer(b):
     with _lock:
         if len(_free_buffers) < 2:
             _free_buffers.append(b)
+
+
 _state = {"generation": 0, "last_change": 0.0, "pending": set(), "final_due": set()}
 
 
 def log(msg):
-    render.log("live: " + msg)
-
-
-_TRACE = bool(os.environ.get("LIBFX_LIVE_TRACE"))
-
-
-def trace(what):
-    """LIBFX_LIVE_TRACE=1: when each step of the loop happens (where a change's time goes), and
-    the calling thread's CPU time (busy or waiting)."""
-    if _TRACE:
-        import resource
-        faults = resource.getrusage(getattr(resource, "RUSAGE_THREAD", resource.RUSAGE_SELF)).ru_minflt
-        render.log("live trace %.4f %s [%s cpu %.4f, %d minor faults]" % (
-            time.perf_counter(), what, threading.current_thread().name, time.thread_time(), faults))
-
-
-class Held:
-    """One rendered frame's passes in memory, with its proxies."""
-
-    def __init__(self, frame_no, frame, path, sidecar):
-        self.frame_no = frame_no
-        self.frame = frame            # native.Frame, full size, every pass the file had
-        self.path = path              # the passes file it came from (None: gone)
-        self.stat = _stat(path)
-        self.sidecar = sidecar
-        self.proxies = {}             # factor -> native.Frame
-        self.before = None            # numpy RGBA of the plain render, display size
-
-    def proxy(self, factor):
-        if factor in (None, 1):
-            return self.frame
-        p = self.proxies.get(factor)
-        if p is None:
-            p = self.frame.reduce(factor)
-            self.proxies[factor] = p
-        return p
-
-    def close(self):
-        for p in self.proxies.values():
-            p.close()
-        self.proxies.clear()
-        self.frame.close()
-
-
-class Session:
-    def __init__(self, scene_name):
-        self.scene_name = scene_name
-        self.frames = OrderedDict()   # frame number -> Held (LRU)
-        self.current = None           # frame number shown
-        self.shown = {}               # what the image shows: setting, ms, timings, frame
-        self.error = None             # the last refused change (the image keeps the last good one)
-        self.debug_passes = []        # debug pass names of the last run
-        self.auto_factor = 2          # the proxy factor of the AUTO setting
-
-    def held(self):
-        return self.frames.get(self.current)
-
-    def add(self, held):
-        old = self.frames.pop(held.frame_no, None)
-        if old is not None:
-            old.close()
-        self.frames[held.frame_no] = held
-        while len(self.frames) > CACHE_FRAMES:
-            _, h = self.frames.popitem(last=False)
-            h.close()
-        self.current = held.frame_no
-
-    def close(self):
-        for h in self.frames.values():
-            h.close()
-        self.frames.clear()
-
-
-def _stat(path):
-    try:
-        st = os.stat(path)
-        return (st.st_mtime_ns, st.st_size)
-    except (OSError, TypeError):
-        return None
+    _log("live: " + msg)
 
 
 def session(scene):
-    with _lock:
-        return SESSIONS.get(scene.name)
+    """The scene's live session (sessions.Session), or None."""
+    return sessions.get(scene.name)
 
 
 def has_frame(scene, frame_no=None):
@@ -183,11 +87,9 @@ def has_frame(scene, frame_no=None):
 
 def drop(scene_name=None):
     """Frees held frames (one scene, or all): on unregister, file load."""
-    with _lock:
-        names = [scene_name] if scene_name else list(SESSIONS)
-        gone = [s for s in (SESSIONS.pop(n, None) for n in names) if s is not None]
-    # the context lock is taken before _lock everywhere else (hold()): never inside it
-    with render.ctx_lock():
+    gone = sessions.pop(scene_name)
+    # the context lock is taken before the sessions' lock everywhere else (hold()): never inside it
+    with shared_context.lock():
         for s in gone:
             s.close()
 
@@ -197,16 +99,11 @@ def drop(scene_name=None):
 def hold(scene_name, frame_no, frame, path, sidecar, proxy_factor=None):
     """Keeps a decoded frame (called with the context lock held, any thread). proxy_factor:
     build that proxy on the worker now, so that the first drag does not pay for it."""
-    held = Held(frame_no, frame, path, sidecar)
-    with _lock:
-        s = SESSIONS.get(scene_name)
-        if s is None:
-            s = SESSIONS[scene_name] = Session(scene_name)
-        s.add(held)
-        s.error = None
+    held = sessions.Held(frame_no, frame, path, sidecar)
+    sessions.add_held(scene_name, held)
     if proxy_factor and proxy_factor > 1:
         def build():
-            with render.ctx_lock():
+            with shared_context.lock():
                 if held.frame.ptr:   # not dropped meanwhile
                     held.proxy(proxy_factor)
         WORKER.submit_task(build)
@@ -221,7 +118,7 @@ def _read_held(ctx, scene_name, frame_no, path, sidecar, fps, proxy_factor=None,
     hold(scene_name, frame_no, fin, path, sidecar, proxy_factor)
 
 
-# ---------------------------------------------------------------- the worker
+# ---------------------------------------------------------------- jobs (run on worker.WORKER)
 
 class _Job:
     def __init__(self, scene_name, generation, recipe_dict, kind, factor, quality, view, split,
@@ -239,122 +136,17 @@ class _Job:
         self.load = load              # (frame_no, path, sidecar, fps, proxy factor, layer): read this frame first
         self.created = time.perf_counter()
 
-
-class _Worker:
-    """One thread, one job slot: a newer job replaces a waiting one (and cancels a running
-    final one, _obsolete)."""
-
-    def __init__(self):
-        self.cv = threading.Condition()
-        self.job = None
-        self.tasks = []               # callables that must all run, in order (result writes)
-        self.running = None
-        self.results = []             # finished jobs' outputs, for the main thread
-        self.thread = None
-        self.stop = False
-
-    def submit(self, job):
-        with self.cv:
-            self.job = job
-            self._start()
-            self.cv.notify_all()
-
-    def submit_task(self, fn):
-        """Runs fn() on the worker before any live job (F12's result write)."""
-        with self.cv:
-            self.tasks.append(fn)
-            self._start()
-            self.cv.notify_all()
-
-    def _start(self):
-        if self.thread is None or not self.thread.is_alive():
-            self.stop = False
-            self.thread = threading.Thread(target=self._loop, name="libfx live", daemon=True)
-            self.thread.start()
-
-    def idle(self):
-        with self.cv:
-            return self.job is None and not self.tasks and self.running is None
-
-    def wait_idle(self, timeout):
-        end = time.monotonic() + timeout
-        with self.cv:
-            while self.job is not None or self.tasks or self.running is not None:
-                left = end - time.monotonic()
-                if left <= 0:
-                    return False
-                self.cv.wait(left)
-        return True
-
-    def shutdown(self):
-        with self.cv:
-            self.stop = True
-            self.job = None
-            tasks, self.tasks = self.tasks, []
-            self.cv.notify_all()
-        for fn in tasks:   # result writes are never dropped
-            _run_task(fn)
-
-    def _loop(self):
-        while True:
-            with self.cv:
-                while self.job is None and not self.tasks and not self.stop:
-                    self.cv.wait()
-                if self.stop:
-                    return
-                task = self.tasks.pop(0) if self.tasks else None
-                if task is not None:
-                    self.running = task
-            if task is not None:
-                _run_task(task)
-                with self.cv:
-                    self.running = None
-                    self.cv.notify_all()
-                continue
-            with self.cv:
-                job, self.job = self.job, None
-                if job is None:
-                    continue
-                self.running = job
-            try:
-                trace("job %s start" % job.kind)
-                out = _run_job(job, lambda: self._obsolete(job))
-                trace("job %s end" % job.kind)
-            except Exception as e:  # never let the thread die
-                out = {"job": job, "error": "%s: %s" % (type(e).__name__, e)}
-            with self.cv:
-                self.running = None
-                if out is not None:
-                    self.results.append(out)
-                self.cv.notify_all()
-
-    def _obsolete(self, job):
-        """A newer change cancels a running final run (hundreds of ms), but not a running
-        interactive one: during a drag a change comes every few tens of ms, about what an
-        interactive run takes, so cancelling those would leave the image still until the
-        drag ends. The interactive run finishes and shows; the newest change runs next."""
-        with self.cv:
-            if self.stop:
-                return True
-            return self.job is not None and self.job.generation > job.generation and job.kind != "interactive"
-
-
-WORKER = _Worker()
-
-
-def _run_task(fn):
-    try:
-        fn()
-    except Exception as e:
-        log("background task failed: %s: %s" % (type(e).__name__, e))
+    def run(self, obsolete):
+        """On the worker (worker.Worker): what the main thread shows, or None."""
+        return _run_job(self, obsolete)
 
 
 def _run_job(job, obsolete):
     """Runs one job on the worker thread; returns what the main thread shows, or None
     (cancelled)."""
     import numpy as np
-    with render.ctx_lock():
-        ctx = render.shared_context(job.threads)
+    with shared_context.lock():
+        ctx = shared_context.get(job.threads)
         if job.load is not None:
             frame_no, path, sidecar, fps, proxy_factor, layer = job.load
             t0 = time.perf_counter()
@@ -363,9 +155,8 @@ def _run_job(job, obsolete):
             except native.LibfxError as e:
                 return {"job": job, "error": str(e)}
             log("frame %d: passes read in %.0f ms" % (frame_no, (time.perf_counter() - t0) * 1e3))
-        with _lock:
-            s = SESSIONS.get(job.scene_name)
-            held = s.held() if s is not None else None
+        s = sessions.get(job.scene_name)
+        held = s.held() if s is not None else None
         if held is None:
             return None
         if obsolete():
@@ -558,7 +349,7 @@ def _submit_new(scene, kind):
         s = session(scene)
         if s is not None:
             s.error = str(e)
-            _redraw_panels()
+            hooks.notify("status_changed")
         return
     _submit(job)
 
@@ -574,9 +365,7 @@ def _submit(job):
 
 
 def _poll():
-    with WORKER.cv:
-        results, WORKER.results = WORKER.results, []
-    for out in results:
+    for out in WORKER.take_results():
         _apply(out)
     return None if WORKER.idle() and not WORKER.results else POLL_S
 
@@ -593,14 +382,13 @@ def next_auto_factor(factor, ms):
 def _apply(out):
     job = out["job"]
     scene = bpy.data.scenes.get(job.scene_name)
-    with _lock:
-        s = SESSIONS.get(job.scene_name)
+    s = sessions.get(job.scene_name)
     if scene is None or s is None:
         return
     if out.get("error"):
         s.error = out["error"] + ("  (showing the last good result)" if s.shown else "")
         log("%s: %s" % (job.scene_name, out["error"]))
-        _redraw_panels()
+        hooks.notify("status_changed")
         return
     s.error = None
     s.debug_passes = out["debug_passes"]
@@ -614,7 +402,7 @@ def _apply(out):
     s.shown = {"kind": job.kind, "factor": job.factor or 1, "quality": job.quality or scene.libfx.quality,
                "frame": out["frame"], "timings": out["timings"], "ms": out["ms"],
                "warnings": out["warnings"], "time": time.time(), "generation": job.generation}
-    _redraw_panels()
+    hooks.notify("status_changed")
 
 
 def result_image(w, h):
@@ -632,7 +420,7 @@ def result_image(w, h):
     # Colour-managed like the render: the scene's view transform, look, exposure.
     img.use_view_as_render = True
     if old is not None:
-        _replace_in_editors(old, img)
+        hooks.notify("result_replaced", old, img)   # editors showing the old one show the new one
         bpy.data.images.remove(old)
     return img
 
@@ -644,37 +432,7 @@ def show_pixels(pixels, w, h):
     trace("pixels set")
     img.update()
     trace("image updated")
-    _show_in_editor(img)
-
-
-def _replace_in_editors(old, new):
-    wm = bpy.context.window_manager
-    for win in (wm.windows if wm else []):
-        for area in win.screen.areas:
-            if area.type == "IMAGE_EDITOR" and area.spaces.active.image == old:
-                area.spaces.active.image = new
-
-
-def _show_in_editor(img):
-    wm = bpy.context.window_manager
-    if wm is None:
-        return
-    for win in wm.windows:
-        for area in win.screen.areas:
-            if area.type == "IMAGE_EDITOR":
-                space = area.spaces.active
-                if space.image is None or space.image.type == "RENDER_RESULT" or space.image == img:
-                    space.image = img
-                    area.tag_redraw()
-                    return
-
-
-def _redraw_panels():
-    wm = bpy.context.window_manager
-    for win in (wm.windows if wm else []):
-        for area in win.screen.areas:
-            if area.type in ("PROPERTIES", "NODE_EDITOR", "IMAGE_EDITOR"):
-                area.tag_redraw()
+    hooks.notify("result_shown", img)   # an Image Editor shows it (ui.py)
 
 
 # ---------------------------------------------------------------- entry points
@@ -692,30 +450,26 @@ def show_after_render(scene_name, frame_no, fout, timings):
         show_pixels(pixels, w, h)
         _give_buffer(pixels)
         info["shown_at"] = time.perf_counter()
-        with _lock:
-            s = SESSIONS.get(scene_name)
+        s = sessions.get(scene_name)
         if s is not None:
             s.shown = info
             s.error = None
-        _redraw_panels()
+        hooks.notify("status_changed")
 
-    render.to_ui(show)
+    ui_queue.to_ui(show)
 
 
 def start(scene, frame_no=None, path=None, sidecar=None):
     """Loads a frame's passes (from ``path``, default the scene's passes file of the frame)
     and shows its final result: "Apply to Last Render", scrubbing, file reloads."""
-    from . import scene_setup
     if not native.has("live"):
         log(native.feature_problem("live") or "live look-dev is unavailable")
         return
     frame_no = scene.frame_current if frame_no is None else frame_no
     path = path or scene_setup.passes_path(scene, frame_no)
     if sidecar is None:
-        sidecar = render.sidecar_for(scene, frame_no)
-    with _lock:
-        if scene.name not in SESSIONS:
-            SESSIONS[scene.name] = Session(scene.name)
+        sidecar = sidecars.sidecar_for(scene, frame_no)
+    sessions.ensure(scene.name)
     fps = scene.render.fps / (scene.render.fps_base or 1.0)
     layer = scene_setup.passes_layer(scene)
     _submit(_make_job(scene, "final", load=(frame_no, path, sidecar, fps, proxy_factor_of(scene), layer)))
@@ -728,7 +482,7 @@ def refresh_if_stale(scene):
     h = s.held() if s else None
     if h is None or h.path is None:
         return
-    st = _stat(h.path)
+    st = sessions.stat(h.path)
     if st is None:
         if h.stat is not None:
             s.error = "the passes file %s is gone: showing the frame held in memory" % h.path
@@ -741,7 +495,6 @@ def refresh_if_stale(scene):
 
 def on_frame_change(scene):
     """Scrubbing: show the new frame's result when its passes are held or on disk."""
-    from . import scene_setup
     if not active(scene) or bpy.app.is_job_running("RENDER"):
         return
     s = session(scene)
@@ -764,8 +517,7 @@ def flush(timeout=60.0):
 
     def drain():   # the pixels stay with the results for the caller
         WORKER.wait_idle(timeout)
-        with WORKER.cv:
-            res, WORKER.results = WORKER.results, []
+        res = WORKER.take_results()
         for out in res:
             out["keep_pixels"] = True
             _apply(out)
@@ -782,7 +534,15 @@ def flush(timeout=60.0):
     return applied
 
 
+def register():
+    """Listens to the live settings' notices."""
+    hooks.listen("live_changed", changed)
+    hooks.listen("view_changed", reshow)
+
+
 def unregister():
+    hooks.unlisten("live_changed", changed)
+    hooks.unlisten("view_changed", reshow)
     for fn in (_kick, _settle, _poll):
         try:
             if bpy.app.timers.is_registered(fn):

@@ -18,6 +18,8 @@ from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProp
                        StringProperty)
 
 from . import catalog as _catalog
+from . import hooks, sessions
+from .log import trace
 
 #: The catalogue the classes were generated from (set by register()).
 CATALOG = None
@@ -27,6 +29,19 @@ _suspend = [0]      # >0 while recipes are being imported: no pass syncing per p
 
 def catalog():
     return CATALOG
+
+
+def settings_of(context):
+    """The context scene's libfx settings (None while the add-on is not registered)."""
+    return getattr(context.scene, "libfx", None)
+
+
+def active_item(context):
+    """The stack item the list has active, or None."""
+    s = settings_of(context)
+    if s is None or not (0 <= s.active_index < len(s.stack)):
+        return None
+    return s.stack[s.active_index]
 
 
 def group_attr(effect_name):
@@ -57,32 +72,28 @@ def _scene_of(self, context):
 def _on_change(self, context):
     if _suspend[0]:
         return
-    from . import live, scene_setup
-    live.trace("update callback")
-    scene_setup.stack_changed(_scene_of(self, context))
+    trace("update callback")
+    hooks.notify("stack_changed", _scene_of(self, context))
 
 
 def _on_live_change(self, context):
     """Live settings: the stack is the same, only what is shown or how it runs changed."""
     if _suspend[0]:
         return
-    from . import live
-    live.changed(_scene_of(self, context))
+    hooks.notify("live_changed", _scene_of(self, context))
 
 
 def _on_view_change(self, context):
     if _suspend[0]:
         return
-    from . import live
-    live.reshow(_scene_of(self, context))
+    hooks.notify("view_changed", _scene_of(self, context))
 
 
 _DEBUG_ITEMS = []   # Blender keeps no copy of dynamic enum strings: they live here
 
 
 def _debug_pass_items(self, context):
-    from . import live
-    s = live.session(_scene_of(self, context)) if context else None
+    s = sessions.get(_scene_of(self, context).name) if context else None
     names = s.debug_passes if s is not None else []
     _DEBUG_ITEMS[:] = [("NONE", "Result", "Show the stack's result", 0)] + [
         (n, n, "Show the debug pass %s of the last run" % n, i + 1) for i, n in enumerate(names)]
@@ -208,8 +219,7 @@ PASSES_CODECS = [
 
 
 def _live_items(name):
-    from . import live
-    return list(getattr(live, name))
+    return list(getattr(sessions, name))
 
 
 def _settings_class(item_cls):

@@ -1,4 +1,4 @@
-"""The scene's effect stack <-> the library's recipe JSON.
+"""The scene's effect stack <-> the library's recipe JSON (recipe_json.py: the JSON itself).
 
 One code path for the UI, F12, batch runs and the CLI: whatever runs, runs the
 JSON that ``to_recipe`` makes.  Only parameters the user set are written (the
@@ -7,46 +7,15 @@ sets exactly the parameters the recipe names.
 """
 
 import json
-import struct
 
 import bpy
 
-from . import native, props
+from . import hooks, native, props
+from . import recipe_json
+from .recipe_json import (RECIPE_VERSION, RecipeError, indices, library_migrate,  # noqa: F401
+                          one_or_list, parse, raw_to_json, validate, value_from_json, value_to_json)
 
-RECIPE_VERSION = 1
 TEXT_NAME = "libfx_recipe.json"
-
-
-class RecipeError(ValueError):
-    pass
-
-
-def _f32(v):
-    """The shortest decimal that is the same float32 (clean JSON from float32 RNA values)."""
-    v = float(v)
-    packed = struct.pack("<f", v)
-    for digits in range(6, 10):
-        s = float("%.*g" % (digits, v))
-        if struct.pack("<f", s) == packed:
-            return s
-    return v
-
-
-def _indices(text, what):
-    out = []
-    for tok in text.replace(";", ",").split(","):
-        tok = tok.strip()
-        if not tok:
-            continue
-        try:
-            out.append(int(tok))
-        except ValueError:
-            raise RecipeError("%s: '%s' is not an integer pass index" % (what, tok))
-    return out
-
-
-def _one_or_list(values):
-    return values[0] if len(values) == 1 else list(values)
 
 
 def mask_to_json(item):
@@ -56,19 +25,19 @@ def mask_to_json(item):
     if "MATERIAL" in kinds:
         names = [n.name for n in item.mask_materials if n.name]
         if names:
-            m["material"] = _one_or_list(names)
+            m["material"] = one_or_list(names)
     if "OBJECT" in kinds:
         names = [n.name for n in item.mask_objects if n.name]
         if names:
-            m["object"] = _one_or_list(names)
+            m["object"] = one_or_list(names)
     if "MATERIAL_INDEX" in kinds:
-        idx = _indices(item.mask_material_indices, where + " material indices")
+        idx = indices(item.mask_material_indices, where + " material indices")
         if idx:
-            m["material_index"] = _one_or_list(idx)
+            m["material_index"] = one_or_list(idx)
     if "OBJECT_INDEX" in kinds:
-        idx = _indices(item.mask_object_indices, where + " object indices")
+        idx = indices(item.mask_object_indices, where + " object indices")
         if idx:
-            m["object_index"] = _one_or_list(idx)
+            m["object_index"] = one_or_list(idx)
     if "RECT" in kinds:
         m["rect"] = list(item.mask_rect)
     if m and item.mask_invert:
@@ -77,33 +46,7 @@ def mask_to_json(item):
 
 
 def _value_to_json(p, v, resolve_paths):
-    if p.type == "float":
-        return _f32(v)
-    if p.type == "int":
-        return int(v)
-    if p.type == "bool":
-        return bool(v)
-    if p.type == "enum":
-        return str(v)
-    if p.type == "floats":
-        return [_f32(x) for x in v]
-    s = str(v)
-    if resolve_paths and p.hint == "path" and s:
-        s = bpy.path.abspath(s)
-    return s
-
-
-def _raw_to_json(v):
-    """An ID-property value the current parameter table does not describe, as JSON."""
-    if hasattr(v, "to_dict"):
-        return {k: _raw_to_json(x) for k, x in v.to_dict().items()}
-    if hasattr(v, "to_list"):
-        v = v.to_list()
-    if isinstance(v, (list, tuple)):
-        return [_raw_to_json(x) for x in v]
-    if isinstance(v, float):
-        return _f32(v)
-    return v
+    return value_to_json(p, v, bpy.path.abspath if resolve_paths else None)
 
 
 def set_params(item, eff, resolve_paths=True):
@@ -134,7 +77,7 @@ def stored_params(item, eff, resolve_paths=True):
             if group.is_property_set(p.prop):
                 params[p.name] = _value_to_json(p, getattr(group, p.prop), resolve_paths)
         else:
-            params[key] = _raw_to_json(group[key])
+            params[key] = raw_to_json(group[key])
     return params
 
 
@@ -184,19 +127,7 @@ def to_json_text(scene, resolve_paths=True):
 
 def _set_param(group, p, value, where):
     try:
-        if p.type == "float":
-            v = float(value)
-        elif p.type == "int":
-            v = int(value)
-        elif p.type == "bool":
-            v = bool(value)
-        elif p.type == "enum":
-            v = p.items[int(value)] if isinstance(value, (int, float)) else str(value)
-        elif p.type == "floats":
-            v = [float(x) for x in value]
-        else:
-            v = str(value)
-        setattr(group, p.prop, v)
+        setattr(group, p.prop, value_from_json(p, value))
     except (TypeError, ValueError, IndexError) as e:
         raise RecipeError("%s: parameter '%s' = %r: %s" % (where, p.name, value, e))
 
@@ -258,19 +189,6 @@ def fill_item(item, entry, n=0):
 
 # ---------------------------------------------------------------- parameter versions
 
-def library_migrate(entry):
-    """(the entry with its parameters migrated by the library to the effect's current
-    table, the library's warnings): fx_stack_load_json migrates an entry that carries an
-    older "params_version", fx_stack_to_json writes the result."""
-    with native.Context(1) as ctx:
-        stack = native.Stack(ctx, {"version": RECIPE_VERSION, "effects": [entry]})
-        try:
-            out = stack.to_json()["effects"][0]
-        finally:
-            stack.close()
-        return out, ctx.warnings()
-
-
 def migrate_item(item, n=0, migrate=library_migrate):
     """Brings an item whose parameters were saved with an older table up to the library's:
     its stored values (old names included) go through ``migrate``, the migrated values are
@@ -286,17 +204,8 @@ def migrate_item(item, n=0, migrate=library_migrate):
     old = item.params_version
     entry = item_to_json(item, resolve_paths=False)
     migrated, warnings = migrate(entry)
-    new_params = migrated.get("params") or {}
-    # Only what lands in this table is written back: a library that stops short of the
-    # table's version, or returns names the table lacks, would otherwise drop values.
-    got = int(migrated.get("params_version", 1))
-    if got != eff.params_version:
-        raise RecipeError("the library migrates to parameter version %d, the panel's table is version %d"
-                          % (got, eff.params_version))
-    unknown = sorted(k for k in new_params if eff.param(k) is None)
-    if unknown:
-        raise RecipeError("the migrated parameters include %s, which the panel's table does not have"
-                          % ", ".join(unknown))
+    # Only what lands in this table is written back.
+    new_params = recipe_json.check_migrated(migrated, eff)
     group = props.effect_group(item)
     with props.suspended():
         known = {p.prop for p in eff.params}
@@ -326,24 +235,6 @@ def migrate_stack(scene, migrate=library_migrate):
     return out
 
 
-def parse(text):
-    try:
-        recipe = json.loads(text)
-    except ValueError as e:
-        raise RecipeError("recipe is not JSON: %s" % e)
-    if not isinstance(recipe, dict) or not isinstance(recipe.get("effects", []), list):
-        raise RecipeError("recipe must be an object with an 'effects' list")
-    return recipe
-
-
-def validate(recipe):
-    """Lets the library check the recipe (messages name effect, parameter, range)."""
-    if native.load() is None:
-        return
-    with native.Context(1) as ctx:
-        native.Stack(ctx, recipe).close()
-
-
 def from_recipe(scene, recipe, check=True):
     """Replaces the scene's stack with the recipe's effects."""
     if isinstance(recipe, str):
@@ -359,8 +250,7 @@ def from_recipe(scene, recipe, check=True):
         for n, entry in enumerate(recipe.get("effects", [])):
             fill_item(s.stack.add(), entry, n)
         s.active_index = 0
-    from . import scene_setup
-    scene_setup.stack_changed(scene)
+    hooks.notify("stack_changed", scene)
 
 
 def load_text_block(scene, force=False):

@@ -23,7 +23,7 @@ from collections import OrderedDict
 
 import bpy
 
-from . import compat, native
+from . import compat, native, recipe
 
 RL_NODE = "libfx Render Layers"
 FO_NODE = "libfx passes"
@@ -39,7 +39,9 @@ def status(scene):
 LIGHT_GROUP_SETTING = "lightgroup:"
 
 
-def _set_status(scene, **kw):
+def set_status(scene, **kw):
+    """Sets entries of the scene's status (the panel shows it): "error", "warnings",
+    "passes", "camera", "aux_views", "migrated"."""
     st = STATUS.setdefault(scene.name, {})
     st.update(kw)
 
@@ -198,43 +200,30 @@ def forget():
     STATUS.clear()
 
 
-def stack_changed(scene):
-    """A stack setting changed (property update, operator, import): the recipe is built once
-    here, the passes follow it and the live loop runs it."""
-    from . import live, recipe
-    try:
-        rec = recipe.to_recipe(scene)
-    except ValueError:
-        rec = None   # sync builds it again and puts the message in the panel
-    request_sync(scene, rec)
-    live.changed(scene, rec)
-
-
 def request_sync(scene, rec=None):
     """From property updates and imports: keep the view layer passes in step."""
     try:
         sync(scene, rec)
     except Exception as e:  # never let a UI update raise
-        _set_status(scene, error=str(e))
+        set_status(scene, error=str(e))
 
 
 def sync(scene, rec=None):
     """Enables exactly the passes the stack needs; returns the library's answer or None.
     ``rec``: the stack's recipe, when the caller has built it already."""
     if native.load() is None:
-        _set_status(scene, error=native.load_error())
+        set_status(scene, error=native.load_error())
         return None
     if not has_stack(scene):
         _restore_settings(scene, keep=set())
         _restore_light_group(scene)
-        _set_status(scene, error=None, warnings=[], passes=[], camera=False, aux_views=[])
+        set_status(scene, error=None, warnings=[], passes=[], camera=False, aux_views=[])
         return None
     try:
-        from . import recipe
         got = answers(recipe.to_recipe(scene) if rec is None else rec)
         req = got["required"]
     except (native.LibfxError, ValueError) as e:
-        _set_status(scene, error=str(e))
+        set_status(scene, error=str(e))
         return None
     warnings = []
     vl = render_view_layer(scene)
@@ -275,7 +264,7 @@ def sync(scene, rec=None):
     problem = scene_problem(scene, create_folder=False)
     if problem:
         warnings.append(problem)
-    _set_status(scene, error=None, warnings=warnings, passes=req.get("passes", []),
+    set_status(scene, error=None, warnings=warnings, passes=req.get("passes", []),
                 camera=bool(req.get("camera", False)),
                 aux_views=[v["name"] for v in got["aux_views"]])
     return req

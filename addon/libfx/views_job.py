@@ -8,7 +8,8 @@ exactly as a batch run does; the UI polls it from a timer and says when the view
 ready. F12 and the live loop then read them from disk (aux_views.from_disk).
 
 One job at a time. ViewsJob has no bpy.app.timers of its own, so a headless test can
-start one and poll it by hand.
+start one and poll it by hand. The panel's line (status_line) changes as it runs: the
+"status_changed" notice (hooks.py) lets the UI redraw.
 """
 
 import os
@@ -18,7 +19,8 @@ import time
 
 import bpy
 
-from . import render, scene_setup
+from . import hooks, scene_setup
+from .log import log
 
 POLL_S = 0.25
 
@@ -106,7 +108,7 @@ def start(scene):
                            % (time.monotonic() - STATE["job"].started))
     job = ViewsJob(scene, scene.frame_current)
     STATE["job"] = job
-    render.log("views: frame %d of '%s' in a background Blender: %s"
+    log("views: frame %d of '%s' in a background Blender: %s"
                % (job.frame, job.scene_name, " ".join(job.command)))
     if not bpy.app.background:
         bpy.app.timers.register(_poll, first_interval=POLL_S)
@@ -128,19 +130,11 @@ def _poll():
     if job is None:
         return None
     res = job.poll()
-    _redraw()
+    hooks.notify("status_changed")   # the panels' line (ui.py redraws them)
     if res is None:
         return POLL_S
-    render.log("views: %s%s (%.1f s)" % ("" if res[0] else "failed: ", res[1], time.monotonic() - job.started))
+    log("views: %s%s (%.1f s)" % ("" if res[0] else "failed: ", res[1], time.monotonic() - job.started))
     return None
-
-
-def _redraw():
-    wm = bpy.context.window_manager
-    for win in (wm.windows if wm else []):
-        for area in win.screen.areas:
-            if area.type == "PROPERTIES":
-                area.tag_redraw()
 
 
 def unregister():

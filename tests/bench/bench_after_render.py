@@ -7,7 +7,7 @@ measured in a headless Blender session driven by a script (not a timed test).
 
 Per scene, one Blender session renders frame 1 (Cycles, 1 sample: the render's own time is not
 counted) --runs times with the add-on's render_post replaced by the F12 branch of it
-(`render.after_render(scene, frame, ui=True)`, then the UI queue drained, as the timers do in
+(`pipeline.after_render(scene, frame, ui=True)`, then the UI queue drained, as the timers do in
 the UI): the passes file written from the Render Result, read, the stack, the result's pixels
 in the "libfx Result" image. The aux views the stack reads are rendered once before, untimed. The clock starts in a render_post handler placed before the
 add-on's, i.e. when Blender has finished the render, and stops when the image holds the result.
@@ -38,8 +38,8 @@ A = json.loads(sys.argv[sys.argv.index("--") + 1])
 sys.path.insert(0, A["addon"])
 import libfx
 libfx.register()
-from libfx import compat, live, render, scene_setup
-render.on_load_post()
+from libfx import aux_views, compat, handlers, live, passes_file, pipeline, scene_setup, sidecars, ui_queue
+handlers.on_load_post()
 scene = bpy.context.scene
 scene.render.filepath = A["prefix"]
 scene.render.resolution_x, scene.render.resolution_y = A["w"], A["h"]
@@ -51,10 +51,10 @@ scene.libfx.live = True
 scene.libfx.show_result = True
 if A["codec"]:
     scene.libfx.passes_codec = A["codec"]
-bpy.app.handlers.render_post.remove(render.on_render_post)
+bpy.app.handlers.render_post.remove(handlers.on_render_post)
 MODES = ("ram", "kept")
 T = {m: {"shown": [], "write_passes": [], "result_exr": [], "parts": []} for m in MODES}
-_write = render.passes_file.write
+_write = passes_file.write
 
 def timed_write(sc, frame):
     t = time.perf_counter()
@@ -62,23 +62,23 @@ def timed_write(sc, frame):
         return _write(sc, frame)
     finally:
         T[T["mode"]]["write_passes"].append((time.perf_counter() - t) * 1e3)
-render.passes_file.write = timed_write
+passes_file.write = timed_write
 
 def stamp(sc, *a):
     T["t0"] = time.perf_counter()
 
 def f12(sc, *a):
-    if render.aux_views.BUSY["on"]:
+    if aux_views.busy():
         return
     t_w = time.perf_counter()
-    rec = render.after_render(sc, sc.frame_current, ui=True)
+    rec = pipeline.after_render(sc, sc.frame_current, ui=True)
     t_pf = time.perf_counter()
-    render._drain_ui()
+    ui_queue.drain()
     t1 = time.perf_counter()
     M = T[T["mode"]]
     M["parts"].append([(t_w - T["t0"]) * 1e3, (t_pf - t_w) * 1e3, (t1 - t_pf) * 1e3])
     assert rec["ok"], rec
-    assert bpy.data.images.get(render.RESULT_IMAGE) is not None
+    assert bpy.data.images.get(live.RESULT_IMAGE) is not None
     live.WORKER.wait_idle(300)
     M["result_exr"].append((time.perf_counter() - t1) * 1e3)
     M["shown"].append((t1 - T["t0"]) * 1e3)
@@ -86,7 +86,7 @@ def f12(sc, *a):
 
 # the aux views the stack reads (light view, rain map, probes), rendered once beforehand as
 # a batch or the panel's button does; not timed
-render.AUX[(scene.name, scene.frame_current)] = render.aux_views.prepare(scene, [scene.frame_current])
+sidecars.set_aux(scene.name, scene.frame_current, aux_views.prepare(scene, [scene.frame_current]))
 bpy.app.handlers.render_post.insert(0, stamp)
 bpy.app.handlers.render_post.append(f12)
 for r in range(A["runs"]):

@@ -14,7 +14,7 @@ In one Blender session per scene:
 - **held**: `live.start()` reads the passes into memory and shows the final result
   (read + stack + pixels into the "libfx Result" image);
 - **after render**: what F12 adds after Blender's File Output node has written the passes:
-  `render.process_frame(hold, show)`: read, stack, result pixels into the image
+  `pipeline.process_frame(hold, show)`: read, stack, result pixels into the image
   (the result EXR is written after that, on the worker, and is listed apart);
 - per effect of the stack, a change of its first look parameter: from setting the property
   (the update callback, the debounced run) to the updated image, at the interactive
@@ -42,8 +42,8 @@ A = json.loads(sys.argv[sys.argv.index("--") + 1])
 sys.path.insert(0, A["addon"])
 import libfx
 libfx.register()
-from libfx import live, render, props
-render.on_load_post()   # the .blend was read before the add-on registered: its recipe text
+from libfx import handlers, live, pipeline, props, sidecars, ui_queue
+handlers.on_load_post()   # the .blend was read before the add-on registered: its recipe text
 scene = bpy.context.scene
 scene.render.filepath = A["prefix"]
 scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = 1920, 1080, 100
@@ -72,15 +72,15 @@ for r in range(A["runs"]):
     t.append((time.perf_counter() - t0) * 1e3)
 rows.append({"what": "load passes + final + image", "effect": "stack", "ms": med(t)})
 # after render: process_frame as F12 calls it (hold, show), the write apart
-render.SIDECARS[(scene.name, 1)] = side
+sidecars.store(scene.name, 1, side)
 scene.libfx.keep_passes = True
 tr, tw = [], []
 for r in range(A["runs"]):
     live.drop()
     t0 = time.perf_counter()
-    rec = render.process_frame(scene, 1, passes_file=A["passes"], sidecar=side, hold=True, show=True,
-                               defer_write=True)
-    render._drain_ui()
+    rec = pipeline.process_frame(scene, 1, passes_file=A["passes"], sidecar=side, hold=True, show=True,
+                                 defer_write=True)
+    ui_queue.drain()
     t1 = time.perf_counter()
     live.WORKER.wait_idle(120)
     t2 = time.perf_counter()

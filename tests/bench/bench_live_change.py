@@ -37,8 +37,8 @@ A = json.loads(sys.argv[sys.argv.index("--") + 1])
 sys.path.insert(0, A["addon"])
 import libfx
 libfx.register()
-from libfx import live, render, props, recipe, native
-render.on_load_post()
+from libfx import handlers, live, props, recipe, native
+handlers.on_load_post()
 scene = bpy.context.scene
 scene.render.filepath = A["prefix"]
 scene.frame_set(1)
