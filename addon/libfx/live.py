@@ -48,6 +48,8 @@ AUTO_UP_MS = 60.0     # an interactive run (library + pixels) slower than this: 
 # quarter run took 18 ms would go back to a half run over the budget, and flip at every change).
 AUTO_DOWN_MS = AUTO_UP_MS / 4 * 0.7
 
+WATCH_S = 1.0         # how often the UI looks whether a held frame's passes file changed on disk
+
 _lock = threading.Lock()   # the buffers below
 _free_buffers = []   # display-sized float32 arrays given back after the image took their pixels
 
@@ -303,10 +305,10 @@ def reshow(scene):
     _register_timer(_settle, DEBOUNCE_S)
 
 
-def _register_timer(fn, interval):
+def _register_timer(fn, interval, persistent=False):
     try:
         if not bpy.app.timers.is_registered(fn):
-            bpy.app.timers.register(fn, first_interval=interval)
+            bpy.app.timers.register(fn, first_interval=interval, persistent=persistent)
     except Exception:
         pass
 
@@ -477,7 +479,8 @@ def start(scene, frame_no=None, path=None, sidecar=None):
 
 def refresh_if_stale(scene):
     """The held frame's passes file changed on disk (re-rendered, replaced): read it again.
-    Deleted: keep what is in memory and say so."""
+    Deleted: keep what is in memory and say so. The UI calls it from a timer
+    (_watch_passes_files), for the scenes its windows show."""
     s = session(scene)
     h = s.held() if s else None
     if h is None or h.path is None:
@@ -487,6 +490,7 @@ def refresh_if_stale(scene):
         if h.stat is not None:
             s.error = "the passes file %s is gone: showing the frame held in memory" % h.path
             h.stat = None
+            hooks.notify("status_changed")
         return
     if st != h.stat:
         log("frame %d: %s changed on disk: reading it again" % (h.frame_no, h.path))
@@ -534,16 +538,39 @@ def flush(timeout=60.0):
     return applied
 
 
+def _watch_passes_files():
+    """Timer (UI sessions only): for the scenes the windows show with Live Update on, a held
+    frame's passes file that changed on disk is read again and one that is gone is said so
+    in the panel (refresh_if_stale). Never from a panel's draw()."""
+    try:
+        wm = bpy.context.window_manager
+        seen = set()
+        for win in (wm.windows if wm else []):
+            scene = win.scene
+            if scene is None or scene.name in seen:
+                continue
+            seen.add(scene.name)
+            s = _settings_of(scene)
+            if s is not None and s.live:
+                refresh_if_stale(scene)
+    except Exception as e:   # a timer that raises is dropped by Blender: keep watching
+        log("watching the passes files: %s: %s" % (type(e).__name__, e))
+    return WATCH_S
+
+
 def register():
-    """Listens to the live settings' notices."""
+    """Listens to the live settings' notices; in a UI session, watches the held frames'
+    passes files."""
     hooks.listen("live_changed", changed)
     hooks.listen("view_changed", reshow)
+    if not bpy.app.background:
+        _register_timer(_watch_passes_files, WATCH_S, persistent=True)
 
 
 def unregister():
     hooks.unlisten("live_changed", changed)
     hooks.unlisten("view_changed", reshow)
-    for fn in (_kick, _settle, _poll):
+    for fn in (_kick, _settle, _poll, _watch_passes_files):
         try:
             if bpy.app.timers.is_registered(fn):
                 bpy.app.timers.unregister(fn)

@@ -1,9 +1,10 @@
 """The UI: the stack list, the add menu and the panels (Properties > Output, Compositor
 sidebar); the operators they show are in operators.py.
 
-The UI hears what changed through hooks.py and does the redrawing itself:
-"status_changed" (a live run, a views job) redraws the panels, "result_shown" /
-"result_replaced" put the "libfx Result" image into an Image Editor.
+Panels only draw: no draw() starts a job or redraws an editor. The UI hears what changed
+through hooks.py and does the redrawing itself: "status_changed" (a live run, a views job)
+redraws the panels, "result_shown" / "result_replaced" put the "libfx Result" image into
+an Image Editor. A held frame's passes file is watched by a timer (live.py), not here.
 """
 
 import bpy
@@ -243,7 +244,6 @@ def _draw_live(layout, context, s, width):
     if sess is None or not sess.frames:
         box.label(text="Render (F12) or Load Passes to start", icon="INFO")
         return
-    live.refresh_if_stale(context.scene)
     shown = sess.shown
     if shown:
         what = {"render": "After render", "interactive": "Interactive", "final": "Final"}.get(
