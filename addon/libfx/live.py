@@ -245,7 +245,7 @@ def active(scene):
     return s is not None and s.live and session(scene) is not None and native.has("live")
 
 
-#: scene name -> the recipe the last stack change built (scene_setup.stack_changed): its
+#: scene name -> the recipe the last stack change built (handlers.stack_changed): its
 #: interactive and final runs use it instead of building it again; dropped once the final
 #: run is submitted, and by any change that comes without one (undo, live settings).
 _RECIPES = {}
@@ -280,7 +280,7 @@ def _make_job(scene, kind, load=None):
 
 def changed(scene, rec=None):
     """A setting changed (property update, operator): re-run soon. ``rec``: the stack's
-    recipe as the change left it (built once per change by scene_setup.stack_changed);
+    recipe as the change left it (built once per change by handlers.stack_changed);
     None: built again when the run is made."""
     if not active(scene):
         _RECIPES.pop(scene.name, None)
