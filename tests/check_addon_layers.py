@@ -37,6 +37,7 @@ LAYERS = {
     "native": 0,       # the ctypes binding of the library
     "compat": 0,       # Blender version differences
     "catalog": 0,      # the library's effect descriptions as the UI's model
+    "frames": 0,       # frame lists (--frames), also loaded by path by the farm's submitters
     # model: no bpy
     "recipe_json": 1,  # the recipe JSON: version, values, parsing, the library's checks
     "sessions": 1,     # live sessions: the frames held per scene, the live settings' meaning
@@ -47,6 +48,7 @@ LAYERS = {
     "passes_file": 2,  # the Render Result's passes as one EXR
     "aux_views": 2,    # light views, rain map, probes, planar views
     "sidecars": 2,     # the scene sidecar of each frame and its store
+    "contact_sheet": 2,  # a range's results as one PNG of thumbnails (batch --check)
     # runtime: the shared context, the worker, the UI queue, the results
     "shared_context": 3,
     "worker": 3,

@@ -24,9 +24,9 @@ bl_info = {
 # (tests/check_addon_layers.py checks that this list names every module, in order).
 if "native" in locals():
     import importlib
-    for _m in ("log", "hooks", "native", "compat", "catalog",
+    for _m in ("log", "hooks", "native", "compat", "catalog", "frames",
                "recipe_json", "sessions",
-               "props", "recipe", "scene_setup", "passes_file", "aux_views", "sidecars",
+               "props", "recipe", "scene_setup", "passes_file", "aux_views", "sidecars", "contact_sheet",
                "shared_context", "worker", "ui_queue", "results",
                "live", "pipeline", "views_job",
                "handlers", "operators", "ui", "render"):
@@ -35,9 +35,9 @@ if "native" in locals():
 
 import bpy  # noqa: E402
 
-from . import (log, hooks, native, compat, catalog,  # noqa: E402,F401
+from . import (log, hooks, native, compat, catalog, frames,  # noqa: E402,F401
                recipe_json, sessions,
-               props, recipe, scene_setup, passes_file, aux_views, sidecars,
+               props, recipe, scene_setup, passes_file, aux_views, sidecars, contact_sheet,
                shared_context, worker, ui_queue, results,
                live, pipeline, views_job,
                handlers, operators, ui, render)
