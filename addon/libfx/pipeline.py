@@ -223,5 +223,3 @@ def _ui_save_image(scene_name, exr, image):
             save_image(scene, exr, image)
         except Exception as e:
             ui_queue.report("ERROR", "libfx: cannot save %s: %s" % (image, e))
-
-
