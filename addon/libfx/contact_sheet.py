@@ -16,6 +16,8 @@ import os
 
 import bpy
 
+from . import compat
+
 # A sheet of a 2,000-frame shot shows an even sample: at most this many thumbnails.
 MAX_THUMBS = 48
 COLUMNS = 6
@@ -73,16 +75,17 @@ def _save_png(scene, pixels, width, height, path):
     scene's view transform, written whole or not at all."""
     img = bpy.data.images.new("libfx contact sheet", width, height, alpha=False, float_buffer=True)
     settings = scene.render.image_settings
-    saved = (settings.file_format, settings.color_mode, settings.color_depth)
+    saved = compat.image_format_snapshot(settings)
     d, name = os.path.split(os.path.abspath(path))
     tmp = os.path.join(d, ".%s.tmp-%d.png" % (name, os.getpid()))
     try:
         img.pixels.foreach_set(pixels)
-        settings.file_format, settings.color_mode, settings.color_depth = "PNG", "RGB", "8"
+        compat.set_file_format(settings, "PNG", "8")   # 5.0+: an image media type first
+        settings.color_mode = "RGB"
         img.save_render(tmp, scene=scene)
         os.replace(tmp, path)
     finally:
-        settings.file_format, settings.color_mode, settings.color_depth = saved
+        compat.image_format_restore(settings, saved)
         bpy.data.images.remove(img)
         if os.path.exists(tmp):
             os.remove(tmp)
