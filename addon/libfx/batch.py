@@ -38,6 +38,7 @@ Per frame it writes, beside the output prefix:
 import argparse
 import glob
 import importlib
+import importlib.util
 import os
 import sys
 
@@ -52,7 +53,6 @@ def _argv():
 def _load_frames():
     """frames.py beside this file, loaded by path: the runner runs as a script, before
     the add-on package (and with it bpy's registration) is imported."""
-    import importlib.util
     spec = importlib.util.spec_from_file_location(
         "libfx_batch_frames", os.path.join(os.path.dirname(os.path.abspath(__file__)), "frames.py"))
     mod = importlib.util.module_from_spec(spec)
