@@ -136,6 +136,19 @@ def pixels_and_header(path):
     return parts
 
 
+def differences(a, b):
+    """Channel: (pixels that differ, largest difference), for an assertion's message."""
+    x, y = oiio.ImageBuf(a), oiio.ImageBuf(b)
+    px, py = x.get_pixels(oiio.FLOAT), y.get_pixels(oiio.FLOAT)
+    out = {}
+    for i, name in enumerate(x.spec().channelnames):
+        d = np.abs(px[..., i].astype(np.float64) - py[..., i])
+        n = int(np.count_nonzero(px[..., i] != py[..., i]))
+        if n:
+            out[name] = (n, float(np.nanmax(d)))
+    return out
+
+
 def chunk_log(prefix, first, last):
     with open(os.path.join(prefix + "slurm", "chunk_%04d-%04d.log" % (first, last))) as f:
         return f.read()
@@ -260,7 +273,8 @@ def test_shot_cancelled_then_resubmitted_is_bit_identical(cluster):
     for f in range(1, FRAMES + 1):
         got, want = pixels_and_header(result(out, f)), pixels_and_header(result(ref, f))
         assert [p[0] for p in got] == [p[0] for p in want], f
-        assert all(g[1] == w[1] for g, w in zip(got, want)), "frame %d differs from the one-machine run" % f
+        assert all(g[1] == w[1] for g, w in zip(got, want)), \
+            "frame %d differs from the one-machine run: %s" % (f, differences(result(out, f), result(ref, f)))
         for g, w in zip(got, want):
             diff = {k: (g[2].get(k), w[2].get(k)) for k in set(g[2]) | set(w[2]) if g[2].get(k) != w[2].get(k)}
             assert not diff, "frame %d's header differs: %s" % (f, diff)
