@@ -449,8 +449,10 @@ def main():
     ap.add_argument("--effects", help="comma-separated effects to run (default: all)")
     ap.add_argument("--only", action="append", default=[], help="run only this id (repeatable, or a,b)")
     ap.add_argument("--limit", type=int, help="run at most this many mutations")
-    ap.add_argument("--build", type=Path, default=REPO / "build-mut",
-                    help="work folder (default build-mut): tree/ holds the snapshot of HEAD, build/ its build")
+    ap.add_argument("--build", type=Path, default=REPO / "build-mut", help="build folder (default build-mut)")
+    ap.add_argument("--tree", type=Path, default=REPO / "out" / "mutation" / "tree",
+                    help="where the snapshot of HEAD is mutated (default out/mutation/tree; no 'build' in "
+                         "its path: test_native_loading orders candidate paths by it)")
     ap.add_argument("--out", type=Path, default=REPO / "out" / "mutation" / "results",
                     help="results base path: writes BASE.csv and BASE.md (default out/mutation/results)")
     ap.add_argument("--timeout", type=int, default=180, help="seconds per test (default 180)")
@@ -487,8 +489,7 @@ def main():
         print(f"{len(rows)} mutations")
         return 0
 
-    args.tree = args.build / "tree"
-    args.build = args.build / "build"
+    args.tree = args.tree.resolve()
     TREE[0] = args.tree
     restorer = Restorer(args.build, args.tree)
     restorer.recover()
