@@ -703,6 +703,27 @@ static void test_wide_rows(fx_context *ctx)
     free(px);
 }
 
+/* One non-finite pixel in the last pair of an 8-pixel chunk (lanes 6, 7), the rest of the
+ * chunk finite: it is found and written finite like any other. */
+static void test_nonfinite_last_pair(fx_context *ctx)
+{
+    enum { W = 16, H = 2 };
+    float px[W * H * 4];
+    for (int i = 0; i < W * H * 4; i++)
+        px[i] = (i % 4) == 3 ? 1.0f : 0.5f;
+    px[4 * 6] = INFINITY;             /* row 0, lane 6 */
+    px[4 * 15 + 1] = NAN;             /* row 0, lane 7 of the second chunk */
+    px[4 * (W + 7) + 2] = -INFINITY;  /* row 1, lane 7 */
+    fx_frame *f = et_frame(ctx, W, H, px);
+    const char *ps[] = { "\"line_color\":[1,0,0,1]", "\"luminance\":false,\"line_color\":[1,0,0,1]" };
+    for (int k = 0; k < 2; k++) {
+        float *o = run_pass(ctx, f, recipe(ps[k], NULL), NULL);
+        CHECK(o && tu_all_finite(o, W * H * 4));
+        free(o);
+    }
+    fx_frame_free(f);
+}
+
 int main(void)
 {
     test_srgb_lut();
@@ -721,6 +742,7 @@ int main(void)
     test_gradient(c1, c2);
     test_proxy_opacity(c1);
     test_wide_rows(c1);
+    test_nonfinite_last_pair(c1);
     fx_context_free(c1);
     fx_context_free(c2);
     return tu_finish("test_edges");
