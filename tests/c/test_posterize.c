@@ -186,7 +186,8 @@ static double level_value(int k, int n, int srgb)
  * 1-pixel paths) against the formula written out here in double: band k = floor(enc(u) N
  * + dither d) clamped to [0, N - 1], value level_value(k), u >= 1 kept (keep_hdr), u <= 0
  * level 0. Equal to the float of that value (within 2 ulp) except within 1e-6 of a band
- * edge, for every Bayer phase. */
+ * edge, for every Bayer phase: the row kernel, fx_levels_apply and the double-precision
+ * fx_levels_apply_reference. */
 static void test_quantiser_exact(void)
 {
     const int ns[] = { 2, 3, 4, 6, 16, 17, 64, 256 };
@@ -223,7 +224,8 @@ static void test_quantiser_exact(void)
                                 const double want = v >= 1.0f ? (double)v : v <= 0.0f ? 0.0 : level_value(k, n, sp == 0);
                                 const double tol = 2.0 * FLT_EPSILON * want;
                                 bad += !(fabs(dst[4 * x + c] - want) <= tol) ||
-                                       !(fabs(fx_levels_apply(q, v, x, y) - want) <= tol);
+                                       !(fabs(fx_levels_apply(q, v, x, y) - want) <= tol) ||
+                                       !(fabs(fx_levels_apply_reference(q, v, x, y) - want) <= tol);
                             }
                     }
             }
