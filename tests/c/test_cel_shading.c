@@ -185,8 +185,9 @@ static void test_extremes(fx_context *ctx)
 }
 
 /* Soft band edges (band_softness 0.02: each step is a smoothstep over [k/n - 0.01, k/n +
- * 0.01]): away from the edges the ramp takes its band's value, and light at or above white
- * takes the top value (1) on every pixel, in the 8-pixel lanes and in the tail (w = 19). */
+ * 0.01]) and hard ones (0): away from the edges the ramp takes its band's value, and light
+ * at or above white takes the top value (1) on every pixel, in the 8-pixel lanes and in the
+ * tail (w = 19). */
 static void test_soft_bands(fx_context *ctx)
 {
     const int w = 19;
@@ -203,20 +204,24 @@ static void test_soft_bands(fx_context *ctx)
             c[4 * (w + x) + k] = col[k] * l + 0.1f;
         }
     }
-    float *o = run_frame(ctx, f, "\"bands\":3,\"band_softness\":0.02,\"outline_width\":0", NULL);
-    int ok = o != NULL, checked = 0;
-    for (int y = 0; ok && y < 2; y++)
-        for (int x = 0; x < w; x++) {
-            const float l = dd[3 * (y * w + x)];
-            if (fabsf(l - 1.0f / 3) < 0.011f || fabsf(l - 2.0f / 3) < 0.011f)
-                continue; /* within a soft edge */
-            const float q = l < 1.0f / 3 ? 0.0f : l < 2.0f / 3 ? 0.5f : 1.0f;
-            for (int k = 0; k < 3; k++)
-                ok &= fabsf(o[4 * (y * w + x) + k] - (col[k] * q + 0.1f)) < 1e-5f;
-            checked++;
-        }
-    CHECK(ok && checked >= 2 * w - 2);
-    free(o);
+    const char *ps[2] = { "\"bands\":3,\"band_softness\":0.02,\"outline_width\":0",
+                          "\"bands\":3,\"band_softness\":0,\"outline_width\":0" };
+    for (int k2 = 0; k2 < 2; k2++) {
+        float *o = run_frame(ctx, f, ps[k2], NULL);
+        int ok = o != NULL, checked = 0;
+        for (int y = 0; ok && y < 2; y++)
+            for (int x = 0; x < w; x++) {
+                const float l = dd[3 * (y * w + x)];
+                if (fabsf(l - 1.0f / 3) < 0.011f || fabsf(l - 2.0f / 3) < 0.011f)
+                    continue; /* within a soft edge */
+                const float q = l < 1.0f / 3 ? 0.0f : l < 2.0f / 3 ? 0.5f : 1.0f;
+                for (int k = 0; k < 3; k++)
+                    ok &= fabsf(o[4 * (y * w + x) + k] - (col[k] * q + 0.1f)) < 1e-5f;
+                checked++;
+            }
+        CHECK(ok && checked >= 2 * w - 2);
+        free(o);
+    }
     fx_frame_free(f);
 }
 
