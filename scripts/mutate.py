@@ -4,10 +4,11 @@
 A catalogue of small, plausible mutations (a flipped sign, an off-by-one bound, a swapped
 channel, a dropped term, a constant changed by 10 %) is generated from the sources by fixed
 rules and a fixed seed (--generate writes scripts/mutation_catalogue.tsv, which is committed
-and reviewed); a run applies each mutation alone to the source tree, rebuilds one object and
-relinks in its own build folder (build-mut/, Release, no benchmarks), runs the tests, puts the
-source back (always: in `finally`, and from a backup copy if a run was killed), and records
-killed / survived / not compiled with the test that killed it. docs/mutation.md.
+and reviewed); a run copies the committed HEAD to out/mutation/tree (the working tree is never
+touched), applies each mutation alone to that copy, rebuilds one object and relinks in its
+own build folder (build-mut/, Release, no benchmarks), runs the tests, puts the file back
+(always: in `finally`, and from a backup copy if a run was killed), and records killed /
+survived / not compiled with the test that killed it. docs/mutation.md.
 
     /usr/bin/python3 scripts/mutate.py --generate           # (re)write the catalogue
     /usr/bin/python3 scripts/mutate.py --list [--effects bloom,edges]
