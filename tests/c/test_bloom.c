@@ -58,6 +58,20 @@ static void test_energy(fx_context *ctx)
     o = run_px(ctx, two, 1, 1, "\"mode\":\"seed\",\"middle_grey\":2,\"intensity\":1,\"radius\":0", NULL);
     CHECK(o && fabsf(o[0] - (2.0f + 5.5f / 6.5f)) < 1e-4f);
     free(o);
+    /* measured scene luminance of coloured pixels: the log-average of Rec.709 luminance
+     * (0.2126 R + 0.7152 G + 0.0722 B) written out here; the same as giving that value */
+    const float cols[12] = { 0.5f, 1, 4, 1, 2, 0.25f, 1, 1, 1, 1, 8, 1 };
+    double lsum = 0;
+    for (int i = 0; i < 3; i++)
+        lsum += log(1e-6 + 0.2126 * cols[4 * i] + 0.7152 * cols[4 * i + 1] + 0.0722 * cols[4 * i + 2]);
+    char given[160];
+    snprintf(given, sizeof given, "\"mode\":\"seed\",\"middle_grey\":1,\"intensity\":1,\"radius\":0,\"scene_luminance\":%.9g",
+             exp(lsum / 3) - 1e-6);
+    float *om = run_px(ctx, cols, 3, 1, "\"mode\":\"seed\",\"middle_grey\":1,\"intensity\":1,\"radius\":0", NULL);
+    float *og = run_px(ctx, cols, 3, 1, given, NULL);
+    CHECK(om && og && tu_max_abs_diff(om, og, 12) < 1e-5 && tu_max_abs_diff(om, cols, 12) > 0.1);
+    free(om);
+    free(og);
     /* screen: white pixels gain nothing; the glow adds at most glow x (1 - colour) */
     o = run_px(ctx, px, w, h, "\"composite\":\"screen\"", NULL);
     CHECK(o && o[0] == 2.0f);

@@ -184,12 +184,83 @@ static void test_extremes(fx_context *ctx)
     fx_frame_free(f);
 }
 
+/* Soft band edges (band_softness 0.02: each step is a smoothstep over [k/n - 0.01, k/n +
+ * 0.01]) and hard ones (0): away from the edges the ramp takes its band's value, and light
+ * at or above white takes the top value (1) on every pixel, in the 8-pixel lanes and in the
+ * tail (w = 19). */
+static void test_soft_bands(fx_context *ctx)
+{
+    const int w = 19;
+    fx_frame *f = diffuse_frame(ctx, w, 2);
+    float *dd = NULL, *c = NULL;
+    int ch = 0;
+    fx_frame_pass(f, "DiffDir", &dd, &ch);
+    fx_frame_pass(f, "Combined", &c, &ch);
+    const float col[3] = { 0.8f, 0.4f, 0.2f };
+    for (int x = 0; x < w; x++) { /* row 1: light 1.0, 1.5 and 2.0 (white 1) */
+        const float l = 1.0f + 0.5f * (float)(x % 3);
+        for (int k = 0; k < 3; k++) {
+            dd[3 * (w + x) + k] = l;
+            c[4 * (w + x) + k] = col[k] * l + 0.1f;
+        }
+    }
+    const char *ps[2] = { "\"bands\":3,\"band_softness\":0.02,\"outline_width\":0",
+                          "\"bands\":3,\"band_softness\":0,\"outline_width\":0" };
+    for (int k2 = 0; k2 < 2; k2++) {
+        float *o = run_frame(ctx, f, ps[k2], NULL);
+        int ok = o != NULL, checked = 0;
+        for (int y = 0; ok && y < 2; y++)
+            for (int x = 0; x < w; x++) {
+                const float l = dd[3 * (y * w + x)];
+                if (fabsf(l - 1.0f / 3) < 0.011f || fabsf(l - 2.0f / 3) < 0.011f)
+                    continue; /* within a soft edge */
+                const float q = l < 1.0f / 3 ? 0.0f : l < 2.0f / 3 ? 0.5f : 1.0f;
+                for (int k = 0; k < 3; k++)
+                    ok &= fabsf(o[4 * (y * w + x) + k] - (col[k] * q + 0.1f)) < 1e-5f;
+                checked++;
+            }
+        CHECK(ok && checked >= 2 * w - 2);
+        free(o);
+    }
+    fx_frame_free(f);
+}
+
+/* An outline pixel takes the outline colour (all four channels) in the 8-pixel lanes and in
+ * the per-pixel tail: a box whose left edge is in the lanes and right edge in the tail of a
+ * 43-pixel row (x 40..42). */
+static void test_outline_tail(fx_context *ctx)
+{
+    const int w = 43, h = 30;
+    fx_frame *f = diffuse_frame(ctx, w, h);
+    float *dep = NULL;
+    int ch = 0;
+    fx_frame_pass(f, "Depth", &dep, &ch);
+    for (int y = 10; y < 20; y++)
+        for (int x = 12; x < 41; x++)
+            dep[y * w + x] = 2.0f;
+    float *o = run_frame(ctx, f, "\"outline_width\":2,\"outline_color\":[0,0,1,0.5],\"normal_sensitivity\":0", NULL);
+    int left = 0, right = 0;
+    for (int y = 12; o && y < 18; y++)
+        for (int x = 0; x < w; x++) {
+            const float *p = o + 4 * (y * w + x);
+            const int full = fabsf(p[0]) < 1e-6f && fabsf(p[1]) < 1e-6f && fabsf(p[2] - 1) < 1e-6f &&
+                             fabsf(p[3] - 0.5f) < 1e-6f;
+            left += full && x < 16;
+            right += full && x >= 40;
+        }
+    CHECK(o && left > 0 && right > 0);
+    free(o);
+    fx_frame_free(f);
+}
+
 int main(void)
 {
     fx_context *c1 = NULL, *c2 = NULL;
     fx_context_new(&c1, 1);
     fx_context_new(&c2, 2);
     test_values(c1);
+    test_soft_bands(c1);
+    test_outline_tail(c1);
     test_outlines_properties(c1, c2);
     test_extremes(c1);
     test_in_place(c1, c2);

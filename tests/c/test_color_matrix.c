@@ -119,12 +119,68 @@ static void test_properties(fx_context *ctx1, fx_context *ctx2)
     fx_stack_free(s);
 }
 
+/* A custom 4x4 over a row of 19 pixels (two 8-pixel vector chunks and a 3-pixel tail), mix 1
+ * and 0.6: every channel, alpha too, is p + mix (M p - p) computed here in double. */
+static void test_custom_row(fx_context *ctx)
+{
+    enum { W = 19 };
+    float px[W * 4];
+    for (int i = 0; i < W * 4; i++)
+        px[i] = 0.05f + 0.9f * (float)((i * 7) % 23) / 23.0f;
+    const float m[16] = { 0.5f, 0.2f, 0.1f, 0.3f, -1, 2, 0.5f, 0.25f, 0.1f, 0.3f, 0.7f, -0.2f, 0.2f, 0.4f, -0.3f, 0.9f };
+    const double mixes[2] = { 1.0, 0.6 };
+    for (int k = 0; k < 2; k++) {
+        float *o = run_on(ctx, px, W, 1, "custom", m, 16, mixes[k], NULL);
+        int ok = o != NULL;
+        for (int x = 0; ok && x < W; x++)
+            for (int r = 0; r < 4; r++) {
+                const float *p = px + 4 * x;
+                double v = 0;
+                for (int c = 0; c < 4; c++)
+                    v += (double)m[r * 4 + c] * p[c];
+                v = p[r] + mixes[k] * (v - p[r]);
+                ok &= fabs(o[4 * x + r] - v) <= 1e-6 * (1 + fabs(v));
+            }
+        CHECK(ok);
+        free(o);
+    }
+}
+
+/* Overflow: a channel past FLT_MAX goes through the double path: mixed there as everywhere
+ * (R: 1e38 through x10 at mix 0.1 is 1e38 + 0.1 (1e39 - 1e38) = 1.9e38, finite), clamped to
+ * +-FLT_MAX when even the mix overflows, and alpha's overflow caught like the colours'
+ * (alone in its pixel, in a 1-pixel image and in a 9-pixel one). */
+static void test_overflow_values(fx_context *ctx)
+{
+    const float diag10[16] = { 10, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1 };
+    const float r[4] = { 1e38f, 0.5f, 0.25f, 1 };
+    float *o = run_on(ctx, r, 1, 1, "custom", diag10, 16, 0.1, NULL);
+    CHECK(o && fabsf(o[0] - 1.9e38f) <= 1e-6f * 1.9e38f && o[1] == 0.5f && o[2] == 0.25f && o[3] == 1);
+    free(o);
+    o = run_on(ctx, r, 1, 1, "custom", diag10, 16, 1.0, NULL);
+    CHECK(o && o[0] == FLT_MAX && o[1] == 0.5f);
+    free(o);
+    const float a10[16] = { 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 10 };
+    for (int w = 1; w <= 9; w += 8) {
+        float px[9 * 4];
+        for (int x = 0; x < w; x++) {
+            px[4 * x] = 0.1f, px[4 * x + 1] = 0.2f, px[4 * x + 2] = 0.3f;
+            px[4 * x + 3] = x == w - 1 ? 1e38f : 0.5f;
+        }
+        o = run_on(ctx, px, w, 1, "custom", a10, 16, 1.0, NULL);
+        CHECK(o && o[4 * (w - 1) + 3] == FLT_MAX && o[4 * (w - 1)] == 0.1f && (w == 1 || o[3] == 5.0f));
+        free(o);
+    }
+}
+
 int main(void)
 {
     fx_context *c1 = NULL, *c2 = NULL;
     if (fx_context_new(&c1, 1) != FX_OK || fx_context_new(&c2, 2) != FX_OK)
         return 1;
     test_values(c1);
+    test_custom_row(c1);
+    test_overflow_values(c1);
     test_properties(c1, c2);
     fx_context_free(c1);
     fx_context_free(c2);

@@ -646,6 +646,84 @@ static void test_gradient(fx_context *c1, fx_context *c2)
     free(px);
 }
 
+/* On a 1/2 proxy, line_width is halved (pixels): a line at least one proxy pixel wide keeps
+ * the full opacity (2.1 -> 1.05: the most any pixel moves toward the line colour is exactly
+ * opacity 0.5), a thinner one is drawn lighter by its width (1.0 -> 0.5: at most 0.25). */
+static void test_proxy_opacity(fx_context *ctx)
+{
+    fx_frame *f = step_frame(ctx, 64, 16, 32, 0.1f, 0.9f), *px = NULL;
+    CHECK_OK(ctx, fx_frame_reduce(f, 2, &px));
+    const float *src = px ? et_combined(px) : NULL;
+    const char *widths[2] = { "2.1", "1.0" };
+    const float want[2] = { 0.5f, 0.25f };
+    for (int k = 0; src && k < 2; k++) {
+        char p[256];
+        snprintf(p, sizeof p, "\"line_width\":%s,\"opacity\":0.5,\"softness\":0,\"line_color\":[0,1,0,1]", widths[k]);
+        float *o = run_pass(ctx, px, recipe(p, NULL), NULL);
+        float most = 0.0f;
+        for (int i = 0; o && i < 32 * 8; i++) {
+            const float s = src[4 * i + 1], frac = (o[4 * i + 1] - s) / (1.0f - s);
+            most = frac > most ? frac : most;
+        }
+        CHECK(o && fabsf(most - want[k]) < 1e-5f);
+        if (o && fabsf(most - want[k]) >= 1e-5f)
+            fprintf(stderr, "proxy line_width %s: most %.6f, want %.6f\n", widths[k], most, want[k]);
+        free(o);
+    }
+    fx_frame_free(px);
+    fx_frame_free(f);
+}
+
+/* Rows wider than the drawing's lists of 256 chunks (2048 pixels): a pattern of period 64
+ * gives the same output 2048 pixels further on (away from the borders), lines drawn there
+ * as in the first list. */
+static void test_wide_rows(fx_context *ctx)
+{
+    enum { W = 4400, H = 3 };
+    float *px = malloc((size_t)W * H * 4 * sizeof(float));
+    for (int i = 0; i < W * H; i++) {
+        const float v = ((i % W) / 32) % 2 ? 0.9f : 0.1f;
+        px[4 * i] = px[4 * i + 1] = px[4 * i + 2] = v;
+        px[4 * i + 3] = 1;
+    }
+    fx_frame *f = et_frame(ctx, W, H, px);
+    float *o = run_pass(ctx, f, recipe("\"line_width\":2,\"line_color\":[1,0,0,1]", NULL), NULL);
+    int periodic = o != NULL, drawn_far = 0;
+    for (int y = 0; o && y < H; y++)
+        for (int x = 2048 + 64; x < W - 64; x++) { /* away from the frame's borders */
+            const size_t i = (size_t)y * W + x;
+            periodic &= memcmp(o + 4 * i, o + 4 * (i - 2048), 4 * sizeof(float)) == 0;
+            drawn_far += o[4 * i] == 1.0f && o[4 * i + 1] == 0.0f;
+        }
+    CHECK(periodic && drawn_far > 0);
+    if (!(periodic && drawn_far > 0))
+        fprintf(stderr, "wide rows: periodic %d, drawn %d\n", periodic, drawn_far);
+    free(o);
+    fx_frame_free(f);
+    free(px);
+}
+
+/* One non-finite pixel in the last pair of an 8-pixel chunk (lanes 6, 7), the rest of the
+ * chunk finite: it is found and written finite like any other. */
+static void test_nonfinite_last_pair(fx_context *ctx)
+{
+    enum { W = 16, H = 2 };
+    float px[W * H * 4];
+    for (int i = 0; i < W * H * 4; i++)
+        px[i] = (i % 4) == 3 ? 1.0f : 0.5f;
+    px[4 * 6] = INFINITY;             /* row 0, lane 6 */
+    px[4 * 15 + 1] = NAN;             /* row 0, lane 7 of the second chunk */
+    px[4 * (W + 7) + 2] = -INFINITY;  /* row 1, lane 7 */
+    fx_frame *f = et_frame(ctx, W, H, px);
+    const char *ps[] = { "\"line_color\":[1,0,0,1]", "\"luminance\":false,\"line_color\":[1,0,0,1]" };
+    for (int k = 0; k < 2; k++) {
+        float *o = run_pass(ctx, f, recipe(ps[k], NULL), NULL);
+        CHECK(o && tu_all_finite(o, W * H * 4));
+        free(o);
+    }
+    fx_frame_free(f);
+}
+
 int main(void)
 {
     test_srgb_lut();
@@ -662,6 +740,9 @@ int main(void)
     test_fast_path(c1);
     test_fast_path(c2);
     test_gradient(c1, c2);
+    test_proxy_opacity(c1);
+    test_wide_rows(c1);
+    test_nonfinite_last_pair(c1);
     fx_context_free(c1);
     fx_context_free(c2);
     return tu_finish("test_edges");

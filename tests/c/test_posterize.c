@@ -186,7 +186,8 @@ static double level_value(int k, int n, int srgb)
  * 1-pixel paths) against the formula written out here in double: band k = floor(enc(u) N
  * + dither d) clamped to [0, N - 1], value level_value(k), u >= 1 kept (keep_hdr), u <= 0
  * level 0. Equal to the float of that value (within 2 ulp) except within 1e-6 of a band
- * edge, for every Bayer phase. */
+ * edge, for every Bayer phase: the row kernel, fx_levels_apply and the double-precision
+ * fx_levels_apply_reference. */
 static void test_quantiser_exact(void)
 {
     const int ns[] = { 2, 3, 4, 6, 16, 17, 64, 256 };
@@ -223,7 +224,8 @@ static void test_quantiser_exact(void)
                                 const double want = v >= 1.0f ? (double)v : v <= 0.0f ? 0.0 : level_value(k, n, sp == 0);
                                 const double tol = 2.0 * FLT_EPSILON * want;
                                 bad += !(fabs(dst[4 * x + c] - want) <= tol) ||
-                                       !(fabs(fx_levels_apply(q, v, x, y) - want) <= tol);
+                                       !(fabs(fx_levels_apply(q, v, x, y) - want) <= tol) ||
+                                       !(fabs(fx_levels_apply_reference(q, v, x, y) - want) <= tol);
                             }
                     }
             }
@@ -235,6 +237,38 @@ static void test_quantiser_exact(void)
     free(dst);
 }
 
+/* The gray modes on coloured pixels, in the 2-pixel vectors and the 1-pixel tail (width 5)
+ * and above 16 levels (every pixel per pixel): gray = (R + G + B) / 3 or Rec.709 luminance,
+ * linear steps: level floor(gray N) of N, value k / (N - 1), alpha kept. */
+static void test_gray_modes_paths(fx_context *ctx)
+{
+    enum { W = 5 };
+    const float px[W * 4] = { 0.9f, 0.1f, 0.2f, 1, 0.05f, 0.7f, 0.3f, 0.5f, 0.3f, 0.2f, 0.95f, 1,
+                              0.6f, 0.6f, 0.1f, 0.25f, 0.15f, 0.02f, 0.8f, 1 };
+    const int ns[2] = { 3, 17 };
+    for (int m = 0; m < 2; m++)
+        for (int k = 0; k < 2; k++) {
+            char p[128];
+            snprintf(p, sizeof p, "\"mode\":\"%s\",\"levels\":%d,\"space\":\"linear\"", m ? "luminance" : "mean", ns[k]);
+            float *o = run_recipe(ctx, px, W, 1, p, NULL);
+            int ok = o != NULL, checked = 0;
+            for (int x = 0; ok && x < W; x++) {
+                const float *c = px + 4 * x;
+                const double g = m ? 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2] : (c[0] + c[1] + c[2]) / 3.0;
+                const double e = g * ns[k];
+                if (fabs(e - floor(e + 0.5)) < 1e-4)
+                    continue; /* on a band edge */
+                const double want = floor(e) / (ns[k] - 1);
+                for (int ch = 0; ch < 3; ch++)
+                    ok &= fabs(o[4 * x + ch] - want) < 1e-6;
+                ok &= o[4 * x + 3] == c[3];
+                checked++;
+            }
+            CHECK(ok && checked >= 4);
+            free(o);
+        }
+}
+
 int main(void)
 {
     test_quantiser_exact();
@@ -243,6 +277,7 @@ int main(void)
     fx_context_new(&c2, 2);
     test_ramp(c1);
     test_modes(c1);
+    test_gray_modes_paths(c1);
     test_properties(c1, c2);
     test_extremes(c1);
     fx_context_free(c1);

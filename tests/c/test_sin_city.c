@@ -284,12 +284,35 @@ static void test_pretest_margins(fx_context *ctx)
     free(px);
 }
 
+/* keep dot with a blue key: the cosine takes all three channels, (0.2, 0.2, 1) is at
+ * 1 / sqrt(1.08) = 0.962 of (0, 0, 1) and kept at dot_min 0.9, (1, 0.5, 0.6) at 0.473 turns
+ * to its Rec.709 luminance Y; at mix 0.5 the gray one is halfway (c + 0.5 (Y - c)) and the
+ * kept one unchanged. */
+static void test_dot_blue_mix(fx_context *ctx)
+{
+    const float px[8] = { 0.2f, 0.2f, 1, 1, 1, 0.5f, 0.6f, 0.5f };
+    const float y1 = 0.2126f * 1 + 0.7152f * 0.5f + 0.0722f * 0.6f;
+    const char *base = "\"keep\":\"dot\",\"key_color\":[0,0,1],\"dot_min\":0.9";
+    float *o = run_px(ctx, px, 2, 1, base, NULL);
+    CHECK(o && memcmp(o, px, 4 * sizeof(float)) == 0 && is_gray(o + 4, y1) && o[7] == 0.5f);
+    free(o);
+    char p[160];
+    snprintf(p, sizeof p, "%s,\"mix\":0.5", base);
+    o = run_px(ctx, px, 2, 1, p, NULL);
+    int ok = o && memcmp(o, px, 4 * sizeof(float)) == 0;
+    for (int c = 0; ok && c < 3; c++)
+        ok &= fabsf(o[4 + c] - (px[4 + c] + 0.5f * (y1 - px[4 + c]))) < 1e-6f;
+    CHECK(ok);
+    free(o);
+}
+
 int main(void)
 {
     fx_context *c1 = NULL, *c2 = NULL;
     fx_context_new(&c1, 1);
     fx_context_new(&c2, 2);
     test_keep(c1);
+    test_dot_blue_mix(c1);
     test_hue_window(c1);
     test_keep_object(c1);
     test_properties(c1, c2);

@@ -790,6 +790,33 @@ static void test_position_from_depth(fx_context *ctx)
     fx_frame_free(f);
 }
 
+/* At half resolution (cells of 2 pixels, anchored to the frame) the floor mirror restricted
+ * by a rect that starts right of x = 0 gives, on the pixels 8 or more pixels inside the rect
+ * (their cells lie inside), the same colours as the whole floor mirror. */
+static void test_cells_rect_mask(fx_context *ctx)
+{
+    scene s;
+    scene_init(&s, 128, 72, 1.2, 12.0, 6.0);
+    fx_frame *f = scene_frame(ctx, &s);
+    const char *scales[1] = { "{\"resolution_scale\": 0.5}" };
+    for (int k = 0; f && k < 1; k++) {
+        float *whole = run_params(ctx, f, "{\"material_index\": 1}", scales[k], 0);
+        float *part = run_params(ctx, f, "{\"material_index\": 1, \"rect\": [40, 8, 60, 56]}", scales[k], 0);
+        int same = whole && part, differs = 0;
+        for (int y = 8 + 8; same && y < 64 - 8; y++)
+            for (int x = 40 + 8; x < 100 - 8; x++) {
+                const size_t i = ((size_t)y * 128 + x) * 4;
+                same &= memcmp(whole + i, part + i, 4 * sizeof(float)) == 0;
+                differs |= memcmp(whole + i, pass_of(f, "Combined") + i, 4 * sizeof(float)) != 0;
+            }
+        CHECK(same && differs);
+        if (!(same && differs))
+            fprintf(stderr, "cells with a rect mask (%s): same %d, reflected %d\n", scales[k], same, differs);
+        free(whole), free(part);
+    }
+    fx_frame_free(f);
+}
+
 int main(void)
 {
     fx_context *ctx1 = NULL, *ctx2 = NULL;
@@ -804,6 +831,7 @@ int main(void)
     test_hiz_geometry(ctx2);
     test_errors(ctx1);
     test_position_from_depth(ctx1);
+    test_cells_rect_mask(ctx2);
     fx_context_free(ctx1);
     fx_context_free(ctx2);
     return tu_finish("test_ssr_mirror");

@@ -1023,11 +1023,46 @@ static void test_screen_downsample(fx_context *ctx)
     fx_frame_free(f);
 }
 
+/* PCF with derivative_bias on a receiver tilted both ways (z = 0.3 x + 0.6 y) that the light
+ * sees unoccluded: the plane fitted from the two tangent points follows it exactly, so every
+ * tap agrees with its depth and every pixel away from the map's border is fully lit. */
+static void test_pcf_tilted_plane(fx_context *ctx)
+{
+    float h[N * N], *nrm = malloc(N * N * 3 * sizeof(float)), *d = NULL;
+    const float len = sqrtf(0.3f * 0.3f + 0.6f * 0.6f + 1.0f);
+    for (int y = 0; y < N; y++)
+        for (int x = 0; x < N; x++) {
+            const float wx = -L + (x + 0.5f) * 2 * L / N, wy = L - (y + 0.5f) * 2 * L / N;
+            h[y * N + x] = 0.3f * wx + 0.6f * wy;
+            nrm[3 * (y * N + x)] = -0.3f / len;
+            nrm[3 * (y * N + x) + 1] = -0.6f / len;
+            nrm[3 * (y * N + x) + 2] = 1.0f / len;
+        }
+    fx_frame *f = floor_frame(ctx, write_light_view(ctx, h, "tilted"));
+    int ch = 0;
+    fx_frame_pass(f, "Depth", &d, &ch);
+    for (int i = 0; i < N * N; i++)
+        d[i] = CAM_Z - h[i];
+    fx_frame_add_pass(f, "Normal", 3, nrm);
+    float *o = run_vsm(ctx, f, "pcf", "box_sat", 4.0f, 0.0f, 0.01f);
+    float least = 1.0f;
+    for (int y = 8; o && y < N - 8; y++)
+        for (int x = 8; x < N - 8; x++)
+            least = o[4 * (y * N + x)] < least ? o[4 * (y * N + x)] : least;
+    CHECK(o && least > 0.999f);
+    if (!(least > 0.999f))
+        fprintf(stderr, "pcf on a tilted plane: least visibility %.4f\n", least);
+    free(o);
+    free(nrm);
+    fx_frame_free(f);
+}
+
 int main(void)
 {
     fx_context *ctx = NULL;
     fx_context_new(&ctx, 2);
     test_hard_limit(ctx);
+    test_pcf_tilted_plane(ctx);
     test_soft_edge_width(ctx);
     test_variance_clamp(ctx);
     test_bleeding(ctx);
