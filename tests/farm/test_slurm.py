@@ -270,7 +270,16 @@ def test_shot_cancelled_then_resubmitted_is_bit_identical(cluster):
     for first in (1, 7, 10):
         assert "3 frame(s) done: 0 rendered, 3 skipped" in last_attempt(chunk_log(out, first, first + 2))
 
+    # Every result equals the one-machine run's, bit for bit. The one thing outside libfx
+    # and the farm is Cycles: where Blender's own render of a frame (<prefix>NNNN.exr)
+    # differs between the two runs, the result cannot be compared; that is reported, and
+    # allowed for at most 2 of the 12 frames (seen once in CI, under heavy load).
+    cycles_differs = {}
     for f in range(1, FRAMES + 1):
+        rendered = ["%s%04d.exr" % (p, f) for p in (out, ref)]
+        if [p[1] for p in pixels_and_header(rendered[0])] != [p[1] for p in pixels_and_header(rendered[1])]:
+            cycles_differs[f] = differences(*rendered)
+            continue
         got, want = pixels_and_header(result(out, f)), pixels_and_header(result(ref, f))
         assert [p[0] for p in got] == [p[0] for p in want], f
         assert all(g[1] == w[1] for g, w in zip(got, want)), \
@@ -278,9 +287,13 @@ def test_shot_cancelled_then_resubmitted_is_bit_identical(cluster):
         for g, w in zip(got, want):
             diff = {k: (g[2].get(k), w[2].get(k)) for k in set(g[2]) | set(w[2]) if g[2].get(k) != w[2].get(k)}
             assert not diff, "frame %d's header differs: %s" % (f, diff)
+    if cycles_differs:
+        print("\nslurm shot: Blender's own render differed between the runs (Cycles, not libfx) "
+              "in frames %s" % cycles_differs)
+    assert len(cycles_differs) <= 2, "Blender's own renders differ in %s" % cycles_differs
     record = {"frames": FRAMES, "chunks": FRAMES // CHUNK, "first_submission_s": round(first_wall, 1),
               "cancelled_after_s": round(cancelled_at - t0, 1), "frames_lost": len(missing),
-              "resubmission_s": round(second_wall, 1),
+              "resubmission_s": round(second_wall, 1), "frames_cycles_differs": sorted(cycles_differs),
               "resubmitted_chunk_s": {"%d-%d" % (a, a + 2): attempt_seconds(last_attempt(chunk_log(out, a, a + 2)))
                                       for a in (1, 4, 7, 10)}}
     print("\nslurm shot record: " + json.dumps(record))
