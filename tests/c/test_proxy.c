@@ -25,19 +25,9 @@
 #include <stdlib.h>
 #include <string.h>
 
-static uint32_t hash32(uint32_t x)
-{
-    x ^= x >> 16;
-    x *= 0x7feb352dU;
-    x ^= x >> 15;
-    x *= 0x846ca68bU;
-    x ^= x >> 16;
-    return x;
-}
-
 static float rnd(uint32_t i, uint32_t salt)
 {
-    return (float)(hash32(i * 2654435761U + salt) >> 8) / 16777216.0f;
+    return (float)(tu_ref_hash_u32(i * 2654435761U + salt) >> 8) / 16777216.0f;
 }
 
 /* A w x h frame where every pixel's data passes are unique: Combined, DiffDir (RGB),
@@ -57,7 +47,7 @@ static fx_frame *data_frame(fx_context *ctx, int w, int h)
         c3[i] = rnd((uint32_t)i, 2);
     fx_frame_add_pass(f, "DiffDir", 3, c3);
     for (size_t i = 0; i < n; i++)
-        c1[i] = (float)(1 + (hash32((uint32_t)i + 77) % 1000003));
+        c1[i] = (float)(1 + (tu_ref_hash_u32((uint32_t)i + 77) % 1000003));
     fx_frame_add_pass(f, "IndexOB", 1, c1);
     for (size_t i = 0; i < n; i++)
         c1[i] = (float)(i % 7);
