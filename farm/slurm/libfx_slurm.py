@@ -289,6 +289,11 @@ def blender_command(args, runner_args):
             + runner_args)
 
 
+def library_export(args):
+    """The job scripts' line that points the add-on at --library (none: its own lib/)."""
+    return "export LIBFX_LIBRARY=%s\n" % shlex.quote(os.path.abspath(args.library)) if args.library else ""
+
+
 def chunk_label(frames):
     return "%04d-%04d" % (frames[0], frames[-1])
 
@@ -301,7 +306,7 @@ def chunk_script(args, chunk_frames, logdir, fr):
     cmd = blender_command(args, ["--frames", "$frames", "--output", os.path.abspath(args.output),
                                  "--skip-existing"] + runner_options(args))
     cmd_text = " ".join('"$frames"' if c == "$frames" else shlex.quote(c) for c in cmd)
-    lib = "export LIBFX_LIBRARY=%s\n" % shlex.quote(os.path.abspath(args.library)) if args.library else ""
+    lib = library_export(args)
     return """#!/bin/bash
 # One chunk of the shot (written by farm/slurm/libfx_slurm.py).
 set -u
@@ -325,7 +330,7 @@ def views_script(args, frames, logdir, fr):
     A stack that reads none costs one Blender start."""
     cmd = blender_command(args, ["--views-only", "--frames", fr.format_frame_list(frames),
                                  "--output", os.path.abspath(args.output)] + runner_options(args))
-    lib = "export LIBFX_LIBRARY=%s\n" % shlex.quote(os.path.abspath(args.library)) if args.library else ""
+    lib = library_export(args)
     return """#!/bin/bash
 # The shot's auxiliary views (written by farm/slurm/libfx_slurm.py): before the chunks.
 set -u
@@ -345,10 +350,10 @@ def final_script(args, frames, chunk_frames, logdir, fr):
     sheet = os.path.abspath(args.output) + "libfx.contact_sheet.png"
     check = blender_command(args, ["--check", "--frames", fr.format_frame_list(frames),
                                    "--output", os.path.abspath(args.output), "--contact-sheet", sheet])
-    lib = "export LIBFX_LIBRARY=%s\n" % shlex.quote(os.path.abspath(args.library)) if args.library else ""
-    chunks = ",".join("%s:%s" % (chunk_label(c), fr.format_frame_list(c).replace(",", "+")) for c in chunk_frames)
+    lib = library_export(args)
+    chunks = ["%s:%s" % (chunk_label(c), fr.format_frame_list(c)) for c in chunk_frames]
     report = [sys.executable if os.path.isabs(sys.executable) else "python3",
-              os.path.join(HERE, "shot_report.py"), logdir, chunks]
+              os.path.join(HERE, "shot_report.py"), logdir, os.path.abspath(args.addon)] + chunks
     return """#!/bin/bash
 # The shot's final job (written by farm/slurm/libfx_slurm.py): runs after every chunk.
 set -u

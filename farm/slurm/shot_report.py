@@ -2,16 +2,17 @@
 """The final job's report when a shot is not complete: for each frame the runner's check
 names (`batch.py --check`, read on stdin), what its chunk's last attempt said.
 
-    shot_report.py LOGDIR LABEL:FRAMES[,LABEL:FRAMES...] < check.out
+    shot_report.py LOGDIR ADDON LABEL:FRAMES [LABEL:FRAMES...] < check.out
 
-LABEL is a chunk's first-last (its log is LOGDIR/chunk_LABEL.log), FRAMES its frame list
-with '+' for ','. Nothing here decides whether a frame is done: the runner's check did;
+LABEL is a chunk's first-last (its log is LOGDIR/chunk_LABEL.log), FRAMES its frame list,
+read by the runner's own parser (ADDON/frames.py). Nothing here decides whether a frame is done: the runner's check did;
 this only joins each missing frame to its chunk's own lines: the runner's per-frame
 failure, a usage error, or Slurm's note that the task was cancelled or ran out of time.
 Prints one line per frame; exits 0 (the final job exits 1 itself).
 """
 
 import glob
+import importlib.util
 import os
 import re
 import sys
@@ -21,15 +22,11 @@ END = re.compile(r"^== libfx slurm: chunk \S+ exit (\d+)")
 FAILED_FRAME = re.compile(r"^\s*frame (-?\d+): (.*)")
 
 
-def parse_frames(text):
-    out = []
-    for part in text.split("+"):
-        if "-" in part[1:]:
-            a, b = part[1:].split("-", 1)
-            out.extend(range(int(part[0] + a), int(b) + 1))
-        else:
-            out.append(int(part))
-    return out
+def load_frames_module(addon):
+    spec = importlib.util.spec_from_file_location("libfx_frames", os.path.join(addon, "frames.py"))
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
 
 
 def last_attempt(path):
@@ -83,11 +80,12 @@ def why(logdir, label, frame):
 
 
 def main():
-    logdir, spec = sys.argv[1], sys.argv[2]
+    logdir, addon, specs = sys.argv[1], sys.argv[2], sys.argv[3:]
+    parse = load_frames_module(addon).parse_frame_list
     chunk_of = {}
-    for item in spec.split(","):
+    for item in specs:
         label, frames = item.split(":", 1)
-        for f in parse_frames(frames):
+        for f in parse(frames):
             chunk_of[f] = label
     missing = []
     for line in sys.stdin:
