@@ -519,31 +519,38 @@ static void test_splashes_reference(fx_context *ctx)
  * of its streaks where the scene's depth is beyond d_l (and the point is exposed: the map
  * here is open), weighted 0.5 + 0.5 s; out = src + brightness colour sum. The layers' points below the
  * ground are under cover (the map is the ground plane). */
-static double ref_streaks(double x, double y, int h, double t, const double *d, int layers, double depth)
+/* one layer's largest streak at (x, y): layer l (3: the cover quads) at scale sc */
+static double ref_layer(double x, double y, int h, double t, int l, double sc)
 {
     const double len = 12.0, width = 3.0, density = 0.6, speed = 1800.0, wind = 10.0 * 3.14159265358979323846 / 180.0;
     const int seed = 9;
+    double k = h / 720.0 * sc;
+    double u = (x * cos(wind) - y * sin(wind)) / k, v = (x * sin(wind) + y * cos(wind)) / k - t * speed * sc;
+    double we = fmax(width, 1.0 / k), best = 0;
+    int ci = (int)floor(u / 14.0), cj = (int)floor(v / (1.5 * len));
+    for (int j = cj - 2; j <= cj; j++)
+        for (int i = ci - 4; i <= ci + 4; i++) {
+            uint32_t h0 = tu_ref_hash4(i, j, l, seed);
+            if (tu_ref_unit(h0) >= density)
+                continue;
+            uint32_t h1 = tu_ref_hash_u32(h0), h2 = tu_ref_hash_u32(h1), h3 = tu_ref_hash_u32(h2);
+            double x0 = (i + 0.15 + 0.7 * tu_ref_unit(h1)) * 14.0, y0 = (j + tu_ref_unit(h2)) * 1.5 * len;
+            double a = (v - y0) / (len * (0.7 + 0.6 * tu_ref_unit(h3)));
+            double across = 1.0 - fabs(u - x0) / we;
+            if (a > 0 && a < 1 && across > 0)
+                best = fmax(best, across * (width / we) * 4 * a * (1 - a));
+        }
+    return best;
+}
+
+static double ref_streaks(double x, double y, int h, double t, const double *d, int layers, double depth)
+{
     double sum = 0;
     for (int l = 0; l < layers; l++) {
         if (!(depth > d[l]))
             continue;
-        double sc = d[0] / d[l], k = h / 720.0 * sc;
-        double u = (x * cos(wind) - y * sin(wind)) / k, v = (x * sin(wind) + y * cos(wind)) / k - t * speed * sc;
-        double we = fmax(width, 1.0 / k), best = 0;
-        int ci = (int)floor(u / 14.0), cj = (int)floor(v / (1.5 * len));
-        for (int j = cj - 2; j <= cj; j++)
-            for (int i = ci - 4; i <= ci + 4; i++) {
-                uint32_t h0 = tu_ref_hash4(i, j, l, seed);
-                if (tu_ref_unit(h0) >= density)
-                    continue;
-                uint32_t h1 = tu_ref_hash_u32(h0), h2 = tu_ref_hash_u32(h1), h3 = tu_ref_hash_u32(h2);
-                double x0 = (i + 0.15 + 0.7 * tu_ref_unit(h1)) * 14.0, y0 = (j + tu_ref_unit(h2)) * 1.5 * len;
-                double a = (v - y0) / (len * (0.7 + 0.6 * tu_ref_unit(h3)));
-                double across = 1.0 - fabs(u - x0) / we;
-                if (a > 0 && a < 1 && across > 0)
-                    best = fmax(best, across * (width / we) * 4 * a * (1 - a));
-            }
-        sum += best * (0.5 + 0.5 * sc);
+        double sc = d[0] / d[l];
+        sum += ref_layer(x, y, h, t, l, sc) * (0.5 + 0.5 * sc);
     }
     return sum;
 }
@@ -606,6 +613,116 @@ static void test_rain_reference(fx_context *ctx)
     CHECK(lit > 500);
     free(rgba);
     free(dep);
+}
+
+/* ---- rain on the cover quads against the same reference ----
+ * docs/effects/rain.md: with the camera under cover, a pixel on a cover quad (Cryptomatte
+ * coverage c of cover_material) adds brightness colour saturate(c / cover_opacity)
+ * cover_brightness times the near layer's pattern at scale 1 (layer index 3 in the hash),
+ * unclipped; the layers themselves are all under the roof here. downsample n: the pattern
+ * evaluated on every n-th row of the ROI (the last on its last row) at every column and a
+ * pixel between two such rows interpolating them along the slant: row r0 above, r1 below
+ * at weights 1 - ty, ty, in each the columns floor(o), floor(o) + 1 of o = col + tan(wind)
+ * (row - y) at weights 1 - frac(o), frac(o) (clamped to the ROI). Run on a rect mask that
+ * starts at (5, 9): the ROI's columns count from its own left edge. */
+enum { CW = 72, CH = 160 };
+
+static fx_frame *cover_frame(fx_context *ctx, const char *map, const fx_camera *map_cam, const float *rgba)
+{
+    float *dep = malloc((size_t)CW * CH * sizeof(float)), *cr = calloc((size_t)CW * CH * 4, sizeof(float));
+    float id = fx_cryptomatte_id("Rain_Cover"), other = fx_cryptomatte_id("Wall");
+    for (int i = 0; i < CW * CH; i++) {
+        int y = i / CW;
+        dep[i] = (i % CW) < CW / 2 ? 3.0f : 1e10f;
+        cr[4 * i] = y >= 30 && y < 130 ? id : other;
+        cr[4 * i + 1] = y == 30 ? 0.03f : 1.0f; /* a partly covered edge row */
+    }
+    fx_frame *f = et_frame(ctx, CW, CH, rgba);
+    fx_frame_add_pass(f, "Depth", 1, dep);
+    fx_frame_add_pass(f, "CryptoMaterial00", 4, cr);
+    float w2c[16] = {1, 0, 0, 0, 0, 0, 1, -1, 0, -1, 0, -10, 0, 0, 0, 1};
+    fx_camera cam;
+    ortho(&cam, w2c, 5.0f, 0.1f, 100.0f);
+    fx_frame_set_camera(f, &cam);
+    fx_frame_set_time(f, 11, 24.0);
+    CHECK_OK(ctx, fx_frame_set_aux_view(f, "rain_map", map, map_cam));
+    free(dep);
+    free(cr);
+    return f;
+}
+
+static double cover_weight(int y) /* saturate(coverage / cover_opacity 0.07) x cover_brightness 0.6 */
+{
+    return y >= 30 && y < 130 ? (y == 30 ? 0.03 / 0.07 : 1.0) * 0.6 : 0.0;
+}
+
+static void test_rain_cover_reference(fx_context *ctx)
+{
+    fx_camera mc;
+    const char *roofed = rain_map(ctx, 100.0f, 50.0f, &mc, "roofed_cover_ref");
+    const float color[3] = {0.8f, 0.85f, 0.9f};
+    const double t = 11 / 24.0, slant = tan(10.0 * 3.14159265358979323846 / 180.0);
+    float *rgba = malloc((size_t)CW * CH * 4 * sizeof(float));
+    for (int i = 0; i < CW * CH; i++) {
+        for (int c = 0; c < 3; c++)
+            rgba[4 * i + c] = 0.1f * (c + 1);
+        rgba[4 * i + 3] = 1.0f;
+    }
+    const char *base = "\"cover_material\": \"Rain_Cover\", \"density\": 0.6, \"streak_length\": 12.0, "
+                       "\"streak_width\": 3.0, \"brightness\": 0.7, \"seed\": 9";
+    const int rx = 5, ry = 9, rw = 60, rh = 140; /* the rect mask of the downsampled runs */
+    for (int ds = 1; ds <= 4; ds += 3) {
+        fx_frame *f = cover_frame(ctx, roofed, &mc, rgba);
+        char params[512], mask[64];
+        snprintf(params, sizeof params, "%s, \"downsample\": %d", base, ds);
+        snprintf(mask, sizeof mask, "{\"rect\": [%d, %d, %d, %d]}", rx, ry, rw, rh);
+        float *o = et_run_effect(ctx, "rain", f, params, ds > 1 ? mask : NULL);
+        const int x0 = ds > 1 ? rx : 0, y0 = ds > 1 ? ry : 0, x1 = ds > 1 ? rx + rw : CW, y1 = ds > 1 ? ry + rh : CH;
+        const int gh = (y1 - y0 - 2) / ds + 2, gw = x1 - x0;
+        /* the pattern at the evaluated rows (every row at downsample 1) */
+        double *node = calloc((size_t)gh * gw, sizeof(double));
+        int *row_y = malloc((size_t)gh * sizeof(int));
+        for (int r = 0; r < gh; r++) {
+            row_y[r] = r == gh - 1 ? y1 - 1 : y0 + r * ds;
+            for (int c = 0; c < gw; c++)
+                node[(size_t)r * gw + c] = ref_layer(x0 + c + 0.5, row_y[r] + 0.5, CH, t, 3, 1.0);
+        }
+        double e = o ? 0 : INFINITY, peak = 0;
+        int lit = 0;
+        for (int y = 0; o && y < CH; y++)
+            for (int x = 0; x < CW; x++) {
+                const int i = y * CW + x;
+                double sum = 0;
+                if (x >= x0 && x < x1 && y >= y0 && y < y1) {
+                    int r0 = (y - y0) / ds;
+                    r0 = r0 > gh - 2 ? gh - 2 : r0;
+                    const int r1 = r0 + 1, col = x - x0;
+                    const double span = row_y[r1] - row_y[r0], ty = fmin((y - row_y[r0]) / span, 1.0);
+                    double cs = 0;
+                    for (int k = 0; k < 2; k++) {
+                        const int r = k ? r1 : r0;
+                        const double oc = slant * (row_y[r] - y), w = floor(oc), fr = oc - w;
+                        const int a = col + (int)w < 0 ? 0 : col + (int)w >= gw ? gw - 1 : col + (int)w;
+                        const int b = col + (int)w + 1 < 0 ? 0 : col + (int)w + 1 >= gw ? gw - 1 : col + (int)w + 1;
+                        cs += (k ? ty : 1 - ty) * ((1 - fr) * node[(size_t)r * gw + a] + fr * node[(size_t)r * gw + b]);
+                    }
+                    sum = cover_weight(y) * cs;
+                }
+                peak = fmax(peak, sum);
+                lit += sum > 0.1;
+                for (int c = 0; c < 3; c++)
+                    e = fmax(e, fabs(o[4 * i + c] - (rgba[4 * i + c] + 0.7 * sum * color[c])));
+                e = fmax(e, fabs(o[4 * i + 3] - rgba[4 * i + 3]));
+            }
+        fprintf(stderr, "rain cover reference, downsample %d: max error %.2e (peak %.3f, %d pixels lit)\n", ds, e,
+                peak, lit);
+        CHECK(e < 2e-4 && lit > 300); /* as test_rain_reference: float pattern coordinates */
+        free(node);
+        free(row_y);
+        free(o);
+        fx_frame_free(f);
+    }
+    free(rgba);
 }
 
 /* ---- wet_surfaces on a hand-worked input ----
@@ -1028,6 +1145,7 @@ int main(void)
     test_cache();
     test_rain_layers_extremes(ctx);
     test_rain_downsample(ctx);
+    test_rain_cover_reference(ctx);
     test_wet_downsample(ctx);
     test_rain_in_place(ctx);
     fx_context_free(ctx);
