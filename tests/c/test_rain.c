@@ -507,6 +507,95 @@ static void test_splashes_reference(fx_context *ctx)
     CHECK(lit > 100); /* rings in the frames */
 }
 
+/* rate is the probability that a cell's cycle has a splash: the splash exists when
+ * unit(hash) < rate, so at a rate of exactly a cell's unit(hash) that cell has none. The
+ * cell is picked where the tie shows (the reference at rate and at the next float above
+ * differs by > 0.1 somewhere in the open ground), then the effect is held to the
+ * reference at that rate. */
+static void test_splashes_rate_tie(fx_context *ctx)
+{
+    fx_camera mc;
+    const char *open_map = rain_map(ctx, -100.0f, 3.0f, &mc, "open_sky_tie");
+    const float color[3] = {0.85f, 0.88f, 0.92f};
+    const double t = 10 / 24.0, spacing = 0.8, size = 0.35, life = 0.3;
+    const int seed = 5;
+    double rate = -1;
+    for (int k = -6; k <= 5 && rate < 0; k++)
+        for (int i = -6; i <= 3 && rate < 0; i++) { /* cells over x < 40 (the wall's columns are 40..47) */
+            const int c = (int)floor(t / life + tu_ref_unit(tu_ref_hash4(i, k, 0x5eed, seed)));
+            const double u = tu_ref_unit(tu_ref_hash4(i, k, c, seed)), above = u + 1.0 / 16777216.0;
+            if (!(u > 0.2 && above <= 1.0))
+                continue;
+            double diff = 0;
+            for (int y = 0; y < N; y++)
+                for (int x = 0; x < 40; x++)
+                    diff = fmax(diff, fabs(ref_splash(ground_wx(x), ground_wy(y), t, spacing, above, size, life, seed) -
+                                           ref_splash(ground_wx(x), ground_wy(y), t, spacing, u, size, life, seed)));
+            if (diff > 0.1)
+                rate = u;
+        }
+    CHECK(rate > 0);
+    fx_frame *f = ground_frame(ctx, open_map, &mc, 10);
+    char params[256];
+    snprintf(params, sizeof params,
+             "\"spacing\": 0.8, \"size\": 0.35, \"rate\": %.9g, \"lifetime\": 0.3, \"brightness\": 1.5, "
+             "\"seed\": 5",
+             rate);
+    float *o = rate > 0 ? et_run_effect(ctx, "rain_splashes", f, params, NULL) : NULL;
+    const float *src = et_combined(f);
+    double e = o ? 0 : INFINITY;
+    for (int y = 0; o && y < N; y++)
+        for (int x = 0; x < N; x++) {
+            const int i = y * N + x;
+            double v = ground_wall(x) ? 0.0 : ref_splash(ground_wx(x), ground_wy(y), t, spacing, rate, size, life, seed);
+            for (int c = 0; c < 3; c++)
+                e = fmax(e, fabs(o[4 * i + c] - (src[4 * i + c] + v * 1.5 * color[c])));
+        }
+    fprintf(stderr, "splashes at rate = a cell's unit(hash) %.9g: max error %.2e\n", rate, e);
+    CHECK(e < 2e-5);
+    free(o);
+    fx_frame_free(f);
+}
+
+/* A pixel without a surface (Depth 0: nothing rendered there) gets no splash, at every
+ * downsample: holes of depth 0 between the lattice nodes (x, y = 2 mod 4) of an open floor
+ * full of splashes keep their source bits at downsample 1 and 4. */
+static void test_splashes_no_depth(fx_context *ctx)
+{
+    fx_camera mc;
+    const char *open_map = rain_map(ctx, -100.0f, 3.0f, &mc, "open_sky_holes");
+    for (int ds = 1; ds <= 4; ds += 3) {
+        fx_frame *f = ground_frame(ctx, open_map, &mc, 10);
+        float *dep = NULL;
+        int ch = 0;
+        CHECK_OK(ctx, fx_frame_pass(f, "Depth", &dep, &ch));
+        for (int y = 2; dep && y < N; y += 4)
+            for (int x = 2; x < 40; x += 4)
+                dep[y * N + x] = 0.0f;
+        char params[256];
+        snprintf(params, sizeof params,
+                 "\"spacing\": 0.8, \"size\": 0.35, \"rate\": 1.0, \"lifetime\": 0.3, \"brightness\": 1.5, "
+                 "\"seed\": 5, \"downsample\": %d",
+                 ds);
+        float *o = et_run_effect(ctx, "rain_splashes", f, params, NULL);
+        const float *src = et_combined(f);
+        int holes_changed = 0, floor_changed = 0;
+        for (int y = 0; o && y < N; y++)
+            for (int x = 0; x < 40; x++) {
+                const int i = y * N + x, changed = memcmp(o + 4 * i, src + 4 * i, 16) != 0;
+                if (y % 4 == 2 && x % 4 == 2)
+                    holes_changed += changed;
+                else
+                    floor_changed += changed;
+            }
+        fprintf(stderr, "splashes downsample %d: %d holes changed, %d floor pixels changed\n", ds, holes_changed,
+                floor_changed);
+        CHECK(o && holes_changed == 0 && floor_changed > 500);
+        free(o);
+        fx_frame_free(f);
+    }
+}
+
 /* ---- rain (streaks) against an independent reference ----
  * The documented model (docs/effects/rain.md, the effect's definition) in double: frame
  * pixel centre (x, y) in pattern space of layer l (scale s = near / d_l, k = (height /
@@ -1140,6 +1229,8 @@ int main(void)
     test_splashes_and_wet(ctx);
     test_splashes_downsample(ctx);
     test_splashes_reference(ctx);
+    test_splashes_rate_tie(ctx);
+    test_splashes_no_depth(ctx);
     test_rain_reference(ctx);
     test_wet_reference(ctx);
     test_cache();
