@@ -1147,6 +1147,119 @@ static void test_wet_downsample(fx_context *ctx)
     fx_frame_free(f);
 }
 
+/* wet_surfaces' downsample against its documented model (docs/effects/wet_surfaces.md:
+ * the look computed on a lattice of every N-th pixel, the last on the ROI's edge; inside a
+ * cell whose four corners' normals agree (dot >= 0.9) a pixel whose depth is within 2 % of
+ * the corners' and whose normal is within about 25 degrees of the first corner's (n.a > 0,
+ * (n.a)^2 >= 0.81 |n|^2) interpolates the corners bilinearly; any other pixel takes the
+ * corners on its own surface (depth within 1.5 % x N, normal within about 25 degrees of that
+ * corner's) at their bilinear weights + 1e-3, and is computed exactly when none is). With
+ * one source colour everywhere the output is linear in the look, so the model works on the
+ * exact (downsample 1) outputs: a corner's is its pixel's. The frame: a floor seen straight
+ * down, tilted 15 degrees towards -X, under the soft edge of a roof (the wetness, and so the
+ * look, changes across rows 19..32), with single pixels off the lattice (x, y = 1 mod 12)
+ * tilted +12 degrees in X (27 degrees from the floor, but only 12 from its Z axis), -45
+ * (30 from the floor, 45 from Z) and +7.5 (22.5 from the floor: inside the 25 degrees). */
+static void tilt_normal(float *n, double deg)
+{
+    n[0] = (float)sin(deg * 3.14159265358979323846 / 180.0);
+    n[1] = 0.0f;
+    n[2] = (float)cos(deg * 3.14159265358979323846 / 180.0);
+}
+
+static int bump_kind(int x, int y) /* 0: floor; 1..3: the three tilts */
+{
+    return x % 12 == 1 && y % 12 == 1 ? 1 + (x / 12 + y / 12) % 3 : 0;
+}
+
+static void test_wet_lattice_model(fx_context *ctx)
+{
+    fx_camera mc;
+    char path[512];
+    roof_map(ctx, "wet_model", &mc, path, sizeof path);
+    const double tilt[4] = {-15.0, 12.0, -45.0, 7.5};
+    float *rgba = malloc(N * N * 4 * sizeof(float)), *d = malloc(N * N * sizeof(float));
+    float *nrm = malloc(N * N * 3 * sizeof(float));
+    for (int i = 0; i < N * N; i++) {
+        rgba[4 * i] = 0.9f, rgba[4 * i + 1] = 0.8f, rgba[4 * i + 2] = 0.7f, rgba[4 * i + 3] = 1.0f;
+        d[i] = 10.0f;
+        tilt_normal(nrm + 3 * i, tilt[bump_kind(i % N, i / N)]);
+    }
+    fx_frame *f = et_frame(ctx, N, N, rgba);
+    fx_frame_add_pass(f, "Depth", 1, d);
+    fx_frame_add_pass(f, "Normal", 3, nrm);
+    float w2c[16] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, -10, 0, 0, 0, 1};
+    fx_camera cam;
+    ortho(&cam, w2c, 5.0f, 0.1f, 100.0f);
+    fx_frame_set_camera(f, &cam);
+    fx_frame_set_time(f, 1, 24.0);
+    CHECK_OK(ctx, fx_frame_set_aux_view(f, "rain_map", path, &mc));
+    const char *look = "\"edge_softness\": 1.0, \"darken\": 1.0, \"up_threshold\": 1.0";
+    char params[256];
+    snprintf(params, sizeof params, "%s, \"downsample\": 1", look);
+    float *ex = et_run_effect(ctx, "wet_surfaces", f, params, NULL);
+    CHECK(ex != NULL);
+    for (int ds = 3; ex && ds <= 4; ds++) {
+        snprintf(params, sizeof params, "%s, \"downsample\": %d", look, ds);
+        float *o = et_run_effect(ctx, "wet_surfaces", f, params, NULL);
+        const int n = (N - 2) / ds + 2;
+        int node[N];
+        for (int k = 0; k < n; k++)
+            node[k] = k == n - 1 ? N - 1 : k * ds;
+        double err[4] = {0, 0, 0, 0}, spread = 0;
+        for (int y = 0; o && y < N; y++)
+            for (int x = 0; x < N; x++) {
+                const int kx = x / ds < n - 2 ? x / ds : n - 2, ky = y / ds < n - 2 ? y / ds : n - 2;
+                const double tx = (double)(x - node[kx]) / (node[kx + 1] - node[kx]);
+                const double ty = (double)(y - node[ky]) / (node[ky + 1] - node[ky]);
+                const int cx[4] = {node[kx], node[kx + 1], node[kx], node[kx + 1]};
+                const int cy[4] = {node[ky], node[ky], node[ky + 1], node[ky + 1]};
+                const double bw[4] = {(1 - tx) * (1 - ty), tx * (1 - ty), (1 - tx) * ty, tx * ty};
+                const float *np = nrm + 3 * (y * N + x);
+                const double nn = (double)np[0] * np[0] + (double)np[1] * np[1] + (double)np[2] * np[2];
+                double dots[4], first[4];
+                int smooth = 1;
+                for (int m = 0; m < 4; m++) {
+                    const float *nc = nrm + 3 * (cy[m] * N + cx[m]), *n0 = nrm + 3 * (cy[0] * N + cx[0]);
+                    dots[m] = (double)np[0] * nc[0] + (double)np[1] * nc[1] + (double)np[2] * nc[2];
+                    first[m] = (double)n0[0] * nc[0] + (double)n0[1] * nc[1] + (double)n0[2] * nc[2];
+                    smooth &= first[m] >= 0.9;
+                }
+                double want[3] = {0, 0, 0}, ws = 0;
+                if (smooth && dots[0] > 0 && dots[0] * dots[0] >= 0.81 * nn) {
+                    for (int m = 0; m < 4; m++)
+                        for (int c = 0; c < 3; c++)
+                            want[c] += bw[m] * ex[4 * (cy[m] * N + cx[m]) + c];
+                    ws = 1;
+                } else {
+                    for (int m = 0; m < 4; m++)
+                        if (dots[m] > 0 && dots[m] * dots[m] >= 0.81 * nn) {
+                            for (int c = 0; c < 3; c++)
+                                want[c] += (bw[m] + 1e-3) * ex[4 * (cy[m] * N + cx[m]) + c];
+                            ws += bw[m] + 1e-3;
+                        }
+                }
+                for (int c = 0; c < 3; c++) {
+                    const double w = ws > 0 ? want[c] / ws : ex[4 * (y * N + x) + c];
+                    err[bump_kind(x, y)] = fmax(err[bump_kind(x, y)], fabs(o[4 * (y * N + x) + c] - w));
+                    if (ws > 0)
+                        spread = fmax(spread, fabs(w - ex[4 * (y * N + x) + c]));
+                }
+            }
+        fprintf(stderr,
+                "wet lattice model, downsample %d: max error floor %.2e, +12 %.2e, -45 %.2e, +7.5 %.2e (model "
+                "against exact up to %.3f)\n",
+                ds, err[0], err[1], err[2], err[3], spread);
+        CHECK(o && err[0] < 1e-5 && err[1] < 1e-5 && err[2] < 1e-5 && err[3] < 1e-5 && spread > 0.01);
+        free(o);
+    }
+    free(ex);
+    fx_frame_free(f);
+    free(rgba);
+    free(d);
+    free(nrm);
+}
+
 /* In place (a consumed frame: rain writes over the input's Combined, FX_EFFECT_IN_PLACE)
  * equals the separate-buffer run bit for bit, the debug pass too; without a mask no second
  * buffer (the output is the input's). A mask runs on a second buffer (the blend needs the
@@ -1238,6 +1351,7 @@ int main(void)
     test_rain_downsample(ctx);
     test_rain_cover_reference(ctx);
     test_wet_downsample(ctx);
+    test_wet_lattice_model(ctx);
     test_rain_in_place(ctx);
     fx_context_free(ctx);
     return tu_finish("test_rain");
