@@ -1,5 +1,5 @@
 /* god_rays method volumetric (math/volume_march.h) against a scene whose in-scattered light
- * has a closed form: an orthographic camera looking straight down at a floor 10 m below,
+ * has a closed form: a camera looking straight down at a floor 10 m below (90 degrees wide),
  * a sun travelling (1, 0, -1)/sqrt(2) and a shelf at z = 5 over x in [-12, -6] whose
  * shadow cuts the air near the floor on the left of the frame (the dark band). The light
  * view is written here from the geometry (ray casts), and the expected radiance is
@@ -95,11 +95,11 @@ static fx_frame *scene_frame(fx_context *ctx, const char *light_path, const char
     char json[4096];
     int k = snprintf(json, sizeof json,
                      "{\"world_to_camera\": [[1,0,0,0],[0,1,0,0],[0,0,1,%.17g],[0,0,0,1]],"
-                     " \"projection\": [[0.2,0,0,0],[0,%.17g,0,0],[0,0,%.17g,%.17g],[0,0,0,1]],"
-                     " \"clip_start\": %g, \"clip_end\": %g, \"orthographic\": true,"
+                     " \"projection\": [[2,0,0,0],[0,%.17g,0,0],[0,0,%.17g,%.17g],[0,0,-1,0]],"
+                     " \"clip_start\": %g, \"clip_end\": %g,"
                      " \"lights\": [{\"name\": \"Sun\", \"type\": \"%s\", \"position\": [-14, 0, 14],"
                      " \"direction\": [%.17g, 0, %.17g], \"color\": [1, 1, 1], \"energy\": %g}]",
-                     -CAM_Z, 0.2 * W / H, -2.0 / (fa - n), -(fa + n) / (fa - n), n, fa, type, A, -A, SUN_E);
+                     -CAM_Z, 2.0 * W / H, (fa + n) / (n - fa), 2 * fa * n / (n - fa), n, fa, type, A, -A, SUN_E);
     if (light_path)
         k += snprintf(json + k, sizeof json - (size_t)k,
                       ", \"aux_views\": [{\"name\": \"light:Sun\", \"path\": \"%s\","
@@ -113,38 +113,62 @@ static fx_frame *scene_frame(fx_context *ctx, const char *light_path, const char
     return f;
 }
 
-/* Closed form for pixel column x (ext: 0 none, 1 view, 2 full). */
+/* The view ray of pixel (x, H / 2): the point at planar depth s is (s kx, s ky, 10 - s). */
+static void ray_of(int x, double *kx, double *ky)
+{
+    *kx = 0.5 * (((x + 0.5) / W) * 2.0 - 1.0);
+    *ky = 0.5 * H / W * (1.0 - ((H / 2 + 0.5) / H) * 2.0);
+}
+
+static int no_shelf; /* expected_L as if the shelf were not there */
+
+/* Closed form for pixel (x, H / 2) (ext: 0 none, 1 view, 2 full). */
 static double expected_L(int x, int ext, double entry)
 {
-    double xp = 5.0 * (((x + 0.5) / W) * 2.0 - 1.0);
-    /* lit s: the point (xp, 10 - s) is in the shelf's shadow when xp - (5 - z) is over the
-     * shelf, z in [X0 + 5 - xp, X1 + 5 - xp] */
-    double z0 = fmax(0.0, SHELF_X0 + SHELF_Z - xp), z1 = fmin(SHELF_Z, SHELF_X1 + SHELF_Z - xp);
+    double kx, ky;
+    ray_of(x, &kx, &ky);
+    double len = sqrt(1.0 + kx * kx + ky * ky);
+    /* the point at s is in the shelf's shadow when its way to the sun, (-1, 0, 1), meets
+     * z = 5 over the shelf: x - (5 - z) = 5 + s (kx - 1) in [X0, X1], below it (s > 5) */
+    double sa = (SHELF_X1 - SHELF_Z) / (kx - 1.0), sb = (SHELF_X0 - SHELF_Z) / (kx - 1.0); /* kx < 1 */
+    sa = fmax(sa, CAM_Z - SHELF_Z);
+    sb = fmin(sb, CAM_Z);
     double segs[2][2];
     int ns = 0;
-    if (z1 > z0) { /* shadow s in [10 - z1, 10 - z0] */
-        segs[ns][0] = 0.0, segs[ns++][1] = CAM_Z - z1;
-        if (z0 > 0.0)
-            segs[ns][0] = CAM_Z - z0, segs[ns++][1] = CAM_Z;
+    if (sb > sa && !no_shelf) {
+        segs[ns][0] = 0.0, segs[ns++][1] = sa;
+        if (sb < CAM_Z)
+            segs[ns][0] = sb, segs[ns++][1] = CAM_Z;
     } else {
         segs[ns][0] = 0.0, segs[ns++][1] = CAM_Z;
     }
-    /* E(s) = alpha + beta s */
+    /* E(s) = alpha + beta s: view sigma len s; light sigma (ld(s) - entry), with
+     * ld = LDIST + (x - z) a = LDIST + (s kx - 10 + s) a */
     double alpha = 0.0, beta = 0.0;
     if (ext >= 1)
-        beta += SIGMA;
-    if (ext == 2) { /* ld(s) = LDIST + (xp - z) a, z = 10 - s */
-        alpha += SIGMA * (LDIST + (xp - CAM_Z) * A - entry);
-        beta += SIGMA * A;
+        beta += SIGMA * len;
+    if (ext == 2) {
+        alpha += SIGMA * (LDIST - CAM_Z * A - entry);
+        beta += SIGMA * (kx + 1.0) * A;
     }
     double integral = 0.0;
     for (int k = 0; k < ns; k++) {
         double a = segs[k][0], b = segs[k][1];
         integral += beta > 0 ? exp(-alpha) * (exp(-beta * a) - exp(-beta * b)) / beta : b - a;
     }
-    double g = G, c = -A; /* cos between the light's travel and the way to the camera (+z) */
+    /* cos between the light's travel (a, 0, -a) and the way to the camera (-kx, -ky, 1) / len */
+    double g = G, c = (-A * kx - A) / len;
     double phase = (1 - g * g) / (4 * M_PI * pow(1 + g * g - 2 * g * c, 1.5));
-    return SIGMA * phase * SUN_E * integral;
+    return SIGMA * phase * SUN_E * len * integral;
+}
+
+/* What is left of the floor's colour: exp(-sigma len 10) exp(-sigma (ld(floor) - entry)). */
+static double expected_T(int x, double entry)
+{
+    double kx, ky;
+    ray_of(x, &kx, &ky);
+    double len = sqrt(1.0 + kx * kx + ky * ky);
+    return exp(-SIGMA * len * CAM_Z) * exp(-SIGMA * (LDIST + CAM_Z * kx * A - entry));
 }
 
 static int quality_of(const char *q)
@@ -192,11 +216,14 @@ static void test_closed_form(fx_context *ctx)
         CHECK(worst < 0.01);
         if (!(worst < 0.01))
             fprintf(stderr, "volumetric extinction %s: worst relative error %.4f\n", ext[e], worst);
-        /* the dark band: the shaded air on the left adds less than the lit air on the right
-         * (without extinction: with it, the left's shorter way in makes up for it here) */
-        if (o && e == 0) {
-            float left = o[4 * ((H / 2) * W + 2)], right = o[4 * ((H / 2) * W + W - 3)];
-            CHECK(left < 0.75f * right);
+        /* the dark band: the shaded air on the left adds less than the same air unshaded */
+        if (o) {
+            no_shelf = 1;
+            double lit = expected_L(2, e, entry);
+            no_shelf = 0;
+            CHECK(o[4 * ((H / 2) * W + 2)] < 0.85 * lit);
+            if (getenv("VOL_DEBUG"))
+                fprintf(stderr, "band %s: %.5f of %.5f unshaded\n", ext[e], o[4 * ((H / 2) * W + 2)], lit);
         }
         free(o);
         fx_stack_free(s);
@@ -208,9 +235,7 @@ static void test_closed_form(fx_context *ctx)
     float *o = et_run(ctx, s, f);
     double worst = 0.0;
     for (int x = 0; o && x < W; x++) {
-        double xp = 5.0 * (((x + 0.5) / W) * 2.0 - 1.0);
-        double ld = LDIST + xp * A; /* the floor point (xp, 0, 0) */
-        double want = exp(-SIGMA * CAM_Z) * exp(-SIGMA * (ld - entry)) + expected_L(x, 2, entry);
+        double want = expected_T(x, entry) + expected_L(x, 2, entry);
         double rel = fabs(o[4 * ((H / 2) * W + x)] - want) / want;
         worst = rel > worst ? rel : worst;
     }
@@ -243,11 +268,12 @@ static void test_threads_presets(fx_context *ctx)
         }
         /* the mean over the row, src 0.25 T included */
         double t_sum = 0.0;
-        for (int x = 0; x < W; x++) {
-            double xp = 5.0 * (((x + 0.5) / W) * 2.0 - 1.0);
-            t_sum += 0.25 * exp(-SIGMA * CAM_Z) * exp(-SIGMA * (LDIST + xp * A - entry));
-        }
-        CHECK(fabs(sum - want - t_sum) < 0.03 * (want + t_sum));
+        for (int x = 0; x < W; x++)
+            t_sum += 0.25 * expected_T(x, entry);
+        double rel = fabs(sum - want - t_sum) / (want + t_sum);
+        CHECK(rel < 0.01);
+        if (getenv("VOL_DEBUG") || !(rel < 0.01))
+            fprintf(stderr, "volumetric %s: row mean relative error %.4f\n", q[k], rel);
         free(a);
         free(b);
         fx_stack_free(s1);
@@ -271,11 +297,33 @@ static void test_extremes_errors(fx_context *ctx)
             fx_stack *s = vol_stack(ctx, e == 1 ? "draft" : "reference", ext[e]);
             CHECK_OK(ctx, fx_stack_set_float(s, 0, "volume_density", dens[k]));
             CHECK_OK(ctx, fx_stack_set_float(s, 0, "anisotropy", aniso[k]));
+            fx_context_clear_warnings(ctx);
             float *o = et_run(ctx, s, f);
-            CHECK(o && tu_all_finite(o, (size_t)W * H * 4));
+            /* finite by itself: the stack replaced nothing (it would warn) and nothing is huge */
+            CHECK(o && tu_all_finite(o, (size_t)W * H * 4) && fx_context_warning_count(ctx) == 0);
+            for (size_t i = 0; o && i < (size_t)W * H * 4; i++)
+                if (!(fabsf(o[i]) < 1e30f)) {
+                    CHECK(!"an output value beyond 1e30");
+                    break;
+                }
             free(o);
             fx_stack_free(s);
         }
+    /* density 1e6, extinction view: the air right at the camera is lit and opaque, so the
+     * in-scatter is the limit p S (sigma / sigma), the floor hidden */
+    for (int k = 0; k < 2; k++) {
+        fx_stack *s = vol_stack(ctx, "reference", "view");
+        CHECK_OK(ctx, fx_stack_set_float(s, 0, "volume_density", 1e6f));
+        CHECK_OK(ctx, fx_stack_set_float(s, 0, "anisotropy", k ? -0.999f : 0.999f));
+        float *o = et_run(ctx, s, f);
+        double kx, ky;
+        ray_of(W / 2, &kx, &ky);
+        double g = k ? -0.999 : 0.999, c = (-A * kx - A) / sqrt(1.0 + kx * kx + ky * ky);
+        double want = SUN_E * (1 - g * g) / (4 * M_PI * pow(1 + g * g - 2 * g * c, 1.5));
+        CHECK(o && fabs(o[4 * ((H / 2) * W + W / 2)] - want) < 0.02 * want);
+        free(o);
+        fx_stack_free(s);
+    }
     /* density 0: the identity, bit for bit */
     fx_stack *s = vol_stack(ctx, "final", "full");
     CHECK_OK(ctx, fx_stack_set_float(s, 0, "volume_density", 0.0f));
