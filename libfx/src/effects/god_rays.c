@@ -137,7 +137,7 @@ static const fx_param_def god_rays_param_defs[] = {
     FX_P_FLOAT(god_rays_params, max_distance, "max_distance", 1e4, 0.0, 1e30, 1.0, 1e4, "m",
                "volumetric: the medium ends this far from the camera (it also ends at each pixel's "
                "surface and outside the light view's box)"),
-    FX_P_INT(god_rays_params, volume_steps, "volume_steps", 24, 1, 4096, 4, 256, "",
+    FX_P_INT(god_rays_params, volume_steps, "volume_steps", 16, 1, 4096, 4, 256, "",
              "volumetric: march steps per ray (with interleave n, n x n neighbours share their strata: "
              "n^2 x the steps' worth)"),
     FX_P_INT(god_rays_params, volume_downsample, "volume_downsample", 2, 1, 16, 1, 8, "",
@@ -578,35 +578,41 @@ typedef struct vol_job {
     const fx_effect_run *run;
     const fx_volume *vol;
     const float *depth;
-    const float *lo, *lo_depth; /* the reduced in-scatter (f > 1) or the full one (f = 1) */
+    const float *lo, *lo_t, *lo_depth; /* the reduced in-scatter and transmittance (f > 1) or
+                                          the full ones (f = 1) */
     int lw, lh, f;
     v4f rad;                    /* the sun's colour * strength */
     int screen;
     float *dbg;                 /* debug "inscatter" (RGB), or NULL */
+    const int *col_x0;          /* per ROI column: its lo texel (left) and the right one's weight */
+    const float *col_t;
 } vol_job;
 
-/* Output = src T + L (T: the view transmittance of the pixel's own ray, with extinction full
- * times the light's transmittance on its way to the pixel's surface; L: the in-scatter,
- * upsampled by depth likeness from the reduced grid). */
+/* Output = src T + L (T: the view transmittance, with extinction full times the light's
+ * transmittance on its way to the surface; L: the in-scatter; both upsampled by depth
+ * likeness from the reduced grid). */
 static void vol_rows(void *user, int begin, int end)
 {
     const vol_job *j = user;
     const fx_effect_run *run = j->run;
     const int w = run->width;
-    for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++)
+    for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++) {
+        int Y0 = 0;
+        float ty = 0.0f;
+        fx_volume_lo_coord(y, j->f, j->lh, &Y0, &ty);
+        const size_t r0 = (size_t)Y0 * j->lw, r1 = Y0 + 1 < j->lh ? r0 + (size_t)j->lw : r0;
         for (int x = run->roi.x0; x < run->roi.x1; x++) {
             size_t i = (size_t)y * w + x;
-            float d = j->depth[i];
-            float L;
-            if (j->f > 1)
-                L = fx_volume_upsample(j->lo, j->lo_depth, j->lw, j->lh, j->f, x, y,
-                                       fx_volume_weight_depth(d, j->vol->far_limit));
-            else
+            float L, T;
+            if (j->f > 1) {
+                float d = fx_volume_weight_depth(j->depth[i], j->vol->far_limit);
+                int X0 = j->col_x0[x - run->roi.x0];
+                fx_volume_upsample(j->lo, j->lo_t, j->lo_depth, r0, r1, X0, X0 + 1 < j->lw ? X0 + 1 : X0,
+                                   j->col_t[x - run->roi.x0], ty, d, &L, &T);
+            } else {
                 L = j->lo[i];
-            float T = 1.0f;
-            fx_volume_ray r;
-            if (j->vol->view_extinction && fx_volume_ray_init(j->vol, (float)x + 0.5f, (float)y + 0.5f, d, &r))
-                T = fx_volume_transmittance(j->vol, &r) * fx_volume_surface_light(j->vol, &r, d);
+                T = j->lo_t[i];
+            }
             v4f s = ld4(run->src + i * 4);
             v4f add = j->rad * V4(L);
             v4f base = s * (v4f){T, T, T, 1.0f};
@@ -619,6 +625,7 @@ static void vol_rows(void *user, int begin, int end)
                 j->dbg[3 * i + 2] = add[2];
             }
         }
+    }
 }
 
 /* The sun and its light view for method volumetric: a sun only (spot and point lights
@@ -666,6 +673,7 @@ static void vol_setup(const god_rays_params *p, const fx_view *cam, const fx_aux
     vol->eps = fx_shadow_map_norm_dist(map->sm, p->volume_bias);
     vol->far_limit = cam->cam.clip_end > 0.0f ? 1.01f * cam->cam.clip_end : 1e9f;
     vol->entry = fx_volume_light_entry(map->sm);
+    fx_volume_prepare(vol);
 }
 
 static fx_result run_volumetric(const fx_effect_run *run, const god_rays_params *p)
@@ -688,7 +696,7 @@ static fx_result run_volumetric(const fx_effect_run *run, const god_rays_params 
     vol_setup(p, &cam, &map, &L, &vol);
     const int f = p->volume_downsample > 1 ? p->volume_downsample : 1;
     const int lw = fx_volume_lo_size(w, f), lh = fx_volume_lo_size(h, f);
-    const size_t ln = (size_t)lw * lh, bytes = ln * 3 * sizeof(float);
+    const size_t ln = (size_t)lw * lh, bytes = ln * 4 * sizeof(float);
     r = fx_check_budget(run->ctx, (uint64_t)bytes, where);
     float *buf = r == FX_OK ? fx_buffer_get(run->ctx, bytes) : NULL;
     if (r == FX_OK && !buf)
@@ -698,16 +706,27 @@ static fx_result run_volumetric(const fx_effect_run *run, const god_rays_params 
         int fr = isfinite(frame_no) && fabs(frame_no) < 2e9 ? (int)floor(frame_no) : 0;
         unsigned rot = fx_hash4(fr, p->seed, 0x766f6c, 0);
         fx_volume_scatter_lo(run->ctx, &vol, dp->data, w, h, f, p->volume_steps, p->interleave, rot, buf,
-                             buf + ln, buf + 2 * ln);
+                             buf + ln, buf + 2 * ln, buf + 3 * ln);
         float e = L.energy;
-        vol_job j = {run, &vol, dp->data, buf, buf + ln, lw, lh, f,
-                     (v4f){L.color.x * e, L.color.y * e, L.color.z * e, 0.0f}, p->composite == COMP_SCREEN, NULL};
+        vol_job j = {run, &vol, dp->data, buf, buf + ln, buf + 2 * ln, lw, lh, f,
+                     (v4f){L.color.x * e, L.color.y * e, L.color.z * e, 0.0f}, p->composite == COMP_SCREEN, NULL, NULL, NULL};
         if (run->debug)
             j.dbg = fx_effect_debug_pass(run, "inscatter", 3, &r);
+        const int cols = run->roi.x1 - run->roi.x0;
+        int *cx = r == FX_OK ? fx_mem_alloc((size_t)cols * sizeof(int)) : NULL;
+        float *ct = r == FX_OK ? fx_mem_alloc((size_t)cols * sizeof(float)) : NULL;
+        if (r == FX_OK && (!cx || !ct))
+            r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
+        for (int x = run->roi.x0; r == FX_OK && x < run->roi.x1; x++)
+            fx_volume_lo_coord(x, f, lw, &cx[x - run->roi.x0], &ct[x - run->roi.x0]);
+        j.col_x0 = cx;
+        j.col_t = ct;
         if (r == FX_OK) {
             int rows = run->roi.y1 - run->roi.y0;
             fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), vol_rows, &j);
         }
+        fx_mem_free(cx);
+        fx_mem_free(ct);
     }
     fx_buffer_put(run->ctx, buf, bytes);
     fx_aux_map_release(run->ctx, &map);
@@ -754,11 +773,11 @@ const fx_effect_class fx_effect_god_rays = {
          * 0.5 has the scene-relative line density of 1.5 at 640x360; at equal time a reduced
          * map with finer lines errs less than coarser lines at full size */
         "{\"method\": \"polar\", \"polar_resolution\": 0.75, \"polar_levels\": 2, \"polar_downsample\": 4, "
-        "\"volume_downsample\": 4, \"volume_steps\": 12, \"interleave\": 4}",
+        "\"volume_downsample\": 4, \"volume_steps\": 8, \"interleave\": 4}",
         "{\"method\": \"polar\", \"polar_resolution\": 0.75, \"polar_levels\": 2, \"polar_downsample\": 2, "
-        "\"volume_downsample\": 3, \"volume_steps\": 16, \"interleave\": 4}",
+        "\"volume_downsample\": 3, \"volume_steps\": 12, \"interleave\": 4}",
         "{\"method\": \"polar\", \"polar_resolution\": 0.5, \"polar_levels\": 2, \"polar_downsample\": 1, "
-        "\"volume_downsample\": 2, \"volume_steps\": 24, \"interleave\": 4}",
+        "\"volume_downsample\": 2, \"volume_steps\": 16, \"interleave\": 4}",
         "{\"method\": \"naive\", \"samples\": 2000, \"jitter\": false, "
         "\"volume_downsample\": 1, \"volume_steps\": 256, \"interleave\": 1}",
     },

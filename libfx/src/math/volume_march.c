@@ -6,90 +6,118 @@
 #include <math.h>
 #include <string.h>
 
-/* Clips [*a, *b] to the s where lo <= c0 + s c1 <= hi; 0 when nothing is left. */
-static int clip_slab(double c0, double c1, double lo, double hi, double *a, double *b)
-{
-    if (fabs(c1) < 1e-30) {
-        if (!(c0 >= lo && c0 <= hi))
-            return 0;
-        return *a < *b;
-    }
-    double t0 = (lo - c0) / c1, t1 = (hi - c0) / c1;
-    if (t0 > t1) {
-        double t = t0;
-        t0 = t1;
-        t1 = t;
-    }
-    if (t0 > *a)
-        *a = t0;
-    if (t1 < *b)
-        *b = t1;
-    return *a < *b;
-}
-
 /* A world point in the light view: pixel x, y and planar depth. */
-static void light_coords(const fx_view *lv, fx_vec3 p, double out[3])
+static fx_vec3 light_coords(const fx_view *lv, fx_vec3 p)
 {
     fx_vec3 q = fx_world_to_view(lv, p);
     fx_vec2 pix = {0.0f, 0.0f};
     fx_view_project(lv, q, &pix);
-    out[0] = pix.x;
-    out[1] = pix.y;
-    out[2] = -q.z;
+    return fx_v3(pix.x, pix.y, -q.z);
+}
+
+/* The world origin and direction (per unit of planar depth) of the ray at pixel position
+ * (x, y). */
+static void world_ray(const fx_view *cam, float x, float y, fx_vec3 *o, fx_vec3 *d)
+{
+    fx_vec2 ndc = fx_view_pixel_to_ndc(cam, x, y);
+    *o = fx_view_to_world(cam, fx_view_position(cam, ndc, 0.0f));
+    *d = fx_v3_sub(fx_view_to_world(cam, fx_view_position(cam, ndc, 1.0f)), *o);
+}
+
+void fx_volume_prepare(fx_volume *v)
+{
+    /* differences over 256 pixels: the maps are affine, the long baseline keeps the
+     * rounding of the two ends small against the step */
+    const float k = 256.0f, ik = 1.0f / 256.0f;
+    fx_vec3 o[3], d[3];
+    world_ray(v->cam, 0.0f, 0.0f, &o[0], &d[0]);
+    world_ray(v->cam, k, 0.0f, &o[1], &d[1]);
+    world_ray(v->cam, 0.0f, k, &o[2], &d[2]);
+    v->wd0 = d[0];
+    v->wdx = fx_v3_scale(fx_v3_sub(d[1], d[0]), ik);
+    v->wdy = fx_v3_scale(fx_v3_sub(d[2], d[0]), ik);
+    fx_vec3 lo[3], le[3];
+    for (int i = 0; i < 3; i++) {
+        lo[i] = light_coords(v->light_view, o[i]);
+        le[i] = fx_v3_sub(light_coords(v->light_view, fx_v3_add(o[i], d[i])), lo[i]);
+    }
+    v->lo0 = lo[0];
+    v->lox = fx_v3_scale(fx_v3_sub(lo[1], lo[0]), ik);
+    v->loy = fx_v3_scale(fx_v3_sub(lo[2], lo[0]), ik);
+    v->ld0 = le[0];
+    v->ldx = fx_v3_scale(fx_v3_sub(le[1], le[0]), ik);
+    v->ldy = fx_v3_scale(fx_v3_sub(le[2], le[0]), ik);
+}
+
+/* Clips [*a, *b] to the s where lo <= c0 + s c1 <= hi (float); 0 when nothing is left. */
+static inline int clip_slab_f(float c0, float c1, float lo, float hi, float *a, float *b)
+{
+    if (fabsf(c1) < 1e-30f)
+        return c0 >= lo && c0 <= hi && *a < *b;
+    float inv = 1.0f / c1;
+    float t0 = (lo - c0) * inv, t1 = (hi - c0) * inv;
+    if (t0 > t1) {
+        float t = t0;
+        t0 = t1;
+        t1 = t;
+    }
+    *a = t0 > *a ? t0 : *a;
+    *b = t1 < *b ? t1 : *b;
+    return *a < *b;
+}
+
+/* The ray's clip to the medium and its light view coordinates (not its phase nor its
+ * optical depth). */
+static inline int volume_ray_geometry(const fx_volume *v, float x, float y, float depth, fx_volume_ray *r)
+{
+    fx_vec3 d = fx_v3_add(v->wd0, fx_v3_add(fx_v3_scale(v->wdx, x), fx_v3_scale(v->wdy, y)));
+    fx_vec3 c0 = fx_v3_add(v->lo0, fx_v3_add(fx_v3_scale(v->lox, x), fx_v3_scale(v->loy, y)));
+    fx_vec3 c1 = fx_v3_add(v->ld0, fx_v3_add(fx_v3_scale(v->ldx, x), fx_v3_scale(v->ldy, y)));
+    float len = fx_v3_length(d);
+    r->s0 = r->s1 = 0.0f;
+    if (!(len > 1e-20f) || !(len < 1e30f))
+        return 0;
+    float a = 0.0f, b = depth > 0.0f && depth < v->far_limit ? depth : 1e30f;
+    float bmax = v->max_distance / len;
+    b = b < bmax ? b : bmax;
+    const fx_shadow_map *sm = v->sm;
+    if (!clip_slab_f(c0.x, c1.x, 0.0f, (float)sm->width, &a, &b) ||
+        !clip_slab_f(c0.y, c1.y, 0.0f, (float)sm->height, &a, &b) ||
+        !clip_slab_f(c0.z, c1.z, v->entry, sm->zfar, &a, &b) || !(b < 1e29f))
+        return 0;
+    float range = sm->zfar - sm->znear;
+    float kn = range > 1e-20f ? 2.0f / range : 0.0f;
+    r->s0 = a;
+    r->s1 = b;
+    r->len = len;
+    r->px0 = c0.x;
+    r->dpx = c1.x;
+    r->py0 = c0.y;
+    r->dpy = c1.y;
+    r->tn0 = (c0.z - sm->znear) * kn - 1.0f;
+    r->dtn = c1.z * kn;
+    r->ld0 = c0.z;
+    r->dld = c1.z;
+    return 1;
 }
 
 int fx_volume_ray_init(const fx_volume *v, float x, float y, float depth, fx_volume_ray *r)
 {
-    memset(r, 0, sizeof *r);
-    const fx_view *cam = v->cam;
-    fx_vec2 ndc = fx_view_pixel_to_ndc(cam, x, y);
-    fx_vec3 p0 = fx_view_to_world(cam, fx_view_position(cam, ndc, 0.0f));
-    fx_vec3 p1 = fx_view_to_world(cam, fx_view_position(cam, ndc, 1.0f));
-    fx_vec3 d = fx_v3_sub(p1, p0);
-    float len = fx_v3_length(d);
-    if (!(len > 1e-20f) || !isfinite(len))
+    if (!volume_ray_geometry(v, x, y, depth, r))
         return 0;
-    double a = 0.0, b = depth > 0.0f && depth < v->far_limit ? (double)depth : 1e30;
-    double bmax = (double)v->max_distance / len;
-    if (b > bmax)
-        b = bmax;
-    double c0[3], c1[3];
-    light_coords(v->light_view, p0, c0);
-    light_coords(v->light_view, p1, c1);
-    for (int k = 0; k < 3; k++)
-        c1[k] -= c0[k];
-    const fx_shadow_map *sm = v->sm;
-    if (!clip_slab(c0[0], c1[0], 0.0, sm->width, &a, &b) || !clip_slab(c0[1], c1[1], 0.0, sm->height, &a, &b) ||
-        !clip_slab(c0[2], c1[2], v->entry, sm->zfar, &a, &b))
-        return 0;
-    if (!(b > a) || !isfinite(a) || !isfinite(b))
-        return 0;
-    double range = (double)sm->zfar - sm->znear;
-    double kn = range > 1e-20 ? 2.0 / range : 0.0;
-    r->s0 = (float)a;
-    r->s1 = (float)b;
-    r->len = len;
-    r->px0 = (float)c0[0];
-    r->dpx = (float)c1[0];
-    r->py0 = (float)c0[1];
-    r->dpy = (float)c1[1];
-    r->tn0 = (float)((c0[2] - sm->znear) * kn - 1.0);
-    r->dtn = (float)(c1[2] * kn);
-    double e0 = 0.0, e1 = 0.0;
+    const float len = r->len, c0z = r->ld0, c1z = r->dld;
+    float e0 = 0.0f, e1 = 0.0f;
     if (v->view_extinction)
-        e1 += (double)v->sigma * len;
+        e1 += v->sigma * len;
     if (v->light_extinction) {
-        e0 += (double)v->sigma * (c0[2] - v->entry);
-        e1 += (double)v->sigma * c1[2];
+        e0 += v->sigma * (c0z - v->entry);
+        e1 += v->sigma * c1z;
     }
-    if (e1 < 0.0) /* light extinction alone, looking towards the light: not offered */
-        e1 = 0.0;
-    r->ld0 = (float)c0[2];
-    r->dld = (float)c1[2];
-    r->e0 = (float)e0;
-    r->e1 = (float)e1;
+    r->e0 = e0;
+    r->e1 = e1 > 0.0f ? e1 : 0.0f; /* light extinction alone, towards the light: not offered */
+    fx_vec3 d = fx_v3_add(v->wd0, fx_v3_add(fx_v3_scale(v->wdx, x), fx_v3_scale(v->wdy, y)));
     r->phase = fx_hg_phase(v->g, -fx_v3_dot(v->light_dir, d) / len);
-    return r->s1 > r->s0;
+    return 1;
 }
 
 float fx_volume_light_entry(const fx_shadow_map *sm)
@@ -101,21 +129,6 @@ float fx_volume_light_entry(const fx_shadow_map *sm)
     if (!(m >= -1.0f))
         m = -1.0f;
     return sm->znear + (m + 1.0f) * 0.5f * (sm->zfar - sm->znear);
-}
-
-/* The sun's visibility at light view pixel (px, py) for normalised depth t: the depth test
- * at the 4 nearest texels, bilinearly weighted. */
-static inline float visibility(const fx_shadow_map *sm, float px, float py, float t)
-{
-    const int w = sm->width, h = sm->height;
-    float fx = fx_clampf(px - 0.5f, 0.0f, (float)(w - 1)), fy = fx_clampf(py - 0.5f, 0.0f, (float)(h - 1));
-    int x0 = (int)fx, y0 = (int)fy;
-    int x1 = x0 + 1 < w ? x0 + 1 : x0;
-    const float *r0 = sm->depth + (size_t)y0 * w, *r1 = y0 + 1 < h ? r0 + w : r0;
-    float tx = fx - (float)x0, ty = fy - (float)y0;
-    float a = (t <= r0[x0] ? 1.0f - tx : 0.0f) + (t <= r0[x1] ? tx : 0.0f);
-    float b = (t <= r1[x0] ? 1.0f - tx : 0.0f) + (t <= r1[x1] ? tx : 0.0f);
-    return a + (b - a) * ty;
 }
 
 float fx_volume_march(const fx_volume *v, const fx_volume_ray *r, int steps, float offset)
@@ -132,13 +145,32 @@ float fx_volume_march(const fx_volume *v, const fx_volume_ray *r, int steps, flo
         return 0.0f;
     float att = expf(-od);
     const float stop = expf(-FX_VOLUME_OPAQUE);
-    const float t_eps = v->eps;
+    /* the sample positions in the light view, stepped (texel centres at + 0.5: the
+     * bilinear's corner texel is floor(p - 0.5)) */
+    const fx_shadow_map *sm = v->sm;
+    const int w = sm->width, hh = sm->height;
+    const float wm1 = (float)(w - 1), hm1 = (float)(hh - 1);
+    const float s = r->s0 + offset * h;
+    float px = r->px0 + s * r->dpx - 0.5f, py = r->py0 + s * r->dpy - 0.5f;
+    float t = r->tn0 + s * r->dtn - v->eps;
+    const float spx = h * r->dpx, spy = h * r->dpy, st = h * r->dtn;
     float acc = 0.0f;
     for (int i = 0; i < steps && att > stop; i++) {
-        float s = r->s0 + ((float)i + offset) * h;
-        float vis = visibility(v->sm, r->px0 + s * r->dpx, r->py0 + s * r->dpy, r->tn0 + s * r->dtn - t_eps);
-        acc += vis * att;
+        /* the depth test at the 4 nearest texels, bilinearly weighted (clamped to the map) */
+        float fx = px > 0.0f ? px : 0.0f, fy = py > 0.0f ? py : 0.0f; /* maxss/minss, no libm */
+        fx = fx < wm1 ? fx : wm1;
+        fy = fy < hm1 ? fy : hm1;
+        int x0 = (int)fx, y0 = (int)fy;
+        int x1 = x0 + (x0 < w - 1);
+        const float *r0 = sm->depth + (size_t)y0 * w, *r1 = r0 + (y0 < hh - 1 ? w : 0);
+        float tx = fx - (float)x0, ty = fy - (float)y0;
+        float a = (t <= r0[x0] ? 1.0f - tx : 0.0f) + (t <= r0[x1] ? tx : 0.0f);
+        float b = (t <= r1[x0] ? 1.0f - tx : 0.0f) + (t <= r1[x1] ? tx : 0.0f);
+        acc += (a + (b - a) * ty) * att;
         att *= decay;
+        px += spx;
+        py += spy;
+        t += st;
     }
     float out = v->sigma * r->phase * r->len * step_int * acc;
     return isfinite(out) ? out : 0.0f;
@@ -163,6 +195,26 @@ float fx_volume_surface_light(const fx_volume *v, const fx_volume_ray *r, float 
     return od < FX_VOLUME_OPAQUE ? expf(-od) : 0.0f;
 }
 
+float fx_volume_behind_at(const fx_volume *v, float x, float y, float depth)
+{
+    fx_volume_ray r;
+    if (!volume_ray_geometry(v, x, y, depth, &r))
+        return 1.0f;
+    return fx_volume_behind(v, &r, depth);
+}
+
+float fx_volume_behind(const fx_volume *v, const fx_volume_ray *r, float depth)
+{
+    float od = 0.0f;
+    if (v->view_extinction && r->s1 > r->s0)
+        od += v->sigma * r->len * (r->s1 - r->s0);
+    if (v->light_extinction && depth > 0.0f && depth < v->far_limit) {
+        float l = r->ld0 + depth * r->dld - v->entry;
+        od += l > 0.0f ? v->sigma * l : 0.0f;
+    }
+    return od < FX_VOLUME_OPAQUE ? expf(-od) : 0.0f;
+}
+
 /* ---- the reduced grid: march with interleaved offsets, then the depth-aware gather ---- */
 
 typedef struct lo_job {
@@ -171,7 +223,7 @@ typedef struct lo_job {
     int w, h, f, steps, n, lw, lh;
     int mult;         /* the strata's permutation: k -> (k mult + rot) mod n^2 */
     unsigned rot;
-    float *lo, *lo_depth, *out;
+    float *lo, *lo_t, *lo_depth, *out;
 } lo_job;
 
 static void march_rows(void *user, int y0, int y1)
@@ -192,11 +244,10 @@ static void march_rows(void *user, int y0, int y1)
                 offset = ((float)k + 0.5f) / (float)nn;
             }
             fx_volume_ray r;
-            float L = fx_volume_ray_init(j->v, (float)x + 0.5f, (float)y + 0.5f, d, &r)
-                          ? fx_volume_march(j->v, &r, j->steps, offset)
-                          : 0.0f;
+            int in = fx_volume_ray_init(j->v, (float)x + 0.5f, (float)y + 0.5f, d, &r);
             size_t i = (size_t)Y * j->lw + X;
-            j->lo[i] = L;
+            j->lo[i] = in ? fx_volume_march(j->v, &r, j->steps, offset) : 0.0f;
+            j->lo_t[i] = in ? fx_volume_behind(j->v, &r, d) : 1.0f;
             j->lo_depth[i] = fx_volume_weight_depth(d, j->v->far_limit);
         }
     }
@@ -210,7 +261,7 @@ static void gather_rows(void *user, int y0, int y1)
     const int n = j->n, lw = j->lw, lh = j->lh;
     for (int Y = y0; Y < y1; Y++)
         for (int X = 0; X < lw; X++) {
-            const float d = j->lo_depth[(size_t)Y * lw + X];
+            const float d = j->lo_depth[(size_t)Y * lw + X], inv = 10.0f / d;
             float s = 0.0f, ws = 0.0f;
             for (int b = 0; b < n; b++) {
                 int yy = Y - n / 2 + b;
@@ -219,12 +270,12 @@ static void gather_rows(void *user, int y0, int y1)
                 for (int a = 0; a < n; a++) {
                     int xx = X - n / 2 + a;
                     xx = xx < 0 ? 0 : xx >= lw ? lw - 1 : xx;
-                    float wt = fx_volume_depth_weight(d, D[xx]);
+                    float wt = fx_volume_depth_weight(d, inv, D[xx]);
                     s += wt * L[xx];
                     ws += wt;
                 }
             }
-            j->out[(size_t)Y * lw + X] = ws > 1e-30f ? s / ws : j->lo[(size_t)Y * lw + X];
+            j->out[(size_t)Y * lw + X] = ws > 1e-6f ? s / ws : j->lo[(size_t)Y * lw + X]; /* ws >= 1: itself */
         }
 }
 
@@ -239,7 +290,8 @@ static int gcd(int a, int b)
 }
 
 void fx_volume_scatter_lo(fx_context *ctx, const fx_volume *v, const float *depth, int w, int h, int factor,
-                          int steps, int interleave, unsigned rotate, float *lo, float *lo_depth, float *tmp)
+                          int steps, int interleave, unsigned rotate, float *lo, float *lo_t, float *lo_depth,
+                          float *tmp)
 {
     lo_job j;
     memset(&j, 0, sizeof j);
@@ -263,6 +315,7 @@ void fx_volume_scatter_lo(fx_context *ctx, const fx_volume *v, const float *dept
     j.rot = nn > 1 ? rotate % (unsigned)nn : 0;
     j.lo = j.n > 1 ? tmp : lo;
     j.lo_depth = lo_depth;
+    j.lo_t = lo_t;
     fx_parallel_for(ctx, j.lh, fx_grain_for(ctx, j.lh), march_rows, &j);
     if (j.n > 1) {
         j.out = lo;

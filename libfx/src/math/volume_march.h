@@ -33,6 +33,8 @@
 #include "math/shadow_map.h"
 #include "math/vec.h"
 
+#include <float.h>
+
 /* Anisotropy is clamped to this (Henyey-Greenstein at |g| = 1 is a delta). */
 #define FX_VOLUME_MAX_G 0.999f
 /* Above this optical depth a sample adds nothing (exp(-40) ~ 4e-18): the march stops. */
@@ -52,7 +54,16 @@ typedef struct fx_volume {
     float far_limit;           /* planar depth at or beyond which a pixel is background */
     float entry;               /* light view planar depth where the light enters the medium
                                   (fx_volume_light_entry): the medium's near side */
+    /* Filled by fx_volume_prepare: a pixel's ray is affine in its pixel coordinates (x, y):
+     * origin o = o0 + x ox + y oy, direction per unit of planar depth d = d0 + x dx + y dy,
+     * in world space (w*) and in the light view's coordinates (l*: pixel x, pixel y, planar
+     * depth; an orthographic view is affine too). */
+    fx_vec3 wd0, wdx, wdy;
+    fx_vec3 lo0, lox, loy, ld0, ldx, ldy;
 } fx_volume;
+
+/* Fills the ray basis of v from its cameras (call once the other fields are set). */
+void fx_volume_prepare(fx_volume *v);
 
 /* The light view's nearest surface depth (planar, scene units): where its light enters. */
 float fx_volume_light_entry(const fx_shadow_map *sm);
@@ -101,27 +112,35 @@ float fx_volume_transmittance(const fx_volume *v, const fx_volume_ray *r);
  * 1 without light extinction, for background and outside the light view's depth range. */
 float fx_volume_surface_light(const fx_volume *v, const fx_volume_ray *r, float depth);
 
-/* The in-scattered light over a frame (w x h, planar depth `depth`) on a grid reduced by
+/* fx_volume_transmittance * fx_volume_surface_light in one exponential; _at: of the ray
+ * at pixel position (x, y) (1 where it misses the medium). */
+float fx_volume_behind(const fx_volume *v, const fx_volume_ray *r, float depth);
+float fx_volume_behind_at(const fx_volume *v, float x, float y, float depth);
+
+/* The in-scattered light (and what is left of the surface behind: fx_volume_behind) over a
+ * frame (w x h, planar depth `depth`) on a grid reduced by
  * `factor` (lo texel X stands for pixel column min(factor X + factor / 2, w - 1)), with
  * interleaved sampling over `interleave` x `interleave` texels (each texel of a block
  * marches with its own offset, a fixed permutation of the block's strata turned by
  * `rotate`) gathered back by a depth-aware box of the block's size. lo (lw x lh) gets the
- * result, lo_depth the texels' depths (background: FX_VOLUME_BG_DEPTH). tmp: lw x lh
- * floats of scratch (interleave > 1). */
+ * result, lo_t the transmittance, lo_depth the texels' depths (background:
+ * FX_VOLUME_BG_DEPTH). tmp: lw x lh floats of scratch (interleave > 1). */
 #define FX_VOLUME_BG_DEPTH 1e10f
 void fx_volume_scatter_lo(fx_context *ctx, const fx_volume *v, const float *depth, int w, int h, int factor,
-                          int steps, int interleave, unsigned rotate, float *lo, float *lo_depth, float *tmp);
+                          int steps, int interleave, unsigned rotate, float *lo, float *lo_t, float *lo_depth,
+                          float *tmp);
 
 static inline int fx_volume_lo_size(int n, int factor) { return (n + factor - 1) / factor; }
 
-/* Depth-aware weight of a sample at planar depth ds for a pixel at depth d (both > 0;
- * background FX_VOLUME_BG_DEPTH): 1 at equal depths, 1/4 at a relative difference of 10 %. */
-static inline float fx_volume_depth_weight(float d, float ds)
+/* Depth-aware weight of a sample at planar depth ds for a pixel at depth d, given
+ * inv = 1 / (0.1 d) (background: d = FX_VOLUME_BG_DEPTH): 1 at equal depths, 1/4 at a
+ * relative difference of 10 %, 0 from 20 % on (no division: it runs per tap). */
+static inline float fx_volume_depth_weight(float d, float inv, float ds)
 {
-    float m = d < ds ? d : ds;
-    float r = fabsf(d - ds) / (0.1f * m + 1e-6f);
-    float q = 1.0f + r * r;
-    return 1.0f / (q * q);
+    float r = fabsf(d - ds) * inv;
+    float q = 1.0f - 0.5f * r;
+    q = q > 0.0f ? q : 0.0f;
+    return q * q;
 }
 
 /* A pixel's planar depth as the weights read it. */
@@ -130,26 +149,51 @@ static inline float fx_volume_weight_depth(float d, float far_limit)
     return d > 0.0f && d < far_limit ? d : FX_VOLUME_BG_DEPTH;
 }
 
-/* The reduced in-scatter at full-resolution pixel (x, y) of depth d (fx_volume_weight_depth):
- * bilinear over the 2 x 2 nearest lo texels, each weighted by its depth's likeness. */
-static inline float fx_volume_upsample(const float *lo, const float *lo_depth, int lw, int lh, int factor, int x,
-                                       int y, float d)
+/* Where full-resolution column (or row) x falls on the reduced grid of n texels: texel
+ * *x0 and the weight *t of texel x0 + 1 (lo texel X stands for pixel factor X + factor / 2). */
+static inline void fx_volume_lo_coord(int x, int factor, int n, int *x0, float *t)
 {
-    float u = (float)(x - factor / 2) / (float)factor, v = (float)(y - factor / 2) / (float)factor;
-    u = fx_clampf(u, 0.0f, (float)(lw - 1));
-    v = fx_clampf(v, 0.0f, (float)(lh - 1));
-    int X0 = (int)u, Y0 = (int)v;
-    int X1 = X0 + 1 < lw ? X0 + 1 : X0, Y1 = Y0 + 1 < lh ? Y0 + 1 : Y0;
-    float tx = u - (float)X0, ty = v - (float)Y0;
-    const size_t i00 = (size_t)Y0 * lw + X0, i01 = (size_t)Y0 * lw + X1;
-    const size_t i10 = (size_t)Y1 * lw + X0, i11 = (size_t)Y1 * lw + X1;
-    float w00 = (1.0f - tx) * (1.0f - ty) * fx_volume_depth_weight(d, lo_depth[i00]);
-    float w01 = tx * (1.0f - ty) * fx_volume_depth_weight(d, lo_depth[i01]);
-    float w10 = (1.0f - tx) * ty * fx_volume_depth_weight(d, lo_depth[i10]);
-    float w11 = tx * ty * fx_volume_depth_weight(d, lo_depth[i11]);
-    float ws = w00 + w01 + w10 + w11;
-    float s = w00 * lo[i00] + w01 * lo[i01] + w10 * lo[i10] + w11 * lo[i11];
-    return ws > 1e-30f ? s / ws : lo[i00];
+    float u = (float)(x - factor / 2) / (float)factor;
+    u = u > 0.0f ? u : 0.0f;
+    u = u < (float)(n - 1) ? u : (float)(n - 1);
+    *x0 = (int)u;
+    *t = u - (float)*x0;
+}
+
+/* The reduced in-scatter and transmittance at a full-resolution pixel of depth d
+ * (fx_volume_weight_depth) between lo rows r0 and r1 (offsets of rows Y0, Y1; weight ty of
+ * r1) and columns X0, X0 + 1 (weight tx): bilinear, each texel weighted by its depth's
+ * likeness; where none is alike (a thin object), the likest one. */
+static inline void fx_volume_upsample(const float *lo, const float *lo_t, const float *lo_depth, size_t r0,
+                                      size_t r1, int X0, int X1, float tx, float ty, float d, float *L, float *T)
+{
+    const size_t i[4] = {r0 + (size_t)X0, r0 + (size_t)X1, r1 + (size_t)X0, r1 + (size_t)X1};
+    const float b[4] = {(1.0f - tx) * (1.0f - ty), tx * (1.0f - ty), (1.0f - tx) * ty, tx * ty};
+    const float inv = 10.0f / d;
+    float ws = 0.0f, sl = 0.0f, st = 0.0f;
+    for (int k = 0; k < 4; k++) {
+        float wk = b[k] * fx_volume_depth_weight(d, inv, lo_depth[i[k]]);
+        ws += wk;
+        sl += wk * lo[i[k]];
+        st += wk * lo_t[i[k]];
+    }
+    if (ws > 1e-6f) {
+        float iw = 1.0f / ws;
+        *L = sl * iw;
+        *T = st * iw;
+        return;
+    }
+    int bi = 0;
+    float best = FLT_MAX;
+    for (int k = 0; k < 4; k++) {
+        float e = fabsf(d - lo_depth[i[k]]);
+        if (e < best) {
+            best = e;
+            bi = k;
+        }
+    }
+    *L = lo[i[bi]];
+    *T = lo_t[i[bi]];
 }
 
 #endif
