@@ -137,12 +137,12 @@ static const fx_param_def god_rays_param_defs[] = {
     FX_P_FLOAT(god_rays_params, max_distance, "max_distance", 1e4, 0.0, 1e30, 1.0, 1e4, "m",
                "volumetric: the medium ends this far from the camera (it also ends at each pixel's "
                "surface and outside the light view's box)"),
-    FX_P_INT(god_rays_params, volume_steps, "volume_steps", 16, 1, 4096, 4, 256, "",
+    FX_P_INT(god_rays_params, volume_steps, "volume_steps", 24, 1, 4096, 4, 256, "",
              "volumetric: march steps per ray (with interleave n, n x n neighbours share their strata: "
              "n^2 x the steps' worth)"),
-    FX_P_INT(god_rays_params, volume_downsample, "volume_downsample", 2, 1, 16, 1, 8, "",
+    FX_P_INT(god_rays_params, volume_downsample, "volume_downsample", 4, 1, 16, 1, 8, "",
              "volumetric: march one ray per factor x factor pixels, upsampled by depth likeness"),
-    FX_P_INT(god_rays_params, interleave, "interleave", 4, 1, 8, 1, 8, "",
+    FX_P_INT(god_rays_params, interleave, "interleave", 2, 1, 8, 1, 8, "",
              "volumetric: interleaved sampling: an n x n block of rays marches with n^2 different step "
              "offsets, gathered back by a depth-aware n x n box (1: midpoints, no gather)"),
     FX_P_FLOAT(god_rays_params, volume_bias, "volume_bias", 0.02, 0.0, 100.0, 0.0, 0.5, "m",
@@ -773,11 +773,11 @@ const fx_effect_class fx_effect_god_rays = {
          * 0.5 has the scene-relative line density of 1.5 at 640x360; at equal time a reduced
          * map with finer lines errs less than coarser lines at full size */
         "{\"method\": \"polar\", \"polar_resolution\": 0.75, \"polar_levels\": 2, \"polar_downsample\": 4, "
-        "\"volume_downsample\": 4, \"volume_steps\": 8, \"interleave\": 4}",
+        "\"volume_downsample\": 8, \"volume_steps\": 16, \"interleave\": 1}",
         "{\"method\": \"polar\", \"polar_resolution\": 0.75, \"polar_levels\": 2, \"polar_downsample\": 2, "
-        "\"volume_downsample\": 3, \"volume_steps\": 12, \"interleave\": 4}",
+        "\"volume_downsample\": 4, \"volume_steps\": 16, \"interleave\": 2}",
         "{\"method\": \"polar\", \"polar_resolution\": 0.5, \"polar_levels\": 2, \"polar_downsample\": 1, "
-        "\"volume_downsample\": 2, \"volume_steps\": 16, \"interleave\": 4}",
+        "\"volume_downsample\": 4, \"volume_steps\": 24, \"interleave\": 2}",
         "{\"method\": \"naive\", \"samples\": 2000, \"jitter\": false, "
         "\"volume_downsample\": 1, \"volume_steps\": 256, \"interleave\": 1}",
     },
