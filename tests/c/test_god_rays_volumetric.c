@@ -195,6 +195,8 @@ static fx_stack *vol_stack(fx_context *ctx, const char *quality, const char *ext
     CHECK_OK(ctx, fx_stack_set_float(s, 0, "volume_density", (float)SIGMA));
     CHECK_OK(ctx, fx_stack_set_float(s, 0, "anisotropy", (float)G));
     CHECK_OK(ctx, fx_stack_set_float(s, 0, "volume_bias", 0.0f));
+    const float white[3] = {1.0f, 1.0f, 1.0f}; /* the closed form's sigma is the density */
+    CHECK_OK(ctx, fx_stack_set_floats(s, 0, "volume_color", white, 3));
     CHECK_OK(ctx, fx_stack_set_enum(s, 0, "extinction", extinction));
     if (quality)
         CHECK_OK(ctx, fx_stack_set_quality(s, quality_of(quality)));
@@ -235,6 +237,37 @@ static void test_closed_form(fx_context *ctx)
         }
         free(o);
         fx_stack_free(s);
+        fx_frame_free(f);
+    }
+    /* volume_color as Cycles' Volume Scatter Color: each channel scatters density x colour
+     * (without extinction exactly the closed form times the colour); the default 0.8 grey is
+     * the density x 0.8 */
+    {
+        fx_frame *f = scene_frame(ctx, path, "SUN", 0.0f);
+        fx_stack *s = vol_stack(ctx, "reference", "none");
+        const float col[3] = {1.0f, 0.5f, 0.25f};
+        CHECK_OK(ctx, fx_stack_set_floats(s, 0, "volume_color", col, 3));
+        float *o = et_run(ctx, s, f);
+        double worst = 0.0;
+        for (int x = 0; o && x < W; x++)
+            for (int c = 0; c < 3; c++) {
+                double want = col[c] * expected_L(x, 0, entry), got = o[4 * ((H / 2) * W + x) + c];
+                double rel = fabs(got - want) / want;
+                worst = rel > worst ? rel : worst;
+            }
+        CHECK(o && worst < 0.01);
+        free(o);
+        fx_stack_free(s);
+        fx_stack *g = vol_stack(ctx, "reference", "full"), *h = vol_stack(ctx, "reference", "full");
+        const float grey[3] = {0.8f, 0.8f, 0.8f};
+        CHECK_OK(ctx, fx_stack_set_floats(g, 0, "volume_color", grey, 3));
+        CHECK_OK(ctx, fx_stack_set_float(h, 0, "volume_density", (float)(SIGMA * 0.8)));
+        float *a = et_run(ctx, g, f), *b = et_run(ctx, h, f);
+        CHECK(a && b && tu_max_abs_diff(a, b, (size_t)W * H * 4) < 1e-6);
+        free(a);
+        free(b);
+        fx_stack_free(g);
+        fx_stack_free(h);
         fx_frame_free(f);
     }
     /* what lies behind the medium: src T_view T_light(surface) + L */

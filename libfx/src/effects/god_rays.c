@@ -47,6 +47,7 @@ typedef struct god_rays_params {
     int polar_levels;
     int polar_downsample;
     float volume_density, anisotropy;
+    float volume_color[3];
     int extinction;
     float max_distance;
     int volume_steps, volume_downsample, interleave;
@@ -65,6 +66,7 @@ static const char *const method_items[] = {"polar", "naive", "volumetric"};
 static const char *const extinction_items[] = {"none", "view", "full"};
 static const char *const composite_items[] = {"add", "screen"};
 static const float default_position[2] = {0.5f, 0.3f};
+static const float default_volume_color[3] = {0.8f, 0.8f, 0.8f}; /* Cycles' Volume Scatter default */
 
 static const fx_param_def god_rays_param_defs[] = {
     FX_P_STRING(god_rays_params, light, "light", "", "",
@@ -125,7 +127,11 @@ static const fx_param_def god_rays_param_defs[] = {
              "rays interpolated back; ~factor^2 faster, shaft edges soften by ~factor pixels"),
     FX_P_FLOAT(god_rays_params, volume_density, "volume_density", 0.03, 0.0, 1e6, 0.0, 0.3, "1/m",
                "volumetric: the medium's density per scene unit, as Cycles' Volume Scatter Density "
-               "(scattering and extinction coefficient; 0: identity)"),
+               "(times volume_color: the scattering and extinction coefficients; 0: identity)"),
+    FX_P_FLOATS(god_rays_params, volume_color, "volume_color", 3, default_volume_color, 0.0, 1000.0, "color",
+                "volumetric: as Cycles' Volume Scatter Color (default 0.8 grey, as the node's): the "
+                "scattering and extinction coefficients are volume_density x this (a coloured medium "
+                "scatters each channel by its own; extinction uses the channels' mean)"),
     FX_P_FLOAT(god_rays_params, anisotropy, "anisotropy", 0.6, -1.0, 1.0, -1.0, 1.0, "",
                "volumetric: Henyey-Greenstein anisotropy, as Cycles' Volume Scatter Anisotropy (> 0: "
                "forward, the shafts glow looking towards the sun; clamped to +-0.999)"),
@@ -182,7 +188,8 @@ static int god_rays_identity(const void *params)
 {
     const god_rays_params *p = params;
     if (p->method == METHOD_VOLUMETRIC)
-        return p->volume_density == 0.0f;
+        return p->volume_density == 0.0f ||
+               (p->volume_color[0] == 0.0f && p->volume_color[1] == 0.0f && p->volume_color[2] == 0.0f);
     return p->weight == 0.0f || p->exposure == 0.0f;
 }
 
@@ -657,6 +664,12 @@ static fx_result vol_light(const fx_effect_run *run, const god_rays_params *p, f
     return FX_OK;
 }
 
+/* The mean of volume_color: the grey part of the coefficients (> 0 unless identity). */
+static float vol_color_mean(const god_rays_params *p)
+{
+    return (p->volume_color[0] + p->volume_color[1] + p->volume_color[2]) * (1.0f / 3.0f);
+}
+
 static void vol_setup(const god_rays_params *p, const fx_view *cam, const fx_aux_map *map, const fx_light *L,
                       fx_volume *vol)
 {
@@ -665,7 +678,7 @@ static void vol_setup(const god_rays_params *p, const fx_view *cam, const fx_aux
     vol->light_view = &map->av->view;
     vol->sm = map->sm;
     vol->light_dir = fx_v3_normalize_or(L->direction, fx_v3(0.0f, 0.0f, -1.0f));
-    vol->sigma = p->volume_density;
+    vol->sigma = p->volume_density * vol_color_mean(p);
     vol->g = fx_clampf(p->anisotropy, -FX_VOLUME_MAX_G, FX_VOLUME_MAX_G);
     vol->view_extinction = p->extinction != EXT_NONE;
     vol->light_extinction = p->extinction == EXT_FULL;
@@ -707,9 +720,12 @@ static fx_result run_volumetric(const fx_effect_run *run, const god_rays_params 
         unsigned rot = fx_hash4(fr, p->seed, 0x766f6c, 0);
         fx_volume_scatter_lo(run->ctx, &vol, dp->data, w, h, f, p->volume_steps, p->interleave, rot, buf,
                              buf + ln, buf + 2 * ln, buf + 3 * ln);
-        float e = L.energy;
+        /* the march scatters with the grey sigma; each channel scatters by its own colour */
+        const float cm = vol_color_mean(p), e = L.energy;
+        const float kc[3] = {p->volume_color[0] / cm, p->volume_color[1] / cm, p->volume_color[2] / cm};
         vol_job j = {run, &vol, dp->data, buf, buf + ln, buf + 2 * ln, lw, lh, f,
-                     (v4f){L.color.x * e, L.color.y * e, L.color.z * e, 0.0f}, p->composite == COMP_SCREEN, NULL, NULL, NULL};
+                     (v4f){L.color.x * e * kc[0], L.color.y * e * kc[1], L.color.z * e * kc[2], 0.0f},
+                     p->composite == COMP_SCREEN, NULL, NULL, NULL};
         if (run->debug)
             j.dbg = fx_effect_debug_pass(run, "inscatter", 3, &r);
         const int cols = run->roi.x1 - run->roi.x0;
