@@ -50,13 +50,13 @@ GODRAYS = {  # preset: (shaft MAE 9x9, correlation of added light, added light /
     "reference": (0.0596, 0.9245, 0.4550, 0.59),
 }   # no effect: shaft MAE 9x9 0.1110
 # god_rays method volumetric with the volume's own density and anisotropy (recipe_volumetric.json),
-# same columns; measured 2026-12-02 at 128x72, 16 spp, Blender 3.4.1 (h-godrays, one run; the
-# radial rows above re-measured identical in the same run)
+# same columns, volume_color at its default 0.8 (the node's); measured 2026-12-02 at 128x72, 16 spp,
+# Blender 3.4.1 (h-godrays, one run; the radial rows above re-measured identical in the same run)
 GODRAYS_VOLUMETRIC = {
-    "draft": (0.0190, 0.9791, 1.1539, 0.25),
-    "preview": (0.0240, 0.9682, 1.1925, 1.73),
-    "final": (0.0235, 0.9682, 1.1849, 1.78),
-    "reference": (0.0186, 0.9855, 1.1645, 0.29),
+    "draft": (0.0130, 0.9794, 0.9823, 0.26),
+    "preview": (0.0155, 0.9683, 1.0155, 1.74),
+    "final": (0.0155, 0.9683, 1.0090, 1.79),
+    "reference": (0.0111, 0.9855, 0.9915, 0.30),
 }
 CAUSTICS = {  # preset: (mean / truth, contrast 4x4 box, whole MAE); Cycles' contrast 4x4: 0.2846
     "draft": (0.9125, 0.2988, 0.2198),
