@@ -73,7 +73,7 @@ def batch(blend, prefix, res, spp, expr=None, recipe=None, seed=None):
     return passes, side, dt
 
 
-def parse_args(res="480x270", spp=16, variants=None, eevee=False):
+def parse_args(res="480x270", spp=16, variants=None, eevee=False, extra=()):
     """The command line every truth script takes: OUT, --res, --spp, --runs, --docs (and
     --variants when the scene has several, --no-eevee where Eevee is a peer)."""
     ap = argparse.ArgumentParser()
@@ -84,6 +84,8 @@ def parse_args(res="480x270", spp=16, variants=None, eevee=False):
     if variants:
         ap.add_argument("--variants", default=",".join(variants))
     ap.add_argument("--docs")
+    for name, kw in extra:
+        ap.add_argument(name, **kw)
     if eevee:
         ap.add_argument("--no-eevee", dest="eevee", action="store_false", help="skip the Eevee peer renders")
     a = ap.parse_args()
@@ -93,10 +95,11 @@ def parse_args(res="480x270", spp=16, variants=None, eevee=False):
     return a
 
 
-def render_three(name, blend, prefix, a, noop):
+def render_three(name, blend, prefix, a, noop, input_recipe=None):
     """libfx's input, the truth and the truth at another seed (the noise floor) of one scene,
-    through the add-on's batch path: (passes, sidecar, truth, truth at seed 17)."""
-    passes, side, _ = batch(blend, prefix + "in_", a.res, a.spp)
+    through the add-on's batch path: (passes, sidecar, truth, truth at seed 17). input_recipe:
+    the recipe the input is rendered with (the aux views it asks for are rendered too)."""
+    passes, side, _ = batch(blend, prefix + "in_", a.res, a.spp, recipe=input_recipe)
     tpass, _, _ = batch(blend, prefix + "truth_", a.res, a.spp, expr=truth_expr(name), recipe=noop)
     t2pass, _, _ = batch(blend, prefix + "truth2_", a.res, a.spp, expr=truth_expr(name), recipe=noop, seed=17)
     return passes, side, tpass, t2pass

@@ -48,19 +48,25 @@ def centroid(a):
 
 
 def main():
-    a = C.parse_args(res="320x180", spp=32)
+    a = C.parse_args(res="320x180", spp=32, extra=[("--volumetric-only", dict(action="store_true",
+                     help="skip the radial presets (re-runs while tuning the volumetric method)"))])
     d = C.scene_dir("godrays")
     blend = d / "truth_godrays_window.blend"
     recipe = json.load(open(d / "recipe.json"))
     noop = C.noop_recipe(C.pathlib.Path(a.out))
     p = os.path.join(a.out, "g_")
-    passes, side, tpass, t2pass = C.render_three("godrays", blend, p, a, noop)
+    # the input is rendered with the volumetric recipe so that the add-on renders the Sun's
+    # light view too (the radial blur reads only the passes, the same for both)
+    vol_recipe = json.load(open(d / "recipe_volumetric.json"))
+    passes, side, tpass, t2pass = C.render_three("godrays", blend, p, a, noop,
+                                                 input_recipe=d / "recipe_volumetric.json")
     truth, truth2, plain = C.rgb(tpass), C.rgb(t2pass), C.rgb(passes)
     lp = C.lum(np.clip(plain, 0, 1))
     add_t = box(C.lum(np.clip(truth, 0, 1)) - lp)
     region = add_t > 0.1 * max(1e-6, float(np.percentile(add_t, 99)))
     ct = centroid(add_t)
-    outs = C.run_presets(recipe, passes, side, a.out, "g", runs=a.runs)
+    outs = {} if a.volumetric_only else C.run_presets(recipe, passes, side, a.out, "g", runs=a.runs)
+    vouts = C.run_presets(vol_recipe, passes, side, a.out, "gv", runs=a.runs)
 
     def row(name, img, ms):
         add = box(C.lum(np.clip(img, 0, 1)) - lp)
@@ -73,7 +79,10 @@ def main():
     bt = np.stack([box(np.clip(truth[..., c], 0, 1)) for c in range(3)], -1)
     rows = [row("no effect (input)", plain, None), row("Cycles, other seed (floor)", truth2, None)]
     for q in C.PRESETS:
-        rows.append(row("libfx " + q, *outs[q]))
+        if q in outs:
+            rows.append(row("libfx " + q + " (radial)", *outs[q]))
+    for q in C.PRESETS:
+        rows.append(row("libfx " + q + " (volumetric)", *vouts[q]))
     head = ["method", "ms", "shaft MAE", "whole MAE", "shaft MAE 9x9", "whole MAE 9x9", "mean / truth", "corr. of added light", "centroid offset px",
             "added light / truth's"]
     md = ["### god rays (%s, %d spp; shaft region %.1f %% of the frame)\n" % (a.res, a.spp, 100 * region.mean()),
@@ -83,7 +92,8 @@ def main():
     C.write_report(a.out, "godrays", md, {"region_px": int(region.sum()), "rows": rows})
     if a.docs:
         os.makedirs(os.path.join(a.docs, "images"), exist_ok=True)
-        C.save_strip(os.path.join(a.docs, "images", "truth_godrays.png"), [truth, outs["final"][0], plain])
+        C.save_strip(os.path.join(a.docs, "images", "truth_godrays.png"),
+                     [truth, vouts["reference"][0], vouts["final"][0]] + ([outs["final"][0]] if outs else []) + [plain])
         C.plot_time_error(os.path.join(a.docs, "images", "truth_godrays_time_error.png"), {"window room": rows},
                           "god_rays vs Cycles volume scatter (%s): time vs shaft-region MAE" % a.res,
                           ylabel="shaft-region MAE vs Cycles, 9x9 box-filtered", col=4)

@@ -17,6 +17,9 @@
 #include "core/parallel.h"
 #include "math/camera.h"
 #include "math/radial_blur.h"
+#include "math/hash.h"
+#include "math/volume_march.h"
+#include "scene/aux_map.h"
 #include "core/simd4.h"
 #include "math/vec.h"
 
@@ -43,18 +46,27 @@ typedef struct god_rays_params {
     float polar_resolution;
     int polar_levels;
     int polar_downsample;
+    float volume_density, anisotropy;
+    float volume_color[3];
+    int extinction;
+    float max_distance;
+    int volume_steps, volume_downsample, interleave;
+    float volume_bias;
 } god_rays_params;
 
 enum { SRC_SCENE = 0, SRC_SCREEN };
 enum { OCC_SKY = 0, OCC_LUMINANCE };
-enum { METHOD_POLAR = 0, METHOD_NAIVE };
+enum { METHOD_POLAR = 0, METHOD_NAIVE, METHOD_VOLUMETRIC };
+enum { EXT_NONE = 0, EXT_VIEW, EXT_FULL };
 enum { COMP_ADD = 0, COMP_SCREEN };
 
 static const char *const source_items[] = {"scene", "screen"};
 static const char *const occlusion_items[] = {"sky", "luminance"};
-static const char *const method_items[] = {"polar", "naive"};
+static const char *const method_items[] = {"polar", "naive", "volumetric"};
+static const char *const extinction_items[] = {"none", "view", "full"};
 static const char *const composite_items[] = {"add", "screen"};
 static const float default_position[2] = {0.5f, 0.3f};
+static const float default_volume_color[3] = {0.8f, 0.8f, 0.8f}; /* Cycles' Volume Scatter default */
 
 static const fx_param_def god_rays_param_defs[] = {
     FX_P_STRING(god_rays_params, light, "light", "", "",
@@ -86,8 +98,11 @@ static const fx_param_def god_rays_param_defs[] = {
                "Emission falls off smoothly to 0 at this distance from the light, as a fraction "
                "of the frame's diagonal (0: no falloff)"),
     FX_P_ENUM(god_rays_params, method, "method", METHOD_POLAR, method_items,
-              "polar: epipolar lines through the light, exact in the limit, cost independent of "
-              "samples; naive: GPU Gems' per-pixel loop of `samples` samples"),
+              "The two radial blurs of the bright sky: polar: epipolar lines through the light, exact "
+              "in the limit, cost independent of samples; naive: GPU Gems' per-pixel loop of `samples` "
+              "samples. volumetric: single scattering of the sun in a homogeneous medium, marched along "
+              "each pixel's view ray through the sun's light view (rendered by the add-on; shadowed air "
+              "stays dark), in the units of Cycles' Volume Scatter (volume_density, anisotropy)"),
     FX_P_INT(god_rays_params, samples, "samples", 100, 1, 65536, 8, 400, "",
              "naive: samples per pixel (the seed: 100)"),
     FX_P_FLOAT(god_rays_params, decay, "decay", 0.97, 0.0, 1.0, 0.9, 1.0, "factor",
@@ -110,12 +125,42 @@ static const fx_param_def god_rays_param_defs[] = {
     FX_P_INT(god_rays_params, polar_downsample, "polar_downsample", 1, 1, 16, 1, 4, "",
              "polar: run on the occlusion map reduced by this factor per axis (box average), "
              "rays interpolated back; ~factor^2 faster, shaft edges soften by ~factor pixels"),
+    FX_P_FLOAT(god_rays_params, volume_density, "volume_density", 0.03, 0.0, 1e6, 0.0, 0.3, "1/m",
+               "volumetric: the medium's density per scene unit, as Cycles' Volume Scatter Density "
+               "(times volume_color: the scattering and extinction coefficients; 0: identity)"),
+    FX_P_FLOATS(god_rays_params, volume_color, "volume_color", 3, default_volume_color, 0.0, 1000.0, "color",
+                "volumetric: as Cycles' Volume Scatter Color (default 0.8 grey, as the node's): the "
+                "scattering and extinction coefficients are volume_density x this (a coloured medium "
+                "scatters each channel by its own; extinction uses the channels' mean)"),
+    FX_P_FLOAT(god_rays_params, anisotropy, "anisotropy", 0.6, -1.0, 1.0, -1.0, 1.0, "",
+               "volumetric: Henyey-Greenstein anisotropy, as Cycles' Volume Scatter Anisotropy (> 0: "
+               "forward, the shafts glow looking towards the sun; clamped to +-0.999)"),
+    FX_P_ENUM(god_rays_params, extinction, "extinction", EXT_FULL, extinction_items,
+              "volumetric: none: in-scattering only; view: the medium also dims what lies behind it "
+              "(exp(-density distance)); full: and the sunlight on its way in, from where it first meets the "
+              "scene (the light view's nearest surface), both in the air and to each surface (Cycles' "
+              "Volume Scatter does both; bounce light is dimmed as the sun's direct light is)"),
+    FX_P_FLOAT(god_rays_params, max_distance, "max_distance", 1e4, 0.0, 1e30, 1.0, 1e4, "m",
+               "volumetric: the medium ends this far from the camera (it also ends at each pixel's "
+               "surface and outside the light view's box)"),
+    FX_P_INT(god_rays_params, volume_steps, "volume_steps", 24, 1, 4096, 4, 256, "",
+             "volumetric: march steps per ray (with interleave n, n x n neighbours share their strata: "
+             "n^2 x the steps' worth)"),
+    FX_P_INT(god_rays_params, volume_downsample, "volume_downsample", 4, 1, 16, 1, 8, "",
+             "volumetric: march one ray per factor x factor pixels, upsampled by depth likeness"),
+    FX_P_INT(god_rays_params, interleave, "interleave", 2, 1, 8, 1, 8, "",
+             "volumetric: interleaved sampling: an n x n block of rays marches with n^2 different step "
+             "offsets, gathered back by a depth-aware n x n box (1: midpoints, no gather)"),
+    FX_P_FLOAT(god_rays_params, volume_bias, "volume_bias", 0.02, 0.0, 100.0, 0.0, 0.5, "m",
+               "volumetric: depth-test bias in the light view (scene units)"),
 };
 
 static fx_pass_set god_rays_passes(const void *params)
 {
     const god_rays_params *p = params;
     fx_pass_set s = 0;
+    if (p->method == METHOD_VOLUMETRIC)
+        return FX_PASS_BIT(FX_PASS_DEPTH);
     if (p->occlusion == OCC_SKY) {
         s |= FX_PASS_BIT(FX_PASS_DEPTH);
         if (p->light_material[0])
@@ -127,12 +172,14 @@ static fx_pass_set god_rays_passes(const void *params)
 static int god_rays_needs_camera(const void *params)
 {
     const god_rays_params *p = params;
-    return p->light_source == SRC_SCENE;
+    return p->light_source == SRC_SCENE || p->method == METHOD_VOLUMETRIC;
 }
 
 static int god_rays_halo(const void *params, int width, int height)
 {
-    (void)params;
+    const god_rays_params *p = params;
+    if (p->method == METHOD_VOLUMETRIC) /* the gather and the upsample */
+        return (p->interleave / 2 + 2) * p->volume_downsample;
     return width > height ? width : height; /* rays come from anywhere in the frame */
 }
 
@@ -140,7 +187,37 @@ static int god_rays_halo(const void *params, int width, int height)
 static int god_rays_identity(const void *params)
 {
     const god_rays_params *p = params;
+    if (p->method == METHOD_VOLUMETRIC)
+        return p->volume_density == 0.0f ||
+               (p->volume_color[0] == 0.0f && p->volume_color[1] == 0.0f && p->volume_color[2] == 0.0f);
     return p->weight == 0.0f || p->exposure == 0.0f;
+}
+
+/* volumetric: the light's depth view, by the light's name ("" = the scene's first sun). */
+static int god_rays_aux_views(const void *params, fx_aux_need *out, int max)
+{
+    const god_rays_params *p = params;
+    if (p->method != METHOD_VOLUMETRIC || max < 1)
+        return 0;
+    snprintf(out->name, sizeof out->name, "light:%.80s", p->light);
+    out->kind = "light";
+    snprintf(out->light, sizeof out->light, "%.80s", p->light);
+    return 1;
+}
+
+static fx_result god_rays_validate(const void *params, char *err, size_t err_size)
+{
+    const god_rays_params *p = params;
+    if (p->method == METHOD_VOLUMETRIC && p->light_source != SRC_SCENE) {
+        snprintf(err, err_size, "method volumetric marches the scene's light (light_source scene), not a "
+                                "screen position: set light_source to scene or choose method polar");
+        return FX_ERR_BAD_PARAM;
+    }
+    if (p->method == METHOD_VOLUMETRIC && !(p->max_distance > 0.0f) && p->volume_density > 0.0f) {
+        snprintf(err, err_size, "max_distance must be above 0 with method volumetric");
+        return FX_ERR_BAD_PARAM;
+    }
+    return FX_OK;
 }
 
 /* Light in frame pixels and the fade factor; returns FX_OK or an error. */
@@ -502,9 +579,181 @@ static fx_result run_full(const fx_effect_run *run, const god_rays_params *p, oc
     return r;
 }
 
+/* ---- method volumetric (math/volume_march.h) ---- */
+
+typedef struct vol_job {
+    const fx_effect_run *run;
+    const fx_volume *vol;
+    const float *depth;
+    const float *lo, *lo_t, *lo_depth; /* the reduced in-scatter and transmittance (f > 1) or
+                                          the full ones (f = 1) */
+    int lw, lh, f;
+    v4f rad;                    /* the sun's colour * strength */
+    int screen;
+    float *dbg;                 /* debug "inscatter" (RGB), or NULL */
+    const int *col_x0;          /* per ROI column: its lo texel (left) and the right one's weight */
+    const float *col_t;
+} vol_job;
+
+/* Output = src T + L (T: the view transmittance, with extinction full times the light's
+ * transmittance on its way to the surface; L: the in-scatter; both upsampled by depth
+ * likeness from the reduced grid). */
+static void vol_rows(void *user, int begin, int end)
+{
+    const vol_job *j = user;
+    const fx_effect_run *run = j->run;
+    const int w = run->width;
+    for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++) {
+        int Y0 = 0;
+        float ty = 0.0f;
+        fx_volume_lo_coord(y, j->f, j->lh, &Y0, &ty);
+        const size_t r0 = (size_t)Y0 * j->lw, r1 = Y0 + 1 < j->lh ? r0 + (size_t)j->lw : r0;
+        for (int x = run->roi.x0; x < run->roi.x1; x++) {
+            size_t i = (size_t)y * w + x;
+            float L, T;
+            if (j->f > 1) {
+                float d = fx_volume_weight_depth(j->depth[i], j->vol->far_limit);
+                int X0 = j->col_x0[x - run->roi.x0];
+                fx_volume_upsample(j->lo, j->lo_t, j->lo_depth, r0, r1, X0, X0 + 1 < j->lw ? X0 + 1 : X0,
+                                   j->col_t[x - run->roi.x0], ty, d, &L, &T);
+            } else {
+                L = j->lo[i];
+                T = j->lo_t[i];
+            }
+            v4f s = ld4(run->src + i * 4);
+            v4f add = j->rad * V4(L);
+            v4f base = s * (v4f){T, T, T, 1.0f};
+            if (j->screen)
+                add *= V4(1.0f) - min4(max4(base, V4(0.0f)), V4(1.0f));
+            st4(run->dst + i * 4, finite4(base + add));
+            if (j->dbg) {
+                j->dbg[3 * i] = add[0];
+                j->dbg[3 * i + 1] = add[1];
+                j->dbg[3 * i + 2] = add[2];
+            }
+        }
+    }
+}
+
+/* The sun and its light view for method volumetric: a sun only (spot and point lights
+ * come later), its orthographic depth view from the aux views. */
+static fx_result vol_light(const fx_effect_run *run, const god_rays_params *p, fx_light *L, fx_aux_map *map)
+{
+    const char *where = run->where;
+    fx_result r = fx_frame_find_light(run->frame, p->light, where, L);
+    if (r != FX_OK)
+        return r;
+    if (L->type != FX_LIGHT_SUN) {
+        static const char *const kinds[] = {"sun", "point", "spot", "area"};
+        return fx_fail(run->ctx, FX_ERR_BAD_PARAM,
+                       "%s: method volumetric: light '%s' is a %s light; only a sun is supported for now "
+                       "(spot and point lights come later): name a sun in 'light' or use method polar",
+                       where, L->name, kinds[L->type]);
+    }
+    char name[FX_STRING_PARAM_MAX + 8];
+    snprintf(name, sizeof name, "light:%s", p->light);
+    r = fx_aux_map_acquire(run->frame, name, 0, -1, 0.0f, where, map);
+    if (r != FX_OK)
+        return r;
+    if (!map->av->view.orthographic) {
+        fx_aux_map_release(run->ctx, map);
+        return fx_fail(run->ctx, FX_ERR_BAD_PARAM,
+                       "%s: method volumetric: the light view '%s' is not orthographic (a sun's is)", where,
+                       map->av->name);
+    }
+    return FX_OK;
+}
+
+/* The mean of volume_color: the grey part of the coefficients (> 0 unless identity). */
+static float vol_color_mean(const god_rays_params *p)
+{
+    return (p->volume_color[0] + p->volume_color[1] + p->volume_color[2]) * (1.0f / 3.0f);
+}
+
+static void vol_setup(const god_rays_params *p, const fx_view *cam, const fx_aux_map *map, const fx_light *L,
+                      fx_volume *vol)
+{
+    memset(vol, 0, sizeof *vol);
+    vol->cam = cam;
+    vol->light_view = &map->av->view;
+    vol->sm = map->sm;
+    vol->light_dir = fx_v3_normalize_or(L->direction, fx_v3(0.0f, 0.0f, -1.0f));
+    vol->sigma = p->volume_density * vol_color_mean(p);
+    vol->g = fx_clampf(p->anisotropy, -FX_VOLUME_MAX_G, FX_VOLUME_MAX_G);
+    vol->view_extinction = p->extinction != EXT_NONE;
+    vol->light_extinction = p->extinction == EXT_FULL;
+    vol->max_distance = p->max_distance;
+    vol->eps = fx_shadow_map_norm_dist(map->sm, p->volume_bias);
+    vol->far_limit = cam->cam.clip_end > 0.0f ? 1.01f * cam->cam.clip_end : 1e9f;
+    vol->entry = fx_volume_light_entry(map->sm);
+    fx_volume_prepare(vol);
+}
+
+static fx_result run_volumetric(const fx_effect_run *run, const god_rays_params *p)
+{
+    const char *where = run->where;
+    const int w = run->width, h = run->height;
+    fx_view cam;
+    if (!fx_view_init(&cam, run->frame))
+        return fx_fail(run->ctx, FX_ERR_NO_CAMERA,
+                       "%s: method volumetric needs the frame's camera (the scene sidecar: --sidecar)", where);
+    const fx_pass *dp = fx_frame_find_pass(run->frame, "Depth");
+    if (!dp)
+        return fx_fail(run->ctx, FX_ERR_MISSING_PASS, "%s: method volumetric needs the Depth pass", where);
+    fx_light L;
+    fx_aux_map map;
+    fx_result r = vol_light(run, p, &L, &map);
+    if (r != FX_OK)
+        return r;
+    fx_volume vol;
+    vol_setup(p, &cam, &map, &L, &vol);
+    const int f = p->volume_downsample > 1 ? p->volume_downsample : 1;
+    const int lw = fx_volume_lo_size(w, f), lh = fx_volume_lo_size(h, f);
+    const size_t ln = (size_t)lw * lh, bytes = ln * 4 * sizeof(float);
+    r = fx_check_budget(run->ctx, (uint64_t)bytes, where);
+    float *buf = r == FX_OK ? fx_buffer_get(run->ctx, bytes) : NULL;
+    if (r == FX_OK && !buf)
+        r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the in-scatter", where);
+    if (r == FX_OK) {
+        double frame_no = fx_effect_scene_frame(run);
+        int fr = isfinite(frame_no) && fabs(frame_no) < 2e9 ? (int)floor(frame_no) : 0;
+        unsigned rot = fx_hash4(fr, p->seed, 0x766f6c, 0);
+        fx_volume_scatter_lo(run->ctx, &vol, dp->data, w, h, f, p->volume_steps, p->interleave, rot, buf,
+                             buf + ln, buf + 2 * ln, buf + 3 * ln);
+        /* the march scatters with the grey sigma; each channel scatters by its own colour */
+        const float cm = vol_color_mean(p), e = L.energy;
+        const float kc[3] = {p->volume_color[0] / cm, p->volume_color[1] / cm, p->volume_color[2] / cm};
+        vol_job j = {run, &vol, dp->data, buf, buf + ln, buf + 2 * ln, lw, lh, f,
+                     (v4f){L.color.x * e * kc[0], L.color.y * e * kc[1], L.color.z * e * kc[2], 0.0f},
+                     p->composite == COMP_SCREEN, NULL, NULL, NULL};
+        if (run->debug)
+            j.dbg = fx_effect_debug_pass(run, "inscatter", 3, &r);
+        const int cols = run->roi.x1 - run->roi.x0;
+        int *cx = r == FX_OK ? fx_mem_alloc((size_t)cols * sizeof(int)) : NULL;
+        float *ct = r == FX_OK ? fx_mem_alloc((size_t)cols * sizeof(float)) : NULL;
+        if (r == FX_OK && (!cx || !ct))
+            r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
+        for (int x = run->roi.x0; r == FX_OK && x < run->roi.x1; x++)
+            fx_volume_lo_coord(x, f, lw, &cx[x - run->roi.x0], &ct[x - run->roi.x0]);
+        j.col_x0 = cx;
+        j.col_t = ct;
+        if (r == FX_OK) {
+            int rows = run->roi.y1 - run->roi.y0;
+            fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), vol_rows, &j);
+        }
+        fx_mem_free(cx);
+        fx_mem_free(ct);
+    }
+    fx_buffer_put(run->ctx, buf, bytes);
+    fx_aux_map_release(run->ctx, &map);
+    return r;
+}
+
 static fx_result god_rays_process(const fx_effect_run *run)
 {
     const god_rays_params *p = run->params;
+    if (p->method == METHOD_VOLUMETRIC)
+        return run_volumetric(run, p);
     const int w = run->width, h = run->height;
     double lx = 0, ly = 0, fade = 0;
     fx_result r = find_light(run, p, run->where, &lx, &ly, &fade);
@@ -539,15 +788,20 @@ const fx_effect_class fx_effect_god_rays = {
         /* chosen from the time/error sweep (docs/effects/god_rays.md): at 1080p resolution
          * 0.5 has the scene-relative line density of 1.5 at 640x360; at equal time a reduced
          * map with finer lines errs less than coarser lines at full size */
-        "{\"method\": \"polar\", \"polar_resolution\": 0.75, \"polar_levels\": 2, \"polar_downsample\": 4}",
-        "{\"method\": \"polar\", \"polar_resolution\": 0.75, \"polar_levels\": 2, \"polar_downsample\": 2}",
-        "{\"method\": \"polar\", \"polar_resolution\": 0.5, \"polar_levels\": 2, \"polar_downsample\": 1}",
-        "{\"method\": \"naive\", \"samples\": 2000, \"jitter\": false}",
+        "{\"method\": \"polar\", \"polar_resolution\": 0.75, \"polar_levels\": 2, \"polar_downsample\": 4, "
+        "\"volume_downsample\": 8, \"volume_steps\": 16, \"interleave\": 1}",
+        "{\"method\": \"polar\", \"polar_resolution\": 0.75, \"polar_levels\": 2, \"polar_downsample\": 2, "
+        "\"volume_downsample\": 4, \"volume_steps\": 16, \"interleave\": 2}",
+        "{\"method\": \"polar\", \"polar_resolution\": 0.5, \"polar_levels\": 2, \"polar_downsample\": 1, "
+        "\"volume_downsample\": 4, \"volume_steps\": 24, \"interleave\": 2}",
+        "{\"method\": \"naive\", \"samples\": 2000, \"jitter\": false, "
+        "\"volume_downsample\": 1, \"volume_steps\": 256, \"interleave\": 1}",
     },
     .passes = god_rays_passes,
     .needs_camera = god_rays_needs_camera,
     .halo = god_rays_halo,
-    .validate = NULL,
+    .validate = god_rays_validate,
+    .aux_views = god_rays_aux_views,
     .process = god_rays_process,
     .identity = god_rays_identity,
 };

@@ -1,0 +1,324 @@
+/* Single scattering of a sun through its light view: see volume_march.h. */
+#include "math/volume_march.h"
+
+#include "core/parallel.h"
+
+#include <math.h>
+#include <string.h>
+
+/* A world point in the light view: pixel x, y and planar depth. */
+static fx_vec3 light_coords(const fx_view *lv, fx_vec3 p)
+{
+    fx_vec3 q = fx_world_to_view(lv, p);
+    fx_vec2 pix = {0.0f, 0.0f};
+    fx_view_project(lv, q, &pix);
+    return fx_v3(pix.x, pix.y, -q.z);
+}
+
+/* The world origin and direction (per unit of planar depth) of the ray at pixel position
+ * (x, y). */
+static void world_ray(const fx_view *cam, float x, float y, fx_vec3 *o, fx_vec3 *d)
+{
+    fx_vec2 ndc = fx_view_pixel_to_ndc(cam, x, y);
+    *o = fx_view_to_world(cam, fx_view_position(cam, ndc, 0.0f));
+    *d = fx_v3_sub(fx_view_to_world(cam, fx_view_position(cam, ndc, 1.0f)), *o);
+}
+
+void fx_volume_prepare(fx_volume *v)
+{
+    /* differences over 256 pixels: the maps are affine, the long baseline keeps the
+     * rounding of the two ends small against the step */
+    const float k = 256.0f, ik = 1.0f / 256.0f;
+    fx_vec3 o[3], d[3];
+    world_ray(v->cam, 0.0f, 0.0f, &o[0], &d[0]);
+    world_ray(v->cam, k, 0.0f, &o[1], &d[1]);
+    world_ray(v->cam, 0.0f, k, &o[2], &d[2]);
+    v->wd0 = d[0];
+    v->wdx = fx_v3_scale(fx_v3_sub(d[1], d[0]), ik);
+    v->wdy = fx_v3_scale(fx_v3_sub(d[2], d[0]), ik);
+    fx_vec3 lo[3], le[3];
+    for (int i = 0; i < 3; i++) {
+        lo[i] = light_coords(v->light_view, o[i]);
+        le[i] = fx_v3_sub(light_coords(v->light_view, fx_v3_add(o[i], d[i])), lo[i]);
+    }
+    v->lo0 = lo[0];
+    v->lox = fx_v3_scale(fx_v3_sub(lo[1], lo[0]), ik);
+    v->loy = fx_v3_scale(fx_v3_sub(lo[2], lo[0]), ik);
+    v->ld0 = le[0];
+    v->ldx = fx_v3_scale(fx_v3_sub(le[1], le[0]), ik);
+    v->ldy = fx_v3_scale(fx_v3_sub(le[2], le[0]), ik);
+}
+
+/* Clips [*a, *b] to the s where lo <= c0 + s c1 <= hi (float); 0 when nothing is left. */
+static inline int clip_slab_f(float c0, float c1, float lo, float hi, float *a, float *b)
+{
+    if (fabsf(c1) < 1e-30f)
+        return c0 >= lo && c0 <= hi && *a < *b;
+    float inv = 1.0f / c1;
+    float t0 = (lo - c0) * inv, t1 = (hi - c0) * inv;
+    if (t0 > t1) {
+        float t = t0;
+        t0 = t1;
+        t1 = t;
+    }
+    *a = t0 > *a ? t0 : *a;
+    *b = t1 < *b ? t1 : *b;
+    return *a < *b;
+}
+
+/* The ray's clip to the medium and its light view coordinates (not its phase nor its
+ * optical depth). */
+static inline int volume_ray_geometry(const fx_volume *v, float x, float y, float depth, fx_volume_ray *r)
+{
+    fx_vec3 d = fx_v3_add(v->wd0, fx_v3_add(fx_v3_scale(v->wdx, x), fx_v3_scale(v->wdy, y)));
+    fx_vec3 c0 = fx_v3_add(v->lo0, fx_v3_add(fx_v3_scale(v->lox, x), fx_v3_scale(v->loy, y)));
+    fx_vec3 c1 = fx_v3_add(v->ld0, fx_v3_add(fx_v3_scale(v->ldx, x), fx_v3_scale(v->ldy, y)));
+    float len = fx_v3_length(d);
+    r->s0 = r->s1 = 0.0f;
+    if (!(len > 1e-20f) || !(len < 1e30f))
+        return 0;
+    float a = 0.0f, b = depth > 0.0f && depth < v->far_limit ? depth : 1e30f;
+    float bmax = v->max_distance / len;
+    b = b < bmax ? b : bmax;
+    const fx_shadow_map *sm = v->sm;
+    if (!clip_slab_f(c0.x, c1.x, 0.0f, (float)sm->width, &a, &b) ||
+        !clip_slab_f(c0.y, c1.y, 0.0f, (float)sm->height, &a, &b) ||
+        !clip_slab_f(c0.z, c1.z, v->entry, sm->zfar, &a, &b) || !(b < 1e29f))
+        return 0;
+    float range = sm->zfar - sm->znear;
+    float kn = range > 1e-20f ? 2.0f / range : 0.0f;
+    r->s0 = a;
+    r->s1 = b;
+    r->len = len;
+    r->px0 = c0.x;
+    r->dpx = c1.x;
+    r->py0 = c0.y;
+    r->dpy = c1.y;
+    r->tn0 = (c0.z - sm->znear) * kn - 1.0f;
+    r->dtn = c1.z * kn;
+    r->ld0 = c0.z;
+    r->dld = c1.z;
+    return 1;
+}
+
+int fx_volume_ray_init(const fx_volume *v, float x, float y, float depth, fx_volume_ray *r)
+{
+    if (!volume_ray_geometry(v, x, y, depth, r))
+        return 0;
+    const float len = r->len, c0z = r->ld0, c1z = r->dld;
+    float e0 = 0.0f, e1 = 0.0f;
+    if (v->view_extinction)
+        e1 += v->sigma * len;
+    if (v->light_extinction) {
+        e0 += v->sigma * (c0z - v->entry);
+        e1 += v->sigma * c1z;
+    }
+    r->e0 = e0;
+    r->e1 = e1 > 0.0f ? e1 : 0.0f; /* light extinction alone, towards the light: not offered */
+    fx_vec3 d = fx_v3_add(v->wd0, fx_v3_add(fx_v3_scale(v->wdx, x), fx_v3_scale(v->wdy, y)));
+    r->phase = fx_hg_phase(v->g, -fx_v3_dot(v->light_dir, d) / len);
+    return 1;
+}
+
+float fx_volume_light_entry(const fx_shadow_map *sm)
+{
+    float m = 1.0f;
+    const size_t n = (size_t)sm->width * sm->height;
+    for (size_t i = 0; i < n; i++)
+        m = sm->depth[i] < m ? sm->depth[i] : m;
+    if (!(m >= -1.0f))
+        m = -1.0f;
+    return sm->znear + (m + 1.0f) * 0.5f * (sm->zfar - sm->znear);
+}
+
+float fx_volume_march(const fx_volume *v, const fx_volume_ray *r, int steps, float offset)
+{
+    if (!(r->s1 > r->s0) || steps < 1)
+        return 0.0f;
+    const float h = (r->s1 - r->s0) / (float)steps;
+    /* exact integral of exp(-(e0 + e1 s)) over one step, relative to its start */
+    const float q = r->e1 * h;
+    const float step_int = q > 1e-4f ? -expm1f(-q) / r->e1 : h * (1.0f - 0.5f * q);
+    const float decay = expf(-q);
+    float od = r->e0 + r->e1 * r->s0;
+    if (!(od < FX_VOLUME_OPAQUE))
+        return 0.0f;
+    float att = expf(-od);
+    const float stop = expf(-FX_VOLUME_OPAQUE);
+    /* the sample positions in the light view, stepped (texel centres at + 0.5: the
+     * bilinear's corner texel is floor(p - 0.5)) */
+    const fx_shadow_map *sm = v->sm;
+    const int w = sm->width, hh = sm->height;
+    const float wm1 = (float)(w - 1), hm1 = (float)(hh - 1);
+    const float s = r->s0 + offset * h;
+    float px = r->px0 + s * r->dpx - 0.5f, py = r->py0 + s * r->dpy - 0.5f;
+    float t = r->tn0 + s * r->dtn - v->eps;
+    const float spx = h * r->dpx, spy = h * r->dpy, st = h * r->dtn;
+    float acc = 0.0f;
+    for (int i = 0; i < steps && att > stop; i++) {
+        /* the depth test at the 4 nearest texels, bilinearly weighted (clamped to the map) */
+        float fx = px > 0.0f ? px : 0.0f, fy = py > 0.0f ? py : 0.0f; /* maxss/minss, no libm */
+        fx = fx < wm1 ? fx : wm1;
+        fy = fy < hm1 ? fy : hm1;
+        int x0 = (int)fx, y0 = (int)fy;
+        int x1 = x0 + (x0 < w - 1);
+        const float *r0 = sm->depth + (size_t)y0 * w, *r1 = r0 + (y0 < hh - 1 ? w : 0);
+        float tx = fx - (float)x0, ty = fy - (float)y0;
+        float a = (t <= r0[x0] ? 1.0f - tx : 0.0f) + (t <= r0[x1] ? tx : 0.0f);
+        float b = (t <= r1[x0] ? 1.0f - tx : 0.0f) + (t <= r1[x1] ? tx : 0.0f);
+        acc += (a + (b - a) * ty) * att;
+        att *= decay;
+        px += spx;
+        py += spy;
+        t += st;
+    }
+    float out = v->sigma * r->phase * r->len * step_int * acc;
+    return isfinite(out) ? out : 0.0f;
+}
+
+float fx_volume_transmittance(const fx_volume *v, const fx_volume_ray *r)
+{
+    if (!v->view_extinction || !(r->s1 > r->s0))
+        return 1.0f;
+    float od = v->sigma * r->len * (r->s1 - r->s0);
+    return od < FX_VOLUME_OPAQUE ? expf(-od) : 0.0f;
+}
+
+float fx_volume_surface_light(const fx_volume *v, const fx_volume_ray *r, float depth)
+{
+    if (!v->light_extinction || !(depth > 0.0f && depth < v->far_limit))
+        return 1.0f;
+    float l = r->ld0 + depth * r->dld - v->entry;
+    if (!(l > 0.0f))
+        return 1.0f;
+    float od = v->sigma * l;
+    return od < FX_VOLUME_OPAQUE ? expf(-od) : 0.0f;
+}
+
+float fx_volume_behind_at(const fx_volume *v, float x, float y, float depth)
+{
+    fx_volume_ray r;
+    if (!volume_ray_geometry(v, x, y, depth, &r))
+        return 1.0f;
+    return fx_volume_behind(v, &r, depth);
+}
+
+float fx_volume_behind(const fx_volume *v, const fx_volume_ray *r, float depth)
+{
+    float od = 0.0f;
+    if (v->view_extinction && r->s1 > r->s0)
+        od += v->sigma * r->len * (r->s1 - r->s0);
+    if (v->light_extinction && depth > 0.0f && depth < v->far_limit) {
+        float l = r->ld0 + depth * r->dld - v->entry;
+        od += l > 0.0f ? v->sigma * l : 0.0f;
+    }
+    return od < FX_VOLUME_OPAQUE ? expf(-od) : 0.0f;
+}
+
+/* ---- the reduced grid: march with interleaved offsets, then the depth-aware gather ---- */
+
+typedef struct lo_job {
+    const fx_volume *v;
+    const float *depth;
+    int w, h, f, steps, n, lw, lh;
+    int mult;         /* the strata's permutation: k -> (k mult + rot) mod n^2 */
+    unsigned rot;
+    float *lo, *lo_t, *lo_depth, *out;
+} lo_job;
+
+static void march_rows(void *user, int y0, int y1)
+{
+    const lo_job *j = user;
+    const int n = j->n, nn = n * n;
+    for (int Y = y0; Y < y1; Y++) {
+        int y = Y * j->f + j->f / 2;
+        y = y < j->h ? y : j->h - 1;
+        for (int X = 0; X < j->lw; X++) {
+            int x = X * j->f + j->f / 2;
+            x = x < j->w ? x : j->w - 1;
+            float d = j->depth[(size_t)y * j->w + x];
+            float offset = 0.5f;
+            if (n > 1) {
+                unsigned k = (unsigned)((X % n) + n * (Y % n));
+                k = (k * (unsigned)j->mult + j->rot) % (unsigned)nn;
+                offset = ((float)k + 0.5f) / (float)nn;
+            }
+            fx_volume_ray r;
+            int in = fx_volume_ray_init(j->v, (float)x + 0.5f, (float)y + 0.5f, d, &r);
+            size_t i = (size_t)Y * j->lw + X;
+            j->lo[i] = in ? fx_volume_march(j->v, &r, j->steps, offset) : 0.0f;
+            j->lo_t[i] = in ? fx_volume_behind(j->v, &r, d) : 1.0f;
+            j->lo_depth[i] = fx_volume_weight_depth(d, j->v->far_limit);
+        }
+    }
+}
+
+/* The n x n block around each texel (columns X - n/2 .. X - n/2 + n - 1: every stratum
+ * once), weighted by depth likeness. */
+static void gather_rows(void *user, int y0, int y1)
+{
+    const lo_job *j = user;
+    const int n = j->n, lw = j->lw, lh = j->lh;
+    for (int Y = y0; Y < y1; Y++)
+        for (int X = 0; X < lw; X++) {
+            const float d = j->lo_depth[(size_t)Y * lw + X], inv = 10.0f / d;
+            float s = 0.0f, ws = 0.0f;
+            for (int b = 0; b < n; b++) {
+                int yy = Y - n / 2 + b;
+                yy = yy < 0 ? 0 : yy >= lh ? lh - 1 : yy;
+                const float *L = j->lo + (size_t)yy * lw, *D = j->lo_depth + (size_t)yy * lw;
+                for (int a = 0; a < n; a++) {
+                    int xx = X - n / 2 + a;
+                    xx = xx < 0 ? 0 : xx >= lw ? lw - 1 : xx;
+                    float wt = fx_volume_depth_weight(d, inv, D[xx]);
+                    s += wt * L[xx];
+                    ws += wt;
+                }
+            }
+            j->out[(size_t)Y * lw + X] = ws > 1e-6f ? s / ws : j->lo[(size_t)Y * lw + X]; /* ws >= 1: itself */
+        }
+}
+
+static int gcd(int a, int b)
+{
+    while (b) {
+        int t = a % b;
+        a = b;
+        b = t;
+    }
+    return a;
+}
+
+void fx_volume_scatter_lo(fx_context *ctx, const fx_volume *v, const float *depth, int w, int h, int factor,
+                          int steps, int interleave, unsigned rotate, float *lo, float *lo_t, float *lo_depth,
+                          float *tmp)
+{
+    lo_job j;
+    memset(&j, 0, sizeof j);
+    j.v = v;
+    j.depth = depth;
+    j.w = w;
+    j.h = h;
+    j.f = factor > 1 ? factor : 1;
+    j.steps = steps;
+    j.n = interleave > 1 ? interleave : 1;
+    j.lw = fx_volume_lo_size(w, j.f);
+    j.lh = fx_volume_lo_size(h, j.f);
+    const int nn = j.n * j.n;
+    /* a multiplier coprime with n^2 scatters neighbouring texels' strata */
+    j.mult = 1;
+    for (int m = nn / 2 + 1; m < 4 * nn + 8; m++)
+        if (gcd(m, nn) == 1) {
+            j.mult = m;
+            break;
+        }
+    j.rot = nn > 1 ? rotate % (unsigned)nn : 0;
+    j.lo = j.n > 1 ? tmp : lo;
+    j.lo_depth = lo_depth;
+    j.lo_t = lo_t;
+    fx_parallel_for(ctx, j.lh, fx_grain_for(ctx, j.lh), march_rows, &j);
+    if (j.n > 1) {
+        j.out = lo;
+        fx_parallel_for(ctx, j.lh, fx_grain_for(ctx, j.lh), gather_rows, &j);
+    }
+}

@@ -1,0 +1,451 @@
+/* god_rays method volumetric (math/volume_march.h) against a scene whose in-scattered light
+ * has a closed form: a camera looking straight down at a floor 10 m below (90 degrees wide),
+ * a sun travelling (1, 0, -1)/sqrt(2) and a shelf at z = 5 over x in [-12, -6] whose
+ * shadow cuts the air near the floor on the left of the frame (the dark band). The light
+ * view is written here from the geometry (ray casts), and the expected radiance is
+ * integrated here in closed form from the same geometry (not from the light view, not
+ * with the library's code):
+ *
+ *     L = sigma p(cos) S  integral over the lit s of exp(-E(s)) ds,
+ *     E(s) = sigma s (view) + sigma (ld(s) - entry) (light, extinction full)
+ *
+ * Also: the dark band is darker than the lit air; 1 and 2 threads give the same bits (with
+ * interleaving and the reduced grid); density 0 is the identity; outputs stay finite at
+ * density 1e6 and anisotropy +-0.999 / +-1; clear errors without the light view, with a
+ * point light, with a screen-space light and for NaN parameters. */
+#include "fx_effect_test.h"
+
+#include <float.h>
+#include <math.h>
+
+#ifndef M_PI
+#define M_PI 3.14159265358979323846
+#endif
+
+#define W 64
+#define H 16
+#define LN 256          /* light view texels per side */
+#define LHALF 12.0      /* light view half-extent (m) */
+#define LDIST 20.0      /* light view origin: 20 m back from the world origin along the light */
+#define SHELF_Z 5.0
+#define SHELF_X0 (-12.0)
+#define SHELF_X1 (-6.0606601717798213) /* its edge on a texel boundary of the light view */
+#define CAM_Z 10.0
+#define SIGMA 0.05
+#define G 0.4
+#define SUN_E 2.0
+
+static const double A = 0.70710678118654752440; /* 1/sqrt(2) */
+
+/* The light view: planar depth of the first surface (shelf or floor) along the light. */
+static double light_depth(int i, int j)
+{
+    double cx = LHALF * (((i + 0.5) / LN) * 2.0 - 1.0);
+    double cy = LHALF * (1.0 - ((j + 0.5) / LN) * 2.0);
+    /* the view's axes: X = (a, 0, a), Y = (0, 1, 0), origin C = -LDIST d, d = (a, 0, -a) */
+    double px = -LDIST * A + cx * A, py = cy, pz = LDIST * A + cx * A;
+    (void)py;
+    double best = 1e10;
+    double ts = (pz - SHELF_Z) / A; /* shelf plane */
+    double xs = px + ts * A;
+    if (ts > 0 && xs >= SHELF_X0 && xs <= SHELF_X1)
+        best = ts;
+    double tf = pz / A; /* floor */
+    if (tf > 0 && tf < best)
+        best = tf;
+    return best;
+}
+
+static const char *write_light_view(fx_context *ctx, double *entry)
+{
+    static char path[512];
+    snprintf(path, sizeof path, "%s/light.exr", tu_tmpdir("god_rays_volumetric"));
+    float *d = malloc((size_t)LN * LN * sizeof(float));
+    double m = 1e30;
+    for (int j = 0; j < LN; j++)
+        for (int i = 0; i < LN; i++) {
+            double v = light_depth(i, j);
+            d[(size_t)j * LN + i] = (float)v;
+            m = v < m ? v : m;
+        }
+    *entry = m;
+    fx_frame *f = NULL;
+    fx_frame_new(ctx, LN, LN, &f);
+    fx_frame_add_pass(f, "Depth", 1, d);
+    CHECK_OK(ctx, fx_frame_write_exr(f, path, NULL));
+    fx_frame_free(f);
+    free(d);
+    return path;
+}
+
+static int box_x0 = W; /* columns x >= box_x0 see a box top 3 m below the camera (not in the light view) */
+#define BOX_DEPTH 3.0
+
+static double ray_end(int x) { return x >= box_x0 ? BOX_DEPTH : CAM_Z; }
+
+/* The scene sidecar: the camera, the sun (or another light type) and the light view. */
+static fx_frame *scene_frame(fx_context *ctx, const char *light_path, const char *type, float src)
+{
+    float *rgba = malloc((size_t)W * H * 4 * sizeof(float)), *d = malloc((size_t)W * H * sizeof(float));
+    for (int i = 0; i < W * H; i++) {
+        rgba[4 * i] = rgba[4 * i + 1] = rgba[4 * i + 2] = src;
+        rgba[4 * i + 3] = 1.0f;
+        d[i] = (float)ray_end(i % W);
+    }
+    fx_frame *f = et_frame(ctx, W, H, rgba);
+    fx_frame_add_pass(f, "Depth", 1, d);
+    free(rgba);
+    free(d);
+    double n = 0.1, fa = 100.0, ln = 0.1, lf = 40.0;
+    char json[4096];
+    int k = snprintf(json, sizeof json,
+                     "{\"world_to_camera\": [[1,0,0,0],[0,1,0,0],[0,0,1,%.17g],[0,0,0,1]],"
+                     " \"projection\": [[2,0,0,0],[0,%.17g,0,0],[0,0,%.17g,%.17g],[0,0,-1,0]],"
+                     " \"clip_start\": %g, \"clip_end\": %g,"
+                     " \"lights\": [{\"name\": \"Sun\", \"type\": \"%s\", \"position\": [-14, 0, 14],"
+                     " \"direction\": [%.17g, 0, %.17g], \"color\": [1, 1, 1], \"energy\": %g}]",
+                     -CAM_Z, 2.0 * W / H, (fa + n) / (n - fa), 2 * fa * n / (n - fa), n, fa, type, A, -A, SUN_E);
+    if (light_path)
+        k += snprintf(json + k, sizeof json - (size_t)k,
+                      ", \"aux_views\": [{\"name\": \"light:Sun\", \"path\": \"%s\","
+                      " \"world_to_camera\": [[%.17g,0,%.17g,0],[0,1,0,0],[%.17g,0,%.17g,%.17g],[0,0,0,1]],"
+                      " \"projection\": [[%.17g,0,0,0],[0,%.17g,0,0],[0,0,%.17g,%.17g],[0,0,0,1]],"
+                      " \"clip_start\": %g, \"clip_end\": %g, \"orthographic\": true}]",
+                      light_path, A, A, -A, A, -LDIST, 1.0 / LHALF, 1.0 / LHALF, -2.0 / (lf - ln),
+                      -(lf + ln) / (lf - ln), ln, lf);
+    snprintf(json + k, sizeof json - (size_t)k, "}");
+    CHECK_OK(ctx, fx_frame_apply_sidecar(f, json));
+    return f;
+}
+
+/* The view ray of pixel (x, H / 2): the point at planar depth s is (s kx, s ky, 10 - s). */
+static void ray_of(int x, double *kx, double *ky)
+{
+    *kx = 0.5 * (((x + 0.5) / W) * 2.0 - 1.0);
+    *ky = 0.5 * H / W * (1.0 - ((H / 2 + 0.5) / H) * 2.0);
+}
+
+static int no_shelf; /* expected_L as if the shelf were not there */
+
+
+/* Closed form for pixel (x, H / 2) (ext: 0 none, 1 view, 2 full). */
+static double expected_L(int x, int ext, double entry)
+{
+    double kx, ky;
+    ray_of(x, &kx, &ky);
+    double len = sqrt(1.0 + kx * kx + ky * ky);
+    /* the point at s is in the shelf's shadow when its way to the sun, (-1, 0, 1), meets
+     * z = 5 over the shelf: x - (5 - z) = 5 + s (kx - 1) in [X0, X1], below it (s > 5) */
+    double sa = (SHELF_X1 - SHELF_Z) / (kx - 1.0), sb = (SHELF_X0 - SHELF_Z) / (kx - 1.0); /* kx < 1 */
+    sa = fmax(sa, CAM_Z - SHELF_Z);
+    const double end = ray_end(x);
+    sa = fmin(sa, end);
+    sb = fmin(sb, end);
+    double segs[2][2];
+    int ns = 0;
+    if (sb > sa && !no_shelf) {
+        segs[ns][0] = 0.0, segs[ns++][1] = sa;
+        if (sb < end)
+            segs[ns][0] = sb, segs[ns++][1] = end;
+    } else {
+        segs[ns][0] = 0.0, segs[ns++][1] = end;
+    }
+    /* E(s) = alpha + beta s: view sigma len s; light sigma (ld(s) - entry), with
+     * ld = LDIST + (x - z) a = LDIST + (s kx - 10 + s) a */
+    double alpha = 0.0, beta = 0.0;
+    if (ext >= 1)
+        beta += SIGMA * len;
+    if (ext == 2) {
+        alpha += SIGMA * (LDIST - CAM_Z * A - entry);
+        beta += SIGMA * (kx + 1.0) * A;
+    }
+    double integral = 0.0;
+    for (int k = 0; k < ns; k++) {
+        double a = segs[k][0], b = segs[k][1];
+        integral += beta > 0 ? exp(-alpha) * (exp(-beta * a) - exp(-beta * b)) / beta : b - a;
+    }
+    /* cos between the light's travel (a, 0, -a) and the way to the camera (-kx, -ky, 1) / len */
+    double g = G, c = (-A * kx - A) / len;
+    double phase = (1 - g * g) / (4 * M_PI * pow(1 + g * g - 2 * g * c, 1.5));
+    return SIGMA * phase * SUN_E * len * integral;
+}
+
+/* What is left of the floor's colour: exp(-sigma len 10) exp(-sigma (ld(floor) - entry)). */
+static double expected_T(int x, double entry)
+{
+    double kx, ky;
+    ray_of(x, &kx, &ky);
+    double len = sqrt(1.0 + kx * kx + ky * ky);
+    return exp(-SIGMA * len * CAM_Z) * exp(-SIGMA * (LDIST + CAM_Z * kx * A - entry));
+}
+
+static int quality_of(const char *q)
+{
+    static const char *const names[] = {"draft", "preview", "final", "reference"};
+    for (int i = 0; i < 4; i++)
+        if (strcmp(q, names[i]) == 0)
+            return i;
+    return -1;
+}
+
+static fx_stack *vol_stack(fx_context *ctx, const char *quality, const char *extinction)
+{
+    fx_stack *s = et_stack(ctx, "god_rays");
+    CHECK_OK(ctx, fx_stack_set_enum(s, 0, "method", "volumetric"));
+    CHECK_OK(ctx, fx_stack_set_float(s, 0, "volume_density", (float)SIGMA));
+    CHECK_OK(ctx, fx_stack_set_float(s, 0, "anisotropy", (float)G));
+    CHECK_OK(ctx, fx_stack_set_float(s, 0, "volume_bias", 0.0f));
+    const float white[3] = {1.0f, 1.0f, 1.0f}; /* the closed form's sigma is the density */
+    CHECK_OK(ctx, fx_stack_set_floats(s, 0, "volume_color", white, 3));
+    CHECK_OK(ctx, fx_stack_set_enum(s, 0, "extinction", extinction));
+    if (quality)
+        CHECK_OK(ctx, fx_stack_set_quality(s, quality_of(quality)));
+    return s;
+}
+
+/* The march at the reference preset (full resolution, 256 steps, midpoints) against the
+ * closed form, with each extinction; the dark band of the shelf's shadow. */
+static void test_closed_form(fx_context *ctx)
+{
+    double entry = 0;
+    const char *path = write_light_view(ctx, &entry);
+    static const char *const ext[] = {"none", "view", "full"};
+    for (int e = 0; e < 3; e++) {
+        fx_frame *f = scene_frame(ctx, path, "SUN", 0.0f);
+        fx_stack *s = vol_stack(ctx, "reference", ext[e]);
+        float *o = et_run(ctx, s, f);
+        CHECK(o != NULL);
+        double worst = 0.0;
+        for (int x = 0; o && x < W; x++) {
+            double want = expected_L(x, e, entry), got = o[4 * ((H / 2) * W + x)];
+            double rel = fabs(got - want) / want;
+            if (getenv("VOL_DEBUG"))
+                fprintf(stderr, "%d %s x %d: got %.6f want %.6f rel %.4f\n", e, ext[e], x, got, want, rel);
+            worst = rel > worst ? rel : worst;
+        }
+        CHECK(worst < 0.01);
+        if (!(worst < 0.01))
+            fprintf(stderr, "volumetric extinction %s: worst relative error %.4f\n", ext[e], worst);
+        /* the dark band: the shaded air on the left adds less than the same air unshaded */
+        if (o) {
+            no_shelf = 1;
+            double lit = expected_L(2, e, entry);
+            no_shelf = 0;
+            CHECK(o[4 * ((H / 2) * W + 2)] < 0.85 * lit);
+            if (getenv("VOL_DEBUG"))
+                fprintf(stderr, "band %s: %.5f of %.5f unshaded\n", ext[e], o[4 * ((H / 2) * W + 2)], lit);
+        }
+        free(o);
+        fx_stack_free(s);
+        fx_frame_free(f);
+    }
+    /* volume_color as Cycles' Volume Scatter Color: each channel scatters density x colour
+     * (without extinction exactly the closed form times the colour); the default 0.8 grey is
+     * the density x 0.8 */
+    {
+        fx_frame *f = scene_frame(ctx, path, "SUN", 0.0f);
+        fx_stack *s = vol_stack(ctx, "reference", "none");
+        const float col[3] = {1.0f, 0.5f, 0.25f};
+        CHECK_OK(ctx, fx_stack_set_floats(s, 0, "volume_color", col, 3));
+        float *o = et_run(ctx, s, f);
+        double worst = 0.0;
+        for (int x = 0; o && x < W; x++)
+            for (int c = 0; c < 3; c++) {
+                double want = col[c] * expected_L(x, 0, entry), got = o[4 * ((H / 2) * W + x) + c];
+                double rel = fabs(got - want) / want;
+                worst = rel > worst ? rel : worst;
+            }
+        CHECK(o && worst < 0.01);
+        free(o);
+        fx_stack_free(s);
+        fx_stack *g = vol_stack(ctx, "reference", "full"), *h = vol_stack(ctx, "reference", "full");
+        const float grey[3] = {0.8f, 0.8f, 0.8f};
+        CHECK_OK(ctx, fx_stack_set_floats(g, 0, "volume_color", grey, 3));
+        CHECK_OK(ctx, fx_stack_set_float(h, 0, "volume_density", (float)(SIGMA * 0.8)));
+        float *a = et_run(ctx, g, f), *b = et_run(ctx, h, f);
+        CHECK(a && b && tu_max_abs_diff(a, b, (size_t)W * H * 4) < 1e-6);
+        free(a);
+        free(b);
+        fx_stack_free(g);
+        fx_stack_free(h);
+        fx_frame_free(f);
+    }
+    /* what lies behind the medium: src T_view T_light(surface) + L */
+    fx_frame *f = scene_frame(ctx, path, "SUN", 1.0f);
+    fx_stack *s = vol_stack(ctx, "reference", "full");
+    float *o = et_run(ctx, s, f);
+    double worst = 0.0;
+    for (int x = 0; o && x < W; x++) {
+        double want = expected_T(x, entry) + expected_L(x, 2, entry);
+        double rel = fabs(o[4 * ((H / 2) * W + x)] - want) / want;
+        worst = rel > worst ? rel : worst;
+    }
+    CHECK(o && worst < 0.01);
+    if (!(worst < 0.01))
+        fprintf(stderr, "volumetric with src 1: worst relative error %.4f\n", worst);
+    free(o);
+    fx_stack_free(s);
+    fx_frame_free(f);
+}
+
+/* Interleaved sampling and the reduced grid: the same bits for 1 and 2 threads, and close
+ * to the closed form (the air is smooth here). */
+static void test_threads_presets(fx_context *ctx)
+{
+    double entry = 0;
+    const char *path = write_light_view(ctx, &entry);
+    static const char *const q[] = {"draft", "preview", "final"};
+    for (int k = 0; k < 3; k++) {
+        fx_context *c1 = NULL;
+        fx_context_new(&c1, 1);
+        fx_frame *f1 = scene_frame(c1, path, "SUN", 0.25f), *f2 = scene_frame(ctx, path, "SUN", 0.25f);
+        fx_stack *s1 = vol_stack(c1, q[k], "full"), *s2 = vol_stack(ctx, q[k], "full");
+        float *a = et_run(c1, s1, f1), *b = et_run(ctx, s2, f2);
+        CHECK(a && b && memcmp(a, b, (size_t)W * H * 4 * sizeof(float)) == 0);
+        double sum = 0.0, want = 0.0;
+        for (int x = 0; b && x < W; x++) {
+            sum += b[4 * ((H / 2) * W + x)];
+            want += expected_L(x, 2, entry);
+        }
+        /* the mean over the row, src 0.25 T included */
+        double t_sum = 0.0;
+        for (int x = 0; x < W; x++)
+            t_sum += 0.25 * expected_T(x, entry);
+        double rel = fabs(sum - want - t_sum) / (want + t_sum);
+        CHECK(rel < 0.01);
+        if (getenv("VOL_DEBUG") || !(rel < 0.01))
+            fprintf(stderr, "volumetric %s: row mean relative error %.4f\n", q[k], rel);
+        free(a);
+        free(b);
+        fx_stack_free(s1);
+        fx_stack_free(s2);
+        fx_frame_free(f1);
+        fx_frame_free(f2);
+        fx_context_free(c1);
+    }
+}
+
+/* The reduced presets at a depth edge: a box top 3 m below the camera over the right half
+ * (the light view does not hold it: only the rays' ends change). The gather and the
+ * upsample take the air's light from rays of like depth, so the columns beside the edge
+ * match the closed form of their own depth (a plain bilinear/box would mix in the 10 m
+ * rays' light, 2-3x brighter). */
+static void test_depth_edge(fx_context *ctx)
+{
+    double entry = 0;
+    const char *path = write_light_view(ctx, &entry);
+    box_x0 = W / 2 + 3; /* not on a lo texel boundary */
+    static const char *const q[] = {"preview", "final"};
+    for (int k = 0; k < 2; k++) {
+        fx_frame *f = scene_frame(ctx, path, "SUN", 0.0f);
+        fx_stack *s = vol_stack(ctx, q[k], "full");
+        float *o = et_run(ctx, s, f);
+        double worst = 0.0;
+        for (int x = box_x0 - 4; o && x < box_x0 + 4; x++)
+            for (int y = 0; y < H; y++) {
+                double want = expected_L(x, 2, entry), got = o[4 * (y * W + x)];
+                double rel = fabs(got - want) / want;
+                worst = rel > worst ? rel : worst;
+            }
+        CHECK(o && worst < 0.1);
+        if (getenv("VOL_DEBUG") || !(worst < 0.1))
+            fprintf(stderr, "volumetric %s at a depth edge: worst relative error %.4f\n", q[k], worst);
+        free(o);
+        fx_stack_free(s);
+        fx_frame_free(f);
+    }
+    box_x0 = W;
+}
+
+static void test_extremes_errors(fx_context *ctx)
+{
+    double entry = 0;
+    const char *path = write_light_view(ctx, &entry);
+    fx_frame *f = scene_frame(ctx, path, "SUN", 0.5f);
+    const float dens[] = {1e6f, 1e6f, 1e-6f, 0.05f, 0.05f, 0.05f, 0.05f};
+    const float aniso[] = {0.999f, -0.999f, 0.0f, 0.999f, -0.999f, 1.0f, -1.0f};
+    static const char *const ext[] = {"full", "none", "view"};
+    for (int k = 0; k < 7; k++)
+        for (int e = 0; e < 3; e++) {
+            fx_stack *s = vol_stack(ctx, e == 1 ? "draft" : "reference", ext[e]);
+            CHECK_OK(ctx, fx_stack_set_float(s, 0, "volume_density", dens[k]));
+            CHECK_OK(ctx, fx_stack_set_float(s, 0, "anisotropy", aniso[k]));
+            fx_context_clear_warnings(ctx);
+            float *o = et_run(ctx, s, f);
+            /* finite by itself: the stack replaced nothing (it would warn) and nothing is huge */
+            CHECK(o && tu_all_finite(o, (size_t)W * H * 4) && fx_context_warning_count(ctx) == 0);
+            for (size_t i = 0; o && i < (size_t)W * H * 4; i++)
+                if (!(fabsf(o[i]) < 1e30f)) {
+                    CHECK(!"an output value beyond 1e30");
+                    break;
+                }
+            free(o);
+            fx_stack_free(s);
+        }
+    /* density 1e6, extinction view: the air right at the camera is lit and opaque, so the
+     * in-scatter is the limit p S (sigma / sigma), the floor hidden */
+    for (int k = 0; k < 2; k++) {
+        fx_stack *s = vol_stack(ctx, "reference", "view");
+        CHECK_OK(ctx, fx_stack_set_float(s, 0, "volume_density", 1e6f));
+        CHECK_OK(ctx, fx_stack_set_float(s, 0, "anisotropy", k ? -0.999f : 0.999f));
+        float *o = et_run(ctx, s, f);
+        double kx, ky;
+        ray_of(W / 2, &kx, &ky);
+        double g = k ? -0.999 : 0.999, c = (-A * kx - A) / sqrt(1.0 + kx * kx + ky * ky);
+        double want = SUN_E * (1 - g * g) / (4 * M_PI * pow(1 + g * g - 2 * g * c, 1.5));
+        CHECK(o && fabs(o[4 * ((H / 2) * W + W / 2)] - want) < 0.02 * want);
+        free(o);
+        fx_stack_free(s);
+    }
+    /* density 0: the identity, bit for bit */
+    fx_stack *s = vol_stack(ctx, "final", "full");
+    CHECK_OK(ctx, fx_stack_set_float(s, 0, "volume_density", 0.0f));
+    float *o = et_run(ctx, s, f);
+    CHECK(o && memcmp(o, et_combined(f), (size_t)W * H * 4 * sizeof(float)) == 0);
+    free(o);
+    /* NaN parameters are refused, naming the parameter */
+    CHECK_FAIL(ctx, fx_stack_set_float(s, 0, "volume_density", NAN), FX_ERR_BAD_PARAM, "volume_density");
+    CHECK_FAIL(ctx, fx_stack_set_float(s, 0, "anisotropy", NAN), FX_ERR_BAD_PARAM, "anisotropy");
+    /* a screen-space light cannot be marched */
+    CHECK_OK(ctx, fx_stack_set_float(s, 0, "volume_density", 0.05f));
+    fx_result r = fx_stack_set_enum(s, 0, "light_source", "screen");
+    fx_frame *out = NULL;
+    if (r == FX_OK)
+        CHECK_FAIL(ctx, fx_stack_run(s, f, &out), FX_ERR_BAD_PARAM, "light_source");
+    else
+        CHECK(tu_contains(fx_context_error(ctx), "light_source"));
+    fx_stack_free(s);
+    fx_frame_free(f);
+    /* no light view: FX_ERR_NO_AUX_VIEW naming it; the stack asks for it */
+    f = scene_frame(ctx, NULL, "SUN", 0.5f);
+    s = vol_stack(ctx, "final", "full");
+    CHECK_FAIL(ctx, fx_stack_run(s, f, &out), FX_ERR_NO_AUX_VIEW, "light:");
+    char *req = NULL;
+    CHECK_OK(ctx, fx_stack_required_aux_views(s, &req));
+    CHECK(req && strcmp(req, "{\"aux_views\":[{\"name\":\"light:\",\"kind\":\"light\",\"light\":\"\"}]}") == 0);
+    fx_free(req);
+    CHECK_OK(ctx, fx_stack_set_enum(s, 0, "method", "polar"));
+    CHECK_OK(ctx, fx_stack_required_aux_views(s, &req));
+    CHECK(req && strcmp(req, "{\"aux_views\":[]}") == 0);
+    fx_free(req);
+    fx_stack_free(s);
+    fx_frame_free(f);
+    /* a point light: not yet */
+    f = scene_frame(ctx, path, "POINT", 0.5f);
+    s = vol_stack(ctx, "final", "full");
+    CHECK_FAIL(ctx, fx_stack_run(s, f, &out), FX_ERR_BAD_PARAM, "point light");
+    fx_stack_free(s);
+    fx_frame_free(f);
+}
+
+int main(void)
+{
+    fx_context *ctx = NULL;
+    fx_context_new(&ctx, 2);
+    test_closed_form(ctx);
+    test_threads_presets(ctx);
+    test_depth_edge(ctx);
+    test_extremes_errors(ctx);
+    fx_context_free(ctx);
+    return tu_finish("test_god_rays_volumetric");
+}
