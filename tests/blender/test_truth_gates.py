@@ -56,18 +56,21 @@ CAUSTICS = {  # preset: (mean / truth, contrast 4x4 box, whole MAE); Cycles' con
     "reference": (0.9429, 0.2833, 0.2820),
 }
 MIRRORS = {  # variant: {row: mirror-region MAE} (no effect: 0.1833, 0.1654, 0.1988, 0.1333)
-    "facing": {"libfx draft": 0.1460, "libfx preview": 0.1544, "libfx final": 0.0510, "libfx reference": 0.0301,
-               "draft + probe": 0.0458, "preview + probe": 0.0510, "final, no probe": 0.1542,
-               "reference, no probe": 0.0311},
-    "grazing": {"libfx draft": 0.0837, "libfx preview": 0.0784, "libfx final": 0.0559, "libfx reference": 0.0374,
-                "draft + probe": 0.0674, "preview + probe": 0.0618, "final, no probe": 0.0726,
+    # re-measured after issue 27 (ssr_mirror's hit confidence, the probe's refined crossings) on
+    # 2026-12-02 with the gate's own command, one run (libfx is deterministic; the renders are the
+    # same); libfx final before: 0.0510, 0.0559, 0.0716, 0.0426
+    "facing": {"libfx draft": 0.1470, "libfx preview": 0.1533, "libfx final": 0.0437, "libfx reference": 0.0302,
+               "draft + probe": 0.0449, "preview + probe": 0.0428, "final, no probe": 0.1534,
+               "reference, no probe": 0.0310},
+    "grazing": {"libfx draft": 0.0836, "libfx preview": 0.0783, "libfx final": 0.0527, "libfx reference": 0.0373,
+                "draft + probe": 0.0643, "preview + probe": 0.0583, "final, no probe": 0.0735,
                 "reference, no probe": 0.0364},
-    "pair": {"libfx draft": 0.0966, "libfx preview": 0.0804, "libfx final": 0.0716, "libfx reference": 0.0413,
-             "draft + probe": 0.0772, "preview + probe": 0.0701, "final, no probe": 0.0819,
-             "reference, no probe": 0.0403},
-    "curved": {"libfx draft": 0.0909, "libfx preview": 0.1010, "libfx final": 0.0426, "libfx reference": 0.0415,
-               "draft + probe": 0.0406, "preview + probe": 0.0423, "final, no probe": 0.1008,
-               "reference, no probe": 0.1000},
+    "pair": {"libfx draft": 0.1000, "libfx preview": 0.0843, "libfx final": 0.0658, "libfx reference": 0.0412,
+             "draft + probe": 0.0716, "preview + probe": 0.0649, "final, no probe": 0.0850,
+             "reference, no probe": 0.0402},
+    "curved": {"libfx draft": 0.0909, "libfx preview": 0.1006, "libfx final": 0.0408, "libfx reference": 0.0400,
+               "draft + probe": 0.0406, "preview + probe": 0.0409, "final, no probe": 0.1004,
+               "reference, no probe": 0.1050},
 }
 SHADOWS = {  # variant: {preset: (shadow-region MAE, mean / truth)}, config light_group (no effect: 0.1722, 0.0804, 0.1593)
     "floor": {"draft": (0.0795, 0.9952), "preview": (0.0563, 0.9961), "final": (0.0505, 0.9989),

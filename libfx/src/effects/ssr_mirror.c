@@ -129,8 +129,9 @@ static const fx_param_def ssr_param_defs[] = {
                "Curved mirror from a flat one: the normal tilts by bend x (position on the face "
                "from its centre, -1..1); > 0 bulges out (convex, wider view), < 0 in (concave)"),
     FX_P_ENUM(ssr_params, fallback, "fallback", FALLBACK_TEXTURE, fallback_items,
-              "Where a ray misses (or leaves the frame, or meets the back of an object): texture: the "
-              "mirror's own pixel; environment: environment_color; probe: the reflection probe (a "
+              "Where a ray misses (or leaves the frame), and blended by the hit's confidence where its "
+              "evidence is weak (near the border, a back face, a ray that passed behind an object, a "
+              "distance the probe's depth contradicts): texture: the mirror's own pixel; environment: environment_color; probe: the reflection probe (a "
               "panorama with depth the add-on renders beside the mirror), parallax-corrected, or the "
               "texture with a warning when the frame has no probe"),
     FX_P_FLOATS(ssr_params, environment, "environment_color", 3, env_default, 0.0, 65504.0, "color",
@@ -152,7 +153,9 @@ static const fx_param_def ssr_param_defs[] = {
                "Step multiplier per step (steps grow with distance)"),
     FX_P_INT(ssr_params, refine, "refine", 6, 0, 24, 0, 10, "", "Binary refinement iterations after a hit"),
     FX_P_FLOAT(ssr_params, thickness, "thickness", 0.35, 0.0, 1e6, 0.01, 2.0, "",
-               "Metres a surface is assumed solid behind its front: rays passing further behind are not hits"),
+               "Metres a surface is assumed solid behind its front: a ray passing further behind goes on; "
+               "one passing within it ends there with confidence 0 (it may be inside the object: the "
+               "fallback), unless it crossed the surface's front (a hit)"),
     FX_P_FLOAT(ssr_params, max_distance, "max_distance", 100.0, 0.001, 1e7, 1.0, 1000.0, "",
                "Longest ray in metres (view space)"),
     FX_P_FLOAT(ssr_params, resolution_scale, "resolution_scale", 1.0, 0.0625, 1.0, 0.125, 1.0, "factor",
@@ -171,8 +174,11 @@ static const fx_param_def ssr_param_defs[] = {
              "(geometric, 2 cm to max_distance; then refine bisections)"),
     FX_P_BOOL(ssr_params, planar_view, "planar_view", 0,
               "Flat mirrors: the reflection is the add-on's render from the camera mirrored in the "
-              "mirror's plane (exact; one more render per mirror plane). Pixels off that plane, glossy, "
-              "bent or cel mirrors, and a frame without that view keep the trace and the fallback"),
+              "mirror's plane (exact; one more render per mirror plane). Worth turning on for a flat "
+              "mirror at final too: on the truth scenes it removed 87-92 % of the mirror error where "
+              "final's trace + probe removed 80-84 %, for one Cycles render per plane (about 2x the "
+              "probe's render time). Pixels off that plane, glossy, bent or cel mirrors, and a frame "
+              "without that view keep the trace and the fallback"),
 };
 
 /* ---- helpers ---- */
