@@ -9,7 +9,10 @@
  *    takes the post's colour where its exact reflection is not the post (the old tracer:
  *    a band of 286 pixels);
  *  - back face: a surface whose Normal pass faces along the ray (n . r = +0.15) is not a
- *    hit (the old test let up to +0.25 through);
+ *    hit (the old test let up to +0.25 through). A Normal pass that disagrees with the
+ *    depth also tilts the tangent plane the thickness term extends, so here that term
+ *    rejects the hit too: without the back-face term this check still passes (checked by
+ *    a temporary edit); it fails on the old tracer;
  *  - a genuine hit on the floor keeps its colour (the confidence is 1: no false fades);
  *  - a ray leaving the screen takes the fallback exactly; hits in the border band fade;
  *  - smear scene: a sphere and a block just in front of the mirror (rays pass behind their
