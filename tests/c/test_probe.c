@@ -195,8 +195,8 @@ static void test_parallax(void)
  * (its lanes must give these bits: the same texel per step, the same crossing), with the
  * refined crossing test of issue 27 (a refined point further behind its texel's surface
  * than the thickness, the bracket and 4 texels' depth step is the ray passing behind an
- * occluder: no hit; the march goes on, and a ray that meets nothing later takes the
- * background texel beside the occluder's silhouette). */
+ * occluder: no hit; the march goes on, and a ray still behind it at the march's end takes
+ * the background texel beside the occluder's silhouette). */
 static int ref_in_front(const fx_pano *p, fx_vec3 q, float *gap)
 {
     float dist = sqrtf(fx_v3_dot(q, q));
@@ -239,6 +239,8 @@ static int ref_trace(const fx_pano *p, const fx_pano_trace_settings *st, fx_vec3
         }
         prev_front = front;
         prev_t = t;
+        if (front)
+            t_hidden = -1.0f; /* out in front again: the far lookup unless it goes behind again */
     }
     if (t_hidden >= 0.0f) {
         float px, py;

@@ -124,8 +124,9 @@ static int refined_crossing(const fx_pano *p, const fx_pano_trace_settings *st, 
 }
 
 /* The march of fx_pano_trace: 1 and *t_hit (the crossing, refined) for a hit; 2 and *t_hit
- * for a ray that passed behind an occluder (seen from the probe) and met nothing the probe
- * sees afterwards: its hit is hidden from the probe, and *t_hit is the last point of the
+ * for a ray that passed behind an occluder (seen from the probe) and is still behind it
+ * when the march ends (a ray that comes out in front again, into the sky or a room too
+ * big for the march, is the far lookup's as any other): its hit is hidden from the probe, and *t_hit is the last point of the
  * ray in front of the background beside the occluder's silhouette (the background there is
  * the best guess of the hidden surface: the ray's direction from the probe would look at
  * the occluder itself, drawing it out over every ray that passes behind it); 0 for none,
@@ -160,6 +161,7 @@ FX_CLONES static int pano_march(const fx_pano *p, const fx_pano_trace_settings *
         if (n == 4 && all4(front)) {
             prev_front = 1; /* no crossing: every step in front */
             prev_t = ts[3];
+            t_hidden = -1.0f; /* out from behind any occluder */
             continue;
         }
         for (int l = 0; l < n; l++) {
@@ -169,6 +171,8 @@ FX_CLONES static int pano_march(const fx_pano *p, const fx_pano_trace_settings *
                 return 1;
             prev_front = front[l] != 0;
             prev_t = tl;
+            if (prev_front)
+                t_hidden = -1.0f; /* out from behind the occluder: the probe sees the ray again */
         }
     }
     if (t_hidden >= 0.0f) {
