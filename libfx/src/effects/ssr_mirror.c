@@ -131,7 +131,8 @@ static const fx_param_def ssr_param_defs[] = {
     FX_P_ENUM(ssr_params, fallback, "fallback", FALLBACK_TEXTURE, fallback_items,
               "Where a ray misses (or leaves the frame), and blended by the hit's confidence where its "
               "evidence is weak (near the border, a back face, a ray that passed behind an object, a "
-              "distance the probe's depth contradicts): texture: the mirror's own pixel; environment: environment_color; probe: the reflection probe (a "
+              "distance the probe's depth contradicts): texture: the mirror's own pixel; environment: "
+              "environment_color; probe: the reflection probe (a "
               "panorama with depth the add-on renders beside the mirror), parallax-corrected, or the "
               "texture with a warning when the frame has no probe"),
     FX_P_FLOATS(ssr_params, environment, "environment_color", 3, env_default, 0.0, 65504.0, "color",
