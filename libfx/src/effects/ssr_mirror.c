@@ -873,9 +873,13 @@ static void shade_rows(void *user, int begin, int end)
                 if (p->op == OP_SEPIA || p->op == OP_GRAYSCALE)
                     fx_color_op_apply3(j->opm, refl, refl);
                 conf = 1.0f;
-            } else if (j->probe && conf < 1.0f)
+            } else if (j->probe && conf < 1.0f) {
                 probe_colour(j, pos, rd, fb); /* only where the fallback shows */
-            else if (p->fallback == FALLBACK_ENVIRONMENT)
+                /* the probe's colour is the reflection there: the colour operator's too (as the
+                 * planar view's; cel's outlines need the hit's depth edges: not on the probe) */
+                if (p->op == OP_SEPIA || p->op == OP_GRAYSCALE)
+                    fx_color_op_apply3(j->opm, fb, fb);
+            } else if (p->fallback == FALLBACK_ENVIRONMENT)
                 memcpy(fb, p->environment, sizeof fb);
             else
                 memcpy(fb, s, sizeof fb);
