@@ -192,7 +192,11 @@ static void test_parallax(void)
 }
 
 /* The march one step at a time, as fx_pano_trace did before it took four steps at once
- * (its lanes must give these bits: the same texel per step, the same crossing). */
+ * (its lanes must give these bits: the same texel per step, the same crossing), with the
+ * refined crossing test of issue 27 (a refined point further behind its texel's surface
+ * than the thickness, the bracket and 4 texels' depth step is the ray passing behind an
+ * occluder: no hit; the march goes on, and a ray still behind it at the march's end takes
+ * the background texel beside the occluder's silhouette). */
 static int ref_in_front(const fx_pano *p, fx_vec3 q, float *gap)
 {
     float dist = sqrtf(fx_v3_dot(q, q));
@@ -210,24 +214,42 @@ static int ref_trace(const fx_pano *p, const fx_pano_trace_settings *st, fx_vec3
         return 0;
     }
     pd = fx_v3_normalize_or(pd, fx_v3(0.0f, 0.0f, -1.0f));
-    float gap, prev_t = 0.0f, t = st->t0;
+    float gap, prev_t = 0.0f, t = st->t0, t_hidden = -1.0f;
     int prev_front = ref_in_front(p, po, &gap);
+    const float texel = 2.0f * (float)PI / (float)(p->w > p->h ? p->w : 2 * p->h);
     for (int k = 0; k < st->steps; k++, t *= st->growth) {
         int front = ref_in_front(p, fx_v3_add(po, fx_v3_scale(pd, t)), &gap);
-        if (prev_front && !front && gap <= st->thickness + (t - prev_t)) {
-            float lo = prev_t, hi = t;
+        if (prev_front && !front) {
+            float lo = prev_t, hi = t, gm;
             for (int r = 0; r < st->refine; r++) {
-                float mid = 0.5f * (lo + hi), gm;
+                float mid = 0.5f * (lo + hi);
                 if (ref_in_front(p, fx_v3_add(po, fx_v3_scale(pd, mid)), &gm))
                     lo = mid;
                 else
                     hi = mid;
             }
-            fx_pano_color(p, fx_v3_add(po, fx_v3_scale(pd, hi)), rgb);
-            return 1;
+            fx_vec3 q = fx_v3_add(po, fx_v3_scale(pd, hi));
+            ref_in_front(p, q, &gm);
+            float dist = sqrtf(fx_v3_dot(q, q));
+            if (gm <= st->thickness + (hi - lo) + 4.0f * texel * (dist - gm)) {
+                fx_pano_color(p, q, rgb);
+                return 1;
+            }
+            t_hidden = lo; /* behind an occluder: its background texel, unless a later hit */
         }
         prev_front = front;
         prev_t = t;
+        if (front)
+            t_hidden = -1.0f; /* out in front again: the far lookup unless it goes behind again */
+    }
+    if (t_hidden >= 0.0f) {
+        float px, py;
+        fx_pano_dir_to_pixel(fx_v3_add(po, fx_v3_scale(pd, t_hidden)), p->w, p->h, &px, &py);
+        int x = (int)px, y = (int)py;
+        x = x < 0 ? 0 : x >= p->w ? p->w - 1 : x;
+        y = y < 0 ? 0 : y >= p->h ? p->h - 1 : y;
+        memcpy(rgb, p->color + ((size_t)y * p->w + x) * 4, 3 * sizeof(float));
+        return 0;
     }
     fx_pano_color(p, pd, rgb);
     return 0;

@@ -24,6 +24,18 @@ void fx_pano_color(const fx_pano *p, fx_vec3 d, float rgb[3])
     }
 }
 
+/* Colour of the texel direction d falls in (nearest). */
+static void pano_texel(const fx_pano *p, fx_vec3 d, float rgb[3])
+{
+    float px, py;
+    fx_pano_dir_to_pixel(d, p->w, p->h, &px, &py);
+    int x = (int)px, y = (int)py;
+    x = x < 0 ? 0 : x >= p->w ? p->w - 1 : x;
+    y = y < 0 ? 0 : y >= p->h ? p->h - 1 : y;
+    const float *c = p->color + ((size_t)y * p->w + x) * 4;
+    rgb[0] = c[0], rgb[1] = c[1], rgb[2] = c[2];
+}
+
 /* Whether probe-space point q lies in front of the probe's surface in its direction. */
 static inline int in_front(const fx_pano *p, fx_vec3 q, float *gap)
 {
@@ -79,22 +91,65 @@ static inline v4i in_front4(const fx_pano *p, fx_vec3 po, fx_vec3 pd, v4f t, v4f
     return ~(dist >= D);
 }
 
-/* an AVX2 clone: VEX's three-operand forms drop the register copies of the selects */
-FX_CLONES int fx_pano_trace(const fx_pano *p, const fx_pano_trace_settings *st, fx_vec3 o, fx_vec3 dir,
-                            float rgb[3])
+/* A crossing between march points a (in front of the probe's surface) and b (behind it),
+ * refined by bisection: 1 and *t_hit if the ray meets the surface there. The refined point
+ * must lie behind the surface of its texel by no more than the thickness, the bracket's
+ * length and the depth step between neighbouring texels of a surface seen obliquely from
+ * the probe (4 texel angles x its distance: up to 76 deg). Further behind, the bracket
+ * straddles a silhouette: the ray passed behind an occluder (in front of the background
+ * on one side, behind the occluder's front on the other), which is not a hit, however
+ * long the step that found it (a long step's slack let rays passing half a metre behind
+ * a block near the probe take its colour: the probe's own smear). */
+static int refined_crossing(const fx_pano *p, const fx_pano_trace_settings *st, fx_vec3 po, fx_vec3 pd, float a,
+                            float b, float *t_hit, float *t_front)
+{
+    float lo = a, hi = b, gm;
+    for (int r = 0; r < st->refine; r++) {
+        float mid = 0.5f * (lo + hi);
+        if (in_front(p, fx_v3_add(po, fx_v3_scale(pd, mid)), &gm))
+            lo = mid;
+        else
+            hi = mid;
+    }
+    fx_vec3 q = fx_v3_add(po, fx_v3_scale(pd, hi));
+    in_front(p, q, &gm);
+    float dist = sqrtf(fx_v3_dot(q, q));
+    float texel = 2.0f * FX_PANO_PI / (float)(p->w > p->h ? p->w : 2 * p->h);
+    if (!(gm <= st->thickness + (hi - lo) + 4.0f * texel * (dist - gm))) {
+        *t_front = lo; /* the last point the probe saw in front of the background */
+        return 0;
+    }
+    *t_hit = hi;
+    return 1;
+}
+
+/* The march of fx_pano_trace: 1 and *t_hit (the crossing, refined) for a hit; 2 and *t_hit
+ * for a ray that passed behind an occluder (seen from the probe) and is still behind it
+ * when the march ends (a ray that comes out in front again, into the sky or a room too
+ * big for the march, is the far lookup's as any other): its hit is hidden from the probe, and *t_hit is the last point of the
+ * ray in front of the background beside the occluder's silhouette (the background there is
+ * the best guess of the hidden surface: the ray's direction from the probe would look at
+ * the occluder itself, drawing it out over every ray that passes behind it); 0 for none,
+ * -1 for a non-finite ray. *po_out, *pd_out: the ray in the probe's space (pd unit). An
+ * AVX2 clone: VEX's three-operand forms drop the register copies of the selects. */
+FX_CLONES static int pano_march(const fx_pano *p, const fx_pano_trace_settings *st, fx_vec3 o, fx_vec3 dir,
+                                fx_vec3 *po_out, fx_vec3 *pd_out, float *t_hit)
 {
     fx_vec3 po = fx_m4_point(p->to_probe, o);
     fx_vec3 pd = fx_m4_dir(p->to_probe, dir);
     if (!isfinite(po.x + po.y + po.z + pd.x + pd.y + pd.z)) {
-        fx_pano_color(p, fx_v3(0.0f, 0.0f, -1.0f), rgb);
-        return 0;
+        *po_out = fx_v3(0.0f, 0.0f, 0.0f);
+        *pd_out = fx_v3(0.0f, 0.0f, -1.0f);
+        return -1;
     }
     pd = fx_v3_normalize_or(pd, fx_v3(0.0f, 0.0f, -1.0f));
+    *po_out = po;
+    *pd_out = pd;
     const int steps = st->steps;
     const float g = st->growth;
     float gap;
     int prev_front = in_front(p, po, &gap);
-    float prev_t = 0.0f, t = st->t0;
+    float prev_t = 0.0f, t = st->t0, t_hidden = -1.0f;
     for (int k0 = 0; k0 < steps; k0 += 4) {
         /* t_k = t_{k-1} g as the one-step loop multiplied it */
         float ts[4];
@@ -106,26 +161,47 @@ FX_CLONES int fx_pano_trace(const fx_pano *p, const fx_pano_trace_settings *st, 
         if (n == 4 && all4(front)) {
             prev_front = 1; /* no crossing: every step in front */
             prev_t = ts[3];
+            t_hidden = -1.0f; /* out from behind any occluder */
             continue;
         }
         for (int l = 0; l < n; l++) {
             const float tl = ts[l];
-            if (prev_front && !front[l] && gaps[l] <= st->thickness + (tl - prev_t)) {
-                float lo = prev_t, hi = tl;
-                for (int r = 0; r < st->refine; r++) {
-                    float mid = 0.5f * (lo + hi), gm;
-                    if (in_front(p, fx_v3_add(po, fx_v3_scale(pd, mid)), &gm))
-                        lo = mid;
-                    else
-                        hi = mid;
-                }
-                fx_pano_color(p, fx_v3_add(po, fx_v3_scale(pd, hi)), rgb);
+            /* a crossing: refined, a hit, or the ray passing behind an occluder */
+            if (prev_front && !front[l] && refined_crossing(p, st, po, pd, prev_t, tl, t_hit, &t_hidden))
                 return 1;
-            }
             prev_front = front[l] != 0;
             prev_t = tl;
+            if (prev_front)
+                t_hidden = -1.0f; /* out from behind the occluder: the probe sees the ray again */
         }
+    }
+    if (t_hidden >= 0.0f) {
+        *t_hit = t_hidden;
+        return 2;
+    }
+    return 0;
+}
+
+int fx_pano_trace(const fx_pano *p, const fx_pano_trace_settings *st, fx_vec3 o, fx_vec3 dir, float rgb[3])
+{
+    fx_vec3 po, pd;
+    float t = 0.0f;
+    int hit = pano_march(p, st, o, dir, &po, &pd, &t);
+    if (hit == 1) {
+        fx_pano_color(p, fx_v3_add(po, fx_v3_scale(pd, t)), rgb);
+        return 1;
+    }
+    if (hit == 2) { /* hidden: the background texel beside the silhouette (nearest: no blend with the occluder) */
+        pano_texel(p, fx_v3_add(po, fx_v3_scale(pd, t)), rgb);
+        return 0;
     }
     fx_pano_color(p, pd, rgb);
     return 0;
+}
+
+float fx_pano_trace_dist(const fx_pano *p, const fx_pano_trace_settings *st, fx_vec3 o, fx_vec3 dir)
+{
+    fx_vec3 po, pd;
+    float t = 0.0f;
+    return pano_march(p, st, o, dir, &po, &pd, &t) == 1 ? t : INFINITY;
 }

@@ -105,6 +105,11 @@ fx_pano_trace_settings fx_pano_trace_setup(int steps, int refine, float min_dist
  * Finite for any input (a non-finite ray gives the colour of the probe's forward view). */
 int fx_pano_trace(const fx_pano *p, const fx_pano_trace_settings *st, fx_vec3 o, fx_vec3 dir, float rgb[3]);
 
+/* The distance along the ray (dir unit, the caller's units) at which fx_pano_trace meets
+ * the probe's depth surface; +inf where it meets none (or the ray is not finite). The
+ * probe's evidence of where the ray ends, for a screen-space hit to agree with. */
+float fx_pano_trace_dist(const fx_pano *p, const fx_pano_trace_settings *st, fx_vec3 o, fx_vec3 dir);
+
 #ifdef __cplusplus
 }
 #endif

@@ -172,6 +172,18 @@ static int test_span(const fx_ssr_scene *s, const line_state *L, fx_vec3 dir, co
     double vx = (L->q0[0] + L->dq[0] * hi) / k - o[0];
     double vy = (L->q0[1] + L->dq[1] * hi) / k - o[1];
     double vz = (L->q0[2] + L->dq[2] * hi) / k - o[2];
+    /* the evidence: where the ray was last in front of the depth buffer (lo: the
+     * bisection's front end, or the span's start), how far it already lay behind the hit
+     * pixel's own surface there (its tangent plane extended, or its sample). A crossing of
+     * that surface from its front: <= 0 (the plane's slope over the bracket). A ray that
+     * came out from behind a silhouette: the depth gap at the discontinuity. */
+    surface hs;
+    surface_get(s, hx, hy, &hs);
+    double behind = depth_at(L, lo) - surface_depth_at(&hs, L, lo);
+    out->behind = isfinite(behind) && behind > 0.0 ? (float)behind : 0.0f;
+    double slack = fabs(dh - depth_at(L, lo));
+    out->slack = isfinite(slack) ? (float)slack : 0.0f;
+    out->hit_depth = (float)sh;
     out->hit = 1;
     out->px = (float)x;
     out->py = (float)y;

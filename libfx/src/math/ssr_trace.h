@@ -10,7 +10,8 @@
  * camera end at the near plane; a 2-D line shorter than 0.01 px is nudged (so rays
  * along the view direction march in depth and still terminate); non-finite input is
  * a miss; background depth (Cycles 1e10/1e11, Eevee 65504, <= 0, NaN) is "infinitely
- * far", never a hit. Depth is planar (distance along -Z), as Blender writes it. */
+ * far", never a hit. A hit reports its evidence (fx_ssr_hit.behind): whether the ray
+ * crossed the surface from its front or came at it from behind a depth discontinuity. Depth is planar (distance along -Z), as Blender writes it. */
 #ifndef LIBFX_MATH_SSR_TRACE_H
 #define LIBFX_MATH_SSR_TRACE_H
 
@@ -65,6 +66,19 @@ typedef struct fx_ssr_hit {
     float length;       /* view-space distance from the origin to the hit (metres) */
     int steps;          /* march steps taken (not counting refinement) */
     int left_screen;    /* the ray's 2-D line was clipped by the screen border (miss cause) */
+    /* The hit's evidence (for the caller's confidence, e.g. ssr_mirror's): how far (metres,
+     * planar depth) the ray already lay behind the hit pixel's surface (its tangent plane,
+     * or its depth sample) at the last point of the march it was still in front of the
+     * depth buffer. A ray that meets a surface crosses it from the front: ~0. A ray that
+     * passes behind a foreground object and "meets" its silhouette from behind (a depth
+     * discontinuity: it was in front of the background pixel beside the silhouette, and is
+     * behind the object's front) lies behind the object already there: > 0, up to the
+     * thickness. Such a hit is the ray passing behind (or through) the object, never the
+     * object's visible front: the smears of a screen-space tracer. */
+    float behind;
+    float slack;        /* metres of depth the ray itself moved between that point and the
+                           hit (a genuine crossing's `behind` stays below it) */
+    float hit_depth;    /* planar depth of the hit pixel's surface at the hit (metres) */
 } fx_ssr_hit;
 
 static inline int fx_ssr_is_background(float d)
