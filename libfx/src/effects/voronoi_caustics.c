@@ -49,6 +49,8 @@
 #include "math/clones.h"
 #include "math/camera.h"
 #include "math/voronoi.h"
+#include "math/caustic_map.h"
+#include "scene/aux_view.h"
 
 #include <float.h>
 #ifdef __SSE2__
@@ -56,6 +58,7 @@
 #endif
 #include <math.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 #ifndef M_PI
@@ -86,16 +89,21 @@ typedef struct caustics_params {
     int distance;
     int refine;
     int lattice_shading;
+    char water[FX_STRING_PARAM_MAX];
+    float ior;
+    int fresnel;
+    int refract_samples;
+    int refract_step;
 } caustics_params;
 
 enum { METRIC_MINKOWSKI = 0, METRIC_CHEBYSHEV };
-enum { MODE_PHYSICAL = 0, MODE_SEED };
+enum { MODE_PHYSICAL = 0, MODE_SEED, MODE_REFRACTIVE };
 enum { POS_POSITION = 0, POS_DEPTH };
 enum { METHOD_GRID = 0, METHOD_BRUTE };
 enum { DIST_FAST = 0, DIST_EXACT };
 
 static const char *const metric_items[] = {"minkowski", "chebyshev"};
-static const char *const mode_items[] = {"physical", "seed"};
+static const char *const mode_items[] = {"physical", "seed", "refractive"};
 static const char *const pos_items[] = {"position", "depth"};
 static const char *const method_items[] = {"grid", "brute"};
 static const char *const distance_items[] = {"fast", "exact"};
@@ -114,7 +122,8 @@ static const fx_param_def caustics_param_defs[] = {
                "metric, still finite)"),
     FX_P_ENUM(caustics_params, mode, "mode", MODE_PHYSICAL, mode_items,
               "physical: light redistributed onto the cell borders (mean brightness kept); seed: "
-              "the seed's alpha/colour formula"),
+              "the seed's alpha/colour formula; refractive: the Sun refracted by the water's surface "
+              "(its normals seen from the Sun, an aux view) onto a horizontal floor"),
     FX_P_FLOAT(caustics_params, strength, "strength", 0.6, 0.0, 100.0, 0.0, 2.0, "",
                "Contrast of the caustics (0: identity)"),
     FX_P_FLOAT(caustics_params, line_width, "line_width", 0.12, 1e-4, 100.0, 0.02, 0.5, "",
@@ -151,6 +160,19 @@ static const fx_param_def caustics_param_defs[] = {
               "environment from the Position pass (draft) keeps the per-pixel surface test (a pixel "
               "off its corners' surface gets its own search), other cases skip it where a lattice "
               "cell's corners all have positions; off: per pixel"),
+    FX_P_STRING(caustics_params, water, "water", "Water", "",
+                "refractive: the water's material; the add-on renders the objects that use it (even when "
+                "hidden from the render) from the Sun: their Normal and Depth (aux view 'water:<material>')"),
+    FX_P_FLOAT(caustics_params, ior, "ior", 1.33, 1.0, 4.0, 1.0, 2.0, "",
+               "refractive: index of refraction of the water (Cycles' Glass IOR)"),
+    FX_P_BOOL(caustics_params, fresnel, "fresnel", 1,
+              "refractive: the light the surface reflects (Fresnel) does not reach the floor"),
+    FX_P_INT(caustics_params, refract_samples, "refract_samples", 2, 1, 16, 1, 8, "",
+             "Quality (refractive): sub-samples per side of each light-view cell splatted onto the floor "
+             "(n x n; more: smoother, converged focal lines)"),
+    FX_P_INT(caustics_params, refract_step, "refract_step", 1, 1, 16, 1, 4, "",
+             "Quality (refractive): every n-th texel of the water's view is refracted (the map n times "
+             "coarser per side)"),
 };
 
 static double exponent_of(const caustics_params *p)
@@ -167,7 +189,23 @@ static fx_result caustics_validate(const void *params, char *err, size_t err_siz
                  (double)p->exponent);
         return FX_ERR_BAD_PARAM;
     }
+    if (p->mode == MODE_REFRACTIVE && !p->water[0]) {
+        snprintf(err, err_size, "parameter 'water' must name the water's material for mode refractive");
+        return FX_ERR_BAD_PARAM;
+    }
     return FX_OK;
+}
+
+/* refractive: the water's normals and depth seen from the scene's first sun */
+static int caustics_aux_views(const void *params, fx_aux_need *out, int max)
+{
+    const caustics_params *p = params;
+    if (p->mode != MODE_REFRACTIVE || max < 1)
+        return 0;
+    snprintf(out->name, sizeof out->name, "water:%.80s", p->water);
+    out->kind = "water";
+    out->light[0] = 0;
+    return 1;
 }
 
 static fx_pass_set caustics_passes(const void *params)
@@ -307,6 +345,7 @@ static inline float value_at(const caustics_job *j, float wx, float wy, int *ids
 
 /* The effect at pixel i as out = src * gain + add per channel, gain from one scalar s
  * (gain_of): physical 1 + s tint, seed s. add is 0 without seed mode or environment. */
+static inline void env_term(const caustics_job *j, size_t i, fx_vec3 P, float add[3]);
 static inline void factors(const caustics_job *j, size_t i, fx_vec3 P, float a, float noise, float *s, float add[3])
 {
     const caustics_params *p = j->p;
@@ -329,7 +368,15 @@ static inline void factors(const caustics_job *j, size_t i, fx_vec3 P, float a, 
         *s = amp * g;
         add[0] = add[1] = add[2] = 0.0f;
     }
-    if (p->environment_strength > 0.0f && j->normal) {
+    if (p->environment_strength > 0.0f && j->normal)
+        env_term(j, i, P, add);
+}
+
+/* The environment term (Fresnel x environment) added to add[3] */
+static inline void env_term(const caustics_job *j, size_t i, fx_vec3 P, float add[3])
+{
+    const caustics_params *p = j->p;
+    {
         const float *nq = j->normal + i * 3;
         fx_vec3 N = fx_v3_normalize_or(fx_v3(nq[0], nq[1], nq[2]), fx_v3(0, 0, 1));
         fx_vec3 V = fx_v3_normalize_or(fx_v3_sub(j->eye, P), N);
@@ -1568,6 +1615,132 @@ static int job_lattice(const fx_effect_run *run, const caustics_params *p, caust
     return 0;
 }
 
+/* ---- mode refractive ------------------------------------------------------------------ */
+
+typedef struct refract_job {
+    const caustics_job *cj;
+    const fx_aux_view *av;
+    fx_caustic_map map;
+} refract_job;
+
+static int float_cmp(const void *a, const void *b)
+{
+    float x = *(const float *)a, y = *(const float *)b;
+    return (x > y) - (x < y);
+}
+
+/* The receiver's height: the median world z of the masked pixels (at most ~64k of them,
+ * on a fixed stride). 0 when no pixel has a position; -1 out of memory. */
+static int receiver_height(const caustics_job *j, float *z)
+{
+    const fx_effect_run *run = j->run;
+    size_t w = (size_t)(run->roi.x1 - run->roi.x0), h = (size_t)(run->roi.y1 - run->roi.y0);
+    size_t stride = 1;
+    while ((w / stride + 1) * (h / stride + 1) > 65536)
+        stride++;
+    size_t cap = (w / stride + 1) * (h / stride + 1), n = 0;
+    float *v = fx_mem_alloc(cap * sizeof(float));
+    if (!v)
+        return -1;
+    for (int y = run->roi.y0; y < run->roi.y1; y += (int)stride)
+        for (int x = run->roi.x0; x < run->roi.x1; x += (int)stride) {
+            fx_vec3 P;
+            if (covered(run, (size_t)y * run->width + x) && world_at(j, x, y, &P) && n < cap)
+                v[n++] = P.z;
+        }
+    if (n)
+        qsort(v, n, sizeof(float), float_cmp);
+    *z = n ? v[n / 2] : 0.0f;
+    fx_mem_free(v);
+    return n ? 1 : 0;
+}
+
+static void refract_rows(void *user, int begin, int end)
+{
+    const refract_job *rj = user;
+    const caustics_job *j = rj->cj;
+    const fx_effect_run *run = j->run;
+    const caustics_params *p = j->p;
+    for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++) {
+        for (int x = run->roi.x0; x < run->roi.x1; x++) {
+            size_t i = (size_t)y * run->width + x;
+            fx_vec3 P;
+            float gain[3] = {1.0f, 1.0f, 1.0f}, add[3] = {0.0f, 0.0f, 0.0f};
+            if (covered(run, i) && world_at(j, x, y, &P)) {
+                float px, py, d;
+                float g = fx_aux_view_project(rj->av, P, &px, &py, &d) ? fx_caustic_map_gain(&rj->map, px, py) : 1.0f;
+                float s = p->strength * (g - 1.0f);
+                for (int k = 0; k < 3; k++)
+                    gain[k] = 1.0f + s * p->tint[k];
+                if (p->environment_strength > 0.0f && j->normal)
+                    env_term(j, i, P, add);
+            }
+            apply(j, i, gain, add);
+        }
+        finish_row(run, y);
+    }
+}
+
+/* The water's view: loaded, with its Normal pass and at least one texel of water. */
+static fx_result refract_view(const fx_effect_run *run, const caustics_params *p, fx_aux_view **av,
+                              const fx_pass **np)
+{
+    char name[FX_NAME_MAX];
+    snprintf(name, sizeof name, "water:%.80s", p->water);
+    int has = fx_aux_view_has(run->frame, name);
+    if (has < 0)
+        return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", run->where);
+    if (!has)
+        return fx_fail(run->ctx, FX_ERR_NO_AUX_VIEW,
+                       "%s (mode refractive) needs the aux view '%s': the objects with the water material '%s' "
+                       "seen from the Sun (Normal and Depth passes); the Blender add-on renders it when the "
+                       "stack needs it and lists it in the scene sidecar's \"aux_views\"",
+                       run->where, name, p->water);
+    fx_result r = fx_aux_view_load(run->frame, name, run->where, av);
+    if (r)
+        return r;
+    *np = fx_frame_find_pass((*av)->frame, "Normal");
+    if (!*np || (*np)->channels < 3)
+        return fx_fail(run->ctx, FX_ERR_MISSING_PASS, "%s: the water view '%s' (%s) has no Normal pass", run->where,
+                       name, (*av)->path);
+    if (!(*av)->view.orthographic)
+        return fx_fail(run->ctx, FX_ERR_BAD_PARAM,
+                       "%s: the water view '%s' must be orthographic (a sun's view); other lights are not "
+                       "supported by mode refractive",
+                       run->where, name);
+    return FX_OK;
+}
+
+static fx_result refract_process(const fx_effect_run *run, const caustics_params *p, caustics_job *j)
+{
+    fx_aux_view *av = NULL;
+    const fx_pass *np = NULL;
+    fx_result r = refract_view(run, p, &av, &np);
+    refract_job rj = {j, av, {0}};
+    float plane_z = 0.0f;
+    int found = r ? 0 : receiver_height(j, &plane_z);
+    if (!r && found < 0)
+        r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", run->where);
+    if (!r) {
+        fx_caustic_input in = {av->width, av->height, av->depth, np->data, np->channels, &av->view,
+                               av->view.cam.clip_end, p->ior, plane_z, p->refract_step, p->refract_samples,
+                               p->fresnel};
+        r = fx_caustic_map_build(run->ctx, &in, &rj.map, run->where);
+    }
+    if (!r && found && rj.map.water_nodes == 0)
+        r = fx_fail(run->ctx, FX_ERR_MISSING_PASS,
+                    "%s: the water view '%s' (%s) shows no water: no object with the material '%s' in the Sun's "
+                    "view (the add-on renders the objects that use the effect's 'water' material)",
+                    run->where, av->name, av->path, p->water);
+    if (!r) {
+        int rows = run->roi.y1 - run->roi.y0;
+        fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), refract_rows, &rj);
+    }
+    fx_caustic_map_free(&rj.map);
+    fx_aux_view_free(av);
+    return r;
+}
+
 static fx_result caustics_process(const fx_effect_run *run)
 {
     const caustics_params *p = run->params;
@@ -1577,6 +1750,11 @@ static fx_result caustics_process(const fx_effect_run *run)
     fx_result r = job_inputs(run, p, &j, &envf);
     if (r != FX_OK)
         return r;
+    if (p->mode == MODE_REFRACTIVE) {
+        r = refract_process(run, p, &j);
+        fx_frame_free(envf);
+        return r;
+    }
     if (job_table(run, p, &j) || job_mean(run, p, &j)) {
         r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", run->where);
     } else {
@@ -1610,10 +1788,14 @@ const fx_effect_class fx_effect_voronoi_caustics = {
     .param_count = FX_COUNT_OF(caustics_param_defs),
     .presets = {
         /* draft at least 3x faster than final; reference: every pixel, double pow */
-        "{\"downsample\": 4, \"distance\": \"fast\", \"refine\": false, \"lattice_shading\": true}",
-        "{\"downsample\": 2, \"distance\": \"fast\", \"refine\": false, \"lattice_shading\": false}",
-        "{\"downsample\": 2, \"distance\": \"fast\", \"refine\": true, \"lattice_shading\": false}",
-        "{\"downsample\": 1, \"distance\": \"exact\", \"refine\": true, \"lattice_shading\": false}",
+        "{\"downsample\": 4, \"distance\": \"fast\", \"refine\": false, \"lattice_shading\": true, "
+        "\"refract_samples\": 1, \"refract_step\": 2}",
+        "{\"downsample\": 2, \"distance\": \"fast\", \"refine\": false, \"lattice_shading\": false, "
+        "\"refract_samples\": 1, \"refract_step\": 1}",
+        "{\"downsample\": 2, \"distance\": \"fast\", \"refine\": true, \"lattice_shading\": false, "
+        "\"refract_samples\": 2, \"refract_step\": 1}",
+        "{\"downsample\": 1, \"distance\": \"exact\", \"refine\": true, \"lattice_shading\": false, "
+        "\"refract_samples\": 4, \"refract_step\": 1}",
     },
     /* in place (dst == src: no mask) for every parameter set: an output pixel reads only its
      * own colour pixel, just before writing it (the pattern, noise and shading come from
@@ -1623,6 +1805,7 @@ const fx_effect_class fx_effect_voronoi_caustics = {
     .flags = FX_EFFECT_IN_PLACE | FX_EFFECT_OWN_FINITE,
     .passes = caustics_passes,
     .needs_camera = caustics_needs_camera,
+    .aux_views = caustics_aux_views,
     .halo = NULL,
     .validate = caustics_validate,
     .process = caustics_process,

@@ -1,0 +1,242 @@
+/* Caustics mapping: the Sun refracted by the water into a gain map (math/caustic_map.h). */
+#include "math/caustic_map.h"
+
+#include "core/mem.h"
+#include "core/parallel.h"
+
+#include <math.h>
+#include <string.h>
+
+int fx_refract_into(fx_vec3 d, fx_vec3 n, float ior, fx_vec3 *out, float *t)
+{
+    float cos_i = -fx_v3_dot(d, n);
+    cos_i = cos_i < 0.0f ? 0.0f : cos_i > 1.0f ? 1.0f : cos_i;
+    float eta = 1.0f / ior;
+    float sin2t = eta * eta * (1.0f - cos_i * cos_i);
+    if (!(sin2t <= 1.0f))
+        return 0;
+    float cos_t = sqrtf(1.0f - sin2t);
+    *out = fx_v3_add(fx_v3_scale(d, eta), fx_v3_scale(n, eta * cos_i - cos_t));
+    if (t) {
+        float a = cos_i + ior * cos_t, b = ior * cos_i + cos_t;
+        float rs = a > 1e-12f ? (cos_i - ior * cos_t) / a : 1.0f;
+        float rp = b > 1e-12f ? (ior * cos_i - cos_t) / b : 1.0f;
+        float f = 0.5f * (rs * rs + rp * rp);
+        *t = f < 0.0f ? 1.0f : f > 1.0f ? 0.0f : 1.0f - f;
+    }
+    return 1;
+}
+
+typedef struct node_job {
+    const fx_caustic_input *in;
+    int nx, ny;
+    fx_vec3 L;      /* the Sun's light travels along L (world, unit) */
+    float far;      /* depth at or beyond: no water */
+    float *img;     /* nx * ny * 3: image u, v (light-view pixels), weight */
+    long *water;    /* per node row: nodes with water */
+} node_job;
+
+/* The image of one node: where its light meets the plane, in light-view pixels. */
+static int node_image(const node_job *j, int x, int y, float *q)
+{
+    const fx_caustic_input *in = j->in;
+    float px = (float)x + 0.5f, py = (float)y + 0.5f;
+    q[0] = px;
+    q[1] = py;
+    q[2] = 1.0f;
+    size_t i = (size_t)y * in->width + x;
+    float d = in->depth[i];
+    const float *nq = in->normal + i * in->normal_channels;
+    fx_vec3 n = fx_v3(nq[0], nq[1], nq[2]);
+    float len = sqrtf(fx_v3_dot(n, n));
+    if (!(d > 0.0f && d < j->far) || !(len >= 0.5f && len < 1e30f))
+        return 0;
+    n = fx_v3_scale(n, 1.0f / len);
+    if (fx_v3_dot(n, j->L) > 0.0f)
+        n = fx_v3_scale(n, -1.0f); /* the side the light comes from */
+    fx_vec3 P = fx_view_to_world(in->view, fx_view_position(in->view, fx_view_pixel_to_ndc(in->view, px, py), d));
+    fx_vec3 T;
+    float w = 1.0f;
+    if (!fx_refract_into(j->L, n, in->ior, &T, in->fresnel ? &w : NULL))
+        return 1;
+    if (!(T.z < -1e-6f) || !(P.z > in->plane_z))
+        return 1; /* no way down to the receiver: the light goes on unrefracted */
+    float t = (in->plane_z - P.z) / T.z;
+    fx_vec3 Y = fx_v3_add(P, fx_v3_scale(T, t));
+    fx_vec2 pix = {0.0f, 0.0f};
+    if (fx_view_project(in->view, fx_world_to_view(in->view, Y), &pix) <= 1e-30f || !(fabsf(pix.x) < 1e7f) ||
+        !(fabsf(pix.y) < 1e7f))
+        return 1;
+    q[0] = pix.x;
+    q[1] = pix.y;
+    q[2] = w;
+    return 1;
+}
+
+static void node_rows(void *user, int begin, int end)
+{
+    node_job *j = user;
+    const int step = j->in->step;
+    for (int r = begin; r < end; r++) {
+        long n = 0;
+        for (int c = 0; c < j->nx; c++)
+            n += node_image(j, c * step, r * step, j->img + ((size_t)r * j->nx + c) * 3);
+        j->water[r] = n;
+    }
+}
+
+static inline void splat(double *g, int nx, int ny, float gx, float gy, float w)
+{
+    if (!(gx > -1.0f && gy > -1.0f && gx < (float)nx && gy < (float)ny))
+        return;
+    float fx = floorf(gx), fy = floorf(gy);
+    int x0 = (int)fx, y0 = (int)fy;
+    float tx = gx - fx, ty = gy - fy;
+    if (y0 >= 0) {
+        if (x0 >= 0)
+            g[(size_t)y0 * nx + x0] += (double)(w * (1.0f - tx) * (1.0f - ty));
+        if (x0 + 1 < nx)
+            g[(size_t)y0 * nx + x0 + 1] += (double)(w * tx * (1.0f - ty));
+    }
+    if (y0 + 1 < ny) {
+        if (x0 >= 0)
+            g[(size_t)(y0 + 1) * nx + x0] += (double)(w * (1.0f - tx) * ty);
+        if (x0 + 1 < nx)
+            g[(size_t)(y0 + 1) * nx + x0 + 1] += (double)(w * tx * ty);
+    }
+}
+
+/* Every cell's flux, s x s sub-samples each, in one fixed order. */
+static void splat_cells(const node_job *j, double *g)
+{
+    const int nx = j->nx, ny = j->ny, s = j->in->samples;
+    const float inv_step = 1.0f / (float)j->in->step, ws = 1.0f / (float)(s * s);
+    for (int r = 0; r + 1 < ny; r++) {
+        for (int c = 0; c + 1 < nx; c++) {
+            const float *a = j->img + ((size_t)r * nx + c) * 3, *b = a + 3;
+            const float *d = a + (size_t)nx * 3, *e = d + 3;
+            for (int sy = 0; sy < s; sy++) {
+                float ty = ((float)sy + 0.5f) / (float)s;
+                float l[3], m[3];
+                for (int k = 0; k < 3; k++) {
+                    l[k] = a[k] + (d[k] - a[k]) * ty;
+                    m[k] = b[k] + (e[k] - b[k]) * ty;
+                }
+                for (int sx = 0; sx < s; sx++) {
+                    float tx = ((float)sx + 0.5f) / (float)s;
+                    float u = l[0] + (m[0] - l[0]) * tx, v = l[1] + (m[1] - l[1]) * tx;
+                    float w = l[2] + (m[2] - l[2]) * tx;
+                    splat(g, nx, ny, (u - 0.5f) * inv_step, (v - 0.5f) * inv_step, w * ws);
+                }
+            }
+        }
+    }
+}
+
+/* The identity map's density along one axis of n nodes (cells between them, s
+ * sub-samples each, tent splat), then the [1 2 1] / 4 filter. */
+static void identity_profile(int n, int s, double *out, double *tmp)
+{
+    memset(tmp, 0, (size_t)n * sizeof(double));
+    for (int c = 0; c + 1 < n; c++)
+        for (int k = 0; k < s; k++) {
+            double t = ((double)k + 0.5) / s;
+            tmp[c] += (1.0 - t) / s;
+            tmp[c + 1] += t / s;
+        }
+    if (n == 1)
+        tmp[0] = 1.0;
+    for (int i = 0; i < n; i++)
+        out[i] = 0.5 * tmp[i] + 0.25 * ((i > 0 ? tmp[i - 1] : 0.0) + (i + 1 < n ? tmp[i + 1] : 0.0));
+}
+
+/* The [1 2 1] / 4 filter per axis, zero outside (as the identity's profile). */
+static void tent_filter(double *g, int nx, int ny, double *line)
+{
+    for (int r = 0; r < ny; r++) {
+        double *q = g + (size_t)r * nx;
+        memcpy(line, q, (size_t)nx * sizeof(double));
+        for (int c = 0; c < nx; c++)
+            q[c] = 0.5 * line[c] + 0.25 * ((c > 0 ? line[c - 1] : 0.0) + (c + 1 < nx ? line[c + 1] : 0.0));
+    }
+    for (int c = 0; c < nx; c++) {
+        for (int r = 0; r < ny; r++)
+            line[r] = g[(size_t)r * nx + c];
+        for (int r = 0; r < ny; r++)
+            g[(size_t)r * nx + c] =
+                0.5 * line[r] + 0.25 * ((r > 0 ? line[r - 1] : 0.0) + (r + 1 < ny ? line[r + 1] : 0.0));
+    }
+}
+
+static void finish_gain(fx_caustic_map *m, const double *g, const double *px, const double *py)
+{
+    double sum = 0.0;
+    long count = 0;
+    for (int r = 0; r < m->ny; r++)
+        for (int c = 0; c < m->nx; c++) {
+            double den = px[c] * py[r];
+            double v = den > 1e-9 ? g[(size_t)r * m->nx + c] / den : 1.0;
+            float f = !(v >= 0.0) ? 0.0f : v > FX_CAUSTIC_GAIN_MAX ? FX_CAUSTIC_GAIN_MAX : (float)v;
+            m->gain[(size_t)r * m->nx + c] = f;
+            if (r >= 2 && c >= 2 && r + 2 < m->ny && c + 2 < m->nx) {
+                sum += f;
+                count++;
+            }
+        }
+    m->mean_gain = count ? sum / (double)count : 1.0;
+}
+
+fx_result fx_caustic_map_build(fx_context *ctx, const fx_caustic_input *in, fx_caustic_map *out, const char *where)
+{
+    memset(out, 0, sizeof *out);
+    node_job j;
+    memset(&j, 0, sizeof j);
+    j.in = in;
+    const int step = in->step > 0 ? in->step : 1;
+    j.nx = (in->width - 1) / step + 1;
+    j.ny = (in->height - 1) / step + 1;
+    j.far = in->clip_end > 0.0f ? in->clip_end : 1e9f;
+    j.L = fx_v3_normalize_or(fx_view_dir_to_world(in->view, fx_v3(0.0f, 0.0f, -1.0f)), fx_v3(0.0f, 0.0f, -1.0f));
+    out->nx = j.nx;
+    out->ny = j.ny;
+    out->step = step;
+    size_t n = (size_t)j.nx * j.ny;
+    int big = j.nx > j.ny ? j.nx : j.ny;
+    j.img = fx_mem_alloc(n * 3 * sizeof(float));
+    j.water = fx_mem_alloc((size_t)j.ny * sizeof(long));
+    double *g = fx_mem_calloc(n, sizeof(double));
+    double *prof = fx_mem_alloc((size_t)(j.nx + j.ny + big) * sizeof(double));
+    out->gain = fx_mem_alloc(n * sizeof(float));
+    fx_result r = FX_OK;
+    if (!j.img || !j.water || !g || !prof || !out->gain) {
+        r = fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory (caustics map %dx%d)", where, j.nx, j.ny);
+        fx_caustic_map_free(out);
+    } else {
+        fx_caustic_input local = *in;
+        local.step = step;
+        local.samples = in->samples > 0 ? in->samples : 1;
+        j.in = &local;
+        fx_parallel_for(ctx, j.ny, 1, node_rows, &j);
+        for (int k = 0; k < j.ny; k++)
+            out->water_nodes += j.water[k];
+        splat_cells(&j, g);
+        double *px = prof, *py = prof + j.nx, *tmp = prof + j.nx + j.ny;
+        identity_profile(j.nx, local.samples, px, tmp);
+        identity_profile(j.ny, local.samples, py, tmp);
+        tent_filter(g, j.nx, j.ny, tmp);
+        finish_gain(out, g, px, py);
+    }
+    fx_mem_free(j.img);
+    fx_mem_free(j.water);
+    fx_mem_free(g);
+    fx_mem_free(prof);
+    return r;
+}
+
+void fx_caustic_map_free(fx_caustic_map *m)
+{
+    if (!m)
+        return;
+    fx_mem_free(m->gain);
+    m->gain = NULL;
+}
