@@ -85,24 +85,67 @@ static void node_rows(void *user, int begin, int end)
     }
 }
 
-static inline void splat(double *g, int nx, int ny, float gx, float gy, float w)
+#define AXIS_MAX 16.0f /* widest tent half-width, nodes (a cell's image spread over more) */
+
+/* A sub-sample's weights along one axis, at node coordinate g, for sub-samples h nodes
+ * apart. A tent of half-width m h (m whole) sums to a constant over a regular lattice of
+ * spacing h, so there is no ripple whatever the cell's scale; with q = 1 / h the weights
+ * blend the tents of m = floor(q) and m + 1 spacings by the fraction of q (continuous in
+ * h, at most 2 nodes wide); h >= 1 (light spread out): one tent of half-width h. */
+typedef struct axis_w {
+    int i0, n;
+    float w[2 * (int)AXIS_MAX + 3];
+} axis_w;
+
+static inline void axis_weights(float g, float h, axis_w *a)
 {
-    if (!(gx > -1.0f && gy > -1.0f && gx < (float)nx && gy < (float)ny))
-        return;
-    float fx = floorf(gx), fy = floorf(gy);
-    int x0 = (int)fx, y0 = (int)fy;
-    float tx = gx - fx, ty = gy - fy;
-    if (y0 >= 0) {
-        if (x0 >= 0)
-            g[(size_t)y0 * nx + x0] += (double)(w * (1.0f - tx) * (1.0f - ty));
-        if (x0 + 1 < nx)
-            g[(size_t)y0 * nx + x0 + 1] += (double)(w * tx * (1.0f - ty));
+    float ra, rb, t;
+    if (!(h > 1e-6f))
+        h = 1e-6f;
+    if (h >= 1.0f) {
+        ra = rb = h < AXIS_MAX ? h : AXIS_MAX;
+        t = 0.0f;
+    } else {
+        float q = 1.0f / h, m = floorf(q);
+        t = q - m;
+        ra = m * h;
+        rb = (m + 1.0f) * h;
     }
-    if (y0 + 1 < ny) {
-        if (x0 >= 0)
-            g[(size_t)(y0 + 1) * nx + x0] += (double)(w * (1.0f - tx) * ty);
-        if (x0 + 1 < nx)
-            g[(size_t)(y0 + 1) * nx + x0 + 1] += (double)(w * tx * ty);
+    a->i0 = (int)ceilf(g - rb);
+    int i1 = (int)floorf(g + rb);
+    a->n = i1 - a->i0 + 1;
+    if (a->n > (int)(sizeof a->w / sizeof a->w[0]))
+        a->n = (int)(sizeof a->w / sizeof a->w[0]);
+    for (int k = 0; k < a->n; k++) {
+        float d = fabsf((float)(a->i0 + k) - g), w = 0.0f;
+        if (d < ra)
+            w += (1.0f - t) * (1.0f - d / ra) / ra;
+        if (d < rb)
+            w += t * (1.0f - d / rb) / rb;
+        a->w[k] = w;
+    }
+}
+
+/* One sub-sample's weight w at node coordinates (gx, gy), sub-samples hx, hy nodes apart */
+static inline void splat(double *g, int nx, int ny, float gx, float gy, float hx, float hy, float w)
+{
+    if (!(gx > -2.0f * AXIS_MAX && gy > -2.0f * AXIS_MAX && gx < (float)nx + 2.0f * AXIS_MAX &&
+          gy < (float)ny + 2.0f * AXIS_MAX))
+        return;
+    axis_w ax, ay;
+    axis_weights(gx, hx, &ax);
+    axis_weights(gy, hy, &ay);
+    for (int k = 0; k < ay.n; k++) {
+        int y = ay.i0 + k;
+        if (y < 0 || y >= ny || !(ay.w[k] > 0.0f))
+            continue;
+        double *row = g + (size_t)y * nx;
+        const float wr = w * ay.w[k];
+        for (int m = 0; m < ax.n; m++) {
+            int x = ax.i0 + m;
+            if (x >= 0 && x < nx)
+                row[x] += (double)(wr * ax.w[m]);
+        }
     }
 }
 
@@ -115,6 +158,9 @@ static void splat_cells(const node_job *j, double *g)
         for (int c = 0; c + 1 < nx; c++) {
             const float *a = j->img + ((size_t)r * nx + c) * 3, *b = a + 3;
             const float *d = a + (size_t)nx * 3, *e = d + 3;
+            float ux = fmaxf(fmaxf(a[0], b[0]), fmaxf(d[0], e[0])) - fminf(fminf(a[0], b[0]), fminf(d[0], e[0]));
+            float uy = fmaxf(fmaxf(a[1], b[1]), fmaxf(d[1], e[1])) - fminf(fminf(a[1], b[1]), fminf(d[1], e[1]));
+            const float hx = ux * inv_step / (float)s, hy = uy * inv_step / (float)s;
             for (int sy = 0; sy < s; sy++) {
                 float ty = ((float)sy + 0.5f) / (float)s;
                 float l[3], m[3];
@@ -126,7 +172,7 @@ static void splat_cells(const node_job *j, double *g)
                     float tx = ((float)sx + 0.5f) / (float)s;
                     float u = l[0] + (m[0] - l[0]) * tx, v = l[1] + (m[1] - l[1]) * tx;
                     float w = l[2] + (m[2] - l[2]) * tx;
-                    splat(g, nx, ny, (u - 0.5f) * inv_step, (v - 0.5f) * inv_step, w * ws);
+                    splat(g, nx, ny, (u - 0.5f) * inv_step, (v - 0.5f) * inv_step, hx, hy, w * ws);
                 }
             }
         }
@@ -134,8 +180,8 @@ static void splat_cells(const node_job *j, double *g)
 }
 
 /* The identity map's density along one axis of n nodes (cells between them, s
- * sub-samples each, tent splat), then the [1 2 1] / 4 filter. */
-static void identity_profile(int n, int s, double *out, double *tmp)
+ * sub-samples each, the tent of half-width 1) */
+static void identity_profile(int n, int s, double *tmp)
 {
     memset(tmp, 0, (size_t)n * sizeof(double));
     for (int c = 0; c + 1 < n; c++)
@@ -146,26 +192,6 @@ static void identity_profile(int n, int s, double *out, double *tmp)
         }
     if (n == 1)
         tmp[0] = 1.0;
-    for (int i = 0; i < n; i++)
-        out[i] = 0.5 * tmp[i] + 0.25 * ((i > 0 ? tmp[i - 1] : 0.0) + (i + 1 < n ? tmp[i + 1] : 0.0));
-}
-
-/* The [1 2 1] / 4 filter per axis, zero outside (as the identity's profile). */
-static void tent_filter(double *g, int nx, int ny, double *line)
-{
-    for (int r = 0; r < ny; r++) {
-        double *q = g + (size_t)r * nx;
-        memcpy(line, q, (size_t)nx * sizeof(double));
-        for (int c = 0; c < nx; c++)
-            q[c] = 0.5 * line[c] + 0.25 * ((c > 0 ? line[c - 1] : 0.0) + (c + 1 < nx ? line[c + 1] : 0.0));
-    }
-    for (int c = 0; c < nx; c++) {
-        for (int r = 0; r < ny; r++)
-            line[r] = g[(size_t)r * nx + c];
-        for (int r = 0; r < ny; r++)
-            g[(size_t)r * nx + c] =
-                0.5 * line[r] + 0.25 * ((r > 0 ? line[r - 1] : 0.0) + (r + 1 < ny ? line[r + 1] : 0.0));
-    }
 }
 
 static void finish_gain(fx_caustic_map *m, const double *g, const double *px, const double *py)
@@ -201,11 +227,10 @@ fx_result fx_caustic_map_build(fx_context *ctx, const fx_caustic_input *in, fx_c
     out->ny = j.ny;
     out->step = step;
     size_t n = (size_t)j.nx * j.ny;
-    int big = j.nx > j.ny ? j.nx : j.ny;
     j.img = fx_mem_alloc(n * 3 * sizeof(float));
     j.water = fx_mem_alloc((size_t)j.ny * sizeof(long));
     double *g = fx_mem_calloc(n, sizeof(double));
-    double *prof = fx_mem_alloc((size_t)(j.nx + j.ny + big) * sizeof(double));
+    double *prof = fx_mem_alloc((size_t)(j.nx + j.ny) * sizeof(double));
     out->gain = fx_mem_alloc(n * sizeof(float));
     fx_result r = FX_OK;
     if (!j.img || !j.water || !g || !prof || !out->gain) {
@@ -220,10 +245,9 @@ fx_result fx_caustic_map_build(fx_context *ctx, const fx_caustic_input *in, fx_c
         for (int k = 0; k < j.ny; k++)
             out->water_nodes += j.water[k];
         splat_cells(&j, g);
-        double *px = prof, *py = prof + j.nx, *tmp = prof + j.nx + j.ny;
-        identity_profile(j.nx, local.samples, px, tmp);
-        identity_profile(j.ny, local.samples, py, tmp);
-        tent_filter(g, j.nx, j.ny, tmp);
+        double *px = prof, *py = prof + j.nx;
+        identity_profile(j.nx, local.samples, px);
+        identity_profile(j.ny, local.samples, py);
         finish_gain(out, g, px, py);
     }
     fx_mem_free(j.img);
