@@ -10,6 +10,11 @@ camera (the water disabled; the scene's recipe: voronoi_caustics on Pool_Floor w
 Greek bath's parameters); the truth the same floor under the displaced refractive water
 (apply_truth: MNEE caustics), a second truth with seed 17 (the noise floor).
 
+The refractive rows run voronoi_caustics' mode refractive (strength 1, white tint: the
+physical setting) on the same input, with the water's view from the Sun that the add-on
+renders for it (`batch.py --views-only` with the refractive recipe; kept and reused like
+the renders), added to the input's sidecar.
+
 Statistics of the luminance over the central square (H x H px; the whole frame is floor):
 mean (and its ratio to the truth's), contrast (std / mean) at full resolution and after a
 4x4 box average (which divides uncorrelated pixel noise by 4: the truth's Monte Carlo
@@ -48,6 +53,38 @@ def stats(img, m_per_px):
     return mean, c_full, c_box, period, radial
 
 
+def refractive_recipe(recipe):
+    """The scene's recipe in mode refractive: strength 1 and a white tint (the physical
+    setting: the gain is the refracted light's own ratio), the water's material 'Water'."""
+    r = json.loads(json.dumps(recipe))
+    r["effects"][0]["params"].update({"mode": "refractive", "strength": 1.0, "tint": [1.0, 1.0, 1.0],
+                                      "water": "Water"})
+    return r
+
+
+def water_sidecar(blend, prefix, a, side, recipe):
+    """The input's sidecar with the water view the add-on renders for the refractive recipe
+    (batch.py --views-only at the same resolution; reused while its files are there)."""
+    rec_path = prefix + "refractive_recipe.json"
+    with open(rec_path, "w") as f:
+        json.dump(recipe, f)
+    meta = prefix + "water_libfx_aux_water_Water.json"
+    if not (os.path.exists(meta) and os.path.exists(meta[:-5] + ".exr")):
+        args = [C.BLENDER, "-b", str(blend), "--python", str(C.ROOT / "addon" / "libfx" / "batch.py"), "--",
+                "--views-only", "--frames", "1", "--output", prefix + "water_", "--resolution", a.res,
+                "--recipe", rec_path]
+        p = C.subprocess.run(args, capture_output=True, text=True, env=dict(os.environ, LIBFX_LIBRARY=C.LIB))
+        if p.returncode or not os.path.exists(meta):
+            sys.exit("the water view render failed:\n%s\n%s" % (p.stdout[-3000:], p.stderr[-3000:]))
+    entry = json.load(open(meta))
+    sc = json.load(open(side))
+    sc["aux_views"] = [v for v in sc.get("aux_views", []) if v.get("name") != entry["name"]] + [entry]
+    out = prefix + "in_water.camera.json"
+    with open(out, "w") as f:
+        json.dump(sc, f)
+    return out
+
+
 def main():
     a = C.parse_args(res="480x270", spp=32)
     d = C.scene_dir("caustics")
@@ -60,11 +97,14 @@ def main():
     # the orthographic camera's width in metres is 2 / projection[0][0] (the sidecar)
     m_per_px = 2.0 / json.load(open(side))["projection"][0][0] / plain.shape[1]
     outs = C.run_presets(recipe, passes, side, a.out, "c", runs=a.runs, frame=1)
+    refr = refractive_recipe(recipe)
+    outs_r = C.run_presets(refr, passes, water_sidecar(blend, p, a, side, refr), a.out, "cr", runs=a.runs, frame=1)
     tmean = stats(truth, m_per_px)[0]
     rows, spectra = [], {}
     for name, img, ms in ([("no effect (input)", plain, None), ("Cycles truth", truth, None),
                            ("Cycles, other seed", truth2, None)]
-                          + [("libfx " + q, *outs[q]) for q in C.PRESETS]):
+                          + [("libfx " + q, *outs[q]) for q in C.PRESETS]
+                          + [("libfx refractive " + q, *outs_r[q]) for q in C.PRESETS]):
         mean, cf, cb, per, rad = stats(img, m_per_px)
         rows.append([name, ms, mean, mean / tmean, cf, cb, per, C.mae(img, truth)])
         spectra[name] = rad
@@ -78,7 +118,8 @@ def main():
                                               "spectra": {k: [float(x) for x in v] for k, v in spectra.items()}})
     if a.docs:
         os.makedirs(os.path.join(a.docs, "images"), exist_ok=True)
-        C.save_strip(os.path.join(a.docs, "images", "truth_caustics.png"), [truth, outs["final"][0], plain])
+        C.save_strip(os.path.join(a.docs, "images", "truth_caustics.png"),
+                     [truth, outs_r["final"][0], outs["final"][0], plain])
         try:
             import matplotlib
             matplotlib.use("Agg")
@@ -86,7 +127,7 @@ def main():
             fig, axs = plt.subplots(1, 2, figsize=(9, 3.4), dpi=100)
             s = len(spectra["Cycles truth"]) * 2
             fr = np.arange(len(spectra["Cycles truth"])) / (s * m_per_px)
-            for name in ("Cycles truth", "Cycles, other seed", "libfx final", "libfx draft"):
+            for name in ("Cycles truth", "Cycles, other seed", "libfx final", "libfx draft", "libfx refractive final"):
                 sp = spectra[name]
                 axs[0].loglog(fr[1:], sp[1:] / sp[1:].sum(), label=name)
             axs[0].set_xlabel("spatial frequency (cycles per metre)")

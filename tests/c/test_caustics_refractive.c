@@ -87,13 +87,16 @@ static fx_frame *view_frame(fx_context *ctx, const fx_camera *cam)
     return f;
 }
 
+static float sun_angle; /* the next builds' sun disc (radians) */
+
 static fx_caustic_map build(fx_context *ctx, const fx_camera *cam, const float *depth, const float *normal,
                             float plane_z, int samples, int fresnel)
 {
     fx_frame *f = view_frame(ctx, cam);
     fx_view v;
     CHECK(fx_view_init(&v, f));
-    fx_caustic_input in = {NV, NV, depth, normal, 3, &v, cam->clip_end, 1.33f, plane_z, 1, samples, fresnel};
+    fx_caustic_input in = {NV, NV, depth, normal, 3, &v, cam->clip_end, 1.33f, plane_z, 1, samples, fresnel,
+                           sun_angle};
     fx_caustic_map m;
     CHECK_OK(ctx, fx_caustic_map_build(ctx, &in, &m, "test"));
     fx_frame_free(f);
@@ -238,6 +241,25 @@ static void test_sinusoid(fx_context *ctx)
         last_crest = crest;
         fx_caustic_map_free(&m);
     }
+    /* a sun disc of 0.1 rad: the floor 0.75 f - A below the crest sees each point of the
+     * water as a disc of radius (0.75 f) tan(0.05 / 1.33) = 12 cm = 8 texels: the crest's
+     * focus spreads (lower), the row's mean stays */
+    sun_angle = 0.1f;
+    double dep = 0.75 * f - SA, sum[2] = {0, 0}, peak[2] = {0, 0};
+    for (int k = 0; k < 2; k++) {
+        if (k == 1)
+            sun_angle = 0.0f;
+        fx_caustic_map m = build(ctx, &cam, depth, normal, (float)-dep, 4, 0);
+        for (int i = 32; i < NV - 32; i++) {
+            sum[k] += m.gain[(size_t)(NV / 2) * NV + i];
+            peak[k] = fmax(peak[k], m.gain[(size_t)(NV / 2) * NV + i]);
+        }
+        CHECK(k == 1 || fabs(m.blur_sigma - 0.5 * dep * tan(0.05 / 1.33) / (2.0 * LV / NV)) < 0.02); /* the mean drop: dep */
+        fx_caustic_map_free(&m);
+    }
+    CHECK(peak[0] < 0.8 * peak[1] && fabs(sum[0] - sum[1]) < 0.01 * sum[1]);
+    if (getenv("DBG") || !(peak[0] < 0.8 * peak[1] && fabs(sum[0] - sum[1]) < 0.01 * sum[1]))
+        fprintf(stderr, "sun disc: peak %.3f -> %.3f, row sum %.2f -> %.2f\n", peak[1], peak[0], sum[1], sum[0]);
     free(depth);
     free(normal);
 }
@@ -301,7 +323,8 @@ static fx_frame *floor_with_water(fx_context *ctx, height_fn h, int normal_pass,
     return f;
 }
 
-#define REFRACTIVE "\"mode\": \"refractive\", \"strength\": 1, \"tint\": [1, 1, 1], \"fresnel\": false"
+#define REFRACTIVE                                                                                          \
+    "\"mode\": \"refractive\", \"strength\": 1, \"tint\": [1, 1, 1], \"fresnel\": false, \"apply\": \"combined\""
 
 /* A lens in flat water focuses light into a bright spot and darkens its surroundings,
  * and the receiver's mean stays: what the lens takes it gives back. */
@@ -346,9 +369,10 @@ static void test_threads_extremes(void)
 
     fx_context *ctx = NULL;
     CHECK_OK(ctx, fx_context_new(&ctx, 2));
-    const char *cases[] = {"\"mode\": \"refractive\", \"ior\": 4, \"strength\": 100",
-                           "\"mode\": \"refractive\", \"ior\": 1, \"refract_step\": 16",
-                           "\"mode\": \"refractive\", \"refract_samples\": 16, \"strength\": 100"};
+    const char *cases[] = {"\"mode\": \"refractive\", \"apply\": \"combined\", \"ior\": 4, \"strength\": 100",
+                           "\"mode\": \"refractive\", \"apply\": \"combined\", \"ior\": 1, \"refract_step\": 16",
+                           "\"mode\": \"refractive\", \"apply\": \"combined\", \"refract_samples\": 16, "
+                           "\"strength\": 100"};
     for (int k = 0; k < 3; k++) {
         tilt_a = 30.0; /* nearly vertical water */
         fx_frame *f = floor_with_water(ctx, k == 2 ? tilted_h : sine_h, 1, "extreme");
@@ -389,6 +413,60 @@ static void test_hostile_map(fx_context *ctx)
     free(normal);
 }
 
+/* apply sun_diffuse: the gain scales the sun's direct diffuse DiffCol E N.L / pi only; the
+ * rest of the pixel (sky, bounce) stays. Here the floor is 0.5 sun + 0.2 sky, DiffCol 0.5,
+ * a vertical sun of energy pi: out - 0.7 is 0.5 (g - 1), g from apply combined on 0.5. */
+static void test_sun_diffuse(fx_context *ctx)
+{
+    fx_frame *f = floor_with_water(ctx, sine_h, 1, "sun_diffuse");
+    float *rgba = malloc(NF * NF * 4 * sizeof(float)), *dc = malloc(NF * NF * 3 * sizeof(float));
+    float *nrm = malloc(NF * NF * 3 * sizeof(float));
+    for (int k = 0; k < NF * NF; k++) {
+        for (int c = 0; c < 3; c++) {
+            rgba[4 * k + c] = 0.7f;
+            dc[3 * k + c] = 0.5f;
+            nrm[3 * k + c] = c == 2 ? 1.0f : 0.0f;
+        }
+        rgba[4 * k + 3] = 1.0f;
+    }
+    float *comb = et_run_effect(ctx, "voronoi_caustics", f, REFRACTIVE, NULL); /* Combined 0.5, 0.4, 0.3 */
+    float *cd = NULL;
+    int cc = 0;
+    CHECK_OK(ctx, fx_frame_pass(f, "Combined", &cd, &cc));
+    memcpy(cd, rgba, NF * NF * 4 * sizeof(float));
+    CHECK_OK(ctx, fx_frame_add_pass(f, "DiffCol", 3, dc));
+    CHECK_OK(ctx, fx_frame_add_pass(f, "Normal", 3, nrm));
+    const char *sun = "{\"lights\": [{\"name\": \"Sun\", \"type\": \"SUN\", \"position\": [0, 0, 10], "
+                      "\"direction\": [0, 0, -1], \"color\": [1, 1, 1], \"energy\": 3.14159265, \"angle\": 0}]}";
+    const char *params = "\"mode\": \"refractive\", \"strength\": 1, \"tint\": [1, 1, 1], \"fresnel\": false";
+    fx_stack *s = NULL;
+    char buf[512];
+    snprintf(buf, sizeof buf, "{\"version\":1,\"effects\":[{\"effect\":\"voronoi_caustics\",\"params\":{%s}}]}",
+             params);
+    CHECK_OK(ctx, fx_stack_new(ctx, &s));
+    CHECK_OK(ctx, fx_stack_load_json(s, buf));
+    fx_frame *out = NULL;
+    CHECK_FAIL(ctx, fx_stack_run(s, f, &out), FX_ERR_NO_LIGHTS, "");
+    CHECK_OK(ctx, fx_frame_apply_sidecar(f, sun));
+    float *o = et_run(ctx, s, f);
+    double worst = 0.0, spread = 0.0;
+    for (int k = 0; o && comb && k < NF * NF; k++) {
+        double g = comb[4 * k] / 0.5;
+        worst = fmax(worst, fabs((o[4 * k + 1] - 0.7) - 0.5 * (g - 1.0)));
+        spread = fmax(spread, fabs(g - 1.0));
+    }
+    CHECK(o && comb && worst < 1e-5 && spread > 0.3);
+    if (!(worst < 1e-5 && spread > 0.3))
+        fprintf(stderr, "sun_diffuse: worst %g, gain spread %g\n", worst, spread);
+    fx_stack_free(s);
+    free(o);
+    free(comb);
+    free(rgba);
+    free(dc);
+    free(nrm);
+    fx_frame_free(f);
+}
+
 static void test_errors_and_needs(fx_context *ctx)
 {
     /* no view at all */
@@ -400,7 +478,7 @@ static void test_errors_and_needs(fx_context *ctx)
     CHECK_OK(ctx, fx_stack_new(ctx, &s));
     CHECK_OK(ctx, fx_stack_load_json(
                       s, "{\"version\":1,\"effects\":[{\"effect\":\"voronoi_caustics\",\"params\":{\"mode\":"
-                         "\"refractive\",\"water\":\"Pool water\"}}]}"));
+                         "\"refractive\",\"water\":\"Pool water\",\"apply\":\"combined\"}}]}"));
     fx_frame *out = NULL;
     CHECK_FAIL(ctx, fx_stack_run(s, bare, &out), FX_ERR_NO_AUX_VIEW, "water:Pool water");
     CHECK(tu_contains(fx_context_error(ctx), "material 'Pool water'"));
@@ -423,7 +501,7 @@ static void test_errors_and_needs(fx_context *ctx)
     fx_frame *f = floor_with_water(ctx, NULL, 1, "dry");
     CHECK_OK(ctx, fx_stack_new(ctx, &s));
     CHECK_OK(ctx, fx_stack_load_json(s, "{\"version\":1,\"effects\":[{\"effect\":\"voronoi_caustics\",\"params\":{"
-                                        "\"mode\":\"refractive\"}}]}"));
+                                        "\"mode\":\"refractive\",\"apply\":\"combined\"}}]}"));
     CHECK_FAIL(ctx, fx_stack_run(s, f, &out), FX_ERR_MISSING_PASS, "shows no water");
     CHECK(tu_contains(fx_context_error(ctx), "'Water'"));
     fx_frame_free(f);
@@ -444,6 +522,7 @@ int main(void)
     test_threads_extremes();
     test_hostile_map(ctx);
     test_errors_and_needs(ctx);
+    test_sun_diffuse(ctx);
     fx_context_free(ctx);
     return tu_finish("test_caustics_refractive");
 }

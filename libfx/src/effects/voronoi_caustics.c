@@ -51,6 +51,7 @@
 #include "math/voronoi.h"
 #include "math/caustic_map.h"
 #include "scene/aux_view.h"
+#include "scene/lights.h"
 
 #include <float.h>
 #ifdef __SSE2__
@@ -94,6 +95,7 @@ typedef struct caustics_params {
     int fresnel;
     int refract_samples;
     int refract_step;
+    int apply;
 } caustics_params;
 
 enum { METRIC_MINKOWSKI = 0, METRIC_CHEBYSHEV };
@@ -101,12 +103,14 @@ enum { MODE_PHYSICAL = 0, MODE_SEED, MODE_REFRACTIVE };
 enum { POS_POSITION = 0, POS_DEPTH };
 enum { METHOD_GRID = 0, METHOD_BRUTE };
 enum { DIST_FAST = 0, DIST_EXACT };
+enum { APPLY_SUN_DIFFUSE = 0, APPLY_COMBINED };
 
 static const char *const metric_items[] = {"minkowski", "chebyshev"};
 static const char *const mode_items[] = {"physical", "seed", "refractive"};
 static const char *const pos_items[] = {"position", "depth"};
 static const char *const method_items[] = {"grid", "brute"};
 static const char *const distance_items[] = {"fast", "exact"};
+static const char *const apply_items[] = {"sun_diffuse", "combined"};
 static const float default_tint[3] = {0.8f, 0.95f, 1.0f};
 static const float default_world[3] = {0.55f, 0.7f, 0.95f};
 
@@ -173,6 +177,10 @@ static const fx_param_def caustics_param_defs[] = {
     FX_P_INT(caustics_params, refract_step, "refract_step", 1, 1, 16, 1, 4, "",
              "Quality (refractive): every n-th texel of the water's view is refracted (the map n times "
              "coarser per side)"),
+    FX_P_ENUM(caustics_params, apply, "apply", APPLY_SUN_DIFFUSE, apply_items,
+              "refractive: what the caustics' gain g scales: sun_diffuse: the sun's direct diffuse light, "
+              "DiffCol x colour x energy x N.L / pi (out = src + strength (g - 1) tint x that; needs DiffCol, "
+              "Normal and the scene's lights); combined: the whole pixel (out = src (1 + strength (g - 1) tint))"),
 };
 
 static double exponent_of(const caustics_params *p)
@@ -214,6 +222,8 @@ static fx_pass_set caustics_passes(const void *params)
     fx_pass_set s = p->position_source == POS_POSITION ? FX_PASS_BIT(FX_PASS_POSITION) : FX_PASS_BIT(FX_PASS_DEPTH);
     if (p->environment_strength > 0.0f)
         s |= FX_PASS_BIT(FX_PASS_NORMAL);
+    if (p->mode == MODE_REFRACTIVE && p->apply == APPLY_SUN_DIFFUSE)
+        s |= FX_PASS_BIT(FX_PASS_NORMAL) | FX_PASS_BIT(FX_PASS_DIFF_COL);
     return s;
 }
 
@@ -1621,6 +1631,9 @@ typedef struct refract_job {
     const caustics_job *cj;
     const fx_aux_view *av;
     fx_caustic_map map;
+    const float *diffcol, *normal; /* apply sun_diffuse */
+    int diffcol_channels, normal_channels;
+    fx_vec3 sun_rad, to_sun;        /* the sun's colour x energy / pi, towards the sun */
 } refract_job;
 
 static int float_cmp(const void *a, const void *b)
@@ -1670,8 +1683,22 @@ static void refract_rows(void *user, int begin, int end)
                 float px, py, d;
                 float g = fx_aux_view_project(rj->av, P, &px, &py, &d) ? fx_caustic_map_gain(&rj->map, px, py) : 1.0f;
                 float s = p->strength * (g - 1.0f);
-                for (int k = 0; k < 3; k++)
-                    gain[k] = 1.0f + s * p->tint[k];
+                if (rj->diffcol) {
+                    /* the sun's direct diffuse: the light the gain redistributes */
+                    const float *nq = rj->normal + i * rj->normal_channels;
+                    const float *dc = rj->diffcol + i * rj->diffcol_channels;
+                    fx_vec3 n = fx_v3_normalize_or(fx_v3(nq[0], nq[1], nq[2]), fx_v3(0.0f, 0.0f, 0.0f));
+                    float ndl = fx_v3_dot(n, rj->to_sun);
+                    ndl = ndl > 0.0f ? ndl : 0.0f;
+                    const float rad[3] = {rj->sun_rad.x, rj->sun_rad.y, rj->sun_rad.z};
+                    for (int k = 0; k < 3; k++) {
+                        float d = dc[k] > 0.0f ? dc[k] * rad[k] * ndl : 0.0f;
+                        add[k] = s * p->tint[k] * (d < 1e30f ? d : 1e30f);
+                    }
+                } else {
+                    for (int k = 0; k < 3; k++)
+                        gain[k] = 1.0f + s * p->tint[k];
+                }
                 if (p->environment_strength > 0.0f && j->normal)
                     env_term(j, i, P, add);
             }
@@ -1711,12 +1738,53 @@ static fx_result refract_view(const fx_effect_run *run, const caustics_params *p
     return FX_OK;
 }
 
+/* The scene's first sun (its disc's angle blurs the map; sun_diffuse: its light) and, for
+ * apply sun_diffuse, the DiffCol and Normal passes. */
+static fx_result refract_sun(const fx_effect_run *run, const caustics_params *p, refract_job *rj, float *angle)
+{
+    fx_light sun;
+    *angle = 0.0f;
+    if (p->apply == APPLY_COMBINED && !fx_frame_meta(run->frame, "libfx:lights"))
+        return FX_OK; /* the sun's disc only blurs: without lights, a point */
+    fx_result r = fx_frame_find_light(run->frame, "", run->where, &sun);
+    if (r)
+        return r;
+    if (sun.type != FX_LIGHT_SUN)
+        return fx_fail(run->ctx, FX_ERR_BAD_PARAM,
+                       "%s: mode refractive refracts a sun's light; the frame's first light '%s' is not a sun "
+                       "(spot and point lights are not supported yet)",
+                       run->where, sun.name);
+    *angle = sun.angle > 0.0f && sun.angle < 3.0f ? sun.angle : 0.0f;
+    if (p->apply != APPLY_SUN_DIFFUSE)
+        return FX_OK;
+    const fx_pass *dc = fx_frame_find_pass(run->frame, "DiffCol");
+    const fx_pass *np = fx_frame_find_pass(run->frame, "Normal");
+    if (!dc || dc->channels < 3 || !np || np->channels < 3)
+        return fx_fail(run->ctx, FX_ERR_MISSING_PASS,
+                       "%s: apply sun_diffuse needs the %s pass (or set apply to combined)", run->where,
+                       !dc || dc->channels < 3 ? "DiffCol" : "Normal");
+    rj->diffcol = dc->data;
+    rj->diffcol_channels = dc->channels;
+    rj->normal = np->data;
+    rj->normal_channels = np->channels;
+    float e = sun.energy > 0.0f && sun.energy < 1e30f ? sun.energy * 0.318309886f /* 1/pi */ : 0.0f;
+    rj->sun_rad = fx_v3(sun.color.x * e, sun.color.y * e, sun.color.z * e);
+    rj->to_sun = fx_v3_scale(sun.direction, -1.0f);
+    return FX_OK;
+}
+
 static fx_result refract_process(const fx_effect_run *run, const caustics_params *p, caustics_job *j)
 {
     fx_aux_view *av = NULL;
     const fx_pass *np = NULL;
+    refract_job rj;
+    memset(&rj, 0, sizeof rj);
+    rj.cj = j;
+    float angle = 0.0f;
     fx_result r = refract_view(run, p, &av, &np);
-    refract_job rj = {j, av, {0}};
+    if (!r)
+        r = refract_sun(run, p, &rj, &angle);
+    rj.av = av;
     float plane_z = 0.0f;
     int found = r ? 0 : receiver_height(j, &plane_z);
     if (!r && found < 0)
@@ -1724,7 +1792,7 @@ static fx_result refract_process(const fx_effect_run *run, const caustics_params
     if (!r) {
         fx_caustic_input in = {av->width, av->height, av->depth, np->data, np->channels, &av->view,
                                av->view.cam.clip_end, p->ior, plane_z, p->refract_step, p->refract_samples,
-                               p->fresnel};
+                               p->fresnel, angle};
         r = fx_caustic_map_build(run->ctx, &in, &rj.map, run->where);
     }
     if (!r && found && rj.map.water_nodes == 0)

@@ -34,10 +34,11 @@ typedef struct node_job {
     float far;      /* depth at or beyond: no water */
     float *img;     /* nx * ny * 3: image u, v (light-view pixels), weight */
     long *water;    /* per node row: nodes with water */
+    double *drop;   /* per node row: sum of the water's height above the plane */
 } node_job;
 
 /* The image of one node: where its light meets the plane, in light-view pixels. */
-static int node_image(const node_job *j, int x, int y, float *q)
+static int node_image(const node_job *j, int x, int y, float *q, double *drop)
 {
     const fx_caustic_input *in = j->in;
     float px = (float)x + 0.5f, py = (float)y + 0.5f;
@@ -61,6 +62,7 @@ static int node_image(const node_job *j, int x, int y, float *q)
         return 1;
     if (!(T.z < -1e-6f) || !(P.z > in->plane_z))
         return 1; /* no way down to the receiver: the light goes on unrefracted */
+    *drop += (double)(P.z - in->plane_z);
     float t = (in->plane_z - P.z) / T.z;
     fx_vec3 Y = fx_v3_add(P, fx_v3_scale(T, t));
     fx_vec2 pix = {0.0f, 0.0f};
@@ -79,9 +81,11 @@ static void node_rows(void *user, int begin, int end)
     const int step = j->in->step;
     for (int r = begin; r < end; r++) {
         long n = 0;
+        double drop = 0.0;
         for (int c = 0; c < j->nx; c++)
-            n += node_image(j, c * step, r * step, j->img + ((size_t)r * j->nx + c) * 3);
+            n += node_image(j, c * step, r * step, j->img + ((size_t)r * j->nx + c) * 3, &drop);
         j->water[r] = n;
+        j->drop[r] = drop;
     }
 }
 
@@ -212,6 +216,40 @@ static void finish_gain(fx_caustic_map *m, const double *g, const double *px, co
     m->mean_gain = count ? sum / (double)count : 1.0;
 }
 
+/* The sun disc's blur: a separable Gaussian (clamped at the edges) of the gain, in place */
+static void sun_blur(fx_caustic_map *m, double *line)
+{
+    double sigma = m->blur_sigma;
+    if (!(sigma >= 0.2))
+        return;
+    int radius = (int)ceil(3.0 * sigma);
+    if (radius > 64)
+        radius = 64;
+    double taps[129];
+    double sum = 0.0;
+    for (int k = -radius; k <= radius; k++)
+        sum += taps[k + radius] = exp(-(double)(k * k) / (2.0 * sigma * sigma));
+    for (int k = 0; k <= 2 * radius; k++)
+        taps[k] /= sum;
+    for (int pass = 0; pass < 2; pass++) {
+        int n = pass ? m->ny : m->nx, lines = pass ? m->nx : m->ny;
+        size_t stride = pass ? (size_t)m->nx : 1, next = pass ? 1 : (size_t)m->nx;
+        for (int l = 0; l < lines; l++) {
+            float *g = m->gain + (size_t)l * next;
+            for (int i = 0; i < n; i++)
+                line[i] = g[(size_t)i * stride];
+            for (int i = 0; i < n; i++) {
+                double acc = 0.0;
+                for (int k = -radius; k <= radius; k++) {
+                    int q = i + k < 0 ? 0 : i + k >= n ? n - 1 : i + k;
+                    acc += taps[k + radius] * line[q];
+                }
+                g[(size_t)i * stride] = (float)acc;
+            }
+        }
+    }
+}
+
 fx_result fx_caustic_map_build(fx_context *ctx, const fx_caustic_input *in, fx_caustic_map *out, const char *where)
 {
     memset(out, 0, sizeof *out);
@@ -229,11 +267,12 @@ fx_result fx_caustic_map_build(fx_context *ctx, const fx_caustic_input *in, fx_c
     size_t n = (size_t)j.nx * j.ny;
     j.img = fx_mem_alloc(n * 3 * sizeof(float));
     j.water = fx_mem_alloc((size_t)j.ny * sizeof(long));
+    j.drop = fx_mem_alloc((size_t)j.ny * sizeof(double));
     double *g = fx_mem_calloc(n, sizeof(double));
-    double *prof = fx_mem_alloc((size_t)(j.nx + j.ny) * sizeof(double));
+    double *prof = fx_mem_alloc((size_t)(2 * j.nx + 2 * j.ny) * sizeof(double));
     out->gain = fx_mem_alloc(n * sizeof(float));
     fx_result r = FX_OK;
-    if (!j.img || !j.water || !g || !prof || !out->gain) {
+    if (!j.img || !j.water || !j.drop || !g || !prof || !out->gain) {
         r = fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory (caustics map %dx%d)", where, j.nx, j.ny);
         fx_caustic_map_free(out);
     } else {
@@ -242,16 +281,29 @@ fx_result fx_caustic_map_build(fx_context *ctx, const fx_caustic_input *in, fx_c
         local.samples = in->samples > 0 ? in->samples : 1;
         j.in = &local;
         fx_parallel_for(ctx, j.ny, 1, node_rows, &j);
-        for (int k = 0; k < j.ny; k++)
+        double drop = 0.0;
+        for (int k = 0; k < j.ny; k++) {
             out->water_nodes += j.water[k];
+            drop += j.drop[k];
+        }
+        out->mean_drop = out->water_nodes ? drop / (double)out->water_nodes : 0.0;
         splat_cells(&j, g);
         double *px = prof, *py = prof + j.nx;
         identity_profile(j.nx, local.samples, px);
         identity_profile(j.ny, local.samples, py);
         finish_gain(out, g, px, py);
+        /* the sun disc: a cone of half-angle a / (2 ior) in the water, its radius on the
+         * floor over the world size of a node (an orthographic view: 2 / P[0] wide) */
+        double node_w = 2.0 / fabs((double)in->view->cam.projection[0]) / in->view->disp_w * step;
+        double radius = out->mean_drop * tan(0.5 * (double)in->sun_angle / (double)in->ior);
+        out->blur_sigma = in->sun_angle > 0.0f && node_w > 0.0 && isfinite(radius) ? 0.5 * radius / node_w : 0.0;
+        if (out->blur_sigma > 20.0)
+            out->blur_sigma = 20.0;
+        sun_blur(out, prof + j.nx + j.ny);
     }
     fx_mem_free(j.img);
     fx_mem_free(j.water);
+    fx_mem_free(j.drop);
     fx_mem_free(g);
     fx_mem_free(prof);
     return r;

@@ -21,6 +21,14 @@
  * horizontal (and up to the light view's edge). Weights: 1, or the Fresnel
  * transmittance (unpolarised, exact dielectric formula) with `fresnel`.
  *
+ * The splat's kernel: per cell, along each axis, tents whose half-width is a whole number
+ * of the cell's sub-sample spacings (two blended, continuous in the spacing): over a
+ * regular lattice they sum to a constant, so a uniformly scaled field has no ripple.
+ *
+ * A sun of angular diameter a spreads each refracted ray into a cone of half-angle
+ * a / (2 ior) in the water: the gain map is blurred by a Gaussian of sigma half that cone's
+ * radius on the floor at the water's mean height above it (a disc's sigma is R / 2).
+ *
  * Node images are computed in parallel; the splat runs in one fixed order on one
  * thread: the map is bit-identical for any thread count. Gains are finite, >= 0, and at
  * most FX_CAUSTIC_GAIN_MAX. */
@@ -44,6 +52,7 @@ typedef struct fx_caustic_input {
     int step;                 /* every step-th texel is a node (>= 1) */
     int samples;              /* sub-samples per cell side (>= 1) */
     int fresnel;              /* weight by the Fresnel transmittance */
+    float sun_angle;          /* the sun disc's angular diameter (radians; 0: a point) */
 } fx_caustic_input;
 
 typedef struct fx_caustic_map {
@@ -51,7 +60,9 @@ typedef struct fx_caustic_map {
     int step;
     float *gain;              /* nx * ny */
     long water_nodes;         /* nodes that saw water */
-    double mean_gain;         /* over the nodes that saw water, away from the border */
+    double mean_gain;         /* over the nodes away from the border */
+    double mean_drop;         /* mean height of the water above the plane (water nodes) */
+    double blur_sigma;        /* the sun disc's blur, nodes */
 } fx_caustic_map;
 
 /* Builds the map; FX_ERR_OUT_OF_MEMORY (message recorded with `where`) on failure. */
