@@ -11,9 +11,9 @@ Greek bath's parameters); the truth the same floor under the displaced refractiv
 (apply_truth: MNEE caustics), a second truth with seed 17 (the noise floor).
 
 The refractive rows run voronoi_caustics' mode refractive (strength 1, white tint: the
-physical setting) on the same input, with the water's view from the Sun that the add-on
-renders for it (`batch.py --views-only` with the refractive recipe; kept and reused like
-the renders), added to the input's sidecar.
+physical setting; apply sun_diffuse) on the same input rendered through the add-on with
+that recipe (the add-on then adds the DiffCol and Normal passes and renders the water's
+view from the Sun into the sidecar; kept and reused like the other renders).
 
 Statistics of the luminance over the central square (H x H px; the whole frame is floor):
 mean (and its ratio to the truth's), contrast (std / mean) at full resolution and after a
@@ -62,29 +62,6 @@ def refractive_recipe(recipe):
     return r
 
 
-def water_sidecar(blend, prefix, a, side, recipe):
-    """The input's sidecar with the water view the add-on renders for the refractive recipe
-    (batch.py --views-only at the same resolution; reused while its files are there)."""
-    rec_path = prefix + "refractive_recipe.json"
-    with open(rec_path, "w") as f:
-        json.dump(recipe, f)
-    meta = prefix + "water_libfx_aux_water_Water.json"
-    if not (os.path.exists(meta) and os.path.exists(meta[:-5] + ".exr")):
-        args = [C.BLENDER, "-b", str(blend), "--python", str(C.ROOT / "addon" / "libfx" / "batch.py"), "--",
-                "--views-only", "--frames", "1", "--output", prefix + "water_", "--resolution", a.res,
-                "--recipe", rec_path]
-        p = C.subprocess.run(args, capture_output=True, text=True, env=dict(os.environ, LIBFX_LIBRARY=C.LIB))
-        if p.returncode or not os.path.exists(meta):
-            sys.exit("the water view render failed:\n%s\n%s" % (p.stdout[-3000:], p.stderr[-3000:]))
-    entry = json.load(open(meta))
-    sc = json.load(open(side))
-    sc["aux_views"] = [v for v in sc.get("aux_views", []) if v.get("name") != entry["name"]] + [entry]
-    out = prefix + "in_water.camera.json"
-    with open(out, "w") as f:
-        json.dump(sc, f)
-    return out
-
-
 def main():
     a = C.parse_args(res="480x270", spp=32)
     d = C.scene_dir("caustics")
@@ -97,8 +74,14 @@ def main():
     # the orthographic camera's width in metres is 2 / projection[0][0] (the sidecar)
     m_per_px = 2.0 / json.load(open(side))["projection"][0][0] / plain.shape[1]
     outs = C.run_presets(recipe, passes, side, a.out, "c", runs=a.runs, frame=1)
+    # the refractive rows' input: the same render through the add-on with the refractive
+    # recipe, which adds the passes it reads (DiffCol, Normal) and the water's view
     refr = refractive_recipe(recipe)
-    outs_r = C.run_presets(refr, passes, water_sidecar(blend, p, a, side, refr), a.out, "cr", runs=a.runs, frame=1)
+    rec_path = os.path.join(a.out, "refractive_recipe.json")
+    with open(rec_path, "w") as f:
+        json.dump(refr, f)
+    rpasses, rside, _ = C.batch(blend, p + "inr_", a.res, a.spp, recipe=rec_path)
+    outs_r = C.run_presets(refr, rpasses, rside, a.out, "cr", runs=a.runs, frame=1)
     tmean = stats(truth, m_per_px)[0]
     rows, spectra = [], {}
     for name, img, ms in ([("no effect (input)", plain, None), ("Cycles truth", truth, None),

@@ -101,44 +101,55 @@ typedef struct axis_w {
     float w[2 * (int)AXIS_MAX + 3];
 } axis_w;
 
-static inline void axis_weights(float g, float h, axis_w *a)
+/* The two tents of one axis of a cell (its sub-samples h nodes apart) */
+typedef struct axis_k {
+    float ra, rb, t;  /* half-widths; rb's share */
+    float wa, wb;     /* (1 - t) / ra, t / rb: the tents' peaks */
+    float ia, ib;     /* 1 / ra, 1 / rb */
+} axis_k;
+
+static inline void axis_kernel(float h, axis_k *k)
 {
-    float ra, rb, t;
     if (!(h > 1e-6f))
         h = 1e-6f;
     if (h >= 1.0f) {
-        ra = rb = h < AXIS_MAX ? h : AXIS_MAX;
-        t = 0.0f;
+        k->ra = k->rb = h < AXIS_MAX ? h : AXIS_MAX;
+        k->t = 0.0f;
     } else {
         float q = 1.0f / h, m = floorf(q);
-        t = q - m;
-        ra = m * h;
-        rb = (m + 1.0f) * h;
+        k->t = q - m;
+        k->ra = m * h;
+        k->rb = (m + 1.0f) * h;
     }
-    a->i0 = (int)ceilf(g - rb);
-    int i1 = (int)floorf(g + rb);
+    k->ia = 1.0f / k->ra;
+    k->ib = 1.0f / k->rb;
+    k->wa = (1.0f - k->t) * k->ia;
+    k->wb = k->t * k->ib;
+}
+
+static inline void axis_weights(float g, const axis_k *k, axis_w *a)
+{
+    a->i0 = (int)ceilf(g - k->rb);
+    int i1 = (int)floorf(g + k->rb);
     a->n = i1 - a->i0 + 1;
     if (a->n > (int)(sizeof a->w / sizeof a->w[0]))
         a->n = (int)(sizeof a->w / sizeof a->w[0]);
-    for (int k = 0; k < a->n; k++) {
-        float d = fabsf((float)(a->i0 + k) - g), w = 0.0f;
-        if (d < ra)
-            w += (1.0f - t) * (1.0f - d / ra) / ra;
-        if (d < rb)
-            w += t * (1.0f - d / rb) / rb;
-        a->w[k] = w;
+    for (int m = 0; m < a->n; m++) {
+        float d = fabsf((float)(a->i0 + m) - g);
+        float wa = 1.0f - d * k->ia, wb = 1.0f - d * k->ib;
+        a->w[m] = (wa > 0.0f ? k->wa * wa : 0.0f) + (wb > 0.0f ? k->wb * wb : 0.0f);
     }
 }
 
-/* One sub-sample's weight w at node coordinates (gx, gy), sub-samples hx, hy nodes apart */
-static inline void splat(double *g, int nx, int ny, float gx, float gy, float hx, float hy, float w)
+/* One sub-sample's weight w at node coordinates (gx, gy), by its cell's kernels kx, ky */
+static inline void splat(double *g, int nx, int ny, float gx, float gy, const axis_k *kx, const axis_k *ky, float w)
 {
     if (!(gx > -2.0f * AXIS_MAX && gy > -2.0f * AXIS_MAX && gx < (float)nx + 2.0f * AXIS_MAX &&
           gy < (float)ny + 2.0f * AXIS_MAX))
         return;
     axis_w ax, ay;
-    axis_weights(gx, hx, &ax);
-    axis_weights(gy, hy, &ay);
+    axis_weights(gx, kx, &ax);
+    axis_weights(gy, ky, &ay);
     for (int k = 0; k < ay.n; k++) {
         int y = ay.i0 + k;
         if (y < 0 || y >= ny || !(ay.w[k] > 0.0f))
@@ -164,7 +175,9 @@ static void splat_cells(const node_job *j, double *g)
             const float *d = a + (size_t)nx * 3, *e = d + 3;
             float ux = fmaxf(fmaxf(a[0], b[0]), fmaxf(d[0], e[0])) - fminf(fminf(a[0], b[0]), fminf(d[0], e[0]));
             float uy = fmaxf(fmaxf(a[1], b[1]), fmaxf(d[1], e[1])) - fminf(fminf(a[1], b[1]), fminf(d[1], e[1]));
-            const float hx = ux * inv_step / (float)s, hy = uy * inv_step / (float)s;
+            axis_k kx, ky;
+            axis_kernel(ux * inv_step / (float)s, &kx);
+            axis_kernel(uy * inv_step / (float)s, &ky);
             for (int sy = 0; sy < s; sy++) {
                 float ty = ((float)sy + 0.5f) / (float)s;
                 float l[3], m[3];
@@ -176,7 +189,7 @@ static void splat_cells(const node_job *j, double *g)
                     float tx = ((float)sx + 0.5f) / (float)s;
                     float u = l[0] + (m[0] - l[0]) * tx, v = l[1] + (m[1] - l[1]) * tx;
                     float w = l[2] + (m[2] - l[2]) * tx;
-                    splat(g, nx, ny, (u - 0.5f) * inv_step, (v - 0.5f) * inv_step, hx, hy, w * ws);
+                    splat(g, nx, ny, (u - 0.5f) * inv_step, (v - 0.5f) * inv_step, &kx, &ky, w * ws);
                 }
             }
         }
