@@ -278,6 +278,9 @@ static double bump_h(double x, double y, double *gx, double *gy)
 /* The floor (z = -1) seen straight down over [-LV / 2, LV / 2], grey, with its Position
  * pass, and the water view (written to an EXR) of height field h; normal_pass 0: without
  * the Normal pass; h NULL: no water at all (background depth). */
+static float frame_z = -1.0f; /* the masked pixels' height */
+static double frame_theta, frame_shift_y; /* the frame camera's slant; the positions' y shift */
+
 static fx_frame *floor_with_water(fx_context *ctx, height_fn h, int normal_pass, const char *name)
 {
     float *rgba = malloc(NF * NF * 4 * sizeof(float)), *pos = malloc(NF * NF * 3 * sizeof(float));
@@ -289,12 +292,12 @@ static fx_frame *floor_with_water(fx_context *ctx, height_fn h, int normal_pass,
             rgba[4 * k + 2] = 0.3f;
             rgba[4 * k + 3] = 1.0f;
             pos[3 * k] = (float)(-LV / 2 + (i + 0.5) * LV / NF);
-            pos[3 * k + 1] = (float)(LV / 2 - (j + 0.5) * LV / NF);
-            pos[3 * k + 2] = -1.0f;
+            pos[3 * k + 1] = (float)(LV / 2 - (j + 0.5) * LV / NF + frame_shift_y);
+            pos[3 * k + 2] = frame_z;
         }
     fx_frame *f = et_frame(ctx, NF, NF, rgba);
     CHECK_OK(ctx, fx_frame_add_pass(f, "Position", 3, pos));
-    fx_camera cam = sun_camera(0.0, LV / 2);
+    fx_camera cam = sun_camera(frame_theta, LV / 2);
     CHECK_OK(ctx, fx_frame_set_camera(f, &cam));
     float *depth = malloc(NV * NV * sizeof(float)), *normal = malloc(NV * NV * 3 * sizeof(float));
     if (h) {
@@ -467,6 +470,39 @@ static void test_sun_diffuse(fx_context *ctx)
     fx_frame_free(f);
 }
 
+/* receiver_depth: the masked pixels are the water's surface (z = 0), the floor lies 1
+ * below and an orthographic camera looks down slanted by 0.5 rad: each pixel shows the
+ * floor where its ray, refracted (Snell, here in double), meets z = -1, a shift in y. The
+ * output equals that of the floor itself masked at those points. */
+static void test_receiver_depth(fx_context *ctx)
+{
+    double d[3] = {0.0, sin(0.5), -cos(0.5)}, n[3] = {0.0, 0.0, 1.0}, t[3];
+    snell(d, n, 1.33, t);
+    frame_theta = 0.5;
+    frame_z = 0.0f;
+    fx_frame *f = floor_with_water(ctx, bump_h, 1, "surface_seen");
+    float *b = et_run_effect(ctx, "voronoi_caustics", f, REFRACTIVE ", \"receiver_depth\": 1", NULL);
+    float *c = et_run_effect(ctx, "voronoi_caustics", f, REFRACTIVE, NULL); /* the floor at the surface */
+    fx_frame_free(f);
+    frame_z = -1.0f;
+    frame_shift_y = t[1] / -t[2];
+    f = floor_with_water(ctx, bump_h, 1, "floor_seen");
+    float *a = et_run_effect(ctx, "voronoi_caustics", f, REFRACTIVE, NULL);
+    fx_frame_free(f);
+    frame_theta = frame_shift_y = 0.0;
+    double worst = 0.0, moved = 0.0;
+    for (int k = 0; a && b && c && k < NF * NF * 4; k++) {
+        worst = fmax(worst, fabs(a[k] - b[k]));
+        moved = fmax(moved, fabs(a[k] - c[k]));
+    }
+    CHECK(a && b && c && worst < 2e-4 && moved > 0.05);
+    if (getenv("DBG") || !(worst < 2e-4 && moved > 0.05))
+        fprintf(stderr, "receiver_depth: worst %g, without it %g\n", worst, moved);
+    free(a);
+    free(b);
+    free(c);
+}
+
 static void test_errors_and_needs(fx_context *ctx)
 {
     /* no view at all */
@@ -523,6 +559,7 @@ int main(void)
     test_hostile_map(ctx);
     test_errors_and_needs(ctx);
     test_sun_diffuse(ctx);
+    test_receiver_depth(ctx);
     fx_context_free(ctx);
     return tu_finish("test_caustics_refractive");
 }

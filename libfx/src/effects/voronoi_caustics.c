@@ -96,6 +96,7 @@ typedef struct caustics_params {
     int refract_samples;
     int refract_step;
     int apply;
+    float receiver_depth;
 } caustics_params;
 
 enum { METRIC_MINKOWSKI = 0, METRIC_CHEBYSHEV };
@@ -181,6 +182,10 @@ static const fx_param_def caustics_param_defs[] = {
               "refractive: what the caustics' gain g scales: sun_diffuse: the sun's direct diffuse light, "
               "DiffCol x colour x energy x N.L / pi (out = src + strength (g - 1) tint x that; needs DiffCol, "
               "Normal and the scene's lights); combined: the whole pixel (out = src (1 + strength (g - 1) tint))"),
+    FX_P_FLOAT(caustics_params, receiver_depth, "receiver_depth", 0.0, 0.0, 1e4, 0.0, 5.0, "",
+               "refractive: 0: the masked pixels are the floor the light falls on; > 0: they are the water's "
+               "surface and the floor lies this far (scene units) below their median height: each pixel's "
+               "camera ray, refracted by a flat surface, finds its floor point there (use apply combined)"),
 };
 
 static double exponent_of(const caustics_params *p)
@@ -230,7 +235,8 @@ static fx_pass_set caustics_passes(const void *params)
 static int caustics_needs_camera(const void *params)
 {
     const caustics_params *p = params;
-    return p->position_source == POS_DEPTH || p->environment_strength > 0.0f;
+    return p->position_source == POS_DEPTH || p->environment_strength > 0.0f ||
+           (p->mode == MODE_REFRACTIVE && p->receiver_depth > 0.0f);
 }
 
 typedef struct env_map {
@@ -1504,7 +1510,8 @@ static fx_result job_inputs(const fx_effect_run *run, const caustics_params *p, 
     const char *where = run->where;
     if (caustics_needs_camera(p) && !j->has_view)
         return fx_fail(run->ctx, FX_ERR_NO_CAMERA,
-                       "%s needs the frame's camera (position_source depth or environment_strength > 0); "
+                       "%s needs the frame's camera (position_source depth, environment_strength > 0 or "
+                       "refractive with receiver_depth > 0); "
                        "give the scene sidecar with --sidecar",
                        where);
     if (p->position_source == POS_POSITION) {
@@ -1634,7 +1641,22 @@ typedef struct refract_job {
     const float *diffcol, *normal; /* apply sun_diffuse */
     int diffcol_channels, normal_channels;
     fx_vec3 sun_rad, to_sun;        /* the sun's colour x energy / pi, towards the sun */
+    float floor_z;                  /* receiver_depth > 0: the floor's height */
+    fx_vec3 eye, forward;           /* the camera (orthographic: forward is the rays' direction) */
 } refract_job;
+
+/* receiver_depth > 0: the floor point a masked water pixel at P shows, along the camera's
+ * ray refracted by a flat surface (normal +z); P itself when the ray does not go down. */
+static fx_vec3 seen_floor(const refract_job *rj, fx_vec3 P)
+{
+    const caustics_job *j = rj->cj;
+    fx_vec3 d = j->view.orthographic ? rj->forward : fx_v3_normalize_or(fx_v3_sub(P, rj->eye), rj->forward);
+    fx_vec3 t;
+    if (!(d.z < -1e-6f) || !fx_refract_into(d, fx_v3(0.0f, 0.0f, 1.0f), j->p->ior, &t, NULL) || !(t.z < -1e-6f) ||
+        !(P.z > rj->floor_z))
+        return P;
+    return fx_v3_add(P, fx_v3_scale(t, (rj->floor_z - P.z) / t.z));
+}
 
 static int float_cmp(const void *a, const void *b)
 {
@@ -1681,6 +1703,8 @@ static void refract_rows(void *user, int begin, int end)
             float gain[3] = {1.0f, 1.0f, 1.0f}, add[3] = {0.0f, 0.0f, 0.0f};
             if (covered(run, i) && world_at(j, x, y, &P)) {
                 float px, py, d;
+                if (p->receiver_depth > 0.0f)
+                    P = seen_floor(rj, P);
                 float g = fx_aux_view_project(rj->av, P, &px, &py, &d) ? fx_caustic_map_gain(&rj->map, px, py) : 1.0f;
                 float s = p->strength * (g - 1.0f);
                 if (rj->diffcol) {
@@ -1790,8 +1814,11 @@ static fx_result refract_process(const fx_effect_run *run, const caustics_params
     if (!r && found < 0)
         r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", run->where);
     if (!r) {
+        rj.floor_z = plane_z - p->receiver_depth;
+        rj.eye = fx_v3(j->view.camera_to_world[3], j->view.camera_to_world[7], j->view.camera_to_world[11]);
+        rj.forward = fx_v3_normalize_or(fx_view_dir_to_world(&j->view, fx_v3(0.0f, 0.0f, -1.0f)), fx_v3(0, 0, -1));
         fx_caustic_input in = {av->width, av->height, av->depth, np->data, np->channels, &av->view,
-                               av->view.cam.clip_end, p->ior, plane_z, p->refract_step, p->refract_samples,
+                               av->view.cam.clip_end, p->ior, rj.floor_z, p->refract_step, p->refract_samples,
                                p->fresnel, angle};
         r = fx_caustic_map_build(run->ctx, &in, &rj.map, run->where);
     }
