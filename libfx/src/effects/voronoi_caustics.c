@@ -53,6 +53,7 @@
 #include "scene/aux_view.h"
 #include "scene/lights.h"
 
+#include <cjson/cJSON.h>
 #include <float.h>
 #ifdef __SSE2__
 #include <emmintrin.h>
@@ -97,6 +98,7 @@ typedef struct caustics_params {
     int refract_step;
     int apply;
     float receiver_depth;
+    float interior;
 } caustics_params;
 
 enum { METRIC_MINKOWSKI = 0, METRIC_CHEBYSHEV };
@@ -182,6 +184,10 @@ static const fx_param_def caustics_param_defs[] = {
               "refractive: what the caustics' gain g scales: sun_diffuse: the sun's direct diffuse light, "
               "DiffCol x colour x energy x N.L / pi (out = src + strength (g - 1) tint x that; needs DiffCol, "
               "Normal and the scene's lights); combined: the whole pixel (out = src (1 + strength (g - 1) tint))"),
+    FX_P_FLOAT(caustics_params, interior, "interior", 0.1, 0.0, 0.95, 0.0, 0.8, "",
+               "physical: light inside a cell relative to the bright lines' peak (focus g = interior + "
+               "(1 - interior) exp(-gap / line_width), then divided by its mean): lit interiors as real "
+               "caustics have; 0: dark interiors (the look before params_version 2)"),
     FX_P_FLOAT(caustics_params, receiver_depth, "receiver_depth", 0.0, 0.0, 1e4, 0.0, 5.0, "",
                "refractive: 0: the masked pixels are the floor the light falls on; > 0: they are the water's "
                "surface and the floor lies this far (scene units) below their median height: each pixel's "
@@ -272,6 +278,7 @@ typedef struct caustics_job {
     double mean_g;
     double time;
     float inv_mean, inv_lw, wave;
+    float focus0; /* interior / mean: inv_mean is (1 - interior) / mean */
     float inv_cell, far_gap; /* far_gap: physical, p >= 1: a gap beyond which g is ~0 */
     const float *position; /* 3 or 4 channels */
     int pos_channels;
@@ -378,7 +385,7 @@ static inline void factors(const caustics_job *j, size_t i, fx_vec3 P, float a, 
         }
     } else {
         /* focus ratio bounded (16x the mean: d < 1 makes the mean tiny) */
-        float g = expf(-a * j->inv_lw) * j->inv_mean;
+        float g = expf(-a * j->inv_lw) * j->inv_mean + j->focus0;
         g = (g < (float)FOCUS_MAX ? g : (float)FOCUS_MAX) - 1.0f;
         float amp = p->strength * (0.4f + 1.2f * noise); /* noise' with mean ~1 */
         *s = amp * g;
@@ -675,8 +682,10 @@ static void shade_segment(const caustics_job *j, const float *src, float *dst, i
         int c = 0;
 #ifdef __SSE2__
         const v4f vmean = {inv_mean, inv_mean, inv_mean, inv_mean}, vcap = {16.0f, 16.0f, 16.0f, 16.0f};
+        const float f0 = j->focus0;
         for (; c + 4 <= n; c += 4) {
             v4f g = ld4(xs + c) * vmean;
+            g = g + f0;
             g = _mm_min_ps(g, vcap); /* g < 16 ? g : 16 (g is never NaN) */
             g = g - 1.0f;
             const v4f amp = strength * (0.4f + 1.2f * ld4(nz + c));
@@ -1020,6 +1029,7 @@ static inline float focus_s(const caustics_job *j, float a, float noise)
     x = x > -87.0f ? x : -87.0f;
     x = x < 0.0f ? x : 0.0f;
     float g = exp_neg(x) * j->inv_mean;
+    g = g + j->focus0;
     g = (g < (float)FOCUS_MAX ? g : (float)FOCUS_MAX) - 1.0f;
     const float amp = j->p->strength * (0.4f + 1.2f * noise);
     return amp * g;
@@ -1585,7 +1595,11 @@ static int job_mean(const fx_effect_run *run, const caustics_params *p, caustics
         if (!(j->mean_g > 1e-12))
             j->mean_g = 1e-12;
     }
-    j->inv_mean = (float)fmin(1.0 / j->mean_g, 1e30);
+    /* the focus interior + (1 - interior) g over its mean interior + (1 - interior) mean(g) */
+    double in = p->mode == MODE_PHYSICAL ? (double)p->interior : 0.0;
+    double m = in + (1.0 - in) * j->mean_g;
+    j->inv_mean = (float)fmin((1.0 - in) / m, 1e30);
+    j->focus0 = (float)(in / m);
     return 0;
 }
 
@@ -1875,6 +1889,19 @@ static fx_result caustics_process(const fx_effect_run *run)
     return r;
 }
 
+/* params_version 2 added interior (lit cell interiors, default 0.1): a recipe of version 1
+ * keeps its dark interiors (interior 0) unless it names one. Silent: its output is the
+ * same as before. */
+static fx_result caustics_migrate(int from_version, cJSON *params, char *note, size_t note_size)
+{
+    (void)note;
+    (void)note_size;
+    if (from_version == 1 && params && !cJSON_GetObjectItemCaseSensitive(params, "interior") &&
+        !cJSON_AddNumberToObject(params, "interior", 0.0))
+        return FX_ERR_OUT_OF_MEMORY;
+    return FX_OK;
+}
+
 const fx_effect_class fx_effect_voronoi_caustics = {
     .name = "voronoi_caustics",
     .doc = "Water caustics: a world-anchored, animated Voronoi pattern (Minkowski metric) on the masked surface",
@@ -1904,4 +1931,6 @@ const fx_effect_class fx_effect_voronoi_caustics = {
     .halo = NULL,
     .validate = caustics_validate,
     .process = caustics_process,
+    .params_version = 2,
+    .migrate = caustics_migrate,
 };
