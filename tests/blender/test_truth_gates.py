@@ -55,6 +55,12 @@ CAUSTICS = {  # preset: (mean / truth, contrast 4x4 box, whole MAE); Cycles' con
     "final": (0.9444, 0.2823, 0.2810),
     "reference": (0.9429, 0.2833, 0.2820),
 }
+CAUSTICS_REFRACTIVE = {  # mode refractive (issue 27): preset: (mean / truth, contrast 4x4 box, whole MAE)
+    "draft": (0.9121, 0.2446, 0.0508),
+    "preview": (0.9209, 0.2819, 0.0397),
+    "final": (0.9204, 0.2806, 0.0382),
+    "reference": (0.9203, 0.2810, 0.0378),
+}   # measured 2026-12-02, branch h-caustics
 MIRRORS = {  # variant: {row: mirror-region MAE} (no effect: 0.1833, 0.1654, 0.1988, 0.1333)
     "facing": {"libfx draft": 0.1460, "libfx preview": 0.1544, "libfx final": 0.0510, "libfx reference": 0.0301,
                "draft + probe": 0.0458, "preview + probe": 0.0510, "final, no probe": 0.1542,
@@ -151,7 +157,8 @@ def check_godrays(report):
 
 def check_caustics(report):
     fails, rows = [], _rows(report["rows"])
-    for q, (mean, contrast, mae) in CAUSTICS.items():
+    for q, (mean, contrast, mae) in [(q, v) for q, v in CAUSTICS.items()] + \
+            [("refractive " + q, v) for q, v in CAUSTICS_REFRACTIVE.items()]:
         r = rows["libfx " + q]
         if not ratio_ok(r[3], mean):
             _fail(fails, q + " mean / truth", r[3], mean)
