@@ -1657,6 +1657,7 @@ typedef struct refract_job {
     fx_vec3 sun_rad, to_sun;        /* the sun's colour x energy / pi, towards the sun */
     float floor_z;                  /* receiver_depth > 0: the floor's height */
     fx_vec3 eye, forward;           /* the camera (orthographic: forward is the rays' direction) */
+    float *debug_gain;              /* debug output "gain": the map's gain per pixel (1 unmasked) */
 } refract_job;
 
 /* receiver_depth > 0: the floor point a masked water pixel at P shows, along the camera's
@@ -1720,6 +1721,8 @@ static void refract_rows(void *user, int begin, int end)
                 if (p->receiver_depth > 0.0f)
                     P = seen_floor(rj, P);
                 float g = fx_aux_view_project(rj->av, P, &px, &py, &d) ? fx_caustic_map_gain(&rj->map, px, py) : 1.0f;
+                if (rj->debug_gain)
+                    rj->debug_gain[i] = g;
                 float s = p->strength * (g - 1.0f);
                 if (rj->diffcol) {
                     /* the sun's direct diffuse: the light the gain redistributes */
@@ -1841,6 +1844,11 @@ static fx_result refract_process(const fx_effect_run *run, const caustics_params
                     "%s: the water view '%s' (%s) shows no water: no object with the material '%s' in the Sun's "
                     "view (the add-on renders the objects that use the effect's 'water' material)",
                     run->where, av->name, av->path, p->water);
+    if (!r) {
+        rj.debug_gain = fx_effect_debug_pass(run, "gain", 1, &r);
+        for (size_t i = 0; rj.debug_gain && i < (size_t)run->width * run->height; i++)
+            rj.debug_gain[i] = 1.0f;
+    }
     if (!r) {
         int rows = run->roi.y1 - run->roi.y0;
         fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), refract_rows, &rj);

@@ -29,12 +29,14 @@ int fx_refract_into(fx_vec3 d, fx_vec3 n, float ior, fx_vec3 *out, float *t)
 
 typedef struct node_job {
     const fx_caustic_input *in;
-    int nx, ny;
+    int nx, ny;     /* the view's nodes */
+    int gx, gy, ox, oy; /* the map's nodes; the view's node (0, 0) in it */
     fx_vec3 L;      /* the Sun's light travels along L (world, unit) */
     float far;      /* depth at or beyond: no water */
-    float *img;     /* nx * ny * 3: image u, v (light-view pixels), weight */
+    float *img;     /* nx * ny * 4: image u, v (light-view pixels), weight, water (1 or 0) */
     long *water;    /* per node row: nodes with water */
     double *drop;   /* per node row: sum of the water's height above the plane */
+    double mass[2]; /* 1-D mass of the bilinear basis at the sub-samples: same node, other node */
 } node_job;
 
 /* The image of one node: where its light meets the plane, in light-view pixels. */
@@ -44,7 +46,7 @@ static int node_image(const node_job *j, int x, int y, float *q, double *drop)
     float px = (float)x + 0.5f, py = (float)y + 0.5f;
     q[0] = px;
     q[1] = py;
-    q[2] = 1.0f;
+    q[2] = q[3] = 0.0f; /* no water: no light the map knows of (the view holds only water) */
     size_t i = (size_t)y * in->width + x;
     float d = in->depth[i];
     const float *nq = in->normal + i * in->normal_channels;
@@ -52,6 +54,7 @@ static int node_image(const node_job *j, int x, int y, float *q, double *drop)
     float len = sqrtf(fx_v3_dot(n, n));
     if (!(d > 0.0f && d < j->far) || !(len >= 0.5f && len < 1e30f))
         return 0;
+    q[2] = q[3] = 1.0f;
     n = fx_v3_scale(n, 1.0f / len);
     if (fx_v3_dot(n, j->L) > 0.0f)
         n = fx_v3_scale(n, -1.0f); /* the side the light comes from */
@@ -83,7 +86,7 @@ static void node_rows(void *user, int begin, int end)
         long n = 0;
         double drop = 0.0;
         for (int c = 0; c < j->nx; c++)
-            n += node_image(j, c * step, r * step, j->img + ((size_t)r * j->nx + c) * 3, &drop);
+            n += node_image(j, c * step, r * step, j->img + ((size_t)r * j->nx + c) * 4, &drop);
         j->water[r] = n;
         j->drop[r] = drop;
     }
@@ -165,14 +168,27 @@ static inline void splat(double *g, int nx, int ny, float gx, float gy, const ax
 }
 
 /* Every cell's flux, s x s sub-samples each, in one fixed order. */
-static void splat_cells(const node_job *j, double *g)
+static void splat_cells(const node_job *j, double *g, double *den)
 {
-    const int nx = j->nx, ny = j->ny, s = j->in->samples;
+    const int nx = j->nx, ny = j->ny, s = j->in->samples, gw = j->gx, gh = j->gy;
+    const float ox = (float)j->ox, oy = (float)j->oy;
     const float inv_step = 1.0f / (float)j->in->step, ws = 1.0f / (float)(s * s);
     for (int r = 0; r + 1 < ny; r++) {
         for (int c = 0; c + 1 < nx; c++) {
-            const float *a = j->img + ((size_t)r * nx + c) * 3, *b = a + 3;
-            const float *d = a + (size_t)nx * 3, *e = d + 3;
+            const float *a = j->img + ((size_t)r * nx + c) * 4, *b = a + 4;
+            const float *d = a + (size_t)nx * 4, *e = d + 4;
+            if (a[3] + b[3] + d[3] + e[3] > 0.0f) {
+                /* the identity map's density of the cell's water corners: the bilinear
+                 * basis' mass matrix at the sub-samples (a cell of water: 1/4 per node) */
+                const double *M = j->mass;
+                double *q = den + (size_t)(r + j->oy) * gw + (c + j->ox);
+                q[0] += a[3] * M[0] * M[0] + b[3] * M[1] * M[0] + d[3] * M[0] * M[1] + e[3] * M[1] * M[1];
+                q[1] += a[3] * M[1] * M[0] + b[3] * M[0] * M[0] + d[3] * M[1] * M[1] + e[3] * M[0] * M[1];
+                q[gw] += a[3] * M[0] * M[1] + b[3] * M[1] * M[1] + d[3] * M[0] * M[0] + e[3] * M[1] * M[0];
+                q[gw + 1] += a[3] * M[1] * M[1] + b[3] * M[0] * M[1] + d[3] * M[1] * M[0] + e[3] * M[0] * M[0];
+            } else {
+                continue; /* no water: no light */
+            }
             float ux = fmaxf(fmaxf(a[0], b[0]), fmaxf(d[0], e[0])) - fminf(fminf(a[0], b[0]), fminf(d[0], e[0]));
             float uy = fmaxf(fmaxf(a[1], b[1]), fmaxf(d[1], e[1])) - fminf(fminf(a[1], b[1]), fminf(d[1], e[1]));
             axis_k kx, ky;
@@ -189,36 +205,24 @@ static void splat_cells(const node_job *j, double *g)
                     float tx = ((float)sx + 0.5f) / (float)s;
                     float u = l[0] + (m[0] - l[0]) * tx, v = l[1] + (m[1] - l[1]) * tx;
                     float w = l[2] + (m[2] - l[2]) * tx;
-                    splat(g, nx, ny, (u - 0.5f) * inv_step, (v - 0.5f) * inv_step, &kx, &ky, w * ws);
+                    splat(g, gw, gh, (u - 0.5f) * inv_step + ox, (v - 0.5f) * inv_step + oy, &kx, &ky, w * ws);
                 }
             }
         }
     }
 }
 
-/* The identity map's density along one axis of n nodes (cells between them, s
- * sub-samples each, the tent of half-width 1) */
-static void identity_profile(int n, int s, double *tmp)
-{
-    memset(tmp, 0, (size_t)n * sizeof(double));
-    for (int c = 0; c + 1 < n; c++)
-        for (int k = 0; k < s; k++) {
-            double t = ((double)k + 0.5) / s;
-            tmp[c] += (1.0 - t) / s;
-            tmp[c + 1] += t / s;
-        }
-    if (n == 1)
-        tmp[0] = 1.0;
-}
-
-static void finish_gain(fx_caustic_map *m, const double *g, const double *px, const double *py)
+/* gain = the refracted light's density + the unrefracted light the view does not hold: 1 -
+ * the identity's density of its water (1 under water: the gain is the density; 0 where the
+ * view has no water: the light reaches that point straight, plus what the water sends it) */
+static void finish_gain(fx_caustic_map *m, const double *g, const double *dens)
 {
     double sum = 0.0;
     long count = 0;
     for (int r = 0; r < m->ny; r++)
         for (int c = 0; c < m->nx; c++) {
-            double den = px[c] * py[r];
-            double v = den > 1e-9 ? g[(size_t)r * m->nx + c] / den : 1.0;
+            double den = dens[(size_t)r * m->nx + c], num = g[(size_t)r * m->nx + c];
+            double v = num + (den < 1.0 ? 1.0 - den : 0.0);
             float f = !(v >= 0.0) ? 0.0f : v > FX_CAUSTIC_GAIN_MAX ? FX_CAUSTIC_GAIN_MAX : (float)v;
             m->gain[(size_t)r * m->nx + c] = f;
             if (r >= 2 && c >= 2 && r + 2 < m->ny && c + 2 < m->nx) {
@@ -263,6 +267,29 @@ static void sun_blur(fx_caustic_map *m, double *line)
     }
 }
 
+/* The map's nodes: the view's, widened to every water node's image (whole nodes, at most
+ * twice the view's size each side; images beyond are dropped by the splat) */
+static void map_extent(node_job *j)
+{
+    float lo_x = 0.0f, hi_x = (float)(j->nx - 1), lo_y = 0.0f, hi_y = (float)(j->ny - 1);
+    const float inv_step = 1.0f / (float)j->in->step;
+    for (size_t k = 0; k < (size_t)j->nx * j->ny; k++) {
+        const float *q = j->img + k * 4;
+        if (!(q[3] > 0.0f))
+            continue;
+        float u = (q[0] - 0.5f) * inv_step, v = (q[1] - 0.5f) * inv_step;
+        lo_x = fminf(lo_x, u);
+        hi_x = fmaxf(hi_x, u);
+        lo_y = fminf(lo_y, v);
+        hi_y = fmaxf(hi_y, v);
+    }
+    float mx = 2.0f * (float)j->nx, my = 2.0f * (float)j->ny;
+    j->ox = (int)ceilf(fminf(-lo_x, mx)) + 1;
+    j->oy = (int)ceilf(fminf(-lo_y, my)) + 1;
+    j->gx = j->ox + (int)ceilf(fminf(hi_x, (float)(j->nx - 1) + mx)) + 2;
+    j->gy = j->oy + (int)ceilf(fminf(hi_y, (float)(j->ny - 1) + my)) + 2;
+}
+
 fx_result fx_caustic_map_build(fx_context *ctx, const fx_caustic_input *in, fx_caustic_map *out, const char *where)
 {
     memset(out, 0, sizeof *out);
@@ -278,33 +305,47 @@ fx_result fx_caustic_map_build(fx_context *ctx, const fx_caustic_input *in, fx_c
     out->ny = j.ny;
     out->step = step;
     size_t n = (size_t)j.nx * j.ny;
-    j.img = fx_mem_alloc(n * 3 * sizeof(float));
+    j.img = fx_mem_alloc(n * 4 * sizeof(float));
     j.water = fx_mem_alloc((size_t)j.ny * sizeof(long));
     j.drop = fx_mem_alloc((size_t)j.ny * sizeof(double));
-    double *g = fx_mem_calloc(n, sizeof(double));
-    double *prof = fx_mem_alloc((size_t)(2 * j.nx + 2 * j.ny) * sizeof(double));
-    out->gain = fx_mem_alloc(n * sizeof(float));
+    double *g = NULL, *den = NULL, *prof = NULL;
     fx_result r = FX_OK;
-    if (!j.img || !j.water || !j.drop || !g || !prof || !out->gain) {
+    if (!j.img || !j.water || !j.drop) {
         r = fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory (caustics map %dx%d)", where, j.nx, j.ny);
-        fx_caustic_map_free(out);
     } else {
         fx_caustic_input local = *in;
         local.step = step;
         local.samples = in->samples > 0 ? in->samples : 1;
         j.in = &local;
+        for (int k = 0; k < local.samples; k++) {
+            double t = ((double)k + 0.5) / local.samples;
+            j.mass[0] += (1.0 - t) * (1.0 - t) / local.samples;
+            j.mass[1] += t * (1.0 - t) / local.samples;
+        }
         fx_parallel_for(ctx, j.ny, 1, node_rows, &j);
+        map_extent(&j);
+        size_t gn = (size_t)j.gx * j.gy;
+        out->nx = j.gx;
+        out->ny = j.gy;
+        out->ox = j.ox;
+        out->oy = j.oy;
+        g = fx_mem_calloc(2 * gn, sizeof(double));
+        den = g ? g + gn : NULL;
+        prof = fx_mem_alloc((size_t)(j.gx + j.gy) * sizeof(double));
+        out->gain = fx_mem_alloc(gn * sizeof(float));
+        if (!g || !prof || !out->gain) {
+            r = fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory (caustics map %dx%d)", where, j.gx, j.gy);
+            fx_caustic_map_free(out);
+            goto done;
+        }
         double drop = 0.0;
         for (int k = 0; k < j.ny; k++) {
             out->water_nodes += j.water[k];
             drop += j.drop[k];
         }
         out->mean_drop = out->water_nodes ? drop / (double)out->water_nodes : 0.0;
-        splat_cells(&j, g);
-        double *px = prof, *py = prof + j.nx;
-        identity_profile(j.nx, local.samples, px);
-        identity_profile(j.ny, local.samples, py);
-        finish_gain(out, g, px, py);
+        splat_cells(&j, g, den);
+        finish_gain(out, g, den);
         /* the sun disc: a cone of half-angle a / (2 ior) in the water, its radius on the
          * floor over the world size of a node (an orthographic view: 2 / P[0] wide) */
         double node_w = 2.0 / fabs((double)in->view->cam.projection[0]) / in->view->disp_w * step;
@@ -312,8 +353,9 @@ fx_result fx_caustic_map_build(fx_context *ctx, const fx_caustic_input *in, fx_c
         out->blur_sigma = in->sun_angle > 0.0f && node_w > 0.0 && isfinite(radius) ? 0.5 * radius / node_w : 0.0;
         if (out->blur_sigma > 20.0)
             out->blur_sigma = 20.0;
-        sun_blur(out, prof + j.nx + j.ny);
+        sun_blur(out, prof);
     }
+done:
     fx_mem_free(j.img);
     fx_mem_free(j.water);
     fx_mem_free(j.drop);

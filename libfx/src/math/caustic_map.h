@@ -10,7 +10,9 @@
  * (or whose water is below the plane, or whose ray does not go down) sends its light
  * straight on. Either way the node's image is where that point of the plane lies in the
  * light view, so the gain map is indexed by light-view coordinates: a receiver point X
- * looks up the texel it projects to along L.
+ * looks up the texel it projects to along L. The map reaches beyond the view as far as the
+ * refracted light does (at most twice the view's size each side): under a low sun the
+ * floor below the water projects far outside the water's own view.
  *
  * The flux between four nodes (a cell) is spread over the cell's image by s x s
  * sub-samples (the corners' images and weights interpolated bilinearly: the piecewise
@@ -56,7 +58,8 @@ typedef struct fx_caustic_input {
 } fx_caustic_input;
 
 typedef struct fx_caustic_map {
-    int nx, ny;               /* nodes */
+    int nx, ny;               /* the map's nodes: the view's nodes and a margin around them */
+    int ox, oy;               /* the view's node (0, 0) is the map's node (ox, oy) */
     int step;
     float *gain;              /* nx * ny */
     long water_nodes;         /* nodes that saw water */
@@ -73,7 +76,7 @@ void fx_caustic_map_free(fx_caustic_map *m);
  * bilinear between nodes; 1 outside the nodes' range (no knowledge: no change). */
 static inline float fx_caustic_map_gain(const fx_caustic_map *m, float px, float py)
 {
-    float gx = (px - 0.5f) / (float)m->step, gy = (py - 0.5f) / (float)m->step;
+    float gx = (px - 0.5f) / (float)m->step + (float)m->ox, gy = (py - 0.5f) / (float)m->step + (float)m->oy;
     if (!(gx >= 0.0f && gy >= 0.0f && gx <= (float)(m->nx - 1) && gy <= (float)(m->ny - 1)))
         return 1.0f; /* also NaN */
     int x0 = (int)gx, y0 = (int)gy;
@@ -87,6 +90,12 @@ static inline float fx_caustic_map_gain(const fx_caustic_map *m, float px, float
     float a = g[(size_t)y0 * m->nx + x0] + (g[(size_t)y0 * m->nx + x1] - g[(size_t)y0 * m->nx + x0]) * tx;
     float b = g[(size_t)y1 * m->nx + x0] + (g[(size_t)y1 * m->nx + x1] - g[(size_t)y1 * m->nx + x0]) * tx;
     return a + (b - a) * ty;
+}
+
+/* The gain at the view's node (c, r) (texel (c step, r step)). */
+static inline float fx_caustic_map_node(const fx_caustic_map *m, int c, int r)
+{
+    return m->gain[(size_t)(r + m->oy) * m->nx + (c + m->ox)];
 }
 
 /* Snell's refraction of unit direction d at unit normal n (n against d: n . d < 0) from
