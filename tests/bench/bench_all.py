@@ -111,10 +111,9 @@ KNOBS = {
     "voronoi_caustics": [("look", "points", "49,196,1024,4096", "4096", ""),
                          ("knob", "method", "grid,brute", None, ""),
                          # issue 27: the refractive mode on the bath (its water is the mask: the
-                         # pool floor 1.05 below), at final against its reference, and its quality
-                         # knob; the water view comes from RENDER_ONLY's entry
-                         ("look", "mode", "physical,refractive", "refractive", REFRACTIVE_BATH),
-                         ("look", "refract_samples", "1,2,4", None, "mode=refractive;" + REFRACTIVE_BATH)],
+                         # pool floor 1.05 below), at final against its reference preset (a look
+                         # knob: both at mode refractive); the water view comes from RENDER_ONLY
+                         ("look", "mode", "physical,refractive", "refractive", REFRACTIVE_BATH)],
     "vsm_shadows": [("look", "filter_size", "1,5,15,33", "15", ""),
                     ("knob", "method", "hard,vsm,pcf", "hard", "")],
     "wet_surfaces": [("look", "edge_softness", "0.1,0.4,1.6", None, "")],
