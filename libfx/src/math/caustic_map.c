@@ -145,8 +145,10 @@ static inline void axis_weights(float g, const axis_k *k, axis_w *a)
 }
 
 /* One sub-sample's weight w at node coordinates (gx, gy), by its cell's kernels kx, ky */
-static inline void splat(double *g, int nx, int ny, float gx, float gy, const axis_k *kx, const axis_k *ky, float w)
+static inline void splat(double *g, int nx, int ylo, int yhi, float gx, float gy, const axis_k *kx, const axis_k *ky,
+                         float w)
 {
+    const int ny = yhi + 1;
     if (!(gx > -2.0f * AXIS_MAX && gy > -2.0f * AXIS_MAX && gx < (float)nx + 2.0f * AXIS_MAX &&
           gy < (float)ny + 2.0f * AXIS_MAX))
         return;
@@ -155,7 +157,7 @@ static inline void splat(double *g, int nx, int ny, float gx, float gy, const ax
     axis_weights(gy, ky, &ay);
     for (int k = 0; k < ay.n; k++) {
         int y = ay.i0 + k;
-        if (y < 0 || y >= ny || !(ay.w[k] > 0.0f))
+        if (y < ylo || y > yhi || !(ay.w[k] > 0.0f))
             continue;
         double *row = g + (size_t)y * nx;
         const float wr = w * ay.w[k];
@@ -167,49 +169,145 @@ static inline void splat(double *g, int nx, int ny, float gx, float gy, const ax
     }
 }
 
-/* Every cell's flux, s x s sub-samples each, in one fixed order. */
-static void splat_cells(const node_job *j, double *g, double *den)
+#define CHUNK_ROWS 16 /* map rows per chunk of the parallel splat */
+
+/* The identity map's density of each cell's water corners: the bilinear basis' mass matrix
+ * at the sub-samples (a cell of water: 1/4 per node). */
+static void identity_density(const node_job *j, double *den)
 {
-    const int nx = j->nx, ny = j->ny, s = j->in->samples, gw = j->gx, gh = j->gy;
-    const float ox = (float)j->ox, oy = (float)j->oy;
-    const float inv_step = 1.0f / (float)j->in->step, ws = 1.0f / (float)(s * s);
-    for (int r = 0; r + 1 < ny; r++) {
+    const int nx = j->nx, ny = j->ny, gw = j->gx;
+    const double *M = j->mass;
+    for (int r = 0; r + 1 < ny; r++)
         for (int c = 0; c + 1 < nx; c++) {
             const float *a = j->img + ((size_t)r * nx + c) * 4, *b = a + 4;
             const float *d = a + (size_t)nx * 4, *e = d + 4;
-            if (a[3] + b[3] + d[3] + e[3] > 0.0f) {
-                /* the identity map's density of the cell's water corners: the bilinear
-                 * basis' mass matrix at the sub-samples (a cell of water: 1/4 per node) */
-                const double *M = j->mass;
-                double *q = den + (size_t)(r + j->oy) * gw + (c + j->ox);
-                q[0] += a[3] * M[0] * M[0] + b[3] * M[1] * M[0] + d[3] * M[0] * M[1] + e[3] * M[1] * M[1];
-                q[1] += a[3] * M[1] * M[0] + b[3] * M[0] * M[0] + d[3] * M[1] * M[1] + e[3] * M[0] * M[1];
-                q[gw] += a[3] * M[0] * M[1] + b[3] * M[1] * M[1] + d[3] * M[0] * M[0] + e[3] * M[1] * M[0];
-                q[gw + 1] += a[3] * M[1] * M[1] + b[3] * M[0] * M[1] + d[3] * M[1] * M[0] + e[3] * M[0] * M[0];
-            } else {
-                continue; /* no water: no light */
-            }
-            float ux = fmaxf(fmaxf(a[0], b[0]), fmaxf(d[0], e[0])) - fminf(fminf(a[0], b[0]), fminf(d[0], e[0]));
-            float uy = fmaxf(fmaxf(a[1], b[1]), fmaxf(d[1], e[1])) - fminf(fminf(a[1], b[1]), fminf(d[1], e[1]));
-            axis_k kx, ky;
-            axis_kernel(ux * inv_step / (float)s, &kx);
-            axis_kernel(uy * inv_step / (float)s, &ky);
-            for (int sy = 0; sy < s; sy++) {
-                float ty = ((float)sy + 0.5f) / (float)s;
-                float l[3], m[3];
-                for (int k = 0; k < 3; k++) {
-                    l[k] = a[k] + (d[k] - a[k]) * ty;
-                    m[k] = b[k] + (e[k] - b[k]) * ty;
-                }
-                for (int sx = 0; sx < s; sx++) {
-                    float tx = ((float)sx + 0.5f) / (float)s;
-                    float u = l[0] + (m[0] - l[0]) * tx, v = l[1] + (m[1] - l[1]) * tx;
-                    float w = l[2] + (m[2] - l[2]) * tx;
-                    splat(g, gw, gh, (u - 0.5f) * inv_step + ox, (v - 0.5f) * inv_step + oy, &kx, &ky, w * ws);
-                }
-            }
+            if (!(a[3] + b[3] + d[3] + e[3] > 0.0f))
+                continue;
+            double *q = den + (size_t)(r + j->oy) * gw + (c + j->ox);
+            q[0] += a[3] * M[0] * M[0] + b[3] * M[1] * M[0] + d[3] * M[0] * M[1] + e[3] * M[1] * M[1];
+            q[1] += a[3] * M[1] * M[0] + b[3] * M[0] * M[0] + d[3] * M[1] * M[1] + e[3] * M[0] * M[1];
+            q[gw] += a[3] * M[0] * M[1] + b[3] * M[1] * M[1] + d[3] * M[0] * M[0] + e[3] * M[1] * M[0];
+            q[gw + 1] += a[3] * M[1] * M[1] + b[3] * M[0] * M[1] + d[3] * M[1] * M[0] + e[3] * M[0] * M[0];
+        }
+}
+
+/* A cell's kernels and the map rows its splat can reach; 0 for a cell without water. */
+static int cell_reach(const node_job *j, int cell, axis_k *kx, axis_k *ky, int *y0, int *y1)
+{
+    const int nx = j->nx, s = j->in->samples;
+    const float *a = j->img + (size_t)cell * 4, *b = a + 4, *d = a + (size_t)nx * 4, *e = d + 4;
+    if (!(a[3] + b[3] + d[3] + e[3] > 0.0f))
+        return 0;
+    const float inv_step = 1.0f / (float)j->in->step;
+    float ux = fmaxf(fmaxf(a[0], b[0]), fmaxf(d[0], e[0])) - fminf(fminf(a[0], b[0]), fminf(d[0], e[0]));
+    float vlo = fminf(fminf(a[1], b[1]), fminf(d[1], e[1])), vhi = fmaxf(fmaxf(a[1], b[1]), fmaxf(d[1], e[1]));
+    axis_kernel(ux * inv_step / (float)s, kx);
+    axis_kernel((vhi - vlo) * inv_step / (float)s, ky);
+    float lo = (vlo - 0.5f) * inv_step + (float)j->oy - ky->rb, hi = (vhi - 0.5f) * inv_step + (float)j->oy + ky->rb;
+    lo = lo > -1.0f ? lo : -1.0f;
+    hi = hi < (float)j->gy ? hi : (float)j->gy;
+    *y0 = (int)ceilf(lo);
+    *y1 = (int)floorf(hi);
+    *y0 = *y0 < 0 ? 0 : *y0;
+    *y1 = *y1 > j->gy - 1 ? j->gy - 1 : *y1;
+    return *y0 <= *y1;
+}
+
+/* A cell's flux, s x s sub-samples, onto the map rows [ylo, yhi] only. */
+static void splat_cell(const node_job *j, double *g, int cell, const axis_k *kx, const axis_k *ky, int ylo, int yhi)
+{
+    const int nx = j->nx, s = j->in->samples, gw = j->gx;
+    const float ox = (float)j->ox, oy = (float)j->oy;
+    const float inv_step = 1.0f / (float)j->in->step, ws = 1.0f / (float)(s * s);
+    const float *a = j->img + (size_t)cell * 4, *b = a + 4, *d = a + (size_t)nx * 4, *e = d + 4;
+    for (int sy = 0; sy < s; sy++) {
+        float ty = ((float)sy + 0.5f) / (float)s;
+        float l[3], m[3];
+        for (int k = 0; k < 3; k++) {
+            l[k] = a[k] + (d[k] - a[k]) * ty;
+            m[k] = b[k] + (e[k] - b[k]) * ty;
+        }
+        for (int sx = 0; sx < s; sx++) {
+            float tx = ((float)sx + 0.5f) / (float)s;
+            float u = l[0] + (m[0] - l[0]) * tx, v = l[1] + (m[1] - l[1]) * tx;
+            float w = l[2] + (m[2] - l[2]) * tx;
+            splat(g, gw, ylo, yhi, (u - 0.5f) * inv_step + ox, (v - 0.5f) * inv_step + oy, kx, ky, w * ws);
         }
     }
+}
+
+/* The parallel splat: the map's rows in chunks of CHUNK_ROWS, each chunk splatting every
+ * cell that reaches it (its list, in increasing cell order) onto its own rows only. Each
+ * map node so adds its contributions in the same order as one thread walking every cell:
+ * the same bits for any thread count (a sub-sample reaching two chunks is weighed twice). */
+typedef struct splat_job {
+    const node_job *j;
+    double *g;
+    const int *start, *cells; /* per chunk: its cells at cells[start[k] .. start[k + 1]) */
+} splat_job;
+
+static void splat_chunks(void *user, int begin, int end)
+{
+    const splat_job *sj = user;
+    for (int k = begin; k < end; k++) {
+        int ylo = k * CHUNK_ROWS, yhi = ylo + CHUNK_ROWS - 1;
+        yhi = yhi < sj->j->gy - 1 ? yhi : sj->j->gy - 1;
+        for (int q = sj->start[k]; q < sj->start[k + 1]; q++) {
+            axis_k kx, ky;
+            int y0, y1;
+            if (cell_reach(sj->j, sj->cells[q], &kx, &ky, &y0, &y1))
+                splat_cell(sj->j, sj->g, sj->cells[q], &kx, &ky, y0 > ylo ? y0 : ylo, y1 < yhi ? y1 : yhi);
+        }
+    }
+}
+
+/* Every cell's flux into g (and the identity's density into den); 0, or -1 out of memory. */
+static int splat_cells(fx_context *ctx, const node_job *j, double *g, double *den)
+{
+    identity_density(j, den);
+    const int nx = j->nx, ny = j->ny, chunks = (j->gy + CHUNK_ROWS - 1) / CHUNK_ROWS;
+    int *start = fx_mem_calloc((size_t)chunks + 1, sizeof(int));
+    if (!start)
+        return -1;
+    size_t total = 0;
+    for (int pass = 0; pass < 2; pass++) {
+        int *cells = NULL, *fill = NULL;
+        if (pass == 1) {
+            for (int k = 0; k < chunks; k++)
+                start[k + 1] += start[k];
+            cells = fx_mem_alloc((total ? total : 1) * sizeof(int));
+            fill = fx_mem_calloc((size_t)chunks, sizeof(int));
+            if (!cells || !fill) {
+                fx_mem_free(cells);
+                fx_mem_free(fill);
+                fx_mem_free(start);
+                return -1;
+            }
+        }
+        for (int r = 0; r + 1 < ny; r++)
+            for (int c = 0; c + 1 < nx; c++) {
+                axis_k kx, ky;
+                int y0, y1, cell = r * nx + c;
+                if (!cell_reach(j, cell, &kx, &ky, &y0, &y1))
+                    continue;
+                for (int k = y0 / CHUNK_ROWS; k <= y1 / CHUNK_ROWS; k++) {
+                    if (pass == 0) {
+                        start[k + 1]++;
+                        total++;
+                    } else {
+                        cells[start[k] + fill[k]++] = cell;
+                    }
+                }
+            }
+        if (pass == 1) {
+            splat_job sj = {j, g, start, cells};
+            fx_parallel_for(ctx, chunks, 1, splat_chunks, &sj);
+            fx_mem_free(cells);
+            fx_mem_free(fill);
+        }
+    }
+    fx_mem_free(start);
+    return 0;
 }
 
 /* gain = the refracted light's density + the unrefracted light the view does not hold: 1 -
@@ -344,7 +442,11 @@ fx_result fx_caustic_map_build(fx_context *ctx, const fx_caustic_input *in, fx_c
             drop += j.drop[k];
         }
         out->mean_drop = out->water_nodes ? drop / (double)out->water_nodes : 0.0;
-        splat_cells(&j, g, den);
+        if (splat_cells(ctx, &j, g, den)) {
+            r = fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory (caustics map %dx%d)", where, j.gx, j.gy);
+            fx_caustic_map_free(out);
+            goto done;
+        }
         finish_gain(out, g, den);
         /* the sun disc: a cone of half-angle a / (2 ior) in the water, its radius on the
          * floor over the world size of a node (an orthographic view: 2 / P[0] wide) */

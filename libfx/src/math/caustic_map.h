@@ -31,8 +31,8 @@
  * a / (2 ior) in the water: the gain map is blurred by a Gaussian of sigma half that cone's
  * radius on the floor at the water's mean height above it (a disc's sigma is R / 2).
  *
- * Node images are computed in parallel; the splat runs in one fixed order on one
- * thread: the map is bit-identical for any thread count. Gains are finite, >= 0, and at
+ * Node images are computed in parallel; the splat too, by chunks of the map's rows, each
+ * adding its cells in the one fixed order: the map is bit-identical for any thread count. Gains are finite, >= 0, and at
  * most FX_CAUSTIC_GAIN_MAX. */
 #ifndef LIBFX_MATH_CAUSTIC_MAP_H
 #define LIBFX_MATH_CAUSTIC_MAP_H
