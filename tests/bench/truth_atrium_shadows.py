@@ -45,8 +45,11 @@ CONFIGS = {
 }
 
 
-# what makes the atrium the truth: the Sun casts its shadows
-TRUTH_SETUP = "import bpy\nbpy.data.objects['Sun'].data.cycles.cast_shadow = True\n"
+# what makes the atrium the truth: the Sun casts its shadows. Both switches, as the add-on's
+# compat.light_cast_shadow sets them: 4.x's Cycles reads use_shadow (setting only
+# cycles.cast_shadow there left the truth without shadows), 5.x has no cycles.cast_shadow.
+TRUTH_SETUP = ("import bpy\nsun = bpy.data.objects['Sun'].data\nsun.use_shadow = True\n"
+               "if hasattr(sun.cycles, 'cast_shadow'):\n    sun.cycles.cast_shadow = True\n")
 
 
 def render(out, res, spp):

@@ -586,6 +586,58 @@ static void test_reference_formula(fx_context *ctx)
     free(img);
 }
 
+/* The light given on the display window of a frame whose data window starts elsewhere
+ * (a cropped or border render): light_position is a fraction of the display window, so in
+ * the data window's pixels the light sits at position * display size - data origin. The
+ * documented sum (ref_rays, in the data window's pixels) with the light there: (0.5, 0.25)
+ * of a 126 x 84 display window is (63, 21), the data window starts at (30, 20), so the light
+ * is at (33, 1) of the data (exact in float, so the same 1e-5 as test_reference_formula). */
+static void test_cropped_data_window(fx_context *ctx)
+{
+    float *img = ref_image();
+    double *occ = ref_occlusion(img, 0.8, 0.25, 8.0);
+    rset r = defaults();
+    r.decay = 0.96;
+    r.density = 0.8;
+    r.weight = 1.3;
+    r.lx = 0.5f; /* of the display window */
+    r.ly = 0.25f;
+    fx_frame *f = et_frame(ctx, W, H, img);
+    const int data[4] = {30, 20, 30 + W - 1, 20 + H - 1}, disp[4] = {0, 0, 30 + W - 1, 20 + H - 1};
+    CHECK_OK(ctx, fx_frame_set_windows(f, data, disp));
+    fx_stack *s = rays_stack(ctx, r);
+    float *o = s && f ? et_run(ctx, s, f) : NULL;
+    rset in_data = r;
+    in_data.lx = 33.0f / W; /* ref_rays places the light at lx W, ly H of the data window */
+    in_data.ly = 1.0f / H;
+    double *rays = ref_rays(occ, in_data, r.samples);
+    double peak = 0, e = o ? ref_error(o, img, rays, 0, &peak) : INFINITY;
+    fprintf(stderr, "cropped data window: max error %.2e of peak %.3f\n", e, peak);
+    CHECK(peak > 0.5 && e < 1e-5);
+    free(rays);
+    free(o);
+    fx_stack_free(s);
+    fx_frame_free(f);
+    free(occ);
+    free(img);
+}
+
+/* A light behind the camera is the identity bit for bit, negative zeros too (an added +0
+ * would turn -0.0 into +0.0: the effect must not run at all). */
+static void test_behind_keeps_signed_zeros(fx_context *ctx)
+{
+    float *img = spot_image(0.5 * W, 0.5 * H);
+    for (int i = 0; i < W * H; i += 7)
+        for (int c = 0; c < 4; c++)
+            img[4 * i + c] = -0.0f;
+    for (int m = 0; m < 2; m++) {
+        float *o = run_scene_light(ctx, img, "[0, 0, -1]", m ? "polar" : "naive");
+        CHECK(o && memcmp(o, img, (size_t)W * H * 4 * sizeof(float)) == 0);
+        free(o);
+    }
+    free(img);
+}
+
 static void test_threads(void)
 {
     float *img = spot_image(50, 10);
@@ -687,6 +739,8 @@ int main(void)
     test_extremes(ctx);
     test_methods_converge(ctx);
     test_reference_formula(ctx);
+    test_cropped_data_window(ctx);
+    test_behind_keeps_signed_zeros(ctx);
     test_threads();
     test_fused_equals_buffered(ctx);
     test_sky_skip(ctx);

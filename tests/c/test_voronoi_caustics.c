@@ -749,6 +749,50 @@ static void test_in_place(void)
     }
 }
 
+/* A Position pass of four channels (XYZ and a fourth, as some exporters write it) is read
+ * as its first three: the same bits as the three-channel pass on every path (the gain
+ * path's octets and chunks, the lattice and per-pixel paths, seed mode, the environment),
+ * on in_place_frame (invalid positions, a step), widths off the octets, with a mask. */
+static void test_position_four_channels(fx_context *ctx)
+{
+    const char *params[] = {
+        "\"downsample\": 4, \"refine\": false, \"lattice_shading\": true",
+        "\"downsample\": 3, \"refine\": false, \"lattice_shading\": true",
+        "\"downsample\": 6, \"refine\": false, \"lattice_shading\": true",
+        "\"downsample\": 2, \"refine\": true",
+        "\"downsample\": 1, \"distance\": \"exact\"",
+        "\"downsample\": 2, \"mode\": \"seed\"",
+        "\"downsample\": 4, \"lattice_shading\": true, \"environment_strength\": 0.5",
+    };
+    const int w = 83, h = 29;
+    for (int m = 0; m < 2; m++)
+        for (int k = 0; k < (int)(sizeof params / sizeof params[0]); k++) {
+            fx_frame *f3 = in_place_frame(ctx, w, h), *f4 = in_place_frame(ctx, w, h);
+            const float *p3 = NULL;
+            fx_frame_pass_read(f3, "Position", &p3, NULL);
+            float *p4 = malloc((size_t)w * h * 4 * sizeof(float));
+            for (int i = 0; p3 && i < w * h; i++) {
+                memcpy(p4 + 4 * i, p3 + 3 * i, 3 * sizeof(float));
+                p4[4 * i + 3] = (float)(i % 5) - 2.0f; /* anything: not a coordinate */
+            }
+            CHECK_OK(ctx, fx_frame_add_pass(f4, "Position", 4, p4)); /* replaces the three-channel one */
+            char pr[512];
+            snprintf(pr, sizeof pr, "\"points\": 60, \"tile_size\": 2.0, %s", params[k]);
+            const char *mask = m ? "{\"rect\": [6, 3, 61, 17]}" : NULL;
+            float *o3 = et_run_effect(ctx, "voronoi_caustics", f3, pr, mask);
+            float *o4 = et_run_effect(ctx, "voronoi_caustics", f4, pr, mask);
+            const int same = o3 && o4 && memcmp(o3, o4, (size_t)w * h * 4 * sizeof(float)) == 0;
+            if (!same)
+                fprintf(stderr, "four-channel Position differs: mask %d, %s\n", m, params[k]);
+            CHECK(same);
+            free(o3);
+            free(o4);
+            free(p4);
+            fx_frame_free(f3);
+            fx_frame_free(f4);
+        }
+}
+
 /* ---- an independent reference: the pattern evaluated directly at every pixel ----
  * From the documented definitions (docs/effects/voronoi_caustics.md, the hash's definition in math/hash.h,
  * tu_ref_hash4 in testutil.c), written out here with no library call: a G x G grid of cells
@@ -947,6 +991,7 @@ int main(void)
     test_extremes_and_mask(ctx);
     test_lattice(ctx);
     test_in_place();
+    test_position_four_channels(ctx);
     test_reference_seed_mode(ctx);
     test_reference_physical_mode(ctx);
     fx_context_free(ctx);
