@@ -15,6 +15,14 @@ alpha threshold exactly as in the main render and cast leaf-shaped shadows.
   64, 256..4096) or the scene's ID property ``libfx_light_map_size``.
 - ``rain_map``: orthographic, straight down, over the same region in XY, ~5 cm
   texels (128..2048) or ``libfx_rain_map_size``.
+- ``water:<material>`` (voronoi_caustics' mode refractive): the objects that use the
+  material <material> (also those hidden from the render or from the camera: a scene
+  often hides its water so that the floor below is in plain sunlight) seen from the
+  scene's first sun, orthographic, Normal and Depth passes, nothing else linked.
+  Extent: the water's box seen from the sun, cut to the receivers the cameras see
+  widened by the water's height above them (refracted light comes from beside a
+  point, not only from straight up the sun's direction); resolution as a light view
+  (``libfx_water_map_size`` overrides it).
 
 - ``probe:<key>``: a reflection probe for one mirror entry (the view lists the
   entry's mask): an equirectangular panorama (Cycles PANO camera, 512x256 or
@@ -688,6 +696,174 @@ def _store_entry(meta_path, entry):
     os.replace(meta_path + ".tmp", meta_path)
 
 
+# ---------------------------------------------------------------- water (refractive caustics)
+
+WATER = "water:"
+
+
+def water_objects(scene, material):
+    """The mesh objects that use `material` (hidden from the render or the camera or not)."""
+    out = []
+    for ob in scene.objects:
+        if ob.type != "MESH":
+            continue
+        if any(sl.material is not None and sl.material.name == material for sl in ob.material_slots):
+            out.append(ob)
+    return sorted(out, key=lambda o: o.name)
+
+
+def _first_sun(scene):
+    for ob in scene.objects:
+        if ob.type == "LIGHT" and not ob.hide_render and ob.data.type == "SUN":
+            return ob
+    return None
+
+
+def water_spec(scene, view, frames):
+    """The sun's orthographic view of the water objects: camera matrices, resolution."""
+    material = view["name"][len(WATER):]
+    water = water_objects(scene, material)
+    if not water:
+        raise native.LibfxError("voronoi_caustics (mode refractive) needs the water's geometry, but no mesh "
+                                "object of the scene uses the material '%s' (the effect's 'water' parameter)"
+                                % material)
+    sun = _first_sun(scene)
+    if sun is None:
+        others = [ob.name + " (" + ob.data.type + ")" for ob in scene.objects if ob.type == "LIGHT"]
+        raise native.LibfxError("voronoi_caustics (mode refractive) refracts a sun's light; the scene has no sun "
+                                "lamp (lights: %s); spot and point lights are not supported yet"
+                                % (", ".join(others) or "none"))
+    d = -sun.matrix_world.col[2].xyz.normalized()
+    rot = d.to_track_quat('-Z', 'Y').to_matrix()
+    inv = rot.transposed()
+    w_lo, w_hi = world_box(water)
+    recv = [ob for ob in casters(scene) if ob not in water]
+    wc = [inv @ p for p in box_corners(w_lo, w_hi)]
+    lo = Vector(map(min, zip(*wc)))
+    hi = Vector(map(max, zip(*wc)))
+    if recv:
+        g_lo, g_hi = world_box(recv)
+        r_lo, r_hi = frusta_box(scene, frames, g_lo, g_hi)
+        rc = [inv @ p for p in box_corners(r_lo, r_hi)]
+        margin = max(0.0, w_hi.z - r_lo.z) * 0.5 + 0.05
+        c_lo = Vector(map(min, zip(*rc))) - Vector((margin, margin, 0))
+        c_hi = Vector(map(max, zip(*rc))) + Vector((margin, margin, 0))
+        if c_lo.x < hi.x and c_hi.x > lo.x and c_lo.y < hi.y and c_hi.y > lo.y:
+            lo.x, lo.y = max(lo.x, c_lo.x), max(lo.y, c_lo.y)
+            hi.x, hi.y = min(hi.x, c_hi.x), min(hi.y, c_hi.y)
+    zmax, zmin = hi.z + 1.0, lo.z - 1.0
+    ext = Vector((max(hi.x - lo.x, 1e-3), max(hi.y - lo.y, 1e-3)))
+    centre = rot @ Vector(((lo.x + hi.x) / 2, (lo.y + hi.y) / 2, zmax + 0.5))
+    near, far = 0.5, zmax - zmin + 0.5
+    r = scene.render
+    rw = int(r.resolution_x * r.resolution_percentage / 100)
+    rh = int(r.resolution_y * r.resolution_percentage / 100)
+    size = int(scene.get("libfx_water_map_size") or _round64(max(rw, rh) * 1.5, 256, 4096))
+    if ext.x >= ext.y:
+        w, h = size, max(16, int(round(size * ext.y / ext.x)))
+        half_x = ext.x / 2 * 1.02
+        half_y = half_x * h / w
+    else:
+        h, w = size, max(16, int(round(size * ext.x / ext.y)))
+        half_y = ext.y / 2 * 1.02
+        half_x = half_y * w / h
+    mw = Matrix.Translation(centre) @ rot.to_4x4()
+    return {
+        "name": view["name"], "kind": "water", "width": w, "height": h, "material": material,
+        "matrix_world": [list(row) for row in mw], "world_to_camera": [list(row) for row in mw.inverted()],
+        "projection": ortho_projection(half_x, half_y, near, far),
+        "clip_start": near, "clip_end": far, "orthographic": True, "ortho_scale": 2 * max(half_x, half_y),
+        "light": [sun.name, [list(r) for r in sun.matrix_world]],
+    }, water
+
+
+def _render_water(scene, spec, water, path):
+    """The water objects alone, from the sun: Normal and Depth (1 sample at texel centres).
+    Objects hidden from the render or the camera are shown for this render only."""
+    aux = bpy.data.scenes.new(AUX_SCENE)
+    cam_data = bpy.data.cameras.new(AUX_SCENE)
+    cam = bpy.data.objects.new(AUX_SCENE, cam_data)
+    shown = []
+    try:
+        for ob in water:
+            aux.collection.objects.link(ob)
+            shown.append((ob, ob.hide_render, ob.visible_camera))
+            ob.hide_render = False
+            ob.visible_camera = True
+        aux.collection.objects.link(cam)
+        cam_data.type = "ORTHO"
+        cam_data.ortho_scale = spec["ortho_scale"]
+        cam_data.sensor_fit = "HORIZONTAL" if spec["width"] >= spec["height"] else "VERTICAL"
+        cam_data.clip_start = spec["clip_start"]
+        cam_data.clip_end = spec["clip_end"]
+        cam.matrix_world = Matrix(spec["matrix_world"])
+        aux.camera = cam
+        r = aux.render
+        r.engine = "CYCLES"
+        r.resolution_x, r.resolution_y, r.resolution_percentage = spec["width"], spec["height"], 100
+        r.use_compositing = True
+        r.filepath = os.path.join(os.path.dirname(path), "")
+        c = aux.cycles
+        c.samples = 1
+        c.use_adaptive_sampling = False
+        c.use_denoising = False
+        c.max_bounces = 0
+        c.filter_width = 0.01
+        c.seed = 0
+        aux.frame_start = aux.frame_end = aux.frame_current = 1
+        vl = aux.view_layers[0]
+        vl.use_pass_z = True
+        vl.use_pass_normal = True
+        _render_view(scene, aux, path, [("Depth", "Depth"), ("Normal", "Normal")],
+                     "the water view render of '%s'" % spec["name"])
+    finally:
+        for ob, hide, cam_vis in shown:
+            ob.hide_render = hide
+            ob.visible_camera = cam_vis
+        bpy.data.scenes.remove(aux)
+        bpy.data.objects.remove(cam)
+        bpy.data.cameras.remove(cam_data)
+
+
+def _evaluated_shape(water):
+    """A hash of the water's evaluated vertices (waves animated by modifiers or shape keys
+    change it while the objects' transforms stay): a changed surface is rendered again."""
+    h = hashlib.sha1()
+    dg = bpy.context.evaluated_depsgraph_get()
+    for ob in water:
+        ev = ob.evaluated_get(dg)
+        me = ev.to_mesh()
+        try:
+            co = [0.0] * (3 * len(me.vertices))
+            me.vertices.foreach_get("co", co)
+            h.update(json.dumps([ob.name, [round(v, 5) for v in co]]).encode("utf-8"))
+        finally:
+            ev.to_mesh_clear()
+    return h.hexdigest()
+
+
+def _prepare_water(scene, view, frames):
+    spec, water = water_spec(scene, view, frames)
+    sig = signature(dict(spec, shape=_evaluated_shape(water)), water)
+    path = "%slibfx_aux_%s.exr" % (scene_setup.output_prefix(scene), _file_name(view["name"]))
+    meta_path = path[:-4] + ".json"
+    old = _stored_entry(path, meta_path)
+    if old and old.get("signature") == sig:
+        log("water view '%s' reused (sun and water unchanged): %s" % (view["name"], path))
+    else:
+        os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
+        t0 = time.perf_counter()
+        _render_water(scene, spec, water, path)
+        log("water view '%s' (%s, from the sun '%s') rendered %dx%d in %.2f s: %s"
+            % (view["name"], ", ".join(o.name for o in water[:4]), spec["light"][0], spec["width"],
+               spec["height"], time.perf_counter() - t0, path))
+    entry = {"name": view["name"], "path": path, "world_to_camera": spec["world_to_camera"],
+             "projection": spec["projection"], "clip_start": spec["clip_start"], "clip_end": spec["clip_end"],
+             "orthographic": True, "kind": "water", "signature": sig}
+    _store_entry(meta_path, entry)
+    return entry
+
+
 def prepare(scene, frames):
     """Renders (or reuses) every aux view the stack needs for `frames`; returns the
     sidecar entries. An empty list, and no render, when the stack needs none."""
@@ -713,6 +889,9 @@ def prepare(scene, frames):
                     continue
                 _store_entry(meta_path, entry)
                 entries.append(entry)
+            continue
+        if view["kind"] == "water":
+            entries.append(_prepare_water(scene, view, frames))
             continue
         spec = view_spec(scene, view, frames, objs)
         sig = signature(spec, objs)

@@ -10,6 +10,11 @@ camera (the water disabled; the scene's recipe: voronoi_caustics on Pool_Floor w
 Greek bath's parameters); the truth the same floor under the displaced refractive water
 (apply_truth: MNEE caustics), a second truth with seed 17 (the noise floor).
 
+The refractive rows run voronoi_caustics' mode refractive (strength 1, white tint: the
+physical setting; apply sun_diffuse) on the same input rendered through the add-on with
+that recipe (the add-on then adds the DiffCol and Normal passes and renders the water's
+view from the Sun into the sidecar; kept and reused like the other renders).
+
 Statistics of the luminance over the central square (H x H px; the whole frame is floor):
 mean (and its ratio to the truth's), contrast (std / mean) at full resolution and after a
 4x4 box average (which divides uncorrelated pixel noise by 4: the truth's Monte Carlo
@@ -48,6 +53,15 @@ def stats(img, m_per_px):
     return mean, c_full, c_box, period, radial
 
 
+def refractive_recipe(recipe):
+    """The scene's recipe in mode refractive: strength 1 and a white tint (the physical
+    setting: the gain is the refracted light's own ratio), the water's material 'Water'."""
+    r = json.loads(json.dumps(recipe))
+    r["effects"][0]["params"].update({"mode": "refractive", "strength": 1.0, "tint": [1.0, 1.0, 1.0],
+                                      "water": "Water"})
+    return r
+
+
 def main():
     a = C.parse_args(res="480x270", spp=32)
     d = C.scene_dir("caustics")
@@ -60,11 +74,20 @@ def main():
     # the orthographic camera's width in metres is 2 / projection[0][0] (the sidecar)
     m_per_px = 2.0 / json.load(open(side))["projection"][0][0] / plain.shape[1]
     outs = C.run_presets(recipe, passes, side, a.out, "c", runs=a.runs, frame=1)
+    # the refractive rows' input: the same render through the add-on with the refractive
+    # recipe, which adds the passes it reads (DiffCol, Normal) and the water's view
+    refr = refractive_recipe(recipe)
+    rec_path = os.path.join(a.out, "refractive_recipe.json")
+    with open(rec_path, "w") as f:
+        json.dump(refr, f)
+    rpasses, rside, _ = C.batch(blend, p + "inr_", a.res, a.spp, recipe=rec_path)
+    outs_r = C.run_presets(refr, rpasses, rside, a.out, "cr", runs=a.runs, frame=1)
     tmean = stats(truth, m_per_px)[0]
     rows, spectra = [], {}
     for name, img, ms in ([("no effect (input)", plain, None), ("Cycles truth", truth, None),
                            ("Cycles, other seed", truth2, None)]
-                          + [("libfx " + q, *outs[q]) for q in C.PRESETS]):
+                          + [("libfx " + q, *outs[q]) for q in C.PRESETS]
+                          + [("libfx refractive " + q, *outs_r[q]) for q in C.PRESETS]):
         mean, cf, cb, per, rad = stats(img, m_per_px)
         rows.append([name, ms, mean, mean / tmean, cf, cb, per, C.mae(img, truth)])
         spectra[name] = rad
@@ -78,7 +101,8 @@ def main():
                                               "spectra": {k: [float(x) for x in v] for k, v in spectra.items()}})
     if a.docs:
         os.makedirs(os.path.join(a.docs, "images"), exist_ok=True)
-        C.save_strip(os.path.join(a.docs, "images", "truth_caustics.png"), [truth, outs["final"][0], plain])
+        C.save_strip(os.path.join(a.docs, "images", "truth_caustics.png"),
+                     [truth, outs_r["final"][0], outs["final"][0], plain])
         try:
             import matplotlib
             matplotlib.use("Agg")
@@ -86,7 +110,7 @@ def main():
             fig, axs = plt.subplots(1, 2, figsize=(9, 3.4), dpi=100)
             s = len(spectra["Cycles truth"]) * 2
             fr = np.arange(len(spectra["Cycles truth"])) / (s * m_per_px)
-            for name in ("Cycles truth", "Cycles, other seed", "libfx final", "libfx draft"):
+            for name in ("Cycles truth", "Cycles, other seed", "libfx final", "libfx draft", "libfx refractive final"):
                 sp = spectra[name]
                 axs[0].loglog(fr[1:], sp[1:] / sp[1:].sum(), label=name)
             axs[0].set_xlabel("spatial frequency (cycles per metre)")

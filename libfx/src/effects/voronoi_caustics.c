@@ -49,13 +49,18 @@
 #include "math/clones.h"
 #include "math/camera.h"
 #include "math/voronoi.h"
+#include "math/caustic_map.h"
+#include "scene/aux_view.h"
+#include "scene/lights.h"
 
+#include <cjson/cJSON.h>
 #include <float.h>
 #ifdef __SSE2__
 #include <emmintrin.h>
 #endif
 #include <math.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 #ifndef M_PI
@@ -86,19 +91,29 @@ typedef struct caustics_params {
     int distance;
     int refine;
     int lattice_shading;
+    char water[FX_STRING_PARAM_MAX];
+    float ior;
+    int fresnel;
+    int refract_samples;
+    int refract_step;
+    int apply;
+    float receiver_depth;
+    float interior;
 } caustics_params;
 
 enum { METRIC_MINKOWSKI = 0, METRIC_CHEBYSHEV };
-enum { MODE_PHYSICAL = 0, MODE_SEED };
+enum { MODE_PHYSICAL = 0, MODE_SEED, MODE_REFRACTIVE };
 enum { POS_POSITION = 0, POS_DEPTH };
 enum { METHOD_GRID = 0, METHOD_BRUTE };
 enum { DIST_FAST = 0, DIST_EXACT };
+enum { APPLY_SUN_DIFFUSE = 0, APPLY_COMBINED };
 
 static const char *const metric_items[] = {"minkowski", "chebyshev"};
-static const char *const mode_items[] = {"physical", "seed"};
+static const char *const mode_items[] = {"physical", "seed", "refractive"};
 static const char *const pos_items[] = {"position", "depth"};
 static const char *const method_items[] = {"grid", "brute"};
 static const char *const distance_items[] = {"fast", "exact"};
+static const char *const apply_items[] = {"sun_diffuse", "combined"};
 static const float default_tint[3] = {0.8f, 0.95f, 1.0f};
 static const float default_world[3] = {0.55f, 0.7f, 0.95f};
 
@@ -114,7 +129,8 @@ static const fx_param_def caustics_param_defs[] = {
                "metric, still finite)"),
     FX_P_ENUM(caustics_params, mode, "mode", MODE_PHYSICAL, mode_items,
               "physical: light redistributed onto the cell borders (mean brightness kept); seed: "
-              "the seed's alpha/colour formula"),
+              "the seed's alpha/colour formula; refractive: the Sun refracted by the water's surface "
+              "(its normals seen from the Sun, an aux view) onto a horizontal floor"),
     FX_P_FLOAT(caustics_params, strength, "strength", 0.6, 0.0, 100.0, 0.0, 2.0, "",
                "Contrast of the caustics (0: identity)"),
     FX_P_FLOAT(caustics_params, line_width, "line_width", 0.12, 1e-4, 100.0, 0.02, 0.5, "",
@@ -151,6 +167,31 @@ static const fx_param_def caustics_param_defs[] = {
               "environment from the Position pass (draft) keeps the per-pixel surface test (a pixel "
               "off its corners' surface gets its own search), other cases skip it where a lattice "
               "cell's corners all have positions; off: per pixel"),
+    FX_P_STRING(caustics_params, water, "water", "Water", "",
+                "refractive: the water's material; the add-on renders the objects that use it (even when "
+                "hidden from the render) from the Sun: their Normal and Depth (aux view 'water:<material>')"),
+    FX_P_FLOAT(caustics_params, ior, "ior", 1.33, 1.0, 4.0, 1.0, 2.0, "",
+               "refractive: index of refraction of the water (Cycles' Glass IOR)"),
+    FX_P_BOOL(caustics_params, fresnel, "fresnel", 1,
+              "refractive: the light the surface reflects (Fresnel) does not reach the floor"),
+    FX_P_INT(caustics_params, refract_samples, "refract_samples", 2, 1, 16, 1, 8, "",
+             "Quality (refractive): sub-samples per side of each light-view cell splatted onto the floor "
+             "(n x n; more: smoother, converged focal lines)"),
+    FX_P_INT(caustics_params, refract_step, "refract_step", 1, 1, 16, 1, 4, "",
+             "Quality (refractive): every n-th texel of the water's view is refracted (the map n times "
+             "coarser per side)"),
+    FX_P_ENUM(caustics_params, apply, "apply", APPLY_SUN_DIFFUSE, apply_items,
+              "refractive: what the caustics' gain g scales: sun_diffuse: the sun's direct diffuse light, "
+              "DiffCol x colour x energy x N.L / pi (out = src + strength (g - 1) tint x that; needs DiffCol, "
+              "Normal and the scene's lights); combined: the whole pixel (out = src (1 + strength (g - 1) tint))"),
+    FX_P_FLOAT(caustics_params, interior, "interior", 0.1, 0.0, 0.95, 0.0, 0.8, "",
+               "physical: light inside a cell relative to the bright lines' peak (focus g = interior + "
+               "(1 - interior) exp(-gap / line_width), then divided by its mean): lit interiors as real "
+               "caustics have; 0: dark interiors (the look before params_version 2)"),
+    FX_P_FLOAT(caustics_params, receiver_depth, "receiver_depth", 0.0, 0.0, 1e4, 0.0, 5.0, "",
+               "refractive: 0: the masked pixels are the floor the light falls on; > 0: they are the water's "
+               "surface and the floor lies this far (scene units) below their median height: each pixel's "
+               "camera ray, refracted by a flat surface, finds its floor point there (use apply combined)"),
 };
 
 static double exponent_of(const caustics_params *p)
@@ -167,7 +208,23 @@ static fx_result caustics_validate(const void *params, char *err, size_t err_siz
                  (double)p->exponent);
         return FX_ERR_BAD_PARAM;
     }
+    if (p->mode == MODE_REFRACTIVE && !p->water[0]) {
+        snprintf(err, err_size, "parameter 'water' must name the water's material for mode refractive");
+        return FX_ERR_BAD_PARAM;
+    }
     return FX_OK;
+}
+
+/* refractive: the water's normals and depth seen from the scene's first sun */
+static int caustics_aux_views(const void *params, fx_aux_need *out, int max)
+{
+    const caustics_params *p = params;
+    if (p->mode != MODE_REFRACTIVE || max < 1)
+        return 0;
+    snprintf(out->name, sizeof out->name, "water:%.80s", p->water);
+    out->kind = "water";
+    out->light[0] = 0;
+    return 1;
 }
 
 static fx_pass_set caustics_passes(const void *params)
@@ -176,13 +233,16 @@ static fx_pass_set caustics_passes(const void *params)
     fx_pass_set s = p->position_source == POS_POSITION ? FX_PASS_BIT(FX_PASS_POSITION) : FX_PASS_BIT(FX_PASS_DEPTH);
     if (p->environment_strength > 0.0f)
         s |= FX_PASS_BIT(FX_PASS_NORMAL);
+    if (p->mode == MODE_REFRACTIVE && p->apply == APPLY_SUN_DIFFUSE)
+        s |= FX_PASS_BIT(FX_PASS_NORMAL) | FX_PASS_BIT(FX_PASS_DIFF_COL);
     return s;
 }
 
 static int caustics_needs_camera(const void *params)
 {
     const caustics_params *p = params;
-    return p->position_source == POS_DEPTH || p->environment_strength > 0.0f;
+    return p->position_source == POS_DEPTH || p->environment_strength > 0.0f ||
+           (p->mode == MODE_REFRACTIVE && p->receiver_depth > 0.0f);
 }
 
 typedef struct env_map {
@@ -218,6 +278,7 @@ typedef struct caustics_job {
     double mean_g;
     double time;
     float inv_mean, inv_lw, wave;
+    float focus0; /* interior / mean: inv_mean is (1 - interior) / mean */
     float inv_cell, far_gap; /* far_gap: physical, p >= 1: a gap beyond which g is ~0 */
     const float *position; /* 3 or 4 channels */
     int pos_channels;
@@ -307,6 +368,7 @@ static inline float value_at(const caustics_job *j, float wx, float wy, int *ids
 
 /* The effect at pixel i as out = src * gain + add per channel, gain from one scalar s
  * (gain_of): physical 1 + s tint, seed s. add is 0 without seed mode or environment. */
+static inline void env_term(const caustics_job *j, size_t i, fx_vec3 P, float add[3]);
 static inline void factors(const caustics_job *j, size_t i, fx_vec3 P, float a, float noise, float *s, float add[3])
 {
     const caustics_params *p = j->p;
@@ -323,13 +385,21 @@ static inline void factors(const caustics_job *j, size_t i, fx_vec3 P, float a, 
         }
     } else {
         /* focus ratio bounded (16x the mean: d < 1 makes the mean tiny) */
-        float g = expf(-a * j->inv_lw) * j->inv_mean;
+        float g = expf(-a * j->inv_lw) * j->inv_mean + j->focus0;
         g = (g < (float)FOCUS_MAX ? g : (float)FOCUS_MAX) - 1.0f;
         float amp = p->strength * (0.4f + 1.2f * noise); /* noise' with mean ~1 */
         *s = amp * g;
         add[0] = add[1] = add[2] = 0.0f;
     }
-    if (p->environment_strength > 0.0f && j->normal) {
+    if (p->environment_strength > 0.0f && j->normal)
+        env_term(j, i, P, add);
+}
+
+/* The environment term (Fresnel x environment) added to add[3] */
+static inline void env_term(const caustics_job *j, size_t i, fx_vec3 P, float add[3])
+{
+    const caustics_params *p = j->p;
+    {
         const float *nq = j->normal + i * 3;
         fx_vec3 N = fx_v3_normalize_or(fx_v3(nq[0], nq[1], nq[2]), fx_v3(0, 0, 1));
         fx_vec3 V = fx_v3_normalize_or(fx_v3_sub(j->eye, P), N);
@@ -612,8 +682,10 @@ static void shade_segment(const caustics_job *j, const float *src, float *dst, i
         int c = 0;
 #ifdef __SSE2__
         const v4f vmean = {inv_mean, inv_mean, inv_mean, inv_mean}, vcap = {16.0f, 16.0f, 16.0f, 16.0f};
+        const float f0 = j->focus0;
         for (; c + 4 <= n; c += 4) {
             v4f g = ld4(xs + c) * vmean;
+            g = g + f0;
             g = _mm_min_ps(g, vcap); /* g < 16 ? g : 16 (g is never NaN) */
             g = g - 1.0f;
             const v4f amp = strength * (0.4f + 1.2f * ld4(nz + c));
@@ -957,6 +1029,7 @@ static inline float focus_s(const caustics_job *j, float a, float noise)
     x = x > -87.0f ? x : -87.0f;
     x = x < 0.0f ? x : 0.0f;
     float g = exp_neg(x) * j->inv_mean;
+    g = g + j->focus0;
     g = (g < (float)FOCUS_MAX ? g : (float)FOCUS_MAX) - 1.0f;
     const float amp = j->p->strength * (0.4f + 1.2f * noise);
     return amp * g;
@@ -1447,7 +1520,8 @@ static fx_result job_inputs(const fx_effect_run *run, const caustics_params *p, 
     const char *where = run->where;
     if (caustics_needs_camera(p) && !j->has_view)
         return fx_fail(run->ctx, FX_ERR_NO_CAMERA,
-                       "%s needs the frame's camera (position_source depth or environment_strength > 0); "
+                       "%s needs the frame's camera (position_source depth, environment_strength > 0 or "
+                       "refractive with receiver_depth > 0); "
                        "give the scene sidecar with --sidecar",
                        where);
     if (p->position_source == POS_POSITION) {
@@ -1521,7 +1595,11 @@ static int job_mean(const fx_effect_run *run, const caustics_params *p, caustics
         if (!(j->mean_g > 1e-12))
             j->mean_g = 1e-12;
     }
-    j->inv_mean = (float)fmin(1.0 / j->mean_g, 1e30);
+    /* the focus interior + (1 - interior) g over its mean interior + (1 - interior) mean(g) */
+    double in = p->mode == MODE_PHYSICAL ? (double)p->interior : 0.0;
+    double m = in + (1.0 - in) * j->mean_g;
+    j->inv_mean = (float)fmin((1.0 - in) / m, 1e30);
+    j->focus0 = (float)(in / m);
     return 0;
 }
 
@@ -1568,6 +1646,218 @@ static int job_lattice(const fx_effect_run *run, const caustics_params *p, caust
     return 0;
 }
 
+/* ---- mode refractive ------------------------------------------------------------------ */
+
+typedef struct refract_job {
+    const caustics_job *cj;
+    const fx_aux_view *av;
+    fx_caustic_map map;
+    const float *diffcol, *normal; /* apply sun_diffuse */
+    int diffcol_channels, normal_channels;
+    fx_vec3 sun_rad, to_sun;        /* the sun's colour x energy / pi, towards the sun */
+    float floor_z;                  /* receiver_depth > 0: the floor's height */
+    fx_vec3 eye, forward;           /* the camera (orthographic: forward is the rays' direction) */
+    float *debug_gain;              /* debug output "gain": the map's gain per pixel (1 unmasked) */
+} refract_job;
+
+/* receiver_depth > 0: the floor point a masked water pixel at P shows, along the camera's
+ * ray refracted by a flat surface (normal +z); P itself when the ray does not go down. */
+static fx_vec3 seen_floor(const refract_job *rj, fx_vec3 P)
+{
+    const caustics_job *j = rj->cj;
+    fx_vec3 d = j->view.orthographic ? rj->forward : fx_v3_normalize_or(fx_v3_sub(P, rj->eye), rj->forward);
+    fx_vec3 t;
+    if (!(d.z < -1e-6f) || !fx_refract_into(d, fx_v3(0.0f, 0.0f, 1.0f), j->p->ior, &t, NULL) || !(t.z < -1e-6f) ||
+        !(P.z > rj->floor_z))
+        return P;
+    return fx_v3_add(P, fx_v3_scale(t, (rj->floor_z - P.z) / t.z));
+}
+
+static int float_cmp(const void *a, const void *b)
+{
+    float x = *(const float *)a, y = *(const float *)b;
+    return (x > y) - (x < y);
+}
+
+/* The receiver's height: the median world z of the masked pixels (at most ~64k of them,
+ * on a fixed stride). 0 when no pixel has a position; -1 out of memory. */
+static int receiver_height(const caustics_job *j, float *z)
+{
+    const fx_effect_run *run = j->run;
+    size_t w = (size_t)(run->roi.x1 - run->roi.x0), h = (size_t)(run->roi.y1 - run->roi.y0);
+    size_t stride = 1;
+    while ((w / stride + 1) * (h / stride + 1) > 65536)
+        stride++;
+    size_t cap = (w / stride + 1) * (h / stride + 1), n = 0;
+    float *v = fx_mem_alloc(cap * sizeof(float));
+    if (!v)
+        return -1;
+    for (int y = run->roi.y0; y < run->roi.y1; y += (int)stride)
+        for (int x = run->roi.x0; x < run->roi.x1; x += (int)stride) {
+            fx_vec3 P;
+            if (covered(run, (size_t)y * run->width + x) && world_at(j, x, y, &P) && n < cap)
+                v[n++] = P.z;
+        }
+    if (n)
+        qsort(v, n, sizeof(float), float_cmp);
+    *z = n ? v[n / 2] : 0.0f;
+    fx_mem_free(v);
+    return n ? 1 : 0;
+}
+
+static void refract_rows(void *user, int begin, int end)
+{
+    const refract_job *rj = user;
+    const caustics_job *j = rj->cj;
+    const fx_effect_run *run = j->run;
+    const caustics_params *p = j->p;
+    for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++) {
+        for (int x = run->roi.x0; x < run->roi.x1; x++) {
+            size_t i = (size_t)y * run->width + x;
+            fx_vec3 P;
+            float gain[3] = {1.0f, 1.0f, 1.0f}, add[3] = {0.0f, 0.0f, 0.0f};
+            if (covered(run, i) && world_at(j, x, y, &P)) {
+                float px, py, d;
+                if (p->receiver_depth > 0.0f)
+                    P = seen_floor(rj, P);
+                float g = fx_aux_view_project(rj->av, P, &px, &py, &d) ? fx_caustic_map_gain(&rj->map, px, py) : 1.0f;
+                if (rj->debug_gain)
+                    rj->debug_gain[i] = g;
+                float s = p->strength * (g - 1.0f);
+                if (rj->diffcol) {
+                    /* the sun's direct diffuse: the light the gain redistributes */
+                    const float *nq = rj->normal + i * rj->normal_channels;
+                    const float *dc = rj->diffcol + i * rj->diffcol_channels;
+                    fx_vec3 n = fx_v3_normalize_or(fx_v3(nq[0], nq[1], nq[2]), fx_v3(0.0f, 0.0f, 0.0f));
+                    float ndl = fx_v3_dot(n, rj->to_sun);
+                    ndl = ndl > 0.0f ? ndl : 0.0f;
+                    const float rad[3] = {rj->sun_rad.x, rj->sun_rad.y, rj->sun_rad.z};
+                    for (int k = 0; k < 3; k++) {
+                        float d = dc[k] > 0.0f ? dc[k] * rad[k] * ndl : 0.0f;
+                        add[k] = s * p->tint[k] * (d < 1e30f ? d : 1e30f);
+                    }
+                } else {
+                    for (int k = 0; k < 3; k++)
+                        gain[k] = 1.0f + s * p->tint[k];
+                }
+                if (p->environment_strength > 0.0f && j->normal)
+                    env_term(j, i, P, add);
+            }
+            apply(j, i, gain, add);
+        }
+        finish_row(run, y);
+    }
+}
+
+/* The water's view: loaded, with its Normal pass and at least one texel of water. */
+static fx_result refract_view(const fx_effect_run *run, const caustics_params *p, fx_aux_view **av,
+                              const fx_pass **np)
+{
+    char name[FX_NAME_MAX];
+    snprintf(name, sizeof name, "water:%.80s", p->water);
+    int has = fx_aux_view_has(run->frame, name);
+    if (has < 0)
+        return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", run->where);
+    if (!has)
+        return fx_fail(run->ctx, FX_ERR_NO_AUX_VIEW,
+                       "%s (mode refractive) needs the aux view '%s': the objects with the water material '%s' "
+                       "seen from the Sun (Normal and Depth passes); the Blender add-on renders it when the "
+                       "stack needs it and lists it in the scene sidecar's \"aux_views\"",
+                       run->where, name, p->water);
+    fx_result r = fx_aux_view_load(run->frame, name, run->where, av);
+    if (r)
+        return r;
+    *np = fx_frame_find_pass((*av)->frame, "Normal");
+    if (!*np || (*np)->channels < 3)
+        return fx_fail(run->ctx, FX_ERR_MISSING_PASS, "%s: the water view '%s' (%s) has no Normal pass", run->where,
+                       name, (*av)->path);
+    if (!(*av)->view.orthographic)
+        return fx_fail(run->ctx, FX_ERR_BAD_PARAM,
+                       "%s: the water view '%s' must be orthographic (a sun's view); other lights are not "
+                       "supported by mode refractive",
+                       run->where, name);
+    return FX_OK;
+}
+
+/* The scene's first sun (its disc's angle blurs the map; sun_diffuse: its light) and, for
+ * apply sun_diffuse, the DiffCol and Normal passes. */
+static fx_result refract_sun(const fx_effect_run *run, const caustics_params *p, refract_job *rj, float *angle)
+{
+    fx_light sun;
+    *angle = 0.0f;
+    if (p->apply == APPLY_COMBINED && !fx_frame_meta(run->frame, "libfx:lights"))
+        return FX_OK; /* the sun's disc only blurs: without lights, a point */
+    fx_result r = fx_frame_find_light(run->frame, "", run->where, &sun);
+    if (r)
+        return r;
+    if (sun.type != FX_LIGHT_SUN)
+        return fx_fail(run->ctx, FX_ERR_BAD_PARAM,
+                       "%s: mode refractive refracts a sun's light; the frame's first light '%s' is not a sun "
+                       "(spot and point lights are not supported yet)",
+                       run->where, sun.name);
+    *angle = sun.angle > 0.0f && sun.angle < 3.0f ? sun.angle : 0.0f;
+    if (p->apply != APPLY_SUN_DIFFUSE)
+        return FX_OK;
+    const fx_pass *dc = fx_frame_find_pass(run->frame, "DiffCol");
+    const fx_pass *np = fx_frame_find_pass(run->frame, "Normal");
+    if (!dc || dc->channels < 3 || !np || np->channels < 3)
+        return fx_fail(run->ctx, FX_ERR_MISSING_PASS,
+                       "%s: apply sun_diffuse needs the %s pass (or set apply to combined)", run->where,
+                       !dc || dc->channels < 3 ? "DiffCol" : "Normal");
+    rj->diffcol = dc->data;
+    rj->diffcol_channels = dc->channels;
+    rj->normal = np->data;
+    rj->normal_channels = np->channels;
+    float e = sun.energy > 0.0f && sun.energy < 1e30f ? sun.energy * 0.318309886f /* 1/pi */ : 0.0f;
+    rj->sun_rad = fx_v3(sun.color.x * e, sun.color.y * e, sun.color.z * e);
+    rj->to_sun = fx_v3_scale(sun.direction, -1.0f);
+    return FX_OK;
+}
+
+static fx_result refract_process(const fx_effect_run *run, const caustics_params *p, caustics_job *j)
+{
+    fx_aux_view *av = NULL;
+    const fx_pass *np = NULL;
+    refract_job rj;
+    memset(&rj, 0, sizeof rj);
+    rj.cj = j;
+    float angle = 0.0f;
+    fx_result r = refract_view(run, p, &av, &np);
+    if (!r)
+        r = refract_sun(run, p, &rj, &angle);
+    rj.av = av;
+    float plane_z = 0.0f;
+    int found = r ? 0 : receiver_height(j, &plane_z);
+    if (!r && found < 0)
+        r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", run->where);
+    if (!r) {
+        rj.floor_z = plane_z - p->receiver_depth;
+        rj.eye = fx_v3(j->view.camera_to_world[3], j->view.camera_to_world[7], j->view.camera_to_world[11]);
+        rj.forward = fx_v3_normalize_or(fx_view_dir_to_world(&j->view, fx_v3(0.0f, 0.0f, -1.0f)), fx_v3(0, 0, -1));
+        fx_caustic_input in = {av->width, av->height, av->depth, np->data, np->channels, &av->view,
+                               av->view.cam.clip_end, p->ior, rj.floor_z, p->refract_step, p->refract_samples,
+                               p->fresnel, angle};
+        r = fx_caustic_map_build(run->ctx, &in, &rj.map, run->where);
+    }
+    if (!r && found && rj.map.water_nodes == 0)
+        r = fx_fail(run->ctx, FX_ERR_MISSING_PASS,
+                    "%s: the water view '%s' (%s) shows no water: no object with the material '%s' in the Sun's "
+                    "view (the add-on renders the objects that use the effect's 'water' material)",
+                    run->where, av->name, av->path, p->water);
+    if (!r) {
+        rj.debug_gain = fx_effect_debug_pass(run, "gain", 1, &r);
+        for (size_t i = 0; rj.debug_gain && i < (size_t)run->width * run->height; i++)
+            rj.debug_gain[i] = 1.0f;
+    }
+    if (!r) {
+        int rows = run->roi.y1 - run->roi.y0;
+        fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), refract_rows, &rj);
+    }
+    fx_caustic_map_free(&rj.map);
+    fx_aux_view_free(av);
+    return r;
+}
+
 static fx_result caustics_process(const fx_effect_run *run)
 {
     const caustics_params *p = run->params;
@@ -1577,6 +1867,11 @@ static fx_result caustics_process(const fx_effect_run *run)
     fx_result r = job_inputs(run, p, &j, &envf);
     if (r != FX_OK)
         return r;
+    if (p->mode == MODE_REFRACTIVE) {
+        r = refract_process(run, p, &j);
+        fx_frame_free(envf);
+        return r;
+    }
     if (job_table(run, p, &j) || job_mean(run, p, &j)) {
         r = fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", run->where);
     } else {
@@ -1602,6 +1897,19 @@ static fx_result caustics_process(const fx_effect_run *run)
     return r;
 }
 
+/* params_version 2 added interior (lit cell interiors, default 0.1): a recipe of version 1
+ * keeps its dark interiors (interior 0) unless it names one. Silent: its output is the
+ * same as before. */
+static fx_result caustics_migrate(int from_version, cJSON *params, char *note, size_t note_size)
+{
+    (void)note;
+    (void)note_size;
+    if (from_version == 1 && params && !cJSON_GetObjectItemCaseSensitive(params, "interior") &&
+        !cJSON_AddNumberToObject(params, "interior", 0.0))
+        return FX_ERR_OUT_OF_MEMORY;
+    return FX_OK;
+}
+
 const fx_effect_class fx_effect_voronoi_caustics = {
     .name = "voronoi_caustics",
     .doc = "Water caustics: a world-anchored, animated Voronoi pattern (Minkowski metric) on the masked surface",
@@ -1610,10 +1918,14 @@ const fx_effect_class fx_effect_voronoi_caustics = {
     .param_count = FX_COUNT_OF(caustics_param_defs),
     .presets = {
         /* draft at least 3x faster than final; reference: every pixel, double pow */
-        "{\"downsample\": 4, \"distance\": \"fast\", \"refine\": false, \"lattice_shading\": true}",
-        "{\"downsample\": 2, \"distance\": \"fast\", \"refine\": false, \"lattice_shading\": false}",
-        "{\"downsample\": 2, \"distance\": \"fast\", \"refine\": true, \"lattice_shading\": false}",
-        "{\"downsample\": 1, \"distance\": \"exact\", \"refine\": true, \"lattice_shading\": false}",
+        "{\"downsample\": 4, \"distance\": \"fast\", \"refine\": false, \"lattice_shading\": true, "
+        "\"refract_samples\": 1, \"refract_step\": 2}",
+        "{\"downsample\": 2, \"distance\": \"fast\", \"refine\": false, \"lattice_shading\": false, "
+        "\"refract_samples\": 1, \"refract_step\": 1}",
+        "{\"downsample\": 2, \"distance\": \"fast\", \"refine\": true, \"lattice_shading\": false, "
+        "\"refract_samples\": 2, \"refract_step\": 1}",
+        "{\"downsample\": 1, \"distance\": \"exact\", \"refine\": true, \"lattice_shading\": false, "
+        "\"refract_samples\": 4, \"refract_step\": 1}",
     },
     /* in place (dst == src: no mask) for every parameter set: an output pixel reads only its
      * own colour pixel, just before writing it (the pattern, noise and shading come from
@@ -1623,7 +1935,10 @@ const fx_effect_class fx_effect_voronoi_caustics = {
     .flags = FX_EFFECT_IN_PLACE | FX_EFFECT_OWN_FINITE,
     .passes = caustics_passes,
     .needs_camera = caustics_needs_camera,
+    .aux_views = caustics_aux_views,
     .halo = NULL,
     .validate = caustics_validate,
     .process = caustics_process,
+    .params_version = 2,
+    .migrate = caustics_migrate,
 };
