@@ -842,26 +842,33 @@ def _evaluated_shape(water):
     return h.hexdigest()
 
 
-def _prepare_water(scene, view, frames):
-    spec, water = water_spec(scene, view, frames)
-    sig = signature(dict(spec, shape=_evaluated_shape(water)), water)
+def _ortho_view(scene, view, spec, sig, render, reused, rendered):
+    """Renders (render(path)) or reuses the orthographic view `view` whose signature is
+    sig; its sidecar entry, stored beside the EXR. reused / rendered: what the log says."""
     path = "%slibfx_aux_%s.exr" % (scene_setup.output_prefix(scene), _file_name(view["name"]))
     meta_path = path[:-4] + ".json"
     old = _stored_entry(path, meta_path)
     if old and old.get("signature") == sig:
-        log("water view '%s' reused (sun and water unchanged): %s" % (view["name"], path))
+        log("%s '%s' reused (%s unchanged): %s" % (reused[0], view["name"], reused[1], path))
     else:
         os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
         t0 = time.perf_counter()
-        _render_water(scene, spec, water, path)
-        log("water view '%s' (%s, from the sun '%s') rendered %dx%d in %.2f s: %s"
-            % (view["name"], ", ".join(o.name for o in water[:4]), spec["light"][0], spec["width"],
-               spec["height"], time.perf_counter() - t0, path))
+        render(path)
+        log("%s '%s'%s rendered %dx%d in %.2f s: %s" % (reused[0], view["name"], rendered, spec["width"],
+                                                      spec["height"], time.perf_counter() - t0, path))
     entry = {"name": view["name"], "path": path, "world_to_camera": spec["world_to_camera"],
              "projection": spec["projection"], "clip_start": spec["clip_start"], "clip_end": spec["clip_end"],
-             "orthographic": True, "kind": "water", "signature": sig}
+             "orthographic": True, "kind": view["kind"], "signature": sig}
     _store_entry(meta_path, entry)
     return entry
+
+
+def _prepare_water(scene, view, frames):
+    spec, water = water_spec(scene, view, frames)
+    sig = signature(dict(spec, shape=_evaluated_shape(water)), water)
+    return _ortho_view(scene, view, spec, sig, lambda path: _render_water(scene, spec, water, path),
+                       ("water view", "sun and water"),
+                       " (%s, from the sun '%s')" % (", ".join(o.name for o in water[:4]), spec["light"][0]))
 
 
 def prepare(scene, frames):
@@ -894,22 +901,9 @@ def prepare(scene, frames):
             entries.append(_prepare_water(scene, view, frames))
             continue
         spec = view_spec(scene, view, frames, objs)
-        sig = signature(spec, objs)
-        path = "%slibfx_aux_%s.exr" % (scene_setup.output_prefix(scene), _file_name(view["name"]))
-        meta_path = path[:-4] + ".json"
-        old = _stored_entry(path, meta_path)
-        if old and old.get("signature") == sig:
-            log("aux view '%s' reused (light and geometry unchanged): %s" % (view["name"], path))
-        else:
-            os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
-            t0 = time.perf_counter()
-            _render(scene, spec, objs, path)
-            log("aux view '%s' rendered %dx%d in %.2f s: %s" % (view["name"], spec["width"], spec["height"],
-                                                              time.perf_counter() - t0, path))
-        entry = {"name": view["name"], "path": path, "world_to_camera": spec["world_to_camera"],
-                 "projection": spec["projection"], "clip_start": spec["clip_start"],
-                 "clip_end": spec["clip_end"], "orthographic": True, "kind": view["kind"], "signature": sig}
-        _store_entry(meta_path, entry)
+        entry = _ortho_view(scene, view, spec, signature(spec, objs),
+                            lambda path, spec=spec: _render(scene, spec, objs, path),
+                            ("aux view", "light and geometry"), "")
         entries.append(entry)
     return entries
 

@@ -8,10 +8,13 @@ new Blender major version (a Blender whose major has no numbers skips the gate, 
   bash scripts/in_root.sh trixie env LIBFX_LIBRARY=$PWD/build-trixie/libfx/libfx.so \
     LIBFX_CLI=$PWD/build-trixie/libfx/libfx python3 tests/blender/measure_truth_gates.py OUT
 
-Each run renders from an empty OUT/run<k>; with --runs 2 or more, every number must be
-the same in every run (the fixed-seed renders repeat bit for bit on one machine), or
-nothing is written. --keep OUT reuses OUT/run1's renders (no repeat check): for updating
-the numbers after a library change that leaves the renders alone.
+Each run renders from an empty OUT/run<k>; with --runs 2 or more, every number must agree
+in every run within 1e-4 + 1e-4 x itself (far inside the gate's smallest margin, 0.002), or
+nothing is written. The fixed-seed renders repeat bit for bit on one machine, except the
+caustics truth (manifold next-event estimation), whose numbers moved in the 10th digit
+between two runs on 3.4 once. --keep reuses the renders already in OUT/run<k> (the truth
+scripts render only what is missing): for updating the numbers after a library change that
+leaves the renders alone.
 """
 import argparse
 import datetime
@@ -26,12 +29,18 @@ sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 import truth_gate_lib as G  # noqa: E402
 
 
+def _agree(a, b):
+    """Two measurements of one number ([kind, value]) agree: same kind, values within
+    1e-4 + 1e-4 x |value|."""
+    return b is not None and a[0] == b[0] and abs(a[1] - b[1]) <= 1e-4 + 1e-4 * abs(a[1])
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("out")
     ap.add_argument("--runs", type=int, default=1)
     ap.add_argument("--only", default="", help="comma-separated gate names (default: all)")
-    ap.add_argument("--keep", action="store_true", help="reuse OUT/run1's renders")
+    ap.add_argument("--keep", action="store_true", help="reuse the renders in OUT/run<k>")
     a = ap.parse_args()
     for var in ("LIBFX_LIBRARY", "LIBFX_CLI"):
         if not os.environ.get(var):
@@ -48,7 +57,7 @@ def main():
     runs = []
     for k in range(1, max(1, a.runs) + 1):
         root = pathlib.Path(a.out) / ("run%d" % k)
-        if root.exists() and not (a.keep and k == 1):
+        if root.exists() and not a.keep:
             shutil.rmtree(root)
         root.mkdir(parents=True, exist_ok=True)
         got = {}
@@ -58,15 +67,15 @@ def main():
         runs.append(got)
     for k, other in enumerate(runs[1:], 2):
         for n in names:
-            diff = [w for w in runs[0][n] if runs[0][n][w] != other[n].get(w)]
+            diff = [w for w in runs[0][n] if not _agree(runs[0][n][w], other[n].get(w))]
             if diff:
-                sys.exit("measure_truth_gates: run %d differs from run 1 in %s: %s; nothing written"
+                sys.exit("measure_truth_gates: run %d differs from run 1 beyond 1e-4 in %s: %s; nothing written"
                          % (k, n, ", ".join(diff[:6])))
     numbers = G.load_numbers()
     entry = numbers.setdefault(major, {"gates": {}})
     entry["blender"] = version
     entry["measured"] = "%s, %d run(s)%s" % (datetime.date.today().isoformat(), len(runs),
-                                              ", identical to the last digit" if len(runs) > 1 else "")
+                                              ", agreeing within 1e-4" if len(runs) > 1 else "")
     try:   # a Blender root may have no git
         entry["commit"] = subprocess.run(["git", "-C", str(G.HERE), "rev-parse", "--short", "HEAD"],
                                          capture_output=True, text=True).stdout.strip()

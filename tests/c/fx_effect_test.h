@@ -33,6 +33,22 @@ static inline void et_write_view(fx_context *ctx, const char *path, int w, int h
     fx_frame_free(f);
 }
 
+/* Lists a reflection probe (an equirect panorama EXR at path, seen from world_to_camera
+ * w2c) among the frame's aux views, as the add-on's sidecar does. */
+static inline void et_add_probe(fx_context *ctx, fx_frame *f, const char *name, const char *path,
+                                const float w2c[16])
+{
+    char json[4096];
+    int n = snprintf(json, sizeof json, "{\"aux_views\": [{\"name\": \"%s\", \"path\": \"%s\", \"world_to_camera\": [",
+                     name, path);
+    for (int i = 0; i < 16; i++)
+        n += snprintf(json + n, sizeof json - n, "%s%.9g", i ? ", " : "", w2c[i]);
+    snprintf(json + n, sizeof json - n,
+             "], \"projection\": [1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1], \"clip_start\": 0, \"clip_end\": 1e6, "
+             "\"orthographic\": false, \"kind\": \"probe\", \"panorama\": \"equirect\"}]}");
+    CHECK_OK(ctx, fx_frame_apply_sidecar(f, json));
+}
+
 static inline const float *et_combined(const fx_frame *f)
 {
     float *d = NULL;

@@ -484,15 +484,7 @@ static void add_probe(fx_context *ctx, fx_frame *f, const char *name, const char
 {
     float m[16];
     cam_w2c(pos, m);
-    char json[4096];
-    int n = snprintf(json, sizeof json, "{\"aux_views\": [{\"name\": \"%s\", \"path\": \"%s\", \"world_to_camera\": [",
-                     name, path);
-    for (int i = 0; i < 16; i++)
-        n += snprintf(json + n, sizeof json - n, "%s%.9g", i ? ", " : "", m[i]);
-    snprintf(json + n, sizeof json - n,
-             "], \"projection\": [1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1], \"clip_start\": 0, \"clip_end\": 1e6, "
-             "\"orthographic\": false, \"kind\": \"probe\", \"panorama\": \"equirect\"}]}");
-    CHECK_OK(ctx, fx_frame_apply_sidecar(f, json));
+    et_add_probe(ctx, f, name, path, m);
 }
 
 /* Mirror MAE against want, and the smear count: mirror pixels whose output is nearer a
