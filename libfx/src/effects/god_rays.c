@@ -595,6 +595,45 @@ typedef struct vol_job {
     const float *col_t;
 } vol_job;
 
+/* One row's L and T (n pixels from roi.x0) from the reduced grid: the cells of the row's two
+ * lo rows gathered once into vectors (row: 12 lw floats), then 4 pixels at a time
+ * fx_volume_upsample_cell4 (the depth-aware bilinear, bit for bit fx_volume_upsample's). */
+static void vol_row_lt(const vol_job *j, int y, float *row, float *restrict Lr, float *restrict Tr)
+{
+    const int lw = j->lw, x0 = j->run->roi.x0, n = j->run->roi.x1 - x0;
+    int Y0 = 0;
+    float ty = 0.0f;
+    fx_volume_lo_coord(y, j->f, j->lh, &Y0, &ty);
+    const size_t r0 = (size_t)Y0 * lw, r1 = Y0 + 1 < j->lh ? r0 + (size_t)lw : r0;
+    const float *restrict lo = j->lo, *restrict lt = j->lo_t, *restrict ld = j->lo_depth;
+    for (int X = 0; X < lw; X++) {
+        const int X1 = X + 1 < lw ? X + 1 : X;
+        st4(row + 12 * X, (v4f){ld[r0 + X], ld[r0 + X1], ld[r1 + X], ld[r1 + X1]});
+        st4(row + 12 * X + 4, (v4f){lo[r0 + X], lo[r0 + X1], lo[r1 + X], lo[r1 + X1]});
+        st4(row + 12 * X + 8, (v4f){lt[r0 + X], lt[r0 + X1], lt[r1 + X], lt[r1 + X1]});
+    }
+    const v4f by = {1.0f - ty, 1.0f - ty, ty, ty};
+    const float *restrict dep = j->depth + (size_t)y * j->run->width + x0;
+    const int *restrict cx = j->col_x0;
+    const float *restrict ct = j->col_t;
+    const float far = j->vol->far_limit;
+    int k = 0;
+    for (; k + 4 <= n; k += 4) {
+        const float *cell[4] = {row + 12 * cx[k], row + 12 * cx[k + 1], row + 12 * cx[k + 2], row + 12 * cx[k + 3]};
+        const v4f d = {fx_volume_weight_depth(dep[k], far), fx_volume_weight_depth(dep[k + 1], far),
+                       fx_volume_weight_depth(dep[k + 2], far), fx_volume_weight_depth(dep[k + 3], far)};
+        v4f L, T;
+        fx_volume_upsample_cell4(cell, by, ld4(ct + k), d, &L, &T);
+        st4(Lr + k, L);
+        st4(Tr + k, T);
+    }
+    for (; k < n; k++) {
+        const int X0 = cx[k];
+        fx_volume_upsample(j->lo, j->lo_t, j->lo_depth, r0, r1, X0, X0 + 1 < lw ? X0 + 1 : X0, ct[k],
+                           ty, fx_volume_weight_depth(dep[k], far), &Lr[k], &Tr[k]);
+    }
+}
+
 /* Output = src T + L (T: the view transmittance, with extinction full times the light's
  * transmittance on its way to the surface; L: the in-scatter; both upsampled by depth
  * likeness from the reduced grid). */
@@ -602,37 +641,74 @@ static void vol_rows(void *user, int begin, int end)
 {
     const vol_job *j = user;
     const fx_effect_run *run = j->run;
-    const int w = run->width;
+    const int w = run->width, lw = j->lw, x0 = run->roi.x0, n = run->roi.x1 - x0;
+    /* per lo column: the cell's texels (vol_row_lt); per pixel of the row: L and T */
+    float *row = j->f > 1 ? fx_mem_alloc((size_t)(12 * lw + 2 * n) * sizeof(float)) : NULL;
+    const v4f rad = j->rad;
+    float *dbg = j->dbg;
     for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++) {
-        int Y0 = 0;
-        float ty = 0.0f;
-        fx_volume_lo_coord(y, j->f, j->lh, &Y0, &ty);
-        const size_t r0 = (size_t)Y0 * j->lw, r1 = Y0 + 1 < j->lh ? r0 + (size_t)j->lw : r0;
-        for (int x = run->roi.x0; x < run->roi.x1; x++) {
-            size_t i = (size_t)y * w + x;
-            float L, T;
-            if (j->f > 1) {
-                float d = fx_volume_weight_depth(j->depth[i], j->vol->far_limit);
-                int X0 = j->col_x0[x - run->roi.x0];
-                fx_volume_upsample(j->lo, j->lo_t, j->lo_depth, r0, r1, X0, X0 + 1 < j->lw ? X0 + 1 : X0,
-                                   j->col_t[x - run->roi.x0], ty, d, &L, &T);
-            } else {
-                L = j->lo[i];
-                T = j->lo_t[i];
+        const size_t i0 = (size_t)y * w + x0;
+        const float *Lr, *Tr;
+        if (j->f > 1 && row) {
+            float *L = row + 12 * lw, *T = L + n;
+            vol_row_lt(j, y, row, L, T);
+            Lr = L;
+            Tr = T;
+        } else if (j->f > 1) {
+            continue; /* no scratch: handled below, pixel by pixel */
+        } else {
+            Lr = j->lo + i0;
+            Tr = j->lo_t + i0;
+        }
+        const float *restrict src = run->src + i0 * 4;
+        float *restrict dst = run->dst + i0 * 4;
+        if (!j->screen && !dbg) {
+            for (int k = 0; k < n; k++) {
+                const float T = Tr[k];
+                st4(dst + 4 * k, finite4(ld4(src + 4 * k) * (v4f){T, T, T, 1.0f} + rad * V4(Lr[k])));
             }
-            v4f s = ld4(run->src + i * 4);
-            v4f add = j->rad * V4(L);
-            v4f base = s * (v4f){T, T, T, 1.0f};
+            continue;
+        }
+        for (int k = 0; k < n; k++) {
+            const float T = Tr[k];
+            v4f base = ld4(src + 4 * k) * (v4f){T, T, T, 1.0f};
+            v4f add = rad * V4(Lr[k]);
             if (j->screen)
                 add *= V4(1.0f) - min4(max4(base, V4(0.0f)), V4(1.0f));
-            st4(run->dst + i * 4, finite4(base + add));
-            if (j->dbg) {
-                j->dbg[3 * i] = add[0];
-                j->dbg[3 * i + 1] = add[1];
-                j->dbg[3 * i + 2] = add[2];
+            st4(dst + 4 * k, finite4(base + add));
+            if (dbg) {
+                dbg[3 * (i0 + k)] = add[0];
+                dbg[3 * (i0 + k) + 1] = add[1];
+                dbg[3 * (i0 + k) + 2] = add[2];
             }
         }
     }
+    if (j->f > 1 && !row) /* out of memory for a row's scratch: the exact upsample, per pixel */
+        for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++) {
+            int Y0 = 0;
+            float ty = 0.0f;
+            fx_volume_lo_coord(y, j->f, j->lh, &Y0, &ty);
+            const size_t r0 = (size_t)Y0 * lw, r1 = Y0 + 1 < j->lh ? r0 + (size_t)lw : r0;
+            for (int x = x0; x < run->roi.x1; x++) {
+                const size_t i = (size_t)y * w + x;
+                const int X0 = j->col_x0[x - x0];
+                float L, T;
+                fx_volume_upsample(j->lo, j->lo_t, j->lo_depth, r0, r1, X0, X0 + 1 < lw ? X0 + 1 : X0,
+                                   j->col_t[x - x0], ty, fx_volume_weight_depth(j->depth[i], j->vol->far_limit),
+                                   &L, &T);
+                v4f base = ld4(run->src + i * 4) * (v4f){T, T, T, 1.0f};
+                v4f add = rad * V4(L);
+                if (j->screen)
+                    add *= V4(1.0f) - min4(max4(base, V4(0.0f)), V4(1.0f));
+                st4(run->dst + i * 4, finite4(base + add));
+                if (dbg) {
+                    dbg[3 * i] = add[0];
+                    dbg[3 * i + 1] = add[1];
+                    dbg[3 * i + 2] = add[2];
+                }
+            }
+        }
+    fx_mem_free(row);
 }
 
 /* The sun and its light view for method volumetric: a sun only (spot and point lights
