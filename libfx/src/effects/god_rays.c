@@ -540,14 +540,20 @@ static fx_result run_full(const fx_effect_run *run, const god_rays_params *p, oc
     /* frame-sized: from the context's buffer store (no page faults frame after frame);
      * occ is written whole, rays inside the ROI (the debug pass wants it whole) */
     const size_t bytes = n4 * sizeof(float);
-    float *occ = fx_buffer_get(run->ctx, bytes);
+    /* polar over the whole frame reads occ whole before it writes any ray: occ can be dst
+     * too, so the first frame of a process touches one fresh frame-sized buffer, not two
+     * (the map outside a smaller ROI would stay in dst: then a buffer of its own) */
+    const int whole = run->roi.x0 == 0 && run->roi.y0 == 0 && run->roi.x1 == w && run->roi.y1 == h;
+    const int in_dst = p->method == METHOD_POLAR && !run->debug && whole;
+    float *occ = in_dst ? run->dst : fx_buffer_get(run->ctx, bytes);
     /* the rays go to dst (same layout; the composite reads each pixel before writing it)
      * unless the debug pass wants them whole */
     float *rays = run->debug ? fx_buffer_get(run->ctx, bytes) : run->dst;
     if (occ && rays && run->debug)
         memset(rays, 0, bytes);
     if (!occ || !rays) {
-        fx_buffer_put(run->ctx, occ, bytes);
+        if (!in_dst)
+            fx_buffer_put(run->ctx, occ, bytes);
         if (run->debug)
             fx_buffer_put(run->ctx, rays, bytes);
         return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the occlusion map", where);
@@ -573,7 +579,8 @@ static fx_result run_full(const fx_effect_run *run, const god_rays_params *p, oc
                 copy_rgb(dr, rays, (size_t)w * h);
         }
     }
-    fx_buffer_put(run->ctx, occ, bytes);
+    if (!in_dst)
+        fx_buffer_put(run->ctx, occ, bytes);
     if (run->debug)
         fx_buffer_put(run->ctx, rays, bytes);
     return r;
@@ -597,7 +604,8 @@ typedef struct vol_job {
 
 /* One row's L and T (n pixels from roi.x0) from the reduced grid: the cells of the row's two
  * lo rows gathered once into vectors (row: 12 lw floats), then 4 pixels at a time
- * fx_volume_upsample_cell4 (the depth-aware bilinear, bit for bit fx_volume_upsample's). */
+ * (fx_volume_upsample_same4 on one cell, fx_volume_upsample_cell4 across cells: the
+ * depth-aware bilinear, bit for bit fx_volume_upsample's). */
 static void vol_row_lt(const vol_job *j, int y, float *row, float *restrict Lr, float *restrict Tr)
 {
     const int lw = j->lw, x0 = j->run->roi.x0, n = j->run->roi.x1 - x0;
@@ -618,14 +626,25 @@ static void vol_row_lt(const vol_job *j, int y, float *row, float *restrict Lr, 
     const float *restrict ct = j->col_t;
     const float far = j->vol->far_limit;
     int k = 0;
-    for (; k + 4 <= n; k += 4) {
-        const float *cell[4] = {row + 12 * cx[k], row + 12 * cx[k + 1], row + 12 * cx[k + 2], row + 12 * cx[k + 3]};
-        const v4f d = {fx_volume_weight_depth(dep[k], far), fx_volume_weight_depth(dep[k + 1], far),
-                       fx_volume_weight_depth(dep[k + 2], far), fx_volume_weight_depth(dep[k + 3], far)};
+    while (k + 4 <= n) {
+        const v4f dk = ld4(dep + k); /* fx_volume_weight_depth, 4 lanes */
+        const v4f d = sel4((dk > V4(0.0f)) & (dk < V4(far)), dk, V4(FX_VOLUME_BG_DEPTH));
         v4f L, T;
-        fx_volume_upsample_cell4(cell, by, ld4(ct + k), d, &L, &T);
+        if (cx[k] == cx[k + 3]) { /* 4 pixels on one cell: with f >= 4, the runs are aligned below */
+            fx_volume_upsample_same4(row + 12 * cx[k], ty, ld4(ct + k), d, &L, &T);
+        } else if (j->f >= 4) { /* the rest of this cell's run, one by one: the next group starts a run */
+            for (const int X0 = cx[k]; cx[k] == X0; k++)
+                fx_volume_upsample(j->lo, j->lo_t, j->lo_depth, r0, r1, X0, X0 + 1 < lw ? X0 + 1 : X0, ct[k],
+                                   ty, fx_volume_weight_depth(dep[k], far), &Lr[k], &Tr[k]);
+            continue;
+        } else {
+            const float *cell[4] = {row + 12 * cx[k], row + 12 * cx[k + 1], row + 12 * cx[k + 2],
+                                    row + 12 * cx[k + 3]};
+            fx_volume_upsample_cell4(cell, by, ld4(ct + k), d, &L, &T);
+        }
         st4(Lr + k, L);
         st4(Tr + k, T);
+        k += 4;
     }
     for (; k < n; k++) {
         const int X0 = cx[k];
