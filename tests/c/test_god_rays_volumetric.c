@@ -440,8 +440,8 @@ static void test_extremes_errors(fx_context *ctx)
     fx_frame_free(f);
 }
 
-/* The composite's 4-pixel upsample (fx_volume_upsample_cell4) gives fx_volume_upsample's
- * bits: random cells mixing alike depths, depth edges, background and thin objects (no
+/* The composite's 4-pixel upsamples (fx_volume_upsample_cell4 across cells,
+ * fx_volume_upsample_same4 on one cell) give fx_volume_upsample's bits: random cells mixing alike depths, depth edges, background and thin objects (no
  * texel alike: the likest one), random tx/ty, including exact 0 and 1. */
 static void test_upsample_cell4(void)
 {
@@ -485,14 +485,20 @@ static void test_upsample_cell4(void)
                                                                                   : 1.0f + 60.0f * u;
                 c[k] = cell[X0[k]];
             }
-            v4f L, T;
-            fx_volume_upsample_cell4(c, by, (v4f){tx[0], tx[1], tx[2], tx[3]}, (v4f){d[0], d[1], d[2], d[3]}, &L,
-                                     &T);
+            v4f L, T, Ls, Ts, bc[12];
+            const v4f tx4 = {tx[0], tx[1], tx[2], tx[3]}, d4 = {d[0], d[1], d[2], d[3]};
+            fx_volume_upsample_cell4(c, by, tx4, d4, &L, &T);
+            for (int m = 0; m < 12; m++) /* the same 4 pixels all on X0[0]'s cell */
+                bc[m] = V4(c[0][m]);
+            fx_volume_upsample_same4(c[0], bc, ty, tx4, d4, &Ls, &Ts);
             for (int k = 0; k < 4; k++) {
-                float l1, t1;
+                float l1, t1, l0, t0;
                 fx_volume_upsample(lo, lt, ld, r0, r1, X0[k], X0[k] + 1 < LW ? X0[k] + 1 : X0[k], tx[k], ty, d[k],
                                    &l1, &t1);
+                fx_volume_upsample(lo, lt, ld, r0, r1, X0[0], X0[0] + 1 < LW ? X0[0] + 1 : X0[0], tx[k], ty, d[k],
+                                   &l0, &t0);
                 bad += memcmp(&l1, &L[k], sizeof l1) != 0 || memcmp(&t1, &T[k], sizeof t1) != 0;
+                bad += memcmp(&l0, &Ls[k], sizeof l0) != 0 || memcmp(&t0, &Ts[k], sizeof t0) != 0;
                 float e = 0.0f;
                 for (int m = 0; m < 4; m++) {
                     float r = fabsf(d[k] - c[k][m]) * (10.0f / d[k]), q = 1.0f - 0.5f * r;

@@ -25,6 +25,7 @@
 
 #include <float.h>
 #include <math.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <string.h>
 
@@ -606,7 +607,8 @@ typedef struct vol_job {
  * lo rows gathered once into vectors (row: 12 lw floats), then 4 pixels at a time
  * (fx_volume_upsample_same4 on one cell, fx_volume_upsample_cell4 across cells: the
  * depth-aware bilinear, bit for bit fx_volume_upsample's). */
-static void vol_row_lt(const vol_job *j, int y, float *row, float *restrict Lr, float *restrict Tr)
+static void vol_row_lt(const vol_job *j, int y, float *row, v4f *bcast, int *cached_Y0, float *restrict Lr,
+                       float *restrict Tr)
 {
     const int lw = j->lw, x0 = j->run->roi.x0, n = j->run->roi.x1 - x0;
     int Y0 = 0;
@@ -614,12 +616,15 @@ static void vol_row_lt(const vol_job *j, int y, float *row, float *restrict Lr, 
     fx_volume_lo_coord(y, j->f, j->lh, &Y0, &ty);
     const size_t r0 = (size_t)Y0 * lw, r1 = Y0 + 1 < j->lh ? r0 + (size_t)lw : r0;
     const float *restrict lo = j->lo, *restrict lt = j->lo_t, *restrict ld = j->lo_depth;
-    for (int X = 0; X < lw; X++) {
+    for (int X = 0; X < lw && Y0 != *cached_Y0; X++) { /* the cells change every f rows */
         const int X1 = X + 1 < lw ? X + 1 : X;
         st4(row + 12 * X, (v4f){ld[r0 + X], ld[r0 + X1], ld[r1 + X], ld[r1 + X1]});
         st4(row + 12 * X + 4, (v4f){lo[r0 + X], lo[r0 + X1], lo[r1 + X], lo[r1 + X1]});
         st4(row + 12 * X + 8, (v4f){lt[r0 + X], lt[r0 + X1], lt[r1 + X], lt[r1 + X1]});
+        for (int m = 0; m < 12; m++)
+            bcast[12 * X + m] = V4(row[12 * X + m]);
     }
+    *cached_Y0 = Y0;
     const v4f by = {1.0f - ty, 1.0f - ty, ty, ty};
     const float *restrict dep = j->depth + (size_t)y * j->run->width + x0;
     const int *restrict cx = j->col_x0;
@@ -631,7 +636,7 @@ static void vol_row_lt(const vol_job *j, int y, float *row, float *restrict Lr, 
         const v4f d = sel4((dk > V4(0.0f)) & (dk < V4(far)), dk, V4(FX_VOLUME_BG_DEPTH));
         v4f L, T;
         if (cx[k] == cx[k + 3]) { /* 4 pixels on one cell: with f >= 4, the runs are aligned below */
-            fx_volume_upsample_same4(row + 12 * cx[k], ty, ld4(ct + k), d, &L, &T);
+            fx_volume_upsample_same4(row + 12 * cx[k], bcast + 12 * cx[k], ty, ld4(ct + k), d, &L, &T);
         } else if (j->f >= 4) { /* the rest of this cell's run, one by one: the next group starts a run */
             for (const int X0 = cx[k]; cx[k] == X0; k++)
                 fx_volume_upsample(j->lo, j->lo_t, j->lo_depth, r0, r1, X0, X0 + 1 < lw ? X0 + 1 : X0, ct[k],
@@ -661,8 +666,11 @@ static void vol_rows(void *user, int begin, int end)
     const vol_job *j = user;
     const fx_effect_run *run = j->run;
     const int w = run->width, lw = j->lw, x0 = run->roi.x0, n = run->roi.x1 - x0;
-    /* per lo column: the cell's texels (vol_row_lt); per pixel of the row: L and T */
-    float *row = j->f > 1 ? fx_mem_alloc((size_t)(12 * lw + 2 * n) * sizeof(float)) : NULL;
+    /* per lo column: the cell's texels, also broadcast (vol_row_lt); per pixel of the row:
+     * L and T */
+    float *row = j->f > 1 ? fx_mem_alloc((size_t)(12 * lw + 2 * n + 48 * lw + 4) * sizeof(float)) : NULL;
+    v4f *bcast = row ? (v4f *)(((uintptr_t)(row + 12 * lw + 2 * n) + 15) & ~(uintptr_t)15) : NULL;
+    int cached_Y0 = -1;
     const v4f rad = j->rad;
     float *dbg = j->dbg;
     for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++) {
@@ -670,7 +678,7 @@ static void vol_rows(void *user, int begin, int end)
         const float *Lr, *Tr;
         if (j->f > 1 && row) {
             float *L = row + 12 * lw, *T = L + n;
-            vol_row_lt(j, y, row, L, T);
+            vol_row_lt(j, y, row, bcast, &cached_Y0, L, T);
             Lr = L;
             Tr = T;
         } else if (j->f > 1) {

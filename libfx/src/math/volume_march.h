@@ -234,6 +234,8 @@ static inline void fx_volume_upsample_cell4(const float *const cell[4], v4f by, 
     const v4f iw = V4(1.0f) / max4(ws, V4(1e-6f));
     *L = fx_hsum4x4(pl[0], pl[1], pl[2], pl[3]) * iw;
     *T = fx_hsum4x4(pt[0], pt[1], pt[2], pt[3]) * iw;
+    if (all4(ws > V4(1e-6f)))
+        return;
     for (int k = 0; k < 4; k++)
         if (!(ws[k] > 1e-6f)) { /* none alike (a thin object): the likest texel */
             int bi = 0;
@@ -251,24 +253,28 @@ static inline void fx_volume_upsample_cell4(const float *const cell[4], v4f by, 
 }
 
 /* fx_volume_upsample_cell4 for 4 pixels on the same cell: the lanes are the pixels, so the
- * taps need no transpose (the same products and sums in the same order: the same bits). */
-static inline void fx_volume_upsample_same4(const float *cell, float ty, v4f tx, v4f d, v4f *L, v4f *T)
+ * taps need no transpose (the same products and sums in the same order: the same bits).
+ * bc: the cell's 12 floats, each broadcast to a vector (built once per cell row). */
+static inline void fx_volume_upsample_same4(const float *cell, const v4f *bc, float ty, v4f tx, v4f d, v4f *L,
+                                            v4f *T)
 {
     const v4f inv = V4(10.0f) / d, ux = V4(1.0f) - tx;
     const v4f b[4] = {ux * V4(1.0f - ty), tx * V4(1.0f - ty), ux * V4(ty), tx * V4(ty)};
     v4f ws = V4(0.0f), sl = V4(0.0f), st = V4(0.0f);
     for (int m = 0; m < 4; m++) {
-        v4f r = d - V4(cell[m]);
+        v4f r = d - bc[m];
         r = (v4f)((v4i)r & (v4i){0x7fffffff, 0x7fffffff, 0x7fffffff, 0x7fffffff}) * inv;
         const v4f q = max4(V4(1.0f) - V4(0.5f) * r, V4(0.0f));
         const v4f wk = b[m] * (q * q);
         ws += wk;
-        sl += wk * V4(cell[4 + m]);
-        st += wk * V4(cell[8 + m]);
+        sl += wk * bc[4 + m];
+        st += wk * bc[8 + m];
     }
     const v4f iw = V4(1.0f) / max4(ws, V4(1e-6f));
     *L = sl * iw;
     *T = st * iw;
+    if (all4(ws > V4(1e-6f)))
+        return;
     for (int k = 0; k < 4; k++)
         if (!(ws[k] > 1e-6f)) { /* none alike (a thin object): the likest texel */
             int bi = 0;
