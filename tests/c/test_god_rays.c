@@ -661,15 +661,16 @@ static void test_threads(void)
 }
 
 /* The reduced path (no full-size buffers: the map built reduced, the rays interpolated in
- * the composite) and the full-size one (the rays written into the output) give the bits of
- * the buffered path the debug outputs take (light inside the frame and off screen). */
+ * the composite) and the full-size one (the occlusion map and the rays both in the output)
+ * give the bits of the buffered path the debug outputs take (light inside the frame and off
+ * screen); naive too (its map must not be the output: it reads the map while it writes). */
 static void test_fused_equals_buffered(fx_context *ctx)
 {
     float *img = spot_image(40, 12);
     int bad = 0;
-    for (int k = 0; k < 6; k++) {
+    for (int k = 0; k < 8; k++) {
         rset r = defaults();
-        r.method = "polar";
+        r.method = k < 6 ? "polar" : "naive";
         r.down = k % 3 == 0 ? 1 : k % 3 == 1 ? 2 : 4;
         r.lx = k < 3 ? 0.5f : 1.7f; /* inside, and off screen */
         float *o[2] = {NULL, NULL};

@@ -14,6 +14,8 @@
  * density 1e6 and anisotropy +-0.999 / +-1; clear errors without the light view, with a
  * point light, with a screen-space light and for NaN parameters. */
 #include "fx_effect_test.h"
+#include "math/hash.h"
+#include "math/volume_march.h"
 
 #include <float.h>
 #include <math.h>
@@ -438,6 +440,81 @@ static void test_extremes_errors(fx_context *ctx)
     fx_frame_free(f);
 }
 
+/* The composite's 4-pixel upsamples (fx_volume_upsample_cell4 across cells,
+ * fx_volume_upsample_same4 on one cell) give fx_volume_upsample's bits: random cells mixing alike depths, depth edges, background and thin objects (no
+ * texel alike: the likest one), random tx/ty, including exact 0 and 1. */
+static void test_upsample_cell4(void)
+{
+    enum { LW = 9, LH = 3 };
+    float lo[LW * LH], lt[LW * LH], ld[LW * LH];
+    long bad = 0, fallback = 0, n = 0;
+    for (int rep = 0; rep < 400; rep++) {
+        for (int i = 0; i < LW * LH; i++) {
+            float u = fx_rand4(rep, i, 1, 7);
+            ld[i] = u < 0.15f ? FX_VOLUME_BG_DEPTH : 2.0f + 40.0f * u * u;
+            if (fx_rand4(rep, i, 2, 7) < 0.5f && i > 0)
+                ld[i] = ld[i - 1] * (1.0f + 0.01f * fx_rand4(rep, i, 3, 7)); /* alike */
+            lo[i] = 3.0f * fx_rand4(rep, i, 4, 7);
+            lt[i] = fx_rand4(rep, i, 5, 7);
+        }
+        const int Y0 = rep % (LH - 1);
+        const size_t r0 = (size_t)Y0 * LW, r1 = r0 + LW;
+        float ty = fx_rand4(rep, 0, 6, 7);
+        ty = rep % 7 == 0 ? 0.0f : rep % 7 == 1 ? 1.0f : ty;
+        float cell[LW][12];
+        for (int X = 0; X < LW; X++) {
+            const int X1 = X + 1 < LW ? X + 1 : X;
+            const size_t t[4] = {r0 + X, r0 + X1, r1 + X, r1 + X1};
+            for (int m = 0; m < 4; m++) {
+                cell[X][m] = ld[t[m]];
+                cell[X][4 + m] = lo[t[m]];
+                cell[X][8 + m] = lt[t[m]];
+            }
+        }
+        const v4f by = {1.0f - ty, 1.0f - ty, ty, ty};
+        for (int blk = 0; blk < 8; blk++) {
+            int X0[4];
+            float tx[4], d[4];
+            const float *c[4];
+            for (int k = 0; k < 4; k++) {
+                X0[k] = (int)(fx_hash4(rep, blk, k, 8) % LW);
+                tx[k] = fx_rand4(rep, blk, k, 9);
+                tx[k] = (blk + k) % 5 == 0 ? 0.0f : tx[k];
+                float u = fx_rand4(rep, blk, k, 10);
+                d[k] = u < 0.3f ? cell[X0[k]][k] * (1.0f + 0.05f * u) : u < 0.4f ? FX_VOLUME_BG_DEPTH
+                                                                                  : 1.0f + 60.0f * u;
+                c[k] = cell[X0[k]];
+            }
+            v4f L, T, Ls, Ts, bc[12];
+            const v4f tx4 = {tx[0], tx[1], tx[2], tx[3]}, d4 = {d[0], d[1], d[2], d[3]};
+            fx_volume_upsample_cell4(c, by, tx4, d4, &L, &T);
+            for (int m = 0; m < 12; m++) /* the same 4 pixels all on X0[0]'s cell */
+                bc[m] = V4(c[0][m]);
+            fx_volume_upsample_same4(c[0], bc, ty, tx4, d4, &Ls, &Ts);
+            for (int k = 0; k < 4; k++) {
+                float l1, t1, l0, t0;
+                fx_volume_upsample(lo, lt, ld, r0, r1, X0[k], X0[k] + 1 < LW ? X0[k] + 1 : X0[k], tx[k], ty, d[k],
+                                   &l1, &t1);
+                fx_volume_upsample(lo, lt, ld, r0, r1, X0[0], X0[0] + 1 < LW ? X0[0] + 1 : X0[0], tx[k], ty, d[k],
+                                   &l0, &t0);
+                bad += memcmp(&l1, &L[k], sizeof l1) != 0 || memcmp(&t1, &T[k], sizeof t1) != 0;
+                bad += memcmp(&l0, &Ls[k], sizeof l0) != 0 || memcmp(&t0, &Ts[k], sizeof t0) != 0;
+                float e = 0.0f;
+                for (int m = 0; m < 4; m++) {
+                    float r = fabsf(d[k] - c[k][m]) * (10.0f / d[k]), q = 1.0f - 0.5f * r;
+                    e += q > 0.0f ? q * q : 0.0f;
+                }
+                fallback += e == 0.0f;
+                n++;
+            }
+        }
+    }
+    CHECK(bad == 0);
+    CHECK(fallback > 20); /* the likest-texel lane was exercised */
+    if (getenv("VOL_DEBUG") || bad)
+        fprintf(stderr, "upsample_cell4: %ld of %ld pixels differ (%ld with no texel alike)\n", bad, n, fallback);
+}
+
 int main(void)
 {
     fx_context *ctx = NULL;
@@ -446,6 +523,7 @@ int main(void)
     test_threads_presets(ctx);
     test_depth_edge(ctx);
     test_extremes_errors(ctx);
+    test_upsample_cell4();
     fx_context_free(ctx);
     return tu_finish("test_god_rays_volumetric");
 }

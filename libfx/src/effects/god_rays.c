@@ -25,6 +25,7 @@
 
 #include <float.h>
 #include <math.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <string.h>
 
@@ -540,14 +541,20 @@ static fx_result run_full(const fx_effect_run *run, const god_rays_params *p, oc
     /* frame-sized: from the context's buffer store (no page faults frame after frame);
      * occ is written whole, rays inside the ROI (the debug pass wants it whole) */
     const size_t bytes = n4 * sizeof(float);
-    float *occ = fx_buffer_get(run->ctx, bytes);
+    /* polar over the whole frame reads occ whole before it writes any ray: occ can be dst
+     * too, so the first frame of a process touches one fresh frame-sized buffer, not two
+     * (the map outside a smaller ROI would stay in dst: then a buffer of its own) */
+    const int whole = run->roi.x0 == 0 && run->roi.y0 == 0 && run->roi.x1 == w && run->roi.y1 == h;
+    const int in_dst = p->method == METHOD_POLAR && !run->debug && whole;
+    float *occ = in_dst ? run->dst : fx_buffer_get(run->ctx, bytes);
     /* the rays go to dst (same layout; the composite reads each pixel before writing it)
      * unless the debug pass wants them whole */
     float *rays = run->debug ? fx_buffer_get(run->ctx, bytes) : run->dst;
     if (occ && rays && run->debug)
         memset(rays, 0, bytes);
     if (!occ || !rays) {
-        fx_buffer_put(run->ctx, occ, bytes);
+        if (!in_dst)
+            fx_buffer_put(run->ctx, occ, bytes);
         if (run->debug)
             fx_buffer_put(run->ctx, rays, bytes);
         return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the occlusion map", where);
@@ -573,7 +580,8 @@ static fx_result run_full(const fx_effect_run *run, const god_rays_params *p, oc
                 copy_rgb(dr, rays, (size_t)w * h);
         }
     }
-    fx_buffer_put(run->ctx, occ, bytes);
+    if (!in_dst)
+        fx_buffer_put(run->ctx, occ, bytes);
     if (run->debug)
         fx_buffer_put(run->ctx, rays, bytes);
     return r;
@@ -595,6 +603,61 @@ typedef struct vol_job {
     const float *col_t;
 } vol_job;
 
+/* One row's L and T (n pixels from roi.x0) from the reduced grid: the cells of the row's two
+ * lo rows gathered once into vectors (row: 12 lw floats), then 4 pixels at a time
+ * (fx_volume_upsample_same4 on one cell, fx_volume_upsample_cell4 across cells: the
+ * depth-aware bilinear, bit for bit fx_volume_upsample's). */
+static void vol_row_lt(const vol_job *j, int y, float *row, v4f *bcast, int *cached_Y0, float *restrict Lr,
+                       float *restrict Tr)
+{
+    const int lw = j->lw, x0 = j->run->roi.x0, n = j->run->roi.x1 - x0;
+    int Y0 = 0;
+    float ty = 0.0f;
+    fx_volume_lo_coord(y, j->f, j->lh, &Y0, &ty);
+    const size_t r0 = (size_t)Y0 * lw, r1 = Y0 + 1 < j->lh ? r0 + (size_t)lw : r0;
+    const float *restrict lo = j->lo, *restrict lt = j->lo_t, *restrict ld = j->lo_depth;
+    for (int X = 0; X < lw && Y0 != *cached_Y0; X++) { /* the cells change every f rows */
+        const int X1 = X + 1 < lw ? X + 1 : X;
+        st4(row + 12 * X, (v4f){ld[r0 + X], ld[r0 + X1], ld[r1 + X], ld[r1 + X1]});
+        st4(row + 12 * X + 4, (v4f){lo[r0 + X], lo[r0 + X1], lo[r1 + X], lo[r1 + X1]});
+        st4(row + 12 * X + 8, (v4f){lt[r0 + X], lt[r0 + X1], lt[r1 + X], lt[r1 + X1]});
+        for (int m = 0; m < 12; m++)
+            bcast[12 * X + m] = V4(row[12 * X + m]);
+    }
+    *cached_Y0 = Y0;
+    const v4f by = {1.0f - ty, 1.0f - ty, ty, ty};
+    const float *restrict dep = j->depth + (size_t)y * j->run->width + x0;
+    const int *restrict cx = j->col_x0;
+    const float *restrict ct = j->col_t;
+    const float far = j->vol->far_limit;
+    int k = 0;
+    while (k + 4 <= n) {
+        const v4f dk = ld4(dep + k); /* fx_volume_weight_depth, 4 lanes */
+        const v4f d = sel4((dk > V4(0.0f)) & (dk < V4(far)), dk, V4(FX_VOLUME_BG_DEPTH));
+        v4f L, T;
+        if (cx[k] == cx[k + 3]) { /* 4 pixels on one cell: with f >= 4, the runs are aligned below */
+            fx_volume_upsample_same4(row + 12 * cx[k], bcast + 12 * cx[k], ty, ld4(ct + k), d, &L, &T);
+        } else if (j->f >= 4) { /* the rest of this cell's run, one by one: the next group starts a run */
+            for (const int X0 = cx[k]; cx[k] == X0; k++)
+                fx_volume_upsample(j->lo, j->lo_t, j->lo_depth, r0, r1, X0, X0 + 1 < lw ? X0 + 1 : X0, ct[k],
+                                   ty, fx_volume_weight_depth(dep[k], far), &Lr[k], &Tr[k]);
+            continue;
+        } else {
+            const float *cell[4] = {row + 12 * cx[k], row + 12 * cx[k + 1], row + 12 * cx[k + 2],
+                                    row + 12 * cx[k + 3]};
+            fx_volume_upsample_cell4(cell, by, ld4(ct + k), d, &L, &T);
+        }
+        st4(Lr + k, L);
+        st4(Tr + k, T);
+        k += 4;
+    }
+    for (; k < n; k++) {
+        const int X0 = cx[k];
+        fx_volume_upsample(j->lo, j->lo_t, j->lo_depth, r0, r1, X0, X0 + 1 < lw ? X0 + 1 : X0, ct[k],
+                           ty, fx_volume_weight_depth(dep[k], far), &Lr[k], &Tr[k]);
+    }
+}
+
 /* Output = src T + L (T: the view transmittance, with extinction full times the light's
  * transmittance on its way to the surface; L: the in-scatter; both upsampled by depth
  * likeness from the reduced grid). */
@@ -602,37 +665,77 @@ static void vol_rows(void *user, int begin, int end)
 {
     const vol_job *j = user;
     const fx_effect_run *run = j->run;
-    const int w = run->width;
+    const int w = run->width, lw = j->lw, x0 = run->roi.x0, n = run->roi.x1 - x0;
+    /* per lo column: the cell's texels, also broadcast (vol_row_lt); per pixel of the row:
+     * L and T */
+    float *row = j->f > 1 ? fx_mem_alloc((size_t)(12 * lw + 2 * n + 48 * lw + 4) * sizeof(float)) : NULL;
+    v4f *bcast = row ? (v4f *)(((uintptr_t)(row + 12 * lw + 2 * n) + 15) & ~(uintptr_t)15) : NULL;
+    int cached_Y0 = -1;
+    const v4f rad = j->rad;
+    float *dbg = j->dbg;
     for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++) {
-        int Y0 = 0;
-        float ty = 0.0f;
-        fx_volume_lo_coord(y, j->f, j->lh, &Y0, &ty);
-        const size_t r0 = (size_t)Y0 * j->lw, r1 = Y0 + 1 < j->lh ? r0 + (size_t)j->lw : r0;
-        for (int x = run->roi.x0; x < run->roi.x1; x++) {
-            size_t i = (size_t)y * w + x;
-            float L, T;
-            if (j->f > 1) {
-                float d = fx_volume_weight_depth(j->depth[i], j->vol->far_limit);
-                int X0 = j->col_x0[x - run->roi.x0];
-                fx_volume_upsample(j->lo, j->lo_t, j->lo_depth, r0, r1, X0, X0 + 1 < j->lw ? X0 + 1 : X0,
-                                   j->col_t[x - run->roi.x0], ty, d, &L, &T);
-            } else {
-                L = j->lo[i];
-                T = j->lo_t[i];
+        const size_t i0 = (size_t)y * w + x0;
+        const float *Lr, *Tr;
+        if (j->f > 1 && row) {
+            float *L = row + 12 * lw, *T = L + n;
+            vol_row_lt(j, y, row, bcast, &cached_Y0, L, T);
+            Lr = L;
+            Tr = T;
+        } else if (j->f > 1) {
+            continue; /* no scratch: handled below, pixel by pixel */
+        } else {
+            Lr = j->lo + i0;
+            Tr = j->lo_t + i0;
+        }
+        const float *restrict src = run->src + i0 * 4;
+        float *restrict dst = run->dst + i0 * 4;
+        if (!j->screen && !dbg) {
+            for (int k = 0; k < n; k++) {
+                const float T = Tr[k];
+                st4(dst + 4 * k, finite4(ld4(src + 4 * k) * (v4f){T, T, T, 1.0f} + rad * V4(Lr[k])));
             }
-            v4f s = ld4(run->src + i * 4);
-            v4f add = j->rad * V4(L);
-            v4f base = s * (v4f){T, T, T, 1.0f};
+            continue;
+        }
+        for (int k = 0; k < n; k++) {
+            const float T = Tr[k];
+            v4f base = ld4(src + 4 * k) * (v4f){T, T, T, 1.0f};
+            v4f add = rad * V4(Lr[k]);
             if (j->screen)
                 add *= V4(1.0f) - min4(max4(base, V4(0.0f)), V4(1.0f));
-            st4(run->dst + i * 4, finite4(base + add));
-            if (j->dbg) {
-                j->dbg[3 * i] = add[0];
-                j->dbg[3 * i + 1] = add[1];
-                j->dbg[3 * i + 2] = add[2];
+            st4(dst + 4 * k, finite4(base + add));
+            if (dbg) {
+                dbg[3 * (i0 + k)] = add[0];
+                dbg[3 * (i0 + k) + 1] = add[1];
+                dbg[3 * (i0 + k) + 2] = add[2];
             }
         }
     }
+    if (j->f > 1 && !row) /* out of memory for a row's scratch: the exact upsample, per pixel */
+        for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++) {
+            int Y0 = 0;
+            float ty = 0.0f;
+            fx_volume_lo_coord(y, j->f, j->lh, &Y0, &ty);
+            const size_t r0 = (size_t)Y0 * lw, r1 = Y0 + 1 < j->lh ? r0 + (size_t)lw : r0;
+            for (int x = x0; x < run->roi.x1; x++) {
+                const size_t i = (size_t)y * w + x;
+                const int X0 = j->col_x0[x - x0];
+                float L, T;
+                fx_volume_upsample(j->lo, j->lo_t, j->lo_depth, r0, r1, X0, X0 + 1 < lw ? X0 + 1 : X0,
+                                   j->col_t[x - x0], ty, fx_volume_weight_depth(j->depth[i], j->vol->far_limit),
+                                   &L, &T);
+                v4f base = ld4(run->src + i * 4) * (v4f){T, T, T, 1.0f};
+                v4f add = rad * V4(L);
+                if (j->screen)
+                    add *= V4(1.0f) - min4(max4(base, V4(0.0f)), V4(1.0f));
+                st4(run->dst + i * 4, finite4(base + add));
+                if (dbg) {
+                    dbg[3 * i] = add[0];
+                    dbg[3 * i + 1] = add[1];
+                    dbg[3 * i + 2] = add[2];
+                }
+            }
+        }
+    fx_mem_free(row);
 }
 
 /* The sun and its light view for method volumetric: a sun only (spot and point lights
@@ -789,7 +892,7 @@ const fx_effect_class fx_effect_god_rays = {
          * 0.5 has the scene-relative line density of 1.5 at 640x360; at equal time a reduced
          * map with finer lines errs less than coarser lines at full size */
         "{\"method\": \"polar\", \"polar_resolution\": 0.75, \"polar_levels\": 2, \"polar_downsample\": 4, "
-        "\"volume_downsample\": 8, \"volume_steps\": 16, \"interleave\": 1}",
+        "\"volume_downsample\": 8, \"volume_steps\": 8, \"interleave\": 2}",
         "{\"method\": \"polar\", \"polar_resolution\": 0.75, \"polar_levels\": 2, \"polar_downsample\": 2, "
         "\"volume_downsample\": 4, \"volume_steps\": 16, \"interleave\": 2}",
         "{\"method\": \"polar\", \"polar_resolution\": 0.5, \"polar_levels\": 2, \"polar_downsample\": 1, "

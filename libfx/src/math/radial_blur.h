@@ -68,7 +68,8 @@ void fx_radial_blur_bound_light(double *lx, double *ly, int width, int height);
 
 /* rays over roi (NULL: all) from occ, both width x height pixels of 4 floats (RGB and a
  * lane that occ holds at 0 and rays gets 0: four-lane vectors). Outside roi, rays is
- * untouched. Finite for finite occ. */
+ * untouched. Finite for finite occ. polar at full size (downsample <= 1) reads occ whole
+ * before it writes rays, so rays may be occ itself; naive's may not. */
 fx_result fx_radial_blur_naive(fx_context *ctx, const float *occ, float *rays, int width, int height,
                                const fx_radial_blur *rb, const fx_rect *roi, const char *where);
 fx_result fx_radial_blur_polar(fx_context *ctx, const float *occ, float *rays, int width, int height,
