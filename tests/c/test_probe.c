@@ -214,8 +214,9 @@ static int ref_trace(const fx_pano *p, const fx_pano_trace_settings *st, fx_vec3
         return 0;
     }
     pd = fx_v3_normalize_or(pd, fx_v3(0.0f, 0.0f, -1.0f));
-    float gap, prev_t = 0.0f, t = st->t0, t_hidden = -1.0f;
+    float gap, prev_t = 0.0f, t = st->t0;
     int prev_front = ref_in_front(p, po, &gap);
+    float t_hidden = prev_front ? -1.0f : 0.0f; /* an origin hidden from the probe: hidden until it comes out */
     const float texel = 2.0f * (float)PI / (float)(p->w > p->h ? p->w : 2 * p->h);
     for (int k = 0; k < st->steps; k++, t *= st->growth) {
         int front = ref_in_front(p, fx_v3_add(po, fx_v3_scale(pd, t)), &gap);
@@ -409,6 +410,30 @@ static void test_disocclusion(void)
     printf("disocclusion: %d rays meet the floor behind the ball (%d hidden from the probe's march): "
            "mean %.4f, worst channel %.3f off the floor's grey, worst step between neighbours %.3f\n", n, hidden,
            mean, worst, worst_step);
+    /* rays that start hidden from the probe (just above the floor behind the ball) and stay
+     * hidden down to the floor: before, the march saw no crossing and took the far lookup,
+     * the probe's colour along the ray's direction (the ball: up to 0.5 off the floor's
+     * grey); now the same fill */
+    double worst0 = 0;
+    int n0 = 0;
+    const double bd = sqrt(0.55 * 0.55 + 1.0);
+    for (int j = 0; j < 5; j++)
+        for (int i = 0; i < 5; i++) {
+            double o2[3] = { -0.1 + 0.05 * i, -0.95, -1.9 - 0.05 * j }, z[3] = { 0, 0, 0 };
+            double l = sqrt(o2[0] * o2[0] + o2[1] * o2[1] + o2[2] * o2[2]);
+            double od[3] = { o2[0] / l, o2[1] / l, o2[2] / l };
+            if (!(ball_hit(z, od) > 0))
+                continue;
+            float c2[3];
+            fx_pano_trace(&p, &st, fx_v3((float)o2[0], (float)o2[1], (float)o2[2]),
+                          fx_v3(0.0f, (float)(-0.55 / bd), (float)(-1.0 / bd)), c2);
+            for (int k = 0; k < 3; k++)
+                worst0 = fmax(worst0, fabs(c2[k] - 0.5));
+            n0++;
+        }
+    printf("disocclusion from a hidden origin: %d rays, worst channel %.3f off the floor's grey\n", n0, worst0);
+    CHECK(n0 > 10);
+    CHECK(worst0 < 0.1);
     CHECK(n > 100);
     CHECK(hidden == n); /* the case under test: the march finds them hidden */
     CHECK(mean < 0.01);

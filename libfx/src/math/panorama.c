@@ -48,23 +48,51 @@ static inline int fill_background(float D, float near)
 }
 
 #define FILL_DIRS 12
-/* The colour of the texel direction d falls in (nearest: its colour and depth agree; a
- * bilinear colour would blend the occluder's texels into a background sample) and whether
- * it is the hidden point's background. (Also requiring its four neighbours to be, which
- * drops a silhouette's texels, whose anti-aliased colour blends the occluder's: 0.6 to 1.2
- * points of fall worse on the grazing and pair truth scenes, not kept.) */
-static int fill_sample(const fx_pano *p, fx_vec3 d, float near, float rgb[3])
+/* A fill sample at direction d: the bilinear colour over the four texels around d that are
+ * the hidden point's background (each texel's depth tested, its bilinear weight kept), so
+ * the occluder's texels never blend into a background sample and the mean moves smoothly
+ * with the ray (nearest texels made bands a texel wide across the grazing mirror's sky;
+ * a plain bilinear colour blends the occluder into the samples beside it).
+ * rgb_bg: the masked sum (weights included), rgb_all: the plain bilinear colour. Returns
+ * the background's share of the weight (0..1). */
+static float fill_sample(const fx_pano *p, fx_vec3 d, float near, float rgb_bg[3], float rgb_all[3])
 {
     float px, py;
     fx_pano_dir_to_pixel(d, p->w, p->h, &px, &py);
-    int x = (int)px, y = (int)py;
-    x = x < 0 ? 0 : x >= p->w ? p->w - 1 : x;
-    y = y < 0 ? 0 : y >= p->h ? p->h - 1 : y;
-    const size_t i = (size_t)y * p->w + x;
-    const float *c = p->color + i * 4;
-    rgb[0] = c[0], rgb[1] = c[1], rgb[2] = c[2];
-    float v = p->depth[i];
-    return fill_background(v > 0.0f && v < 6.0e4f ? v : INFINITY, near);
+    float fx = px - 0.5f, fy = fx_clampf(py - 0.5f, 0.0f, (float)(p->h - 1));
+    int x0 = (int)floorf(fx), y0 = (int)fy;
+    float ax = fx - (float)x0, ay = fy - (float)y0;
+    x0 = ((x0 % p->w) + p->w) % p->w;
+    const int xs[2] = { x0, x0 + 1 < p->w ? x0 + 1 : 0 }, ys[2] = { y0, y0 + 1 < p->h ? y0 + 1 : y0 };
+    const float wx[2] = { 1.0f - ax, ax }, wy[2] = { 1.0f - ay, ay };
+    float wbg = 0.0f;
+    for (int k = 0; k < 3; k++)
+        rgb_bg[k] = rgb_all[k] = 0.0f;
+    for (int j = 0; j < 2; j++)
+        for (int i = 0; i < 2; i++) {
+            const size_t t = (size_t)ys[j] * p->w + xs[i];
+            const float wt = wx[i] * wy[j], *c = p->color + t * 4, v = p->depth[t];
+            int bg = fill_background(v > 0.0f && v < 6.0e4f ? v : INFINITY, near);
+            if (bg && !isfinite(near)) {
+                /* the sky beside the silhouette: only sky texels whose four neighbours are sky
+                 * (the silhouette's texels blend the occluder's anti-aliased colour into the
+                 * sky, and the rings' centre sits on the silhouette here: drawn out along the
+                 * rays they made a fan of light and dark bands in the grazing mirror's sky) */
+                static const int nb[4][2] = { { -1, 0 }, { 1, 0 }, { 0, -1 }, { 0, 1 } };
+                for (int q = 0; q < 4 && bg; q++) {
+                    int xx = (xs[i] + nb[q][0] + p->w) % p->w, yy = ys[j] + nb[q][1];
+                    yy = yy < 0 ? 0 : yy >= p->h ? p->h - 1 : yy;
+                    float u = p->depth[(size_t)yy * p->w + xx];
+                    bg = fill_background(u > 0.0f && u < 6.0e4f ? u : INFINITY, near);
+                }
+            }
+            for (int k = 0; k < 3; k++) {
+                rgb_all[k] += wt * c[k];
+                rgb_bg[k] += bg ? wt * c[k] : 0.0f;
+            }
+            wbg += bg ? wt : 0.0f;
+        }
+    return wbg;
 }
 
 static void hidden_fill(const fx_pano *p, fx_vec3 po, fx_vec3 pd, float t_front, float rgb[3])
@@ -101,37 +129,28 @@ static void hidden_fill(const fx_pano *p, fx_vec3 po, fx_vec3 pd, float t_front,
     const float texel = 2.0f * FX_PANO_PI / (float)(p->w > p->h ? p->w : 2 * p->h);
     const float near = isfinite(dbg) ? 0.9f * dist : INFINITY;
     double sum[3] = { 0, 0, 0 }, wsum = 0, all[3] = { 0, 0, 0 }, wall = 0;
-    {
-        float col[3];
-        int bg = fill_sample(p, c, near, col); /* the centre itself */
-        for (int ch = 0; ch < 3; ch++) {
-            all[ch] += 256.0 * col[ch];
-            sum[ch] += bg ? 256.0 * col[ch] : 0.0;
-        }
-        wall += 256.0;
-        wsum += bg ? 256.0 : 0.0;
-    }
-    for (int r = 0; r < FILL_RINGS; r++) {
-        float ang = fminf(texel * (float)(4 << r), 1.2f);
-        float ca = cosf(ang), sa = sinf(ang), wr = (float)(64 >> (2 * r));
-        for (int k = 0; k < FILL_DIRS; k++) {
+    for (int r = -1; r < FILL_RINGS; r++) {
+        /* r = -1: the centre itself (weight 256); then the rings */
+        float ang = r < 0 ? 0.0f : fminf(texel * (float)(4 << r), 1.2f);
+        float ca = cosf(ang), sa = sinf(ang), wr = r < 0 ? 256.0f : (float)(64 >> (2 * r));
+        for (int k = 0; k < (r < 0 ? 1 : FILL_DIRS); k++) {
             const float *e = cs[2 * k + (r & 1)];
-            fx_vec3 d = fx_v3_add(fx_v3_scale(c, ca),
-                                  fx_v3_add(fx_v3_scale(e1, sa * e[0]), fx_v3_scale(e2, sa * e[1])));
-            float col[3];
-            int bg = fill_sample(p, d, near, col);
-            for (int ch = 0; ch < 3; ch++)
-                all[ch] += (double)(wr * col[ch]);
+            fx_vec3 d = r < 0 ? c
+                              : fx_v3_add(fx_v3_scale(c, ca),
+                                          fx_v3_add(fx_v3_scale(e1, sa * e[0]), fx_v3_scale(e2, sa * e[1])));
+            float bgc[3], allc[3];
+            float wb = fill_sample(p, d, near, bgc, allc);
+            for (int ch = 0; ch < 3; ch++) {
+                all[ch] += (double)(wr * allc[ch]);
+                sum[ch] += (double)(wr * bgc[ch]); /* the occluder's texels (nearer than the hidden
+                                                      point), or the sky beside a surface: weight 0 */
+            }
             wall += wr;
-            if (!bg)
-                continue; /* the occluder (nearer than the hidden point) or its silhouette, or the sky beside a surface */
-            for (int ch = 0; ch < 3; ch++)
-                sum[ch] += (double)(wr * col[ch]);
-            wsum += wr;
+            wsum += (double)(wr * wb);
         }
     }
     for (int ch = 0; ch < 3; ch++)
-        rgb[ch] = (float)(wsum > 0.0 ? sum[ch] / wsum : all[ch] / wall);
+        rgb[ch] = (float)(wsum > 1e-6 ? sum[ch] / wsum : all[ch] / wall);
 }
 
 /* Whether probe-space point q lies in front of the probe's surface in its direction. */
@@ -222,8 +241,8 @@ static int refined_crossing(const fx_pano *p, const fx_pano_trace_settings *st, 
 }
 
 /* The march of fx_pano_trace: 1 and *t_hit (the crossing, refined) for a hit; 2 and *t_hit
- * for a ray that passed behind an occluder (seen from the probe) and is still behind it
- * when the march ends (a ray that comes out in front again, into the sky or a room too
+ * for a ray that passed behind an occluder (seen from the probe), or started behind one,
+ * and is still behind it when the march ends (a ray that comes out in front again, into the sky or a room too
  * big for the march, is the far lookup's as any other): its hit is hidden from the probe,
  * and *t_hit is the last point of the ray in front of the background beside the occluder's
  * silhouette, where hidden_fill starts (the ray's direction from the probe would look at
@@ -247,7 +266,11 @@ FX_CLONES static int pano_march(const fx_pano *p, const fx_pano_trace_settings *
     const float g = st->growth;
     float gap;
     int prev_front = in_front(p, po, &gap);
-    float prev_t = 0.0f, t = st->t0, t_hidden = -1.0f;
+    /* an origin the probe does not see (behind a surface it sees: a mirror slab's side face,
+     * a point behind the mirror's own frame) is hidden from the start: the fill unless the
+     * ray comes out in front (before, such a ray met no crossing and took the far lookup,
+     * the probe's colour along the ray's direction: the occluder's or the wall's) */
+    float prev_t = 0.0f, t = st->t0, t_hidden = prev_front ? -1.0f : 0.0f;
     for (int k0 = 0; k0 < steps; k0 += 4) {
         /* t_k = t_{k-1} g as the one-step loop multiplied it */
         float ts[4];
