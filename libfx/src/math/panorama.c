@@ -24,16 +24,133 @@ void fx_pano_color(const fx_pano *p, fx_vec3 d, float rgb[3])
     }
 }
 
-/* Colour of the texel direction d falls in (nearest). */
-static void pano_texel(const fx_pano *p, fx_vec3 d, float rgb[3])
+/* The fill for a ray whose hit is hidden from the probe (a disocclusion: it passed behind an
+ * occluder the probe sees and never came out). The hidden surface is estimated as the
+ * background beside the occluder continued behind it: the ray's point at the background's
+ * radial depth there (the texel of the last point t_front where the probe saw the ray in
+ * front of the background). Its colour is the probe's background around that point's
+ * direction: a weighted mean of the centre (weight 256) and rings of 12 samples at 4, 8,
+ * 16 and 32 texel angles (weights 64, 16, 4, 1 per sample: 1 / angle^2, the nearest
+ * background first), counting only samples whose surface lies no nearer than that point
+ * (less 10 %): the occluder itself, nearer, never counts, nor the sky beside a surface.
+ * With the sky beside the silhouette the hidden point is at infinity: the rings around the
+ * silhouette point, the sky's samples only. The result is smooth in the ray, so it cannot
+ * streak: every ray that passes behind the occluder gets a mean of the background around
+ * its own hidden point, not the one texel beside the silhouette where it disappeared
+ * (before: stretched bands of that texel, and of the silhouette's anti-aliased colour,
+ * along the rays). No background sample at all: the same samples' plain mean. */
+#define FILL_RINGS 4
+/* A sample of the hidden point's background: a surface no nearer than `near` (the sky
+ * does not continue a surface), or, beside the sky (near = +inf), the sky. */
+static inline int fill_background(float D, float near)
+{
+    return isfinite(near) ? D >= near && isfinite(D) : !isfinite(D);
+}
+
+#define FILL_DIRS 12
+/* A fill sample at direction d: the bilinear colour over the four texels around d that are
+ * the hidden point's background (each texel's depth tested, its bilinear weight kept), so
+ * the occluder's texels never blend into a background sample and the mean moves smoothly
+ * with the ray (nearest texels made bands a texel wide across the grazing mirror's sky;
+ * a plain bilinear colour blends the occluder into the samples beside it).
+ * rgb_bg: the masked sum (weights included), rgb_all: the plain bilinear colour. Returns
+ * the background's share of the weight (0..1). */
+static float fill_sample(const fx_pano *p, fx_vec3 d, float near, float rgb_bg[3], float rgb_all[3])
 {
     float px, py;
     fx_pano_dir_to_pixel(d, p->w, p->h, &px, &py);
-    int x = (int)px, y = (int)py;
-    x = x < 0 ? 0 : x >= p->w ? p->w - 1 : x;
-    y = y < 0 ? 0 : y >= p->h ? p->h - 1 : y;
-    const float *c = p->color + ((size_t)y * p->w + x) * 4;
-    rgb[0] = c[0], rgb[1] = c[1], rgb[2] = c[2];
+    float fx = px - 0.5f, fy = fx_clampf(py - 0.5f, 0.0f, (float)(p->h - 1));
+    int x0 = (int)floorf(fx), y0 = (int)fy;
+    float ax = fx - (float)x0, ay = fy - (float)y0;
+    x0 = ((x0 % p->w) + p->w) % p->w;
+    const int xs[2] = { x0, x0 + 1 < p->w ? x0 + 1 : 0 }, ys[2] = { y0, y0 + 1 < p->h ? y0 + 1 : y0 };
+    const float wx[2] = { 1.0f - ax, ax }, wy[2] = { 1.0f - ay, ay };
+    float wbg = 0.0f;
+    for (int k = 0; k < 3; k++)
+        rgb_bg[k] = rgb_all[k] = 0.0f;
+    for (int j = 0; j < 2; j++)
+        for (int i = 0; i < 2; i++) {
+            const size_t t = (size_t)ys[j] * p->w + xs[i];
+            const float wt = wx[i] * wy[j], *c = p->color + t * 4, v = p->depth[t];
+            int bg = fill_background(v > 0.0f && v < 6.0e4f ? v : INFINITY, near);
+            if (bg && !isfinite(near)) {
+                /* the sky beside the silhouette: only sky texels whose four neighbours are sky
+                 * (the silhouette's texels blend the occluder's anti-aliased colour into the
+                 * sky, and the rings' centre sits on the silhouette here: drawn out along the
+                 * rays they made a fan of light and dark bands in the grazing mirror's sky) */
+                static const int nb[4][2] = { { -1, 0 }, { 1, 0 }, { 0, -1 }, { 0, 1 } };
+                for (int q = 0; q < 4 && bg; q++) {
+                    int xx = (xs[i] + nb[q][0] + p->w) % p->w, yy = ys[j] + nb[q][1];
+                    yy = yy < 0 ? 0 : yy >= p->h ? p->h - 1 : yy;
+                    float u = p->depth[(size_t)yy * p->w + xx];
+                    bg = fill_background(u > 0.0f && u < 6.0e4f ? u : INFINITY, near);
+                }
+            }
+            for (int k = 0; k < 3; k++) {
+                rgb_all[k] += wt * c[k];
+                rgb_bg[k] += bg ? wt * c[k] : 0.0f;
+            }
+            wbg += bg ? wt : 0.0f;
+        }
+    return wbg;
+}
+
+static void hidden_fill(const fx_pano *p, fx_vec3 po, fx_vec3 pd, float t_front, float rgb[3])
+{
+    /* cos and sin of k x 15 deg: a ring's 12 directions at 30 deg, odd rings turned 15 deg */
+    static const float cs[24][2] = {
+        { 1.0f, 0.0f }, { 0.96592583f, 0.25881905f }, { 0.86602540f, 0.5f }, { 0.70710678f, 0.70710678f },
+        { 0.5f, 0.86602540f }, { 0.25881905f, 0.96592583f }, { 0.0f, 1.0f }, { -0.25881905f, 0.96592583f },
+        { -0.5f, 0.86602540f }, { -0.70710678f, 0.70710678f }, { -0.86602540f, 0.5f },
+        { -0.96592583f, 0.25881905f }, { -1.0f, 0.0f }, { -0.96592583f, -0.25881905f },
+        { -0.86602540f, -0.5f }, { -0.70710678f, -0.70710678f }, { -0.5f, -0.86602540f },
+        { -0.25881905f, -0.96592583f }, { 0.0f, -1.0f }, { 0.25881905f, -0.96592583f },
+        { 0.5f, -0.86602540f }, { 0.70710678f, -0.70710678f }, { 0.86602540f, -0.5f },
+        { 0.96592583f, -0.25881905f } };
+    fx_vec3 qf = fx_v3_add(po, fx_v3_scale(pd, t_front));
+    float dbg = fx_pano_depth(p, qf); /* the background beside the silhouette */
+    float tc = t_front;
+    if (isfinite(dbg)) {
+        /* |po + t pd| = dbg, the root past t_front (pd unit) */
+        float b = fx_v3_dot(po, pd), c = fx_v3_dot(po, po) - dbg * dbg, disc = b * b - c;
+        float t = disc >= 0.0f ? -b + sqrtf(disc) : t_front;
+        if (t > t_front && isfinite(t))
+            tc = t;
+    }
+    fx_vec3 q = fx_v3_add(po, fx_v3_scale(pd, tc));
+    float dist = sqrtf(fx_v3_dot(q, q));
+    /* around the hidden point's direction (the sky beside the silhouette: tc = t_front,
+     * the silhouette point; its sky samples are the sky nearest the ray's direction) */
+    fx_vec3 c = fx_v3_normalize_or(q, pd);
+    /* an orthonormal frame around c */
+    fx_vec3 a = fabsf(c.y) < 0.9f ? fx_v3(0.0f, 1.0f, 0.0f) : fx_v3(1.0f, 0.0f, 0.0f);
+    fx_vec3 e1 = fx_v3_normalize_or(fx_v3_cross(a, c), fx_v3(1.0f, 0.0f, 0.0f));
+    fx_vec3 e2 = fx_v3_cross(c, e1);
+    const float texel = 2.0f * FX_PANO_PI / (float)(p->w > p->h ? p->w : 2 * p->h);
+    const float near = isfinite(dbg) ? 0.9f * dist : INFINITY;
+    double sum[3] = { 0, 0, 0 }, wsum = 0, all[3] = { 0, 0, 0 }, wall = 0;
+    for (int r = -1; r < FILL_RINGS; r++) {
+        /* r = -1: the centre itself (weight 256); then the rings */
+        float ang = r < 0 ? 0.0f : fminf(texel * (float)(4 << r), 1.2f);
+        float ca = cosf(ang), sa = sinf(ang), wr = r < 0 ? 256.0f : (float)(64 >> (2 * r));
+        for (int k = 0; k < (r < 0 ? 1 : FILL_DIRS); k++) {
+            const float *e = cs[2 * k + (r & 1)];
+            fx_vec3 d = r < 0 ? c
+                              : fx_v3_add(fx_v3_scale(c, ca),
+                                          fx_v3_add(fx_v3_scale(e1, sa * e[0]), fx_v3_scale(e2, sa * e[1])));
+            float bgc[3], allc[3];
+            float wb = fill_sample(p, d, near, bgc, allc);
+            for (int ch = 0; ch < 3; ch++) {
+                all[ch] += (double)(wr * allc[ch]);
+                sum[ch] += (double)(wr * bgc[ch]); /* the occluder's texels (nearer than the hidden
+                                                      point), or the sky beside a surface: weight 0 */
+            }
+            wall += wr;
+            wsum += (double)(wr * wb);
+        }
+    }
+    for (int ch = 0; ch < 3; ch++)
+        rgb[ch] = (float)(wsum > 1e-6 ? sum[ch] / wsum : all[ch] / wall);
 }
 
 /* Whether probe-space point q lies in front of the probe's surface in its direction. */
@@ -124,11 +241,11 @@ static int refined_crossing(const fx_pano *p, const fx_pano_trace_settings *st, 
 }
 
 /* The march of fx_pano_trace: 1 and *t_hit (the crossing, refined) for a hit; 2 and *t_hit
- * for a ray that passed behind an occluder (seen from the probe) and is still behind it
- * when the march ends (a ray that comes out in front again, into the sky or a room too
- * big for the march, is the far lookup's as any other): its hit is hidden from the probe, and *t_hit is the last point of the
- * ray in front of the background beside the occluder's silhouette (the background there is
- * the best guess of the hidden surface: the ray's direction from the probe would look at
+ * for a ray that passed behind an occluder (seen from the probe), or started behind one,
+ * and is still behind it when the march ends (a ray that comes out in front again, into the sky or a room too
+ * big for the march, is the far lookup's as any other): its hit is hidden from the probe,
+ * and *t_hit is the last point of the ray in front of the background beside the occluder's
+ * silhouette, where hidden_fill starts (the ray's direction from the probe would look at
  * the occluder itself, drawing it out over every ray that passes behind it); 0 for none,
  * -1 for a non-finite ray. *po_out, *pd_out: the ray in the probe's space (pd unit). An
  * AVX2 clone: VEX's three-operand forms drop the register copies of the selects. */
@@ -149,7 +266,11 @@ FX_CLONES static int pano_march(const fx_pano *p, const fx_pano_trace_settings *
     const float g = st->growth;
     float gap;
     int prev_front = in_front(p, po, &gap);
-    float prev_t = 0.0f, t = st->t0, t_hidden = -1.0f;
+    /* an origin the probe does not see (behind a surface it sees: a mirror slab's side face,
+     * a point behind the mirror's own frame) is hidden from the start: the fill unless the
+     * ray comes out in front (before, such a ray met no crossing and took the far lookup,
+     * the probe's colour along the ray's direction: the occluder's or the wall's) */
+    float prev_t = 0.0f, t = st->t0, t_hidden = prev_front ? -1.0f : 0.0f;
     for (int k0 = 0; k0 < steps; k0 += 4) {
         /* t_k = t_{k-1} g as the one-step loop multiplied it */
         float ts[4];
@@ -191,8 +312,8 @@ int fx_pano_trace(const fx_pano *p, const fx_pano_trace_settings *st, fx_vec3 o,
         fx_pano_color(p, fx_v3_add(po, fx_v3_scale(pd, t)), rgb);
         return 1;
     }
-    if (hit == 2) { /* hidden: the background texel beside the silhouette (nearest: no blend with the occluder) */
-        pano_texel(p, fx_v3_add(po, fx_v3_scale(pd, t)), rgb);
+    if (hit == 2) { /* hidden from the probe: the background around the hidden point, wide (hidden_fill) */
+        hidden_fill(p, po, pd, t, rgb);
         return 0;
     }
     fx_pano_color(p, pd, rgb);

@@ -101,7 +101,10 @@ fx_pano_trace_settings fx_pano_trace_setup(int steps, int refine, float min_dist
  * and returns the probe's colour where the ray meets the probe's depth surface (the
  * first crossing from in front of it to behind it, refined by bisection); where it meets
  * none within max_distance, the colour along dir as seen from the probe (infinitely far:
- * the sky, or a room too big for the march). Returns 1 for a hit, 0 for the far lookup.
+ * the sky, or a room too big for the march); where it passes behind an occluder the probe
+ * sees and never comes out (its hit is hidden from the probe: a disocclusion), a wide,
+ * depth-tested mean of the probe's background around the hidden point (never one texel
+ * drawn out along the rays). Returns 1 for a hit, 0 for the far lookup or the fill.
  * Finite for any input (a non-finite ray gives the colour of the probe's forward view). */
 int fx_pano_trace(const fx_pano *p, const fx_pano_trace_settings *st, fx_vec3 o, fx_vec3 dir, float rgb[3]);
 
