@@ -268,6 +268,17 @@ def _render_view(scene, aux, path, passes, what):
         compat.release_compositor_tree(aux, made)
 
 
+def _place_ortho_camera(aux, cam, spec):
+    """The aux scene's camera as the orthographic view spec describes (light and water views)."""
+    cam.data.type = "ORTHO"
+    cam.data.ortho_scale = spec["ortho_scale"]
+    cam.data.sensor_fit = "HORIZONTAL" if spec["width"] >= spec["height"] else "VERTICAL"
+    cam.data.clip_start = spec["clip_start"]
+    cam.data.clip_end = spec["clip_end"]
+    cam.matrix_world = Matrix(spec["matrix_world"])
+    aux.camera = cam
+
+
 def _render(scene, spec, objs, path):
     aux = bpy.data.scenes.new(AUX_SCENE)
     cam_data = bpy.data.cameras.new(AUX_SCENE)
@@ -276,13 +287,7 @@ def _render(scene, spec, objs, path):
         for ob in objs:
             aux.collection.objects.link(ob)
         aux.collection.objects.link(cam)
-        cam_data.type = "ORTHO"
-        cam_data.ortho_scale = spec["ortho_scale"]
-        cam_data.sensor_fit = "HORIZONTAL" if spec["width"] >= spec["height"] else "VERTICAL"
-        cam_data.clip_start = spec["clip_start"]
-        cam_data.clip_end = spec["clip_end"]
-        cam.matrix_world = Matrix(spec["matrix_world"])
-        aux.camera = cam
+        _place_ortho_camera(aux, cam, spec)
         aux.world = scene.world
         r = aux.render
         r.engine = "CYCLES"
@@ -791,13 +796,7 @@ def _render_water(scene, spec, water, path):
             ob.hide_render = False
             ob.visible_camera = True
         aux.collection.objects.link(cam)
-        cam_data.type = "ORTHO"
-        cam_data.ortho_scale = spec["ortho_scale"]
-        cam_data.sensor_fit = "HORIZONTAL" if spec["width"] >= spec["height"] else "VERTICAL"
-        cam_data.clip_start = spec["clip_start"]
-        cam_data.clip_end = spec["clip_end"]
-        cam.matrix_world = Matrix(spec["matrix_world"])
-        aux.camera = cam
+        _place_ortho_camera(aux, cam, spec)
         r = aux.render
         r.engine = "CYCLES"
         r.resolution_x, r.resolution_y, r.resolution_percentage = spec["width"], spec["height"], 100

@@ -6,6 +6,7 @@
 
 #include "testutil.h"
 
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -31,6 +32,24 @@ static inline void et_write_view(fx_context *ctx, const char *path, int w, int h
     CHECK_OK(ctx, fx_frame_add_pass(f, "Depth", 1, dep));
     CHECK_OK(ctx, fx_frame_write_exr(f, path, NULL));
     fx_frame_free(f);
+}
+
+/* A perspective camera as Blender's (OpenGL projection), vertical field of view fov_deg,
+ * w x h pixels, clip planes nn and ff, seen through world_to_camera w2c. */
+static inline void et_perspective(fx_camera *c, const float w2c[16], double fov_deg, int w, int h, double nn,
+                                  double ff)
+{
+    memset(c, 0, sizeof *c);
+    c->size = sizeof *c;
+    memcpy(c->world_to_camera, w2c, 16 * sizeof(float));
+    double fy = 1.0 / tan(fov_deg * 0.5 * 3.14159265358979323846 / 180), asp = (double)w / h;
+    c->projection[0] = (float)(fy / asp);
+    c->projection[5] = (float)fy;
+    c->projection[10] = (float)((ff + nn) / (nn - ff));
+    c->projection[11] = (float)(2 * ff * nn / (nn - ff));
+    c->projection[14] = -1;
+    c->clip_start = (float)nn;
+    c->clip_end = (float)ff;
 }
 
 /* Lists a reflection probe (an equirect panorama EXR at path, seen from world_to_camera

@@ -489,17 +489,9 @@ static fx_frame *room_frame(fx_context *ctx, float *want)
         }
     fx_frame *f = et_frame(ctx, FW, FH, rgba);
     fx_camera c;
-    memset(&c, 0, sizeof c);
-    c.size = sizeof c;
-    w2c(CAM, c.world_to_camera);
-    double nn = 0.1, ff = 100.0, fy = 1.0 / tan(30 * PI / 180), asp = (double)FW / FH;
-    c.projection[0] = (float)(fy / asp);
-    c.projection[5] = (float)fy;
-    c.projection[10] = (float)((ff + nn) / (nn - ff));
-    c.projection[11] = (float)(2 * ff * nn / (nn - ff));
-    c.projection[14] = -1;
-    c.clip_start = (float)nn;
-    c.clip_end = (float)ff;
+    float cw[16];
+    w2c(CAM, cw);
+    et_perspective(&c, cw, 60.0, FW, FH, 0.1, 100.0);
     fx_frame_add_pass(f, "Depth", 1, dep);
     fx_frame_add_pass(f, "Normal", 3, nor);
     fx_frame_add_pass(f, "IndexMA", 1, ima);
