@@ -978,6 +978,83 @@ static void test_reference_physical_mode(fx_context *ctx)
     free(o);
 }
 
+/* The domain warp (params_version 3, warp): identity at 0 (old recipes' bits), periodic over
+ * the tile, bounded by its amplitude, its Lipschitz factor (cell_smooth's skip) a true bound,
+ * and it bends a cell side. Two points on one row, under the p = 1.5 distance: the
+ * analytic bisector is the straight line x = mid (symmetry), for any Minkowski exponent;
+ * with the warp, the edge found by bisection satisfies x + dx(x, y) = mid, so it bends by
+ * the warp's x offset (of order amp: curved, not a polygon side). */
+static double edge_x(const fx_voronoi_warp *w, double y, double ax, double bx, double ay)
+{
+    double lo = ax + 0.05, hi = bx - 0.05;
+    for (int it = 0; it < 80; it++) {
+        double x = 0.5 * (lo + hi), u = x, v = y;
+        fx_voronoi_warp_apply(w, &u, &v);
+        double da = fx_minkowski2(u - ax, v - ay, 1.5), db = fx_minkowski2(u - bx, v - ay, 1.5);
+        if (da < db)
+            lo = x;
+        else
+            hi = x;
+    }
+    return 0.5 * (lo + hi);
+}
+
+static void test_warp(void)
+{
+    const int G = 14;
+    fx_voronoi_warp w0, w;
+    fx_voronoi_warp_init(&w0, G, 3, 0.0, 0.0);
+    double x = 3.3, y = -7.1;
+    fx_voronoi_warp_apply(&w0, &x, &y);
+    CHECK(x == 3.3 && y == -7.1);
+    for (uint32_t seed = 0; seed < 4; seed++) {
+        fx_voronoi_warp_init(&w, G, seed, 0.3, 0.7 * seed);
+        double lip = 0.0;
+        for (int k = 0; k < 2000; k++) {
+            double qx = G * fx_hash_to_unit(fx_hash4(k, 1, (int32_t)seed, 9));
+            double qy = G * fx_hash_to_unit(fx_hash4(k, 2, (int32_t)seed, 9));
+            double a = qx, b = qy, c = qx + G, d = qy - 2 * G;
+            fx_voronoi_warp_apply(&w, &a, &b);
+            fx_voronoi_warp_apply(&w, &c, &d);
+            CHECK(fabs((c - G) - a) < 1e-9 && fabs((d + 2 * G) - b) < 1e-9); /* periodic */
+            /* continuous across the tile's border (whole wave numbers: no seam) */
+            double s0 = G - 1e-7, t0 = qy, s1 = G + 1e-7, t1 = qy, r0 = qx, u0 = -1e-7, r1 = qx, u1 = 1e-7;
+            fx_voronoi_warp_apply(&w, &s0, &t0);
+            fx_voronoi_warp_apply(&w, &s1, &t1);
+            fx_voronoi_warp_apply(&w, &r0, &u0);
+            fx_voronoi_warp_apply(&w, &r1, &u1);
+            CHECK(fabs(s1 - s0) < 1e-5 && fabs(t1 - t0) < 1e-5 && fabs(r1 - r0) < 1e-5 && fabs(u1 - u0) < 1e-5);
+            CHECK(fabs(a - qx) <= 0.3 + 1e-12 && fabs(b - qy) <= 0.3 + 1e-12);
+            /* L1 stretch of a small step (finite differences) */
+            double h = 1e-5, e = qx + h, f = qy + h;
+            fx_voronoi_warp_apply(&w, &e, &f);
+            double s = (fabs(e - a) + fabs(f - b)) / (2 * h);
+            lip = s > lip ? s : lip;
+        }
+        CHECK(lip <= w.lipschitz * (1 + 1e-6));
+        CHECK(lip > 1.2); /* the warp does stretch */
+    }
+    /* the edge between (5, 7.3) and (7, 7.3) over y in 6.3 .. 8.3 */
+    const double ax = 5.0, bx = 7.0, ay = 7.3, mid = 6.0;
+    double dev0 = 0.0, lo = INFINITY, hi = -INFINITY, err = 0.0;
+    fx_voronoi_warp_init(&w, G, 1, 0.3, 0.0);
+    for (int k = 0; k <= 40; k++) {
+        double yy = ay - 1.0 + k * 0.05;
+        double e0 = edge_x(&w0, yy, ax, bx, ay), e1 = edge_x(&w, yy, ax, bx, ay);
+        dev0 = fmax(dev0, fabs(e0 - mid));
+        double u = e1, v = yy;
+        fx_voronoi_warp_apply(&w, &u, &v);
+        err = fmax(err, fabs(u - mid)); /* x + dx(x, y) = mid on the warped edge */
+        lo = fmin(lo, e1);
+        hi = fmax(hi, e1);
+    }
+    CHECK(dev0 < 1e-9);       /* no warp: the straight analytic bisector */
+    CHECK(err < 1e-6);        /* warped: the analytic relation holds */
+    CHECK(hi - lo > 0.1);     /* and the side bends by a visible part of a cell */
+    if (!(hi - lo > 0.1))
+        fprintf(stderr, "warped edge spans only %g cells\n", hi - lo);
+}
+
 int main(void)
 {
     fx_context *ctx = NULL;
@@ -987,6 +1064,7 @@ int main(void)
     test_table();
     test_lists();
     test_minkowski();
+    test_warp();
     test_world_anchoring(ctx);
     test_extremes_and_mask(ctx);
     test_lattice(ctx);

@@ -99,6 +99,7 @@ typedef struct caustics_params {
     int apply;
     float receiver_depth;
     float interior;
+    float warp;
 } caustics_params;
 
 enum { METRIC_MINKOWSKI = 0, METRIC_CHEBYSHEV };
@@ -192,6 +193,11 @@ static const fx_param_def caustics_param_defs[] = {
                "refractive: 0: the masked pixels are the floor the light falls on; > 0: they are the water's "
                "surface and the floor lies this far (scene units) below their median height: each pixel's "
                "camera ray, refracted by a flat surface, finds its floor point there (use apply combined)"),
+    FX_P_FLOAT(caustics_params, warp, "warp", 0.3, 0.0, 2.0, 0.0, 1.0, "",
+               "physical, seed: the lookup position is displaced by a smooth periodic field of this "
+               "amplitude (in cells, wavelength ~2 cells, drifting with speed): the cells' sides bend as a "
+               "caustic network's do; 0: the Minkowski bisectors, nearly straight (the look before "
+               "params_version 3)"),
 };
 
 static double exponent_of(const caustics_params *p)
@@ -273,6 +279,7 @@ typedef struct caustics_job {
     const caustics_params *p;
     fx_voronoi vor;
     fx_voronoi_table table; /* the frame's points */
+    fx_voronoi_warp warp;   /* the lookup's domain warp (amp 0: none) */
     double cell;      /* world units per cell */
     double inv_cell_d;
     double mean_g;
@@ -280,6 +287,7 @@ typedef struct caustics_job {
     float inv_mean, inv_lw, wave;
     float focus0; /* interior / mean: inv_mean is (1 - interior) / mean */
     float inv_cell, far_gap; /* far_gap: physical, p >= 1: a gap beyond which g is ~0 */
+    float warp_lip;          /* the warp's Lipschitz factor (1: no warp) */
     const float *position; /* 3 or 4 channels */
     int pos_channels;
     const float *depth;
@@ -313,6 +321,7 @@ static void evaluate(const caustics_job *j, double wx, double wy, fx_voronoi_hit
      * the exact kind (reference) keeps the quotient */
     double cx = j->table.kind ? wx * j->inv_cell_d : wx / j->cell;
     double cy = j->table.kind ? wy * j->inv_cell_d : wy / j->cell;
+    fx_voronoi_warp_apply(&j->warp, &cx, &cy);
     if (j->p->method == METHOD_BRUTE)
         fx_voronoi_table_brute(&j->table, cx, cy, h);
     else
@@ -530,6 +539,7 @@ static void node_rows(void *user, int begin, int end)
             if (buf) {
                 qx[nq] = (double)P.x * j->inv_cell_d;
                 qy[nq] = (double)P.y * j->inv_cell_d;
+                fx_voronoi_warp_apply(&j->warp, &qx[nq], &qy[nq]);
                 qi[nq++] = ni;
             } else {
                 q[0] = value_at(j, P.x, P.y, id);
@@ -589,7 +599,8 @@ static int cell_smooth(const caustics_job *j, int j0, int j1, int i0, int i1)
         float lo = q00[0] < q10[0] ? q00[0] : q10[0];
         lo = lo < q01[0] ? lo : q01[0];
         lo = lo < q11[0] ? lo : q11[0];
-        same = lo - 2.0f * ext * j->inv_cell > j->far_gap;
+        /* the warp stretches the footprint by at most its Lipschitz factor */
+        same = lo - 2.0f * ext * j->inv_cell * j->warp_lip > j->far_gap;
     }
     return same;
 }
@@ -996,6 +1007,7 @@ static void caustics_rows_lattice(void *user, int begin, int end)
                     const float *pq = position + ((size_t)y * w + xs + queue[k]) * pc;
                     qx[k] = (double)pq[0] * j->inv_cell_d;
                     qy[k] = (double)pq[1] * j->inv_cell_d;
+                    fx_voronoi_warp_apply(&j->warp, &qx[k], &qy[k]);
                 }
                 fx_voronoi_table_grid_n(&j->table, nq, qx, qy, f1, f2, NULL, NULL);
                 for (int k = 0; k < nq; k++) {
@@ -1075,6 +1087,7 @@ static __attribute__((noinline)) void gain_flush(const caustics_job *j, gain_que
         for (int k = 0; k < n; k++) {
             qx[k] = (double)q->px[k] * j->inv_cell_d;
             qy[k] = (double)q->py[k] * j->inv_cell_d;
+            fx_voronoi_warp_apply(&j->warp, &qx[k], &qy[k]);
         }
         fx_voronoi_table_grid_n(&j->table, n, qx, qy, f1, f2, NULL, NULL);
         for (int k = 0; k < n; k++) {
@@ -1444,7 +1457,9 @@ static void mean_rows(void *user, int begin, int end)
         double acc = 0.0;
         for (int c = 0; c < m->n; c++) {
             fx_voronoi_hit h;
-            fx_voronoi_table_grid(t, (c + 0.5) * t->grid / m->n, (r + 0.5) * t->grid / m->n, &h);
+            double x = (c + 0.5) * t->grid / m->n, y = (r + 0.5) * t->grid / m->n;
+            fx_voronoi_warp_apply(&m->cj->warp, &x, &y);
+            fx_voronoi_table_grid(t, x, y, &h);
             acc += pattern_g(m->cj->p, &h);
         }
         m->partial[r] = acc;
@@ -1499,6 +1514,10 @@ static void job_init(const fx_effect_run *run, const caustics_params *p, caustic
     j->inv_lw = (float)(1.0 / p->line_width);
     j->inv_cell = (float)(1.0 / j->cell);
     j->inv_cell_d = 1.0 / j->cell;
+    /* the warp's waves drift at a fifth of the points' speed: the network flows as they wander */
+    fx_voronoi_warp_init(&j->warp, j->vor.grid, (uint32_t)p->seed, p->mode == MODE_REFRACTIVE ? 0.0 : p->warp,
+                         0.2 * p->speed * j->time);
+    j->warp_lip = (float)j->warp.lipschitz;
     /* exp(-10) = 5e-5: below any visible change of the focus ratio */
     j->far_gap = p->mode == MODE_PHYSICAL && exponent_of(p) >= 1.0 ? (float)(10.0 * p->line_width) : 0.0f;
     j->wave = (float)sin(2.0 * j->time);
@@ -1898,14 +1917,18 @@ static fx_result caustics_process(const fx_effect_run *run)
 }
 
 /* params_version 2 added interior (lit cell interiors, default 0.1): a recipe of version 1
- * keeps its dark interiors (interior 0) unless it names one. Silent: its output is the
- * same as before. */
+ * keeps its dark interiors (interior 0) unless it names one; params_version 3 added warp
+ * (curved cell sides, default 0.3): a recipe of version 1 or 2 keeps straight sides (warp 0)
+ * unless it names one. Silent: its output is the same as before. */
 static fx_result caustics_migrate(int from_version, cJSON *params, char *note, size_t note_size)
 {
     (void)note;
     (void)note_size;
     if (from_version == 1 && params && !cJSON_GetObjectItemCaseSensitive(params, "interior") &&
         !cJSON_AddNumberToObject(params, "interior", 0.0))
+        return FX_ERR_OUT_OF_MEMORY;
+    if (from_version == 2 && params && !cJSON_GetObjectItemCaseSensitive(params, "warp") &&
+        !cJSON_AddNumberToObject(params, "warp", 0.0))
         return FX_ERR_OUT_OF_MEMORY;
     return FX_OK;
 }
@@ -1939,6 +1962,6 @@ const fx_effect_class fx_effect_voronoi_caustics = {
     .halo = NULL,
     .validate = caustics_validate,
     .process = caustics_process,
-    .params_version = 2,
+    .params_version = 3,
     .migrate = caustics_migrate,
 };

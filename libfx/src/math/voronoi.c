@@ -34,6 +34,56 @@ int fx_voronoi_grid_for_points(int points)
     return g < 1 ? 1 : g;
 }
 
+void fx_voronoi_warp_init(fx_voronoi_warp *w, int grid, uint32_t seed, double amp, double phase_shift)
+{
+    memset(w, 0, sizeof *w);
+    w->grid = grid < 1 ? 1 : grid;
+    w->amp = amp > 0.0 && isfinite(amp) ? amp : 0.0;
+    w->lipschitz = 1.0;
+    if (w->amp == 0.0)
+        return;
+    const double G = w->grid, len = 0.5 * G;
+    for (int a = 0; a < 2; a++) {
+        double lip = 0.0;
+        for (int k = 0; k < FX_WARP_WAVES; k++) {
+            uint32_t h = fx_hash4(a, k, (int32_t)seed, 0x3a7b);
+            /* directions spread over a half turn, jittered: no axis is preferred */
+            double th = M_PI * (k + 0.8 * fx_hash_to_unit(h) + 0.1) / FX_WARP_WAVES + 0.5 * M_PI * a;
+            double m = floor(len * cos(th) + 0.5), n = floor(len * sin(th) + 0.5);
+            if (m == 0.0 && n == 0.0)
+                m = 1.0;
+            w->kx[a][k] = 2.0 * M_PI * m / G;
+            w->ky[a][k] = 2.0 * M_PI * n / G;
+            w->ph[a][k] = 2.0 * M_PI * fx_hash_to_unit(fx_hash_u32(h ^ 0x51ed27u)) + phase_shift;
+            lip += fmax(fabs(w->kx[a][k]), fabs(w->ky[a][k]));
+        }
+        w->lipschitz += w->amp / FX_WARP_WAVES * lip;
+    }
+}
+
+void fx_voronoi_warp_apply(const fx_voronoi_warp *w, double *x, double *y)
+{
+    if (w->amp == 0.0)
+        return;
+    const double G = w->grid;
+    double u = *x, v = *y;
+    /* reduced to the tile first: the same offset for every image of a point, and sin's
+     * argument stays small (precision) */
+    if (fabs(u) < 4e15 && fabs(v) < 4e15) {
+        u -= G * floor(u / G);
+        v -= G * floor(v / G);
+    }
+    double d[2];
+    for (int a = 0; a < 2; a++) {
+        double s = 0.0;
+        for (int k = 0; k < FX_WARP_WAVES; k++)
+            s += sin(w->kx[a][k] * u + w->ky[a][k] * v + w->ph[a][k]);
+        d[a] = w->amp / FX_WARP_WAVES * s;
+    }
+    *x += d[0];
+    *y += d[1];
+}
+
 static void fx_voronoi_point(const fx_voronoi *v, int index, double *x, double *y)
 {
     int G = v->grid;

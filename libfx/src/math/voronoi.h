@@ -45,6 +45,22 @@ void fx_voronoi_grid(const fx_voronoi *v, double x, double y, fx_voronoi_hit *ou
 /* Rounded square root of a point count: the grid size G (>= 1). */
 int fx_voronoi_grid_for_points(int points);
 
+/* A smooth periodic domain warp of the lookup position (cell units): the cells' sides bend
+ * like a caustic network's instead of staying (nearly) straight Minkowski bisectors.
+ * offset = amp / FX_WARP_WAVES x sum_k sin(2 pi (m_k x + n_k y) / G + phase_k + drift t),
+ * per axis, with whole wave numbers (m_k, n_k) of length ~ G / 2 (a wavelength of ~2 cells)
+ * in directions from the seed: periodic over the tile, the same bits for every query order. */
+#define FX_WARP_WAVES 3
+typedef struct fx_voronoi_warp {
+    double amp;                      /* cells; 0: no warp (the query is left as it is) */
+    int grid;
+    double kx[2][FX_WARP_WAVES], ky[2][FX_WARP_WAVES], ph[2][FX_WARP_WAVES];
+    double lipschitz; /* L1 extent of a warped footprint <= lipschitz x its L1 extent */
+} fx_voronoi_warp;
+void fx_voronoi_warp_init(fx_voronoi_warp *w, int grid, uint32_t seed, double amp, double phase_shift);
+/* (x, y) in cell units -> the warped position (the identity when amp is 0) */
+void fx_voronoi_warp_apply(const fx_voronoi_warp *w, double *x, double *y);
+
 /* A frame's points, computed once (they depend only on time): the per-query searches
  * below then cost no sin/hash per candidate. Two distance kinds:
  *  - exact (fast = 0, or p not in {1, 1.5, 2, inf}): double, fx_minkowski2, the same
