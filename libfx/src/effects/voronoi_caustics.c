@@ -49,6 +49,7 @@
 #include "math/clones.h"
 #include "math/camera.h"
 #include "math/voronoi.h"
+#include "math/wave_scale.h"
 #include "math/caustic_map.h"
 #include "scene/aux_view.h"
 #include "scene/lights.h"
@@ -100,10 +101,13 @@ typedef struct caustics_params {
     float receiver_depth;
     float interior;
     float warp;
+    int cell_scale;
+    float wave_cell_ratio;
 } caustics_params;
 
 enum { METRIC_MINKOWSKI = 0, METRIC_CHEBYSHEV };
 enum { MODE_PHYSICAL = 0, MODE_SEED, MODE_REFRACTIVE };
+enum { CELL_MANUAL = 0, CELL_AUTO };
 enum { POS_POSITION = 0, POS_DEPTH };
 enum { METHOD_GRID = 0, METHOD_BRUTE };
 enum { DIST_FAST = 0, DIST_EXACT };
@@ -115,6 +119,7 @@ static const char *const pos_items[] = {"position", "depth"};
 static const char *const method_items[] = {"grid", "brute"};
 static const char *const distance_items[] = {"fast", "exact"};
 static const char *const apply_items[] = {"sun_diffuse", "combined"};
+static const char *const cell_scale_items[] = {"manual", "auto"};
 static const float default_tint[3] = {0.8f, 0.95f, 1.0f};
 static const float default_world[3] = {0.55f, 0.7f, 0.95f};
 
@@ -198,6 +203,13 @@ static const fx_param_def caustics_param_defs[] = {
                "amplitude (in cells, wavelength ~2 cells, drifting with speed): the cells' sides bend as a "
                "caustic network's do; 0: the Minkowski bisectors, nearly straight (the look before "
                "params_version 3)"),
+    FX_P_ENUM(caustics_params, cell_scale, "cell_scale", CELL_MANUAL, cell_scale_items,
+              "physical, seed: manual: cells are tile_size / sqrt(points); auto: wave_cell_ratio x the "
+              "waves' mean wavelength, estimated from the water's normals in its view from the Sun (aux view "
+              "'water:<water>', rendered by the add-on as for mode refractive); without that view: manual"),
+    FX_P_FLOAT(caustics_params, wave_cell_ratio, "wave_cell_ratio", 1.5, 0.01, 100.0, 0.2, 5.0, "",
+               "cell_scale auto: cell size over the waves' mean (Rice) wavelength (1: one bright line per "
+               "wave crest, the network of a floor near the waves' first focus)"),
 };
 
 static double exponent_of(const caustics_params *p)
@@ -225,7 +237,7 @@ static fx_result caustics_validate(const void *params, char *err, size_t err_siz
 static int caustics_aux_views(const void *params, fx_aux_need *out, int max)
 {
     const caustics_params *p = params;
-    if (p->mode != MODE_REFRACTIVE || max < 1)
+    if ((p->mode != MODE_REFRACTIVE && p->cell_scale != CELL_AUTO) || max < 1)
         return 0;
     snprintf(out->name, sizeof out->name, "water:%.80s", p->water);
     out->kind = "water";
@@ -1499,6 +1511,56 @@ static int *lattice_axis(int a, int b, int f, int *n)
 }
 
 /* Process stage 1: the job's constants from the parameters and the frame's time. */
+/* cell_scale auto: the cell from the waves' mean wavelength in the water's view (world
+ * normals, the texels' world points from its Depth); without the view, or with nothing to
+ * estimate from, the manual cell stays (a warning says why). */
+static void auto_cell(const fx_effect_run *run, const caustics_params *p, double *cell)
+{
+    char name[FX_NAME_MAX];
+    snprintf(name, sizeof name, "water:%.80s", p->water);
+    if (fx_aux_view_has(run->frame, name) != 1) {
+        fx_warn(run->ctx, "%s: cell_scale auto: no aux view '%s' (the water's view from the Sun): the manual cell "
+                "(tile_size / sqrt(points)) is used", run->where, name);
+        return;
+    }
+    fx_aux_view *av = NULL;
+    if (fx_aux_view_load(run->frame, name, run->where, &av) != FX_OK) {
+        fx_warn(run->ctx, "%s: cell_scale auto: the view '%s' could not be read: the manual cell is used", run->where,
+                name);
+        return;
+    }
+    const fx_pass *np = fx_frame_find_pass(av->frame, "Normal");
+    const int w = av->width, h = av->height;
+    float *xy = np && np->channels >= 3 ? fx_mem_alloc((size_t)w * h * 2 * sizeof(float)) : NULL;
+    unsigned char *valid = xy ? fx_mem_alloc((size_t)w * h) : NULL;
+    double lambda = 0.0;
+    int ok = -1;
+    if (valid) {
+        for (int y = 0; y < h; y++)
+            for (int x = 0; x < w; x++) {
+                size_t i = (size_t)y * w + x;
+                float d = av->depth[i];
+                valid[i] = isfinite(d) && d > 0.0f && d < 1e9f;
+                fx_vec3 P = fx_view_to_world(
+                    &av->view, fx_view_position(&av->view, fx_view_pixel_to_ndc(&av->view, x + 0.5f, y + 0.5f),
+                                                valid[i] ? d : 1.0f));
+                xy[2 * i] = P.x;
+                xy[2 * i + 1] = P.y;
+            }
+        ok = fx_wave_length(np->data, np->channels, xy, valid, w, h, &lambda);
+    }
+    fx_mem_free(xy);
+    fx_mem_free(valid);
+    fx_aux_view_free(av);
+    double c = (double)p->wave_cell_ratio * lambda;
+    if (ok || !(c > 1e-9) || !(c < 1e9)) {
+        fx_warn(run->ctx, "%s: cell_scale auto: no wavelength could be estimated from '%s' (%s): the manual cell is "
+                "used", run->where, name, np && np->channels >= 3 ? "a flat or too small water surface" : "no Normal pass");
+        return;
+    }
+    *cell = c;
+}
+
 static void job_init(const fx_effect_run *run, const caustics_params *p, caustics_job *j)
 {
     memset(j, 0, sizeof *j);
@@ -1511,6 +1573,8 @@ static void job_init(const fx_effect_run *run, const caustics_params *p, caustic
     j->vor.speed = p->speed;
     j->vor.p = exponent_of(p);
     j->cell = (double)p->tile_size / j->vor.grid;
+    if (p->mode != MODE_REFRACTIVE && p->cell_scale == CELL_AUTO)
+        auto_cell(run, p, &j->cell);
     j->inv_lw = (float)(1.0 / p->line_width);
     j->inv_cell = (float)(1.0 / j->cell);
     j->inv_cell_d = 1.0 / j->cell;
