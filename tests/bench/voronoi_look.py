@@ -60,13 +60,14 @@ def main():
         img = C.rgb(op)
         imgs.append(img)
         mean, cf, cb, per, _ = stats(img, m_per_px)
-        rows.append((name, mean / tmean, cb, per))
+        rows.append((name, mean, mean / tmean, cf, cb, per, C.mae(img, truth)))
     mean, cf, cb, per, _ = stats(truth, m_per_px)
-    rows.append(("Cycles truth", 1.0, cb, per))
-    print("| variant (%s) | mean / truth | contrast 4x4 | dominant period (m) |" % a.quality)
-    print("|---|---:|---:|---:|")
+    rows.append(("Cycles truth", mean, 1.0, cf, cb, per, 0.0))
+    print("| variant (%s) | mean lum | mean / truth | contrast | contrast 4x4 box | dominant period (m) | whole MAE |"
+          % a.quality)
+    print("|---|---:|---:|---:|---:|---:|---:|")
     for r in rows:
-        print("| %s | %.3f | %.3f | %.3f |" % r)
+        print("| %s | %.4f | %.3f | %.3f | %.3f | %.3f | %.4f |" % r)
     C.save_strip(os.path.join(a.out, "voronoi_look.png"), imgs + [truth])
 
 

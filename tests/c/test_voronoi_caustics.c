@@ -427,6 +427,21 @@ static void test_extremes_and_mask(fx_context *ctx)
     const float *in = et_combined(f);
     CHECK(o && memcmp(o, in, (size_t)W * H * 4 * sizeof(float)) == 0);
     free(o);
+    /* cell_scale auto without the water's view: the manual cell, the same bits (a warning);
+     * warp changes the image, warp 0 named in a version-1 recipe is the migrated default */
+    {
+        float *man = run_caustics(ctx, f, "position", "\"warp\": 0.3");
+        float *aut = run_caustics(ctx, f, "position", "\"warp\": 0.3, \"cell_scale\": \"auto\"");
+        float *w0 = run_caustics(ctx, f, "position", "\"warp\": 0.0");
+        float *old = run_caustics(ctx, f, "position", NULL);
+        CHECK(man && aut && memcmp(man, aut, (size_t)W * H * 4 * sizeof(float)) == 0);
+        CHECK(w0 && old && memcmp(w0, old, (size_t)W * H * 4 * sizeof(float)) == 0);
+        CHECK(man && w0 && memcmp(man, w0, (size_t)W * H * 4 * sizeof(float)) != 0);
+        free(man);
+        free(aut);
+        free(w0);
+        free(old);
+    }
     /* d <= 0 rejected, with the parameter named */
     fx_stack *s = et_stack(ctx, "voronoi_caustics");
     CHECK_FAIL(ctx, fx_stack_set_float(s, 0, "exponent", -1.0), FX_ERR_BAD_PARAM, "exponent");
@@ -719,6 +734,9 @@ static void test_in_place(void)
         "\"downsample\": 4, \"lattice_shading\": true, \"environment_strength\": 0.5",
         "\"downsample\": 1, \"environment_strength\": 0.5, \"mode\": \"seed\"",
         "\"downsample\": 2, \"position_source\": \"depth\"",
+        "\"downsample\": 4, \"refine\": false, \"lattice_shading\": true, \"warp\": 0.3",
+        "\"downsample\": 2, \"refine\": true, \"warp\": 0.6",
+        "\"downsample\": 1, \"distance\": \"exact\", \"warp\": 0.3, \"mode\": \"seed\"",
     };
     const int sizes[][2] = {{83, 29}, {1100, 9}};
     const char *masks[] = {NULL, "{\"rect\": [6, 3, 61, 17]}"};
