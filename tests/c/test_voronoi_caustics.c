@@ -1028,7 +1028,10 @@ static void test_warp(void)
     CHECK(x == 3.3 && y == -7.1);
     for (uint32_t seed = 0; seed < 4; seed++) {
         fx_voronoi_warp_init(&w, G, seed, 0.3, 0.7 * seed);
-        double lip = 0.0;
+        fx_voronoi_warp direct = w;
+        if (seed & 1) /* odd seeds: the tabulated offsets (what the effect runs) */
+            CHECK(fx_voronoi_warp_table(&w) == 0 && w.tab);
+        double lip = 0.0, tab_err = 0.0;
         for (int k = 0; k < 2000; k++) {
             double qx = G * fx_hash_to_unit(fx_hash4(k, 1, (int32_t)seed, 9));
             double qy = G * fx_hash_to_unit(fx_hash4(k, 2, (int32_t)seed, 9));
@@ -1049,7 +1052,12 @@ static void test_warp(void)
             fx_voronoi_warp_apply(&w, &e, &f);
             double s = (fabs(e - a) + fabs(f - b)) / (2 * h);
             lip = s > lip ? s : lip;
+            double g = qx, q2 = qy;
+            fx_voronoi_warp_apply(&direct, &g, &q2);
+            tab_err = fmax(tab_err, fmax(fabs(g - a), fabs(q2 - b)));
         }
+        CHECK(tab_err < 0.03 * 0.3); /* the table's bilinear offsets: within 3 % of amp of the sines */
+        fx_voronoi_warp_free(&w);
         CHECK(lip <= w.lipschitz * (1 + 1e-6));
         CHECK(lip > 1.2); /* the warp does stretch */
     }
@@ -1057,6 +1065,7 @@ static void test_warp(void)
     const double ax = 5.0, bx = 7.0, ay = 7.3, mid = 6.0;
     double dev0 = 0.0, lo = INFINITY, hi = -INFINITY, err = 0.0;
     fx_voronoi_warp_init(&w, G, 1, 0.3, 0.0);
+    CHECK(fx_voronoi_warp_table(&w) == 0);
     for (int k = 0; k <= 40; k++) {
         double yy = ay - 1.0 + k * 0.05;
         double e0 = edge_x(&w0, yy, ax, bx, ay), e1 = edge_x(&w, yy, ax, bx, ay);
@@ -1067,6 +1076,7 @@ static void test_warp(void)
         lo = fmin(lo, e1);
         hi = fmax(hi, e1);
     }
+    fx_voronoi_warp_free(&w);
     CHECK(dev0 < 1e-9);       /* no warp: the straight analytic bisector */
     CHECK(err < 1e-6);        /* warped: the analytic relation holds */
     CHECK(hi - lo > 0.1);     /* and the side bends by a visible part of a cell */

@@ -1486,6 +1486,7 @@ static void list_rows(void *user, int begin, int end)
 static void job_free(caustics_job *j)
 {
     fx_voronoi_table_free(&j->table);
+    fx_voronoi_warp_free(&j->warp);
     fx_mem_free(j->node_x);
     fx_mem_free(j->node_y);
     fx_mem_free(j->cell_any);
@@ -1648,6 +1649,11 @@ static fx_result job_inputs(const fx_effect_run *run, const caustics_params *p, 
 /* Process stage 3: the Voronoi table; the square lists cost about two ring searches per
  * square: built (in parallel) only when the ROI has many more pixels than squares (same
  * bits either way). -1: out of memory. */
+static void warp_rows(void *user, int begin, int end)
+{
+    fx_voronoi_warp_table_rows(user, begin, end);
+}
+
 static int job_table(const fx_effect_run *run, const caustics_params *p, caustics_job *j)
 {
     double area = (double)(run->roi.x1 - run->roi.x0) * (run->roi.y1 - run->roi.y0);
@@ -1655,6 +1661,11 @@ static int job_table(const fx_effect_run *run, const caustics_params *p, caustic
     int fast = p->distance != DIST_FAST ? 0 : area >= 16.0 * squares ? 2 : 3;
     if (fx_voronoi_table_init(&j->table, &j->vor, fast) != 0)
         return -1;
+    int wt = fx_voronoi_warp_table_alloc(&j->warp);
+    if (wt < 0)
+        return -1;
+    if (wt > 0) /* each sample computed alone: the same bits for any thread count */
+        fx_parallel_for(run->ctx, j->warp.n, 8, warp_rows, &j->warp);
     if (j->table.sub)
         fx_parallel_for(run->ctx, j->vor.grid, 1, list_rows, &j->table);
     return 0;

@@ -61,12 +61,79 @@ void fx_voronoi_warp_init(fx_voronoi_warp *w, int grid, uint32_t seed, double am
     }
 }
 
+static void warp_offset(const fx_voronoi_warp *w, double u, double v, double d[2])
+{
+    for (int a = 0; a < 2; a++) {
+        double s = 0.0;
+        for (int k = 0; k < FX_WARP_WAVES; k++)
+            s += sin(w->kx[a][k] * u + w->ky[a][k] * v + w->ph[a][k]);
+        d[a] = w->amp / FX_WARP_WAVES * s;
+    }
+}
+
+int fx_voronoi_warp_table_alloc(fx_voronoi_warp *w)
+{
+    if (w->amp == 0.0 || w->tab || (double)w->grid * FX_WARP_SAMPLES > 1024.0)
+        return 0;
+    const int n = w->grid * FX_WARP_SAMPLES;
+    w->tab = fx_mem_alloc((size_t)n * n * 2 * sizeof(double));
+    if (!w->tab)
+        return -1;
+    w->n = n;
+    return 1;
+}
+
+void fx_voronoi_warp_table_rows(fx_voronoi_warp *w, int row0, int row1)
+{
+    const int n = w->n;
+    for (int j = row0; j < row1; j++)
+        for (int i = 0; i < n; i++)
+            warp_offset(w, (double)i / FX_WARP_SAMPLES, (double)j / FX_WARP_SAMPLES,
+                        w->tab + ((size_t)j * n + i) * 2);
+}
+
+int fx_voronoi_warp_table(fx_voronoi_warp *w)
+{
+    int r = fx_voronoi_warp_table_alloc(w);
+    if (r > 0)
+        fx_voronoi_warp_table_rows(w, 0, w->n);
+    return r < 0 ? -1 : 0;
+}
+
+void fx_voronoi_warp_free(fx_voronoi_warp *w)
+{
+    fx_mem_free(w->tab);
+    w->tab = NULL;
+    w->n = 0;
+}
+
 void fx_voronoi_warp_apply(const fx_voronoi_warp *w, double *x, double *y)
 {
     if (w->amp == 0.0)
         return;
     const double G = w->grid;
     double u = *x, v = *y;
+    if (w->tab && fabs(u) < 4e15 && fabs(v) < 4e15) {
+        const int n = w->n;
+        double tu = (u - G * floor(u / G)) * FX_WARP_SAMPLES, tv = (v - G * floor(v / G)) * FX_WARP_SAMPLES;
+        double fu = floor(tu), fv = floor(tv);
+        int i0 = (int)fu, j0 = (int)fv;
+        double au = tu - fu, av = tv - fv;
+        i0 = i0 >= n ? i0 - n : i0 < 0 ? i0 + n : i0;
+        j0 = j0 >= n ? j0 - n : j0 < 0 ? j0 + n : j0;
+        int i1 = i0 + 1 == n ? 0 : i0 + 1, j1 = j0 + 1 == n ? 0 : j0 + 1;
+        const double *p00 = w->tab + ((size_t)j0 * n + i0) * 2, *p10 = w->tab + ((size_t)j0 * n + i1) * 2;
+        const double *p01 = w->tab + ((size_t)j1 * n + i0) * 2, *p11 = w->tab + ((size_t)j1 * n + i1) * 2;
+        for (int a = 0; a < 2; a++) {
+            double top = p00[a] + au * (p10[a] - p00[a]), bot = p01[a] + au * (p11[a] - p01[a]);
+            double d = top + av * (bot - top);
+            if (a == 0)
+                *x += d;
+            else
+                *y += d;
+        }
+        return;
+    }
     /* reduced to the tile first: the same offset for every image of a point, and sin's
      * argument stays small (precision) */
     if (fabs(u) < 4e15 && fabs(v) < 4e15) {
@@ -74,12 +141,7 @@ void fx_voronoi_warp_apply(const fx_voronoi_warp *w, double *x, double *y)
         v -= G * floor(v / G);
     }
     double d[2];
-    for (int a = 0; a < 2; a++) {
-        double s = 0.0;
-        for (int k = 0; k < FX_WARP_WAVES; k++)
-            s += sin(w->kx[a][k] * u + w->ky[a][k] * v + w->ph[a][k]);
-        d[a] = w->amp / FX_WARP_WAVES * s;
-    }
+    warp_offset(w, u, v, d);
     *x += d[0];
     *y += d[1];
 }

@@ -56,10 +56,25 @@ typedef struct fx_voronoi_warp {
     int grid;
     double kx[2][FX_WARP_WAVES], ky[2][FX_WARP_WAVES], ph[2][FX_WARP_WAVES];
     double lipschitz; /* L1 extent of a warped footprint <= lipschitz x its L1 extent */
+    double *tab;      /* fx_voronoi_warp_table: n x n samples (2 doubles each) over the tile */
+    int n;            /* FX_WARP_SAMPLES x grid */
 } fx_voronoi_warp;
+/* Samples per cell of the offsets' table: ~16 per wave of the field; the bilinear
+ * interpolation between them stays within a few % of the offsets, is as periodic and
+ * continuous, and keeps the Lipschitz bound (its slopes are averages of the samples'
+ * differences). */
+#define FX_WARP_SAMPLES 8
 void fx_voronoi_warp_init(fx_voronoi_warp *w, int grid, uint32_t seed, double amp, double phase_shift);
 /* (x, y) in cell units -> the warped position (the identity when amp is 0) */
 void fx_voronoi_warp_apply(const fx_voronoi_warp *w, double *x, double *y);
+/* Tabulates the offsets (then fx_voronoi_warp_apply interpolates: no sines per query) when the
+ * table has at most 2^20 samples (grid <= 128); 0, or -1 out of memory. */
+int fx_voronoi_warp_table(fx_voronoi_warp *w);
+/* The same in two steps, for a parallel fill: allocate (0: no table wanted or made; 1: fill
+ * rows 0 .. w->n - 1 with fx_voronoi_warp_table_rows; -1 out of memory) */
+int fx_voronoi_warp_table_alloc(fx_voronoi_warp *w);
+void fx_voronoi_warp_table_rows(fx_voronoi_warp *w, int row0, int row1);
+void fx_voronoi_warp_free(fx_voronoi_warp *w);
 
 /* A frame's points, computed once (they depend only on time): the per-query searches
  * below then cost no sin/hash per candidate. Two distance kinds:
