@@ -41,11 +41,11 @@ RECIPE = {
     "version": 1,
     "quality": "final",
     "effects": [
-        # params_version 2 (issue 27) with interior 0: the bath keeps its look of before
-        {"effect": "voronoi_caustics", "enabled": True, "params_version": 2,
+        # params_version 3 (issue 27) with interior 0 and warp 0: the bath keeps its look of before
+        {"effect": "voronoi_caustics", "enabled": True, "params_version": 3,
          "params": {"mode": "physical", "points": 196, "tile_size": 3.0, "strength": 0.8,
                     "line_width": 0.12, "speed": 2.0, "environment_strength": 0.25,
-                    "world_color": [0.55, 0.7, 0.95], "interior": 0.0},
+                    "world_color": [0.55, 0.7, 0.95], "interior": 0.0, "warp": 0.0},
          "mask": {"material": "Water"}},
         {"effect": "god_rays", "enabled": True,
          "params": {"light": "Sun", "occlusion": "sky", "threshold": 0.9, "knee": 0.5,

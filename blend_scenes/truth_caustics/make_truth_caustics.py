@@ -35,10 +35,10 @@ RECIPE = {
     "version": 1,
     "quality": "final",
     "effects": [
-        # params_version 2 (issue 27) with interior 0: the Greek bath's look, as measured before
-        {"effect": "voronoi_caustics", "enabled": True, "params_version": 2,
+        # params_version 3 (issue 27) with interior 0 and warp 0: the Greek bath's look, as measured before
+        {"effect": "voronoi_caustics", "enabled": True, "params_version": 3,
          "params": {"mode": "physical", "points": 196, "tile_size": 3.0, "strength": 0.8, "line_width": 0.12,
-                    "speed": 2.0, "interior": 0.0},
+                    "speed": 2.0, "interior": 0.0, "warp": 0.0},
          "mask": {"material": "Pool_Floor"}},
     ],
 }
