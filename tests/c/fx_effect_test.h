@@ -34,6 +34,22 @@ static inline void et_write_view(fx_context *ctx, const char *path, int w, int h
     fx_frame_free(f);
 }
 
+/* world_to_camera = R^T T(-pos) for a camera at pos whose axes are R's columns (row-major
+ * 3x3): the 4x4 row-major matrix the sidecar and fx_camera hold. */
+static inline void et_world_to_camera(const double R[9], const double pos[3], float m[16])
+{
+    memset(m, 0, 16 * sizeof(float));
+    for (int i = 0; i < 3; i++) {
+        double t = 0;
+        for (int k = 0; k < 3; k++) {
+            m[i * 4 + k] = (float)R[k * 3 + i];
+            t -= R[k * 3 + i] * pos[k];
+        }
+        m[i * 4 + 3] = (float)t;
+    }
+    m[15] = 1;
+}
+
 /* A perspective camera as Blender's (OpenGL projection), vertical field of view fov_deg,
  * w x h pixels, clip planes nn and ff, seen through world_to_camera w2c. */
 static inline void et_perspective(fx_camera *c, const float w2c[16], double fov_deg, int w, int h, double nn,

@@ -61,16 +61,7 @@ static void rot(const double m[9], const double v[3], double out[3])
 
 static void w2c(const double pos[3], float m[16])
 {
-    memset(m, 0, 16 * sizeof(float));
-    for (int i = 0; i < 3; i++) {
-        double t = 0;
-        for (int k = 0; k < 3; k++) {
-            m[i * 4 + k] = (float)R[k * 3 + i];
-            t -= R[k * 3 + i] * pos[k];
-        }
-        m[i * 4 + 3] = (float)t;
-    }
-    m[15] = 1;
+    et_world_to_camera(R, pos, m);
 }
 
 /* The probe from pos: colour and radial depth (background where the room is not around). */

@@ -138,17 +138,8 @@ static void cam_ray(double px, double py, double d[3])
 static void cam_w2c(const double pos[3], float m[16])
 {
     /* world_to_camera = R^T T(-pos); R's columns: x, z-up -> camera y, -y -> camera z */
-    const double R[9] = { 1, 0, 0, 0, 0, -1, 0, 1, 0 };
-    memset(m, 0, 16 * sizeof(float));
-    for (int i = 0; i < 3; i++) {
-        double t = 0;
-        for (int k = 0; k < 3; k++) {
-            m[i * 4 + k] = (float)R[k * 3 + i];
-            t -= R[k * 3 + i] * pos[k];
-        }
-        m[i * 4 + 3] = (float)t;
-    }
-    m[15] = 1;
+    static const double R[9] = { 1, 0, 0, 0, 0, -1, 0, 1, 0 };
+    et_world_to_camera(R, pos, m);
 }
 
 /* The frame of world wd; want: the exact one-bounce reflection of each mirror pixel (and
