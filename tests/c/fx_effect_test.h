@@ -50,15 +50,16 @@ static inline void et_world_to_camera(const double R[9], const double pos[3], fl
     m[15] = 1;
 }
 
-/* A perspective camera as Blender's (OpenGL projection), vertical field of view fov_deg,
- * w x h pixels, clip planes nn and ff, seen through world_to_camera w2c. */
-static inline void et_perspective(fx_camera *c, const float w2c[16], double fov_deg, int w, int h, double nn,
+/* A perspective camera as Blender's (OpenGL projection): tan_half the tangent of half the
+ * vertical field of view, w x h pixels, clip planes nn and ff, seen through world_to_camera
+ * w2c. */
+static inline void et_perspective(fx_camera *c, const float w2c[16], double tan_half, int w, int h, double nn,
                                   double ff)
 {
     memset(c, 0, sizeof *c);
     c->size = sizeof *c;
     memcpy(c->world_to_camera, w2c, 16 * sizeof(float));
-    double fy = 1.0 / tan(fov_deg * 0.5 * 3.14159265358979323846 / 180), asp = (double)w / h;
+    double fy = 1.0 / tan_half, asp = (double)w / h;
     c->projection[0] = (float)(fy / asp);
     c->projection[5] = (float)fy;
     c->projection[10] = (float)((ff + nn) / (nn - ff));

@@ -31,18 +31,8 @@ static void ray(int x, int y, double v[3])
 
 static void camera(fx_camera *c)
 {
-    memset(c, 0, sizeof *c);
-    c->size = sizeof *c;
-    for (int i = 0; i < 4; i++)
-        c->world_to_camera[i * 5] = 1;
-    double nn = 0.1, ff = 100.0, fy = 1.0 / TAN_HALF, asp = (double)W / H;
-    c->projection[0] = (float)(fy / asp);
-    c->projection[5] = (float)fy;
-    c->projection[10] = (float)((ff + nn) / (nn - ff));
-    c->projection[11] = (float)(2 * ff * nn / (nn - ff));
-    c->projection[14] = -1;
-    c->clip_start = (float)nn;
-    c->clip_end = (float)ff;
+    static const float identity[16] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
+    et_perspective(c, identity, TAN_HALF, W, H, 0.1, 100.0);
 }
 
 static fx_frame *pair_frame(fx_context *ctx)

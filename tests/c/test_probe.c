@@ -482,7 +482,7 @@ static fx_frame *room_frame(fx_context *ctx, float *want)
     fx_camera c;
     float cw[16];
     w2c(CAM, cw);
-    et_perspective(&c, cw, 60.0, FW, FH, 0.1, 100.0);
+    et_perspective(&c, cw, tan(30 * PI / 180), FW, FH, 0.1, 100.0);
     fx_frame_add_pass(f, "Depth", 1, dep);
     fx_frame_add_pass(f, "Normal", 3, nor);
     fx_frame_add_pass(f, "IndexMA", 1, ima);

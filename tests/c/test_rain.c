@@ -23,6 +23,15 @@ static void ortho(fx_camera *c, const float w2c[16], float half, float n, float 
     c->orthographic = 1;
 }
 
+/* The frames' camera: orthographic, 10 m wide, at (0, -10, 1) looking along +y, world z up. */
+static void set_ground_camera(fx_frame *f)
+{
+    float w2c[16] = {1, 0, 0, 0, 0, 0, 1, -1, 0, -1, 0, -10, 0, 0, 0, 1};
+    fx_camera cam;
+    ortho(&cam, w2c, 5.0f, 0.1f, 100.0f);
+    fx_frame_set_camera(f, &cam);
+}
+
 /* Rain map: top-down from z = 40 over x, y in [-20, 20]; cover at height `roof_z` where
  * world y < roof_y (else ground at 0). */
 static const char *rain_map(fx_context *ctx, float roof_y, float roof_z, fx_camera *cam, const char *name)
@@ -60,10 +69,7 @@ static fx_frame *street_frame(fx_context *ctx, float wall, const char *map, cons
     }
     fx_frame *f = et_frame(ctx, N, N, rgba);
     fx_frame_add_pass(f, "Depth", 1, d);
-    float w2c[16] = {1, 0, 0, 0, 0, 0, 1, -1, 0, -1, 0, -10, 0, 0, 0, 1};
-    fx_camera cam;
-    ortho(&cam, w2c, 5.0f, 0.1f, 100.0f);
-    fx_frame_set_camera(f, &cam);
+    set_ground_camera(f);
     fx_frame_set_time(f, frame, 24.0);
     CHECK_OK(ctx, fx_frame_set_aux_view(f, "rain_map", map, map_cam));
     free(rgba);
@@ -665,10 +671,7 @@ static void test_rain_reference(fx_context *ctx)
     for (int fr = 1; fr <= 3; fr++) {
         fx_frame *f = et_frame(ctx, RW, RH, rgba);
         fx_frame_add_pass(f, "Depth", 1, dep);
-        float w2c[16] = {1, 0, 0, 0, 0, 0, 1, -1, 0, -1, 0, -10, 0, 0, 0, 1};
-        fx_camera cam;
-        ortho(&cam, w2c, 5.0f, 0.1f, 100.0f);
-        fx_frame_set_camera(f, &cam);
+        set_ground_camera(f);
         fx_frame_set_time(f, 7 * fr, 24.0);
         CHECK_OK(ctx, fx_frame_set_aux_view(f, "rain_map", open_map, &mc));
         float *o = et_run_effect(ctx, "rain", f,
@@ -729,10 +732,7 @@ static fx_frame *cover_frame(fx_context *ctx, const char *map, const fx_camera *
     fx_frame *f = et_frame(ctx, CW, CH, rgba);
     fx_frame_add_pass(f, "Depth", 1, dep);
     fx_frame_add_pass(f, "CryptoMaterial00", 4, cr);
-    float w2c[16] = {1, 0, 0, 0, 0, 0, 1, -1, 0, -1, 0, -10, 0, 0, 0, 1};
-    fx_camera cam;
-    ortho(&cam, w2c, 5.0f, 0.1f, 100.0f);
-    fx_frame_set_camera(f, &cam);
+    set_ground_camera(f);
     fx_frame_set_time(f, 11, 24.0);
     CHECK_OK(ctx, fx_frame_set_aux_view(f, "rain_map", map, map_cam));
     free(dep);
@@ -994,10 +994,7 @@ static void test_rain_layers_extremes(fx_context *ctx)
         fx_frame *g = et_frame(ctx, w, h, rgba);
         fx_frame_add_pass(g, "Depth", 1, d);
         fx_frame_add_pass(g, "Normal", 3, nrm);
-        float w2c[16] = {1, 0, 0, 0, 0, 0, 1, -1, 0, -1, 0, -10, 0, 0, 0, 1};
-        fx_camera cam;
-        ortho(&cam, w2c, 5.0f, 0.1f, 100.0f);
-        fx_frame_set_camera(g, &cam);
+        set_ground_camera(g);
         CHECK_OK(ctx, fx_frame_set_aux_view(g, "rain_map", open, &mc));
         const char *runs[][2] = {{"rain", "\"cover_material\": \"\", \"layers\": 1"},
                                  {"rain", "\"cover_material\": \"\", \"layers\": 3"},

@@ -202,7 +202,7 @@ static fx_frame *make_frame(fx_context *ctx, const world *wd, float *want, int *
     fx_camera c;
     float cw[16];
     cam_w2c(CAM, cw);
-    et_perspective(&c, cw, 60.0, FW, FH, 0.1, 100.0);
+    et_perspective(&c, cw, tan(30 * PI / 180), FW, FH, 0.1, 100.0);
     CHECK_OK(ctx, fx_frame_add_pass(f, "Depth", 1, dep));
     CHECK_OK(ctx, fx_frame_add_pass(f, "Normal", 3, nor));
     CHECK_OK(ctx, fx_frame_add_pass(f, "IndexMA", 1, ima));

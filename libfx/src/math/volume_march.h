@@ -161,6 +161,22 @@ static inline void fx_volume_lo_coord(int x, int factor, int n, int *x0, float *
     *t = u - (float)*x0;
 }
 
+/* The upsample's fallback where no tap's depth is alike (a thin object): the index of the
+ * tap (of 4 depths) nearest in depth to d; the first one on a tie. */
+static inline int fx_volume_likest(const float taps[4], float d)
+{
+    int bi = 0;
+    float best = FLT_MAX;
+    for (int k = 0; k < 4; k++) {
+        const float e = fabsf(d - taps[k]);
+        if (e < best) {
+            best = e;
+            bi = k;
+        }
+    }
+    return bi;
+}
+
 /* The reduced in-scatter and transmittance at a full-resolution pixel of depth d
  * (fx_volume_weight_depth) between lo rows r0 and r1 (offsets of rows Y0, Y1; weight ty of
  * r1) and columns X0, X0 + 1 (weight tx): bilinear, each texel weighted by its depth's
@@ -184,15 +200,8 @@ static inline void fx_volume_upsample(const float *lo, const float *lo_t, const 
         *T = st * iw;
         return;
     }
-    int bi = 0;
-    float best = FLT_MAX;
-    for (int k = 0; k < 4; k++) {
-        float e = fabsf(d - lo_depth[i[k]]);
-        if (e < best) {
-            best = e;
-            bi = k;
-        }
-    }
+    const float taps[4] = {lo_depth[i[0]], lo_depth[i[1]], lo_depth[i[2]], lo_depth[i[3]]};
+    const int bi = fx_volume_likest(taps, d);
     *L = lo[i[bi]];
     *T = lo_t[i[bi]];
 }
@@ -238,15 +247,7 @@ static inline void fx_volume_upsample_cell4(const float *const cell[4], v4f by, 
         return;
     for (int k = 0; k < 4; k++)
         if (!(ws[k] > 1e-6f)) { /* none alike (a thin object): the likest texel */
-            int bi = 0;
-            float best = FLT_MAX;
-            for (int m = 0; m < 4; m++) {
-                float e = fabsf(d[k] - cell[k][m]);
-                if (e < best) {
-                    best = e;
-                    bi = m;
-                }
-            }
+            const int bi = fx_volume_likest(cell[k], d[k]);
             (*L)[k] = cell[k][4 + bi];
             (*T)[k] = cell[k][8 + bi];
         }
@@ -277,15 +278,7 @@ static inline void fx_volume_upsample_same4(const float *cell, const v4f *bc, fl
         return;
     for (int k = 0; k < 4; k++)
         if (!(ws[k] > 1e-6f)) { /* none alike (a thin object): the likest texel */
-            int bi = 0;
-            float best = FLT_MAX;
-            for (int m = 0; m < 4; m++) {
-                float e = fabsf(d[k] - cell[m]);
-                if (e < best) {
-                    best = e;
-                    bi = m;
-                }
-            }
+            const int bi = fx_volume_likest(cell, d[k]);
             (*L)[k] = cell[4 + bi];
             (*T)[k] = cell[8 + bi];
         }
