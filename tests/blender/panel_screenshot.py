@@ -13,6 +13,7 @@ before/after split view) and quits (exit code 1 if the F12 path or the live loop
 did not produce its result). The times it prints ("timing: ...") are from the UI's
 own event loop: render_post to result shown, and a change to each live image.
 """
+import faulthandler
 import time
 import os
 import shutil
@@ -29,6 +30,10 @@ OUT = sys.argv[sys.argv.index("--") + 1] if "--" in sys.argv else "addon_panel.p
 OUT = os.path.abspath(OUT)
 state = {"t": 0, "phase": "setup", "ok": False, "live_ok": False}
 stamps = {}
+T0 = time.perf_counter()
+# Every Python thread's stack on stderr and exit 1 well before the test's 300 s
+# timeout, so a hang names where it hangs instead of ending in a bare timeout.
+faulthandler.dump_traceback_later(240, exit=True)
 
 
 @bpy.app.handlers.persistent
@@ -125,6 +130,9 @@ def job_running(kind):
 
 def tick():
     state["t"] += 1
+    if state.get("logged_phase") != state["phase"]:
+        state["logged_phase"] = state["phase"]
+        log("phase %s at %.1f s" % (state["phase"], time.perf_counter() - T0))
     try:
         if state["phase"] == "setup":
             setup()

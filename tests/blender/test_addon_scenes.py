@@ -142,6 +142,11 @@ def test_f12_in_the_ui_shows_the_result(blender, library, tmp_path):
            str(T.SCENES_DIR / "greek_bath" / "greek_bath.blend"),
            "--python", str(T.REPO / "tests" / "blender" / "panel_screenshot.py"), "--", str(shot)]
     env = dict(os.environ, **T.addon_env(library))
-    p = subprocess.run(cmd, capture_output=True, text=True, timeout=300, env=env)
-    assert p.returncode == 0, (p.stdout + p.stderr)[-4000:]
+    try:
+        p = subprocess.run(cmd, capture_output=True, text=True, timeout=300, env=env)
+    except subprocess.TimeoutExpired as e:   # what it printed says where it stopped
+        out = "".join(t.decode(errors="replace") if isinstance(t, bytes) else t
+                      for t in (e.stdout or "", e.stderr or ""))
+        raise AssertionError("no exit within 300 s; its output:\n" + out[-8000:]) from None
+    assert p.returncode == 0, (p.stdout + p.stderr)[-8000:]
     assert "F12 result image: True" in p.stdout and shot.is_file()
