@@ -34,9 +34,13 @@ The differences, and the releases that made them:
   type ``CUBEMAP`` (3.x) or ``SPHERE`` (4.1+).
 - extensions (4.2+): the add-on's module is ``bl_ext.<repo>.libfx`` (batch.py
   looks for either name before it can import this module).
+- ID writes refused for a moment on the render thread (seen on 4.3 under F12):
+  ``when_writable`` retries them.
 """
 
 import os
+import sys
+import time
 
 import bpy
 
@@ -209,19 +213,50 @@ _FORMAT_PROPS = ("media_type", "file_format", "color_mode", "color_depth", "exr_
                  "compression", "use_preview")
 
 
+#: How long a handler waits for Blender to allow ID writes again before it gives up.
+WRITE_WAIT_S = 20.0
+
+
+def when_writable(fn, *args, wait=WRITE_WAIT_S):
+    """fn(*args), called again while Blender refuses writes to ID data ("Writing to ID
+    classes in this context is not allowed"). Blender's switch for that refusal is one flag
+    for the whole process, set while the UI thread runs a Python draw() or poll(); an F12
+    render's handlers run on the render thread, so a panel redrawing at that moment made
+    the render_post handler's format change fail on 4.3 (the frame then had no result).
+    Sleeping hands the interpreter to the UI thread, whose draw then ends."""
+    t0 = time.monotonic()
+    pause = 0.001
+    while True:
+        try:
+            out = fn(*args)
+            break
+        except AttributeError as e:
+            if "not allowed" not in str(e) or time.monotonic() - t0 > wait:
+                raise
+        time.sleep(pause)
+        pause = min(pause * 2, 0.05)
+    if pause > 0.001:   # printed as log.log does: this file imports nothing of the add-on
+        print("libfx: Blender refused ID writes for %.3f s (%s); written then"
+              % (time.monotonic() - t0, fn.__name__), file=sys.stderr, flush=True)
+    return out
+
+
 def image_format_snapshot(settings):
     return [(p, getattr(settings, p)) for p in _FORMAT_PROPS if hasattr(settings, p)]
 
 
 def image_format_restore(settings, snapshot):
-    """Puts back what image_format_snapshot saw; a value the restored format refuses (none
-    should) is left as Blender set it rather than raising in a render handler."""
+    """Puts back what image_format_snapshot saw (waiting out refused writes: when_writable);
+    a value the restored format refuses (none should) is left as Blender set it rather than
+    raising in a render handler. Returns the properties it could not put back."""
+    missed = []
     for prop, value in snapshot:
         if getattr(settings, prop) != value:
             try:
-                setattr(settings, prop, value)
+                when_writable(setattr, settings, prop, value)
             except (TypeError, ValueError, AttributeError):
-                pass
+                missed.append(prop)
+    return missed
 
 
 def file_output_format(node, file_format="OPEN_EXR_MULTILAYER", depth="32", codec="ZIP"):

@@ -20,7 +20,7 @@ results are recorded (results.py) and batch.py turns failures into an exit code.
 import bpy
 from bpy.app.handlers import persistent
 
-from . import aux_views, hooks, live, native, pipeline, recipe, results, scene_setup, sidecars, ui_queue
+from . import aux_views, compat, hooks, live, native, pipeline, recipe, results, scene_setup, sidecars, ui_queue
 from .log import log
 
 
@@ -74,7 +74,7 @@ def on_render_init(scene, *args):
     if problem:
         results.record(scene, scene.frame_current, error=problem)
         return
-    req = scene_setup.sync(scene)
+    req = compat.when_writable(scene_setup.sync, scene)   # F12: on the render thread
     st = scene_setup.status(scene)
     if req is None:
         results.record(scene, scene.frame_current, error="stack cannot run: %s" % st.get("error"))

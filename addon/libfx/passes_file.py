@@ -28,6 +28,7 @@ import time
 import bpy
 
 from . import compat, native, scene_setup
+from .log import log
 
 RENDER_RESULT = "Render Result"
 
@@ -120,13 +121,17 @@ def _write(scene, img, path):
     saved = compat.image_format_snapshot(settings)
     t0 = time.perf_counter()
     try:
-        compat.set_file_format(settings, "OPEN_EXR_MULTILAYER", "32", scene.libfx.passes_codec)
+        compat.when_writable(compat.set_file_format, settings, "OPEN_EXR_MULTILAYER", "32",
+                             scene.libfx.passes_codec)
         img.save_render(tmp, scene=scene)
-    except (RuntimeError, OSError) as e:
+    except (RuntimeError, OSError, AttributeError) as e:
         _remove_quietly(tmp)
         raise native.LibfxError("cannot write the passes file %s: %s" % (path, e))
     finally:
-        compat.image_format_restore(settings, saved)
+        missed = compat.image_format_restore(settings, saved)
+        if missed:
+            log("scene '%s': the output format's %s could not be put back after the passes file"
+                % (scene.name, ", ".join(missed)), err=True)
     if not os.path.exists(tmp):
         raise native.LibfxError("Blender wrote no passes file at %s" % tmp)
     old = _set_aside(path)

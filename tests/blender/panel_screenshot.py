@@ -198,11 +198,15 @@ def tick():
             os.makedirs(os.path.dirname(OUT), exist_ok=True)
             shoot(OUT)
             log("saved", OUT)
+            state["phase"] = "split_set"
+            state["t_split_set"] = time.perf_counter()
+            return 0.1
+        if state["phase"] == "split_set":
             scene = bpy.context.scene
             try:
                 scene.libfx.live_view = "SPLIT"
             except (AttributeError, RuntimeError) as e:   # 4.3 refuses data writes a moment after a render
-                if "not allowed" not in str(e):
+                if "not allowed" not in str(e) or time.perf_counter() - state["t_split_set"] > 60:
                     raise
                 return 0.1
             state["phase"] = "split"

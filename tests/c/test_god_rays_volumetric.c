@@ -356,6 +356,39 @@ static void test_depth_edge(fx_context *ctx)
         fx_stack_free(s);
         fx_frame_free(f);
     }
+    /* volume_upsample edges (draft's): the plain bilinear only where a cell and its pixels
+     * are alike in depth, so each side of the edge keeps its own depth's light; on the
+     * floor, where every depth is alike, it is the likeness upsample's value (both are the
+     * bilinear there) */
+    fx_frame *f = scene_frame(ctx, path, "SUN", 0.0f);
+    fx_stack *se = vol_stack(ctx, "final", "full"), *sd = vol_stack(ctx, "final", "full");
+    for (int k = 0; k < 2; k++) {
+        fx_stack *s = k ? sd : se;
+        CHECK_OK(ctx, fx_stack_set_int(s, 0, "volume_downsample", 8));
+        CHECK_OK(ctx, fx_stack_set_int(s, 0, "interleave", 1));
+        CHECK_OK(ctx, fx_stack_set_enum(s, 0, "volume_upsample", k ? "depth" : "edges"));
+    }
+    float *oe = et_run(ctx, se, f), *od = et_run(ctx, sd, f);
+    double worst = 0.0, floor_diff = 0.0;
+    for (int y = 0; oe && od && y < H; y++) {
+        for (int x = box_x0 - 4; x < box_x0 + 4; x++) {
+            double want = expected_L(x, 2, entry), rel = fabs(oe[4 * (y * W + x)] - want) / want;
+            worst = rel > worst ? rel : worst;
+        }
+        for (int x = 0; x < box_x0 - 16; x++) {
+            double a = oe[4 * (y * W + x)], b = od[4 * (y * W + x)], d = fabs(a - b) / b;
+            floor_diff = d > floor_diff ? d : floor_diff;
+        }
+    }
+    CHECK(oe && od && worst < 0.1 && floor_diff < 1e-5);
+    if (getenv("VOL_DEBUG") || !(worst < 0.1 && floor_diff < 1e-5))
+        fprintf(stderr, "volume_upsample edges at a depth edge: worst relative error %.4f; on the floor %.2e "
+                        "from the likeness upsample\n", worst, floor_diff);
+    free(oe);
+    free(od);
+    fx_stack_free(se);
+    fx_stack_free(sd);
+    fx_frame_free(f);
     box_x0 = W;
 }
 

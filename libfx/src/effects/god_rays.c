@@ -18,6 +18,8 @@
 #include "math/camera.h"
 #include "math/radial_blur.h"
 #include "math/hash.h"
+#include "core/simd8.h"
+#include "math/clones.h"
 #include "math/volume_march.h"
 #include "scene/aux_map.h"
 #include "core/simd4.h"
@@ -53,6 +55,7 @@ typedef struct god_rays_params {
     float max_distance;
     int volume_steps, volume_downsample, interleave;
     float volume_bias;
+    int volume_upsample;
 } god_rays_params;
 
 enum { SRC_SCENE = 0, SRC_SCREEN };
@@ -60,12 +63,14 @@ enum { OCC_SKY = 0, OCC_LUMINANCE };
 enum { METHOD_POLAR = 0, METHOD_NAIVE, METHOD_VOLUMETRIC };
 enum { EXT_NONE = 0, EXT_VIEW, EXT_FULL };
 enum { COMP_ADD = 0, COMP_SCREEN };
+enum { UPS_DEPTH = 0, UPS_EDGES };
 
 static const char *const source_items[] = {"scene", "screen"};
 static const char *const occlusion_items[] = {"sky", "luminance"};
 static const char *const method_items[] = {"polar", "naive", "volumetric"};
 static const char *const extinction_items[] = {"none", "view", "full"};
 static const char *const composite_items[] = {"add", "screen"};
+static const char *const upsample_items[] = {"depth", "edges"};
 static const float default_position[2] = {0.5f, 0.3f};
 static const float default_volume_color[3] = {0.8f, 0.8f, 0.8f}; /* Cycles' Volume Scatter default */
 
@@ -154,6 +159,11 @@ static const fx_param_def god_rays_param_defs[] = {
              "offsets, gathered back by a depth-aware n x n box (1: midpoints, no gather)"),
     FX_P_FLOAT(god_rays_params, volume_bias, "volume_bias", 0.02, 0.0, 100.0, 0.0, 0.5, "m",
                "volumetric: depth-test bias in the light view (scene units)"),
+    FX_P_ENUM(god_rays_params, volume_upsample, "volume_upsample", UPS_DEPTH, upsample_items,
+              "volumetric: how the reduced grid comes back to full resolution: depth: each pixel's 4 "
+              "texels weighted by their depth's likeness to the pixel's; edges: a plain bilinear where "
+              "the 4 texels and the pixel lie within 5 % in depth (fewer instructions where "
+              "volume_downsample is a multiple of 8), the likeness weights only at depth edges (draft)"),
 };
 
 static fx_pass_set god_rays_passes(const void *params)
@@ -601,7 +611,57 @@ typedef struct vol_job {
     float *dbg;                 /* debug "inscatter" (RGB), or NULL */
     const int *col_x0;          /* per ROI column: its lo texel (left) and the right one's weight */
     const float *col_t;
+    int edges;                  /* volume_upsample edges */
 } vol_job;
+
+/* volume_upsample edges: a plain bilinear where a cell's 4 texels and the pixel lie within
+ * this relative depth of each other (the likeness weights there are >= (1 - 5 x it)^2 =
+ * 0.56, so the two differ by a part of the cell's own spread of L and T; depth edges, 10 %
+ * and more, keep the weights). */
+#define VOL_ALIKE 0.05f
+
+/* The cells of lo rows r0, r1 gathered once into vectors (row: 12 lw floats: per column
+ * the 4 texels' depths, in-scatter and transmittance; bcast: each of them broadcast). */
+static void vol_row_cells(const vol_job *j, size_t r0, size_t r1, float *row, v4f *bcast)
+{
+    const int lw = j->lw;
+    const float *restrict lo = j->lo, *restrict lt = j->lo_t, *restrict ld = j->lo_depth;
+    for (int X = 0; X < lw; X++) {
+        const int X1 = X + 1 < lw ? X + 1 : X;
+        st4(row + 12 * X, (v4f){ld[r0 + X], ld[r0 + X1], ld[r1 + X], ld[r1 + X1]});
+        st4(row + 12 * X + 4, (v4f){lo[r0 + X], lo[r0 + X1], lo[r1 + X], lo[r1 + X1]});
+        st4(row + 12 * X + 8, (v4f){lt[r0 + X], lt[r0 + X1], lt[r1 + X], lt[r1 + X1]});
+        for (int m = 0; m < 12; m++)
+            bcast[12 * X + m] = V4(row[12 * X + m]);
+    }
+}
+
+/* volume_upsample edges, per lo column X of the row (ty: the row's weight of lo row r1):
+ * the vertical lerps of L and T and their steps to column X + 1 (e: 4 lw floats), and when
+ * the cells change (every f rows) their depth range over the 4 texels (range: 2 lw). */
+static void vol_row_edges(const vol_job *j, size_t r0, size_t r1, float ty, int cells_changed, float *e,
+                          float *range)
+{
+    const int lw = j->lw;
+    float *Lv = e, *dL = e + lw, *Tv = e + 2 * lw, *dT = e + 3 * lw;
+    const float *lo = j->lo, *lt = j->lo_t, *ld = j->lo_depth;
+    for (int X = 0; X < lw; X++) {
+        Lv[X] = lo[r0 + X] + ty * (lo[r1 + X] - lo[r0 + X]);
+        Tv[X] = lt[r0 + X] + ty * (lt[r1 + X] - lt[r0 + X]);
+    }
+    for (int X = 0; X + 1 < lw; X++) {
+        dL[X] = Lv[X + 1] - Lv[X];
+        dT[X] = Tv[X + 1] - Tv[X];
+    }
+    dL[lw - 1] = dT[lw - 1] = 0.0f;
+    for (int X = 0; X < lw && cells_changed; X++) {
+        const int X1 = X + 1 < lw ? X + 1 : X;
+        const float a = ld[r0 + X], b = ld[r0 + X1], c = ld[r1 + X], d = ld[r1 + X1];
+        const float lo_ab = a < b ? a : b, lo_cd = c < d ? c : d, hi_ab = a < b ? b : a, hi_cd = c < d ? d : c;
+        range[2 * X] = lo_ab < lo_cd ? lo_ab : lo_cd;
+        range[2 * X + 1] = hi_ab < hi_cd ? hi_cd : hi_ab;
+    }
+}
 
 /* One row's L and T (n pixels from roi.x0) from the reduced grid: the cells of the row's two
  * lo rows gathered once into vectors (row: 12 lw floats), then 4 pixels at a time
@@ -615,15 +675,8 @@ static void vol_row_lt(const vol_job *j, int y, float *row, v4f *bcast, int *cac
     float ty = 0.0f;
     fx_volume_lo_coord(y, j->f, j->lh, &Y0, &ty);
     const size_t r0 = (size_t)Y0 * lw, r1 = Y0 + 1 < j->lh ? r0 + (size_t)lw : r0;
-    const float *restrict lo = j->lo, *restrict lt = j->lo_t, *restrict ld = j->lo_depth;
-    for (int X = 0; X < lw && Y0 != *cached_Y0; X++) { /* the cells change every f rows */
-        const int X1 = X + 1 < lw ? X + 1 : X;
-        st4(row + 12 * X, (v4f){ld[r0 + X], ld[r0 + X1], ld[r1 + X], ld[r1 + X1]});
-        st4(row + 12 * X + 4, (v4f){lo[r0 + X], lo[r0 + X1], lo[r1 + X], lo[r1 + X1]});
-        st4(row + 12 * X + 8, (v4f){lt[r0 + X], lt[r0 + X1], lt[r1 + X], lt[r1 + X1]});
-        for (int m = 0; m < 12; m++)
-            bcast[12 * X + m] = V4(row[12 * X + m]);
-    }
+    if (Y0 != *cached_Y0)
+        vol_row_cells(j, r0, r1, row, bcast);
     *cached_Y0 = Y0;
     const v4f by = {1.0f - ty, 1.0f - ty, ty, ty};
     const float *restrict dep = j->depth + (size_t)y * j->run->width + x0;
@@ -658,25 +711,126 @@ static void vol_row_lt(const vol_job *j, int y, float *row, v4f *bcast, int *cac
     }
 }
 
-/* Output = src T + L (T: the view transmittance, with extinction full times the light's
- * transmittance on its way to the surface; L: the in-scatter; both upsampled by depth
- * likeness from the reduced grid). */
-static void vol_rows(void *user, int begin, int end)
+/* One pixel's output: src T + L (T: the view transmittance, with extinction full times the
+ * light's transmittance on its way to the surface; L: the in-scatter), screened or added;
+ * the debug pass gets what was added. */
+static inline void vol_put(const vol_job *j, size_t i, float L, float T)
+{
+    v4f base = ld4(j->run->src + i * 4) * (v4f){T, T, T, 1.0f};
+    v4f add = j->rad * V4(L);
+    if (j->screen)
+        add *= V4(1.0f) - min4(max4(base, V4(0.0f)), V4(1.0f));
+    st4(j->run->dst + i * 4, finite4(base + add));
+    if (j->dbg) {
+        j->dbg[3 * i] = add[0];
+        j->dbg[3 * i + 1] = add[1];
+        j->dbg[3 * i + 2] = add[2];
+    }
+}
+
+/* vol_put for 4 pixels from i on, added, no debug: two pixels per 8-lane vector (one AVX
+ * register in vol_rows' AVX2 clone), {T,T,T,1} and L spread from the lanes of T4 and L4;
+ * the same products and sums as vol_put, so the same bits. */
+static inline __attribute__((always_inline)) void vol_put4_add(const vol_job *j, size_t i, v4f L4, v4f T4)
+{
+    const v4f one = V4(1.0f), rad = j->rad;
+    const v8f rad8 = __builtin_shufflevector(rad, rad, 0, 1, 2, 3, 0, 1, 2, 3);
+    const v8f t01 = __builtin_shufflevector(T4, one, 0, 0, 0, 4, 1, 1, 1, 4);
+    const v8f t23 = __builtin_shufflevector(T4, one, 2, 2, 2, 4, 3, 3, 3, 4);
+    const v8f l01 = __builtin_shufflevector(L4, L4, 0, 0, 0, 0, 1, 1, 1, 1);
+    const v8f l23 = __builtin_shufflevector(L4, L4, 2, 2, 2, 2, 3, 3, 3, 3);
+    const float *restrict src = j->run->src + i * 4;
+    float *restrict dst = j->run->dst + i * 4;
+    fx_store8(dst, fx_finite8(fx_load8(src) * t01 + rad8 * l01));
+    fx_store8(dst + 8, fx_finite8(fx_load8(src + 8) * t23 + rad8 * l23));
+}
+
+/* volume_upsample edges: one row, 4 pixels at a time, put at once. A group on one cell
+ * whose 4 pixels lie within VOL_ALIKE in depth of the cell's 4 texels takes the plain
+ * bilinear (vol_row_edges' lerps); any other takes vol_row_lt's likeness weights (the
+ * same functions, so the same bits). */
+FX_CLONES static void vol_row_edges_put(const vol_job *j, int y, float *row, v4f *bcast, float *edges, int *cached_Y0)
+{
+    const int lw = j->lw, x0 = j->run->roi.x0, n = j->run->roi.x1 - x0;
+    int Y0 = 0;
+    float ty = 0.0f;
+    fx_volume_lo_coord(y, j->f, j->lh, &Y0, &ty);
+    const size_t r0 = (size_t)Y0 * lw, r1 = Y0 + 1 < j->lh ? r0 + (size_t)lw : r0;
+    if (Y0 != *cached_Y0)
+        vol_row_cells(j, r0, r1, row, bcast);
+    vol_row_edges(j, r0, r1, ty, Y0 != *cached_Y0, edges, edges + 4 * lw);
+    *cached_Y0 = Y0;
+    const float *Lv = edges, *dL = edges + lw, *Tv = edges + 2 * lw, *dT = edges + 3 * lw, *range = edges + 4 * lw;
+    const float *restrict dep = j->depth + (size_t)y * j->run->width + x0;
+    const int *restrict cx = j->col_x0;
+    const float *restrict ct = j->col_t;
+    const float far = j->vol->far_limit;
+    const size_t i0 = (size_t)y * j->run->width + x0;
+    const int add = !j->screen && !j->dbg;
+    int Xc = -1;
+    v4f lv = V4(0.0f), dl = lv, tv = lv, dt = lv, dlo = lv, dhi = lv;
+    int k = 0;
+    for (; k + 4 <= n; k += 4) {
+        const int X = cx[k];
+        v4f L, T;
+        if (X == cx[k + 3]) {
+            if (X != Xc) {
+                Xc = X;
+                lv = V4(Lv[X]), dl = V4(dL[X]), tv = V4(Tv[X]), dt = V4(dT[X]);
+                dlo = V4(range[2 * X]), dhi = V4(range[2 * X + 1]);
+            }
+            const v4f dk = ld4(dep + k); /* fx_volume_weight_depth, 4 lanes */
+            const v4f d = sel4((dk > V4(0.0f)) & (dk < V4(far)), dk, V4(FX_VOLUME_BG_DEPTH));
+            const v4f tol = d * V4(VOL_ALIKE), tx = ld4(ct + k);
+            if (all4((dhi - d <= tol) & (d - dlo <= tol))) {
+                L = lv + tx * dl;
+                T = tv + tx * dt;
+            } else {
+                fx_volume_upsample_same4(row + 12 * X, bcast + 12 * X, ty, tx, d, &L, &T);
+            }
+        } else { /* across cells: one by one */
+            for (int m = 0; m < 4; m++) {
+                const int X0 = cx[k + m];
+                fx_volume_upsample(j->lo, j->lo_t, j->lo_depth, r0, r1, X0, X0 + 1 < lw ? X0 + 1 : X0, ct[k + m],
+                                   ty, fx_volume_weight_depth(dep[k + m], far), &L[m], &T[m]);
+            }
+        }
+        if (add) {
+            vol_put4_add(j, i0 + (size_t)k, L, T);
+        } else {
+            for (int m = 0; m < 4; m++)
+                vol_put(j, i0 + (size_t)(k + m), L[m], T[m]);
+        }
+    }
+    for (; k < n; k++) {
+        const int X0 = cx[k];
+        float L, T;
+        fx_volume_upsample(j->lo, j->lo_t, j->lo_depth, r0, r1, X0, X0 + 1 < lw ? X0 + 1 : X0, ct[k], ty,
+                           fx_volume_weight_depth(dep[k], far), &L, &T);
+        vol_put(j, i0 + (size_t)k, L, T);
+    }
+}
+
+/* The output rows: the in-scatter and transmittance upsampled from the reduced grid by
+ * depth likeness (vol_row_lt, or vol_row_edges_put for volume_upsample edges), then put. */
+FX_CLONES static void vol_rows(void *user, int begin, int end)
 {
     const vol_job *j = user;
     const fx_effect_run *run = j->run;
     const int w = run->width, lw = j->lw, x0 = run->roi.x0, n = run->roi.x1 - x0;
-    /* per lo column: the cell's texels, also broadcast (vol_row_lt); per pixel of the row:
-     * L and T */
-    float *row = j->f > 1 ? fx_mem_alloc((size_t)(12 * lw + 2 * n + 48 * lw + 4) * sizeof(float)) : NULL;
+    /* per lo column: the cell's texels, also broadcast (vol_row_cells); per pixel of the
+     * row: L and T (vol_row_lt); per lo column: vol_row_edges' 6 floats */
+    float *row = j->f > 1 ? fx_mem_alloc((size_t)(12 * lw + 2 * n + 48 * lw + 4 + 6 * lw) * sizeof(float)) : NULL;
     v4f *bcast = row ? (v4f *)(((uintptr_t)(row + 12 * lw + 2 * n) + 15) & ~(uintptr_t)15) : NULL;
+    float *edges = row ? (float *)(bcast + 12 * lw) : NULL;
     int cached_Y0 = -1;
-    const v4f rad = j->rad;
-    float *dbg = j->dbg;
     for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++) {
         const size_t i0 = (size_t)y * w + x0;
         const float *Lr, *Tr;
-        if (j->f > 1 && row) {
+        if (j->f > 1 && row && j->edges) {
+            vol_row_edges_put(j, y, row, bcast, edges, &cached_Y0);
+            continue;
+        } else if (j->f > 1 && row) {
             float *L = row + 12 * lw, *T = L + n;
             vol_row_lt(j, y, row, bcast, &cached_Y0, L, T);
             Lr = L;
@@ -687,28 +841,12 @@ static void vol_rows(void *user, int begin, int end)
             Lr = j->lo + i0;
             Tr = j->lo_t + i0;
         }
-        const float *restrict src = run->src + i0 * 4;
-        float *restrict dst = run->dst + i0 * 4;
-        if (!j->screen && !dbg) {
-            for (int k = 0; k < n; k++) {
-                const float T = Tr[k];
-                st4(dst + 4 * k, finite4(ld4(src + 4 * k) * (v4f){T, T, T, 1.0f} + rad * V4(Lr[k])));
-            }
-            continue;
-        }
-        for (int k = 0; k < n; k++) {
-            const float T = Tr[k];
-            v4f base = ld4(src + 4 * k) * (v4f){T, T, T, 1.0f};
-            v4f add = rad * V4(Lr[k]);
-            if (j->screen)
-                add *= V4(1.0f) - min4(max4(base, V4(0.0f)), V4(1.0f));
-            st4(dst + 4 * k, finite4(base + add));
-            if (dbg) {
-                dbg[3 * (i0 + k)] = add[0];
-                dbg[3 * (i0 + k) + 1] = add[1];
-                dbg[3 * (i0 + k) + 2] = add[2];
-            }
-        }
+        int k = 0;
+        if (!j->screen && !j->dbg)
+            for (; k + 4 <= n; k += 4)
+                vol_put4_add(j, i0 + (size_t)k, ld4(Lr + k), ld4(Tr + k));
+        for (; k < n; k++)
+            vol_put(j, i0 + (size_t)k, Lr[k], Tr[k]);
     }
     if (j->f > 1 && !row) /* out of memory for a row's scratch: the exact upsample, per pixel */
         for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++) {
@@ -723,16 +861,7 @@ static void vol_rows(void *user, int begin, int end)
                 fx_volume_upsample(j->lo, j->lo_t, j->lo_depth, r0, r1, X0, X0 + 1 < lw ? X0 + 1 : X0,
                                    j->col_t[x - x0], ty, fx_volume_weight_depth(j->depth[i], j->vol->far_limit),
                                    &L, &T);
-                v4f base = ld4(run->src + i * 4) * (v4f){T, T, T, 1.0f};
-                v4f add = rad * V4(L);
-                if (j->screen)
-                    add *= V4(1.0f) - min4(max4(base, V4(0.0f)), V4(1.0f));
-                st4(run->dst + i * 4, finite4(base + add));
-                if (dbg) {
-                    dbg[3 * i] = add[0];
-                    dbg[3 * i + 1] = add[1];
-                    dbg[3 * i + 2] = add[2];
-                }
+                vol_put(j, i, L, T);
             }
         }
     fx_mem_free(row);
@@ -828,7 +957,7 @@ static fx_result run_volumetric(const fx_effect_run *run, const god_rays_params 
         const float kc[3] = {p->volume_color[0] / cm, p->volume_color[1] / cm, p->volume_color[2] / cm};
         vol_job j = {run, &vol, dp->data, buf, buf + ln, buf + 2 * ln, lw, lh, f,
                      (v4f){L.color.x * e * kc[0], L.color.y * e * kc[1], L.color.z * e * kc[2], 0.0f},
-                     p->composite == COMP_SCREEN, NULL, NULL, NULL};
+                     p->composite == COMP_SCREEN, NULL, NULL, NULL, p->volume_upsample == UPS_EDGES};
         if (run->debug)
             j.dbg = fx_effect_debug_pass(run, "inscatter", 3, &r);
         const int cols = run->roi.x1 - run->roi.x0;
@@ -892,7 +1021,7 @@ const fx_effect_class fx_effect_god_rays = {
          * 0.5 has the scene-relative line density of 1.5 at 640x360; at equal time a reduced
          * map with finer lines errs less than coarser lines at full size */
         "{\"method\": \"polar\", \"polar_resolution\": 0.75, \"polar_levels\": 2, \"polar_downsample\": 4, "
-        "\"volume_downsample\": 8, \"volume_steps\": 8, \"interleave\": 2}",
+        "\"volume_downsample\": 16, \"volume_steps\": 16, \"interleave\": 1, \"volume_upsample\": \"edges\"}",
         "{\"method\": \"polar\", \"polar_resolution\": 0.75, \"polar_levels\": 2, \"polar_downsample\": 2, "
         "\"volume_downsample\": 4, \"volume_steps\": 16, \"interleave\": 2}",
         "{\"method\": \"polar\", \"polar_resolution\": 0.5, \"polar_levels\": 2, \"polar_downsample\": 1, "
