@@ -150,3 +150,6 @@ def test_f12_in_the_ui_shows_the_result(blender, library, tmp_path):
         raise AssertionError("no exit within 300 s; its output:\n" + out[-8000:]) from None
     assert p.returncode == 0, (p.stdout + p.stderr)[-8000:]
     assert "F12 result image: True" in p.stdout and shot.is_file()
+    for line in (p.stdout + p.stderr).splitlines():   # (pytest -s) how often the retries were needed
+        if "refused ID writes" in line:
+            print(line)
