@@ -6,7 +6,12 @@ pattern on the floor (material ``Pool_Floor``). ``apply_truth()`` enables the wa
 refractive glass (IOR 1.33), invisible to the camera, and turns Cycles' refractive
 caustics on, with manifold next-event estimation (MNEE: the Sun a caustics light, the
 water a caster, the floor a receiver) so a sun's caustics converge at few samples (the
-ground truth, tests/bench/truth_caustics.py).
+ground truth, tests/bench/truth_caustics.py), and with two corrections that make Cycles'
+light transport physical here (measured, docs/accuracy_truth.md#pool-caustics-voronoi_caustics):
+the world is not sampled as a light (Cycles' MNEE scales a sun's caustic by the number of
+lights it samples: 2x with the sky), and the water's refraction carries the radiance factor
+n^2 (Cycles' refraction leaves it out: a floor under flat water got T / n^2 of the sun, not
+the transmittance T that flux conservation gives).
 
     blender -b --factory-startup --python blend_scenes/truth_caustics/make_truth_caustics.py
 
@@ -29,6 +34,7 @@ ORTHO_SCALE = 4.0
 DEPTH = 1.2
 WAVE_SIZE = 0.35
 WAVE_HEIGHT = 0.05
+WATER_IOR = 1.33
 GRID = 12                       # water grid faces per side (6 m), each subdivided 16x16
 
 RECIPE = {
@@ -70,7 +76,7 @@ def main():
     out = nt.nodes.new("ShaderNodeOutputMaterial")
     glass = nt.nodes.new("ShaderNodeBsdfGlass")
     sc.sharp_bsdf(glass)
-    glass.inputs["IOR"].default_value = 1.33
+    glass.inputs["IOR"].default_value = WATER_IOR
     glass.inputs["Color"].default_value = (1, 1, 1, 1)
     nt.links.new(glass.outputs[0], out.inputs["Surface"])
     obj = sc.mesh_object("Water", water_grid, water, 2, smooth=True)
@@ -102,10 +108,56 @@ def main():
     sc.save_blend(os.path.join(HERE, "truth_caustics_pool.blend"))
 
 
+def physical_water(mat, ior=WATER_IOR):
+    """The water's interface as Cycles' sharp Glass (a Fresnel mix of a sharp refraction and
+    a sharp reflection), with the radiance factor of refraction that Cycles leaves out:
+    radiance entering a medium of index n from air is n^2 times brighter (L / n^2 is
+    invariant), so a path that leaves the water upwards (the interface seen from below)
+    carries n^2 T, one that enters it 1 / n^2 T. Reflection is unchanged."""
+    nt = mat.node_tree
+    for n in list(nt.nodes):
+        nt.nodes.remove(n)
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    fresnel = nt.nodes.new("ShaderNodeFresnel")
+    fresnel.inputs["IOR"].default_value = ior
+    refr = nt.nodes.new("ShaderNodeBsdfRefraction")
+    refr.inputs["IOR"].default_value = ior
+    refl = nt.nodes.new("ShaderNodeBsdfGlossy")
+    for node in (refr, refl):
+        sc.sharp_bsdf(node)
+        node.inputs["Color"].default_value = (1, 1, 1, 1)
+    back = nt.nodes.new("ShaderNodeNewGeometry")
+    k = nt.nodes.new("ShaderNodeMath")          # n^2 seen from below, 1 / n^2 from above
+    k.operation = 'MULTIPLY_ADD'
+    nt.links.new(back.outputs["Backfacing"], k.inputs[0])
+    k.inputs[1].default_value = ior * ior - 1.0 / (ior * ior)
+    k.inputs[2].default_value = 1.0 / (ior * ior)
+    nt.links.new(k.outputs[0], refr.inputs["Color"])
+    mix = nt.nodes.new("ShaderNodeMixShader")   # the Fresnel node takes 1 / ior from below
+    nt.links.new(fresnel.outputs[0], mix.inputs[0])
+    nt.links.new(refr.outputs[0], mix.inputs[1])
+    nt.links.new(refl.outputs[0], mix.inputs[2])
+    nt.links.new(mix.outputs[0], out.inputs["Surface"])
+
+
 def apply_truth(scene=None):
-    """The ground truth: the water refracts the Sun onto the floor. Never saved."""
+    """The ground truth: the water refracts the Sun onto the floor. Never saved.
+
+    Two corrections of Cycles (3.4, 4.3 and 5.2 alike; measured with flat water, where the
+    floor must get the Fresnel transmittance T of the sun's light, 0.980 at 20 deg):
+    - the world is not sampled as a light: Cycles' MNEE divides a sun's caustic by the
+      light-selection probability twice, so with the sky as a second light the caustic
+      came out 2x (3 lights: 3x); the sky still lights the floor through the rays the
+      floor's BSDF sends (a smooth gradient: little noise);
+    - the water's refraction carries n^2 (physical_water): without it the floor got T / n^2
+      (0.554 at n 1.33; 0.825 at 1.1, 0.370 at 1.6, as measured).
+    Before them the two errors nearly cancelled: the floor got 2 T / n^2 = 1.108 of the
+    sun's light in air, 1.13x the physical T."""
     scene = scene or bpy.context.scene
     w = bpy.data.objects["Water"]
+    physical_water(bpy.data.materials["Water"])
+    if scene.world is not None:
+        scene.world.cycles.sampling_method = 'NONE'
     w.hide_render = False
     w.visible_camera = False
     cy = scene.cycles

@@ -68,3 +68,67 @@ def test_truth_scene_builds_and_renders(name, args, blend_name, blender, library
     assert np.isfinite(truth).all()
     # the real effect changes the picture
     assert np.abs(truth - plain).mean() > 1e-3
+
+
+# Inside Blender on the committed pool scene: the waves flattened, frame 1 rendered four times
+# at 64x36, 16 samples, to single-layer EXRs: the truth (apply_truth) and the input (the water
+# hidden), each with the Sun on and off (the sky, a second light, always on).
+FLAT_POOL = r"""
+import bpy, json, sys
+sys.path.insert(0, %(sdir)r)
+import make_truth_caustics as m
+sc = bpy.context.scene
+m.apply_truth(sc)
+bpy.data.objects["Water"].modifiers["Waves"].strength = 0.0
+sc.render.resolution_x, sc.render.resolution_y, sc.render.resolution_percentage = 64, 36, 100
+sc.cycles.samples = 16
+sc.render.use_compositing = False
+im = sc.render.image_settings
+if hasattr(im, "media_type"):
+    im.media_type = "IMAGE"
+im.file_format, im.color_depth, im.color_mode = "OPEN_EXR", "32", "RGB"
+sun = bpy.data.objects["Sun"]
+energy = sun.data.energy
+for water in (True, False):
+    bpy.data.objects["Water"].hide_render = not water
+    for lit in (True, False):
+        sun.data.energy = energy if lit else 0.0
+        sc.render.filepath = "%(out)s/%%s_%%s.exr" %% ("truth" if water else "input", "sun" if lit else "sky")
+        bpy.ops.render.render(write_still=True)
+d = sun.matrix_world.to_quaternion() @ __import__("mathutils").Vector((0, 0, 1))
+print("LIBFX_SUN " + json.dumps({"cos": d.normalized().z}))
+"""
+
+
+def _fresnel_t(cos_i, n):
+    """The unpolarised Fresnel transmittance from air into index n (the exact formula)."""
+    cos_t = np.sqrt(1.0 - (1.0 - cos_i * cos_i) / (n * n))
+    rs = (cos_i - n * cos_t) / (cos_i + n * cos_t)
+    rp = (n * cos_i - cos_t) / (n * cos_i + cos_t)
+    return 1.0 - 0.5 * (rs * rs + rp * rp)
+
+
+def test_caustics_truth_flat_water_transmits_fresnel(blender, tmp_path):
+    """Under flat water the floor gets the sun's light in air times the Fresnel transmittance T
+    (flux through parallel planes is conserved): the truth's Sun share (Sun on minus off) over
+    the input's, on the central square. Cycles alone gave 2 T / n^2 = 1.108 (its MNEE counts a
+    sun's caustic once per sampled light, and its refraction leaves out the radiance factor n^2);
+    apply_truth corrects both (0.991 on 3.4, whose Principled floor adds a glossy bounce off the
+    water's underside; 0.982 on 4.3 and 5.2)."""
+    T.need_oiio()
+    sdir = T.REPO / "blend_scenes" / "truth_caustics"
+    proc = T.run_blender([], blend=sdir / "truth_caustics_pool.blend", timeout=400,
+                         python_expr=FLAT_POOL % {"sdir": str(sdir), "out": str(tmp_path)})
+    out = proc.stdout + proc.stderr
+    assert proc.returncode == 0 and not T.tracebacks(out), out[-5000:]
+    cos_i = json.loads([x for x in out.splitlines() if x.startswith("LIBFX_SUN ")][-1][len("LIBFX_SUN "):])["cos"]
+
+    def mean(name):
+        e = T.Exr(tmp_path / (name + ".exr"))
+        y = np.stack([e.channels[c] for c in "RGB"], axis=-1).astype(np.float64) @ [0.2126, 0.7152, 0.0722]
+        return y[:, 14:50].mean()   # the central 36 x 36
+
+    share = (mean("truth_sun") - mean("truth_sky")) / (mean("input_sun") - mean("input_sky"))
+    t = _fresnel_t(cos_i, 1.33)
+    assert abs(cos_i - np.cos(np.radians(20.0))) < 1e-3   # the scene's sun, 70 deg up
+    assert abs(share - t) < 0.025, (share, t)
