@@ -208,6 +208,9 @@ def tick():
             except (AttributeError, RuntimeError) as e:   # 4.3 refuses data writes a moment after a render
                 if "not allowed" not in str(e) or time.perf_counter() - state["t_split_set"] > 60:
                     raise
+                state["split_refusals"] = state.get("split_refusals", 0) + 1
+                if state["split_refusals"] in (1, 10, 100):
+                    log("live_view refused %d times since %.1f s" % (state["split_refusals"], state["t_split_set"] - T0))
                 return 0.1
             state["phase"] = "split"
             state["gen"] = libfx.live.session(scene).shown.get("generation", -1)
@@ -235,7 +238,11 @@ def tick():
             traceback.print_exc()
             os._exit(2)
         state["id_write_retries"] += 1
-        log("retrying phase %s: %s" % (state["phase"], e))
+        if state["id_write_retries"] in (1, 10, 50):   # a few lines, not a flood that hides the start
+            jobs = [k for k in ("RENDER", "RENDER_PREVIEW", "COMPOSITE", "OBJECT_BAKE", "SHADER_COMPILATION")
+                    if job_running(k)]
+            log("retry %d of phase %s at %.1f s (jobs running: %s): %s"
+                % (state["id_write_retries"], state["phase"], time.perf_counter() - T0, jobs or "none", e))
         return 0.1
     except Exception:
         import traceback
