@@ -4,7 +4,7 @@
     LIBFX_LIBRARY=build/libfx/libfx.so LIBFX_CLI=build/libfx/libfx \\
         /usr/bin/python3 tests/bench/truth_mirrors.py OUT_DIR [--res 480x270] [--spp 16] \\
         [--runs 3] [--variants facing,grazing,pair,curved] [--docs docs] [--no-eevee] \\
-        [--truth-spp 64]
+        [--truth-spp 64] [--probe WIDTHxSAMPLES]
 
 Renders already in OUT_DIR (the inputs with their probe and planar views, the truths) are
 reused: a second run re-runs only libfx against them (delete the files to render again).
@@ -46,15 +46,21 @@ import truth_common as C  # noqa: E402
 VARIANTS = ("facing", "grazing", "pair", "curved")
 
 
-def batch_logged(blend, prefix, res, spp, recipe=None):
+def batch_logged(blend, prefix, res, spp, recipe=None, probe=None):
     """C.batch for the input render, keeping the add-on's log (prefix + batch.log): the
-    probe's render time is in it. Returns (passes, sidecar, log text)."""
+    probe's render time is in it. probe: (width, samples) of the reflection probe (the
+    scene's libfx_probe_size / libfx_probe_samples), or None for the add-on's defaults.
+    Returns (passes, sidecar, log text)."""
     prefix = str(prefix)
     passes = prefix + "libfx_passes.0001.exr"
     side = prefix + "libfx.0001.camera.json"
     log = prefix + "batch.log"
     if not (os.path.exists(passes) and os.path.exists(side) and os.path.exists(log)):
-        args = [C.BLENDER, "-b", str(blend), "--python", str(C.ROOT / "addon" / "libfx" / "batch.py"), "--",
+        args = [C.BLENDER, "-b", str(blend)]
+        if probe:
+            args += ["--python-expr", "import bpy; s = bpy.context.scene; s['libfx_probe_size'] = %d; "
+                     "s['libfx_probe_samples'] = %d" % probe]
+        args += ["--python", str(C.ROOT / "addon" / "libfx" / "batch.py"), "--",
                 "--keep-passes", "--frames", "1", "--output", prefix, "--resolution", res, "--samples", str(spp)]
         if recipe:
             args += ["--recipe", str(recipe)]
@@ -105,10 +111,14 @@ def with_fallback(recipe, fallback):
 
 
 def main():
-    sys.argv, extra = list(sys.argv), None
+    sys.argv, extra, probe = list(sys.argv), None, None
     if "--truth-spp" in sys.argv:
         i = sys.argv.index("--truth-spp")
         extra = int(sys.argv[i + 1])
+        del sys.argv[i:i + 2]
+    if "--probe" in sys.argv:   # WIDTHxSAMPLES of the reflection probe (default: the add-on's 512x16)
+        i = sys.argv.index("--probe")
+        probe = tuple(int(v) for v in sys.argv[i + 1].split("x"))
         del sys.argv[i:i + 2]
     a = C.parse_args(res="480x270", spp=16, variants=VARIANTS, eevee=True)
     a.truth_spp = extra or 64
@@ -126,7 +136,7 @@ def main():
         ref_recipe = os.path.join(a.out, "m_recipe_reference.json")
         with open(ref_recipe, "w") as f:
             json.dump(dict(recipe, quality="reference"), f)
-        passes, side, log = batch_logged(blend, p + "inref_", a.res, a.spp, ref_recipe)
+        passes, side, log = batch_logged(blend, p + "inref_", a.res, a.spp, ref_recipe, probe)
         tpass, _, _ = C.batch(blend, p + "truth_", a.res, a.truth_spp, expr=C.truth_expr("mirrors"), recipe=noop)
         t2pass, _, _ = C.batch(blend, p + "truth2_", a.res, a.truth_spp, expr=C.truth_expr("mirrors"), recipe=noop,
                                seed=17)
