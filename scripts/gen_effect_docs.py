@@ -16,6 +16,12 @@ leaves everything outside them (the hand-written prose) alone:
                                        (written by tests/bench/bench_all.py), or a note
                                        naming that command when the file has no rows
 
+The bench block shows the effect's rows at 1920x1080, then each method variant's (CSV
+entry "effect:variant", e.g. god_rays:volumetric: its own presets against its own
+reference) in its own table titled by the parameter that selects it (`method: volumetric`),
+then the first frame of a process of the effect and of each variant, the peers and the
+Cycles rows.
+
 A page that does not exist is created with a title and the blocks; a page that lacks a
 block gets it (params and image after the first paragraph, bench at the end).
 
@@ -288,15 +294,55 @@ def pivot(rows, label):
     return out
 
 
-def bench_block(name, rows):
+def variant_title(label, params):
+    """"god_rays:volumetric" -> "`method: volumetric`": the enum parameter that has the
+    variant as an item (the label's own words when none has)."""
+    variant = label.split(":", 1)[1]
+    for p in params or []:
+        if p["type"] == "enum" and variant in p.get("items", []):
+            return f"`{p['name']}: {variant}`"
+    return f"`{md(variant)}`"
+
+
+def main_rows(rows):
+    """The presets' table rows: effect, reference and floor at 1920x1080, in that order."""
+    out = [r for r in rows if r["kind"] in ("effect", "reference", "floor")
+           and r["width"].strip() == "1920" and r["height"].strip() == "1080"]
+    out.sort(key=lambda r: {"effect": 0, "reference": 1, "floor": 2}[r["kind"]])
+    return out
+
+
+def first_frame_table(rows):
+    """bench_all's first_frame rows: frame 1 of a fresh `libfx run` against the later
+    frames (its note: "warm W ms (frames 2-N, median); first / warm Rx; ...")."""
+    out = ["| entry | scene | size | first frame ms | warm ms | first / warm | processes |",
+           "|---|---|---|---:|---:|---:|---:|"]
+    for r in rows:
+        note = r["note"] or ""
+        warm = re.match(r"warm ([0-9.]+) ms", note)
+        ratio = re.search(r"first / warm ([0-9.]+x)", note)
+        out.append(f"| `{md(r['effect'])}` | {md(r['scene'])} | {r['width']}x{r['height']} | "
+                   f"{fnum(r['ms_median'], 'ms')} | {fnum(warm.group(1), 'ms') if warm else ''} | "
+                   f"{ratio.group(1) if ratio else ''} | {r['runs']} |")
+    return out
+
+
+def bench_block(name, rows, params=None):
     out = [begin("bench"), "## Measured time and error", ""]
     mine = [r for r in (rows or []) if r["effect"].strip() == name]
-    main = [r for r in mine if r["kind"] in ("effect", "reference", "floor")
-            and r["width"].strip() == "1920" and r["height"].strip() == "1080"]
-    main.sort(key=lambda r: {"effect": 0, "reference": 1, "floor": 2}[r["kind"]])
+    # method variants: their own entries (bench_all's VARIANTS), in the CSV's order
+    variants = {}
+    for r in rows or []:
+        if r["effect"].strip().startswith(name + ":"):
+            variants.setdefault(r["effect"].strip(), []).append(r)
+    main = main_rows(mine)
+    vmain = {label: main_rows(rs) for label, rs in variants.items()}
+    vmain = {label: rs for label, rs in vmain.items() if rs}
+    first = [r for r in mine if r["kind"] == "first_frame"] + \
+        [r for rs in variants.values() for r in rs if r["kind"] == "first_frame"]
     peers = [r for r in mine if r["kind"] == "peer"]
     cycles = [r for r in mine if r["kind"] == "cycles"]
-    if not (main or peers or cycles):
+    if not (main or vmain or first or peers or cycles):
         out.append(f"Not measured yet: the table comes from `{BENCH_COMMAND}` (it writes "
                    f"docs/bench/bench_all.csv; then `{GEN_COMMAND}`). How we measure: "
                    f"[performance.md](../performance.md).")
@@ -310,6 +356,16 @@ def bench_block(name, rows):
             out += ["", "At 1920x1080 (floor: a memcpy of the same bytes, the bandwidth bound):",
                     ""]
             out += pivot(main, "setting")
+        for label, rs in vmain.items():
+            out += ["", f"Variant {variant_title(label, params)} (CSV entry `{md(label)}`: its "
+                        f"own presets against its own `reference`; its params in "
+                        f"[performance.md](../performance.md)), at 1920x1080:", ""]
+            out += pivot(rs, "setting")
+        if first:
+            out += ["", "First frame of a process (`libfx run -v`, 2 threads, `final`: frame 1 "
+                        "against the later frames of the same process, medians over fresh "
+                        "processes):", ""]
+            out += first_frame_table(first)
         if peers:
             out += ["", "Peers (other tools doing the nearest job):", ""]
             out += pivot(peers, "peer")
@@ -336,7 +392,7 @@ def split_intro(text):
 
 def render_page(name, d, text, rows):
     blocks = {"params": params_block(d), "image": image_block(name),
-              "bench": bench_block(name, rows)}
+              "bench": bench_block(name, rows, d.get("params"))}
     if text is None:
         text = (f"# {name}\n\n{d['doc']}. Code: `libfx/src/effects/{name}.c`.\n\n")
     for b in BLOCKS:

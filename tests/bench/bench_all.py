@@ -6,6 +6,21 @@ and writes a CSV, a Markdown report and plots.
 
     /usr/bin/python3 tests/bench/bench_all.py [--quick] [--runs N] [--out out/bench_all] [--docs]
         [--build build-benchall] [--spp 4] [--docs-root .] [--skip first,peers,cycles]
+        [--only-effects god_rays:volumetric,voronoi_caustics:refractive [--merge]]
+
+Entries: each effect of the scenes' recipes (its CSV `effect` column: its name), and the
+method variants of VARIANTS, benched as their own entries labelled "effect:variant"
+("god_rays:volumetric": the scene's god_rays entry with method volumetric; its own presets,
+reference, first frame and scaling rows, never mixed with the radial rows of god_rays).
+
+--only-effects L1,L2: only these entries (effect names or variant labels), only the scenes
+that hold them; no peers (they time every effect at once) and no Cycles stage unless its
+effect is named; no empty-stack first-frame rows. With --docs it needs --merge, which
+replaces in docs/bench/bench_all.csv the rows of the kinds this run measured for these
+entries (an entry's (effect, kind) pairs; e.g. its peer rows stay when peers did not run),
+keeps every other row where it was, and regenerates the report, the plots and the effect
+pages from the merged rows. docs/bench/bench_all.runs.json says which run made which rows
+(the performance.md section lists them).
 
 Stages (progress and ETA on stderr):
  1. build    cmake --build BUILD (bench_presets, the CLI, the library); configures BUILD with
@@ -75,16 +90,40 @@ SCENE_RECIPES = {
     "mirror_room": [("blend_scenes/mirror_room/recipe.json", None)],
 }
 
-# Entries only the render recipe holds: their passes and aux views are rendered, they are not
-# benchmarked as entries (the refractive caustics' water view, for the knob sweeps below).
-REFRACTIVE_BATH = "water=Water;receiver_depth=1.05;apply=combined"
-RENDER_ONLY = {
-    "greek_bath": [{"effect": "voronoi_caustics", "params": {"mode": "refractive", "water": "Water",
-                                                             "receiver_depth": 1.05, "apply": "combined"},
-                    "mask": {"material": "Water"}}],
+# Method variants (issue 27): scene -> [(label "effect:variant", recipe holding the effect's
+# entries, params set over theirs)]. A variant is its own entry: its own bench recipe (bench_presets
+# --label names its rows), its presets against its own reference preset, its first frame. Its
+# entries join the scene's render recipe, so the aux views its method needs are rendered (light:Sun,
+# water:Water; render_scene checks the sidecar lists them).
+VARIANTS = {
+    "greek_bath": [
+        # as tests/bench/bench_volumetric_sweep.py's BASE (docs/effects/god_rays.md's speed passes):
+        # extinction full darkens this low-sun frame (the ~260 m light-view box)
+        ("god_rays:volumetric", "blend_scenes/greek_bath/recipe.json",
+         {"method": "volumetric", "extinction": "view", "max_distance": 30.0, "volume_density": 0.03,
+          "anisotropy": 0.6}),
+        # the bath's water is the mask: its surface, the pool floor 1.05 below it
+        ("voronoi_caustics:refractive", "blend_scenes/greek_bath/recipe.json",
+         {"mode": "refractive", "water": "Water", "receiver_depth": 1.05, "apply": "combined"}),
+    ],
 }
 
-# The knob sweeps: (kind, param, full values, quick values or None, "@p=v;..." fixed params).
+
+def split_label(label):
+    """"god_rays:volumetric" -> ("god_rays", "volumetric"); "god_rays" -> ("god_rays", None)."""
+    effect, sep, variant = label.partition(":")
+    if not effect or (sep and not variant) or ":" in variant:
+        raise ValueError("bench_all: entry label %r is not EFFECT or EFFECT:VARIANT" % label)
+    return effect, (variant or None)
+
+
+def label_slug(label):
+    """A file name part for a label (no ':' in file names: Windows checkouts)."""
+    return label.replace(":", "_")
+
+
+# The knob sweeps per entry label (a variant has its own key; none has sweeps yet): (kind, param,
+# full values, quick values or None, "@p=v;..." fixed params).
 # kind "knob": a cost/quality knob, error against the reference preset of the recipe's params;
 # "look": a knob that changes the picture, each value at final against the reference preset at
 # the same value. Main knobs from `libfx describe EFFECT` (the params the presets set, or
@@ -109,11 +148,9 @@ KNOBS = {
                    ("knob", "resolution_scale", "0.25,0.5,1", "0.5", ""),
                    ("knob", "refine", "0,2,6", None, "")],
     "voronoi_caustics": [("look", "points", "49,196,1024,4096", "4096", ""),
-                         ("knob", "method", "grid,brute", None, ""),
-                         # issue 27: the refractive mode on the bath (its water is the mask: the
-                         # pool floor 1.05 below), at final against its reference preset (a look
-                         # knob: both at mode refractive); the water view comes from RENDER_ONLY
-                         ("look", "mode", "physical,refractive", "refractive", REFRACTIVE_BATH)],
+                         ("knob", "method", "grid,brute", None, "")],
+    # (the refractive mode is the entry voronoi_caustics:refractive of VARIANTS: its presets and
+    # reference, where a look knob gave only `final` against `reference`)
     "vsm_shadows": [("look", "filter_size", "1,5,15,33", "15", ""),
                     ("knob", "method", "hard,vsm,pcf", "hard", "")],
     "wet_surfaces": [("look", "edge_softness", "0.1,0.4,1.6", None, "")],
@@ -222,43 +259,98 @@ def load_entries(src):
     return json.load(open(ROOT / src))["effects"]
 
 
+def variant_entries(src, effect, params):
+    """The enabled entries of `effect` in recipe `src`, with `params` set over theirs."""
+    es = [json.loads(json.dumps(e)) for e in load_entries(src) if e.get("enabled", True) and e["effect"] == effect]
+    if not es:
+        raise SystemExit("bench_all: %s has no enabled %s entry (VARIANTS)" % (src, effect))
+    for e in es:
+        e["params"] = dict(e.get("params", {}), **params)
+    return es
+
+
 def scene_plan(scene):
-    """(union recipe for the render, bench recipe, [effects to bench in order])."""
-    entries, effects = [], []
+    """(union recipe for the render, {entry label: its bench recipe}, [entry labels in order]).
+    The scene's effects share one bench recipe; each variant of VARIANTS has its own (its
+    label right after its effect's)."""
+    entries, labels = [], []
     for src, only in SCENE_RECIPES[scene]:
         es = [e for e in load_entries(src) if e.get("enabled", True)]
         for e in es:
             if only is None or e["effect"] in only:
                 entries.append(e)
-                if e["effect"] not in effects:
-                    effects.append(e["effect"])
-        # the render needs the passes of every entry of the recipe, benched or not
-    render = {"version": 1, "quality": "final", "effects": entries + RENDER_ONLY.get(scene, [])}
-    return render, {"version": 1, "quality": "final", "effects": entries}, effects
+                if e["effect"] not in labels:
+                    labels.append(e["effect"])
+    base = {"version": 1, "quality": "final", "effects": entries}
+    benches = {l: base for l in labels}
+    render_entries = list(entries)
+    for label, src, params in VARIANTS.get(scene, []):
+        effect, variant = split_label(label)
+        if not variant:
+            raise SystemExit("bench_all: VARIANTS label %r names no variant (EFFECT:VARIANT)" % label)
+        es = variant_entries(src, effect, params)
+        benches[label] = {"version": 1, "quality": "final", "effects": es}
+        after = max([i for i, l in enumerate(labels) if split_label(l)[0] == effect], default=len(labels) - 1)
+        labels.insert(after + 1, label)
+        render_entries += es  # the render holds its passes and aux views
+    render = {"version": 1, "quality": "final", "effects": render_entries}
+    return render, benches, labels
+
+
+def write_bench_recipes(d, benches):
+    """{label: path}: the scene's shared bench recipe as bench_recipe.json, a variant's as
+    bench_recipe_<label>.json."""
+    paths = {}
+    for label, recipe in benches.items():
+        variant = split_label(label)[1]
+        path = d / ("bench_recipe_%s.json" % label_slug(label) if variant else "bench_recipe.json")
+        path.write_text(json.dumps(recipe, indent=1))
+        paths[label] = path
+    return paths
+
+
+def missing_aux_views(side, benches):
+    """The aux views some bench recipe needs (the library says which) that the sidecar lacks."""
+    import importlib.util
+    spec = importlib.util.spec_from_file_location("libfx_native", ROOT / "addon" / "libfx" / "native.py")
+    native = importlib.util.module_from_spec(spec)  # its package's __init__ imports bpy: the file alone
+    spec.loader.exec_module(native)
+    have = {v.get("name") for v in json.loads(pathlib.Path(side).read_text()).get("aux_views", [])}
+    ctx = native.Context(1)
+    try:
+        need = {v["name"] for recipe in benches.values() for v in native.Stack(ctx, recipe).required_aux_views()}
+    finally:
+        ctx.close()
+    return sorted(need - have)
 
 
 def render_scene(scene, w, h, spp, out, env):
+    """(passes, sidecar, {label: bench recipe path}, labels, render seconds or None if cached)."""
     d = out / "renders" / ("%s_%dx%d" % (scene, w, h))
     d.mkdir(parents=True, exist_ok=True)
-    render, bench, effects = scene_plan(scene)
-    rpath, bpath = d / "render_recipe.json", d / "bench_recipe.json"
+    render, benches, labels = scene_plan(scene)
+    rpath = d / "render_recipe.json"
     rtext = json.dumps(render, indent=1)
     stamp = {"recipe": hashlib.sha1(rtext.encode()).hexdigest(), "size": [w, h], "spp": spp, "frame": FRAME}
     passes, side = d / ("r_libfx_passes.%04d.exr" % FRAME), d / ("r_libfx.%04d.camera.json" % FRAME)
-    bpath.write_text(json.dumps(bench, indent=1))
+    bpaths = write_bench_recipes(d, benches)
     sp = d / "stamp.json"
     if passes.exists() and side.exists() and sp.exists() and json.loads(sp.read_text()) == stamp:
         log("%s %dx%d: cached render" % (scene, w, h))
-        return passes, side, bpath, effects, None
+        return passes, side, bpaths, labels, None
     rpath.write_text(rtext)
     t0 = time.time()
     run(["blender", "-b", ROOT / "blend_scenes" / scene / ("%s.blend" % scene), "--python",
          ROOT / "addon" / "libfx" / "batch.py", "--", "--keep-passes", "--frames", str(FRAME), "--output", str(d / "r_"),
          "--resolution", "%dx%d" % (w, h), "--samples", str(spp), "--recipe", rpath], env=env)
     dt = time.time() - t0
+    missing = missing_aux_views(side, benches)
+    if missing:  # the variants would fail (or the light view be missing) in every run
+        raise SystemExit("bench_all: %s: the sidecar lists no aux view %s (render recipe %s)" %
+                         (side, ", ".join(missing), rpath))
     sp.write_text(json.dumps(stamp))
     log("%s %dx%d: rendered in %.0f s" % (scene, w, h, dt))
-    return passes, side, bpath, effects, dt
+    return passes, side, bpaths, labels, dt
 
 
 # ---------------------------------------------------------------- effects
@@ -266,20 +358,23 @@ def render_scene(scene, w, h, spp, out, env):
 FIRST_FRAME_SEQ = 4  # frames per process: the first, then warm ones
 
 
-def first_frame_rows(cli, scene, passes, side, recipe_path, effects, w, h, runs, tmp):
+def first_frame_rows(cli, scene, passes, side, recipes, labels, w, h, runs, tmp, empty=True):
     """What a one-frame run meets: `libfx run -v` (2 threads, `final`) over FIRST_FRAME_SEQ links
-    to the scene's passes, in `runs` fresh processes per effect; the effect's time on frame 1
-    (median over processes) against the median of the later frames. Also the empty stack
+    to the scene's passes, in `runs` fresh processes per entry (`recipes`: label -> its bench
+    recipe; its entries of the label's effect); the entry's time on frame 1 (median over
+    processes) against the median of the later frames. With `empty` also the empty stack
     (effect "(empty stack)"), with the whole one-frame process's wall time."""
-    entries = json.loads(pathlib.Path(recipe_path).read_text())["effects"]
     tmp.mkdir(parents=True, exist_ok=True)
     for i in range(1, FIRST_FRAME_SEQ + 1):
         link = tmp / ("in.%04d.exr" % i)
         link.unlink(missing_ok=True)
         link.symlink_to(pathlib.Path(passes).resolve())
     rows = []
-    for eff in [None] + list(effects):
-        es = [e for e in entries if e["effect"] == eff and e.get("enabled", True)] if eff else []
+    for eff in ([None] if empty else []) + list(labels):
+        es = []
+        if eff:
+            entries = json.loads(pathlib.Path(recipes[eff]).read_text())["effects"]
+            es = [e for e in entries if e["effect"] == split_label(eff)[0] and e.get("enabled", True)]
         rp = tmp / "recipe.json"
         rp.write_text(json.dumps({"version": 1, "quality": "final", "effects": es}))
         first, warm, one = [], [], []
@@ -333,13 +428,17 @@ def read_rows(path):
         return [dict(r) for r in csv.DictReader(f)]
 
 
-def bench_effect(bench_bin, scene, effect, passes, side, recipe, args, scaling, tmp):
-    """bench_presets for one effect: the presets and the knob sweeps (every size and thread
+def bench_effect(bench_bin, scene, label, passes, side, recipe, args, scaling, tmp):
+    """bench_presets for one entry (an effect, or a variant "effect:variant" from its own
+    recipe, its rows labelled so): the presets and the knob sweeps (every size and thread
     count; --quick: the first thread count only); scaling: the scaling rows too."""
+    effect, variant = split_label(label)
     cmd = [bench_bin, "--passes", passes, "--sidecar", side, "--recipe", recipe, "--scene", scene,
            "--effects", effect, "--threads", args.threads, "--runs", str(args.runs),
            "--budget-ms", str(args.budget_ms), "--ref-max-ms", str(args.ref_max_ms), "-o", tmp]
-    for kind, param, full, quick, fixed in KNOBS.get(effect, []):
+    if variant:
+        cmd += ["--label", label]
+    for kind, param, full, quick, fixed in KNOBS.get(label, []):
         vals = quick if args.quick else full
         if not vals:
             continue
@@ -355,8 +454,8 @@ def bench_effect(bench_bin, scene, effect, passes, side, recipe, args, scaling, 
         if args.verbose or not line.startswith("bench_presets: ["):
             sys.stderr.write("  " + line)
     if p.wait():
-        log("ERROR: bench_presets failed for %s on %s (its rows are missing; message above)" % (effect, scene))
-        FAILURES.append("%s on %s" % (effect, scene))
+        log("ERROR: bench_presets failed for %s on %s (its rows are missing; message above)" % (label, scene))
+        FAILURES.append("%s on %s" % (label, scene))
         return []
     return read_rows(tmp)
 
@@ -500,7 +599,8 @@ def common_note_parts(rows):
 
 
 def effect_tables(rows, effects, halos):
-    """One table per effect: a row per (scene, setting, size), a column pair per thread count."""
+    """One table per entry (effect or variant label): a row per (scene, setting, size), a
+    column pair per thread count."""
     md = []
     floors = {(r["scene"], r["effect"], r["width"], r["height"], r["threads"]): float(r["ms_median"])
               for r in rows if r["kind"] == "floor" and r["ms_median"]}
@@ -512,6 +612,8 @@ def effect_tables(rows, effects, halos):
         threads = sorted({r["threads"] for r in er}, key=lambda t: -int(t or 0))
         common = common_note_parts(er)
         md.append("#### %s\n" % eff)
+        if variant_note(eff):
+            md.append(variant_note(eff) + "\n")
         if common:
             md.append("Every row: %s.\n" % "; ".join(sorted(common)))
         groups = {}
@@ -697,7 +799,7 @@ def plots(rows, effects, img_dir, peer_rows):
         ax.set_title("%s on %s at %sx%s: time vs error" % (eff, scene, W, H), fontsize=10)
         ax.legend(fontsize=7, loc="best")
         fig.tight_layout()
-        p = img_dir / ("perf_%s.png" % eff)
+        p = img_dir / ("perf_%s.png" % label_slug(eff))
         fig.savefig(p)
         plt.close(fig)
         made.append(p)
@@ -741,26 +843,60 @@ def write_csv(path, rows):
             w.writerow({k: r.get(k, "") for k in SCHEMA})
 
 
-def report_md(a, info, rows, peer_rows, peer_note, effects, halos, images, img_prefix, durations, command):
+def run_record(a, info, durations, rows):
+    """What docs/bench/bench_all.runs.json keeps of a run: the report's header, and which
+    (entry, kind) pairs of the CSV it made ("all" for a whole run)."""
+    mode = ("%s; runs per setting: %d (fewer, 3 at least, where one run exceeds %.0f ms / runs; one where "
+            "it exceeds %.0f ms: `runs` column); threads: %s; sizes: %s (presets and knob sweeps at every size%s; "
+            "the scaling rows at the largest, %s threads)" % (
+                "--quick" if a.quick else "full", a.runs, a.budget_ms, a.budget_ms, a.threads,
+                ", ".join("%dx%d" % s for s in info["sizes"]),
+                " and the first thread count only" if a.quick else " and thread count",
+                max(int(t) for t in a.threads.split(","))))
+    made = "all" if not a.merge else sorted([list(p) for p in replaced_pairs(rows)])
+    return {"rows": made, "command": info["command"], "cpu": info["cpu"], "cores": info["cores"],
+            "memory": info["memory"], "os": info["os"], "date": info["date"], "seconds": round(info["seconds"]),
+            "source": info["source"], "load_start": info["load_start"], "load_end": info["load_end"],
+            "sizes": [list(s) for s in info["sizes"]], "spp": info["spp"], "frame": FRAME,
+            "durations": {k: round(v) for k, v in durations.items()}, "failures": list(FAILURES), "mode": mode}
+
+
+def run_header(r):
+    """The report's header lines for one run record."""
+    return ["Command: `%s`" % r["command"], "",
+            "- Machine: %s, %s cores, %s RAM; %s" % (r["cpu"], r["cores"], r["memory"], r["os"]),
+            "- Date: %s (UTC); run took %s" % (r["date"], fmt_s(r["seconds"])),
+            "- Source: %s" % r["source"],
+            "- Load average (1/5/15 min): %s at the start, %s at the end" % (r["load_start"], r["load_end"]),
+            "- Renders: %s, %d samples, frame %d, through the add-on's batch runner" % (
+                ", ".join("%dx%d" % tuple(s) for s in r["sizes"]), r["spp"], r["frame"]),
+            "- Stage durations: %s" % ", ".join("%s %s" % (k, fmt_s(v)) for k, v in r["durations"].items()),
+            "- Failures: %s" % (", ".join(r["failures"]) or "none"),
+            "- Mode: %s" % r["mode"]]
+
+
+def merged_runs_md(runs):
+    """The runs merged over the first one (--merge): which rows each made, and its header."""
+    if not runs:
+        return []
+    md = ["", "Rows replaced since by `--merge` runs: each made the rows of the kinds it names for the entries "
+              "it names (docs/bench/bench_all.runs.json); every other row is the run above's.", ""]
+    for r in runs:
+        by_label = {}
+        for label, kind in r["rows"]:
+            by_label.setdefault(label, []).append(kind)
+        md.append("- %s:" % "; ".join("`%s` (%s)" % (l, ", ".join(k)) for l, k in by_label.items()))
+        md += ["  " + l if l else "" for l in run_header(r) if l]
+    return md
+
+
+def report_md(a, runs, rows, peer_rows, peer_note, effects, halos, images, img_prefix):
+    """The report; `runs`: the run that made the rows, or the base run and the merged ones."""
     md = ["<!-- generated by tests/bench/bench_all.py: do not edit by hand; rerun the command -->", "",
-          "## bench_all: every effect, preset and knob, measured in one run (issue 8)", "",
-          "Command: `%s`" % command, "",
-          "- Machine: %s, %s cores, %s RAM; %s" % (info["cpu"], info["cores"], info["memory"], info["os"]),
-          "- Date: %s (UTC); run took %s" % (info["date"], fmt_s(info["seconds"])),
-          "- Source: %s" % info["source"],
-          "- Load average (1/5/15 min): %s at the start, %s at the end" % (info["load_start"], info["load_end"]),
-          "- Renders: %s, %d samples, frame %d, through the add-on's batch runner" % (
-              ", ".join("%dx%d" % s for s in info["sizes"]), info["spp"], FRAME),
-          "- Stage durations: %s" % ", ".join("%s %s" % (k, fmt_s(v)) for k, v in durations.items()),
-          "- Failures: %s" % (", ".join(FAILURES) or "none"),
-          "- Mode: %s; runs per setting: %d (fewer, 3 at least, where one run exceeds %.0f ms / runs; one where "
-          "it exceeds %.0f ms: `runs` column); threads: %s; sizes: %s (presets and knob sweeps at every size%s; "
-          "the scaling rows at the largest, %s threads)" % (
-              "--quick" if a.quick else "full", a.runs, a.budget_ms, a.budget_ms, a.threads,
-              ", ".join("%dx%d" % s for s in info["sizes"]),
-              " and the first thread count only" if a.quick else " and thread count",
-              max(int(t) for t in a.threads.split(","))),
-          "", "How each number is made (tests/bench/bench_presets.c):", "",
+          "## bench_all: every effect, preset and knob, measured in one run (issue 8)", ""]
+    md += run_header(runs[0])
+    md += merged_runs_md(runs[1:])
+    md += ["", "How each number is made (tests/bench/bench_presets.c):", "",
           "- **ms**: median wall time of `fx_stack_run` on a one-effect stack (the recipe's entries of that "
           "effect with their params and masks) after one warm-up run; the input is the scene's passes EXR "
           "and sidecar (aux views read and built in every run: no aux cache). 1 and 2 threads are separate "
@@ -816,7 +952,7 @@ def report_md(a, info, rows, peer_rows, peer_note, effects, halos, images, img_p
         md += md_table(["effect", "scene", "setting", "size", "threads", "ms", "MAE", "PSNR dB", "px", "note"], body,
                        ["---", "---", "---", "---", "---:", "---:", "---:", "---:", "---:", "---"])
     else:
-        md.append("Not run (%s)." % ("--quick" if a.quick else "skipped"))
+        md.append("Not run (%s)." % ("--quick" if a.quick and len(runs) == 1 else "skipped"))
     md.append("")
     md.append("### Scaling: cost follows what the scene requires\n")
     md += scaling_tables(rows)
@@ -851,9 +987,100 @@ def update_performance_md(path, section):
     os.replace(tmp, path)
 
 
+# ---------------------------------------------------------------- merge (--merge)
+
+RUNS_JSON = "bench_all.runs.json"  # beside docs/bench/bench_all.csv: which run made which rows
+
+
+def as_text(row):
+    """A row with every value as the CSV gives it back (str; None and missing as "")."""
+    return {k: ("" if row.get(k) is None else str(row.get(k))) for k in SCHEMA}
+
+
+def replaced_pairs(rows):
+    """The (entry, kind) pairs that rows hold: what --merge replaces in the docs CSV."""
+    return {(r["effect"], r["kind"]) for r in rows}
+
+
+def row_block(r):
+    """Where a row sits in the CSV: bench_presets' rows by size (the 720p block, then the
+    1080p one), the other kinds by kind (first frames, scaling, peers, cycles)."""
+    if r["kind"] in ("effect", "reference", "floor"):
+        return ("effect", str(r["width"]), str(r["height"]))
+    return (r["kind"],)
+
+
+def merge_rows(old, new):
+    """`old` with the rows of every (entry, kind) pair that `new` holds replaced by new's;
+    every other row kept, in its place. New rows go where the first replaced row of their
+    block was; a block with none replaced (an entry new to the CSV) gets them after its last
+    row (at the end when the CSV has no such block)."""
+    gone = replaced_pairs(new)
+    pending = {}
+    for r in new:
+        pending.setdefault(row_block(r), []).append(r)
+    out = []
+    for r in old:
+        if (r["effect"], r["kind"]) in gone:
+            out += pending.pop(row_block(r), [])
+        else:
+            out.append(r)
+    for block, rs in pending.items():
+        at = max((i for i, r in enumerate(out) if row_block(r) == block), default=len(out) - 1)
+        out[at + 1:at + 1] = rs
+    return out
+
+
+def unknown_run():
+    """The record of a CSV whose run left no runs file (before --merge existed)."""
+    return {"rows": "all", "command": "unknown (no docs/bench/%s)" % RUNS_JSON, "cpu": "?", "cores": "?",
+            "memory": "?", "os": "?", "date": "?", "seconds": 0, "source": "?", "load_start": "?", "load_end": "?",
+            "sizes": [], "spp": 0, "frame": FRAME, "durations": {}, "failures": [], "mode": "?"}
+
+
+def merge_runs(runs, new_run):
+    """The runs after a merge: the first (whole) run stays; the earlier merged runs lose the
+    pairs new_run made again (one left with none is dropped); new_run last."""
+    pairs = {tuple(p) for p in new_run["rows"]}
+    out = []
+    for i, r in enumerate(runs):
+        if i > 0:
+            r = dict(r, rows=[p for p in r["rows"] if tuple(p) not in pairs])
+            if not r["rows"]:
+                continue
+        out.append(r)
+    return (out or [unknown_run()]) + [new_run]
+
+
+def peer_rows_of(rows):
+    """The rows bench_peers_all.py made (its floor rows are the effect 'memcpy')."""
+    return [r for r in rows if r["kind"] in ("peer", "io") or (r["kind"] == "floor" and r["effect"] == "memcpy")]
+
+
+def entry_labels(effects, rows):
+    """The report's entries: each listed effect, then its variants that have rows."""
+    seen = list(dict.fromkeys(r["effect"] for r in rows))
+    out = []
+    for e in effects:
+        out.append(e)
+        out += [l for l in seen if ":" in l and split_label(l)[0] == e]
+    return out
+
+
+def variant_note(label):
+    """How a variant's entries are made (VARIANTS), for the report."""
+    for scene, vs in VARIANTS.items():
+        for l, src, params in vs:
+            if l == label:
+                return ("The %s entries of %s with `%s` over their params (VARIANTS in tests/bench/bench_all.py); "
+                        "its own presets, reference and first frame." % (split_label(l)[0], src,
+                                                                       json.dumps(params)))
+    return ""
+
+
 # ---------------------------------------------------------------- main
 
-def parse_args():
+def parse_args(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="1280x720, 2 runs, 2 threads, coarse sweeps, no Cycles")
     ap.add_argument("--runs", type=int, help="runs per setting (default 5; --quick 2)")
@@ -868,9 +1095,14 @@ def parse_args():
     ap.add_argument("--cycles-ssr-res", default="640x360", help=argparse.SUPPRESS)
     ap.add_argument("--cycles-vsm-res", default="480x270", help=argparse.SUPPRESS)
     ap.add_argument("--skip", default="", help="comma list of stages to skip: first, peers, cycles")
-    ap.add_argument("--only-effects", default="", help="comma list: bench only these effects (development)")
+    ap.add_argument("--only-effects", default="",
+                    help="comma list of entries: effect names or variant labels (god_rays:volumetric); only "
+                         "their scenes, no peers, no Cycles stage unless its effect is named")
+    ap.add_argument("--merge", action="store_true",
+                    help="with --docs: replace only this run's (entry, kind) rows in docs/bench/bench_all.csv, "
+                         "keep the others, regenerate the report, plots and pages from the merged rows")
     ap.add_argument("--verbose", "-v", action="store_true", help="every bench_presets line on stderr")
-    a = ap.parse_args()
+    a = ap.parse_args(argv)
     a.runs = a.runs or (2 if a.quick else 5)
     a.budget_ms = a.budget_ms or (3000 if a.quick else 2000)
     a.threads = "2" if a.quick else "2,1"  # the fastest first: errors and the slow reference come from it
@@ -881,34 +1113,68 @@ def parse_args():
     a.skip_stages = set(filter(None, a.skip.split(",")))
     if a.quick:
         a.skip_stages.add("cycles")
-    a.only = set(filter(None, a.only_effects.split(",")))
+    a.only = list(dict.fromkeys(filter(None, a.only_effects.split(","))))
+    for label in a.only:
+        try:
+            split_label(label)
+        except ValueError as e:
+            ap.error(str(e))
+    if a.merge and not a.docs:
+        ap.error("--merge merges into docs/bench/bench_all.csv: give --docs")
+    if a.merge and a.quick:
+        ap.error("--merge --quick would put 720p-only, 2-run rows beside the full run's: merge full runs")
+    if a.docs and a.only and not a.merge:
+        ap.error("--only-effects with --docs would replace docs/bench/bench_all.csv by these entries' rows "
+                 "alone: add --merge")
+    if a.only:  # the peers time every effect at once: a subset run keeps their rows as they are
+        a.skip_stages.add("peers")
     return a
 
 
-def plan_stages(a, plan):
+def select_plan(plan, only):
+    """The plan cut to the --only-effects entries (SystemExit naming the known ones when an
+    entry is in no scene)."""
+    if not only:
+        return plan
+    known = [l for labels in plan.values() for l in labels]
+    unknown = [l for l in only if l not in known]
+    if unknown:
+        raise SystemExit("bench_all: --only-effects: no entry %s (entries: %s)" % (", ".join(unknown),
+                                                                                 ", ".join(known)))
+    return {sc: [l for l in labels if l in only] for sc, labels in plan.items()}
+
+
+def plan_stages(a, plan, scenes):
     """The stages with rough cost estimates (s) for the ETA (measured on the 2-core VM)."""
     sizes, skip = a.sizes, a.skip_stages
     # seconds per effect at 1280x720 in a --quick run (2-core VM); the full run's 720p pass
     # (presets only, 2 thread counts, 5 runs) costs ~1.5x that, its 1080p pass (with the
     # sweeps and scaling rows) ~4x
     quick_s = {"god_rays": 52, "ssr_mirror": 27, "vsm_shadows": 15, "rain": 9, "voronoi_caustics": 7,
-               "gaussian_blur": 5}
+               "gaussian_blur": 5, "god_rays:volumetric": 30, "voronoi_caustics:refractive": 30}
     stages = [("build", 20)]
     stages += [("render: %s %dx%d" % (sc, w, h), (40 if sc == "greek_bath" else 80) * w * h / 0.92e6 *
-                (0.5 + a.spp / 16)) for sc in SCENES for (w, h) in sizes]
+                (0.5 + a.spp / 16)) for sc in scenes for (w, h) in sizes]
     for (w, h) in sizes:
-        for sc in SCENES:
+        for sc in scenes:
             for e in plan[sc]:
                 f = 1.0 if a.quick else 4.0 if (w, h) == sizes[-1] else 1.5
                 stages.append(("effects: %s %s %dx%d" % (sc, e, w, h), quick_s.get(e, 3) * f))
     if "first" not in skip:
-        stages += [("first frame: %s" % sc, 12 * (1 + len(plan[sc]))) for sc in SCENES]
+        stages += [("first frame: %s" % sc, 12 * ((not a.only) + len(plan[sc]))) for sc in scenes]
     if "peers" not in skip:
         stages.append(("peers", 240 if a.quick else 480))
-    if "cycles" not in skip:
-        stages += [("cycles: ssr_mirror", 240), ("cycles: vsm_shadows", 180)]
+    for eff in cycles_effects(a):
+        stages.append(("cycles: %s" % eff, {"ssr_mirror": 240, "vsm_shadows": 180}[eff]))
     stages.append(("report", 15))
     return stages
+
+
+def cycles_effects(a):
+    """The Cycles stage's effects this run measures."""
+    if "cycles" in a.skip_stages:
+        return []
+    return [e for e in ("ssr_mirror", "vsm_shadows") if not a.only or e in a.only]
 
 
 def build_stage(build, prog):
@@ -923,13 +1189,14 @@ def build_stage(build, prog):
         if not p.exists():
             raise SystemExit("bench_all: %s not built (configure %s with -DLIBFX_BUILD_BENCH=ON)" % (p, build))
     env = dict(os.environ, LIBFX_LIBRARY=str(lib), LIBFX_CLI=str(cli), LIBFX_BENCH_DIR=str(build / "tests" / "bench"))
+    os.environ["LIBFX_LIBRARY"] = str(lib)  # the sidecar check loads the library (addon/libfx/native.py)
     prog.end()
     return bench_bin, cli, env
 
 
-def render_stage(a, out, env, prog):
+def render_stage(a, scenes, out, env, prog):
     renders = {}
-    for sc in SCENES:
+    for sc in scenes:
         for (w, h) in a.sizes:
             prog.start("render: %s %dx%d" % (sc, w, h))
             renders[(sc, w, h)] = render_scene(sc, w, h, a.spp, out, env)
@@ -937,17 +1204,17 @@ def render_stage(a, out, env, prog):
     return renders
 
 
-def effects_stage(a, bench_bin, plan, renders, out, prog):
-    """Every planned effect at every size: the rows of bench_presets."""
+def effects_stage(a, bench_bin, plan, scenes, renders, out, prog):
+    """Every planned entry at every size: the rows of bench_presets."""
     sizes = a.sizes
     rows = []
     tmp = out / "bench_presets.tmp.csv"
     for (w, h) in sizes:
-        for sc in SCENES:
-            passes, side, recipe, _, _ = renders[(sc, w, h)]
+        for sc in scenes:
+            passes, side, recipes, _, _ = renders[(sc, w, h)]
             for e in plan[sc]:
                 prog.start("effects: %s %s %dx%d" % (sc, e, w, h))
-                rows += bench_effect(bench_bin, sc, e, passes, side, recipe, a, (w, h) == sizes[-1], tmp)
+                rows += bench_effect(bench_bin, sc, e, passes, side, recipes[e], a, (w, h) == sizes[-1], tmp)
                 dt = prog.end()
                 log("  %s on %s %dx%d: %d rows in %.0f s" % (e, sc, w, h, len(rows), dt))
                 write_csv(out / "bench_all.partial.csv", rows)
@@ -955,47 +1222,48 @@ def effects_stage(a, bench_bin, plan, renders, out, prog):
     return rows
 
 
-def first_frame_stage(a, build, cli, plan, renders, out, prog):
+def first_frame_stage(a, build, cli, plan, scenes, renders, out, prog):
+    """The first frames of the planned entries at the largest size; a whole run also the
+    fresh-pages floor and each scene's empty stack."""
     rows = []
     w, h = a.sizes[-1]
-    for sc in SCENES:
+    for sc in scenes:
         prog.start("first frame: %s" % sc)
-        passes, side, recipe = renders[(sc, w, h)][:3]
-        if sc == SCENES[0]:
+        passes, side, recipes = renders[(sc, w, h)][:3]
+        if sc == SCENES[0] and not a.only:
             rows.append(fresh_pages_row(build / "tests" / "bench", sc, w, h))
-        rows += first_frame_rows(cli, sc, passes, side, recipe, plan[sc], w, h, 3, out / "first_frame" / sc)
+        rows += first_frame_rows(cli, sc, passes, side, recipes, plan[sc], w, h, 3, out / "first_frame" / sc,
+                                 empty=not a.only)
         prog.end()
     return rows
 
 
 def cycles_stage(a, cli, out, env, prog):
     rows = []
-    prog.start("cycles: ssr_mirror")
-    try:
-        rows += cycles_ssr(out, env, a.cycles_ssr_res, 2, cli)
-    except SystemExit as e:
-        log("cycles ssr_mirror failed: %s" % str(e)[:2000])
-    prog.end()
-    prog.start("cycles: vsm_shadows")
-    try:
-        rows += cycles_vsm(out, env, a.cycles_vsm_res, 16, 1)
-    except SystemExit as e:
-        log("cycles vsm_shadows failed: %s" % str(e)[:2000])
-    prog.end()
+    for eff in cycles_effects(a):
+        prog.start("cycles: %s" % eff)
+        try:
+            if eff == "ssr_mirror":
+                rows += cycles_ssr(out, env, a.cycles_ssr_res, 2, cli)
+            else:
+                rows += cycles_vsm(out, env, a.cycles_vsm_res, 16, 1)
+        except SystemExit as e:
+            log("cycles %s failed: %s" % (eff, str(e)[:2000]))
+        prog.end()
     return rows
 
 
-def write_docs(a, rows, peer_rows, peer_note, effects, halos, images, info, durations, command, cli):
-    """--docs: the CSV, the plots and the performance.md section in the docs tree, and the
-    effect pages' generated blocks."""
+def write_docs(a, rows, runs, peer_note, labels, halos, images, cli):
+    """--docs: the CSV (merged when --merge), its runs file, the plots and the performance.md
+    section in the docs tree, and the effect pages' generated blocks."""
     droot = pathlib.Path(a.docs_root).resolve()
     write_csv(droot / "docs" / "bench" / "bench_all.csv", rows)
+    (droot / "docs" / "bench" / RUNS_JSON).write_text(json.dumps(runs, indent=1) + "\n")
     dimg = droot / "docs" / "images"
     dimg.mkdir(parents=True, exist_ok=True)
     for p in images:
         shutil.copyfile(p, dimg / p.name)
-    section = report_md(a, info, rows, peer_rows, peer_note, effects, halos, images, "images/", durations,
-                        command)
+    section = report_md(a, runs, rows, peer_rows_of(rows), peer_note, labels, halos, images, "images/")
     update_performance_md(droot / "docs" / "performance.md", section)
     gen = droot / "scripts" / "gen_effect_docs.py"
     if gen.exists():
@@ -1004,7 +1272,19 @@ def write_docs(a, rows, peer_rows, peer_note, effects, halos, images, info, dura
         log("gen_effect_docs.py: exit %d\n%s" % (p.returncode, (p.stdout + p.stderr)[-1500:]))
 
 
-def report_stage(a, cli, rows, peer_rows, peer_note, info, out, prog, command):
+def merged_docs_state(a, rows, record):
+    """--merge: (the docs CSV's rows with this run's replacing theirs, the runs after it)."""
+    dbench = pathlib.Path(a.docs_root).resolve() / "docs" / "bench"
+    old = read_rows(dbench / "bench_all.csv") if (dbench / "bench_all.csv").exists() else []
+    runs = json.loads((dbench / RUNS_JSON).read_text()) if (dbench / RUNS_JSON).exists() else [unknown_run()]
+    merged = merge_rows(old, [as_text(r) for r in rows])
+    kept = len(old) - sum((r["effect"], r["kind"]) in replaced_pairs(rows) for r in old)
+    log("merge: %d rows kept, %d replaced by %d of this run (%s)" % (
+        kept, len(old) - kept, len(rows), ", ".join("%s/%s" % p for p in sorted(replaced_pairs(rows)))))
+    return merged, merge_runs(runs, record)
+
+
+def report_stage(a, cli, rows, peer_note, info, out, prog):
     prog.start("report")
     effects = [l.split("\t")[0] for l in run([cli, "list"]).stdout.splitlines() if l.strip()]
     halos = {e: describe(cli, e).get("halo", 99) for e in effects}
@@ -1015,12 +1295,24 @@ def report_stage(a, cli, rows, peer_rows, peer_note, info, out, prog, command):
     info["seconds"] = time.time() - T0
     write_csv(out / "bench_all.csv", rows)
     (out / "bench_all.partial.csv").unlink(missing_ok=True)
-    images = plots(rows, effects, out / "images", peer_rows)
     durations = dict(prog.durations)
-    md = report_md(a, info, rows, peer_rows, peer_note, effects, halos, images, "images/", durations, command)
+    record = run_record(a, info, durations, rows)
+    # OUT/: this run's rows alone
+    labels = entry_labels(effects, rows)
+    halos.update({l: halos.get(split_label(l)[0], 99) for l in labels})
+    images = plots(rows, labels, out / "images", peer_rows_of(rows))
+    md = report_md(a, [dict(record, rows="all")], rows, peer_rows_of(rows), peer_note, labels, halos, images,
+                   "images/")
     (out / "bench_all.md").write_text(md)
     if a.docs:
-        write_docs(a, rows, peer_rows, peer_note, effects, halos, images, info, durations, command, cli)
+        runs, drows = [record], rows
+        if a.merge:  # every entry's plot and table again, from the merged rows
+            drows, runs = merged_docs_state(a, rows, record)
+            labels = entry_labels(effects, drows)
+            halos.update({l: halos.get(split_label(l)[0], 99) for l in labels})
+            images = plots(drows, labels, out / "images_merged", peer_rows_of(drows))
+            peer_note = peer_note if peer_rows_of(drows) else (peer_note or "skipped")
+        write_docs(a, drows, runs, peer_note, labels, halos, images, cli)
     prog.end()
 
 
@@ -1030,25 +1322,25 @@ def main():
     out = pathlib.Path(a.out).resolve()
     out.mkdir(parents=True, exist_ok=True)
     build = pathlib.Path(a.build).resolve()
-    command = "/usr/bin/python3 tests/bench/bench_all.py" + "".join(" " + x for x in sys.argv[1:])
     info = machine()
+    info["command"] = "/usr/bin/python3 tests/bench/bench_all.py" + "".join(" " + x for x in sys.argv[1:])
     info["load_start"] = loadavg()
     info["source"] = source_state()
     info["date"] = datetime.datetime.utcnow().strftime("%Y-%m-%d %H:%M")
     info["sizes"], info["spp"] = sizes, a.spp
     log("%s; %s cores; load %s" % (info["cpu"], info["cores"], info["load_start"]))
 
-    plan = {sc: scene_plan(sc)[2] for sc in SCENES}
-    if a.only:
-        plan = {sc: [e for e in effs if e in a.only] for sc, effs in plan.items()}
-    prog = Progress(plan_stages(a, plan))
+    plan = select_plan({sc: scene_plan(sc)[2] for sc in SCENES}, a.only)
+    # a subset run renders only the scenes of its entries (the peers, which need the bath, are off)
+    scenes = [sc for sc in SCENES if plan[sc] or not a.only]
+    prog = Progress(plan_stages(a, plan, scenes))
     bench_bin, cli, env = build_stage(build, prog)
-    renders = render_stage(a, out, env, prog)
-    rows = effects_stage(a, bench_bin, plan, renders, out, prog)
+    renders = render_stage(a, scenes, out, env, prog)
+    rows = effects_stage(a, bench_bin, plan, scenes, renders, out, prog)
     if "first" not in skip:
-        rows += first_frame_stage(a, build, cli, plan, renders, out, prog)
+        rows += first_frame_stage(a, build, cli, plan, scenes, renders, out, prog)
         write_csv(out / "bench_all.partial.csv", rows)
-    peer_rows, peer_note = [], None
+    peer_note = "skipped (--only-effects: the peers time every effect at once)" if a.only else None
     if "peers" not in skip:
         prog.start("peers")
         w, h = sizes[-1]
@@ -1056,12 +1348,12 @@ def main():
         peer_rows, peer_note = peers_stage(passes, side, w, h, min(a.runs, 3), out, env)
         rows += peer_rows
         prog.end()
-    if "cycles" not in skip:
-        rows += cycles_stage(a, cli, out, env, prog)
-    report_stage(a, cli, rows, peer_rows, peer_note, info, out, prog, command)
+    rows += cycles_stage(a, cli, out, env, prog)
+    report_stage(a, cli, rows, peer_note, info, out, prog)
     durations = dict(prog.durations)
     log("done in %s: %s" % (fmt_s(time.time() - T0), ", ".join("%s %s" % (k, fmt_s(v)) for k, v in durations.items())))
-    log("wrote %s, %s%s" % (out / "bench_all.csv", out / "bench_all.md", " and docs/" if a.docs else ""))
+    log("wrote %s, %s%s" % (out / "bench_all.csv", out / "bench_all.md",
+                            " and docs/ (merged)" if a.merge else " and docs/" if a.docs else ""))
     if FAILURES:
         log("FAILED: %s" % ", ".join(FAILURES))
         sys.exit(1)

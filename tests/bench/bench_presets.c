@@ -6,7 +6,7 @@
  *                 [--knob EFFECT.PARAM=v1,v2,...[@P=V;Q=W]] [--look-knob EFFECT.PARAM=v1,v2,...]
  *                 [--scaling-res 0.25,0.5,1,2,4] [--scaling-mask 25,50,75,100]
  *                 [--scaling-threads 2] [--ref-max-ms MS] [--knobs-first-threads-only]
- *                 [--no-header] [-o out.csv]
+ *                 [--label NAME] [--no-header] [-o out.csv]
  *
  * Per effect of the recipe (all enabled entries of one effect name, in recipe order, with
  * their params and masks: mirror_room's ten ssr_mirror entries run as one ten-entry stack):
@@ -35,6 +35,10 @@
  *    data pass nearest: IDs, Cryptomatte, depth, normals, positions are never blended).
  *  - kind scaling_mask: `final`, scaling-threads, the masks cut by a rectangle [0, 0, x, H]
  *    whose x keeps 25..100 % of the masked pixels (the whole frame without a mask).
+ * --label NAME: the effect column says NAME instead of the effect's name (one effect group
+ * only): a method variant of an effect benched as its own entry (bench_all's
+ * "god_rays:volumetric": a recipe whose god_rays is volumetric, kept apart from the radial
+ * rows of the same effect).
  * CSV (docs/performance.md): kind,scene,effect,setting,width,height,threads,runs,ms_median,
  * mae,max_err,psnr_db,mask_px,note. Progress on stderr. Run by tests/bench/bench_all.py. */
 #include "core/effect.h"
@@ -66,6 +70,7 @@ typedef struct knob {
 
 static struct {
     const char *passes, *recipe, *sidecar, *scene, *effects, *out;
+    const char *label; /* --label: the effect column's name for the one group benched */
     int threads[4], nthreads;
     int runs;
     double budget_ms;
@@ -83,6 +88,12 @@ static struct {
 } A;
 
 static FILE *g_csv;
+
+/* The name rows and progress lines give an effect: --label when set. */
+static const char *row_name(const char *effect)
+{
+    return A.label ? A.label : effect;
+}
 
 static void die(const char *what, fx_context *ctx)
 {
@@ -152,8 +163,8 @@ static void csv_row(const char *kind, const char *effect, const char *setting, i
     for (char *p = clean; *p; p++)
         if (*p == ',' || *p == '\n' || *p == '"')
             *p = ';';
-    fprintf(g_csv, "%s,%s,%s,%s,%d,%d,%s,%s,%s,%s,%s,%s,%s,%s\n", kind, A.scene, effect, setting, w, h, c_th,
-            c_runs, c_ms, c_mae, c_max, c_psnr, c_px, clean);
+    fprintf(g_csv, "%s,%s,%s,%s,%d,%d,%s,%s,%s,%s,%s,%s,%s,%s\n", kind, A.scene, row_name(effect), setting, w, h,
+            c_th, c_runs, c_ms, c_mae, c_max, c_psnr, c_px, clean);
     fflush(g_csv);
 }
 
@@ -615,7 +626,7 @@ static void bench_setting(effect_bench *b, int ti, setting *s, float **refp)
     csv_row(s->kind, effect, s->label, w, h, th, runs, ms, s->have_err ? s->mae : NAN,
             s->have_err ? s->maxe : NAN, s->have_err ? s->psnr : NAN, mask_px, note);
     fprintf(stderr, "bench_presets: [%s %dx%d] %s %s, %d thread%s: %.2f ms (%d run%s)\n", A.scene, w, h,
-            effect, s->label, th, th == 1 ? "" : "s", ms, runs, runs == 1 ? "" : "s");
+            row_name(effect), s->label, th, th == 1 ? "" : "s", ms, runs, runs == 1 ? "" : "s");
 }
 
 /* Every setting at every thread count, between two samples of the memcpy floor. */
@@ -647,7 +658,7 @@ static void bench_threads(effect_bench *b)
         free(fa);
         free(fb);
         char note[128];
-        snprintf(note, sizeof note, "parallel copy of %dx%d RGBA float; same run as %s", w, h, effect);
+        snprintf(note, sizeof note, "parallel copy of %dx%d RGBA float; same run as %s", w, h, row_name(effect));
         csv_row("floor", effect, "memcpy", w, h, th, fl[ti].n, median_d(fl[ti].ms, fl[ti].n), NAN,
                 NAN, NAN, -1, note);
     }
@@ -685,7 +696,7 @@ static void bench_scaling_res(effect_bench *b, fx_context *sc, const char *final
             snprintf(note, sizeof note, "quality=final; the frame as rendered%s%s", base_note[0] ? "; " : "",
                      base_note);
         csv_row("scaling_res", effect, setting_s, W, H, sth, runs, ms, NAN, NAN, NAN, px, note);
-        fprintf(stderr, "bench_presets: [%s] %s scaling %dx%d (%.2f MP): %.2f ms\n", A.scene, effect, W, H,
+        fprintf(stderr, "bench_presets: [%s] %s scaling %dx%d (%.2f MP): %.2f ms\n", A.scene, row_name(effect), W, H,
                 W * (double)H / 1e6, ms);
         fx_frame_free(g);
     }
@@ -724,7 +735,8 @@ static void bench_scaling_mask(effect_bench *b, fx_context *sc)
         snprintf(note, sizeof note, "quality=final; masks cut by rect [0 0 %d %d]%s%s", x, h,
                  base_note[0] ? "; " : "", base_note);
         csv_row("scaling_mask", effect, setting_s, w, h, sth, runs, ms, NAN, NAN, NAN, cum[x], note);
-        fprintf(stderr, "bench_presets: [%s] %s mask %g%% (%ld px): %.2f ms\n", A.scene, effect, pct, cum[x], ms);
+        fprintf(stderr, "bench_presets: [%s] %s mask %g%% (%ld px): %.2f ms\n", A.scene, row_name(effect), pct,
+                cum[x], ms);
     }
     free(cum);
 }
@@ -772,7 +784,7 @@ static void usage(void)
                     "  [--qualities draft,preview,final,reference] [--knob EFFECT.PARAM=v1,v2[@P=V;Q=W]]\n"
                     "  [--look-knob EFFECT.PARAM=v1,v2] [--scaling-res 0.25,0.5,1,2,4]\n"
                     "  [--scaling-mask 25,50,75,100] [--scaling-threads 2] [--ref-max-ms 0] [--knobs-first-threads-only]\n"
-                    "  [--no-header] [-o out.csv]\n");
+                    "  [--label NAME] [--no-header] [-o out.csv]\n");
     exit(2);
 }
 
@@ -830,6 +842,8 @@ static void parse_args(int argc, char **argv)
             A.scene = v;
         else if (OPT("--effects"))
             A.effects = v;
+        else if (OPT("--label"))
+            A.label = v;
         else if (OPT("-o"))
             A.out = v;
         else if (OPT("--runs"))
@@ -888,6 +902,12 @@ static void bench_groups(const cJSON *effects, const fx_frame *f, fx_context **c
             seen |= strcmp(done[k], name->valuestring) == 0;
         if (seen || ndone >= MAX_LIST || (A.effects && !in_list(A.effects, name->valuestring)))
             continue;
+        if (A.label && ndone == 1) {
+            /* two groups under one label would be one entry's rows in the CSV */
+            fprintf(stderr, "bench_presets: --label %s names one effect, the recipe has %s and %s (--effects)\n",
+                    A.label, done[0], name->valuestring);
+            exit(2);
+        }
         snprintf(done[ndone++], 64, "%s", name->valuestring);
         cJSON *group = cJSON_CreateArray();
         const cJSON *g;

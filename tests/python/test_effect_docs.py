@@ -172,6 +172,42 @@ def test_bench_block_with_and_without_the_csv(cli, tmp_path):
     assert r.returncode == 1 and "bloom.md" in r.stderr, r.stderr
 
 
+def test_bench_block_variants_and_first_frames(cli, tmp_path):
+    """A method variant's rows (CSV entry "effect:variant", bench_all's VARIANTS) get their
+    own table, titled by the parameter that selects the variant, never mixed into the
+    effect's; the first frames of the effect and of its variants are shown."""
+    docs = tmp_path / "effects"
+    shutil.copytree(PAGES, docs)
+    bench = tmp_path / "bench_all.csv"
+    write_bench_csv(bench, "gaussian_blur")
+    with open(bench, "a", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["effect", "bath", "gaussian_blur:box", "quality=draft", 1920, 1080, 2, 5, 7.25,
+                    2e-3, 0.1, 50.5, "", "variant row"])
+        w.writerow(["reference", "bath", "gaussian_blur:box", "quality=reference", 1920, 1080, 2, 5,
+                    333, "", "", "", "", ""])
+        w.writerow(["first_frame", "bath", "gaussian_blur", "quality=final", 1920, 1080, 2, 3, 45.9,
+                    "", "", "", "", "warm 45.2 ms (frames 2-4, median); first / warm 1.02x"])
+        w.writerow(["first_frame", "bath", "gaussian_blur:box", "quality=final", 1920, 1080, 2, 3,
+                    12.99, "", "", "", "", "warm 11.0 ms (frames 2-4, median); first / warm 1.18x"])
+        w.writerow(["effect", "atrium", "rain_splashes:other", "quality=final", 1920, 1080, 2, 5, 3.5,
+                    "", "", "", "", "not rain's"])
+    assert gen(cli, "--docs", docs, "--bench-csv", bench).returncode == 0
+    b = block((docs / "gaussian_blur.md").read_text(), "bench")
+    main, rest = b.split("Variant `algorithm: box` (CSV entry `gaussian_blur:box`", 1)
+    assert "| synthetic | `quality=final` | 1920x1080 | 38.5 | 20.2 |" in main
+    assert "variant row" not in main and "333" not in main
+    variant, first = rest.split("First frame of a process", 1)
+    assert "| bath | `quality=draft` | 1920x1080 | 7.25 |" in variant and "variant row" in variant
+    assert "`quality=reference` (reference) | 1920x1080 | 333 |" in variant
+    assert "| `gaussian_blur` | bath | 1920x1080 | 45.9 | 45.2 | 1.02x | 3 |" in first
+    assert "| `gaussian_blur:box` | bath | 1920x1080 | 13.0 | 11.0 | 1.18x | 3 |" in first
+    # rain_splashes' variant is not rain's (nor its name's beginning)
+    assert "not rain's" in block((docs / "rain_splashes.md").read_text(), "bench")
+    assert "not rain's" not in block((docs / "rain.md").read_text(), "bench")
+    assert gen(cli, "--check", "--docs", docs, "--bench-csv", bench).returncode == 0
+
+
 def test_defaults_and_ranges_in_the_pages_are_the_librarys(effects):
     checked = 0
     for name, d in effects.items():
