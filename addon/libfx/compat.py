@@ -217,13 +217,15 @@ _FORMAT_PROPS = ("media_type", "file_format", "color_mode", "color_depth", "exr_
 WRITE_WAIT_S = 20.0
 
 
-def when_writable(fn, *args, wait=WRITE_WAIT_S):
+def when_writable(fn, *args, wait=None):
     """fn(*args), called again while Blender refuses writes to ID data ("Writing to ID
     classes in this context is not allowed"). Blender's switch for that refusal is one flag
     for the whole process, set while the UI thread runs a Python draw() or poll(); an F12
     render's handlers run on the render thread, so a panel redrawing at that moment made
     the render_post handler's format change fail on 4.3 (the frame then had no result).
-    Sleeping hands the interpreter to the UI thread, whose draw then ends."""
+    Sleeping hands the interpreter to the UI thread, whose draw then ends. wait: seconds
+    (default WRITE_WAIT_S)."""
+    wait = WRITE_WAIT_S if wait is None else wait
     t0 = time.monotonic()
     pause = 0.001
     while True:

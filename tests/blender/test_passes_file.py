@@ -197,3 +197,54 @@ def test_kept_passes_rendered_again_replace_the_file(blender, library, tmp_path)
     assert second.spec().width == 160 and second.spec().channelnames == first.spec().channelnames
     a, b = first.get_pixels(oiio.FLOAT), second.get_pixels(oiio.FLOAT)
     assert np.abs(a - b).max() > 0.1, "the passes file still holds the first render"
+
+
+#: compat.when_writable in Blender's Python: a write Blender refuses twice is made on the third
+#: try (and said so on stderr), any other AttributeError is raised at once, and a refusal that
+#: lasts longer than the wait is raised after it; image_format_restore names what it could not
+#: put back instead of passing over it.
+WHEN_WRITABLE = T.PRELUDE + r"""
+import time
+from libfx import compat
+REFUSED = "Writing to ID classes in this context is not allowed: Scene, Scene datablock, error setting x"
+calls = []
+def refused_twice(v):
+    calls.append(v)
+    if len(calls) < 3:
+        raise AttributeError(REFUSED)
+    return v * 2
+print("RESULT", compat.when_writable(refused_twice, 21), len(calls))
+other = []
+def other_error():
+    other.append(1)
+    raise AttributeError("'Scene' object has no attribute 'nope'")
+try:
+    compat.when_writable(other_error)
+except AttributeError as e:
+    print("OTHER", len(other), "no attribute" in str(e))
+t0 = time.monotonic()
+def always():
+    raise AttributeError(REFUSED)
+try:
+    compat.when_writable(always, wait=0.2)
+except AttributeError:
+    print("GAVE_UP %.2f" % (time.monotonic() - t0))
+class Settings:
+    file_format = "PNG"
+    def __setattr__(self, k, v):
+        raise AttributeError(REFUSED)
+compat.WRITE_WAIT_S = 0.1
+print("MISSED", compat.image_format_restore(Settings(), [("file_format", "JPEG")]))
+"""
+
+
+def test_when_writable_waits_out_a_refused_write(blender, library):
+    p = T.run_blender([], env=T.addon_env(library), python_expr=WHEN_WRITABLE)
+    out = p.stdout + p.stderr
+    assert p.returncode == 0 and not T.tracebacks(out), out[-3000:]
+    assert "RESULT 42 3" in p.stdout                      # made on the third try
+    assert "refused ID writes for" in out                   # and said so
+    assert "OTHER 1 True" in p.stdout                      # another error: at once, unchanged
+    gave_up = float(p.stdout.split("GAVE_UP ")[1].split()[0])
+    assert 0.2 <= gave_up < 2.0                            # a lasting refusal: after the wait
+    assert "MISSED ['file_format']" in p.stdout            # restore names what it could not do
