@@ -789,11 +789,14 @@ FX_CLONES static void vol_row_edges_put(const vol_job *j, int y, float *row, v4f
                 fx_volume_upsample_same4(row + 12 * X, bcast + 12 * X, ty, tx, d, &L, &T);
             }
         } else { /* across cells: one by one */
+            float Ls[4], Ts[4]; /* (a vector's lanes have no address in clang) */
             for (int m = 0; m < 4; m++) {
                 const int X0 = cx[k + m];
                 fx_volume_upsample(j->lo, j->lo_t, j->lo_depth, r0, r1, X0, X0 + 1 < lw ? X0 + 1 : X0, ct[k + m],
-                                   ty, fx_volume_weight_depth(dep[k + m], far), &L[m], &T[m]);
+                                   ty, fx_volume_weight_depth(dep[k + m], far), &Ls[m], &Ts[m]);
             }
+            L = ld4(Ls);
+            T = ld4(Ts);
         }
         if (add) {
             vol_put4_add(j, i0 + (size_t)k, L, T);
