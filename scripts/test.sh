@@ -8,6 +8,12 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
+# What the library-loading tests try (tests/python, the add-on's error test): a Windows DLL
+# made with MinGW, and the Debian 11 root a library's glibc floor is tried in (made once
+# per machine, reused; scripts/platforms.sh uses it too). Without them those tests skip.
+source scripts/apt_missing.sh
+apt_install_missing gcc-mingw-w64-x86-64
+bash scripts/blender_roots.sh bullseye
 
 status=0
 echo "== C tests (release build)"
