@@ -74,9 +74,17 @@ int tu_all_finite(const float *a, size_t n)
 const char *tu_tmpdir(const char *name)
 {
     static char path[512];
-    snprintf(path, sizeof path, "%s/libfx-test-%s-%ld", tu_temp_root(), name, fx_os_pid());
-    tu_rmtree(path);
-    tu_mkdir(path, 0700);
+    /* a fresh folder: Wine reuses small process ids, and a folder an earlier run left that
+     * cannot be removed (seen: a UTF-8 name under Wine) takes the next suffix */
+    for (int k = 0; k < 100; k++) {
+        if (k == 0)
+            snprintf(path, sizeof path, "%s/libfx-test-%s-%ld", tu_temp_root(), name, fx_os_pid());
+        else
+            snprintf(path, sizeof path, "%s/libfx-test-%s-%ld-%d", tu_temp_root(), name, fx_os_pid(), k);
+        tu_rmtree(path);
+        if (tu_mkdir(path, 0700) == 0)
+            break;
+    }
     return path;
 }
 
