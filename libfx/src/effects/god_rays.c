@@ -636,6 +636,22 @@ static void vol_row_cells(const vol_job *j, size_t r0, size_t r1, float *row, v4
     }
 }
 
+/* Row y's place on the reduced grid (lo rows r0, r1; ty: r1's weight), its cells gathered
+ * (vol_row_cells) when they changed since the last row; returns whether they did. */
+static int vol_row_begin(const vol_job *j, int y, float *row, v4f *bcast, int *cached_Y0, size_t *r0, size_t *r1,
+                         float *ty)
+{
+    int Y0 = 0;
+    fx_volume_lo_coord(y, j->f, j->lh, &Y0, ty);
+    *r0 = (size_t)Y0 * j->lw;
+    *r1 = Y0 + 1 < j->lh ? *r0 + (size_t)j->lw : *r0;
+    const int changed = Y0 != *cached_Y0;
+    if (changed)
+        vol_row_cells(j, *r0, *r1, row, bcast);
+    *cached_Y0 = Y0;
+    return changed;
+}
+
 /* volume_upsample edges, per lo column X of the row (ty: the row's weight of lo row r1):
  * the vertical lerps of L and T and their steps to column X + 1 (e: 4 lw floats), and when
  * the cells change (every f rows) their depth range over the 4 texels (range: 2 lw). */
@@ -671,13 +687,9 @@ static void vol_row_lt(const vol_job *j, int y, float *row, v4f *bcast, int *cac
                        float *restrict Tr)
 {
     const int lw = j->lw, x0 = j->run->roi.x0, n = j->run->roi.x1 - x0;
-    int Y0 = 0;
+    size_t r0 = 0, r1 = 0;
     float ty = 0.0f;
-    fx_volume_lo_coord(y, j->f, j->lh, &Y0, &ty);
-    const size_t r0 = (size_t)Y0 * lw, r1 = Y0 + 1 < j->lh ? r0 + (size_t)lw : r0;
-    if (Y0 != *cached_Y0)
-        vol_row_cells(j, r0, r1, row, bcast);
-    *cached_Y0 = Y0;
+    vol_row_begin(j, y, row, bcast, cached_Y0, &r0, &r1, &ty);
     const v4f by = {1.0f - ty, 1.0f - ty, ty, ty};
     const float *restrict dep = j->depth + (size_t)y * j->run->width + x0;
     const int *restrict cx = j->col_x0;
@@ -752,14 +764,10 @@ static inline __attribute__((always_inline)) void vol_put4_add(const vol_job *j,
 FX_CLONES static void vol_row_edges_put(const vol_job *j, int y, float *row, v4f *bcast, float *edges, int *cached_Y0)
 {
     const int lw = j->lw, x0 = j->run->roi.x0, n = j->run->roi.x1 - x0;
-    int Y0 = 0;
+    size_t r0 = 0, r1 = 0;
     float ty = 0.0f;
-    fx_volume_lo_coord(y, j->f, j->lh, &Y0, &ty);
-    const size_t r0 = (size_t)Y0 * lw, r1 = Y0 + 1 < j->lh ? r0 + (size_t)lw : r0;
-    if (Y0 != *cached_Y0)
-        vol_row_cells(j, r0, r1, row, bcast);
-    vol_row_edges(j, r0, r1, ty, Y0 != *cached_Y0, edges, edges + 4 * lw);
-    *cached_Y0 = Y0;
+    const int changed = vol_row_begin(j, y, row, bcast, cached_Y0, &r0, &r1, &ty);
+    vol_row_edges(j, r0, r1, ty, changed, edges, edges + 4 * lw);
     const float *Lv = edges, *dL = edges + lw, *Tv = edges + 2 * lw, *dT = edges + 3 * lw, *range = edges + 4 * lw;
     const float *restrict dep = j->depth + (size_t)y * j->run->width + x0;
     const int *restrict cx = j->col_x0;
