@@ -16,6 +16,7 @@
  *    in the mirror wall's plane gives the exact reflection; a view whose plane is not the
  *    mirror's is not used; a planar mirror seen edge-on stays finite. */
 #include "fx_effect_test.h"
+#include "core/mask.h"
 #include "math/panorama.h"
 
 #include <cjson/cJSON.h>
@@ -40,8 +41,17 @@ static double box_exit(const double o[3], const double d[3], int *wall)
     return best;
 }
 
+/* > 0: the walls carry black and white stripes of this width (metres, along x + y + z)
+ * instead of gradients: detail a convex mirror shrinks below a pixel (test_footprint) */
+static double g_stripes;
+
 static void room_colour(const double p[3], int wall, float c[3])
 {
+    if (g_stripes) {
+        float v = wall >= 0 && fmod(floor((p[0] + p[1] + p[2]) / g_stripes), 2.0) != 0.0 ? 1.0f : 0.0f;
+        c[0] = c[1] = c[2] = v;
+        return;
+    }
     static const float base[6][3] = { { 0.2f, 0.8f, 0.2f }, { 0.9f, 0.2f, 0.2f }, { 0.9f, 0.9f, 0.2f },
                                       { 0.2f, 0.3f, 0.9f }, { 0.5f, 0.5f, 0.5f }, { 1.0f, 1.0f, 1.0f } };
     double g = 0.6 + 0.4 * sin(1.3 * p[0] + 0.7) * cos(0.9 * p[1] - 0.4) * cos(1.1 * p[2]);
@@ -474,8 +484,22 @@ static fx_frame *room_frame(fx_context *ctx, float *want)
                 double t2 = box_exit(p, r, &w2);
                 double q[3] = { p[0] + t2 * r[0], p[1] + t2 * r[1], p[2] + t2 * r[2] };
                 room_colour(q, w2, want + i * 3);
-            } else {
+            } else if (!g_stripes) {
                 room_colour(p, wall, rgba + i * 4);
+            } else { /* stripes: the pixel's mean over 8 x 8 rays, as a renderer's pixel filter */
+                for (int sy = 0; sy < 8; sy++)
+                    for (int sx = 0; sx < 8; sx++) {
+                        double ds[3], col3[3];
+                        float col[3];
+                        int ws;
+                        cam_dir(x + (sx + 0.5) / 8, y + (sy + 0.5) / 8, ds);
+                        double ts = box_exit(CAM, ds, &ws);
+                        for (int k = 0; k < 3; k++)
+                            col3[k] = CAM[k] + ts * ds[k];
+                        room_colour(col3, ws, col);
+                        for (int k = 0; k < 3; k++)
+                            rgba[i * 4 + k] += col[k] / 64.0f;
+                    }
             }
         }
     fx_frame *f = et_frame(ctx, FW, FH, rgba);
@@ -784,6 +808,290 @@ static void test_planar(fx_context *ctx)
     free(want);
 }
 
+/* ---- footprints (ray differentials) ---- */
+
+/* fx_pano_trace_footprint: no footprint is fx_pano_trace's one tap, bit for bit; a footprint
+ * over many texels of 1-texel stripes is their mean (what the pixel sees), where one tap is
+ * a stripe's own 0 or 1; at a hit, the footprint grows with the distance. */
+static void test_pano_footprint(void)
+{
+    const int w = 256, h = 128;
+    float *rgba = malloc((size_t)w * h * 4 * sizeof(float)), *dep = malloc((size_t)w * h * sizeof(float));
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++) {
+            size_t i = (size_t)y * w + x;
+            rgba[i * 4] = rgba[i * 4 + 1] = rgba[i * 4 + 2] = (float)(x % 2);
+            rgba[i * 4 + 3] = 1.0f;
+            dep[i] = x < w / 2 ? 1e10f : 2.0f; /* the sky left of forward, a 2 m sphere right */
+        }
+    fx_pano p = { rgba, dep, w, h, { 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1 } };
+    fx_pano_trace_settings st = fx_pano_trace_setup(48, 6, 0.02f, 100.0f, 0.05f);
+    const float texel = 2.0f * (float)PI / (float)w;
+    /* the sky, 21 texels (~30 deg) left of forward, at a texel's centre */
+    fx_vec3 dir = fx_pano_pixel_to_dir((float)(w / 2 - 21) + 0.5f, (float)(h / 2) + 0.5f, w, h);
+    fx_vec3 o = fx_v3(0, 0, 0), side = fx_v3_normalize_or(fx_v3_cross(dir, fx_v3(0, 1, 0)), fx_v3(1, 0, 0));
+    fx_ray_diff none, wide;
+    memset(&none, 0, sizeof none);
+    memset(&wide, 0, sizeof wide);
+    wide.ddx = fx_v3_scale(side, 6.0f * texel); /* 6 texels across */
+    float a[3], b[3], c[3];
+    int ha = fx_pano_trace(&p, &st, o, dir, a), hb = fx_pano_trace_footprint(&p, &st, o, dir, &none, b);
+    CHECK(ha == hb && memcmp(a, b, sizeof a) == 0);
+    fx_pano_trace_footprint(&p, &st, o, dir, &wide, c);
+    printf("far lookup over 1-texel stripes: one tap %.3f, a 6-texel footprint %.3f (their mean 0.5)\n", a[0], c[0]);
+    CHECK(fabsf(a[0] - 0.5f) > 0.4f);
+    CHECK(fabsf(c[0] - 0.5f) < 0.1f);
+    /* a hit on the 2 m sphere, 30 deg right: the footprint at t spans dox + t ddx; a small
+     * origin spread with no direction spread stays within a texel (one tap, the same bits) */
+    dir = fx_pano_pixel_to_dir((float)(w / 2 + 21) + 0.5f, (float)(h / 2) + 0.5f, w, h);
+    side = fx_v3_normalize_or(fx_v3_cross(dir, fx_v3(0, 1, 0)), fx_v3(1, 0, 0));
+    fx_ray_diff small = none;
+    small.dox = fx_v3_scale(side, 0.2f * texel * 2.0f);
+    ha = fx_pano_trace(&p, &st, o, dir, a);
+    hb = fx_pano_trace_footprint(&p, &st, o, dir, &small, b);
+    CHECK(ha == 1 && hb == 1 && memcmp(a, b, sizeof a) == 0);
+    wide.ddx = fx_v3_scale(side, 6.0f * texel); /* seen from the probe's centre: 6 texels at any t */
+    fx_pano_trace_footprint(&p, &st, o, dir, &wide, c);
+    printf("hit at 2 m over 1-texel stripes: one tap %.3f, a footprint of 6 texels there %.3f\n", a[0], c[0]);
+    CHECK(fabsf(a[0] - 0.5f) > 0.4f && fabsf(c[0] - 0.5f) < 0.1f);
+    /* a non-finite differential: finite, one tap */
+    wide.ddx = fx_v3(NAN, INFINITY, 0);
+    fx_pano_trace_footprint(&p, &st, o, dir, &wide, c);
+    CHECK(memcmp(a, c, sizeof a) == 0);
+    free(rgba), free(dep);
+}
+
+/* The mirror wall bent into a convex mirror (its normals turn by BEND radians across the frame) over
+ * a striped room: the mirror shrinks the room, so each pixel sees many stripes. The exact
+ * answer is the pixel's mean of the exact reflection (8 x 8 rays across the pixel, normals
+ * following the same bend); footprint on (final's default) must come much closer to it
+ * than one lookup per pixel, and must not touch a pixel off the mirror. */
+#define BEND 2.5
+static void bent_normal(double px, double n[3])
+{
+    double a = BEND * (px / FW - 0.5); /* radians: the normal turns about Z across the frame */
+    n[0] = sin(a), n[1] = -cos(a), n[2] = 0.0;
+}
+
+static void test_footprint(fx_context *ctx)
+{
+    const char *dir = tu_tmpdir("footprint");
+    g_stripes = 0.08; /* one to two frame pixels on the walls */
+    float *want = calloc((size_t)FW * FH * 3, sizeof(float));
+    fx_frame *f = room_frame(ctx, want);
+    float *nor, *ima;
+    int c;
+    fx_frame_pass(f, "Normal", &nor, &c);
+    fx_frame_pass(f, "IndexMA", &ima, &c);
+    for (int y = 0; y < FH; y++)
+        for (int x = 0; x < FW; x++) {
+            size_t i = (size_t)y * FW + x;
+            if (ima[i] != 1)
+                continue;
+            double n[3], acc[3] = { 0, 0, 0 };
+            bent_normal(x + 0.5, n);
+            for (int k = 0; k < 3; k++)
+                nor[i * 3 + k] = (float)n[k];
+            for (int sy = 0; sy < 8; sy++)
+                for (int sx = 0; sx < 8; sx++) {
+                    double px = x + (sx + 0.5) / 8, py = y + (sy + 0.5) / 8, d[3], nn[3], r[3], q[3];
+                    cam_dir(px, py, d);
+                    int wall, w2;
+                    double t = box_exit(CAM, d, &wall);
+                    double pt[3] = { CAM[0] + t * d[0], CAM[1] + t * d[1], CAM[2] + t * d[2] };
+                    bent_normal(px, nn);
+                    double dn = d[0] * nn[0] + d[1] * nn[1] + d[2] * nn[2];
+                    for (int k = 0; k < 3; k++)
+                        r[k] = d[k] - 2 * dn * nn[k];
+                    double t2 = box_exit(pt, r, &w2);
+                    for (int k = 0; k < 3; k++)
+                        q[k] = pt[k] + t2 * r[k];
+                    float col[3];
+                    room_colour(q, w2, col);
+                    for (int k = 0; k < 3; k++)
+                        acc[k] += col[k] / 64.0;
+                }
+            for (int k = 0; k < 3; k++)
+                want[i * 3 + k] = (float)acc[k];
+        }
+    char path[600];
+    snprintf(path, sizeof path, "%s/probe.exr", dir);
+    const double ppos[3] = { 0.0, 2.6, 1.5 };
+    write_probe(ctx, path, ppos, 1024, 512, 0);
+    double err[2];
+    fx_frame *out[2] = { NULL, NULL };
+    for (int on = 0; on < 2; on++) {
+        fx_stack *s = et_stack(ctx, "ssr_mirror");
+        CHECK_OK(ctx, fx_stack_set_mask_json(s, 0, "{\"material_index\": 1}"));
+        CHECK_OK(ctx, fx_stack_set_quality(s, FX_QUALITY_FINAL));
+        CHECK_OK(ctx, fx_stack_set_int(s, 0, "footprint", on));
+        char *req = NULL;
+        CHECK_OK(ctx, fx_stack_required_aux_views(s, &req));
+        const char *at = req ? strstr(req, "\"probe:") : NULL;
+        char pname[64] = "probe:?";
+        if (at)
+            snprintf(pname, 19, "%s", at + 1);
+        fx_free(req);
+        add_probe(ctx, f, pname, path, ppos);
+        CHECK_OK(ctx, fx_stack_run(s, f, &out[on]));
+        err[on] = mirror_mae(f, out[on], want);
+        fx_stack_free(s);
+    }
+    printf("convex mirror over 8 cm stripes, MAE against the pixels' exact mean: one lookup %.4f, footprint %.4f\n",
+           err[0], err[1]);
+    CHECK(err[1] < 0.6 * err[0]);
+    /* the screen-space hits alone (no probe; the pixels whose hit is trusted fully): the
+     * lookup over the footprint's projection in the frame */
+    double serr[2] = { 0, 0 };
+    int sn = 0;
+    fx_frame *so[2] = { NULL, NULL };
+    for (int on = 0; on < 2; on++) {
+        fx_stack *s = et_stack(ctx, "ssr_mirror");
+        CHECK_OK(ctx, fx_stack_set_mask_json(s, 0, "{\"material_index\": 1}"));
+        CHECK_OK(ctx, fx_stack_set_quality(s, FX_QUALITY_FINAL));
+        CHECK_OK(ctx, fx_stack_set_enum(s, 0, "fallback", "texture"));
+        CHECK_OK(ctx, fx_stack_set_int(s, 0, "footprint", on));
+        fx_stack_set_debug_outputs(s, 1);
+        CHECK_OK(ctx, fx_stack_run(s, f, &so[on]));
+        fx_stack_free(s);
+    }
+    float *hit0 = NULL, *hit1 = NULL;
+    CHECK(fx_frame_pass(so[0], "fx0_ssr_mirror_hit", &hit0, &c) == FX_OK);
+    CHECK(fx_frame_pass(so[1], "fx0_ssr_mirror_hit", &hit1, &c) == FX_OK);
+    const float *c0 = et_combined(so[0]), *c1 = et_combined(so[1]);
+    for (size_t i = 0; hit0 && hit1 && c0 && c1 && i < (size_t)FW * FH; i++)
+        if (ima[i] == 1 && hit0[i] == 1.0f && hit1[i] == 1.0f) {
+            for (int k = 0; k < 3; k++) {
+                serr[0] += fabs(c0[i * 4 + k] - want[i * 3 + k]);
+                serr[1] += fabs(c1[i * 4 + k] - want[i * 3 + k]);
+            }
+            sn += 3;
+        }
+    printf("  its %d screen-space hits: one lookup %.4f, footprint %.4f\n", sn / 3, serr[0] / (sn ? sn : 1),
+           serr[1] / (sn ? sn : 1));
+    /* the frame's pixels are already their own means: less to gain than in the probe */
+    CHECK(sn > 300 && serr[1] < 0.9 * serr[0]);
+    fx_frame_free(so[0]), fx_frame_free(so[1]);
+    /* outside the mirror: the input, bit for bit */
+    const float *in = et_combined(f), *o = et_combined(out[1]);
+    int same = 1;
+    for (size_t i = 0; in && o && i < (size_t)FW * FH; i++)
+        if (ima[i] != 1)
+            same &= memcmp(in + i * 4, o + i * 4, 4 * sizeof(float)) == 0;
+    CHECK(in && o && same);
+    fx_frame_free(out[0]), fx_frame_free(out[1]);
+    fx_frame_free(f);
+    free(want);
+    g_stripes = 0;
+}
+
+/* Saved recipes keep their bits: a recipe of params_version 1 (before footprint) runs with
+ * footprint off at final; version 2 takes final's footprint. */
+static void test_footprint_migration(fx_context *ctx)
+{
+    const char *v[2] = { "", "\"params_version\": 2, " };
+    for (int k = 0; k < 2; k++) {
+        char json[400], *eff = NULL;
+        snprintf(json, sizeof json, "{\"version\": 1, \"quality\": \"final\", \"effects\": [{\"effect\": "
+                 "\"ssr_mirror\", %s\"params\": {}}]}", v[k]);
+        fx_stack *s = NULL;
+        CHECK_OK(ctx, fx_stack_new(ctx, &s));
+        CHECK_OK(ctx, fx_stack_load_json(s, json));
+        CHECK_OK(ctx, fx_stack_effective_params_json(s, 0, &eff));
+        cJSON *e = eff ? cJSON_Parse(eff) : NULL;
+        const cJSON *fp = cJSON_GetObjectItem(e, "footprint");
+        CHECK(cJSON_IsBool(fp) && cJSON_IsTrue(fp) == (k == 1));
+        cJSON_Delete(e);
+        fx_free(eff);
+        fx_stack_free(s);
+    }
+}
+
+/* A pixel the mirror only partly covers: a thin red post stands in front of the mirror's
+ * middle column, covering 0.6 of each of its pixels (Cryptomatte), and those pixels' Depth
+ * and Normal are the post's (not anti-aliased). The truth there is 0.4 x the mirror's
+ * exact reflection + 0.6 x the post. With footprint the pixel takes its fully covered
+ * neighbour's change scaled by 0.4; without it, the stack's blend of the pixel's own
+ * result (the post's ray, and 0.24 of the mirror's grey backing) errs far more. */
+static void test_edge_coverage(fx_context *ctx)
+{
+    const char *dir = tu_tmpdir("edgecov");
+    float *want = calloc((size_t)FW * FH * 3, sizeof(float));
+    fx_frame *f = room_frame(ctx, want);
+    float *rgba, *dep, *nor, *ima;
+    int c;
+    fx_frame_pass(f, "Combined", &rgba, &c);
+    fx_frame_pass(f, "Depth", &dep, &c);
+    fx_frame_pass(f, "Normal", &nor, &c);
+    fx_frame_pass(f, "IndexMA", &ima, &c);
+    const float mirror_id = fx_cryptomatte_id("Mirror"), post_id = fx_cryptomatte_id("Post");
+    const float cov = 0.4f, post[3] = { 1.0f, 0.0f, 0.0f };
+    float *crypto = calloc((size_t)FW * FH * 4, sizeof(float));
+    float *truth = calloc((size_t)FW * FH * 3, sizeof(float));
+    const int px = FW / 2;
+    int edge = 0;
+    for (int y = 0; y < FH; y++)
+        for (int x = 0; x < FW; x++) {
+            size_t i = (size_t)y * FW + x;
+            float *cr = crypto + i * 4;
+            if (ima[i] != 1)
+                continue;
+            if (x != px) {
+                cr[0] = mirror_id, cr[1] = 1.0f;
+                continue;
+            }
+            /* the post: 0.6 of the pixel, 1 m in front of the camera, facing +X */
+            cr[0] = post_id, cr[1] = 1.0f - cov, cr[2] = mirror_id, cr[3] = cov;
+            for (int k = 0; k < 3; k++) {
+                rgba[i * 4 + k] = cov * rgba[i * 4 + k] + (1.0f - cov) * post[k];
+                truth[i * 3 + k] = cov * want[i * 3 + k] + (1.0f - cov) * post[k];
+                nor[i * 3 + k] = k == 0 ? 1.0f : 0.0f;
+            }
+            dep[i] = 1.0f;
+            edge++;
+        }
+    fx_frame_add_pass(f, "CryptoMaterial00", 4, crypto);
+    fx_frame_set_meta(f, "cryptomatte/CryptoMaterial/manifest", "{\"Mirror\": \"x\", \"Post\": \"y\"}");
+    char path[600];
+    snprintf(path, sizeof path, "%s/probe.exr", dir);
+    const double ppos[3] = { 0.0, 2.6, 1.5 };
+    write_probe(ctx, path, ppos, 256, 128, 0);
+    double err[2];
+    for (int on = 0; on < 2; on++) {
+        fx_stack *s = et_stack(ctx, "ssr_mirror");
+        CHECK_OK(ctx, fx_stack_set_mask_json(s, 0, "{\"material\": \"Mirror\"}"));
+        CHECK_OK(ctx, fx_stack_set_quality(s, FX_QUALITY_FINAL));
+        CHECK_OK(ctx, fx_stack_set_int(s, 0, "footprint", on));
+        char *req = NULL;
+        CHECK_OK(ctx, fx_stack_required_aux_views(s, &req));
+        const char *at = req ? strstr(req, "\"probe:") : NULL;
+        char pname[64] = "probe:?";
+        if (at)
+            snprintf(pname, 19, "%s", at + 1);
+        fx_free(req);
+        add_probe(ctx, f, pname, path, ppos);
+        fx_frame *o = NULL;
+        CHECK_OK(ctx, fx_stack_run(s, f, &o));
+        const float *oc = et_combined(o);
+        double e = 0;
+        for (int y = 0; oc && y < FH; y++) {
+            size_t i = (size_t)y * FW + px;
+            if (ima[i] == 1)
+                for (int k = 0; k < 3; k++)
+                    e += fabs(oc[i * 4 + k] - truth[i * 3 + k]) / (3.0 * edge);
+        }
+        err[on] = e;
+        fx_frame_free(o);
+        fx_stack_free(s);
+    }
+    printf("%d pixels 0.4 mirror / 0.6 post, MAE against 0.4 x the exact reflection + 0.6 x the post: "
+           "own ray %.4f, the neighbour's change %.4f\n", edge, err[0], err[1]);
+    CHECK(edge > 10);
+    CHECK(err[1] < 0.03 && err[1] < 0.4 * err[0]);
+    fx_frame_free(f);
+    free(want), free(crypto), free(truth);
+}
+
 int main(void)
 {
     fx_context *ctx = NULL;
@@ -794,6 +1102,10 @@ int main(void)
     test_disocclusion();
     test_end_to_end(ctx);
     test_planar(ctx);
+    test_pano_footprint();
+    test_footprint(ctx);
+    test_edge_coverage(ctx);
+    test_footprint_migration(ctx);
     fx_context_free(ctx);
     return tu_finish("test_probe");
 }

@@ -60,6 +60,8 @@
 #include "scene/aux_map.h"
 #include "scene/aux_view.h"
 
+#include <cjson/cJSON.h>
+
 #include <float.h>
 #include <math.h>
 #include <stdatomic.h>
@@ -96,6 +98,7 @@ typedef struct ssr_params {
     int hiz;
     int probe_steps;
     int planar_view;
+    int footprint;
 } ssr_params;
 
 enum { OP_NONE = 0, OP_SEPIA, OP_GRAYSCALE, OP_CEL };
@@ -180,6 +183,11 @@ static const fx_param_def ssr_param_defs[] = {
               "final's trace + probe removed 80-84 %, for one Cycles render per plane (about 2x the "
               "probe's render time). Pixels off that plane, glossy, bent or cel mirrors, and a frame "
               "without that view keep the trace and the fallback"),
+    FX_P_BOOL(ssr_params, footprint, "footprint", 1,
+              "Filter the reflection over each pixel's footprint (ray differentials, Igehy 1999): a "
+              "curved or distant mirror shows the room smaller than the frame does, and one lookup per "
+              "pixel aliases it and keeps the render's full noise where the pixel sees a mean; final and "
+              "reference (params_version 2; older recipes keep it off)"),
 };
 
 /* ---- helpers ---- */
@@ -827,6 +835,104 @@ static void apply_operator(const ssr_job *j, float px, float py, float rgb[3])
     }
 }
 
+/* The reflected ray of the mirror pixel beside (x, y) at step (sx, sy), as differentials
+ * of this pixel's (pos, rd): 0 where that pixel is not on the same smooth surface (outside
+ * the frame or the mask, no surface, off this pixel's tangent plane by more than ~6 deg and
+ * more than 2 % away in depth, or its normal more than ~45 deg away): a depth edge is not a
+ * footprint. */
+static int neighbour_ray(const ssr_job *j, int x, int y, int sx, int sy, fx_vec3 pos, fx_vec3 n, fx_vec3 rd,
+                         fx_vec3 *dpos, fx_vec3 *ddir)
+{
+    const ssr_frame *F = j->F;
+    int xn = x + sx, yn = y + sy;
+    if (xn < 0 || yn < 0 || xn >= F->w || yn >= F->h || !in_mask(j->run->mask, F->w, xn, yn))
+        return 0;
+    float d;
+    fx_vec3 q = view_pos_at(F, xn, yn, &d);
+    if (fx_ssr_is_background(d) || !isfinite(q.x + q.y + q.z))
+        return 0;
+    fx_vec3 inc = F->view.orthographic ? fx_v3(0, 0, -1) : fx_v3_normalize_or(q, fx_v3(0, 0, -1));
+    fx_vec3 nn;
+    if (!shading_normal(j, xn, yn, q, inc, &nn) || fx_v3_dot(nn, n) < 0.7f)
+        return 0;
+    fx_vec3 dp = fx_v3_sub(q, pos);
+    /* on this pixel's tangent plane, or at nearly its depth (a bent or normal-mapped mirror's
+     * shading normal is not its surface's) */
+    if (!(fabsf(fx_v3_dot(n, dp)) <= 0.1f * fx_v3_length(dp)) && !(fabsf(q.z - pos.z) <= 0.02f * fabsf(pos.z)))
+        return 0;
+    *dpos = dp;
+    *ddir = fx_v3_sub(fx_v3_reflect(inc, nn), rd);
+    return 1;
+}
+
+/* The pixel's ray differentials along x and y (math/panorama.h's fx_ray_diff): the
+ * neighbour's reflected ray after it, or the one before it turned round; a pixel with
+ * neither along an axis (a one-pixel sliver) gets no footprint along it. */
+static void ray_diff_at(const ssr_job *j, int x, int y, fx_vec3 pos, fx_vec3 n, fx_vec3 rd, fx_ray_diff *df)
+{
+    memset(df, 0, sizeof *df);
+    if (!neighbour_ray(j, x, y, 1, 0, pos, n, rd, &df->dox, &df->ddx) &&
+        neighbour_ray(j, x, y, -1, 0, pos, n, rd, &df->dox, &df->ddx)) {
+        df->dox = fx_v3_scale(df->dox, -1.0f);
+        df->ddx = fx_v3_scale(df->ddx, -1.0f);
+    }
+    if (!neighbour_ray(j, x, y, 0, 1, pos, n, rd, &df->doy, &df->ddy) &&
+        neighbour_ray(j, x, y, 0, -1, pos, n, rd, &df->doy, &df->ddy)) {
+        df->doy = fx_v3_scale(df->doy, -1.0f);
+        df->ddy = fx_v3_scale(df->ddy, -1.0f);
+    }
+}
+
+/* Frame pixels spanned by view-space footprint axis e at view point c (c - e/2 to c + e/2
+ * projected): the pixel offset, 0 if either end is behind the eye. */
+static fx_vec2 screen_axis(const ssr_frame *F, fx_vec3 c, fx_vec3 e)
+{
+    fx_vec2 a = { 0.0f, 0.0f }, b = { 0.0f, 0.0f }, none = { 0.0f, 0.0f };
+    fx_vec3 h = fx_v3_scale(e, 0.5f);
+    if (!(fx_view_project(&F->view, fx_v3_sub(c, h), &a) > 0.0f) ||
+        !(fx_view_project(&F->view, fx_v3_add(c, h), &b) > 0.0f))
+        return none;
+    fx_vec2 r = { b.x - a.x, b.y - a.y };
+    return isfinite(r.x + r.y) ? r : none;
+}
+
+/* The reflected image over the pixel's footprint where its ray landed at (px, py) after
+ * `length` along rd from ro (a first hit that bounces no further): the mean of a grid of
+ * lookup taps over the footprint's projection, one per frame pixel it spans along each axis
+ * (at most FX_FOOTPRINT_TAPS_MAX). Taps that land on a mirror pixel (this entry's or
+ * mirror_surfaces') are left out: its backing is not what the ray sees. A footprint within
+ * one pixel is the one tap at (px, py) (the same bits as without footprints). */
+static void footprint_lookup(const ssr_job *j, fx_vec3 ro, fx_vec3 rd, float length, float px, float py,
+                             const fx_ray_diff *df, float rgb[3])
+{
+    const ssr_frame *F = j->F;
+    fx_vec3 c = fx_v3_add(ro, fx_v3_scale(rd, length));
+    fx_vec2 ax = screen_axis(F, c, fx_v3_add(df->dox, fx_v3_scale(df->ddx, length)));
+    fx_vec2 ay = screen_axis(F, c, fx_v3_add(df->doy, fx_v3_scale(df->ddy, length)));
+    int nx = fx_footprint_taps(fmaxf(fabsf(ax.x), fabsf(ax.y)));
+    int ny = fx_footprint_taps(fmaxf(fabsf(ay.x), fabsf(ay.y)));
+    sample_lookup(j, px, py, rgb);
+    if (nx == 1 && ny == 1)
+        return;
+    float sum[3] = { 0.0f, 0.0f, 0.0f }, tap[3];
+    int n = 0;
+    for (int b = 0; b < ny; b++)
+        for (int a = 0; a < nx; a++) {
+            float s = ((float)a + 0.5f) / (float)nx - 0.5f, r = ((float)b + 0.5f) / (float)ny - 0.5f;
+            float tx = px + s * ax.x + r * ay.x, ty = py + s * ax.y + r * ay.y;
+            int hx = pixel_of(tx, F->w), hy = pixel_of(ty, F->h);
+            if (own_at(j, hx, hy) || (j->surfaces && j->surfaces->coverage[(size_t)hy * F->w + hx] > 0.5f))
+                continue;
+            sample_lookup(j, tx, ty, tap);
+            for (int k = 0; k < 3; k++)
+                sum[k] += tap[k];
+            n++;
+        }
+    if (n > 0)
+        for (int k = 0; k < 3; k++)
+            rgb[k] = sum[k] / (float)n;
+}
+
 static void shade_rows(void *user, int begin, int end)
 {
     ssr_job *j = user;
@@ -868,13 +974,20 @@ static void shade_rows(void *user, int begin, int end)
             float refl[3], fb[3];
             float conf = h.state == 1 ? h.conf : 0.0f;
             fx_vec3 rd = fx_v3_reflect(inc, n);
+            fx_ray_diff df;
+            if (p->footprint)
+                ray_diff_at(j, x, y, pos, n, rd, &df);
             int on_plane = j->planar_count ? planar_colour(j, x, y, pos, refl) : 0; /* 1 + its view */
             if (on_plane) {
                 if (p->op == OP_SEPIA || p->op == OP_GRAYSCALE)
                     fx_color_op_apply3(j->opm, refl, refl);
                 conf = 1.0f;
             } else if (j->probe && conf < 1.0f) {
-                probe_colour(j, pos, rd, fb); /* only where the fallback shows */
+                /* only where the fallback shows */
+                if (p->footprint)
+                    fx_pano_trace_footprint(j->probe, &j->pst, pos, rd, &df, fb);
+                else
+                    probe_colour(j, pos, rd, fb);
                 /* the probe's colour is the reflection there: the colour operator's too (as the
                  * planar view's; cel's outlines need the hit's depth edges: not on the probe) */
                 if (p->op == OP_SEPIA || p->op == OP_GRAYSCALE)
@@ -887,7 +1000,10 @@ static void shade_rows(void *user, int begin, int end)
                 /* the mirrored camera's view: refl holds it */
             } else if (conf > 0.0f) {
                 fx_vec3 ro = fx_v3_add(pos, fx_v3_scale(n, p->bias * fx_ssr_pixel_footprint(&F->view, d)));
-                ray_colour(j, ro, rd, h.px, h.py, j->last_bounce, refl);
+                if (p->footprint && !hit_bounces(j, &h))
+                    footprint_lookup(j, ro, rd, h.length, h.px, h.py, &df, refl);
+                else
+                    ray_colour(j, ro, rd, h.px, h.py, j->last_bounce, refl);
                 if (p->op != OP_NONE)
                     apply_operator(j, h.px, h.py, refl);
                 for (int k = 0; k < 3; k++)
@@ -915,6 +1031,51 @@ static void shade_rows(void *user, int begin, int end)
                 j->dbg_fb[i] = 1.0f - conf;
             if (j->dbg_planar)
                 j->dbg_planar[i] = (float)on_plane;
+        }
+}
+
+/* With footprint: a pixel the mirror only partly covers (0 < coverage < 1: anti-aliased,
+ * the rest is the object in front or the frame around it) takes the change its nearest
+ * fully covered neighbour within 2 px got (dst - src there), which the stack scales by the
+ * coverage. Its own ray is not the mirror's (Depth and Normal are not anti-aliased: they
+ * may be the other surface's), and the stack's blend of a whole-pixel result keeps
+ * coverage x (1 - coverage) of the mirror's backing in the pixel: a grey seam around
+ * everything in front of the mirror. Reads only fully covered pixels, which this pass
+ * does not write: any row order gives the same bits. */
+#define EDGE_FULL 0.999f
+static void edge_rows(void *user, int begin, int end)
+{
+    const ssr_job *j = user;
+    const fx_effect_run *run = j->run;
+    const float *cov = run->mask->coverage;
+    const int w = run->width, h = run->height;
+    for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++)
+        for (int x = run->roi.x0; x < run->roi.x1; x++) {
+            size_t i = (size_t)y * w + x;
+            if (!(cov[i] > 0.0f && cov[i] < EDGE_FULL))
+                continue;
+            long best = -1;
+            int best_d = 9;
+            for (int dy = -2; dy <= 2; dy++)
+                for (int dx = -2; dx <= 2; dx++) {
+                    int xx = x + dx, yy = y + dy, d2 = dx * dx + dy * dy;
+                    if (xx < 0 || yy < 0 || xx >= w || yy >= h || d2 >= best_d)
+                        continue;
+                    size_t k = (size_t)yy * w + xx;
+                    if (cov[k] >= EDGE_FULL) {
+                        best = (long)k;
+                        best_d = d2;
+                    }
+                }
+            if (best < 0)
+                continue; /* a sliver: its own result stands */
+            const float *sn = run->src + (size_t)best * 4, *dn = run->dst + (size_t)best * 4;
+            const float *s = run->src + i * 4;
+            float *o = run->dst + i * 4;
+            for (int k = 0; k < 3; k++) {
+                float v = s[k] + (dn[k] - sn[k]);
+                o[k] = isfinite(v) ? v : s[k];
+            }
         }
 }
 
@@ -1321,6 +1482,8 @@ static fx_result ssr_process(const fx_effect_run *run)
     j.last_bounce = p->bounces - 1;
     j.reuse_fin = j.fin && !j.dbg_hit && !j.dbg_xy && !j.dbg_len && !j.dbg_fb && !j.dbg_planar;
     fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), shade_rows, &j);
+    if (p->footprint && run->mask)
+        fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), edge_rows, &j);
 out:
     fx_buffer_put(run->ctx, surf, surf_bytes);
     fx_buffer_put(run->ctx, fin[0], 2 * frame_bytes);
@@ -1357,6 +1520,18 @@ static int ssr_aux_views(const void *params, fx_aux_need *out, int max)
     return n;
 }
 
+/* params_version 2 added footprint (default on): a recipe of version 1 keeps one lookup per
+ * pixel (footprint off) unless it names one. Silent: its output is the same as before. */
+static fx_result ssr_migrate(int from_version, cJSON *params, char *note, size_t note_size)
+{
+    (void)note;
+    (void)note_size;
+    if (from_version == 1 && params && !cJSON_GetObjectItemCaseSensitive(params, "footprint") &&
+        !cJSON_AddBoolToObject(params, "footprint", 0))
+        return FX_ERR_OUT_OF_MEMORY;
+    return FX_OK;
+}
+
 const fx_effect_class fx_effect_ssr_mirror = {
     .name = "ssr_mirror",
     .doc = "Screen-space ray-traced mirror (McGuire & Mara 2014) on the masked pixels: reflectivity, "
@@ -1366,13 +1541,13 @@ const fx_effect_class fx_effect_ssr_mirror = {
     .param_count = FX_COUNT_OF(ssr_param_defs),
     .presets = {
         "{\"max_steps\": 48, \"stride\": 2, \"growth\": 1.08, \"refine\": 3, \"resolution_scale\": 0.25, "
-        "\"retrace_edges\": false}",
+        "\"retrace_edges\": false, \"footprint\": false}",
         "{\"max_steps\": 96, \"stride\": 1.5, \"growth\": 1.04, \"refine\": 6, \"resolution_scale\": 0.5, "
-        "\"retrace_edges\": true}",
+        "\"retrace_edges\": true, \"footprint\": false}",
         "{\"max_steps\": 96, \"stride\": 1.5, \"growth\": 1.04, \"refine\": 6, \"resolution_scale\": 1, "
-        "\"fallback\": \"probe\", \"probe_steps\": 48}",
+        "\"fallback\": \"probe\", \"probe_steps\": 48, \"footprint\": true}",
         "{\"max_steps\": 4096, \"stride\": 1, \"growth\": 1, \"refine\": 10, \"resolution_scale\": 1, "
-        "\"fallback\": \"probe\", \"probe_steps\": 160, \"planar_view\": true}",
+        "\"fallback\": \"probe\", \"probe_steps\": 160, \"planar_view\": true, \"footprint\": true}",
     },
     .passes = ssr_passes,
     .aux_views = ssr_aux_views,
@@ -1380,4 +1555,6 @@ const fx_effect_class fx_effect_ssr_mirror = {
     .halo = ssr_halo,
     .validate = ssr_validate,
     .process = ssr_process,
+    .params_version = 2,
+    .migrate = ssr_migrate,
 };

@@ -320,6 +320,69 @@ int fx_pano_trace(const fx_pano *p, const fx_pano_trace_settings *st, fx_vec3 o,
     return 0;
 }
 
+/* Texels between the probe's pixels of probe-space directions a and b (the shorter way
+ * round horizontally): the larger of the two axes. */
+static float texel_span(const fx_pano *p, fx_vec3 a, fx_vec3 b)
+{
+    float ax, ay, bx, by;
+    fx_pano_dir_to_pixel(a, p->w, p->h, &ax, &ay);
+    fx_pano_dir_to_pixel(b, p->w, p->h, &bx, &by);
+    float dx = fabsf(ax - bx);
+    dx = fminf(dx, (float)p->w - dx);
+    return fmaxf(dx, fabsf(ay - by));
+}
+
+/* The mean colour over a grid of taps at c + s ex + r ey (probe space), s and r the cells'
+ * centres across [-1/2, 1/2]: the axes' texel spans set the grid (fx_footprint_taps). */
+static void footprint_mean(const fx_pano *p, fx_vec3 c, fx_vec3 ex, fx_vec3 ey, float rgb[3])
+{
+    fx_vec3 hx = fx_v3_scale(ex, 0.5f), hy = fx_v3_scale(ey, 0.5f);
+    int nx = fx_footprint_taps(texel_span(p, fx_v3_sub(c, hx), fx_v3_add(c, hx)));
+    int ny = fx_footprint_taps(texel_span(p, fx_v3_sub(c, hy), fx_v3_add(c, hy)));
+    if (nx == 1 && ny == 1) {
+        fx_pano_color(p, c, rgb);
+        return;
+    }
+    float sum[3] = { 0.0f, 0.0f, 0.0f }, tap[3];
+    for (int b = 0; b < ny; b++)
+        for (int a = 0; a < nx; a++) {
+            float s = ((float)a + 0.5f) / (float)nx - 0.5f, r = ((float)b + 0.5f) / (float)ny - 0.5f;
+            fx_pano_color(p, fx_v3_add(c, fx_v3_add(fx_v3_scale(ex, s), fx_v3_scale(ey, r))), tap);
+            for (int k = 0; k < 3; k++)
+                sum[k] += tap[k];
+        }
+    for (int k = 0; k < 3; k++)
+        rgb[k] = sum[k] / (float)(nx * ny);
+}
+
+/* A footprint axis turned into the probe's space; none (a point) where it is not finite. */
+static fx_vec3 probe_axis(const fx_pano *p, fx_vec3 e)
+{
+    fx_vec3 r = fx_m4_dir(p->to_probe, e);
+    return isfinite(r.x + r.y + r.z) ? r : fx_v3(0.0f, 0.0f, 0.0f);
+}
+
+int fx_pano_trace_footprint(const fx_pano *p, const fx_pano_trace_settings *st, fx_vec3 o, fx_vec3 dir,
+                            const fx_ray_diff *diff, float rgb[3])
+{
+    fx_vec3 po, pd;
+    float t = 0.0f;
+    int hit = pano_march(p, st, o, dir, &po, &pd, &t);
+    if (hit == 2) {
+        hidden_fill(p, po, pd, t, rgb);
+        return 0;
+    }
+    if (hit == 1) { /* the footprint on the surface the ray meets */
+        fx_vec3 ex = probe_axis(p, fx_v3_add(diff->dox, fx_v3_scale(diff->ddx, t)));
+        fx_vec3 ey = probe_axis(p, fx_v3_add(diff->doy, fx_v3_scale(diff->ddy, t)));
+        footprint_mean(p, fx_v3_add(po, fx_v3_scale(pd, t)), ex, ey, rgb);
+        return 1;
+    }
+    /* infinitely far: only the directions spread (pd unit) */
+    footprint_mean(p, pd, probe_axis(p, diff->ddx), probe_axis(p, diff->ddy), rgb);
+    return 0;
+}
+
 float fx_pano_trace_dist(const fx_pano *p, const fx_pano_trace_settings *st, fx_vec3 o, fx_vec3 dir)
 {
     fx_vec3 po, pd;

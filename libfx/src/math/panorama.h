@@ -108,6 +108,38 @@ fx_pano_trace_settings fx_pano_trace_setup(int steps, int refine, float min_dist
  * Finite for any input (a non-finite ray gives the colour of the probe's forward view). */
 int fx_pano_trace(const fx_pano *p, const fx_pano_trace_settings *st, fx_vec3 o, fx_vec3 dir, float rgb[3]);
 
+/* A pixel's ray differentials (Igehy, "Tracing Ray Differentials", 1999), the caller's
+ * space: the neighbouring pixels' reflected rays differ from this one by do_ in origin
+ * and dd_ in direction, so the pixel's footprint at distance t along the ray spans
+ * do_x + t dd_x by do_y + t dd_y. All zero: a point (no footprint). */
+typedef struct fx_ray_diff {
+    fx_vec3 dox, ddx, doy, ddy;
+} fx_ray_diff;
+
+/* Most taps along one axis of a footprint (fx_pano_trace_footprint, ssr_mirror's lookup). */
+#define FX_FOOTPRINT_TAPS_MAX 8
+
+/* Taps along an axis spanning `texels` texels (or pixels): one per texel, at least one, at
+ * most FX_FOOTPRINT_TAPS_MAX; 1 for a non-finite span. */
+static inline int fx_footprint_taps(float texels)
+{
+    if (!(texels > 1.0f))
+        return 1;
+    if (!(texels < (float)FX_FOOTPRINT_TAPS_MAX))
+        return FX_FOOTPRINT_TAPS_MAX;
+    return (int)ceilf(texels);
+}
+
+/* fx_pano_trace over a pixel's footprint: where the ray meets the probe's surface (or
+ * meets none: the far lookup), the mean of a grid of bilinear taps spread over the
+ * footprint there, one tap per texel it spans along each axis (at most
+ * FX_FOOTPRINT_TAPS_MAX each): a convex mirror shrinks the room into few pixels, and one
+ * tap per pixel would alias it and keep the probe's full noise, where the pixel sees the
+ * mean. A footprint within one texel takes the one tap of fx_pano_trace (the same bits);
+ * the hidden fill is wide already and stays. */
+int fx_pano_trace_footprint(const fx_pano *p, const fx_pano_trace_settings *st, fx_vec3 o, fx_vec3 dir,
+                            const fx_ray_diff *diff, float rgb[3]);
+
 /* The distance along the ray (dir unit, the caller's units) at which fx_pano_trace meets
  * the probe's depth surface; +inf where it meets none (or the ray is not finite). The
  * probe's evidence of where the ray ends, for a screen-space hit to agree with. */
