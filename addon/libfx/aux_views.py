@@ -231,20 +231,28 @@ def signature(spec, objs):
 
 # ---------------------------------------------------------------- render
 
-def _render_view(scene, aux, path, passes, what):
+def _render_view(scene, aux, path, passes, what, layer_passes=()):
     """Renders the aux scene and moves the EXR its File Output node wrote to path (32-bit
     multilayer, uncompressed: the mirror room's first frame at final reads its ten probes in
     0.1 G instructions instead of 0.93 G with ZIP; callgrind, docs/effects/ssr_mirror.md).
-    passes: [(EXR layer name, render pass)]; `what` names the view in errors."""
+    passes: [(EXR layer name, render pass)] of the aux scene's first view layer;
+    layer_passes: [(EXR layer name, view layer name, render pass)] of its other view layers;
+    `what` names the view in errors."""
     nt, made = compat.ensure_compositor_tree(aux, AUX_SCENE)
     try:
         rl = next(n for n in nt.nodes if n.bl_idname == "CompositorNodeRLayers")
         rl.scene = aux
+        sources = [(name, compat.render_layer_output(rl, p)) for name, p in passes]
+        for name, layer, p in layer_passes:
+            other = nt.nodes.new("CompositorNodeRLayers")
+            other.scene = aux
+            other.layer = layer
+            sources.append((name, compat.render_layer_output(other, p)))
         fo = nt.nodes.new("CompositorNodeOutputFile")
         compat.file_output_format(fo, "OPEN_EXR_MULTILAYER", "32", "NONE")
         base = path[:-len(".exr")] + ".tmp."
         compat.file_output_set_prefix(fo, base)
-        compat.file_output_link(nt, fo, [(name, compat.render_layer_output(rl, p)) for name, p in passes])
+        compat.file_output_link(nt, fo, sources)
         BUSY["on"] = True
         try:
             bpy.ops.render.render(write_still=False, scene=aux.name)
@@ -398,6 +406,7 @@ def probe_spec(scene, view):
         "matrix_world": [list(row) for row in mw], "world_to_camera": [list(row) for row in mw.inverted()],
         "clip_start": 0.0, "clip_end": clip_end, "hidden": [o.name for o in objs], "where": where,
         "mirrors": "perfect",   # how the probe shows the entry's mirrors (part of the signature)
+        "sky": PROBE_SKY_LAYER,  # the world alone as a second layer (part of the signature)
     }
 
 
@@ -436,16 +445,29 @@ def _probe_mirror_material():
     return mat
 
 
+PROBE_SKY_LAYER = "Sky"
+
+
 def _render_probe(scene, spec, objs, path):
     aux = bpy.data.scenes.new(AUX_SCENE)
     cam_data = bpy.data.cameras.new(AUX_SCENE)
     cam = bpy.data.objects.new(AUX_SCENE, cam_data)
+    # the objects in a collection of their own, which a probe's second view layer leaves
+    # out: that layer is the world alone (the sky a ray meets after passing over a wall
+    # that hides that part of the sky from the probe; math/panorama.h, fx_pano.sky)
+    coll = bpy.data.collections.new(AUX_SCENE)
     hidden = []
     swapped = []
     try:
+        aux.collection.children.link(coll)
         for ob in objs:
-            aux.collection.objects.link(ob)
+            coll.objects.link(ob)
         aux.collection.objects.link(cam)
+        layer_passes = []
+        if spec["kind"] == "probe":
+            sky = aux.view_layers.new(PROBE_SKY_LAYER)
+            sky.layer_collection.children[coll.name].exclude = True
+            layer_passes = [(PROBE_SKY_LAYER, sky.name, "Combined")]
         if spec["kind"] == "probe":
             compat.set_equirect_camera(cam_data)
             cam_data.clip_start = 0.01
@@ -500,7 +522,7 @@ def _render_probe(scene, spec, objs, path):
         vl = aux.view_layers[0]
         vl.use_pass_z = True
         _render_view(scene, aux, path, [("Image", "Combined"), ("Depth", "Depth")],
-                     "the %s render '%s'" % (spec["kind"], spec["name"]))
+                     "the %s render '%s'" % (spec["kind"], spec["name"]), layer_passes)
     finally:
         for ob in hidden:
             ob.visible_camera = True
@@ -510,6 +532,7 @@ def _render_probe(scene, spec, objs, path):
             for sl, m in zip(ob.material_slots, slot_mats):
                 sl.material = m
         bpy.data.scenes.remove(aux)
+        bpy.data.collections.remove(coll)
         bpy.data.objects.remove(cam)
         bpy.data.cameras.remove(cam_data)
 

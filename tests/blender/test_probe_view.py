@@ -10,7 +10,9 @@ tests/c/test_probe.c checks the library against the same statement):
 - the mirror objects named in the probe's spec render as perfect mirrors in the probe
   (the yellow cube at -X shows the red cube at +X) and get their materials back;
 - colour comes with the Depth (the File Output node's Image), rows as the library reads
-  them (top row = up)."""
+  them (top row = up);
+- its Sky layer is the world alone: the world's colour in every direction, no object
+  (math/panorama.h's fx_pano.sky)."""
 import math
 
 import numpy as np
@@ -26,8 +28,8 @@ from libfx import aux_views
 scene = bpy.context.scene
 for ob in list(bpy.data.objects):
     bpy.data.objects.remove(ob)
-scene.world = bpy.data.worlds.new("black")
-scene.world.color = (0, 0, 0)
+scene.world = bpy.data.worlds.new("plain")
+scene.world.color = (0.05, 0.1, 0.3)   # the probe's Sky layer must show it, and nothing else
 scene.render.engine = "CYCLES"
 scene.cycles.samples = 4
 scene.cycles.use_denoising = False
@@ -132,3 +134,9 @@ def test_probe_conventions(blender, library, tmp_path):
     # rows the grey floor
     assert rgb[0:3, :, 2].mean() > 0.9 and rgb[0:3, :, 0].mean() < 0.05
     assert np.allclose(rgb[-3:], 0.2, atol=0.02)
+    # the Sky layer: the world alone (Combined shows the cubes and the floor there)
+    assert "Sky" in exr.passes(), exr.passes()
+    sky = exr.get("Sky", "RGB")
+    assert np.allclose(sky, (0.05, 0.1, 0.3), atol=0.01), (sky.min(axis=(0, 1)), sky.max(axis=(0, 1)))
+    c, _, _ = colour_at((0, 1, 0))
+    assert c[1] > 0.5, "Combined lost the green cube"

@@ -139,7 +139,7 @@ static void test_parallax(void)
     const double pos[3] = { 0.3, 1.9, 1.4 };
     float *rgba = malloc((size_t)w * h * 4 * sizeof(float)), *dep = malloc((size_t)w * h * sizeof(float));
     render_probe(pos, w, h, rgba, dep);
-    fx_pano p = { rgba, dep, w, h, { 0 } };
+    fx_pano p = { rgba, dep, w, h, { 0 }, NULL };
     w2c(pos, p.to_probe);
     fx_pano_trace_settings st = fx_pano_trace_setup(64, 8, 0.02f, 100.0f, 0.35f);
     double err = 0, err_dir = 0;
@@ -261,7 +261,7 @@ static void test_trace_bits(void)
     render_probe(pos, w, h, rgba, dep);
     for (int i = 0; i < w * h; i += 37)
         dep[i] = i % 2 ? 1e10f : 0.0f;
-    fx_pano p = { rgba, dep, w, h, { 0 } };
+    fx_pano p = { rgba, dep, w, h, { 0 }, NULL };
     w2c(pos, p.to_probe);
     static const int steps[] = { 1, 2, 3, 5, 48, 63 };
     static const float thick[] = { 0.0f, 0.05f, 2.0f };
@@ -365,7 +365,7 @@ static void test_disocclusion(void)
             rgba[((size_t)y * w + x) * 4 + 3] = 1.0f;
             dep[(size_t)y * w + x] = dd;
         }
-    fx_pano p = { rgba, dep, w, h, { 0 } };
+    fx_pano p = { rgba, dep, w, h, { 0 }, NULL };
     for (int i = 0; i < 16; i++)
         p.to_probe[i] = i % 5 == 0 ? 1.0f : 0.0f; /* the caller's space is the probe's */
     fx_pano_trace_settings st = fx_pano_trace_setup(48, 6, 0.02f, 100.0f, 0.05f); /* final's */
@@ -441,6 +441,62 @@ static void test_disocclusion(void)
     CHECK(worst < 0.1);
     CHECK(worst_step < 0.1);
     free(rgba), free(dep);
+}
+
+/* The sky behind a wall: a wall 4 m ahead of the probe, 1.5 m high, hides the sky below
+ * 20.6 deg from it. A ray from 1 m higher and 3 m nearer the wall, rising at 15 deg,
+ * passes over the wall into the sky; beyond the wall the probe sees its points behind the
+ * wall to the end (they stay below 20.6 deg). The ray meets the sky at 15 deg, which the
+ * probe cannot show: with the world image (fx_pano.sky) the fill is that sky exactly;
+ * without it, the sky nearest the silhouette, higher and darker. */
+static void wall_sky_scene(fx_vec3 d, float c[3], float *depth, int world_only)
+{
+    float len = sqrtf(fx_v3_dot(d, d));
+    float up = d.y / len; /* the sky: a gradient with elevation */
+    c[0] = 0.8f - 0.6f * up, c[1] = 0.85f - 0.45f * up, c[2] = 1.0f;
+    *depth = 1e10f;
+    if (!world_only && d.z < 0.0f) {
+        float t = -4.0f / (d.z / len); /* radial distance to the plane z = -4 */
+        if (t * up < 1.5f)
+            c[0] = c[1] = c[2] = 0.3f, *depth = t;
+    }
+}
+
+static void test_sky_behind_wall(void)
+{
+    const int w = 512, h = 256;
+    float *rgba = malloc((size_t)w * h * 4 * sizeof(float)), *sky = malloc((size_t)w * h * 4 * sizeof(float));
+    float *dep = malloc((size_t)w * h * sizeof(float)), dd;
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++) {
+            size_t i = (size_t)y * w + x;
+            fx_vec3 d = fx_pano_pixel_to_dir(x + 0.5f, y + 0.5f, w, h);
+            wall_sky_scene(d, rgba + i * 4, dep + i, 0);
+            wall_sky_scene(d, sky + i * 4, &dd, 1);
+            rgba[i * 4 + 3] = sky[i * 4 + 3] = 1.0f;
+        }
+    fx_pano p = { rgba, dep, w, h, { 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1 }, NULL };
+    fx_pano_trace_settings st = fx_pano_trace_setup(48, 6, 0.02f, 100.0f, 0.05f);
+    double worst[2] = { 0, 0 };
+    int n = 0;
+    for (int k = -4; k <= 4; k++) {
+        float az = 0.05f * (float)k, el = 15.0f * (float)PI / 180.0f;
+        fx_vec3 dir = fx_v3(sinf(az) * cosf(el), sinf(el), -cosf(az) * cosf(el)), o = fx_v3(0.0f, 1.0f, -1.0f);
+        float want[3], got[2][3];
+        wall_sky_scene(dir, want, &dd, 1);
+        for (int with = 0; with < 2; with++) {
+            p.sky = with ? sky : NULL;
+            CHECK(fx_pano_trace(&p, &st, o, dir, got[with]) == 0);
+            for (int c = 0; c < 3; c++)
+                worst[with] = fmax(worst[with], fabs(got[with][c] - want[c]));
+        }
+        n++;
+    }
+    printf("sky behind a wall the ray passed over (%d rays): worst channel off the sky at the ray's direction: "
+           "without the world image %.3f, with it %.4f\n", n, worst[0], worst[1]);
+    CHECK(worst[1] < 0.005);
+    CHECK(worst[0] > 0.02); /* the case under test: the probe alone cannot show that sky */
+    free(rgba), free(sky), free(dep);
 }
 
 /* ---- end to end ---- */
@@ -824,7 +880,7 @@ static void test_pano_footprint(void)
             rgba[i * 4 + 3] = 1.0f;
             dep[i] = x < w / 2 ? 1e10f : 2.0f; /* the sky left of forward, a 2 m sphere right */
         }
-    fx_pano p = { rgba, dep, w, h, { 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1 } };
+    fx_pano p = { rgba, dep, w, h, { 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1 }, NULL };
     fx_pano_trace_settings st = fx_pano_trace_setup(48, 6, 0.02f, 100.0f, 0.05f);
     const float texel = 2.0f * (float)PI / (float)w;
     /* the sky, 21 texels (~30 deg) left of forward, at a texel's centre */
@@ -1100,6 +1156,7 @@ int main(void)
     test_parallax();
     test_trace_bits();
     test_disocclusion();
+    test_sky_behind_wall();
     test_end_to_end(ctx);
     test_planar(ctx);
     test_pano_footprint();

@@ -1363,6 +1363,7 @@ static fx_result ssr_probe_load(const fx_effect_run *run, ssr_job *j, const ssr_
     const fx_aux_view *av = pm->av;
     pano->color = av->color;
     pano->depth = av->depth;
+    pano->sky = av->sky;
     pano->w = av->width;
     pano->h = av->height;
     fx_m4_mul(av->view.cam.world_to_camera, F->view.camera_to_world, pano->to_probe);

@@ -5,7 +5,9 @@
 
 #include <float.h>
 
-void fx_pano_color(const fx_pano *p, fx_vec3 d, float rgb[3])
+/* Image img (RGBA, the probe's size) along probe-space direction d: bilinear, wrapping
+ * around horizontally and clamped at the poles. */
+static void pano_bilinear(const fx_pano *p, const float *img, fx_vec3 d, float rgb[3])
 {
     float px, py;
     fx_pano_dir_to_pixel(d, p->w, p->h, &px, &py);
@@ -16,12 +18,17 @@ void fx_pano_color(const fx_pano *p, fx_vec3 d, float rgb[3])
     x0 = ((x0 % p->w) + p->w) % p->w;
     int x1 = x0 + 1 < p->w ? x0 + 1 : 0;
     int y1 = y0 + 1 < p->h ? y0 + 1 : y0;
-    const float *a = p->color + ((size_t)y0 * p->w + x0) * 4, *b = p->color + ((size_t)y0 * p->w + x1) * 4;
-    const float *c = p->color + ((size_t)y1 * p->w + x0) * 4, *e = p->color + ((size_t)y1 * p->w + x1) * 4;
+    const float *a = img + ((size_t)y0 * p->w + x0) * 4, *b = img + ((size_t)y0 * p->w + x1) * 4;
+    const float *c = img + ((size_t)y1 * p->w + x0) * 4, *e = img + ((size_t)y1 * p->w + x1) * 4;
     for (int k = 0; k < 3; k++) {
         float top = a[k] + (b[k] - a[k]) * ax, bot = c[k] + (e[k] - c[k]) * ax;
         rgb[k] = top + (bot - top) * ay;
     }
+}
+
+void fx_pano_color(const fx_pano *p, fx_vec3 d, float rgb[3])
+{
+    pano_bilinear(p, p->color, d, rgb);
 }
 
 /* The fill for a ray whose hit is hidden from the probe (a disocclusion: it passed behind an
@@ -33,8 +40,9 @@ void fx_pano_color(const fx_pano *p, fx_vec3 d, float rgb[3])
  * 16 and 32 texel angles (weights 64, 16, 4, 1 per sample: 1 / angle^2, the nearest
  * background first), counting only samples whose surface lies no nearer than that point
  * (less 10 %): the occluder itself, nearer, never counts, nor the sky beside a surface.
- * With the sky beside the silhouette the hidden point is at infinity: the rings around the
- * silhouette point, the sky's samples only. The result is smooth in the ray, so it cannot
+ * With the sky beside the silhouette the hidden point is at infinity: the probe's world
+ * image along the ray's direction where the add-on rendered one (fx_pano.sky), else the
+ * rings around the silhouette point, the sky's samples only. The result is smooth in the ray, so it cannot
  * streak: every ray that passes behind the occluder gets a mean of the background around
  * its own hidden point, not the one texel beside the silhouette where it disappeared
  * (before: stretched bands of that texel, and of the silhouette's anti-aliased colour,
@@ -109,6 +117,11 @@ static void hidden_fill(const fx_pano *p, fx_vec3 po, fx_vec3 pd, float t_front,
         { 0.96592583f, -0.25881905f } };
     fx_vec3 qf = fx_v3_add(po, fx_v3_scale(pd, t_front));
     float dbg = fx_pano_depth(p, qf); /* the background beside the silhouette */
+    if (!isfinite(dbg) && p->sky) {
+        /* the sky beside the silhouette: the ray meets the sky, at infinity along pd */
+        pano_bilinear(p, p->sky, pd, rgb);
+        return;
+    }
     float tc = t_front;
     if (isfinite(dbg)) {
         /* |po + t pd| = dbg, the root past t_front (pd unit) */

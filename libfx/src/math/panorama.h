@@ -63,6 +63,10 @@ typedef struct fx_pano {
     /* from the caller's space (e.g. the main camera's view space) to the probe's camera
      * space: a rigid transform (row-major, as math/vec.h) */
     float to_probe[16];
+    /* the world alone (the sky, no objects) in the same directions, RGBA, finite; or NULL.
+     * A ray hidden from the probe behind a wall it passed over meets the sky, which the
+     * probe cannot show there (the wall hides the sky's lower part from the probe) */
+    const float *sky;
 } fx_pano;
 
 /* Radial depth of the texel a direction falls in (nearest: depth is never blended

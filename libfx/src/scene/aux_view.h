@@ -45,6 +45,7 @@ typedef struct fx_aux_view {
     fx_view view;      /* the view's camera (from the sidecar, not the EXR) */
     int panorama;      /* 1: an equirectangular probe (depth is then radial) */
     const float *color;/* its Combined pass (RGBA, non-finite values replaced by 0), or NULL */
+    const float *sky;  /* a probe's Sky pass (the world alone, RGBA, finite), or NULL */
     int has_plane;     /* "plane" given (planar mirror views) */
     float plane[4];    /* world plane n . x = d: nx, ny, nz (unit), d */
 } fx_aux_view;

@@ -187,6 +187,11 @@ fx_result fx_aux_view_load(const fx_frame *f, const char *name, const char *wher
         fx_aux_view_free(av);
         return rr;
     }
+    fx_pass *sk = av->panorama ? fx_frame_find_pass(av->frame, "Sky") : NULL;
+    if (sk && sk->channels == 4) {
+        fx_parallel_for(ctx, av->height, 16, half_range_rows, &(half_range_job){ sk->data, (size_t)av->width * 4 });
+        av->sky = sk->data;
+    }
     if (fx_frame_set_camera(av->frame, &cam) || !fx_view_init(&av->view, av->frame)) {
         fx_aux_view_free(av);
         return fx_fail(ctx, FX_ERR_NO_CAMERA, "%s: aux view '%s' has a singular camera matrix", where, name);
