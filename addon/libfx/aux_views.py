@@ -448,7 +448,12 @@ def _probe_mirror_material():
 PROBE_SKY_LAYER = "Sky"
 
 
-def _render_probe(scene, spec, objs, path):
+SKY_SAMPLES = 4  # the world alone is smooth: a few samples per texel for its anti-aliasing
+
+
+def _render_probe(scene, spec, objs, path, sky=True):
+    """Renders the probe or planar view `spec` of objs to path; sky=False leaves out a
+    probe's Sky layer (only to measure what it costs: tests/bench/bench_probe_sky.py)."""
     aux = bpy.data.scenes.new(AUX_SCENE)
     cam_data = bpy.data.cameras.new(AUX_SCENE)
     cam = bpy.data.objects.new(AUX_SCENE, cam_data)
@@ -464,10 +469,12 @@ def _render_probe(scene, spec, objs, path):
             coll.objects.link(ob)
         aux.collection.objects.link(cam)
         layer_passes = []
-        if spec["kind"] == "probe":
-            sky = aux.view_layers.new(PROBE_SKY_LAYER)
-            sky.layer_collection.children[coll.name].exclude = True
-            layer_passes = [(PROBE_SKY_LAYER, sky.name, "Combined")]
+        if spec["kind"] == "probe" and sky:
+            vl_sky = aux.view_layers.new(PROBE_SKY_LAYER)
+            vl_sky.layer_collection.children[coll.name].exclude = True
+            if hasattr(vl_sky, "samples"):
+                vl_sky.samples = min(SKY_SAMPLES, spec["samples"])
+            layer_passes = [(PROBE_SKY_LAYER, vl_sky.name, "Combined")]
         if spec["kind"] == "probe":
             compat.set_equirect_camera(cam_data)
             cam_data.clip_start = 0.01

@@ -30,6 +30,9 @@ for ob in list(bpy.data.objects):
     bpy.data.objects.remove(ob)
 scene.world = bpy.data.worlds.new("plain")
 scene.world.color = (0.05, 0.1, 0.3)   # the probe's Sky layer must show it, and nothing else
+for n in (scene.world.node_tree.nodes if scene.world.node_tree else []):
+    if n.type == "BACKGROUND":         # 5.x: a new world has nodes, which win over .color
+        n.inputs["Color"].default_value = (0.05, 0.1, 0.3, 1.0)
 scene.render.engine = "CYCLES"
 scene.cycles.samples = 4
 scene.cycles.use_denoising = False
