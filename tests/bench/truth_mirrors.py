@@ -102,6 +102,20 @@ def local_worse(img, plain, truth, region):
     return int(worse.sum()), ratio
 
 
+def copy_bound(plain, truth, truth2, region, rows):
+    """How much of the mirror error a method that copies the right input pixels into the
+    mirror can remove: the input renders with fewer samples than the truths, so a perfect
+    copy still carries the input's noise. Off the mirror (the same surfaces in input and
+    truth) the input's MAE against the truth is k times the second truth's; the floor's
+    region MAE (the second truth's) times k is then the copy's. Returns (k, fall bound)."""
+    off = ~region
+    def mae(a):
+        return float(np.abs(np.clip(a, 0, 1) - np.clip(truth, 0, 1)).mean(2)[off].mean())
+    k = mae(plain) / max(mae(truth2), 1e-9)
+    none, floor = rows[0][2], rows[1][2]
+    return k, 1.0 - k * floor / none
+
+
 def with_fallback(recipe, fallback):
     r = json.loads(json.dumps(recipe))
     for e in r["effects"]:
@@ -146,6 +160,7 @@ def main():
         outs = C.run_presets(recipe, passes, side, a.out, "m_%s" % v, runs=a.runs)
         rows = C.rows_for(truth, truth2, plain, outs, region)
         local = {q: local_worse(outs[q][0], plain, truth, region) for q in C.PRESETS}
+        bound = copy_bound(plain, truth, truth2, region, rows)
         # the other fallback at each preset ("no probe": fallback texture; reference keeps its planar view)
         tex = C.run_presets(with_fallback(recipe, "texture"), passes, side, a.out, "m_%s_ss" % v, runs=a.runs)
         prb = C.run_presets(with_fallback(recipe, "probe"), passes, side, a.out, "m_%s_probe" % v, runs=a.runs)
@@ -163,6 +178,7 @@ def main():
             bake = json.load(open(p + "eevee_probes.exr.json")).get("bake_s")
         series[v] = rows
         report[v] = {"region_px": int(region.sum()), "rows": rows,
+                     "copy_bound": {"noise_ratio": bound[0], "fall": bound[1]},
                      "local9_worse": {q: {"pixels": n, "max_ratio": m} for q, (n, m) in local.items()},
                      "probes": [{"name": n, "at": at, "size": [int(w), int(h)], "samples": int(sp),
                                  "render_s": float(t)} for n, at, w, h, sp, t in probes],
@@ -173,6 +189,9 @@ def main():
         md.append("9x9 check (issue 27): mirror-region pixels whose 9x9 mean error exceeds the no-effect "
                   "input's there (largest ratio): " + ", ".join("%s %d (%.2f)" % (q, n, m)
                                                                for q, (n, m) in local.items()) + "\n")
+        md.append("A perfect copy of the input's pixels removes at most %.0f %% here: off the mirror the input's "
+                  "MAE against the truth is %.2fx the second truth's (its fewer samples' noise)\n"
+                  % (100 * bound[1], bound[0]))
         for n, at, w, h, sp, t in probes:
             md.append("%s at %s: Cycles %sx%s, %s samples, rendered in %.1f s (apart from the ms above)\n"
                       % (n, at, w, h, sp, float(t)))

@@ -180,7 +180,7 @@ static const fx_param_def ssr_param_defs[] = {
               "Flat mirrors: the reflection is the add-on's render from the camera mirrored in the "
               "mirror's plane (exact; one more render per mirror plane). Worth turning on for a flat "
               "mirror at final too: on the truth scenes it removed 87-92 % of the mirror error where "
-              "final's trace + probe removed 80-84 %, for one Cycles render per plane (about 2x the "
+              "final's trace + probe removed 79-86 %, for one Cycles render per plane (about 2x the "
               "probe's render time). Pixels off that plane, glossy, bent or cel mirrors, and a frame "
               "without that view keep the trace and the fallback"),
     FX_P_BOOL(ssr_params, footprint, "footprint", 1,
