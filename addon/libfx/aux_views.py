@@ -410,6 +410,48 @@ def probe_spec(scene, view):
     }
 
 
+PROBES_MAX = 4   # probes per mirror entry (ssr_mirror's PROBES_MAX)
+
+
+def probe_specs(scene, view):
+    """The probes of a need: one (probe_spec), or, for a mirror whose planes face different
+    ways (a facing pair in one entry: the single probe would sit between them, in the
+    room's middle, far from what either mirror's rays start from), one per plane, each
+    placed before its own plane as a single flat mirror's probe is ("probe:<key>",
+    "probe:<key>#2", ...; ssr_mirror takes for each mirror point the nearest probe in front
+    of it). A curved mirror, a Light Probe in the scene, or planes that face one way keep
+    the one probe."""
+    base = probe_spec(scene, view)
+    mask = view.get("mask") or {}
+    objs = mask_objects(scene, mask)
+    cam = scene.camera
+    if not objs or cam is None or base["where"].startswith("the Light Probe"):
+        return [base]
+    mats = set(mask.get("material") or [])
+    try:
+        planes = _planes(objs, mats, cam.matrix_world.translation)
+    except NotPlanar:
+        return [base]
+    if len(planes) < 2 or all(p[0].dot(planes[0][0]) > 0.5 for p in planes):
+        return [base]
+    specs = []
+    for k, (n, d, _, names) in enumerate(planes[:PROBES_MAX]):
+        on = [o for o in objs if o.name in names]
+        faces = [f for f in _mirror_faces(on, mats) if f[1].dot(n) > 0.999]
+        area = sum(f[2] for f in faces)
+        if not faces or area <= 0:
+            return [base]
+        centre = sum((f[0] * f[2] for f in faces), Vector((0, 0, 0))) / area
+        lo, hi = world_box(on)
+        size = (hi - lo).length
+        pos = centre + n * min(1.0, max(0.1, 0.15 * size))
+        mw = Matrix.Translation(pos) @ Euler((math.pi / 2, 0.0, 0.0)).to_matrix().to_4x4()
+        specs.append(dict(base, name=planar_view_name(view["name"], k), where="the mirror plane of %s"
+                          % ", ".join(names[:4]), matrix_world=[list(row) for row in mw],
+                          world_to_camera=[list(row) for row in mw.inverted()]))
+    return specs
+
+
 def _probe_scene_objects(scene):
     return sorted([ob for ob in scene.objects if ob.type != "CAMERA" and not ob.hide_render],
                   key=lambda o: o.name)
@@ -701,7 +743,7 @@ def _view_specs(scene, view):
     """The renders one needed probe or planar view takes: [spec] (planar: one per plane;
     none, with a log line, for a mirror that is not flat)."""
     if view["kind"] != "planar":
-        return [probe_spec(scene, view)]
+        return probe_specs(scene, view)
     try:
         return planar_specs(scene, view)
     except NotPlanar as e:
@@ -945,6 +987,8 @@ def from_disk(scene):
         names = [view["name"]]
         if view["kind"] == "planar":   # one view per plane of the mirror
             names = [planar_view_name(view["name"], k) for k in range(PLANAR_MAX)]
+        elif view["kind"] == "probe":  # one probe per plane of a facing pair
+            names = [planar_view_name(view["name"], k) for k in range(PROBES_MAX)]
         for name in names:
             meta_path = "%slibfx_aux_%s.json" % (scene_setup.output_prefix(scene), _file_name(name))
             try:

@@ -69,6 +69,8 @@
 #include <string.h>
 
 #define PLANAR_VIEWS_MAX 4 /* planar views per entry (the add-on's aux_views.PLANAR_MAX) */
+#define PROBES_MAX 4       /* probes per entry: one per mirror plane facing its own way (the add-on's
+                              aux_views.probe_specs) */
 
 typedef struct ssr_params {
     float reflectivity;
@@ -385,16 +387,41 @@ typedef struct ssr_job {
     float opm[16];
     float *dbg_hit, *dbg_xy, *dbg_len, *dbg_fb;
     const fx_pano *probe;      /* the reflection probe (fallback probe and present), or NULL */
+    const fx_pano *probes[PROBES_MAX]; /* every probe of the entry (probes[0] == probe) */
+    fx_vec3 probe_at_view[PROBES_MAX]; /* their centres in view space */
+    int probe_count;
     const fx_aux_view *planar[PLANAR_VIEWS_MAX]; /* the mirrored cameras' views, one per plane */
     int planar_count;          /* how many (0: planar_view off or none rendered) */
     float *dbg_planar;
     fx_pano_trace_settings pst;
 } ssr_job;
 
-/* The reflection of ray o + t dir (view space) seen in the probe, parallax-corrected. */
-static inline void probe_colour(const ssr_job *j, fx_vec3 o, fx_vec3 dir, float rgb[3])
+/* The probe that serves a mirror point at pos with normal n: with one probe, that one;
+ * with one per mirror plane (a facing pair), the nearest whose centre lies in front of the
+ * surface (each is placed before its own plane), else the nearest. */
+static const fx_pano *probe_at(const ssr_job *j, fx_vec3 pos, fx_vec3 n)
 {
-    fx_pano_trace(j->probe, &j->pst, o, dir, rgb);
+    if (j->probe_count <= 1)
+        return j->probe;
+    int best = -1, best_front = 0;
+    float best_d = 0.0f;
+    for (int k = 0; k < j->probe_count; k++) {
+        fx_vec3 d = fx_v3_sub(j->probe_at_view[k], pos);
+        int front = fx_v3_dot(d, n) > 0.0f;
+        float dist = fx_v3_dot(d, d);
+        if (best < 0 || front > best_front || (front == best_front && dist < best_d)) {
+            best = k;
+            best_front = front;
+            best_d = dist;
+        }
+    }
+    return j->probes[best];
+}
+
+/* The reflection of ray o + t dir (view space) seen in probe pr, parallax-corrected. */
+static inline void probe_colour(const ssr_job *j, const fx_pano *pr, fx_vec3 o, fx_vec3 dir, float rgb[3])
+{
+    fx_pano_trace(pr, &j->pst, o, dir, rgb);
 }
 
 /* The pixel (0..n-1) holding coordinate p: (int)clamp(floorf(p), 0, n - 1) without floorf
@@ -449,8 +476,8 @@ static int shading_normal(const ssr_job *j, int x, int y, fx_vec3 pos, fx_vec3 i
  *  - back faces: a surface whose normal faces along the ray (n . r > 0: the ray would meet
  *    its back, which the frame does not show): 1 at n . r <= 0, 0 from CONF_BACK1;
  *  - the ray's length: 0 at max_distance (the ray was cut there), from 0.8 of it;
- *  - with a probe (its depth): the hit's distance against the probe's distance along the
- *    same ray (fx_pano_trace_dist): a factor CONF_PROBE1 apart or more (either way) is a
+ *  - with a probe (its depth; the one that serves the ray's mirror point, probe_at): the
+ *    hit's distance against the probe's distance along the same ray (fx_pano_trace_dist): a factor CONF_PROBE1 apart or more (either way) is a
  *    contradiction (the tracer passed an occluder the probe sees, or took a silhouette
  *    the probe sees past): 0; within CONF_PROBE0: 1. A ray the probe sees no surface
  *    along gives no evidence either way.
@@ -460,7 +487,8 @@ static int shading_normal(const ssr_job *j, int x, int y, fx_vec3 pos, fx_vec3 i
 #define CONF_BACK1 0.1f
 #define CONF_PROBE0 1.3f
 #define CONF_PROBE1 2.0f
-static float hit_confidence(const ssr_job *j, const ssr_frame *F, const fx_ssr_hit *hit, fx_vec3 o, fx_vec3 r)
+static float hit_confidence(const ssr_job *j, const ssr_frame *F, const fx_ssr_hit *hit, fx_vec3 o, fx_vec3 r,
+                            const fx_pano *probe)
 {
     float conf = 1.0f;
     if (j->p->edge_fade > 0.0f) {
@@ -476,8 +504,8 @@ static float hit_confidence(const ssr_job *j, const ssr_frame *F, const fx_ssr_h
     if (view_normal_at(F, hit->ix, hit->iy, &hn))
         conf *= 1.0f - fx_smoothstep(0.0f, CONF_BACK1, fx_v3_dot(hn, r));
     conf *= 1.0f - fx_smoothstep(0.8f * j->p->max_distance, j->p->max_distance, hit->length);
-    if (j->probe && conf > 0.0f && hit->length > 0.0f) {
-        float tp = fx_pano_trace_dist(j->probe, &j->pst, o, r);
+    if (probe && conf > 0.0f && hit->length > 0.0f) {
+        float tp = fx_pano_trace_dist(probe, &j->pst, o, r);
         if (tp > 0.0f && isfinite(tp)) {
             float q = hit->length > tp ? hit->length / tp : tp / hit->length;
             conf *= 1.0f - fx_smoothstep(CONF_PROBE0, CONF_PROBE1, q);
@@ -506,7 +534,7 @@ static void trace_pixel(const ssr_job *j, int x, int y, cell_hit *h)
     fx_ssr_hit hit;
     if (!fx_ssr_trace(&F->scene, &j->st, o, r, &hit))
         return;
-    float fade = hit_confidence(j, F, &hit, o, r);
+    float fade = hit_confidence(j, F, &hit, o, r, probe_at(j, pos, n));
     h->px = hit.px;
     h->py = hit.py;
     h->conf = fade;
@@ -732,7 +760,8 @@ static void ray_colour(const ssr_job *j, fx_vec3 ro, fx_vec3 rd, float px, float
     fx_vec3 r = fx_v3_reflect(inc, n);
     fx_vec3 o = fx_v3_add(pos, fx_v3_scale(n, j->p->bias * fx_ssr_pixel_footprint(&F->view, -pos.z)));
     fx_ssr_hit hit;
-    float fade = fx_ssr_trace(&F->scene, &j->st, o, r, &hit) ? hit_confidence(j, F, &hit, o, r) : 0.0f;
+    const fx_pano *probe = probe_at(j, pos, n);
+    float fade = fx_ssr_trace(&F->scene, &j->st, o, r, &hit) ? hit_confidence(j, F, &hit, o, r, probe) : 0.0f;
     if (!(fade > 0.0f) && !j->probe)
         return;
     float next[3] = { 0.0f, 0.0f, 0.0f }, tex[3], est[3] = { rgb[0], rgb[1], rgb[2] };
@@ -741,7 +770,7 @@ static void ray_colour(const ssr_job *j, fx_vec3 ro, fx_vec3 rd, float px, float
     if (j->probe && fade < 1.0f) {
         /* the bounce's miss: the probe, blended by the hit's confidence */
         float pc[3];
-        probe_colour(j, pos, r, pc);
+        probe_colour(j, probe, pos, r, pc);
         for (int k = 0; k < 3; k++)
             next[k] = pc[k] + (next[k] - pc[k]) * fade;
         fade = 1.0f;
@@ -984,10 +1013,11 @@ static void shade_rows(void *user, int begin, int end)
                 conf = 1.0f;
             } else if (j->probe && conf < 1.0f) {
                 /* only where the fallback shows */
+                const fx_pano *pr = probe_at(j, pos, n);
                 if (p->footprint)
-                    fx_pano_trace_footprint(j->probe, &j->pst, pos, rd, &df, fb);
+                    fx_pano_trace_footprint(pr, &j->pst, pos, rd, &df, fb);
                 else
-                    probe_colour(j, pos, rd, fb);
+                    probe_colour(j, pr, pos, rd, fb);
                 /* the probe's colour is the reflection there: the colour operator's too (as the
                  * planar view's; cel's outlines need the hit's depth edges: not on the probe) */
                 if (p->op == OP_SEPIA || p->op == OP_GRAYSCALE)
@@ -1336,14 +1366,12 @@ static fx_result ssr_multi_bounce(const fx_effect_run *run, ssr_job *j, float *f
     return FX_OK;
 }
 
-/* Process stage 0 (fallback probe): the entry's reflection probe as j->probe, in the
- * frame's view space. Missing or unreadable: a warning, and the texture fallback. */
-static fx_result ssr_probe_load(const fx_effect_run *run, ssr_job *j, const ssr_frame *F, fx_aux_map *pm,
-                                fx_pano *pano)
+/* One probe (aux view `name`) into *pano, in the frame's view space; 0 when it is
+ * unusable (a warning), 1 when loaded, or an error (out of memory). */
+static fx_result probe_load_one(const fx_effect_run *run, const ssr_frame *F, const char *name, fx_aux_map *pm,
+                                fx_pano *pano, int *loaded)
 {
-    const ssr_params *p = run->params;
-    char name[FX_NAME_MAX];
-    snprintf(name, sizeof name, FX_AUX_PROBE "%s", run->mask_key ? run->mask_key : "");
+    *loaded = 0;
     /* from the context's cache: a batch or a live session decodes each probe once */
     fx_result r = fx_aux_view_acquire(run->frame, name, run->where, pm);
     if (r == FX_ERR_OUT_OF_MEMORY)
@@ -1367,8 +1395,49 @@ static fx_result ssr_probe_load(const fx_effect_run *run, ssr_job *j, const ssr_
     pano->w = av->width;
     pano->h = av->height;
     fx_m4_mul(av->view.cam.world_to_camera, F->view.camera_to_world, pano->to_probe);
-    j->probe = pano;
-    j->pst = fx_pano_trace_setup(p->probe_steps, p->refine, 0.02f, p->max_distance, 0.05f);
+    *loaded = 1;
+    return FX_OK;
+}
+
+/* Process stage 0 (fallback probe): the entry's reflection probes, "probe:<key>" and, for
+ * a mirror whose planes face different ways (a facing pair), "probe:<key>#2", ... while
+ * the frame has them, in the frame's view space (j->probes; j->probe the first). Missing or
+ * unreadable: a warning, and the texture fallback where no probe is left. pm[] and pano[]
+ * receive them (released by the caller). */
+static fx_result ssr_probe_load(const fx_effect_run *run, ssr_job *j, const ssr_frame *F,
+                                fx_aux_map pm[PROBES_MAX], fx_pano pano[PROBES_MAX])
+{
+    const ssr_params *p = run->params;
+    for (int k = 0; k < PROBES_MAX; k++) {
+        char name[FX_NAME_MAX];
+        if (k == 0)
+            snprintf(name, sizeof name, FX_AUX_PROBE "%s", run->mask_key ? run->mask_key : "");
+        else
+            snprintf(name, sizeof name, FX_AUX_PROBE "%s#%d", run->mask_key ? run->mask_key : "", k + 1);
+        if (k > 0) {
+            int has = fx_aux_view_has(run->frame, name);
+            if (has < 0)
+                return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory reading the frame's aux views",
+                               run->where);
+            if (!has)
+                break;
+        }
+        int loaded;
+        fx_result r = probe_load_one(run, F, name, &pm[k], &pano[k], &loaded);
+        if (r)
+            return r;
+        if (!loaded)
+            continue;
+        /* its centre in view space: to_probe is rigid (R, t), the centre is -R^T t */
+        const float *m = pano[k].to_probe;
+        fx_vec3 c = fx_v3(-(m[0] * m[3] + m[4] * m[7] + m[8] * m[11]), -(m[1] * m[3] + m[5] * m[7] + m[9] * m[11]),
+                          -(m[2] * m[3] + m[6] * m[7] + m[10] * m[11]));
+        j->probe_at_view[j->probe_count] = c;
+        j->probes[j->probe_count++] = &pano[k];
+    }
+    j->probe = j->probe_count ? j->probes[0] : NULL;
+    if (j->probe)
+        j->pst = fx_pano_trace_setup(p->probe_steps, p->refine, 0.02f, p->max_distance, 0.05f);
     return FX_OK;
 }
 
@@ -1438,9 +1507,10 @@ static fx_result ssr_process(const fx_effect_run *run)
     fx_color_op_matrix(p->op == OP_SEPIA ? FX_COLOR_OP_SEPIA : FX_COLOR_OP_GRAY_LUMINANCE, j.opm);
     if (p->bend != 0.0f)
         fit_face(&j);
-    fx_aux_map probe_map;
-    memset(&probe_map, 0, sizeof probe_map);
-    fx_pano pano;
+    fx_aux_map probe_maps[PROBES_MAX];
+    memset(probe_maps, 0, sizeof probe_maps);
+    fx_pano panos[PROBES_MAX];
+    memset(panos, 0, sizeof panos);
     fx_aux_map planar_maps[PLANAR_VIEWS_MAX];
     memset(planar_maps, 0, sizeof planar_maps);
     fx_mask *surfaces = NULL;
@@ -1449,7 +1519,7 @@ static fx_result ssr_process(const fx_effect_run *run)
     const size_t hits_bytes = (size_t)F.w * F.h * sizeof(cell_hit);
     fx_depth_pyramid pyr;
     memset(&pyr, 0, sizeof pyr);
-    if (p->fallback == FALLBACK_PROBE && (r = ssr_probe_load(run, &j, &F, &probe_map, &pano)))
+    if (p->fallback == FALLBACK_PROBE && (r = ssr_probe_load(run, &j, &F, probe_maps, panos)))
         goto out;
     if (p->planar_view && p->glossiness == 0.0f && p->bend == 0.0f && p->op != OP_CEL &&
         (r = ssr_planar_load(run, &j, planar_maps)))
@@ -1492,7 +1562,8 @@ out:
     fx_buffer_put(run->ctx, blurred, frame_bytes);
     fx_mask_free(surfaces);
     fx_depth_pyramid_free(run->ctx, &pyr);
-    fx_aux_map_release(run->ctx, &probe_map);
+    for (int k = 0; k < PROBES_MAX; k++)
+        fx_aux_map_release(run->ctx, &probe_maps[k]);
     for (int k = 0; k < PLANAR_VIEWS_MAX; k++)
         fx_aux_map_release(run->ctx, &planar_maps[k]);
     return r;
