@@ -1041,6 +1041,131 @@ static void test_footprint(fx_context *ctx)
     g_stripes = 0;
 }
 
+/* Two mirrors facing different ways in one entry (the +Y wall and the -X wall), one probe
+ * before each ("probe:<key>" and "probe:<key>#2", as the add-on's probe_specs places
+ * them): each mirror point takes the nearest probe in front of it. The trace is cut to one
+ * step, so the probes serve every pixel. With a second probe that is all magenta, the
+ * pixels nearer the first probe show none of it and those nearer the second show it. (In
+ * this empty box either probe sees the whole room, so which one is nearer does not change
+ * the error; the pair truth scene, whose blocks and ball hide the floor from a probe
+ * between the mirrors, measures that: docs/accuracy_truth.md.) */
+static void add_probes(fx_context *ctx, fx_frame *f, const char *name, const char *pa, const double a[3],
+                       const char *pb, const double b[3])
+{
+    char json[8192];
+    int n = snprintf(json, sizeof json, "{\"aux_views\": [");
+    for (int k = 0; k < (pb ? 2 : 1); k++) {
+        float m[16];
+        w2c(k ? b : a, m);
+        n += snprintf(json + n, sizeof json - n, "%s{\"name\": \"%s%s\", \"path\": \"%s\", \"world_to_camera\": [",
+                      k ? ", " : "", name, k ? "#2" : "", k ? pb : pa);
+        for (int i = 0; i < 16; i++)
+            n += snprintf(json + n, sizeof json - n, "%s%.9g", i ? ", " : "", m[i]);
+        n += snprintf(json + n, sizeof json - n,
+                      "], \"projection\": [1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1], \"clip_start\": 0, "
+                      "\"clip_end\": 1e6, \"orthographic\": false, \"kind\": \"probe\", \"panorama\": \"equirect\"}");
+    }
+    snprintf(json + n, sizeof json - n, "]}");
+    CHECK_OK(ctx, fx_frame_apply_sidecar(f, json));
+}
+
+static void test_two_probes(fx_context *ctx)
+{
+    const char *dir = tu_tmpdir("twoprobes");
+    float *want = calloc((size_t)FW * FH * 3, sizeof(float));
+    fx_frame *f = room_frame(ctx, want);
+    float *rgba, *ima;
+    int c;
+    fx_frame_pass(f, "Combined", &rgba, &c);
+    fx_frame_pass(f, "IndexMA", &ima, &c);
+    unsigned char *side = calloc((size_t)FW * FH, 1); /* 1: the +Y wall, 2: the -X wall */
+    for (int y = 0; y < FH; y++)
+        for (int x = 0; x < FW; x++) {
+            size_t i = (size_t)y * FW + x;
+            double d[3];
+            cam_dir(x + 0.5, y + 0.5, d);
+            int wall, w2;
+            double t = box_exit(CAM, d, &wall);
+            if (wall == 3)
+                side[i] = 1;
+            if (wall != 0)
+                continue;
+            /* the -X wall is a mirror too: grey backing, its exact reflection */
+            side[i] = 2;
+            ima[i] = 1;
+            rgba[i * 4] = rgba[i * 4 + 1] = rgba[i * 4 + 2] = 0.1f;
+            double p[3] = { CAM[0] + t * d[0], CAM[1] + t * d[1], CAM[2] + t * d[2] }, r[3] = { -d[0], d[1], d[2] };
+            double t2 = box_exit(p, r, &w2);
+            double q[3] = { p[0] + t2 * r[0], p[1] + t2 * r[1], p[2] + t2 * r[2] };
+            room_colour(q, w2, want + i * 3);
+        }
+    fx_stack *s = et_stack(ctx, "ssr_mirror");
+    CHECK_OK(ctx, fx_stack_set_mask_json(s, 0, "{\"material_index\": 1}"));
+    CHECK_OK(ctx, fx_stack_set_quality(s, FX_QUALITY_FINAL));
+    CHECK_OK(ctx, fx_stack_set_int(s, 0, "max_steps", 1));
+    char *req = NULL;
+    CHECK_OK(ctx, fx_stack_required_aux_views(s, &req));
+    const char *at = req ? strstr(req, "\"probe:") : NULL;
+    char pname[64] = "probe:?";
+    if (at)
+        snprintf(pname, 19, "%s", at + 1);
+    fx_free(req);
+    char pa[600], pm[600];
+    snprintf(pa, sizeof pa, "%s/a.exr", dir);
+    snprintf(pm, sizeof pm, "%s/magenta.exr", dir);
+    const double a[3] = { 0.0, 2.6, 1.5 }, b[3] = { -2.1, 0.0, 1.5 };
+    write_probe(ctx, pa, a, 256, 128, 0);
+    {
+        float *col = malloc((size_t)256 * 128 * 4 * sizeof(float)), *dep = malloc((size_t)256 * 128 * sizeof(float));
+        render_probe(b, 256, 128, col, dep);
+        for (size_t i = 0; i < (size_t)256 * 128; i++)
+            col[i * 4] = 1.0f, col[i * 4 + 1] = 0.0f, col[i * 4 + 2] = 1.0f;
+        et_write_view(ctx, pm, 256, 128, col, dep);
+        free(col), free(dep);
+    }
+    fx_frame *o[2] = { NULL, NULL };
+    add_probes(ctx, f, pname, pa, a, NULL, NULL);
+    CHECK_OK(ctx, fx_stack_run(s, f, &o[0]));
+    add_probes(ctx, f, pname, pa, a, pm, b);
+    CHECK_OK(ctx, fx_stack_run(s, f, &o[1]));
+    const float *c0 = et_combined(o[0]), *c1 = et_combined(o[1]);
+    int na = 0, nb = 0;
+    double mag_a = 0, mag_b = 0;
+    for (int y = 0; c0 && c1 && y < FH; y++)
+        for (int x = 0; x < FW; x++) {
+            size_t i = (size_t)y * FW + x;
+            if (!side[i])
+                continue;
+            /* the pixel's wall point and which probe lies nearer */
+            double d[3], p[3];
+            int wall;
+            cam_dir(x + 0.5, y + 0.5, d);
+            double t = box_exit(CAM, d, &wall), da = 0, db = 0;
+            for (int k = 0; k < 3; k++) {
+                p[k] = CAM[k] + t * d[k];
+                da += (p[k] - a[k]) * (p[k] - a[k]);
+                db += (p[k] - b[k]) * (p[k] - b[k]);
+            }
+            /* magenta: (R + B) / 2 - G, against the first probe's run alone */
+            double mg = (c1[i * 4] + c1[i * 4 + 2]) / 2 - c1[i * 4 + 1] -
+                        ((c0[i * 4] + c0[i * 4 + 2]) / 2 - c0[i * 4 + 1]);
+            if (da < 0.8 * db) {
+                mag_a += mg, na++;
+            } else if (db < 0.8 * da) {
+                mag_b += mg, nb++;
+            }
+        }
+    na = na ? na : 1, nb = nb ? nb : 1;
+    printf("two mirrors, two probes, a magenta second probe: magenta %.3f on the %d pixels nearer the first, %.3f "
+           "on the %d nearer the second\n", mag_a / na, na, mag_b / nb, nb);
+    CHECK(na > 100 && nb > 100);
+    CHECK(fabs(mag_a / na) < 0.01 && mag_b / nb > 0.5);
+    fx_frame_free(o[0]), fx_frame_free(o[1]);
+    fx_stack_free(s);
+    fx_frame_free(f);
+    free(want), free(side);
+}
+
 /* Saved recipes keep their bits: a recipe of params_version 1 (before footprint) runs with
  * footprint off at final; version 2 takes final's footprint. */
 static void test_footprint_migration(fx_context *ctx)
@@ -1163,6 +1288,7 @@ int main(void)
     test_footprint(ctx);
     test_edge_coverage(ctx);
     test_footprint_migration(ctx);
+    test_two_probes(ctx);
     fx_context_free(ctx);
     return tu_finish("test_probe");
 }
