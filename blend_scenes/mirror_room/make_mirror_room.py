@@ -53,7 +53,7 @@ ALL_MIRRORS = [m[0] for m in MIRRORS]
 
 def ssr(name, label, **params):
     """One ssr_mirror entry: one mirror kind on its own material mask."""
-    return {"effect": "ssr_mirror", "enabled": True, "label": label, "params": params,
+    return {"effect": "ssr_mirror", "params_version": 2, "enabled": True, "label": label, "params": params,
             "mask": {"material": name}}
 
 
@@ -80,7 +80,7 @@ RECIPE = {
         ssr("Mirror_BentIn", "concave (curved geometry)"),
         # last, so rays landing on the other mirrors see their finished reflections;
         # one entry for both panels, so the regress between them is traced (bounces)
-        {"effect": "ssr_mirror", "enabled": True, "label": "facing pair (multiple reflections)",
+        {"effect": "ssr_mirror", "params_version": 2, "enabled": True, "label": "facing pair (multiple reflections)",
          "params": {"bounces": 4}, "mask": {"material": ["Mirror_FacingA", "Mirror_FacingB"]}},
     ],
 }

@@ -44,7 +44,9 @@ RECIPE = {
     "version": 1,
     "quality": "final",
     "effects": [
-        {"effect": "ssr_mirror", "enabled": True, "label": "the truth scene's mirror",
+        # params_version 2: final's footprints (tests/bench/truth_mirrors.py passes this
+        # recipe explicitly; the .blend's embedded copy predates it)
+        {"effect": "ssr_mirror", "params_version": 2, "enabled": True, "label": "the truth scene's mirror",
          "params": {}, "mask": {"material": "Mirror"}},
     ],
 }
