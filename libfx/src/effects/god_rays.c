@@ -204,6 +204,16 @@ static int god_rays_identity(const void *params)
     return p->weight == 0.0f || p->exposure == 0.0f;
 }
 
+/* Method volumetric writes each output pixel from its own source pixel only (vol_put,
+ * vol_put4_add: read, then written) and makes it finite there (finite4, fx_finite8): the
+ * stack may hand it its own buffer as dst (no fresh frame-sized buffer on a consumed
+ * frame's first run) and skip its whole-frame NaN/Inf scan. The radial methods read
+ * neighbours (the blur) and are neither. */
+static int god_rays_volumetric_only(const void *params)
+{
+    return ((const god_rays_params *)params)->method == METHOD_VOLUMETRIC;
+}
+
 /* volumetric: the light's depth view, by the light's name ("" = the scene's first sun). */
 static int god_rays_aux_views(const void *params, fx_aux_need *out, int max)
 {
@@ -751,8 +761,8 @@ static inline __attribute__((always_inline)) void vol_put4_add(const vol_job *j,
     const v8f t23 = __builtin_shufflevector(T4, one, 2, 2, 2, 4, 3, 3, 3, 4);
     const v8f l01 = __builtin_shufflevector(L4, L4, 0, 0, 0, 0, 1, 1, 1, 1);
     const v8f l23 = __builtin_shufflevector(L4, L4, 2, 2, 2, 2, 3, 3, 3, 3);
-    const float *restrict src = j->run->src + i * 4;
-    float *restrict dst = j->run->dst + i * 4;
+    const float *src = j->run->src + i * 4; /* may be dst (god_rays_in_place) */
+    float *dst = j->run->dst + i * 4;
     fx_store8(dst, fx_finite8(fx_load8(src) * t01 + rad8 * l01));
     fx_store8(dst + 8, fx_finite8(fx_load8(src + 8) * t23 + rad8 * l23));
 }
@@ -1047,4 +1057,6 @@ const fx_effect_class fx_effect_god_rays = {
     .aux_views = god_rays_aux_views,
     .process = god_rays_process,
     .identity = god_rays_identity,
+    .in_place = god_rays_volumetric_only,
+    .own_finite = god_rays_volumetric_only,
 };
