@@ -1098,10 +1098,41 @@ static void test_pcf_tilted_plane(fx_context *ctx)
     fx_frame_free(f);
 }
 
+/* depth_min (the medium's entry in god_rays volumetric) is the least normalised depth
+ * wherever it lies (first, middle or last row, first or last column, a row's tail past its
+ * 4-lane part), 1 and 2 threads; 1 when every texel is background or non-finite. */
+static void test_depth_min(fx_context *c2)
+{
+    fx_context *c1 = NULL;
+    fx_context_new(&c1, 1);
+    const int w = 37, h = 29;
+    float *raw = malloc((size_t)w * h * sizeof(float));
+    const int at[][2] = {{0, 0}, {w - 1, h - 1}, {5, h / 2}, {w - 1, 0}, {0, h - 1}, {-1, -1}};
+    for (size_t k = 0; k < sizeof at / sizeof at[0]; k++)
+        for (int t = 0; t < 2; t++) {
+            for (int i = 0; i < w * h; i++)
+                raw[i] = at[k][0] < 0 ? (i % 2 ? 1e10f : NAN) : 5.0f + (float)((i * 7919) % 13) * 0.1f;
+            if (at[k][0] >= 0)
+                raw[at[k][1] * w + at[k][0]] = 2.5f;
+            fx_shadow_map sm;
+            fx_context *ctx = t ? c2 : c1;
+            CHECK_OK(ctx, fx_shadow_map_build(ctx, raw, w, h, 1.0f, 10.0f, 0, &sm, "test"));
+            float want = 1.0f;
+            for (int i = 0; i < w * h; i++)
+                want = sm.depth[i] < want ? sm.depth[i] : want;
+            CHECK(sm.depth_min == want);
+            CHECK(at[k][0] < 0 ? want == 1.0f : want == fx_shadow_map_norm(&sm, 2.5f));
+            fx_shadow_map_free(&sm);
+        }
+    free(raw);
+    fx_context_free(c1);
+}
+
 int main(void)
 {
     fx_context *ctx = NULL;
     fx_context_new(&ctx, 2);
+    test_depth_min(ctx);
     test_hard_limit(ctx);
     test_pcf_tilted_plane(ctx);
     test_soft_edge_width(ctx);

@@ -34,6 +34,8 @@ typedef struct fx_shadow_map {
     int width, height;
     float znear, zfar;
     float *depth;    /* normalised depth, width * height */
+    float depth_min; /* its least value, at most 1 (fx_shadow_map_build: the rows' minima
+                        taken while they are in cache; a copy of the map keeps it) */
     float *moments;  /* filtered (E[z], E[z^2]), mwidth * mheight * 2; NULL until filtered */
     int mwidth, mheight; /* the moments' grid: ceil(width / 2^level) x ceil(height / 2^level) */
     int level;       /* the moments' reduction level (0: full resolution) */
