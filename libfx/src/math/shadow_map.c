@@ -51,12 +51,21 @@ FX_CLONES_VECTORIZE static void norm_rows(void *user, int y0, int y1)
         return;
     }
     for (int y = y0; y < y1; y++) {
-        const float *restrict raw = j->raw + (size_t)y * sm->width;
-        float *restrict out = sm->depth + (size_t)y * sm->width;
-        for (int x = 0; x < sm->width; x++) {
-            const float z = 2.0f * (raw[x] - znear) / range - 1.0f;
-            const float c = z < -1.0f ? -1.0f : z > 1.0f ? 1.0f : z;
-            out[x] = fabsf(z) <= FLT_MAX ? c : 1.0f; /* NaN, +-Inf: 1 (isfinite) */
+        float *out = sm->depth + (size_t)y * sm->width;
+        if (j->raw == sm->depth) { /* in place: one pointer, so the loop needs no overlap check */
+            for (int x = 0; x < sm->width; x++) {
+                const float z = 2.0f * (out[x] - znear) / range - 1.0f;
+                const float c = z < -1.0f ? -1.0f : z > 1.0f ? 1.0f : z;
+                out[x] = fabsf(z) <= FLT_MAX ? c : 1.0f;
+            }
+        } else {
+            const float *restrict raw = j->raw + (size_t)y * sm->width;
+            float *restrict o = out;
+            for (int x = 0; x < sm->width; x++) {
+                const float z = 2.0f * (raw[x] - znear) / range - 1.0f;
+                const float c = z < -1.0f ? -1.0f : z > 1.0f ? 1.0f : z;
+                o[x] = fabsf(z) <= FLT_MAX ? c : 1.0f; /* NaN, +-Inf: 1 (isfinite) */
+            }
         }
         j->row_min[y] = least(out, (size_t)sm->width);
     }
@@ -100,8 +109,8 @@ static void moment_rows(void *user, int y0, int y1)
         }
 }
 
-fx_result fx_shadow_map_build(fx_context *ctx, const float *raw_depth, int width, int height, float znear,
-                              float zfar, int derivative_bias, fx_shadow_map *out, const char *where)
+static fx_result build(fx_context *ctx, const float *raw_depth, float *in_place, int width, int height, float znear,
+                       float zfar, int derivative_bias, fx_shadow_map *out, const char *where)
 {
     memset(out, 0, sizeof *out);
     if (width <= 0 || height <= 0 || !(zfar > znear) || !isfinite(zfar) || !isfinite(znear))
@@ -111,10 +120,12 @@ fx_result fx_shadow_map_build(fx_context *ctx, const float *raw_depth, int width
     fx_result r = fx_check_budget(ctx, (uint64_t)n * 3 * sizeof(float), "shadow map");
     if (r)
         return r;
-    out->depth = fx_mem_alloc(n * sizeof(float));
+    out->depth = in_place ? in_place : fx_mem_alloc(n * sizeof(float));
     float *row_min = fx_mem_alloc((size_t)height * sizeof(float));
     if (!out->depth || !row_min) {
         fx_mem_free(row_min);
+        if (in_place)
+            out->depth = NULL; /* the caller's still */
         fx_shadow_map_free(out);
         return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for a %d x %d shadow map", where, width, height);
     }
@@ -129,6 +140,18 @@ fx_result fx_shadow_map_build(fx_context *ctx, const float *raw_depth, int width
     out->depth_min = least(row_min, (size_t)height);
     fx_mem_free(row_min);
     return FX_OK;
+}
+
+fx_result fx_shadow_map_build(fx_context *ctx, const float *raw_depth, int width, int height, float znear,
+                              float zfar, int derivative_bias, fx_shadow_map *out, const char *where)
+{
+    return build(ctx, raw_depth, NULL, width, height, znear, zfar, derivative_bias, out, where);
+}
+
+fx_result fx_shadow_map_build_in_place(fx_context *ctx, float *raw_depth, int width, int height, float znear,
+                                       float zfar, int derivative_bias, fx_shadow_map *out, const char *where)
+{
+    return build(ctx, raw_depth, raw_depth, width, height, znear, zfar, derivative_bias, out, where);
 }
 
 /* ---- the moments' reduction (mip) ---- */

@@ -62,6 +62,11 @@ static inline float fx_shadow_map_norm_dist(const fx_shadow_map *sm, float metre
  * moments is NULL (PCF and the hard test read only the depth). */
 fx_result fx_shadow_map_build(fx_context *ctx, const float *raw_depth, int width, int height, float znear,
                               float zfar, int derivative_bias, fx_shadow_map *out, const char *where);
+/* The same over raw_depth itself (fx_mem_alloc'ed, width * height): on success it becomes
+ * out->depth (the map owns it: no second buffer, no fresh pages); on failure the caller
+ * keeps it. The same bits as fx_shadow_map_build. */
+fx_result fx_shadow_map_build_in_place(fx_context *ctx, float *raw_depth, int width, int height, float znear,
+                                       float zfar, int derivative_bias, fx_shadow_map *out, const char *where);
 /* Filters the moments with a box (width rounded to an odd number of texels) or a Gaussian
  * of the same variance (first making the moments when there are none). width <= 1:
  * unfiltered. `filter` may carry a reduction level

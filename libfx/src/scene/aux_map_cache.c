@@ -214,8 +214,19 @@ static fx_result entry_build(const fx_frame *f, const char *name, int bias, int 
         e->bytes = (uint64_t)floats * sizeof(float) + sizeof *av;
         return FX_OK;
     }
-    r = fx_shadow_map_build(f->ctx, av->depth, av->width, av->height, av->view.cam.clip_start,
-                            av->view.cam.clip_end, bias, &e->sm, where);
+    /* the EXR's depth is dropped below: the map normalises it where it lies (one buffer
+     * fewer, no fresh pages on a first frame) when the pass alone holds it */
+    float *own = fx_frame_take_pass_data(av->frame, "Depth");
+    if (own) {
+        r = fx_shadow_map_build_in_place(f->ctx, own, av->width, av->height, av->view.cam.clip_start,
+                                         av->view.cam.clip_end, bias, &e->sm, where);
+        if (r)
+            fx_mem_free(own);
+        av->depth = NULL;
+    } else {
+        r = fx_shadow_map_build(f->ctx, av->depth, av->width, av->height, av->view.cam.clip_start,
+                                av->view.cam.clip_end, bias, &e->sm, where);
+    }
     if (!r && filter <= AUX_MOMENTS(0))
         /* width 1: the moments at the level, unfiltered */
         r = fx_shadow_map_filter(f->ctx, &e->sm,
