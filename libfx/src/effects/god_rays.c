@@ -775,10 +775,10 @@ static inline __attribute__((always_inline)) void vol_put4_add(const vol_job *j,
  * crowded the bilinear path's into spills): the likeness upsample on one cell
  * (fx_volume_upsample_same4) and across cells (fx_volume_upsample per pixel); the same
  * functions, so the same bits. */
-FX_CLONES __attribute__((noinline)) static void vol_group_same4(const float *cell, const v4f *bc, float ty,
-                                                               const v4f *tx, const v4f *d, v4f *L, v4f *T)
+FX_CLONES __attribute__((noinline)) static void vol_group_same4(const float *cell, const v4f *bc, float ty, v4f tx,
+                                                               v4f d, v4f *L, v4f *T)
 {
-    fx_volume_upsample_same4(cell, bc, ty, *tx, *d, L, T);
+    fx_volume_upsample_same4(cell, bc, ty, tx, d, L, T);
 }
 
 FX_CLONES __attribute__((noinline)) static void vol_group_across(const vol_job *j, const float *dep, int k, size_t r0,
@@ -834,7 +834,7 @@ static inline __attribute__((always_inline)) void vol_row_edges_body(const vol_j
                 L = lv + tx * dl;
                 T = tv + tx * dt;
             } else {
-                vol_group_same4(row + 12 * X, bcast + 12 * X, ty, &tx, &d, &L, &T);
+                vol_group_same4(row + 12 * X, bcast + 12 * X, ty, tx, d, &L, &T);
             }
         } else { /* across cells: one by one */
             vol_group_across(j, dep, k, r0, r1, ty, &L, &T);
