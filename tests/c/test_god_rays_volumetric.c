@@ -84,6 +84,7 @@ static int box_x0 = W; /* columns x >= box_x0 see a box top 3 m below the camera
 #define BOX_DEPTH 3.0
 
 static double ray_end(int x) { return x >= box_x0 ? BOX_DEPTH : CAM_Z; }
+static int poison; /* scene_frame puts NaN, +-Inf and 1e38 into some source pixels */
 
 /* The scene sidecar: the camera, the sun (or another light type) and the light view. */
 static fx_frame *scene_frame(fx_context *ctx, const char *light_path, const char *type, float src)
@@ -94,6 +95,9 @@ static fx_frame *scene_frame(fx_context *ctx, const char *light_path, const char
         rgba[4 * i + 3] = 1.0f;
         d[i] = (float)ray_end(i % W);
     }
+    static const float bad[] = {NAN, INFINITY, -INFINITY, 1e38f, -1e38f};
+    for (int i = 0; poison && i < W * H; i += 37)
+        rgba[4 * i + i % 4] = bad[(i / 37) % 5];
     fx_frame *f = et_frame(ctx, W, H, rgba);
     fx_frame_add_pass(f, "Depth", 1, d);
     free(rgba);
@@ -473,6 +477,64 @@ static void test_extremes_errors(fx_context *ctx)
     fx_frame_free(f);
 }
 
+/* In place and finite by itself (god_rays_volumetric_only): on a consumed frame the
+ * volumetric method writes over the frame's own Combined with the bits of the run that keeps
+ * its input, at every reduced preset, both composites, 1 and 2 threads; source pixels with
+ * NaN, +-Inf and +-1e38 give finite outputs although the stack no longer scans them, and
+ * no warning (nothing was left for the stack to replace). The polar method is neither: it
+ * takes a buffer of its own and still gives the same bits. */
+static void test_in_place_finite(fx_context *c2)
+{
+    double entry = 0;
+    const char *path = write_light_view(c2, &entry);
+    fx_context *c1 = NULL;
+    fx_context_new(&c1, 1);
+    static const char *const q[] = {"draft", "preview", "final"};
+    poison = 1;
+    for (int t = 0; t < 2; t++)
+        for (int k = 0; k < 4; k++)
+            for (int screen = 0; screen < 2; screen++) {
+                fx_context *ctx = t ? c2 : c1;
+                fx_stack *s = vol_stack(ctx, k < 3 ? q[k] : "final", "full");
+                if (screen)
+                    CHECK_OK(ctx, fx_stack_set_enum(s, 0, "composite", "screen"));
+                if (k == 3) {
+                    CHECK_OK(ctx, fx_stack_set_enum(s, 0, "method", "polar"));
+                    CHECK_OK(ctx, fx_stack_set_enum(s, 0, "light_source", "screen"));
+                }
+                fx_frame *f = scene_frame(ctx, path, "SUN", 0.25f);
+                fx_context_clear_warnings(ctx);
+                float *o = et_run(ctx, s, f);
+                if (k < 3)
+                    CHECK(o && tu_all_finite(o, (size_t)W * H * 4) && fx_context_warning_count(ctx) == 0);
+                CHECK(et_in_place_equal(ctx, s, f, k < 3)); /* f is consumed */
+                free(o);
+                fx_stack_free(s);
+            }
+    poison = 0;
+    fx_context_free(c1);
+    /* the aux cache off: each run reads and builds a private light map, whose buffer goes back
+     * to the context's store at release and is taken again by the next read: the same bits
+     * run after run as with the cache */
+    fx_context *nc = NULL;
+    fx_context_new(&nc, 2);
+    CHECK_OK(nc, fx_context_set_aux_cache(nc, 0));
+    fx_frame *f = scene_frame(c2, path, "SUN", 0.25f), *g = scene_frame(nc, path, "SUN", 0.25f);
+    fx_stack *s = vol_stack(c2, "final", "full"), *t = vol_stack(nc, "final", "full");
+    float *want = et_run(c2, s, f);
+    for (int k = 0; k < 3; k++) {
+        float *o = et_run(nc, t, g);
+        CHECK(want && o && memcmp(want, o, (size_t)W * H * 4 * sizeof(float)) == 0);
+        free(o);
+    }
+    free(want);
+    fx_stack_free(s);
+    fx_stack_free(t);
+    fx_frame_free(f);
+    fx_frame_free(g);
+    fx_context_free(nc);
+}
+
 /* The composite's 4-pixel upsamples (fx_volume_upsample_cell4 across cells,
  * fx_volume_upsample_same4 on one cell) give fx_volume_upsample's bits: random cells mixing alike depths, depth edges, background and thin objects (no
  * texel alike: the likest one), random tx/ty, including exact 0 and 1. */
@@ -556,6 +618,7 @@ int main(void)
     test_threads_presets(ctx);
     test_depth_edge(ctx);
     test_extremes_errors(ctx);
+    test_in_place_finite(ctx);
     test_upsample_cell4();
     fx_context_free(ctx);
     return tu_finish("test_god_rays_volumetric");

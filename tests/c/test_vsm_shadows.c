@@ -4,6 +4,8 @@
  * against the multi-occluder leak; aux views through the sidecar; threads; NaN input. */
 #include "fx_effect_test.h"
 
+#include "core/frame.h"
+#include "core/mem.h"
 #include "scene/aux_map.h"
 #include "math/sat.h"
 #include "math/shadow_map.h"
@@ -1098,10 +1100,68 @@ static void test_pcf_tilted_plane(fx_context *ctx)
     fx_frame_free(f);
 }
 
+/* depth_min (the medium's entry in god_rays volumetric) is the least normalised depth
+ * wherever it lies (first, middle or last row, first or last column, a row's tail past its
+ * 4-lane part), 1 and 2 threads; 1 when every texel is background or non-finite. */
+static void test_depth_min(fx_context *c2)
+{
+    fx_context *c1 = NULL;
+    fx_context_new(&c1, 1);
+    const int w = 37, h = 29;
+    float *raw = malloc((size_t)w * h * sizeof(float));
+    const int at[][2] = {{0, 0}, {w - 1, h - 1}, {5, h / 2}, {w - 1, 0}, {0, h - 1}, {-1, -1}};
+    for (size_t k = 0; k < sizeof at / sizeof at[0]; k++)
+        for (int t = 0; t < 2; t++) {
+            for (int i = 0; i < w * h; i++)
+                raw[i] = at[k][0] < 0 ? (i % 2 ? 1e10f : NAN) : 5.0f + (float)((i * 7919) % 13) * 0.1f;
+            if (at[k][0] >= 0)
+                raw[at[k][1] * w + at[k][0]] = 2.5f;
+            fx_shadow_map sm;
+            fx_context *ctx = t ? c2 : c1;
+            CHECK_OK(ctx, fx_shadow_map_build(ctx, raw, w, h, 1.0f, 10.0f, 0, &sm, "test"));
+            float want = 1.0f;
+            for (int i = 0; i < w * h; i++)
+                want = sm.depth[i] < want ? sm.depth[i] : want;
+            CHECK(sm.depth_min == want);
+            CHECK(at[k][0] < 0 ? want == 1.0f : want == fx_shadow_map_norm(&sm, 2.5f));
+            /* in place over the raw buffer (the aux-map cache's light views): the same bits */
+            float *own = fx_mem_alloc((size_t)w * h * sizeof(float));
+            memcpy(own, raw, (size_t)w * h * sizeof(float));
+            fx_shadow_map ip;
+            CHECK_OK(ctx, fx_shadow_map_build_in_place(ctx, own, w, h, 1.0f, 10.0f, 0, &ip, "test"));
+            CHECK(ip.depth == own && ip.depth_min == sm.depth_min &&
+                  memcmp(ip.depth, sm.depth, (size_t)w * h * sizeof(float)) == 0);
+            fx_shadow_map_free(&ip);
+            fx_shadow_map_free(&sm);
+        }
+    free(raw);
+    fx_context_free(c1);
+    /* fx_frame_take_pass_data: the pass leaves the frame with its pixels; not when shared */
+    fx_frame *f = NULL, *g = NULL;
+    fx_frame_new(c2, 8, 4, &f);
+    fx_frame_new(c2, 8, 4, &g);
+    float ones[32];
+    for (int i = 0; i < 32; i++)
+        ones[i] = 1.0f + (float)i;
+    CHECK_OK(c2, fx_frame_add_pass(f, "Depth", 1, ones));
+    CHECK_OK(c2, fx_frame_add_pass(f, "Normal", 3, NULL));
+    CHECK_OK(c2, fx_frame_share_pass(g, "Depth", f, fx_frame_find_pass(f, "Depth")));
+    CHECK(!fx_frame_take_pass_data(f, "Depth") && fx_frame_pass_count(f) == 2); /* g holds it too */
+    fx_frame_free(g);
+    const float *was = fx_frame_find_pass(f, "Depth")->data;
+    float *got = fx_frame_take_pass_data(f, "Depth");
+    CHECK(got == was && got && got[31] == 32.0f && fx_frame_pass_count(f) == 1 && !fx_frame_find_pass(f, "Depth") &&
+          fx_frame_find_pass(f, "Normal"));
+    CHECK(!fx_frame_take_pass_data(f, "Depth"));
+    fx_mem_free(got);
+    fx_frame_free(f);
+}
+
 int main(void)
 {
     fx_context *ctx = NULL;
     fx_context_new(&ctx, 2);
+    test_depth_min(ctx);
     test_hard_limit(ctx);
     test_pcf_tilted_plane(ctx);
     test_soft_edge_width(ctx);

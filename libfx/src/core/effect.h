@@ -199,6 +199,10 @@ typedef struct fx_effect_class {
     /* Non-zero if these params let process() run with dst == src (see FX_EFFECT_IN_PLACE,
      * for effects where it depends on the params). NULL: the flag decides. */
     int (*in_place)(const void *params);
+    /* Non-zero if these params make process() write only finite values (see
+     * FX_EFFECT_OWN_FINITE, for effects where it depends on the params). NULL: the flag
+     * decides. */
+    int (*own_finite)(const void *params);
     /* Border pixels read around each output pixel, for a w x h frame. NULL: 0. The stack
      * does not tile and hands process() the whole source image, so no run needs it: it is
      * what `describe` reports (docs, the add-on, bench_all's "local effect" tables), at

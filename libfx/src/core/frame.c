@@ -205,6 +205,19 @@ fx_result fx_frame_adopt_pass(fx_frame *f, const char *name, int channels, float
     return FX_OK;
 }
 
+float *fx_frame_take_pass_data(fx_frame *f, const char *name)
+{
+    fx_pass *p = fx_frame_find_pass(f, name);
+    if (!p || !p->pixels || atomic_load(&p->pixels->holders) != 1)
+        return NULL;
+    float *data = p->pixels->data;
+    fx_mem_free(p->pixels);
+    const int i = (int)(p - f->passes);
+    memmove(f->passes + i, f->passes + i + 1, (size_t)(f->pass_count - i - 1) * sizeof *f->passes);
+    f->pass_count--;
+    return data;
+}
+
 int fx_frame_pixels_holders(const fx_pass *p)
 {
     return p && p->pixels ? atomic_load(&p->pixels->holders) : 0;

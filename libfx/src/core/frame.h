@@ -60,6 +60,10 @@ fx_result fx_frame_adopt_pass(fx_frame *f, const char *name, int channels, float
 /* Gives dst a pass named `name` holding src_pass's pixels: shared when both frames have
  * one context and the pass was never handed out writable, else copied. Same sizes only. */
 fx_result fx_frame_share_pass(fx_frame *dst, const char *name, const fx_frame *src, const fx_pass *src_pass);
+/* Takes the pixels of f's pass `name` out of the frame (the pass is removed) when the pass
+ * alone holds them: the caller owns them (fx_mem_free or fx_buffer_put). NULL when there is
+ * no such pass or another pass holds its pixels too (the frame is then unchanged). */
+float *fx_frame_take_pass_data(fx_frame *f, const char *name);
 /* How many passes (in any frames) hold p's pixels. */
 int fx_frame_pixels_holders(const fx_pass *p);
 /* New frame with f's size, windows, camera, time, metadata and proxy factor, no passes. */

@@ -1162,7 +1162,7 @@ static fx_result check_inputs(const fx_stack *s, const fx_entry *e, const void *
 
 /* Blends the effect's output into the image by the mask, replaces non-finite values
  * (warning with their count) and makes dst the image. */
-static fx_result composite(fx_context *ctx, run_buffers *b, const fx_effect_run *run, unsigned flags,
+static fx_result composite(fx_context *ctx, run_buffers *b, const fx_effect_run *run, int own_finite,
                            atomic_size_t *own_bad)
 {
     const int w = run->width, h = run->height;
@@ -1171,7 +1171,7 @@ static fx_result composite(fx_context *ctx, run_buffers *b, const fx_effect_run 
         return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", run->where);
     float *dst = run->dst;
     fx_rect stale = dst == b->cur ? b->stale_cur : dst == b->spare ? b->stale_spare : (fx_rect){0, 0, 0, 0};
-    composite_job job = {b->image, dst, run->mask, run->roi, stale, w, (flags & FX_EFFECT_OWN_FINITE) != 0, bad};
+    composite_job job = {b->image, dst, run->mask, run->roi, stale, w, own_finite, bad};
     fx_parallel_for(ctx, h, fx_grain_for(ctx, h), composite_rows, &job);
     image_moved(b, dst, run->roi);
     size_t total = atomic_load(own_bad);
@@ -1267,7 +1267,9 @@ static fx_result run_entry(fx_stack *s, fx_entry *e, int i, const fx_frame *in, 
     atomic_init(&own_bad, 0);
     run.nonfinite = &own_bad;
     if (!(r = identity ? fx_effect_pass_through(&run) : e->cls->process(&run)))
-        r = composite(ctx, b, &run, e->cls->flags, &own_bad);
+        r = composite(ctx, b, &run,
+                      (e->cls->flags & FX_EFFECT_OWN_FINITE) || (e->cls->own_finite && e->cls->own_finite(params)),
+                      &own_bad);
 out:
     fx_mask_free(mask);
     fx_mem_free(scaled);

@@ -204,6 +204,16 @@ static int god_rays_identity(const void *params)
     return p->weight == 0.0f || p->exposure == 0.0f;
 }
 
+/* Method volumetric writes each output pixel from its own source pixel only (vol_put,
+ * vol_put4_add: read, then written) and makes it finite there (finite4, fx_finite8): the
+ * stack may hand it its own buffer as dst (no fresh frame-sized buffer on a consumed
+ * frame's first run) and skip its whole-frame NaN/Inf scan. The radial methods read
+ * neighbours (the blur) and are neither. */
+static int god_rays_volumetric_only(const void *params)
+{
+    return ((const god_rays_params *)params)->method == METHOD_VOLUMETRIC;
+}
+
 /* volumetric: the light's depth view, by the light's name ("" = the scene's first sun). */
 static int god_rays_aux_views(const void *params, fx_aux_need *out, int max)
 {
@@ -743,25 +753,53 @@ static inline void vol_put(const vol_job *j, size_t i, float L, float T)
 /* vol_put for 4 pixels from i on, added, no debug: two pixels per 8-lane vector (one AVX
  * register in vol_rows' AVX2 clone), {T,T,T,1} and L spread from the lanes of T4 and L4;
  * the same products and sums as vol_put, so the same bits. */
-static inline __attribute__((always_inline)) void vol_put4_add(const vol_job *j, size_t i, v4f L4, v4f T4)
+static inline __attribute__((always_inline)) void vol_put4_add_at(v4f rad, const float *src, float *dst, v4f L4,
+                                                                   v4f T4)
 {
-    const v4f one = V4(1.0f), rad = j->rad;
+    const v4f one = V4(1.0f);
     const v8f rad8 = __builtin_shufflevector(rad, rad, 0, 1, 2, 3, 0, 1, 2, 3);
     const v8f t01 = __builtin_shufflevector(T4, one, 0, 0, 0, 4, 1, 1, 1, 4);
     const v8f t23 = __builtin_shufflevector(T4, one, 2, 2, 2, 4, 3, 3, 3, 4);
     const v8f l01 = __builtin_shufflevector(L4, L4, 0, 0, 0, 0, 1, 1, 1, 1);
     const v8f l23 = __builtin_shufflevector(L4, L4, 2, 2, 2, 2, 3, 3, 3, 3);
-    const float *restrict src = j->run->src + i * 4;
-    float *restrict dst = j->run->dst + i * 4;
-    fx_store8(dst, fx_finite8(fx_load8(src) * t01 + rad8 * l01));
+    fx_store8(dst, fx_finite8(fx_load8(src) * t01 + rad8 * l01)); /* src may be dst (god_rays_in_place) */
     fx_store8(dst + 8, fx_finite8(fx_load8(src + 8) * t23 + rad8 * l23));
+}
+
+static inline __attribute__((always_inline)) void vol_put4_add(const vol_job *j, size_t i, v4f L4, v4f T4)
+{
+    vol_put4_add_at(j->rad, j->run->src + i * 4, j->run->dst + i * 4, L4, T4);
+}
+
+/* The groups off vol_row_edges_body's bilinear path, out of line (inlined, their registers
+ * crowded the bilinear path's into spills): the likeness upsample on one cell
+ * (fx_volume_upsample_same4) and across cells (fx_volume_upsample per pixel); the same
+ * functions, so the same bits. */
+FX_CLONES __attribute__((noinline)) static void vol_group_same4(const float *cell, const v4f *bc, float ty, v4f tx,
+                                                               v4f d, v4f *L, v4f *T)
+{
+    fx_volume_upsample_same4(cell, bc, ty, tx, d, L, T);
+}
+
+FX_CLONES __attribute__((noinline)) static void vol_group_across(const vol_job *j, const float *dep, int k, size_t r0,
+                                                                size_t r1, float ty, v4f *L, v4f *T)
+{
+    float Ls[4], Ts[4]; /* (a vector's lanes have no address in clang) */
+    for (int m = 0; m < 4; m++) {
+        const int X0 = j->col_x0[k + m];
+        fx_volume_upsample(j->lo, j->lo_t, j->lo_depth, r0, r1, X0, X0 + 1 < j->lw ? X0 + 1 : X0, j->col_t[k + m],
+                           ty, fx_volume_weight_depth(dep[k + m], j->vol->far_limit), &Ls[m], &Ts[m]);
+    }
+    *L = ld4(Ls);
+    *T = ld4(Ts);
 }
 
 /* volume_upsample edges: one row, 4 pixels at a time, put at once. A group on one cell
  * whose 4 pixels lie within VOL_ALIKE in depth of the cell's 4 texels takes the plain
  * bilinear (vol_row_edges' lerps); any other takes vol_row_lt's likeness weights (the
  * same functions, so the same bits). */
-FX_CLONES static void vol_row_edges_put(const vol_job *j, int y, float *row, v4f *bcast, float *edges, int *cached_Y0)
+static inline __attribute__((always_inline)) void vol_row_edges_body(const vol_job *j, int y, float *row, v4f *bcast,
+                                                                      float *edges, int *cached_Y0, const int add)
 {
     const int lw = j->lw, x0 = j->run->roi.x0, n = j->run->roi.x1 - x0;
     size_t r0 = 0, r1 = 0;
@@ -774,7 +812,9 @@ FX_CLONES static void vol_row_edges_put(const vol_job *j, int y, float *row, v4f
     const float *restrict ct = j->col_t;
     const float far = j->vol->far_limit;
     const size_t i0 = (size_t)y * j->run->width + x0;
-    const int add = !j->screen && !j->dbg;
+    const float *srow = j->run->src + i0 * 4;
+    float *drow = j->run->dst + i0 * 4;
+    const v4f rad = j->rad;
     int Xc = -1;
     v4f lv = V4(0.0f), dl = lv, tv = lv, dt = lv, dlo = lv, dhi = lv;
     int k = 0;
@@ -794,20 +834,13 @@ FX_CLONES static void vol_row_edges_put(const vol_job *j, int y, float *row, v4f
                 L = lv + tx * dl;
                 T = tv + tx * dt;
             } else {
-                fx_volume_upsample_same4(row + 12 * X, bcast + 12 * X, ty, tx, d, &L, &T);
+                vol_group_same4(row + 12 * X, bcast + 12 * X, ty, tx, d, &L, &T);
             }
         } else { /* across cells: one by one */
-            float Ls[4], Ts[4]; /* (a vector's lanes have no address in clang) */
-            for (int m = 0; m < 4; m++) {
-                const int X0 = cx[k + m];
-                fx_volume_upsample(j->lo, j->lo_t, j->lo_depth, r0, r1, X0, X0 + 1 < lw ? X0 + 1 : X0, ct[k + m],
-                                   ty, fx_volume_weight_depth(dep[k + m], far), &Ls[m], &Ts[m]);
-            }
-            L = ld4(Ls);
-            T = ld4(Ts);
+            vol_group_across(j, dep, k, r0, r1, ty, &L, &T);
         }
         if (add) {
-            vol_put4_add(j, i0 + (size_t)k, L, T);
+            vol_put4_add_at(rad, srow + 4 * (size_t)k, drow + 4 * (size_t)k, L, T);
         } else {
             for (int m = 0; m < 4; m++)
                 vol_put(j, i0 + (size_t)(k + m), L[m], T[m]);
@@ -820,6 +853,16 @@ FX_CLONES static void vol_row_edges_put(const vol_job *j, int y, float *row, v4f
                            fx_volume_weight_depth(dep[k], far), &L, &T);
         vol_put(j, i0 + (size_t)k, L, T);
     }
+}
+
+/* the body twice: with the composite add and no debug pass as a constant (the usual case,
+ * the loop then tests nothing per group), and the general one */
+FX_CLONES static void vol_row_edges_put(const vol_job *j, int y, float *row, v4f *bcast, float *edges, int *cached_Y0)
+{
+    if (!j->screen && !j->dbg)
+        vol_row_edges_body(j, y, row, bcast, edges, cached_Y0, 1);
+    else
+        vol_row_edges_body(j, y, row, bcast, edges, cached_Y0, 0);
 }
 
 /* The output rows: the in-scatter and transmittance upsampled from the reduced grid by
@@ -1047,4 +1090,6 @@ const fx_effect_class fx_effect_god_rays = {
     .aux_views = god_rays_aux_views,
     .process = god_rays_process,
     .identity = god_rays_identity,
+    .in_place = god_rays_volumetric_only,
+    .own_finite = god_rays_volumetric_only,
 };

@@ -151,10 +151,16 @@ static void raw_chunk(decode_job *j, int k, const exr_chunk_info_t *ci, int x0, 
             int end = c + 1; /* a run of decoded channels, adjacent in the line */
             while (end < pt->channel_count && rd->dest[pt->first_chan + end].base)
                 end++;
+            /* a lone one-channel pass (a light view's depth): its row is contiguous in the
+             * pass, so the bytes go there at once, without the scratch and the copy */
+            const chan_dest *d0 = &rd->dest[pt->first_chan + c];
+            char *to = end - c == 1 && d0->stride == 1
+                           ? (char *)(d0->base + (size_t)(y0 + y - rd->dw[1]) * (size_t)rd->width +
+                                      (size_t)(x0 - rd->dw[0]))
+                           : (char *)scratch;
             size_t want = (size_t)(end - c) * row, got = 0;
             while (got < want) {
-                long long n = fx_os_pread(j->raw_fd, (char *)scratch + got, want - got,
-                                          line + j->raw_off[c] + got);
+                long long n = fx_os_pread(j->raw_fd, to + got, want - got, line + j->raw_off[c] + got);
                 if (n <= 0) {
                     fx_exr_job_fail(&j->err, k, n < 0 ? FX_ERR_IO : FX_ERR_BAD_FILE, "'%s': %s: %s", rd->f->path,
                                     what, n < 0 ? strerror(errno) : "the file ends inside the chunk");
@@ -162,7 +168,7 @@ static void raw_chunk(decode_job *j, int k, const exr_chunk_info_t *ci, int x0, 
                 }
                 got += (size_t)n;
             }
-            for (int i = c; i < end; i++) {
+            for (int i = c; i < end && to == (char *)scratch; i++) {
                 const chan_dest *d = &rd->dest[pt->first_chan + i];
                 const float *src = scratch + (size_t)(i - c) * (size_t)ci->width;
                 float *dst = d->base +

@@ -4,6 +4,8 @@
 #include "math/blur.h"
 #include "core/buffers.h"
 #include "core/mem.h"
+#include "core/simd4.h"
+#include "math/clones.h"
 
 #include <float.h>
 #include <math.h>
@@ -13,29 +15,59 @@ typedef struct build_job {
     const float *raw;
     fx_shadow_map *sm;
     int bias;
+    float *row_min; /* per row: its least normalised depth (1 at most) */
 } build_job;
+
+/* The least of n values (never NaN here) and 1, 4 lanes at a time: the minimum does not
+ * depend on the order, so neither on the rows' split over threads. */
+static float least(const float *z, size_t n)
+{
+    v4f m4 = V4(1.0f);
+    size_t i = 0;
+    for (; i + 4 <= n; i += 4)
+        m4 = min4(ld4(z + i), m4);
+    float m = 1.0f;
+    for (int k = 0; k < 4; k++)
+        m = m4[k] < m ? m4[k] : m;
+    for (; i < n; i++)
+        m = z[i] < m ? z[i] : m;
+    return m;
+}
 
 /* fx_shadow_map_norm over rows, written branch-free so that the compiler vectorises it (the
  * same operations in the same order, so the same bits: IEEE division and comparisons are
- * exact lane by lane) */
-static void norm_rows(void *user, int y0, int y1)
+ * exact lane by lane; 8 lanes in the AVX2 clone), and each row's least value while the row
+ * is in cache (depth_min) */
+FX_CLONES_VECTORIZE static void norm_rows(void *user, int y0, int y1)
 {
     build_job *j = user;
     fx_shadow_map *sm = j->sm;
     const float znear = sm->znear, range = sm->zfar - sm->znear;
     if (!(range > 1e-20f)) { /* as fx_shadow_map_norm: z = 0 */
-        for (int y = y0; y < y1; y++)
+        for (int y = y0; y < y1; y++) {
             memset(sm->depth + (size_t)y * sm->width, 0, (size_t)sm->width * sizeof(float));
+            j->row_min[y] = 0.0f;
+        }
         return;
     }
     for (int y = y0; y < y1; y++) {
-        const float *restrict raw = j->raw + (size_t)y * sm->width;
-        float *restrict out = sm->depth + (size_t)y * sm->width;
-        for (int x = 0; x < sm->width; x++) {
-            const float z = 2.0f * (raw[x] - znear) / range - 1.0f;
-            const float c = z < -1.0f ? -1.0f : z > 1.0f ? 1.0f : z;
-            out[x] = fabsf(z) <= FLT_MAX ? c : 1.0f; /* NaN, +-Inf: 1 (isfinite) */
+        float *out = sm->depth + (size_t)y * sm->width;
+        if (j->raw == sm->depth) { /* in place: one pointer, so the loop needs no overlap check */
+            for (int x = 0; x < sm->width; x++) {
+                const float z = 2.0f * (out[x] - znear) / range - 1.0f;
+                const float c = z < -1.0f ? -1.0f : z > 1.0f ? 1.0f : z;
+                out[x] = fabsf(z) <= FLT_MAX ? c : 1.0f;
+            }
+        } else {
+            const float *restrict raw = j->raw + (size_t)y * sm->width;
+            float *restrict o = out;
+            for (int x = 0; x < sm->width; x++) {
+                const float z = 2.0f * (raw[x] - znear) / range - 1.0f;
+                const float c = z < -1.0f ? -1.0f : z > 1.0f ? 1.0f : z;
+                o[x] = fabsf(z) <= FLT_MAX ? c : 1.0f; /* NaN, +-Inf: 1 (isfinite) */
+            }
         }
+        j->row_min[y] = least(out, (size_t)sm->width);
     }
 }
 
@@ -77,8 +109,8 @@ static void moment_rows(void *user, int y0, int y1)
         }
 }
 
-fx_result fx_shadow_map_build(fx_context *ctx, const float *raw_depth, int width, int height, float znear,
-                              float zfar, int derivative_bias, fx_shadow_map *out, const char *where)
+static fx_result build(fx_context *ctx, const float *raw_depth, float *in_place, int width, int height, float znear,
+                       float zfar, int derivative_bias, fx_shadow_map *out, const char *where)
 {
     memset(out, 0, sizeof *out);
     if (width <= 0 || height <= 0 || !(zfar > znear) || !isfinite(zfar) || !isfinite(znear))
@@ -88,8 +120,12 @@ fx_result fx_shadow_map_build(fx_context *ctx, const float *raw_depth, int width
     fx_result r = fx_check_budget(ctx, (uint64_t)n * 3 * sizeof(float), "shadow map");
     if (r)
         return r;
-    out->depth = fx_mem_alloc(n * sizeof(float));
-    if (!out->depth) {
+    out->depth = in_place ? in_place : fx_mem_alloc(n * sizeof(float));
+    float *row_min = fx_mem_alloc((size_t)height * sizeof(float));
+    if (!out->depth || !row_min) {
+        fx_mem_free(row_min);
+        if (in_place)
+            out->depth = NULL; /* the caller's still */
         fx_shadow_map_free(out);
         return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for a %d x %d shadow map", where, width, height);
     }
@@ -99,9 +135,23 @@ fx_result fx_shadow_map_build(fx_context *ctx, const float *raw_depth, int width
     out->derivative_bias = derivative_bias != 0;
     out->znear = znear;
     out->zfar = zfar;
-    build_job j = {raw_depth, out, derivative_bias};
+    build_job j = {raw_depth, out, derivative_bias, row_min};
     fx_parallel_for(ctx, height, fx_grain_for(ctx, height), norm_rows, &j);
+    out->depth_min = least(row_min, (size_t)height);
+    fx_mem_free(row_min);
     return FX_OK;
+}
+
+fx_result fx_shadow_map_build(fx_context *ctx, const float *raw_depth, int width, int height, float znear,
+                              float zfar, int derivative_bias, fx_shadow_map *out, const char *where)
+{
+    return build(ctx, raw_depth, NULL, width, height, znear, zfar, derivative_bias, out, where);
+}
+
+fx_result fx_shadow_map_build_in_place(fx_context *ctx, float *raw_depth, int width, int height, float znear,
+                                       float zfar, int derivative_bias, fx_shadow_map *out, const char *where)
+{
+    return build(ctx, raw_depth, raw_depth, width, height, znear, zfar, derivative_bias, out, where);
 }
 
 /* ---- the moments' reduction (mip) ---- */
@@ -219,7 +269,7 @@ static fx_result make_moments(fx_context *ctx, fx_shadow_map *sm, int level, con
     sm->mheight = mh;
     sm->level = level;
     if (level == 0) {
-        build_job j = {NULL, sm, sm->derivative_bias};
+        build_job j = {NULL, sm, sm->derivative_bias, NULL};
         fx_parallel_for(ctx, mh, fx_grain_for(ctx, mh), moment_rows, &j);
     } else {
         reduce_job j = {sm, m, mw, step};

@@ -34,6 +34,8 @@ typedef struct fx_shadow_map {
     int width, height;
     float znear, zfar;
     float *depth;    /* normalised depth, width * height */
+    float depth_min; /* its least value, at most 1 (fx_shadow_map_build: the rows' minima
+                        taken while they are in cache; a copy of the map keeps it) */
     float *moments;  /* filtered (E[z], E[z^2]), mwidth * mheight * 2; NULL until filtered */
     int mwidth, mheight; /* the moments' grid: ceil(width / 2^level) x ceil(height / 2^level) */
     int level;       /* the moments' reduction level (0: full resolution) */
@@ -60,6 +62,11 @@ static inline float fx_shadow_map_norm_dist(const fx_shadow_map *sm, float metre
  * moments is NULL (PCF and the hard test read only the depth). */
 fx_result fx_shadow_map_build(fx_context *ctx, const float *raw_depth, int width, int height, float znear,
                               float zfar, int derivative_bias, fx_shadow_map *out, const char *where);
+/* The same over raw_depth itself (fx_mem_alloc'ed, width * height): on success it becomes
+ * out->depth (the map owns it: no second buffer, no fresh pages); on failure the caller
+ * keeps it. The same bits as fx_shadow_map_build. */
+fx_result fx_shadow_map_build_in_place(fx_context *ctx, float *raw_depth, int width, int height, float znear,
+                                       float zfar, int derivative_bias, fx_shadow_map *out, const char *where);
 /* Filters the moments with a box (width rounded to an odd number of texels) or a Gaussian
  * of the same variance (first making the moments when there are none). width <= 1:
  * unfiltered. `filter` may carry a reduction level

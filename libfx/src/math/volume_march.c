@@ -122,18 +122,8 @@ int fx_volume_ray_init(const fx_volume *v, float x, float y, float depth, fx_vol
 
 float fx_volume_light_entry(const fx_shadow_map *sm)
 {
-    /* the minimum, 4 lanes at a time (min4(x, m): a NaN x keeps m, as the scalar test
-     * does; the minimum does not depend on the order) */
-    const size_t n = (size_t)sm->width * sm->height;
-    v4f m4 = V4(1.0f);
-    size_t i = 0;
-    for (; i + 4 <= n; i += 4)
-        m4 = min4(ld4(sm->depth + i), m4);
-    float m = 1.0f;
-    for (int k = 0; k < 4; k++)
-        m = m4[k] < m ? m4[k] : m;
-    for (; i < n; i++)
-        m = sm->depth[i] < m ? sm->depth[i] : m;
+    /* the least normalised depth, taken when the map was built (and cached with it) */
+    float m = sm->depth_min;
     if (!(m >= -1.0f))
         m = -1.0f;
     return sm->znear + (m + 1.0f) * 0.5f * (sm->zfar - sm->znear);

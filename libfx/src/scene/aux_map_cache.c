@@ -1,4 +1,5 @@
 /* The per-context LRU cache of shadow maps built from aux views (scene/aux_map.h). */
+#include "core/buffers.h"
 #include "core/context.h"
 #include "core/frame.h"
 #include "core/mem.h"
@@ -31,8 +32,16 @@ struct fx_aux_cache {
     long built, reused;
 };
 
-static void entry_free(aux_entry *e)
+/* The map's normalised depth (a light view's frame-sized buffer, or its copy: both from
+ * fx_mem_alloc) goes back to the context's buffer store: with the cache off (each acquire
+ * builds a private map, freed at release) the next read of the view takes it instead of
+ * fresh pages. */
+static void entry_free(fx_context *ctx, aux_entry *e)
 {
+    if (e->sm.depth) {
+        fx_buffer_put(ctx, e->sm.depth, (size_t)e->sm.width * (size_t)e->sm.height * sizeof(float));
+        e->sm.depth = NULL;
+    }
     fx_mem_free(e->key);
     fx_mem_free(e->pixels);
     fx_aux_view_free(e->av);
@@ -78,7 +87,7 @@ static int cache_make_room(fx_context *ctx, uint64_t need)
             return 1;
         if (victim < 0)
             return 0;
-        entry_free(&c->e[victim]);
+        entry_free(ctx, &c->e[victim]);
         c->e[victim] = c->e[--c->n];
         memset(&c->e[c->n], 0, sizeof c->e[c->n]);
     }
@@ -95,7 +104,7 @@ fx_result fx_context_set_aux_cache(fx_context *ctx, uint64_t max_bytes)
     c->limit_set = 1;
     for (int i = c->n - 1; i >= 0; i--)
         if (!c->e[i].refs) {
-            entry_free(&c->e[i]);
+            entry_free(ctx, &c->e[i]);
             c->e[i] = c->e[--c->n];
             memset(&c->e[c->n], 0, sizeof c->e[c->n]);
         }
@@ -108,7 +117,7 @@ static void aux_cache_free(fx_context *ctx)
     if (!ctx || !ctx->aux_cache)
         return;
     for (int i = 0; i < ctx->aux_cache->n; i++)
-        entry_free(&ctx->aux_cache->e[i]);
+        entry_free(ctx, &ctx->aux_cache->e[i]);
     fx_mem_free(ctx->aux_cache);
     ctx->aux_cache = NULL;
 }
@@ -214,8 +223,19 @@ static fx_result entry_build(const fx_frame *f, const char *name, int bias, int 
         e->bytes = (uint64_t)floats * sizeof(float) + sizeof *av;
         return FX_OK;
     }
-    r = fx_shadow_map_build(f->ctx, av->depth, av->width, av->height, av->view.cam.clip_start,
-                            av->view.cam.clip_end, bias, &e->sm, where);
+    /* the EXR's depth is dropped below: the map normalises it where it lies (one buffer
+     * fewer, no fresh pages on a first frame) when the pass alone holds it */
+    float *own = fx_frame_take_pass_data(av->frame, "Depth");
+    if (own) {
+        r = fx_shadow_map_build_in_place(f->ctx, own, av->width, av->height, av->view.cam.clip_start,
+                                         av->view.cam.clip_end, bias, &e->sm, where);
+        if (r)
+            fx_mem_free(own);
+        av->depth = NULL;
+    } else {
+        r = fx_shadow_map_build(f->ctx, av->depth, av->width, av->height, av->view.cam.clip_start,
+                                av->view.cam.clip_end, bias, &e->sm, where);
+    }
     if (!r && filter <= AUX_MOMENTS(0))
         /* width 1: the moments at the level, unfiltered */
         r = fx_shadow_map_filter(f->ctx, &e->sm,
@@ -291,7 +311,7 @@ static fx_result acquire(const fx_frame *f, const char *name, int derivative_bia
     /* without a key (no caching) the entry is private: the copy out of the frame is skipped */
     r = entry_build(f, name, derivative_bias, filter, width, where, !key, &tmp);
     if (r) {
-        entry_free(&tmp);
+        entry_free(ctx, &tmp);
         fx_mem_free(key);
         return r;
     }
@@ -312,7 +332,7 @@ static fx_result acquire(const fx_frame *f, const char *name, int derivative_bia
     /* private: owned by the caller until release */
     aux_entry *e = fx_mem_alloc(sizeof *e);
     if (!e) {
-        entry_free(&tmp);
+        entry_free(ctx, &tmp);
         return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where);
     }
     *e = tmp;
@@ -346,7 +366,7 @@ void fx_aux_map_release(fx_context *ctx, fx_aux_map *m)
     } else {
         /* the private entry: sm is its first field after key and av */
         aux_entry *e = (aux_entry *)((char *)m->sm - offsetof(aux_entry, sm));
-        entry_free(e);
+        entry_free(ctx, e);
         fx_mem_free(e);
     }
     memset(m, 0, sizeof *m);
