@@ -32,8 +32,13 @@ alpha threshold exactly as in the main render and cast leaf-shaped shadows.
   facing pair sees the other one's reflections).  Placed at the
   reflection-cubemap Light Probe nearest the mirror if the scene has one, else
   at the centre of the mirror objects' bounding box pushed out past their front
-  along their mean normal (towards the camera).  A probe that fails to render
-  is a warning: the run goes on and ssr_mirror takes its texture fallback.
+  along their mean normal (towards the camera); a mirror whose planes face
+  different ways (a facing pair in one entry) gets one probe per plane, each
+  before its own plane (``probe:<key>``, ``probe:<key>#2``, ...: probe_specs).
+  Each probe also carries a ``Sky`` layer: the world alone (a second view layer
+  without the objects, 4 samples), the sky a ray meets where a wall hides it from
+  the probe.  A probe that fails to render is a warning: the run goes on and
+  ssr_mirror takes its texture fallback.
 - ``planar:<key>``: for a mirror whose faces lie in a few planes (a flat mirror: one;
   a facing pair in one entry: two; at most PLANAR_MAX), one view per plane
   (``planar:<key>``, ``planar:<key>#2``, ...): the scene seen by the camera mirrored
@@ -65,6 +70,9 @@ from .log import log
 
 AUX_SCENE = "libfx aux view"
 BUSY = {"on": False}   # while an aux view renders here (busy())
+PROBES_MAX = 4         # probes per mirror entry (ssr_mirror's PROBES_MAX)
+PROBE_SKY_LAYER = "Sky"  # a probe's layer of the world alone (math/panorama.h, fx_pano.sky)
+SKY_SAMPLES = 4        # the world alone is smooth: a few samples per texel anti-alias it
 
 
 def busy():
@@ -410,9 +418,6 @@ def probe_spec(scene, view):
     }
 
 
-PROBES_MAX = 4   # probes per mirror entry (ssr_mirror's PROBES_MAX)
-
-
 def probe_specs(scene, view):
     """The probes of a need: one (probe_spec), or, for a mirror whose planes face different
     ways (a facing pair in one entry: the single probe would sit between them, in the
@@ -485,12 +490,6 @@ def _probe_mirror_material():
         out = nt.nodes.new("ShaderNodeOutputMaterial")
         nt.links.new(g.outputs[0], out.inputs[0])
     return mat
-
-
-PROBE_SKY_LAYER = "Sky"
-
-
-SKY_SAMPLES = 4  # the world alone is smooth: a few samples per texel for its anti-aliasing
 
 
 def _render_probe(scene, spec, objs, path, sky=True):

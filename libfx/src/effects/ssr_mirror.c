@@ -477,9 +477,10 @@ static int shading_normal(const ssr_job *j, int x, int y, fx_vec3 pos, fx_vec3 i
  *    its back, which the frame does not show): 1 at n . r <= 0, 0 from CONF_BACK1;
  *  - the ray's length: 0 at max_distance (the ray was cut there), from 0.8 of it;
  *  - with a probe (its depth; the one that serves the ray's mirror point, probe_at): the
- *    hit's distance against the probe's distance along the same ray (fx_pano_trace_dist): a factor CONF_PROBE1 apart or more (either way) is a
- *    contradiction (the tracer passed an occluder the probe sees, or took a silhouette
- *    the probe sees past): 0; within CONF_PROBE0: 1. A ray the probe sees no surface
+ *    hit's distance against the probe's distance along the same ray (fx_pano_trace_dist):
+ *    a factor CONF_PROBE1 apart or more (either way) is a contradiction (the tracer passed
+ *    an occluder the probe sees, or took a silhouette the probe sees past): 0; within
+ *    CONF_PROBE0: 1. A ray the probe sees no surface
  *    along gives no evidence either way.
  * Rays towards the camera need no term of their own: the surfaces they can meet that
  * the frame shows are seen edge-on, and the back-face and thickness terms take the rest. */
