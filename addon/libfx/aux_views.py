@@ -966,6 +966,7 @@ def prepare(scene, frames):
                     continue
                 _store_entry(meta_path, entry)
                 entries.append(entry)
+            _drop_stale_planes(scene, view, {s["name"] for s in specs})
             continue
         if view["kind"] == "water":
             entries.append(_prepare_water(scene, view, frames))
@@ -978,16 +979,38 @@ def prepare(scene, frames):
     return entries
 
 
+def _plane_names(view):
+    """Every name a probe or planar need's views may have on disk: one per plane."""
+    most = PLANAR_MAX if view["kind"] == "planar" else PROBES_MAX
+    return [planar_view_name(view["name"], k) for k in range(most)]
+
+
+def _drop_stale_planes(scene, view, current):
+    """Removes the files of this need's views that the scene no longer has (a facing pair
+    that became one mirror leaves "probe:<key>#2"): F12 reads what is on disk
+    (from_disk), and would take the old plane's view for a mirror point it is nearer."""
+    for name in _plane_names(view):
+        if name in current:
+            continue
+        path = "%slibfx_aux_%s.exr" % (scene_setup.output_prefix(scene), _file_name(name))
+        for stale in (path[:-4] + ".json", path):
+            try:
+                os.remove(stale)
+                log("%s view '%s' removed: the scene has no such plane now (%s)" % (view["kind"], name, stale))
+            except FileNotFoundError:
+                pass
+            except OSError as e:
+                log("warning: the stale %s view '%s' could not be removed (%s)" % (view["kind"], name, e))
+
+
 def from_disk(scene):
     """The views a previous batch run left beside the output (for F12, which cannot
     render them from inside a render)."""
     out = []
     for view in needed(scene):
         names = [view["name"]]
-        if view["kind"] == "planar":   # one view per plane of the mirror
-            names = [planar_view_name(view["name"], k) for k in range(PLANAR_MAX)]
-        elif view["kind"] == "probe":  # one probe per plane of a facing pair
-            names = [planar_view_name(view["name"], k) for k in range(PROBES_MAX)]
+        if view["kind"] in ("planar", "probe"):   # one view per mirror plane
+            names = _plane_names(view)
         for name in names:
             meta_path = "%slibfx_aux_%s.json" % (scene_setup.output_prefix(scene), _file_name(name))
             try:

@@ -54,3 +54,47 @@ def test_single_and_curved_mirrors_keep_one_probe(blender, library):
         specs = _specs(blender, library, variant)
         assert [s["name"] for s in specs] == ["probe:k"], (variant, specs)
         assert specs[0]["mirrors"][0][1] < 1.5, (variant, specs)
+
+
+STALE = T.PRELUDE + r"""
+import os
+from libfx import aux_views, recipe, scene_setup
+scene = bpy.context.scene
+with open(os.environ["STALE_RECIPE"], encoding="utf-8") as f:
+    recipe.from_recipe(scene, f.read())   # the scene's stack at final: it reads a probe
+scene.render.filepath = os.environ["STALE_OUT"] + "/f_"
+scene["libfx_probe_size"] = 32        # a thumbnail probe: the test is about its files
+scene["libfx_probe_samples"] = 1
+need = [v for v in aux_views.needed(scene) if v["kind"] == "probe"][0]
+prefix = scene_setup.output_prefix(scene)
+stale = {}
+for k in (1, 2):                    # what a facing pair left there: "#2" and "#3"
+    name = aux_views.planar_view_name(need["name"], k)
+    base = prefix + "libfx_aux_" + aux_views._file_name(name)
+    for ext in (".json", ".exr"):
+        with open(base + ext, "w") as f:
+            f.write(json.dumps({"name": name, "path": base + ".exr", "kind": "probe"}) if ext == ".json" else "x")
+    stale[name] = base
+entries = aux_views.prepare(scene, [1])
+print("PREPARED " + json.dumps(sorted(e["name"] for e in entries)))
+print("DISK " + json.dumps(sorted(e["name"] for e in aux_views.from_disk(scene))))
+print("LEFT " + json.dumps(sorted(n for n, b in stale.items() if os.path.exists(b + ".json") or os.path.exists(b + ".exr"))))
+print("NEED " + json.dumps(need["name"]))
+print("LIBFX-TEST-OK")
+"""
+
+
+def test_a_batch_run_removes_the_probes_of_planes_gone(blender, library, tmp_path):
+    """F12 reads the probes a batch run left on disk (aux_views.from_disk): a "#2" probe
+    from when the scene's mirror was a facing pair must not outlive it."""
+    blend = T.REPO / "blend_scenes" / "truth_mirrors" / "truth_mirrors_facing.blend"
+    proc = T.run_blender([], blend=str(blend), python_expr=STALE,
+                         env=dict(T.addon_env(library), STALE_OUT=str(tmp_path),
+                                                   STALE_RECIPE=str(blend.parent / "recipe.json")), timeout=300)
+    text = proc.stdout + proc.stderr
+    assert proc.returncode == 0 and OK in proc.stdout, text[-4000:]
+    got = {x.split(" ", 1)[0]: json.loads(x.split(" ", 1)[1]) for x in proc.stdout.splitlines()
+           if x.split(" ", 1)[0] in ("PREPARED", "DISK", "LEFT", "NEED")}
+    assert got["PREPARED"] == [got["NEED"]], text[-3000:]
+    assert got["DISK"] == [got["NEED"]], text[-3000:]   # the fresh probe, and only it
+    assert got["LEFT"] == [], text[-3000:]
