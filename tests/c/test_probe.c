@@ -1273,6 +1273,86 @@ static void test_edge_coverage(fx_context *ctx)
     free(want), free(crypto), free(truth);
 }
 
+/* A covered mirror pixel whose Normal blends two faces (a card's front and its edge: Cycles'
+ * Normal pass is the mean of the unit normals in the pixel, 0.71 long for faces 90 deg
+ * apart): its ray is neither face's. The mirror's middle column gets the mean of the
+ * mirror's normal and one at right angles to it, full coverage. With footprint it takes
+ * its neighbour's change (the front's reflection, the exact one here); its own ray errs
+ * far more. Its neighbours' footprints must not take its ray as a differential. */
+static void test_edge_normal(fx_context *ctx)
+{
+    const char *dir = tu_tmpdir("edgenormal");
+    float *want = calloc((size_t)FW * FH * 3, sizeof(float));
+    fx_frame *f = room_frame(ctx, want);
+    float *nor, *ima;
+    int c;
+    fx_frame_pass(f, "Normal", &nor, &c);
+    fx_frame_pass(f, "IndexMA", &ima, &c);
+    const int px = FW / 2;
+    int edge = 0, beside = 0;
+    for (int y = 0; y < FH; y++) {
+        size_t i = (size_t)y * FW + px;
+        if (ima[i] != 1)
+            continue;
+        float *n = nor + i * 3;
+        /* a unit vector at right angles to the mirror's normal, then the pair's mean */
+        float sx = -n[1], sy = n[0], sz = 0.0f, l = sqrtf(sx * sx + sy * sy);
+        if (l < 1e-3f)
+            sx = 1.0f, sy = 0.0f, l = 1.0f;
+        n[0] = 0.5f * (n[0] + sx / l), n[1] = 0.5f * (n[1] + sy / l), n[2] = 0.5f * (n[2] + sz);
+        edge++;
+    }
+    char path[600];
+    snprintf(path, sizeof path, "%s/probe.exr", dir);
+    const double ppos[3] = { 0.0, 2.6, 1.5 };
+    write_probe(ctx, path, ppos, 256, 128, 0);
+    double err[2], err_beside[2];
+    for (int on = 0; on < 2; on++) {
+        fx_stack *s = et_stack(ctx, "ssr_mirror");
+        CHECK_OK(ctx, fx_stack_set_mask_json(s, 0, "{\"material_index\": 1}"));
+        CHECK_OK(ctx, fx_stack_set_quality(s, FX_QUALITY_FINAL));
+        CHECK_OK(ctx, fx_stack_set_int(s, 0, "footprint", on));
+        char *req = NULL;
+        CHECK_OK(ctx, fx_stack_required_aux_views(s, &req));
+        const char *at = req ? strstr(req, "\"probe:") : NULL;
+        char pname[64] = "probe:?";
+        if (at)
+            snprintf(pname, 19, "%s", at + 1);
+        fx_free(req);
+        add_probe(ctx, f, pname, path, ppos);
+        fx_frame *o = NULL;
+        CHECK_OK(ctx, fx_stack_run(s, f, &o));
+        const float *oc = et_combined(o);
+        double e = 0, eb = 0;
+        beside = 0;
+        for (int y = 0; oc && y < FH; y++)
+            for (int x = px - 1; x <= px + 1; x++) {
+                size_t i = (size_t)y * FW + x;
+                if (ima[i] != 1 || ima[(size_t)y * FW + px] != 1)
+                    continue;
+                double d = 0;
+                for (int k = 0; k < 3; k++)
+                    d += fabs(oc[i * 4 + k] - want[i * 3 + k]) / 3.0;
+                if (x == px)
+                    e += d / edge;
+                else
+                    eb += d, beside++;
+            }
+        err[on] = e;
+        err_beside[on] = beside ? eb / beside : 1.0;
+        fx_frame_free(o);
+        fx_stack_free(s);
+    }
+    printf("%d pixels with a two-face Normal (|N| 0.71), MAE against the exact reflection: own ray %.4f, the "
+           "neighbour's change %.4f; their neighbours %.4f / %.4f\n", edge, err[0], err[1], err_beside[0],
+           err_beside[1]);
+    CHECK(edge > 10);
+    CHECK(err[1] < 0.05 && err[1] < 0.2 * err[0]); /* the neighbour's reflection is a pixel off */
+    CHECK(err_beside[1] < 0.015);
+    fx_frame_free(f);
+    free(want);
+}
+
 int main(void)
 {
     fx_context *ctx = NULL;
@@ -1287,6 +1367,7 @@ int main(void)
     test_pano_footprint();
     test_footprint(ctx);
     test_edge_coverage(ctx);
+    test_edge_normal(ctx);
     test_footprint_migration(ctx);
     test_two_probes(ctx);
     fx_context_free(ctx);

@@ -285,6 +285,19 @@ static inline int view_normal_at(const ssr_frame *F, int x, int y, fx_vec3 *n)
     return surface_at_pixel(F, x, y, n, &c) >= SURF_NORMAL;
 }
 
+/* Whether pixel i's Normal is one surface's: Cycles' Normal pass is the mean of the unit
+ * normals the pixel's samples met, so it is shorter than 1 where the pixel holds two faces
+ * (a mirror card's front and its edge: 0.71 half and half for faces 90 deg apart; cos(d/2)
+ * for faces d apart) and about 1 across a smooth curve (1 - 3e-5 at the curved truth's
+ * 1.5 deg per pixel). The normal of such a blend is no surface's: its ray goes where
+ * neither face's does. */
+#define NORMAL_WHOLE2 (0.95f * 0.95f)
+static inline int whole_surface(const ssr_frame *F, size_t i)
+{
+    const float *p = F->normal + i * F->nch;
+    return p[0] * p[0] + p[1] * p[1] + p[2] * p[2] >= NORMAL_WHOLE2; /* NaN: not whole */
+}
+
 /* Tracer hits: the march goes on past a mirror pixel (this entry's or mirror_surfaces')
  * seen from behind: a ray leaving a mirror seen at a grazing angle otherwise "hits" the far
  * half of its own start pixel. Any other surface is a hit, whichever way it faces: a back
@@ -883,7 +896,8 @@ static int neighbour_ray(const ssr_job *j, int x, int y, int sx, int sy, fx_vec3
         return 0;
     fx_vec3 inc = F->view.orthographic ? fx_v3(0, 0, -1) : fx_v3_normalize_or(q, fx_v3(0, 0, -1));
     fx_vec3 nn;
-    if (!shading_normal(j, xn, yn, q, inc, &nn) || fx_v3_dot(nn, n) < 0.7f)
+    if (!shading_normal(j, xn, yn, q, inc, &nn) || fx_v3_dot(nn, n) < 0.7f ||
+        !whole_surface(F, (size_t)yn * F->w + xn))
         return 0;
     fx_vec3 dp = fx_v3_sub(q, pos);
     /* on this pixel's tangent plane, or at nearly its depth (a bent or normal-mapped mirror's
@@ -1071,8 +1085,10 @@ static void shade_rows(void *user, int begin, int end)
  * coverage. Its own ray is not the mirror's (Depth and Normal are not anti-aliased: they
  * may be the other surface's), and the stack's blend of a whole-pixel result keeps
  * coverage x (1 - coverage) of the mirror's backing in the pixel: a grey seam around
- * everything in front of the mirror. Reads only fully covered pixels, which this pass
- * does not write: any row order gives the same bits. */
+ * everything in front of the mirror. So does a covered pixel whose Normal blends two of
+ * the mirror's faces (whole_surface: a card's front and its edge), whose ray is neither
+ * face's. Reads only fully covered pixels of one surface, which this pass does not write:
+ * any row order gives the same bits. */
 #define EDGE_FULL 0.999f
 static void edge_rows(void *user, int begin, int end)
 {
@@ -1083,20 +1099,32 @@ static void edge_rows(void *user, int begin, int end)
     for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++)
         for (int x = run->roi.x0; x < run->roi.x1; x++) {
             size_t i = (size_t)y * w + x;
-            if (!(cov[i] > 0.0f && cov[i] < EDGE_FULL))
+            if (!(cov[i] > 0.0f) || (cov[i] >= EDGE_FULL && whole_surface(j->F, i)))
                 continue;
+            /* a covered pixel blending two faces takes the face it holds most of: the whole
+             * neighbour whose normal lies nearest its mean normal (the nearest one may be the
+             * other face's: a card seen edge-on is all such pixels); a partly covered one,
+             * whose Normal is the other object's, the nearest */
+            const int blend = cov[i] >= EDGE_FULL;
+            const float *ni = j->F->normal + i * j->F->nch;
             long best = -1;
             int best_d = 9;
+            float best_dot = -2.0f;
             for (int dy = -2; dy <= 2; dy++)
                 for (int dx = -2; dx <= 2; dx++) {
                     int xx = x + dx, yy = y + dy, d2 = dx * dx + dy * dy;
-                    if (xx < 0 || yy < 0 || xx >= w || yy >= h || d2 >= best_d)
+                    if (xx < 0 || yy < 0 || xx >= w || yy >= h || (!blend && d2 >= best_d))
                         continue;
                     size_t k = (size_t)yy * w + xx;
-                    if (cov[k] >= EDGE_FULL) {
-                        best = (long)k;
-                        best_d = d2;
-                    }
+                    if (!(cov[k] >= EDGE_FULL && whole_surface(j->F, k)))
+                        continue;
+                    const float *nk = j->F->normal + k * j->F->nch;
+                    float dot = blend ? ni[0] * nk[0] + ni[1] * nk[1] + ni[2] * nk[2] : 0.0f;
+                    if (blend && !(dot > best_dot || (dot == best_dot && d2 < best_d)))
+                        continue;
+                    best = (long)k;
+                    best_d = d2;
+                    best_dot = dot;
                 }
             if (best < 0)
                 continue; /* a sliver: its own result stands */
@@ -1104,8 +1132,10 @@ static void edge_rows(void *user, int begin, int end)
             const float *s = run->src + i * 4;
             float *o = run->dst + i * 4;
             for (int k = 0; k < 3; k++) {
+                /* its own backing (or the object in front) differs from the neighbour's: the
+                 * sum can fall below black, which no reflection is */
                 float v = s[k] + (dn[k] - sn[k]);
-                o[k] = isfinite(v) ? v : s[k];
+                o[k] = isfinite(v) ? (v > 0.0f ? v : 0.0f) : s[k];
             }
         }
 }
