@@ -4,7 +4,11 @@
     LIBFX_LIBRARY=build/libfx/libfx.so LIBFX_CLI=build/libfx/libfx \\
         /usr/bin/python3 tests/bench/truth_mirrors.py OUT_DIR [--res 480x270] [--spp 16] \\
         [--runs 3] [--variants facing,grazing,pair,curved] [--docs docs] [--no-eevee] \\
-        [--truth-spp 64] [--probe WIDTHxSAMPLES]
+        [--truth-spp 64] [--probe WIDTHxSAMPLES] [--lambertian]
+
+--lambertian renders every scene with the room's materials' specular at 0 (a diagnostic of
+what view-dependent shading costs a reflection made of the camera's and the probe's views;
+give it an OUT_DIR of its own, and --no-eevee: the Eevee peer keeps the speculars).
 
 Renders already in OUT_DIR (the inputs with their probe and planar views, the truths) are
 reused: a second run re-runs only libfx against them (delete the files to render again).
@@ -47,7 +51,7 @@ import truth_common as C  # noqa: E402
 VARIANTS = ("facing", "grazing", "pair", "curved")
 
 
-def batch_logged(blend, prefix, res, spp, recipe=None, probe=None):
+def batch_logged(blend, prefix, res, spp, recipe=None, probe=None, expr=""):
     """C.batch for the input render, keeping the add-on's log (prefix + batch.log): the
     probe's render time is in it. probe: (width, samples) of the reflection probe (the
     scene's libfx_probe_size / libfx_probe_samples), or None for the add-on's defaults.
@@ -59,8 +63,10 @@ def batch_logged(blend, prefix, res, spp, recipe=None, probe=None):
     if not (os.path.exists(passes) and os.path.exists(side) and os.path.exists(log)):
         args = [C.BLENDER, "-b", str(blend)]
         if probe:
-            args += ["--python-expr", "import bpy; s = bpy.context.scene; s['libfx_probe_size'] = %d; "
-                     "s['libfx_probe_samples'] = %d" % probe]
+            expr += ("\nimport bpy; s = bpy.context.scene; s['libfx_probe_size'] = %d; "
+                     "s['libfx_probe_samples'] = %d\n" % probe)
+        if expr:
+            args += ["--python-expr", expr]
         args += ["--python", str(C.ROOT / "addon" / "libfx" / "batch.py"), "--",
                 "--keep-passes", "--frames", "1", "--output", prefix, "--resolution", res, "--samples", str(spp)]
         if recipe:
@@ -77,6 +83,20 @@ def batch_logged(blend, prefix, res, spp, recipe=None, probe=None):
 
 
 PROBE_LOG = re.compile(r"(?:probe|planar) '([^']+)' at (.+?) rendered (\d+)x(\d+) \((\d+) samples\) in ([0-9.]+) s")
+
+
+# --lambertian: every material but the mirror loses its specular layer, so a surface
+# looks the same from every direction. A reflection made of what the camera (or a probe)
+# sees of the room cannot show a surface's look from the mirror's direction; this variant
+# measures what is left when there is none to show (accuracy_truth.md).
+LAMBERTIAN = ("import bpy\n"
+              "for m in bpy.data.materials:\n"
+              "    if m.name == 'Mirror' or not m.use_nodes:\n"
+              "        continue\n"
+              "    for n in m.node_tree.nodes:\n"
+              "        if n.type == 'BSDF_PRINCIPLED':\n"
+              "            s = n.inputs.get('Specular') or n.inputs.get('Specular IOR Level')\n"
+              "            s.default_value = 0.0\n")
 
 
 def box_mean(a, r=4):
@@ -117,6 +137,10 @@ def main():
         i = sys.argv.index("--truth-spp")
         extra = int(sys.argv[i + 1])
         del sys.argv[i:i + 2]
+    lamb = ""
+    if "--lambertian" in sys.argv:
+        sys.argv.remove("--lambertian")
+        lamb = LAMBERTIAN
     if "--probe" in sys.argv:   # WIDTHxSAMPLES of the reflection probe (default: the add-on's 512x16)
         i = sys.argv.index("--probe")
         probe = tuple(int(v) for v in sys.argv[i + 1].split("x"))
@@ -137,17 +161,16 @@ def main():
         ref_recipe = os.path.join(a.out, "m_recipe_reference.json")
         with open(ref_recipe, "w") as f:
             json.dump(dict(recipe, quality="reference"), f)
-        passes, side, log = batch_logged(blend, p + "inref_", a.res, a.spp, ref_recipe, probe)
-        tpass, _, _ = C.batch(blend, p + "truth_", a.res, a.truth_spp, expr=C.truth_expr("mirrors"), recipe=noop)
-        t2pass, _, _ = C.batch(blend, p + "truth2_", a.res, a.truth_spp, expr=C.truth_expr("mirrors"), recipe=noop,
-                               seed=17)
+        passes, side, log = batch_logged(blend, p + "inref_", a.res, a.spp, ref_recipe, probe, expr=lamb)
+        truth_expr = lamb + C.truth_expr("mirrors")
+        tpass, _, _ = C.batch(blend, p + "truth_", a.res, a.truth_spp, expr=truth_expr, recipe=noop)
+        t2pass, _, _ = C.batch(blend, p + "truth2_", a.res, a.truth_spp, expr=truth_expr, recipe=noop, seed=17)
         # the true mirror at the input's samples: what a perfect method reaches with the
         # input's noise. Another seed than the input's and the truth's: Cycles' samples of
         # one pixel are shared by renders of the same seed, so the truth and a copy of the
         # input's pixels (from other pixels) have independent noise, as this render's has
         # (the same seed would share the truth's samples and score 2.5-4.6 points higher)
-        t16pass, _, _ = C.batch(blend, p + "truth%d_" % a.spp, a.res, a.spp, expr=C.truth_expr("mirrors"),
-                                recipe=noop, seed=5)
+        t16pass, _, _ = C.batch(blend, p + "truth%d_" % a.spp, a.res, a.spp, expr=truth_expr, recipe=noop, seed=5)
         probes = PROBE_LOG.findall(log)
         region = C.T.crypto_support(C.T.Exr(passes), "CryptoMaterial", ["Mirror"])
         truth, truth2, plain = C.rgb(tpass), C.rgb(t2pass), C.rgb(passes)

@@ -210,6 +210,7 @@ typedef struct ssr_frame {
     double *splane_c; /* n . centre */
     const fx_mask *mask;     /* the entry's mask (NULL: every pixel), for the tracer's accept */
     const fx_mask *surfaces; /* mirror_surfaces, or NULL */
+    int face_normals;        /* footprint: a mirror pixel blending two faces takes one's (face_normal) */
 } ssr_frame;
 
 enum { SURF_NONE = 2, SURF_NORMAL = 3, SURF_PLANE = 4 };
@@ -223,6 +224,76 @@ static inline fx_vec3 view_pos_at(const ssr_frame *F, int x, int y, float *depth
     return fx_view_position(&F->view, ndc, d);
 }
 
+/* Whether pixel i's Normal is one surface's: Cycles' Normal pass is the mean of the unit
+ * normals the pixel's samples met, so it is shorter than 1 where the pixel holds two faces
+ * (a mirror card's front and its edge: 0.71 half and half for faces 90 deg apart; cos(d/2)
+ * for faces d apart) and about 1 across a smooth curve (1 - 3e-5 at the curved truth's
+ * 1.5 deg per pixel). The normal of such a blend is no surface's: its ray goes where
+ * neither face's does. */
+#define NORMAL_WHOLE2 (0.95f * 0.95f)
+#define EDGE_FULL 0.999f /* coverage of a wholly covered pixel (Cryptomatte sums may fall short of 1) */
+static inline int whole_surface(const ssr_frame *F, size_t i)
+{
+    const float *p = F->normal + i * F->nch;
+    return p[0] * p[0] + p[1] * p[1] + p[2] * p[2] >= NORMAL_WHOLE2; /* NaN: not whole */
+}
+
+/* The (world) normal a covered mirror pixel whose Normal blends two faces traces with
+ * (*n; returns 1), at its own position: that of the whole, covered neighbour within 2 px
+ * whose normal lies nearest its mean N (the face it holds most of; the nearest neighbour
+ * may be the other face's), if N lies within 45 deg of it: with faces d apart, a share a
+ * of the first puts N within 45 deg of it for a >= 1/2 (90 deg apart) to a >= 0.3 (45
+ * apart). Otherwise (0, *n untouched) the face the pixel holds most of has no whole pixel
+ * near, as a 3 cm edge seen from afar, and its mean normal is the better guess. Pixel order
+ * does not matter: it reads the pass only. */
+static int face_normal(const ssr_frame *F, int x, int y, fx_vec3 *n)
+{
+    const float *cov = F->mask ? F->mask->coverage : NULL;
+    size_t i = (size_t)y * F->w + x;
+    if (!F->face_normals || whole_surface(F, i) || (cov && !(cov[i] >= EDGE_FULL)))
+        return 0;
+    const fx_vec3 nm = *n;
+    fx_vec3 best = nm;
+    float best_dot = -2.0f;
+    int best_d = 9;
+    for (int dy = -2; dy <= 2; dy++)
+        for (int dx = -2; dx <= 2; dx++) {
+            int xx = x + dx, yy = y + dy, d2 = dx * dx + dy * dy;
+            if (xx < 0 || yy < 0 || xx >= F->w || yy >= F->h)
+                continue;
+            size_t k = (size_t)yy * F->w + xx;
+            if ((cov && !(cov[k] >= EDGE_FULL)) || !whole_surface(F, k))
+                continue;
+            const float *q = F->normal + k * F->nch;
+            fx_vec3 nk = fx_v3_normalize_or(fx_v3(q[0], q[1], q[2]), nm);
+            float dot = fx_v3_dot(nm, nk);
+            if (dot > best_dot || (dot == best_dot && d2 < best_d)) {
+                best = nk;
+                best_dot = dot;
+                best_d = d2;
+            }
+        }
+    /* N . n1 >= |N| cos 45 deg */
+    if (!(best_dot * best_dot >= 0.5f * fx_v3_dot(nm, nm)) || !(best_dot > 0.0f))
+        return 0;
+    *n = best;
+    return 1;
+}
+
+/* Whether pixel (x, y)'s ray is the mirror's (with footprint): not where the mirror covers
+ * the pixel only in part (its Depth and Normal may be the object in front's), nor where
+ * its Normal blends two faces and face_normal found neither (its ray goes where neither
+ * face's does). Such a pixel is no ray differential for its neighbours. */
+static int mirror_ray_at(const ssr_frame *F, int x, int y)
+{
+    size_t i = (size_t)y * F->w + x;
+    if (F->mask && !(F->mask->coverage[i] >= EDGE_FULL))
+        return 0;
+    const float *q = F->normal + i * F->nch;
+    fx_vec3 n = fx_v3(q[0], q[1], q[2]);
+    return whole_surface(F, i) || face_normal(F, x, y, &n);
+}
+
 /* The surface of pixel (x, y), computed: its view-space unit normal (none for background,
  * NaN, zero: SURF_NONE) and, for a perspective view, its tangent plane n . p = *c through
  * the pixel's centre position (SURF_PLANE; SURF_NORMAL when that is not finite). */
@@ -232,6 +303,7 @@ static int surface_compute(const ssr_frame *F, int x, int y, fx_vec3 *n, double 
     fx_vec3 nw = fx_v3(p[0], p[1], p[2]);
     if (!(fx_v3_dot(nw, nw) > 0.01f) || !isfinite(fx_v3_dot(nw, nw))) /* |N| >= 0.1 (AA edges: ~0.5) */
         return SURF_NONE;
+    face_normal(F, x, y, &nw);
     *n = fx_v3_normalize_or(fx_world_dir_to_view(&F->view, nw), fx_v3(0, 0, 0));
     if (!(n->x != 0.0f || n->y != 0.0f || n->z != 0.0f))
         return SURF_NONE;
@@ -283,19 +355,6 @@ static inline int view_normal_at(const ssr_frame *F, int x, int y, fx_vec3 *n)
 {
     double c;
     return surface_at_pixel(F, x, y, n, &c) >= SURF_NORMAL;
-}
-
-/* Whether pixel i's Normal is one surface's: Cycles' Normal pass is the mean of the unit
- * normals the pixel's samples met, so it is shorter than 1 where the pixel holds two faces
- * (a mirror card's front and its edge: 0.71 half and half for faces 90 deg apart; cos(d/2)
- * for faces d apart) and about 1 across a smooth curve (1 - 3e-5 at the curved truth's
- * 1.5 deg per pixel). The normal of such a blend is no surface's: its ray goes where
- * neither face's does. */
-#define NORMAL_WHOLE2 (0.95f * 0.95f)
-static inline int whole_surface(const ssr_frame *F, size_t i)
-{
-    const float *p = F->normal + i * F->nch;
-    return p[0] * p[0] + p[1] * p[1] + p[2] * p[2] >= NORMAL_WHOLE2; /* NaN: not whole */
 }
 
 /* Tracer hits: the march goes on past a mirror pixel (this entry's or mirror_surfaces')
@@ -896,8 +955,7 @@ static int neighbour_ray(const ssr_job *j, int x, int y, int sx, int sy, fx_vec3
         return 0;
     fx_vec3 inc = F->view.orthographic ? fx_v3(0, 0, -1) : fx_v3_normalize_or(q, fx_v3(0, 0, -1));
     fx_vec3 nn;
-    if (!shading_normal(j, xn, yn, q, inc, &nn) || fx_v3_dot(nn, n) < 0.7f ||
-        !whole_surface(F, (size_t)yn * F->w + xn))
+    if (!shading_normal(j, xn, yn, q, inc, &nn) || fx_v3_dot(nn, n) < 0.7f || !mirror_ray_at(F, xn, yn))
         return 0;
     fx_vec3 dp = fx_v3_sub(q, pos);
     /* on this pixel's tangent plane, or at nearly its depth (a bent or normal-mapped mirror's
@@ -1085,11 +1143,8 @@ static void shade_rows(void *user, int begin, int end)
  * coverage. Its own ray is not the mirror's (Depth and Normal are not anti-aliased: they
  * may be the other surface's), and the stack's blend of a whole-pixel result keeps
  * coverage x (1 - coverage) of the mirror's backing in the pixel: a grey seam around
- * everything in front of the mirror. So does a covered pixel whose Normal blends two of
- * the mirror's faces (whole_surface: a card's front and its edge), whose ray is neither
- * face's. Reads only fully covered pixels of one surface, which this pass does not write:
- * any row order gives the same bits. */
-#define EDGE_FULL 0.999f
+ * everything in front of the mirror. Reads only fully covered pixels, which this pass
+ * does not write: any row order gives the same bits. */
 static void edge_rows(void *user, int begin, int end)
 {
     const ssr_job *j = user;
@@ -1099,32 +1154,20 @@ static void edge_rows(void *user, int begin, int end)
     for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++)
         for (int x = run->roi.x0; x < run->roi.x1; x++) {
             size_t i = (size_t)y * w + x;
-            if (!(cov[i] > 0.0f) || (cov[i] >= EDGE_FULL && whole_surface(j->F, i)))
+            if (!(cov[i] > 0.0f && cov[i] < EDGE_FULL))
                 continue;
-            /* a covered pixel blending two faces takes the face it holds most of: the whole
-             * neighbour whose normal lies nearest its mean normal (the nearest one may be the
-             * other face's: a card seen edge-on is all such pixels); a partly covered one,
-             * whose Normal is the other object's, the nearest */
-            const int blend = cov[i] >= EDGE_FULL;
-            const float *ni = j->F->normal + i * j->F->nch;
             long best = -1;
             int best_d = 9;
-            float best_dot = -2.0f;
             for (int dy = -2; dy <= 2; dy++)
                 for (int dx = -2; dx <= 2; dx++) {
                     int xx = x + dx, yy = y + dy, d2 = dx * dx + dy * dy;
-                    if (xx < 0 || yy < 0 || xx >= w || yy >= h || (!blend && d2 >= best_d))
+                    if (xx < 0 || yy < 0 || xx >= w || yy >= h || d2 >= best_d)
                         continue;
                     size_t k = (size_t)yy * w + xx;
-                    if (!(cov[k] >= EDGE_FULL && whole_surface(j->F, k)))
-                        continue;
-                    const float *nk = j->F->normal + k * j->F->nch;
-                    float dot = blend ? ni[0] * nk[0] + ni[1] * nk[1] + ni[2] * nk[2] : 0.0f;
-                    if (blend && !(dot > best_dot || (dot == best_dot && d2 < best_d)))
-                        continue;
-                    best = (long)k;
-                    best_d = d2;
-                    best_dot = dot;
+                    if (cov[k] >= EDGE_FULL) {
+                        best = (long)k;
+                        best_d = d2;
+                    }
                 }
             if (best < 0)
                 continue; /* a sliver: its own result stands */
@@ -1132,10 +1175,81 @@ static void edge_rows(void *user, int begin, int end)
             const float *s = run->src + i * 4;
             float *o = run->dst + i * 4;
             for (int k = 0; k < 3; k++) {
-                /* its own backing (or the object in front) differs from the neighbour's: the
-                 * sum can fall below black, which no reflection is */
+                /* the object in front can be darker than the neighbour's backing: the sum
+                 * can fall below black, which no reflection is */
                 float v = s[k] + (dn[k] - sn[k]);
                 o[k] = isfinite(v) ? (v > 0.0f ? v : 0.0f) : s[k];
+            }
+        }
+}
+
+/* With footprint: a covered pixel whose Normal blends two of the mirror's faces was traced
+ * with the face it holds most of (face_normal). Its colour is both faces' reflections in
+ * their shares: the second face's is the change of the whole, covered neighbour within 2 px
+ * (another face: its normal more than ~20 deg from the first's) whose normal best explains
+ * what the first leaves of the pixel's mean normal N; the shares solve N = a n1 + b n2 in
+ * least squares. Reads whole pixels only, which this pass does not write, so any row order
+ * gives the same bits; runs before edge_rows, which reads the pixels it writes. */
+#define FACE_APART 0.94f
+static void two_face_rows(void *user, int begin, int end)
+{
+    const ssr_job *j = user;
+    const fx_effect_run *run = j->run;
+    const ssr_frame *F = j->F;
+    const float *cov = run->mask ? run->mask->coverage : NULL;
+    const int w = run->width, h = run->height;
+    for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++)
+        for (int x = run->roi.x0; x < run->roi.x1; x++) {
+            size_t i = (size_t)y * w + x;
+            if ((cov && !(cov[i] >= EDGE_FULL)) || whole_surface(F, i))
+                continue;
+            const float *q = F->normal + i * F->nch;
+            fx_vec3 nm = fx_v3(q[0], q[1], q[2]);
+            if (!(fx_v3_dot(nm, nm) > 0.01f) || !isfinite(fx_v3_dot(nm, nm)))
+                continue; /* no surface (surface_compute's test) */
+            fx_vec3 n1 = nm;
+            if (!face_normal(F, x, y, &n1))
+                continue; /* traced with its own mean normal: no share to split */
+            float m1 = fx_v3_dot(nm, n1);
+            fx_vec3 rest = fx_v3_sub(nm, fx_v3_scale(n1, m1));
+            long k2 = -1;
+            float best = 0.0f;
+            int best_d = 9;
+            fx_vec3 n2 = n1;
+            for (int dy = -2; dy <= 2; dy++)
+                for (int dx = -2; dx <= 2; dx++) {
+                    int xx = x + dx, yy = y + dy, d2 = dx * dx + dy * dy;
+                    if (xx < 0 || yy < 0 || xx >= w || yy >= h)
+                        continue;
+                    size_t k = (size_t)yy * w + xx;
+                    if ((cov && !(cov[k] >= EDGE_FULL)) || !whole_surface(F, k))
+                        continue;
+                    const float *qk = F->normal + k * F->nch;
+                    fx_vec3 nk = fx_v3_normalize_or(fx_v3(qk[0], qk[1], qk[2]), n1);
+                    float along = fx_v3_dot(nk, rest);
+                    if (!(fx_v3_dot(nk, n1) < FACE_APART) || !(along > best || (along == best && d2 < best_d)))
+                        continue;
+                    k2 = (long)k;
+                    best = along;
+                    best_d = d2;
+                    n2 = nk;
+                }
+            if (k2 < 0)
+                continue; /* the other face has no whole pixel near: the first face alone */
+            float c = fx_v3_dot(n1, n2), det = 1.0f - c * c, m2 = fx_v3_dot(nm, n2);
+            float a = (m1 - c * m2) / det, b = (m2 - c * m1) / det;
+            a = a > 0.0f ? a : 0.0f;
+            b = b > 0.0f ? b : 0.0f;
+            if (!(det > 1e-3f) || !(a + b > 0.0f) || !isfinite(a + b))
+                continue;
+            b /= a + b;
+            const float *sn = run->src + (size_t)k2 * 4, *dn = run->dst + (size_t)k2 * 4;
+            const float *s = run->src + i * 4;
+            float *o = run->dst + i * 4;
+            for (int k = 0; k < 3; k++) {
+                float second = s[k] + (dn[k] - sn[k]);
+                float v = (1.0f - b) * o[k] + b * (second > 0.0f ? second : 0.0f);
+                o[k] = isfinite(v) ? v : o[k];
             }
         }
 }
@@ -1237,6 +1351,7 @@ static fx_result ssr_frame_init(const fx_effect_run *run, ssr_frame *F)
     F->normal = np->data;
     F->nch = np->channels;
     F->mask = run->mask;
+    F->face_normals = ((const ssr_params *)run->params)->footprint;
     F->scene = (fx_ssr_scene){ &F->view, F->depth, F->w, F->h, front_facing, surface_plane, F, NULL };
     return FX_OK;
 }
@@ -1584,6 +1699,8 @@ static fx_result ssr_process(const fx_effect_run *run)
     j.last_bounce = p->bounces - 1;
     j.reuse_fin = j.fin && !j.dbg_hit && !j.dbg_xy && !j.dbg_len && !j.dbg_fb && !j.dbg_planar;
     fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), shade_rows, &j);
+    if (p->footprint)
+        fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), two_face_rows, &j);
     if (p->footprint && run->mask)
         fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), edge_rows, &j);
 out:
