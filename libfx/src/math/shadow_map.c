@@ -194,9 +194,42 @@ fx_result fx_shadow_map_reduced_begin(fx_context *ctx, int width, int height, in
     return FX_OK;
 }
 
-/* Each raw row normalised where it lies (norm_rows' arithmetic: the same bits) and its
- * least value taken while it is in cache (depth_min is the full map's); the band's sampled
- * row keeps every factor-th value (fx_shadow_map_sample_offset). */
+/* The least of n raw values (finite here), 4 lanes at a time. */
+static float least_raw(const float *z, size_t n)
+{
+    v4f m4 = ld4(z);
+    size_t i = 4;
+    for (; i + 4 <= n; i += 4)
+        m4 = min4(ld4(z + i), m4);
+    float m = m4[0];
+    for (int k = 1; k < 4; k++)
+        m = m4[k] < m ? m4[k] : m;
+    for (; i < n; i++)
+        m = z[i] < m ? z[i] : m;
+    return m;
+}
+
+/* The least of a raw row's normalised values (norm_rows' least) from its least raw value:
+ * the normalisation is monotone wherever its z is finite, and a value whose z is not
+ * (|raw| near FLT_MAX) normalises to 1, the top; only a least raw value whose z is not
+ * finite (a depth of -FLT_MAX, the reader's -Inf) needs the row normalised. */
+static float row_least(float *row, int n, float znear, float range)
+{
+    if (n < 4) {
+        norm_span_in_place(row, n, znear, range);
+        return least(row, (size_t)n);
+    }
+    const float m = least_raw(row, (size_t)n);
+    const float z = 2.0f * (m - znear) / range - 1.0f;
+    if (fabsf(z) <= FLT_MAX)
+        return z < -1.0f ? -1.0f : z > 1.0f ? 1.0f : z;
+    norm_span_in_place(row, n, znear, range);
+    return least(row, (size_t)n);
+}
+
+/* Each row's least normalised value (depth_min is the full map's) and the band's kept row
+ * normalised at the kept texels only (norm_rows' arithmetic: the same bits): a point
+ * sample (fx_shadow_map_sample_offset). */
 FX_CLONES_VECTORIZE void fx_shadow_map_reduced_band(fx_shadow_map *sm, int band, float *raw, int nrows,
                                                     int raw_width)
 {
@@ -204,23 +237,30 @@ FX_CLONES_VECTORIZE void fx_shadow_map_reduced_band(fx_shadow_map *sm, int band,
     const int s = fx_shadow_map_sample_offset(k);
     const float znear = sm->znear, range = sm->zfar - sm->znear;
     const int keep = s < nrows ? s : nrows - 1; /* the last band may be short */
+    float *out = sm->depth + (size_t)band * w;
+    if (!(range > 1e-20f)) { /* as fx_shadow_map_norm: z = 0 */
+        memset(out, 0, (size_t)w * sizeof(float));
+        sm->row_min[band] = 0.0f;
+        return;
+    }
     float m = 1.0f;
     for (int i = 0; i < nrows; i++) {
         float *row = raw + (size_t)i * raw_width;
-        if (range > 1e-20f)
-            norm_span_in_place(row, raw_width, znear, range);
-        else /* as fx_shadow_map_norm: z = 0 */
-            memset(row, 0, (size_t)raw_width * sizeof(float));
-        const float r = least(row, (size_t)raw_width);
-        m = r < m ? r : m;
-        if (i != keep)
-            continue;
-        float *out = sm->depth + (size_t)band * w;
-        for (int X = 0; X < w; X++) {
-            const int x = k * X + s;
-            out[X] = row[x < raw_width ? x : raw_width - 1];
+        if (i == keep) {
+            const int inside = (raw_width - 1 - s) / k + 1; /* kept texels inside the row */
+            if (k == 2)
+                for (int X = 0; X < inside; X++)
+                    out[X] = row[2 * X + s];
+            else
+                for (int X = 0; X < inside; X++)
+                    out[X] = row[k * X + s];
+            for (int X = inside; X < w; X++)
+                out[X] = row[raw_width - 1];
         }
+        const float r = row_least(row, raw_width, znear, range);
+        m = r < m ? r : m;
     }
+    norm_span_in_place(out, w, znear, range);
     sm->row_min[band] = m;
 }
 
