@@ -22,7 +22,7 @@ import OpenImageIO as oiio
 
 BASE = {"light": "Sun", "method": "volumetric", "extinction": "view", "max_distance": 30.0,
         "volume_density": 0.03}
-PARTS = ("god_rays_process", "fx_aux_map_acquire", "fx_volume_scatter_lo")
+PARTS = ("god_rays_process", "fx_aux_map_acquire_reduced", "fx_volume_scatter_lo")
 
 
 def rgb(path):

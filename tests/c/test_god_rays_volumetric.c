@@ -14,8 +14,11 @@
  * density 1e6 and anisotropy +-0.999 / +-1; clear errors without the light view, with a
  * point light, with a screen-space light and for NaN parameters. */
 #include "fx_effect_test.h"
+#include "io/exr_rows.h"
 #include "math/hash.h"
+#include "math/shadow_map.h"
 #include "math/volume_march.h"
+#include "scene/aux_map.h"
 
 #include <float.h>
 #include <math.h>
@@ -610,6 +613,221 @@ static void test_upsample_cell4(void)
         fprintf(stderr, "upsample_cell4: %ld of %ld pixels differ (%ld with no texel alike)\n", bad, n, fallback);
 }
 
+/* A light view of w x h raw depths written with `compression` ("none": the layout that
+ * streams band by band, io/exr_rows.h; "zip": read whole). */
+static const char *write_raw_view(fx_context *ctx, const float *d, int w, int h, const char *name,
+                                  const char *compression)
+{
+    static char path[4][512];
+    static int next;
+    char *p = path[next++ % 4];
+    snprintf(p, 512, "%s/%s_%s.exr", tu_tmpdir("god_rays_volumetric"), name, compression);
+    fx_frame *f = NULL;
+    fx_frame_new(ctx, w, h, &f);
+    fx_frame_add_pass(f, "Depth", 1, d);
+    fx_write_options o = {sizeof o, 0, 0, NULL, compression};
+    CHECK_OK(ctx, fx_frame_write_exr(f, p, &o));
+    fx_frame_free(f);
+    return p;
+}
+
+/* light_view_downsample (draft: 2): the reduced map is the full map's texels (f X + o,
+ * f Y + o), o = (f - 1) / 2, bit for bit, read band by band (uncompressed) or whole (zip),
+ * with NaN/Inf made finite as the reader makes them; depth_min is the full map's when the
+ * least texel is not a kept one; the reduced view puts a kept texel's centre at X + 0.5. */
+static void test_reduced_map(fx_context *ctx)
+{
+    const int w = 37, h = 23;
+    float *d = malloc((size_t)w * h * sizeof(float));
+    static const char *const comp[] = {"none", "zip"};
+    for (int poisoned = 0; poisoned < 2; poisoned++) {
+        for (int i = 0; i < w * h; i++)
+            d[i] = 5.0f + (float)((i * 7919) % 251) * 0.1f;
+        d[3 * w + 3] = 2.5f; /* the least, on a texel neither f = 2 nor f = 3 keeps */
+        static const float bad[] = {NAN, INFINITY, -INFINITY, 1e38f};
+        for (int i = 0; poisoned && i < w * h; i += 17)
+            d[i] = bad[(i / 17) % 4];
+        for (int c = 0; c < 2; c++) {
+            const char *path = write_raw_view(ctx, d, w, h, "reduced", comp[c]);
+            fx_exr_rows *rows = NULL;
+            fx_exr_rows_info info;
+            CHECK_OK(ctx, fx_exr_rows_open(ctx, path, "Depth", &rows, &info));
+            CHECK((rows != NULL) == (c == 0)); /* only the uncompressed file streams */
+            CHECK(!rows || (info.width == w && info.height == h));
+            fx_exr_rows_close(rows);
+            fx_frame *f = scene_frame(ctx, path, "SUN", 0.0f);
+            fx_aux_map full, red;
+            CHECK_OK(ctx, fx_aux_map_acquire(f, "light:Sun", 0, -1, 0.0f, "test", &full));
+            for (int k = 2; k <= 3; k++) {
+                CHECK_OK(ctx, fx_aux_map_acquire_reduced(f, "light:Sun", k, "test", &red));
+                const fx_shadow_map *a = full.sm, *b = red.sm;
+                const int o = (k - 1) / 2;
+                CHECK(b->width == (w + k - 1) / k && b->height == (h + k - 1) / k);
+                long differ = 0;
+                for (int Y = 0; Y < b->height; Y++)
+                    for (int X = 0; X < b->width; X++) {
+                        const int x = k * X + o < w ? k * X + o : w - 1, y = k * Y + o < h ? k * Y + o : h - 1;
+                        differ += memcmp(&b->depth[(size_t)Y * b->width + X], &a->depth[(size_t)y * w + x], 4) != 0;
+                    }
+                CHECK(differ == 0);
+                CHECK(b->depth_min == a->depth_min);
+                CHECK(poisoned || a->depth_min == fx_shadow_map_norm(a, 2.5f));
+                if (differ || b->depth_min != a->depth_min)
+                    fprintf(stderr, "reduced map %s f %d poisoned %d: %ld texels differ, depth_min %g vs %g\n",
+                            comp[c], k, poisoned, differ, (double)b->depth_min, (double)a->depth_min);
+                /* a world point: its reduced coordinates are (full - o - 0.5) / k + 0.5 */
+                const fx_vec3 pts[] = {fx_v3(-3.0f, 2.0f, 1.0f), fx_v3(4.5f, -7.25f, 0.0f)};
+                for (int q = 0; q < 2; q++) {
+                    float fx_, fy, fd, rx, ry, rd;
+                    fx_aux_view_project(full.av, pts[q], &fx_, &fy, &fd);
+                    fx_aux_view_project(red.av, pts[q], &rx, &ry, &rd);
+                    const float ex = (fx_ - (float)o - 0.5f) / (float)k + 0.5f;
+                    const float ey = (fy - (float)o - 0.5f) / (float)k + 0.5f;
+                    CHECK(fabsf(rx - ex) < 1e-3f && fabsf(ry - ey) < 1e-3f && rd == fd);
+                }
+                fx_aux_map_release(ctx, &red);
+            }
+            fx_aux_map_release(ctx, &full);
+            fx_frame_free(f);
+        }
+    }
+    free(d);
+}
+
+/* A stack where vsm_shadows reads the full light view and god_rays draft the reduced one:
+ * each gets its own map (the cache keys the factor), so the stack gives the bits of a
+ * context without the cache, frame after frame; draft gives the same bits for 1 and 2
+ * threads with the view read band by band. */
+static void test_reduced_stack(fx_context *ctx)
+{
+    double entry = 0;
+    const char *zip = write_light_view(ctx, &entry);
+    /* the same view, uncompressed (the add-on's layout: read band by band) */
+    fx_frame *lv = NULL;
+    CHECK_OK(ctx, fx_frame_read_exr(ctx, zip, NULL, &lv));
+    const fx_pass *lp = lv ? fx_frame_find_pass(lv, "Depth") : NULL;
+    CHECK(lp != NULL);
+    if (!lp)
+        return;
+    const char *path = write_raw_view(ctx, lp->data, LN, LN, "stack", "none");
+    fx_frame_free(lv);
+    fx_context *plain = NULL, *one = NULL;
+    fx_context_new(&plain, 2);
+    fx_context_new(&one, 1);
+    CHECK_OK(plain, fx_context_set_aux_cache(plain, 0));
+    const char *json = "{\"version\": 1, \"quality\": \"draft\", \"effects\": ["
+                       "{\"effect\": \"vsm_shadows\", \"params\": {\"light\": \"Sun\", \"apply\": \"combined\"}},"
+                       "{\"effect\": \"god_rays\", \"params\": {\"light\": \"Sun\", \"method\": \"volumetric\","
+                       " \"volume_density\": 0.05, \"anisotropy\": 0.4, \"volume_bias\": 0}}]}";
+    fx_stack *sc = NULL, *sp = NULL;
+    CHECK_OK(ctx, fx_stack_new(ctx, &sc));
+    CHECK_OK(plain, fx_stack_new(plain, &sp));
+    CHECK_OK(ctx, fx_stack_load_json(sc, json));
+    CHECK_OK(plain, fx_stack_load_json(sp, json));
+    fx_frame *fc = scene_frame(ctx, path, "SUN", 0.5f), *fp = scene_frame(plain, path, "SUN", 0.5f);
+    float *want = et_run(plain, sp, fp);
+    long b0, r0, b1, r1;
+    fx_aux_cache_stats(ctx, &b0, &r0);
+    for (int frame = 0; frame < 2; frame++) {
+        float *got = et_run(ctx, sc, fc);
+        CHECK(got && want && memcmp(got, want, (size_t)W * H * 4 * sizeof(float)) == 0);
+        free(got);
+    }
+    fx_aux_cache_stats(ctx, &b1, &r1);
+    CHECK(r1 - r0 >= 2); /* the second frame reused both */
+    /* god_rays draft alone: 1 and 2 threads, the view streamed */
+    fx_stack *g1 = vol_stack(one, "draft", "full"), *g2 = vol_stack(ctx, "draft", "full");
+    fx_frame *f1 = scene_frame(one, path, "SUN", 0.25f), *f2 = scene_frame(ctx, path, "SUN", 0.25f);
+    float *a = et_run(one, g1, f1), *b = et_run(ctx, g2, f2);
+    CHECK(a && b && memcmp(a, b, (size_t)W * H * 4 * sizeof(float)) == 0);
+    free(a);
+    free(b);
+    free(want);
+    fx_stack_free(g1);
+    fx_stack_free(g2);
+    fx_stack_free(sc);
+    fx_stack_free(sp);
+    fx_frame_free(f1);
+    fx_frame_free(f2);
+    fx_frame_free(fc);
+    fx_frame_free(fp);
+    fx_context_free(plain);
+    fx_context_free(one);
+}
+
+static void count_band(void *user, int band, float *rows, int nrows, int worker)
+{
+    (void)band;
+    (void)rows;
+    (void)worker;
+    __atomic_add_fetch((int *)user, nrows, __ATOMIC_RELAXED);
+}
+
+/* The band reader on damaged copies of a streamable view: cut short, and with bytes of its
+ * chunk table and chunks overwritten (seeded): an error naming the file or, where the damage
+ * lands in pixel bytes, a read of every row; never a crash (scripts/test.sh runs this under
+ * AddressSanitizer). */
+static void test_rows_damaged(fx_context *ctx)
+{
+    const int w = 37, h = 23;
+    float d[37 * 23];
+    for (int i = 0; i < w * h; i++)
+        d[i] = 5.0f + (float)(i % 11);
+    const char *good = write_raw_view(ctx, d, w, h, "damaged_src", "none");
+    FILE *in = fopen(good, "rb");
+    CHECK(in != NULL);
+    if (!in)
+        return;
+    fseek(in, 0, SEEK_END);
+    const long n = ftell(in);
+    fseek(in, 0, SEEK_SET);
+    unsigned char *bytes = malloc((size_t)n), *copy = malloc((size_t)n);
+    CHECK(fread(bytes, 1, (size_t)n, in) == (size_t)n);
+    fclose(in);
+    char path[600];
+    snprintf(path, sizeof path, "%s/damaged_rows.exr", tu_tmpdir("god_rays_volumetric"));
+    const long body = n - (long)h * (8 + w * 4) - 8L * h; /* the chunk table's start */
+    int errors = 0, reads = 0;
+    for (int k = 0; k < 160; k++) {
+        memcpy(copy, bytes, (size_t)n);
+        long len = n;
+        if (k < 8) {
+            len = n * (2 + k) / 10; /* cut at 20 % .. 90 % */
+        } else {
+            unsigned hsh = fx_hash4(k, 7, 3, 1);
+            for (int b = 0; b < 4; b++) { /* 4 bytes in the table and the chunks' headers */
+                long at = body + (long)(fx_hash4(k, b, 5, 2) % (unsigned)(n - body));
+                copy[at] = (unsigned char)(hsh >> (8 * b));
+            }
+        }
+        FILE *out = fopen(path, "wb");
+        fwrite(copy, 1, (size_t)len, out);
+        fclose(out);
+        fx_exr_rows *rows = NULL;
+        fx_exr_rows_info info;
+        fx_result r = fx_exr_rows_open(ctx, path, "Depth", &rows, &info);
+        if (!r && rows) {
+            int got = 0;
+            size_t bad = 0;
+            r = fx_exr_rows_read(rows, 2, count_band, &got, &bad);
+            CHECK(r || got == h);
+            fx_exr_rows_close(rows);
+        }
+        if (r) {
+            errors++;
+            CHECK(tu_contains(fx_context_error(ctx), "damaged_rows.exr"));
+        } else {
+            reads++;
+        }
+    }
+    CHECK(errors >= 8); /* every cut file at least */
+    if (getenv("VOL_DEBUG"))
+        fprintf(stderr, "damaged band reads: %d errors, %d read\n", errors, reads);
+    free(bytes);
+    free(copy);
+    fx_context_clear_warnings(ctx);
+}
+
 int main(void)
 {
     fx_context *ctx = NULL;
@@ -620,6 +838,9 @@ int main(void)
     test_extremes_errors(ctx);
     test_in_place_finite(ctx);
     test_upsample_cell4();
+    test_reduced_map(ctx);
+    test_reduced_stack(ctx);
+    test_rows_damaged(ctx);
     fx_context_free(ctx);
     return tu_finish("test_god_rays_volumetric");
 }

@@ -1132,8 +1132,36 @@ static void test_depth_min(fx_context *c2)
             CHECK(ip.depth == own && ip.depth_min == sm.depth_min &&
                   memcmp(ip.depth, sm.depth, (size_t)w * h * sizeof(float)) == 0);
             fx_shadow_map_free(&ip);
+            /* reduced (every f-th texel, god_rays' light_view_downsample): the kept texels'
+             * bits and the full map's depth_min, wherever the least lies */
+            for (int f = 2; f <= 3; f++) {
+                fx_shadow_map rm;
+                CHECK_OK(ctx, fx_shadow_map_build_reduced(ctx, raw, w, h, f, 1.0f, 10.0f, &rm, "test"));
+                CHECK(rm.depth_min == sm.depth_min);
+                const int o = (f - 1) / 2;
+                for (int Y = 0; Y < rm.height; Y++)
+                    for (int X = 0; X < rm.width; X++) {
+                        const int x = f * X + o < w ? f * X + o : w - 1, y = f * Y + o < h ? f * Y + o : h - 1;
+                        CHECK(memcmp(&rm.depth[Y * rm.width + X], &sm.depth[y * w + x], sizeof(float)) == 0);
+                    }
+                fx_shadow_map_free(&rm);
+            }
             fx_shadow_map_free(&sm);
         }
+    /* a depth range under 2: the reader's -Inf (-FLT_MAX) normalises to 1, not -1 (its z
+     * overflows), so the row's least raw value is not its least normalised one */
+    for (int i = 0; i < w * h; i++)
+        raw[i] = 1.5f + (float)(i % 5) * 0.1f;
+    raw[2 * w + 7] = -FLT_MAX;
+    raw[3 * w + 8] = 1.05f;
+    for (int f = 1; f <= 3; f += 2) {
+        fx_shadow_map sm, rm;
+        CHECK_OK(c2, fx_shadow_map_build(c2, raw, w, h, 1.0f, 2.0f, 0, &sm, "test"));
+        CHECK_OK(c2, fx_shadow_map_build_reduced(c2, raw, w, h, f == 1 ? 2 : f, 1.0f, 2.0f, &rm, "test"));
+        CHECK(sm.depth_min == fx_shadow_map_norm(&sm, 1.05f) && rm.depth_min == sm.depth_min);
+        fx_shadow_map_free(&sm);
+        fx_shadow_map_free(&rm);
+    }
     free(raw);
     fx_context_free(c1);
     /* fx_frame_take_pass_data: the pass leaves the frame with its pixels; not when shared */

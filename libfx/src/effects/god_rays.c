@@ -56,6 +56,7 @@ typedef struct god_rays_params {
     int volume_steps, volume_downsample, interleave;
     float volume_bias;
     int volume_upsample;
+    int light_view_downsample;
 } god_rays_params;
 
 enum { SRC_SCENE = 0, SRC_SCREEN };
@@ -164,6 +165,11 @@ static const fx_param_def god_rays_param_defs[] = {
               "texels weighted by their depth's likeness to the pixel's; edges: a plain bilinear where "
               "the 4 texels and the pixel lie within 5 % in depth (fewer instructions where "
               "volume_downsample is a multiple of 8), the likeness weights only at depth edges (draft)"),
+    FX_P_INT(god_rays_params, light_view_downsample, "light_view_downsample", 1, 1, 8, 1, 4, "",
+             "volumetric: march through the light view reduced by this factor per axis (every factor-th "
+             "texel each way: shadows are neither widened nor narrowed, features below factor texels "
+             "may drop out); read without the full map: 1 / factor^2 of the memory and a faster first "
+             "frame (draft: 2)"),
 };
 
 static fx_pass_set god_rays_passes(const void *params)
@@ -938,7 +944,8 @@ static fx_result vol_light(const fx_effect_run *run, const god_rays_params *p, f
     }
     char name[FX_STRING_PARAM_MAX + 8];
     snprintf(name, sizeof name, "light:%s", p->light);
-    r = fx_aux_map_acquire(run->frame, name, 0, -1, 0.0f, where, map);
+    /* a reduced view is its own cache entry: a vsm_shadows in the stack keeps the full one */
+    r = fx_aux_map_acquire_reduced(run->frame, name, p->light_view_downsample, where, map);
     if (r != FX_OK)
         return r;
     if (!map->av->view.orthographic) {
@@ -1075,7 +1082,8 @@ const fx_effect_class fx_effect_god_rays = {
          * 0.5 has the scene-relative line density of 1.5 at 640x360; at equal time a reduced
          * map with finer lines errs less than coarser lines at full size */
         "{\"method\": \"polar\", \"polar_resolution\": 0.75, \"polar_levels\": 2, \"polar_downsample\": 4, "
-        "\"volume_downsample\": 16, \"volume_steps\": 16, \"interleave\": 1, \"volume_upsample\": \"edges\"}",
+        "\"volume_downsample\": 16, \"volume_steps\": 16, \"interleave\": 1, \"volume_upsample\": \"edges\", "
+        "\"light_view_downsample\": 2}",
         "{\"method\": \"polar\", \"polar_resolution\": 0.75, \"polar_levels\": 2, \"polar_downsample\": 2, "
         "\"volume_downsample\": 4, \"volume_steps\": 16, \"interleave\": 2}",
         "{\"method\": \"polar\", \"polar_resolution\": 0.5, \"polar_levels\": 2, \"polar_downsample\": 1, "

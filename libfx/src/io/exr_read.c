@@ -544,7 +544,7 @@ static int pass_fully_decoded(const reader *rd, const fx_exr_plan_pass *pp)
 }
 
 /* Stage 1, resolve: the view and the layer the caller asked for, checked against the file. */
-static fx_result resolve_layer_view(fx_context *ctx, const fx_exr_file *f, const fx_exr_read_request *req,
+fx_result fx_exr_resolve_layer_view(fx_context *ctx, const fx_exr_file *f, const fx_exr_read_request *req,
                                     const char **layer, const char **view)
 {
     fx_result r = resolve_view(ctx, f, req->view, view);
@@ -722,7 +722,7 @@ static fx_result fix_up_passes(reader *rd, const fx_exr_plan_pass *plan, int np)
 static fx_result read_frame(fx_context *ctx, fx_exr_file *f, const fx_exr_read_request *req, fx_frame **out)
 {
     const char *layer = NULL, *view = NULL;
-    fx_result r = resolve_layer_view(ctx, f, req, &layer, &view);
+    fx_result r = fx_exr_resolve_layer_view(ctx, f, req, &layer, &view);
     if (r != FX_OK)
         return r;
     fx_exr_select sel = {layer, view, 1, 0};

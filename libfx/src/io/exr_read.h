@@ -20,6 +20,12 @@ typedef struct fx_exr_read_request {
 /* req NULL: every pass of the default layer and view. */
 fx_result fx_exr_read(fx_context *ctx, const char *path, const fx_exr_read_request *req, fx_frame **out);
 
+/* The layer and view req asks for, checked against an opened file (exr_common.h): the row
+ * reader (exr_rows.h) names passes as fx_exr_read does. */
+struct fx_exr_file;
+fx_result fx_exr_resolve_layer_view(fx_context *ctx, const struct fx_exr_file *f, const fx_exr_read_request *req,
+                                    const char **layer, const char **view);
+
 #ifdef __cplusplus
 }
 #endif

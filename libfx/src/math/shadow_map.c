@@ -34,6 +34,27 @@ static float least(const float *z, size_t n)
     return m;
 }
 
+/* fx_shadow_map_norm over n values, written branch-free so that the compiler vectorises it
+ * (inlined into the callers' clones; range > 1e-20) */
+static inline void norm_span(const float *restrict raw, float *restrict o, int n, float znear, float range)
+{
+    for (int x = 0; x < n; x++) {
+        const float z = 2.0f * (raw[x] - znear) / range - 1.0f;
+        const float c = z < -1.0f ? -1.0f : z > 1.0f ? 1.0f : z;
+        o[x] = fabsf(z) <= FLT_MAX ? c : 1.0f; /* NaN, +-Inf: 1 (isfinite) */
+    }
+}
+
+/* The same in place: one pointer, so the loop needs no overlap check */
+static inline void norm_span_in_place(float *out, int n, float znear, float range)
+{
+    for (int x = 0; x < n; x++) {
+        const float z = 2.0f * (out[x] - znear) / range - 1.0f;
+        const float c = z < -1.0f ? -1.0f : z > 1.0f ? 1.0f : z;
+        out[x] = fabsf(z) <= FLT_MAX ? c : 1.0f;
+    }
+}
+
 /* fx_shadow_map_norm over rows, written branch-free so that the compiler vectorises it (the
  * same operations in the same order, so the same bits: IEEE division and comparisons are
  * exact lane by lane; 8 lanes in the AVX2 clone), and each row's least value while the row
@@ -52,21 +73,10 @@ FX_CLONES_VECTORIZE static void norm_rows(void *user, int y0, int y1)
     }
     for (int y = y0; y < y1; y++) {
         float *out = sm->depth + (size_t)y * sm->width;
-        if (j->raw == sm->depth) { /* in place: one pointer, so the loop needs no overlap check */
-            for (int x = 0; x < sm->width; x++) {
-                const float z = 2.0f * (out[x] - znear) / range - 1.0f;
-                const float c = z < -1.0f ? -1.0f : z > 1.0f ? 1.0f : z;
-                out[x] = fabsf(z) <= FLT_MAX ? c : 1.0f;
-            }
-        } else {
-            const float *restrict raw = j->raw + (size_t)y * sm->width;
-            float *restrict o = out;
-            for (int x = 0; x < sm->width; x++) {
-                const float z = 2.0f * (raw[x] - znear) / range - 1.0f;
-                const float c = z < -1.0f ? -1.0f : z > 1.0f ? 1.0f : z;
-                o[x] = fabsf(z) <= FLT_MAX ? c : 1.0f; /* NaN, +-Inf: 1 (isfinite) */
-            }
-        }
+        if (j->raw == sm->depth)
+            norm_span_in_place(out, sm->width, znear, range);
+        else
+            norm_span(j->raw + (size_t)y * sm->width, out, sm->width, znear, range);
         j->row_min[y] = least(out, (size_t)sm->width);
     }
 }
@@ -152,6 +162,151 @@ fx_result fx_shadow_map_build_in_place(fx_context *ctx, float *raw_depth, int wi
                                        float zfar, int derivative_bias, fx_shadow_map *out, const char *where)
 {
     return build(ctx, raw_depth, raw_depth, width, height, znear, zfar, derivative_bias, out, where);
+}
+
+/* ---- a map reduced per axis (shadow_map.h) ---- */
+
+fx_result fx_shadow_map_reduced_begin(fx_context *ctx, int width, int height, int factor, float znear, float zfar,
+                                      fx_shadow_map *out, const char *where)
+{
+    memset(out, 0, sizeof *out);
+    if (width <= 0 || height <= 0 || factor < 1 || !(zfar > znear) || !isfinite(zfar) || !isfinite(znear))
+        return fx_fail(ctx, FX_ERR_INVALID_ARGUMENT, "%s: shadow map %d x %d / %d with depth range [%g, %g]", where,
+                       width, height, factor, (double)znear, (double)zfar);
+    const int w = (width + factor - 1) / factor, h = (height + factor - 1) / factor;
+    const size_t n = (size_t)w * h;
+    fx_result r = fx_check_budget(ctx, (uint64_t)n * sizeof(float), "shadow map");
+    if (r)
+        return r;
+    /* whole huge pages from 256 KiB up: a first frame's 1080p light view at half resolution
+     * (1.6 MB) faulted 380 small pages here, 3-4 ms of system time; one huge page ~1 ms */
+    out->depth = fx_mem_alloc_whole(n * sizeof(float));
+    out->row_min = fx_mem_alloc((size_t)h * sizeof(float));
+    if (!out->depth || !out->row_min) {
+        fx_shadow_map_free(out);
+        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for a %d x %d shadow map", where, w, h);
+    }
+    out->width = out->mwidth = w;
+    out->height = out->mheight = h;
+    out->factor = factor;
+    out->znear = znear;
+    out->zfar = zfar;
+    return FX_OK;
+}
+
+/* The least of n raw values (finite here), 4 lanes at a time. */
+static float least_raw(const float *z, size_t n)
+{
+    v4f m4 = ld4(z);
+    size_t i = 4;
+    for (; i + 4 <= n; i += 4)
+        m4 = min4(ld4(z + i), m4);
+    float m = m4[0];
+    for (int k = 1; k < 4; k++)
+        m = m4[k] < m ? m4[k] : m;
+    for (; i < n; i++)
+        m = z[i] < m ? z[i] : m;
+    return m;
+}
+
+/* The least of a raw row's normalised values (norm_rows' least) from its least raw value:
+ * the normalisation is monotone wherever its z is finite, and a value whose z is not
+ * (|raw| near FLT_MAX) normalises to 1, the top; only a least raw value whose z is not
+ * finite (a depth of -FLT_MAX, the reader's -Inf) needs the row normalised. */
+static float row_least(float *row, int n, float znear, float range)
+{
+    if (n < 4) {
+        norm_span_in_place(row, n, znear, range);
+        return least(row, (size_t)n);
+    }
+    const float m = least_raw(row, (size_t)n);
+    const float z = 2.0f * (m - znear) / range - 1.0f;
+    if (fabsf(z) <= FLT_MAX)
+        return z < -1.0f ? -1.0f : z > 1.0f ? 1.0f : z;
+    norm_span_in_place(row, n, znear, range);
+    return least(row, (size_t)n);
+}
+
+/* Each row's least normalised value (depth_min is the full map's) and the band's kept row
+ * normalised at the kept texels only (norm_rows' arithmetic: the same bits): a point
+ * sample (fx_shadow_map_sample_offset). */
+FX_CLONES_VECTORIZE void fx_shadow_map_reduced_band(fx_shadow_map *sm, int band, float *raw, int nrows,
+                                                    int raw_width)
+{
+    const int k = sm->factor, w = sm->width;
+    const int s = fx_shadow_map_sample_offset(k);
+    const float znear = sm->znear, range = sm->zfar - sm->znear;
+    const int keep = s < nrows ? s : nrows - 1; /* the last band may be short */
+    float *out = sm->depth + (size_t)band * w;
+    if (!(range > 1e-20f)) { /* as fx_shadow_map_norm: z = 0 */
+        memset(out, 0, (size_t)w * sizeof(float));
+        sm->row_min[band] = 0.0f;
+        return;
+    }
+    float m = 1.0f;
+    for (int i = 0; i < nrows; i++) {
+        float *row = raw + (size_t)i * raw_width;
+        if (i == keep) {
+            const int inside = (raw_width - 1 - s) / k + 1; /* kept texels inside the row */
+            if (k == 2)
+                for (int X = 0; X < inside; X++)
+                    out[X] = row[2 * X + s];
+            else
+                for (int X = 0; X < inside; X++)
+                    out[X] = row[k * X + s];
+            for (int X = inside; X < w; X++)
+                out[X] = row[raw_width - 1];
+        }
+        const float r = row_least(row, raw_width, znear, range);
+        m = r < m ? r : m;
+    }
+    norm_span_in_place(out, w, znear, range);
+    sm->row_min[band] = m;
+}
+
+void fx_shadow_map_reduced_end(fx_shadow_map *sm)
+{
+    sm->depth_min = least(sm->row_min, (size_t)sm->height);
+    fx_mem_free(sm->row_min);
+    sm->row_min = NULL;
+}
+
+typedef struct reduced_job {
+    const float *raw;
+    fx_shadow_map *sm;
+    int raw_width, raw_height;
+    float *scratch; /* per worker: factor raw rows */
+} reduced_job;
+
+static void reduced_bands(void *user, int b0, int b1, int worker)
+{
+    reduced_job *j = user;
+    const int k = j->sm->factor;
+    float *rows = j->scratch + (size_t)worker * k * j->raw_width;
+    for (int b = b0; b < b1; b++) {
+        const int y0 = b * k, n = y0 + k <= j->raw_height ? k : j->raw_height - y0;
+        memcpy(rows, j->raw + (size_t)y0 * j->raw_width, (size_t)n * j->raw_width * sizeof(float));
+        fx_shadow_map_reduced_band(j->sm, b, rows, n, j->raw_width);
+    }
+}
+
+fx_result fx_shadow_map_build_reduced(fx_context *ctx, const float *raw_depth, int width, int height, int factor,
+                                      float znear, float zfar, fx_shadow_map *out, const char *where)
+{
+    fx_result r = fx_shadow_map_reduced_begin(ctx, width, height, factor, znear, zfar, out, where);
+    if (r)
+        return r;
+    const int workers = fx_parallel_workers(ctx);
+    float *scratch = fx_mem_alloc((size_t)workers * factor * width * sizeof(float));
+    if (!scratch) {
+        fx_shadow_map_free(out);
+        return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for a reduced shadow map", where);
+    }
+    reduced_job j = {raw_depth, out, width, height, scratch};
+    fx_parallel_for_worker(ctx, out->height, 1, reduced_bands, &j);
+    fx_mem_free(scratch);
+    fx_shadow_map_reduced_end(out);
+    return FX_OK;
 }
 
 /* ---- the moments' reduction (mip) ---- */
@@ -446,7 +601,8 @@ void fx_shadow_map_free(fx_shadow_map *sm)
         return;
     fx_mem_free(sm->depth);
     fx_mem_free(sm->moments);
-    sm->depth = sm->moments = NULL;
+    fx_mem_free(sm->row_min);
+    sm->depth = sm->moments = sm->row_min = NULL;
 }
 
 float fx_shadow_map_pcf_plane(const fx_shadow_map *sm, float px, float py, float t, int radius, float eps, float gx,

@@ -31,6 +31,16 @@ typedef struct fx_aux_map {
  * depth; VSM asks for a width above 1). */
 fx_result fx_aux_map_acquire(const fx_frame *f, const char *name, int derivative_bias, int filter, float width,
                              const char *where, fx_aux_map *out);
+/* The view's normalised depth reduced by `factor` per axis (math/shadow_map.h: every
+ * factor-th texel each way, depth_min the full map's; no moments), for a reader that needs
+ * less than the view's resolution (god_rays' volumetric march at draft). Read band by band
+ * without ever holding the full map when the view's EXR allows it (io/exr_rows.h: what the
+ * add-on writes), else read whole and reduced: the same bits. out->av's view and size are
+ * the reduced map's (fx_view_reduce_sampled: its pixel coordinates address the kept
+ * texels). An entry of its own, keyed by the factor: a stack whose vsm_shadows reads the
+ * full view gets both maps. factor <= 1: fx_aux_map_acquire's. */
+fx_result fx_aux_map_acquire_reduced(const fx_frame *f, const char *name, int factor, const char *where,
+                                     fx_aux_map *out);
 /* The view itself, as read (colour, depth, camera; no shadow map): reflection probes and
  * planar views, which are looked up as images. Cached and keyed as the maps are, so a
  * batch or a live session decodes each probe once. out->av stays valid until release;

@@ -4,6 +4,7 @@
 #include "core/frame.h"
 #include "core/mem.h"
 #include "core/platform.h"
+#include "io/exr_rows.h"
 #include "scene/aux_map.h"
 
 #include <cjson/cJSON.h>
@@ -136,7 +137,7 @@ void fx_aux_cache_stats(const fx_context *ctx, long *built, long *reused)
 #define AUX_MOMENTS_LEVEL(filter) (-16 - (filter))
 
 static fx_result acquire(const fx_frame *f, const char *name, int derivative_bias, int filter, float width,
-                         const char *where, fx_aux_map *out);
+                         int factor, const char *where, fx_aux_map *out);
 
 /* Filtered maps made from the cached moments: those whose moments are made first and
  * filtered after (fx_shadow_map_filter). The full-resolution box filters straight from the
@@ -158,7 +159,7 @@ static fx_result entry_from_base(const fx_frame *f, const char *name, int bias, 
     level = level > FX_SHADOW_MAX_LEVEL ? FX_SHADOW_MAX_LEVEL : level;
     const int moments = from_moments(filter);
     fx_aux_map base;
-    fx_result r = acquire(f, name, bias, moments ? AUX_MOMENTS(level) : -1, 0.0f, where, &base);
+    fx_result r = acquire(f, name, bias, moments ? AUX_MOMENTS(level) : -1, 0.0f, 1, where, &base);
     if (r)
         return r;
     const float *src = moments ? base.sm->moments : base.sm->depth;
@@ -185,11 +186,64 @@ static fx_result entry_from_base(const fx_frame *f, const char *name, int bias, 
     return r;
 }
 
+typedef struct reduce_ctx {
+    fx_shadow_map *sm;
+    int raw_width;
+} reduce_ctx;
+
+static void reduce_band_exact(void *user, int band, float *rows, int nrows, int worker)
+{
+    (void)worker;
+    const reduce_ctx *c = user;
+    fx_shadow_map_reduced_band(c->sm, band, rows, nrows, c->raw_width);
+}
+
+/* Entry e as the view's depth reduced by factor per axis: streamed band by band from its
+ * EXR into the reduced map when the file allows it (no frame-sized buffer is ever touched:
+ * on a first frame their fresh pages cost more than the read), else read whole and
+ * reduced; the same bits either way. Its view addresses the kept texels
+ * (fx_view_reduce_sampled). */
+static fx_result entry_build_reduced(const fx_frame *f, const char *name, int factor, const char *where,
+                                     aux_entry *e)
+{
+    fx_exr_rows *rows = NULL;
+    fx_result r = fx_aux_view_open_rows(f, name, where, &e->av, &rows);
+    if (r)
+        return r;
+    fx_aux_view *av = e->av;
+    const float zn = av->view.cam.clip_start, zf = av->view.cam.clip_end;
+    if (rows) {
+        size_t bad = 0;
+        r = fx_shadow_map_reduced_begin(f->ctx, av->width, av->height, factor, zn, zf, &e->sm, where);
+        if (!r)
+            r = fx_exr_rows_read(rows, factor, reduce_band_exact, &(reduce_ctx){&e->sm, av->width}, &bad);
+        if (!r)
+            fx_shadow_map_reduced_end(&e->sm);
+        if (!r && bad)
+            fx_warn(f->ctx, "'%s': %zu NaN/Inf values in pass Depth replaced", av->path, bad);
+        fx_exr_rows_close(rows);
+    } else {
+        r = fx_shadow_map_build_reduced(f->ctx, av->depth, av->width, av->height, factor, zn, zf, &e->sm, where);
+    }
+    if (r)
+        return r;
+    fx_frame_free(av->frame);
+    av->frame = NULL;
+    av->depth = NULL;
+    fx_view_reduce_sampled(&av->view, factor);
+    av->width = e->sm.width;
+    av->height = e->sm.height;
+    e->bytes = (uint64_t)e->sm.width * e->sm.height * sizeof(float) + sizeof *av;
+    return FX_OK;
+}
+
 /* Builds the map of entry e (key already set). keep_frame: a view kept as read stays in
  * its EXR's frame (an entry that cannot go into the cache: released within the run). */
-static fx_result entry_build(const fx_frame *f, const char *name, int bias, int filter, float width,
+static fx_result entry_build(const fx_frame *f, const char *name, int bias, int filter, float width, int factor,
                              const char *where, int keep_frame, aux_entry *e)
 {
+    if (factor > 1)
+        return entry_build_reduced(f, name, factor, where, e);
     if (filter >= 0 && width > 1.0f)
         return entry_from_base(f, name, bias, filter, width, where, e);
     fx_result r = fx_aux_view_load(f, name, where, &e->av);
@@ -262,7 +316,7 @@ static fx_result entry_build(const fx_frame *f, const char *name, int bias, int 
 }
 
 static fx_result acquire(const fx_frame *f, const char *name, int derivative_bias, int filter, float width,
-                         const char *where, fx_aux_map *out)
+                         int factor, const char *where, fx_aux_map *out)
 {
     memset(out, 0, sizeof *out);
     fx_context *ctx = f->ctx;
@@ -282,9 +336,9 @@ static fx_result acquire(const fx_frame *f, const char *name, int derivative_bia
         }
         /* device + inode too: writers replace the file (temp + rename), which gives it a new
          * inode even when size and the coarse mtime clock are the same */
-        int n = snprintf(tail, sizeof tail, "|%llu:%llu|%lld|%lld.%09ld|%d|%d|%.9g", (unsigned long long)st.dev,
+        int n = snprintf(tail, sizeof tail, "|%llu:%llu|%lld|%lld.%09ld|%d|%d|%.9g|%d", (unsigned long long)st.dev,
                          (unsigned long long)st.ino, (long long)st.size, (long long)st.mtime_sec,
-                         st.mtime_nsec, derivative_bias ? 1 : 0, filter, (double)width);
+                         st.mtime_nsec, derivative_bias ? 1 : 0, filter, (double)width, factor);
         size_t len = strlen(entry);
         key = fx_mem_alloc(len + (size_t)n + 1);
         if (key) {
@@ -309,7 +363,7 @@ static fx_result acquire(const fx_frame *f, const char *name, int derivative_bia
     aux_entry tmp;
     memset(&tmp, 0, sizeof tmp);
     /* without a key (no caching) the entry is private: the copy out of the frame is skipped */
-    r = entry_build(f, name, derivative_bias, filter, width, where, !key, &tmp);
+    r = entry_build(f, name, derivative_bias, filter, width, factor, where, !key, &tmp);
     if (r) {
         entry_free(ctx, &tmp);
         fx_mem_free(key);
@@ -345,12 +399,18 @@ static fx_result acquire(const fx_frame *f, const char *name, int derivative_bia
 fx_result fx_aux_map_acquire(const fx_frame *f, const char *name, int derivative_bias, int filter, float width,
                              const char *where, fx_aux_map *out)
 {
-    return acquire(f, name, derivative_bias, filter < 0 ? -1 : filter, width, where, out);
+    return acquire(f, name, derivative_bias, filter < 0 ? -1 : filter, width, 1, where, out);
+}
+
+fx_result fx_aux_map_acquire_reduced(const fx_frame *f, const char *name, int factor, const char *where,
+                                     fx_aux_map *out)
+{
+    return acquire(f, name, 0, -1, 0.0f, factor > 1 ? factor : 1, where, out);
 }
 
 fx_result fx_aux_view_acquire(const fx_frame *f, const char *name, const char *where, fx_aux_map *out)
 {
-    return acquire(f, name, 0, AUX_RAW_VIEW, 0.0f, where, out);
+    return acquire(f, name, 0, AUX_RAW_VIEW, 0.0f, 1, where, out);
 }
 
 void fx_aux_map_release(fx_context *ctx, fx_aux_map *m)

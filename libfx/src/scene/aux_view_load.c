@@ -7,6 +7,7 @@
 #include "core/parallel.h"
 #include "core/simd4.h"
 #include "io/exr_read.h"
+#include "io/exr_rows.h"
 #include "scene/aux_view.h"
 #include "scene/camera_json.h"
 
@@ -101,7 +102,48 @@ int fx_aux_view_has(const fx_frame *f, const char *name)
     return found;
 }
 
-fx_result fx_aux_view_load(const fx_frame *f, const char *name, const char *where, fx_aux_view **out)
+/* The view's EXR read whole: its Depth pass, and a probe's colour and sky made finite.
+ * On failure the caller frees av. */
+static fx_result read_whole(fx_context *ctx, fx_aux_view *av, const char *name, const char *where)
+{
+    fx_result r = fx_exr_read(ctx, av->path, NULL, &av->frame);
+    if (r) {
+        char msg[1024];
+        snprintf(msg, sizeof msg, "%s", fx_context_error(ctx));
+        return fx_fail(ctx, r, "%s: aux view '%s': %s", where, name, msg);
+    }
+    fx_pass *d = fx_frame_find_pass(av->frame, "Depth");
+    if (!d) {
+        return fx_fail(ctx, FX_ERR_MISSING_PASS, "%s: aux view '%s' (%s) has no Depth pass", where, av->name,
+                       av->path);
+    }
+    av->depth = d->data;
+    av->width = av->frame->width;
+    av->height = av->frame->height;
+    /* the colour (probes reflect it): finite and within half-float range (the reader
+     * turns +-Inf into +-FLT_MAX, which a blend would overflow) */
+    fx_pass *c = fx_frame_find_pass(av->frame, "Combined");
+    if (c && c->channels == 4) {
+        /* a probe's colour is read whole before the first mirror pixel can use it: on
+         * the context's threads, four floats at a time */
+        fx_parallel_for(ctx, av->height, 16, half_range_rows, &(half_range_job){ c->data, (size_t)av->width * 4 });
+        av->color = c->data;
+    } else if (av->panorama) {
+        return fx_fail(ctx, FX_ERR_MISSING_PASS, "%s: probe '%s' (%s) has no RGBA colour (Combined/Image) pass",
+                       where, av->name, av->path);
+    }
+    fx_pass *sk = av->panorama ? fx_frame_find_pass(av->frame, "Sky") : NULL;
+    if (sk && sk->channels == 4) {
+        fx_parallel_for(ctx, av->height, 16, half_range_rows, &(half_range_job){ sk->data, (size_t)av->width * 4 });
+        av->sky = sk->data;
+    }
+    return FX_OK;
+}
+
+/* fx_aux_view_load; with rows (a light view's map built band by band), the Depth pass is
+ * opened to stream when the file allows it (*rows set, the view's frame without passes). */
+static fx_result load(const fx_frame *f, const char *name, const char *where, fx_aux_view **out,
+                      fx_exr_rows **rows)
 {
     *out = NULL;
     fx_context *ctx = f->ctx;
@@ -156,47 +198,56 @@ fx_result fx_aux_view_load(const fx_frame *f, const char *name, const char *wher
             av->plane[k] /= n;
     }
     cJSON_Delete(list);
-    fx_result r = fx_exr_read(ctx, av->path, NULL, &av->frame);
+    fx_result r = FX_OK;
+    if (rows && !av->panorama) {
+        fx_exr_rows_info info;
+        r = fx_exr_rows_open(ctx, av->path, "Depth", rows, &info);
+        if (!r && *rows) {
+            r = fx_frame_new(ctx, info.width, info.height, &av->frame);
+            if (!r)
+                r = fx_frame_set_windows(av->frame, info.data_window, info.display_window);
+            if (r) {
+                fx_exr_rows_close(*rows);
+                *rows = NULL;
+                fx_aux_view_free(av);
+                return r;
+            }
+            av->width = info.width;
+            av->height = info.height;
+        }
+    }
     if (r) {
         char msg[1024];
         snprintf(msg, sizeof msg, "%s", fx_context_error(ctx));
-        fx_aux_view_free(av);
-        return fx_fail(ctx, r, "%s: aux view '%s': %s", where, name, msg);
+        r = fx_fail(ctx, r, "%s: aux view '%s': %s", where, name, msg);
+    } else if (!rows || !*rows) {
+        r = read_whole(ctx, av, name, where);
     }
-    fx_pass *d = fx_frame_find_pass(av->frame, "Depth");
-    if (!d) {
-        fx_result rr = fx_fail(ctx, FX_ERR_MISSING_PASS, "%s: aux view '%s' (%s) has no Depth pass", where,
-                               av->name, av->path);
+    if (r) {
         fx_aux_view_free(av);
-        return rr;
-    }
-    av->depth = d->data;
-    av->width = av->frame->width;
-    av->height = av->frame->height;
-    /* the colour (probes reflect it): finite and within half-float range (the reader
-     * turns +-Inf into +-FLT_MAX, which a blend would overflow) */
-    fx_pass *c = fx_frame_find_pass(av->frame, "Combined");
-    if (c && c->channels == 4) {
-        /* a probe's colour is read whole before the first mirror pixel can use it: on
-         * the context's threads, four floats at a time */
-        fx_parallel_for(ctx, av->height, 16, half_range_rows, &(half_range_job){ c->data, (size_t)av->width * 4 });
-        av->color = c->data;
-    } else if (av->panorama) {
-        fx_result rr = fx_fail(ctx, FX_ERR_MISSING_PASS, "%s: probe '%s' (%s) has no RGBA colour (Combined/Image) pass",
-                               where, av->name, av->path);
-        fx_aux_view_free(av);
-        return rr;
-    }
-    fx_pass *sk = av->panorama ? fx_frame_find_pass(av->frame, "Sky") : NULL;
-    if (sk && sk->channels == 4) {
-        fx_parallel_for(ctx, av->height, 16, half_range_rows, &(half_range_job){ sk->data, (size_t)av->width * 4 });
-        av->sky = sk->data;
+        return r;
     }
     if (fx_frame_set_camera(av->frame, &cam) || !fx_view_init(&av->view, av->frame)) {
+        if (rows) {
+            fx_exr_rows_close(*rows);
+            *rows = NULL;
+        }
         fx_aux_view_free(av);
         return fx_fail(ctx, FX_ERR_NO_CAMERA, "%s: aux view '%s' has a singular camera matrix", where, name);
     }
     *out = av;
     return FX_OK;
+}
+
+fx_result fx_aux_view_load(const fx_frame *f, const char *name, const char *where, fx_aux_view **out)
+{
+    return load(f, name, where, out, NULL);
+}
+
+fx_result fx_aux_view_open_rows(const fx_frame *f, const char *name, const char *where, fx_aux_view **out,
+                                fx_exr_rows **rows)
+{
+    *rows = NULL;
+    return load(f, name, where, out, rows);
 }
 
