@@ -40,8 +40,8 @@ typedef struct fx_shadow_map {
     int mwidth, mheight; /* the moments' grid: ceil(width / 2^level) x ceil(height / 2^level) */
     int level;       /* the moments' reduction level (0: full resolution) */
     int derivative_bias;
-    int factor;      /* the depth's reduction per axis (fx_shadow_map_reduced_*): a texel is the
-                        least of factor x factor texels of the view; 0 or 1: as rendered */
+    int factor;      /* the depth's reduction per axis (fx_shadow_map_reduced_*): a texel is one
+                        kept texel of each factor x factor block of the view; 0 or 1: as rendered */
     float *row_min;  /* during a reduced build: each row's least value */
 } fx_shadow_map;
 
