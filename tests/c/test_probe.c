@@ -923,6 +923,49 @@ static void test_pano_footprint(void)
  * following the same bend); footprint on (final's default) must come much closer to it
  * than one lookup per pixel, and must not touch a pixel off the mirror. */
 #define BEND 2.5
+/* ssr_mirror at final over f (mask: the stack's mask JSON, footprint on or off), with the
+ * probe written at `path` (placed at pos) attached under the name the stack asks for. */
+static fx_frame *run_final_with_probe(fx_context *ctx, fx_frame *f, const char *mask, int footprint,
+                                      const char *path, const double pos[3])
+{
+    fx_stack *s = et_stack(ctx, "ssr_mirror");
+    CHECK_OK(ctx, fx_stack_set_mask_json(s, 0, mask));
+    CHECK_OK(ctx, fx_stack_set_quality(s, FX_QUALITY_FINAL));
+    CHECK_OK(ctx, fx_stack_set_int(s, 0, "footprint", footprint));
+    char *req = NULL;
+    CHECK_OK(ctx, fx_stack_required_aux_views(s, &req));
+    const char *at = req ? strstr(req, "\"probe:") : NULL;
+    char pname[64] = "probe:?";
+    if (at)
+        snprintf(pname, 19, "%s", at + 1);
+    fx_free(req);
+    add_probe(ctx, f, pname, path, pos);
+    fx_frame *o = NULL;
+    CHECK_OK(ctx, fx_stack_run(s, f, &o));
+    fx_stack_free(s);
+    return o;
+}
+
+/* A Cryptomatte pass over room_frame's mirror (IndexMA 1): material Mirror covers every
+ * mirror pixel wholly but column px, which it covers by mirror_cov, the rest a "Post". */
+static void add_post_crypto(fx_frame *f, const float *ima, int px, float mirror_cov)
+{
+    const float mirror_id = fx_cryptomatte_id("Mirror"), post_id = fx_cryptomatte_id("Post");
+    float *crypto = calloc((size_t)FW * FH * 4, sizeof(float));
+    for (size_t i = 0; crypto && i < (size_t)FW * FH; i++) {
+        float *cr = crypto + i * 4;
+        if (ima[i] != 1)
+            continue;
+        if ((int)(i % FW) != px)
+            cr[0] = mirror_id, cr[1] = 1.0f;
+        else
+            cr[0] = post_id, cr[1] = 1.0f - mirror_cov, cr[2] = mirror_id, cr[3] = mirror_cov;
+    }
+    CHECK(crypto && fx_frame_add_pass(f, "CryptoMaterial00", 4, crypto) == FX_OK);
+    fx_frame_set_meta(f, "cryptomatte/CryptoMaterial/manifest", "{\"Mirror\": \"x\", \"Post\": \"y\"}");
+    free(crypto);
+}
+
 static void bent_normal(double px, double n[3])
 {
     double a = BEND * (px / FW - 0.5); /* radians: the normal turns about Z across the frame */
@@ -977,21 +1020,8 @@ static void test_footprint(fx_context *ctx)
     double err[2];
     fx_frame *out[2] = { NULL, NULL };
     for (int on = 0; on < 2; on++) {
-        fx_stack *s = et_stack(ctx, "ssr_mirror");
-        CHECK_OK(ctx, fx_stack_set_mask_json(s, 0, "{\"material_index\": 1}"));
-        CHECK_OK(ctx, fx_stack_set_quality(s, FX_QUALITY_FINAL));
-        CHECK_OK(ctx, fx_stack_set_int(s, 0, "footprint", on));
-        char *req = NULL;
-        CHECK_OK(ctx, fx_stack_required_aux_views(s, &req));
-        const char *at = req ? strstr(req, "\"probe:") : NULL;
-        char pname[64] = "probe:?";
-        if (at)
-            snprintf(pname, 19, "%s", at + 1);
-        fx_free(req);
-        add_probe(ctx, f, pname, path, ppos);
-        CHECK_OK(ctx, fx_stack_run(s, f, &out[on]));
+        out[on] = run_final_with_probe(ctx, f, "{\"material_index\": 1}", on, path, ppos);
         err[on] = mirror_mae(f, out[on], want);
-        fx_stack_free(s);
     }
     printf("convex mirror over 8 cm stripes, MAE against the pixels' exact mean: one lookup %.4f, footprint %.4f\n",
            err[0], err[1]);
@@ -1205,54 +1235,31 @@ static void test_edge_coverage(fx_context *ctx)
     fx_frame_pass(f, "Depth", &dep, &c);
     fx_frame_pass(f, "Normal", &nor, &c);
     fx_frame_pass(f, "IndexMA", &ima, &c);
-    const float mirror_id = fx_cryptomatte_id("Mirror"), post_id = fx_cryptomatte_id("Post");
     const float cov = 0.4f, post[3] = { 1.0f, 0.0f, 0.0f };
-    float *crypto = calloc((size_t)FW * FH * 4, sizeof(float));
     float *truth = calloc((size_t)FW * FH * 3, sizeof(float));
     const int px = FW / 2;
     int edge = 0;
-    for (int y = 0; y < FH; y++)
-        for (int x = 0; x < FW; x++) {
-            size_t i = (size_t)y * FW + x;
-            float *cr = crypto + i * 4;
-            if (ima[i] != 1)
-                continue;
-            if (x != px) {
-                cr[0] = mirror_id, cr[1] = 1.0f;
-                continue;
-            }
-            /* the post: 0.6 of the pixel, 1 m in front of the camera, facing +X */
-            cr[0] = post_id, cr[1] = 1.0f - cov, cr[2] = mirror_id, cr[3] = cov;
-            for (int k = 0; k < 3; k++) {
-                rgba[i * 4 + k] = cov * rgba[i * 4 + k] + (1.0f - cov) * post[k];
-                truth[i * 3 + k] = cov * want[i * 3 + k] + (1.0f - cov) * post[k];
-                nor[i * 3 + k] = k == 0 ? 1.0f : 0.0f;
-            }
-            dep[i] = 1.0f;
-            edge++;
+    for (int y = 0; y < FH; y++) {
+        /* the post: 0.6 of the pixel, 1 m in front of the camera, facing +X */
+        size_t i = (size_t)y * FW + px;
+        if (ima[i] != 1)
+            continue;
+        for (int k = 0; k < 3; k++) {
+            rgba[i * 4 + k] = cov * rgba[i * 4 + k] + (1.0f - cov) * post[k];
+            truth[i * 3 + k] = cov * want[i * 3 + k] + (1.0f - cov) * post[k];
+            nor[i * 3 + k] = k == 0 ? 1.0f : 0.0f;
         }
-    fx_frame_add_pass(f, "CryptoMaterial00", 4, crypto);
-    fx_frame_set_meta(f, "cryptomatte/CryptoMaterial/manifest", "{\"Mirror\": \"x\", \"Post\": \"y\"}");
+        dep[i] = 1.0f;
+        edge++;
+    }
+    add_post_crypto(f, ima, px, cov);
     char path[600];
     snprintf(path, sizeof path, "%s/probe.exr", dir);
     const double ppos[3] = { 0.0, 2.6, 1.5 };
     write_probe(ctx, path, ppos, 256, 128, 0);
     double err[2];
     for (int on = 0; on < 2; on++) {
-        fx_stack *s = et_stack(ctx, "ssr_mirror");
-        CHECK_OK(ctx, fx_stack_set_mask_json(s, 0, "{\"material\": \"Mirror\"}"));
-        CHECK_OK(ctx, fx_stack_set_quality(s, FX_QUALITY_FINAL));
-        CHECK_OK(ctx, fx_stack_set_int(s, 0, "footprint", on));
-        char *req = NULL;
-        CHECK_OK(ctx, fx_stack_required_aux_views(s, &req));
-        const char *at = req ? strstr(req, "\"probe:") : NULL;
-        char pname[64] = "probe:?";
-        if (at)
-            snprintf(pname, 19, "%s", at + 1);
-        fx_free(req);
-        add_probe(ctx, f, pname, path, ppos);
-        fx_frame *o = NULL;
-        CHECK_OK(ctx, fx_stack_run(s, f, &o));
+        fx_frame *o = run_final_with_probe(ctx, f, "{\"material\": \"Mirror\"}", on, path, ppos);
         const float *oc = et_combined(o);
         double e = 0;
         for (int y = 0; oc && y < FH; y++) {
@@ -1263,14 +1270,13 @@ static void test_edge_coverage(fx_context *ctx)
         }
         err[on] = e;
         fx_frame_free(o);
-        fx_stack_free(s);
     }
     printf("%d pixels 0.4 mirror / 0.6 post, MAE against 0.4 x the exact reflection + 0.6 x the post: "
            "own ray %.4f, the neighbour's change %.4f\n", edge, err[0], err[1]);
     CHECK(edge > 10);
     CHECK(err[1] < 0.03 && err[1] < 0.4 * err[0]);
     fx_frame_free(f);
-    free(want), free(crypto), free(truth);
+    free(want), free(truth);
 }
 
 /* A covered mirror pixel whose Normal blends two faces (a card's front and its edge: Cycles'
@@ -1309,20 +1315,7 @@ static void test_edge_normal(fx_context *ctx)
     write_probe(ctx, path, ppos, 256, 128, 0);
     double err[2], err_beside[2];
     for (int on = 0; on < 2; on++) {
-        fx_stack *s = et_stack(ctx, "ssr_mirror");
-        CHECK_OK(ctx, fx_stack_set_mask_json(s, 0, "{\"material_index\": 1}"));
-        CHECK_OK(ctx, fx_stack_set_quality(s, FX_QUALITY_FINAL));
-        CHECK_OK(ctx, fx_stack_set_int(s, 0, "footprint", on));
-        char *req = NULL;
-        CHECK_OK(ctx, fx_stack_required_aux_views(s, &req));
-        const char *at = req ? strstr(req, "\"probe:") : NULL;
-        char pname[64] = "probe:?";
-        if (at)
-            snprintf(pname, 19, "%s", at + 1);
-        fx_free(req);
-        add_probe(ctx, f, pname, path, ppos);
-        fx_frame *o = NULL;
-        CHECK_OK(ctx, fx_stack_run(s, f, &o));
+        fx_frame *o = run_final_with_probe(ctx, f, "{\"material_index\": 1}", on, path, ppos);
         const float *oc = et_combined(o);
         double e = 0, eb = 0;
         beside = 0;
@@ -1342,7 +1335,6 @@ static void test_edge_normal(fx_context *ctx)
         err[on] = e;
         err_beside[on] = beside ? eb / beside : 1.0;
         fx_frame_free(o);
-        fx_stack_free(s);
     }
     printf("%d pixels with a two-face Normal (|N| 0.72), MAE against the exact reflection: own normal %.4f, a "
            "face's %.4f; their neighbours %.4f / %.4f\n", edge, err[0], err[1], err_beside[0], err_beside[1]);
@@ -1390,19 +1382,7 @@ static void test_two_faces(fx_context *ctx)
     snprintf(path, sizeof path, "%s/probe.exr", dir);
     const double ppos[3] = { 0.0, 2.6, 1.5 };
     write_probe(ctx, path, ppos, 256, 128, 0);
-    fx_stack *s = et_stack(ctx, "ssr_mirror");
-    CHECK_OK(ctx, fx_stack_set_mask_json(s, 0, "{\"material_index\": 1}"));
-    CHECK_OK(ctx, fx_stack_set_quality(s, FX_QUALITY_FINAL));
-    char *req = NULL;
-    CHECK_OK(ctx, fx_stack_required_aux_views(s, &req));
-    const char *at = req ? strstr(req, "\"probe:") : NULL;
-    char pname[64] = "probe:?";
-    if (at)
-        snprintf(pname, 19, "%s", at + 1);
-    fx_free(req);
-    add_probe(ctx, f, pname, path, ppos);
-    fx_frame *o = NULL;
-    CHECK_OK(ctx, fx_stack_run(s, f, &o));
+    fx_frame *o = run_final_with_probe(ctx, f, "{\"material_index\": 1}", 1, path, ppos);
     const float *oc = et_combined(o);
     double e_mix = 0, e_one = 0, apart = 0;
     for (int y = 0; oc && y < FH; y++) {
@@ -1424,7 +1404,6 @@ static void test_two_faces(fx_context *ctx)
     CHECK(apart > 0.05);              /* the faces' reflections differ: the test can tell */
     CHECK(e_mix < 0.01 && e_mix < 0.2 * e_one);
     fx_frame_free(o);
-    fx_stack_free(s);
     fx_frame_free(f);
     free(want);
 }
@@ -1443,47 +1422,24 @@ static void test_edge_differentials(fx_context *ctx)
     int c;
     fx_frame_pass(f, "Normal", &nor, &c);
     fx_frame_pass(f, "IndexMA", &ima, &c);
-    const float mirror_id = fx_cryptomatte_id("Mirror"), post_id = fx_cryptomatte_id("Post");
-    float *crypto = calloc((size_t)FW * FH * 4, sizeof(float));
     const int px = FW / 2;
     const float ca = cosf(40.0f * 3.14159265f / 180.0f), sa = sinf(40.0f * 3.14159265f / 180.0f);
-    for (int y = 0; y < FH; y++)
-        for (int x = 0; x < FW; x++) {
-            size_t i = (size_t)y * FW + x;
-            float *cr = crypto + i * 4;
-            if (ima[i] != 1)
-                continue;
-            if (x != px) {
-                cr[0] = mirror_id, cr[1] = 1.0f;
-                continue;
-            }
-            cr[0] = post_id, cr[1] = 0.5f, cr[2] = mirror_id, cr[3] = 0.5f;
-            float *n = nor + i * 3; /* turned 40 deg about world Z */
-            float nx = ca * n[0] - sa * n[1], ny = sa * n[0] + ca * n[1];
-            n[0] = nx, n[1] = ny;
-        }
-    fx_frame_add_pass(f, "CryptoMaterial00", 4, crypto);
-    fx_frame_set_meta(f, "cryptomatte/CryptoMaterial/manifest", "{\"Mirror\": \"x\", \"Post\": \"y\"}");
+    for (int y = 0; y < FH; y++) {
+        size_t i = (size_t)y * FW + px;
+        if (ima[i] != 1)
+            continue;
+        float *n = nor + i * 3; /* turned 40 deg about world Z */
+        float nx = ca * n[0] - sa * n[1], ny = sa * n[0] + ca * n[1];
+        n[0] = nx, n[1] = ny;
+    }
+    add_post_crypto(f, ima, px, 0.5f);
     char path[600];
     snprintf(path, sizeof path, "%s/probe.exr", dir);
     const double ppos[3] = { 0.0, 2.6, 1.5 };
     write_probe(ctx, path, ppos, 256, 128, 0);
     double err[2];
     for (int on = 0; on < 2; on++) {
-        fx_stack *s = et_stack(ctx, "ssr_mirror");
-        CHECK_OK(ctx, fx_stack_set_mask_json(s, 0, "{\"material\": \"Mirror\"}"));
-        CHECK_OK(ctx, fx_stack_set_quality(s, FX_QUALITY_FINAL));
-        CHECK_OK(ctx, fx_stack_set_int(s, 0, "footprint", on));
-        char *req = NULL;
-        CHECK_OK(ctx, fx_stack_required_aux_views(s, &req));
-        const char *at = req ? strstr(req, "\"probe:") : NULL;
-        char pname[64] = "probe:?";
-        if (at)
-            snprintf(pname, 19, "%s", at + 1);
-        fx_free(req);
-        add_probe(ctx, f, pname, path, ppos);
-        fx_frame *o = NULL;
-        CHECK_OK(ctx, fx_stack_run(s, f, &o));
+        fx_frame *o = run_final_with_probe(ctx, f, "{\"material\": \"Mirror\"}", on, path, ppos);
         const float *oc = et_combined(o);
         double e = 0;
         int n = 0;
@@ -1498,13 +1454,12 @@ static void test_edge_differentials(fx_context *ctx)
             }
         err[on] = n ? e / n : 1.0;
         fx_frame_free(o);
-        fx_stack_free(s);
     }
     printf("the columns beside a half-covered one with a turned Normal, MAE against the exact reflection: "
            "footprint off %.4f, on %.4f\n", err[0], err[1]);
     CHECK(err[1] < 0.015 && err[1] < 2.0 * err[0] + 0.002);
     fx_frame_free(f);
-    free(want), free(crypto);
+    free(want);
 }
 
 int main(void)
