@@ -1133,12 +1133,19 @@ static void test_depth_min(fx_context *c2)
                   memcmp(ip.depth, sm.depth, (size_t)w * h * sizeof(float)) == 0);
             fx_shadow_map_free(&ip);
             /* reduced (every f-th texel, god_rays' light_view_downsample): the kept texels'
-             * bits and the full map's depth_min, wherever the least lies */
+             * bits and the least of the kept rows, every texel of them, wherever it lies */
             for (int f = 2; f <= 3; f++) {
                 fx_shadow_map rm;
                 CHECK_OK(ctx, fx_shadow_map_build_reduced(ctx, raw, w, h, f, 1.0f, 10.0f, &rm, "test"));
-                CHECK(rm.depth_min == sm.depth_min);
                 const int o = (f - 1) / 2;
+                float kept_min = 1.0f;
+                for (int Y = 0; Y < rm.height; Y++)
+                    for (int x = 0, y = f * Y + o < h ? f * Y + o : h - 1; x < w; x++)
+                        kept_min = sm.depth[y * w + x] < kept_min ? sm.depth[y * w + x] : kept_min;
+                CHECK(rm.depth_min == kept_min);
+                /* the least on a kept row: the view's least; else above it */
+                const int on_kept = at[k][0] >= 0 && (at[k][1] == h - 1 || at[k][1] % f == o);
+                CHECK(on_kept ? kept_min == sm.depth_min : kept_min > sm.depth_min || at[k][0] < 0);
                 for (int Y = 0; Y < rm.height; Y++)
                     for (int X = 0; X < rm.width; X++) {
                         const int x = f * X + o < w ? f * X + o : w - 1, y = f * Y + o < h ? f * Y + o : h - 1;
@@ -1152,8 +1159,8 @@ static void test_depth_min(fx_context *c2)
      * overflows), so the row's least raw value is not its least normalised one */
     for (int i = 0; i < w * h; i++)
         raw[i] = 1.5f + (float)(i % 5) * 0.1f;
-    raw[2 * w + 7] = -FLT_MAX;
-    raw[3 * w + 8] = 1.05f;
+    raw[4 * w + 7] = -FLT_MAX; /* row 4: kept at f = 2 and 3 */
+    raw[4 * w + 8] = 1.05f;
     for (int f = 1; f <= 3; f += 2) {
         fx_shadow_map sm, rm;
         CHECK_OK(c2, fx_shadow_map_build(c2, raw, w, h, 1.0f, 2.0f, 0, &sm, "test"));

@@ -163,13 +163,14 @@ static const fx_param_def god_rays_param_defs[] = {
     FX_P_ENUM(god_rays_params, volume_upsample, "volume_upsample", UPS_DEPTH, upsample_items,
               "volumetric: how the reduced grid comes back to full resolution: depth: each pixel's 4 "
               "texels weighted by their depth's likeness to the pixel's; edges: a plain bilinear where "
-              "the 4 texels and the pixel lie within 5 % in depth (fewer instructions where "
-              "volume_downsample is a multiple of 8), the likeness weights only at depth edges (draft)"),
+              "the pixel lies within 5 % of the depth of the plane through its 4 texels (a floor or wall "
+              "at any slant; fewer instructions where volume_downsample is a multiple of 8), the likeness "
+              "weights only at depth edges and thin objects (draft)"),
     FX_P_INT(god_rays_params, light_view_downsample, "light_view_downsample", 1, 1, 8, 1, 4, "",
              "volumetric: march through the light view reduced by this factor per axis (every factor-th "
              "texel each way: shadows are neither widened nor narrowed, features below factor texels "
-             "may drop out); read without the full map: 1 / factor^2 of the memory and a faster first "
-             "frame (draft: 2)"),
+             "may drop out); only every factor-th row of the view is read, and the full map never "
+             "exists: 1 / factor^2 of the memory and a faster first frame (draft: 2)"),
 };
 
 static fx_pass_set god_rays_passes(const void *params)
@@ -630,10 +631,11 @@ typedef struct vol_job {
     int edges;                  /* volume_upsample edges */
 } vol_job;
 
-/* volume_upsample edges: a plain bilinear where a cell's 4 texels and the pixel lie within
- * this relative depth of each other (the likeness weights there are >= (1 - 5 x it)^2 =
- * 0.56, so the two differ by a part of the cell's own spread of L and T; depth edges, 10 %
- * and more, keep the weights). */
+/* volume_upsample edges: a plain bilinear where each pixel's depth lies within this relative
+ * distance of the depth that the cell's 4 texels give it if they and the pixel lie on one
+ * plane (inverse depth is affine in screen space on a plane, so its bilinear is exact
+ * there): a floor or wall seen at any slant, not only one facing the camera; depth edges
+ * and thin objects keep the likeness weights. */
 #define VOL_ALIKE 0.05f
 
 /* The cells of lo rows r0, r1 gathered once into vectors (row: 12 lw floats: per column
@@ -669,30 +671,50 @@ static int vol_row_begin(const vol_job *j, int y, float *row, v4f *bcast, int *c
 }
 
 /* volume_upsample edges, per lo column X of the row (ty: the row's weight of lo row r1):
- * the vertical lerps of L and T and their steps to column X + 1 (e: 4 lw floats), and when
- * the cells change (every f rows) their depth range over the 4 texels (range: 2 lw). */
+ * the vertical lerps of L, T and inverse depth and their steps to column X + 1 (e: 6 lw
+ * floats); inv: the two lo rows' inverse depths (2 lw), made when the cells change (every
+ * f rows). */
 static void vol_row_edges(const vol_job *j, size_t r0, size_t r1, float ty, int cells_changed, float *e,
-                          float *range)
+                          float *inv)
 {
     const int lw = j->lw;
-    float *Lv = e, *dL = e + lw, *Tv = e + 2 * lw, *dT = e + 3 * lw;
+    float *Lv = e, *dL = e + lw, *Tv = e + 2 * lw, *dT = e + 3 * lw, *Iv = e + 4 * lw, *dI = e + 5 * lw;
+    float *i0 = inv, *i1 = inv + lw;
     const float *lo = j->lo, *lt = j->lo_t, *ld = j->lo_depth;
-    for (int X = 0; X < lw; X++) {
+    int X = 0;
+    if (cells_changed) { /* lo depths are > 0 (fx_volume_weight_depth) */
+        for (; X + 4 <= lw; X += 4) {
+            st4(i0 + X, V4(1.0f) / ld4(ld + r0 + X));
+            st4(i1 + X, V4(1.0f) / ld4(ld + r1 + X));
+        }
+        for (; X < lw; X++) {
+            i0[X] = 1.0f / ld[r0 + X];
+            i1[X] = 1.0f / ld[r1 + X];
+        }
+    }
+    const v4f t4 = V4(ty);
+    for (X = 0; X + 4 <= lw; X += 4) { /* the lerps, 4 columns at a time (lane by lane: the same bits) */
+        const v4f a = ld4(lo + r0 + X), b = ld4(lt + r0 + X), c = ld4(i0 + X);
+        st4(Lv + X, a + t4 * (ld4(lo + r1 + X) - a));
+        st4(Tv + X, b + t4 * (ld4(lt + r1 + X) - b));
+        st4(Iv + X, c + t4 * (ld4(i1 + X) - c));
+    }
+    for (; X < lw; X++) {
         Lv[X] = lo[r0 + X] + ty * (lo[r1 + X] - lo[r0 + X]);
         Tv[X] = lt[r0 + X] + ty * (lt[r1 + X] - lt[r0 + X]);
+        Iv[X] = i0[X] + ty * (i1[X] - i0[X]);
     }
-    for (int X = 0; X + 1 < lw; X++) {
+    for (X = 0; X + 5 <= lw; X += 4) {
+        st4(dL + X, ld4(Lv + X + 1) - ld4(Lv + X));
+        st4(dT + X, ld4(Tv + X + 1) - ld4(Tv + X));
+        st4(dI + X, ld4(Iv + X + 1) - ld4(Iv + X));
+    }
+    for (; X + 1 < lw; X++) {
         dL[X] = Lv[X + 1] - Lv[X];
         dT[X] = Tv[X + 1] - Tv[X];
+        dI[X] = Iv[X + 1] - Iv[X];
     }
-    dL[lw - 1] = dT[lw - 1] = 0.0f;
-    for (int X = 0; X < lw && cells_changed; X++) {
-        const int X1 = X + 1 < lw ? X + 1 : X;
-        const float a = ld[r0 + X], b = ld[r0 + X1], c = ld[r1 + X], d = ld[r1 + X1];
-        const float lo_ab = a < b ? a : b, lo_cd = c < d ? c : d, hi_ab = a < b ? b : a, hi_cd = c < d ? d : c;
-        range[2 * X] = lo_ab < lo_cd ? lo_ab : lo_cd;
-        range[2 * X + 1] = hi_ab < hi_cd ? hi_cd : hi_ab;
-    }
+    dL[lw - 1] = dT[lw - 1] = dI[lw - 1] = 0.0f;
 }
 
 /* One row's L and T (n pixels from roi.x0) from the reduced grid: the cells of the row's two
@@ -800,19 +822,38 @@ FX_CLONES __attribute__((noinline)) static void vol_group_across(const vol_job *
     *T = ld4(Ts);
 }
 
+/* One group's put (pixels i0 + k ..., srow / drow: the row's src and dst at i0): added
+ * (vol_put4_add_at) or per pixel (vol_put). */
+static inline __attribute__((always_inline)) void vol_put_group(const vol_job *j, v4f rad, const float *srow,
+                                                                 float *drow, size_t i0, int k, v4f L, v4f T,
+                                                                 const int add)
+{
+    if (add) {
+        vol_put4_add_at(rad, srow + 4 * (size_t)k, drow + 4 * (size_t)k, L, T);
+    } else {
+        for (int m = 0; m < 4; m++)
+            vol_put(j, i0 + (size_t)(k + m), L[m], T[m]);
+    }
+}
+
 /* volume_upsample edges: one row, 4 pixels at a time, put at once. A group on one cell
- * whose 4 pixels lie within VOL_ALIKE in depth of the cell's 4 texels takes the plain
- * bilinear (vol_row_edges' lerps); any other takes vol_row_lt's likeness weights (the
- * same functions, so the same bits). */
+ * whose 4 pixels lie within VOL_ALIKE of the depth the cell's plane gives them takes the
+ * plain bilinear (vol_row_edges' lerps); any other takes vol_row_lt's likeness weights (the
+ * same functions, so the same bits). Two passes: the bilinear groups first, in a loop
+ * without calls (a call in it made the compiler keep every vector on the stack), the
+ * others listed (defer: n / 4 ints) and put after; each pixel is still read once, before
+ * its write. */
 static inline __attribute__((always_inline)) void vol_row_edges_body(const vol_job *j, int y, float *row, v4f *bcast,
-                                                                      float *edges, int *cached_Y0, const int add)
+                                                                      float *edges, int *defer, int *cached_Y0,
+                                                                      const int add)
 {
     const int lw = j->lw, x0 = j->run->roi.x0, n = j->run->roi.x1 - x0;
     size_t r0 = 0, r1 = 0;
     float ty = 0.0f;
     const int changed = vol_row_begin(j, y, row, bcast, cached_Y0, &r0, &r1, &ty);
-    vol_row_edges(j, r0, r1, ty, changed, edges, edges + 4 * lw);
-    const float *Lv = edges, *dL = edges + lw, *Tv = edges + 2 * lw, *dT = edges + 3 * lw, *range = edges + 4 * lw;
+    vol_row_edges(j, r0, r1, ty, changed, edges, edges + 6 * lw);
+    const float *Lv = edges, *dL = edges + lw, *Tv = edges + 2 * lw, *dT = edges + 3 * lw, *Iv = edges + 4 * lw,
+                *dI = edges + 5 * lw;
     const float *restrict dep = j->depth + (size_t)y * j->run->width + x0;
     const int *restrict cx = j->col_x0;
     const float *restrict ct = j->col_t;
@@ -821,36 +862,41 @@ static inline __attribute__((always_inline)) void vol_row_edges_body(const vol_j
     const float *srow = j->run->src + i0 * 4;
     float *drow = j->run->dst + i0 * 4;
     const v4f rad = j->rad;
-    int Xc = -1;
-    v4f lv = V4(0.0f), dl = lv, tv = lv, dt = lv, dlo = lv, dhi = lv;
+    int Xc = -1, nd = 0;
+    v4f lv = V4(0.0f), dl = lv, tv = lv, dt = lv, iv = lv, di = lv;
     int k = 0;
     for (; k + 4 <= n; k += 4) {
         const int X = cx[k];
+        if (X != cx[k + 3]) { /* across cells */
+            defer[nd++] = k;
+            continue;
+        }
+        if (X != Xc) {
+            Xc = X;
+            lv = V4(Lv[X]), dl = V4(dL[X]), tv = V4(Tv[X]), dt = V4(dT[X]);
+            iv = V4(Iv[X]), di = V4(dI[X]);
+        }
+        const v4f dk = ld4(dep + k); /* fx_volume_weight_depth, 4 lanes */
+        const v4f d = sel4((dk > V4(0.0f)) & (dk < V4(far)), dk, V4(FX_VOLUME_BG_DEPTH));
+        const v4f tx = ld4(ct + k);
+        const v4f rel = d * (iv + tx * di); /* the pixel's depth over the plane's */
+        if (!all4((rel <= V4(1.0f + VOL_ALIKE)) & (rel >= V4(1.0f - VOL_ALIKE)))) {
+            defer[nd++] = k;
+            continue;
+        }
+        vol_put_group(j, rad, srow, drow, i0, k, lv + tx * dl, tv + tx * dt, add);
+    }
+    for (int q = 0; q < nd; q++) {
+        const int g = defer[q], X = cx[g];
         v4f L, T;
-        if (X == cx[k + 3]) {
-            if (X != Xc) {
-                Xc = X;
-                lv = V4(Lv[X]), dl = V4(dL[X]), tv = V4(Tv[X]), dt = V4(dT[X]);
-                dlo = V4(range[2 * X]), dhi = V4(range[2 * X + 1]);
-            }
-            const v4f dk = ld4(dep + k); /* fx_volume_weight_depth, 4 lanes */
+        if (X == cx[g + 3]) {
+            const v4f dk = ld4(dep + g);
             const v4f d = sel4((dk > V4(0.0f)) & (dk < V4(far)), dk, V4(FX_VOLUME_BG_DEPTH));
-            const v4f tol = d * V4(VOL_ALIKE), tx = ld4(ct + k);
-            if (all4((dhi - d <= tol) & (d - dlo <= tol))) {
-                L = lv + tx * dl;
-                T = tv + tx * dt;
-            } else {
-                vol_group_same4(row + 12 * X, bcast + 12 * X, ty, tx, d, &L, &T);
-            }
+            vol_group_same4(row + 12 * X, bcast + 12 * X, ty, ld4(ct + g), d, &L, &T);
         } else { /* across cells: one by one */
-            vol_group_across(j, dep, k, r0, r1, ty, &L, &T);
+            vol_group_across(j, dep, g, r0, r1, ty, &L, &T);
         }
-        if (add) {
-            vol_put4_add_at(rad, srow + 4 * (size_t)k, drow + 4 * (size_t)k, L, T);
-        } else {
-            for (int m = 0; m < 4; m++)
-                vol_put(j, i0 + (size_t)(k + m), L[m], T[m]);
-        }
+        vol_put_group(j, rad, srow, drow, i0, g, L, T, add);
     }
     for (; k < n; k++) {
         const int X0 = cx[k];
@@ -863,12 +909,13 @@ static inline __attribute__((always_inline)) void vol_row_edges_body(const vol_j
 
 /* the body twice: with the composite add and no debug pass as a constant (the usual case,
  * the loop then tests nothing per group), and the general one */
-FX_CLONES static void vol_row_edges_put(const vol_job *j, int y, float *row, v4f *bcast, float *edges, int *cached_Y0)
+FX_CLONES static void vol_row_edges_put(const vol_job *j, int y, float *row, v4f *bcast, float *edges, int *defer,
+                                        int *cached_Y0)
 {
     if (!j->screen && !j->dbg)
-        vol_row_edges_body(j, y, row, bcast, edges, cached_Y0, 1);
+        vol_row_edges_body(j, y, row, bcast, edges, defer, cached_Y0, 1);
     else
-        vol_row_edges_body(j, y, row, bcast, edges, cached_Y0, 0);
+        vol_row_edges_body(j, y, row, bcast, edges, defer, cached_Y0, 0);
 }
 
 /* The output rows: the in-scatter and transmittance upsampled from the reduced grid by
@@ -879,16 +926,19 @@ FX_CLONES static void vol_rows(void *user, int begin, int end)
     const fx_effect_run *run = j->run;
     const int w = run->width, lw = j->lw, x0 = run->roi.x0, n = run->roi.x1 - x0;
     /* per lo column: the cell's texels, also broadcast (vol_row_cells); per pixel of the
-     * row: L and T (vol_row_lt); per lo column: vol_row_edges' 6 floats */
-    float *row = j->f > 1 ? fx_mem_alloc((size_t)(12 * lw + 2 * n + 48 * lw + 4 + 6 * lw) * sizeof(float)) : NULL;
+     * row: L and T (vol_row_lt); per lo column: vol_row_edges' 8 floats; per group of 4
+     * pixels: vol_row_edges_body's deferred list */
+    float *row = j->f > 1 ? fx_mem_alloc((size_t)(12 * lw + 2 * n + 48 * lw + 4 + 8 * lw + n / 4 + 1) * sizeof(float))
+                          : NULL;
     v4f *bcast = row ? (v4f *)(((uintptr_t)(row + 12 * lw + 2 * n) + 15) & ~(uintptr_t)15) : NULL;
     float *edges = row ? (float *)(bcast + 12 * lw) : NULL;
+    int *defer = row ? (int *)(edges + 8 * lw) : NULL;
     int cached_Y0 = -1;
     for (int y = run->roi.y0 + begin; y < run->roi.y0 + end; y++) {
         const size_t i0 = (size_t)y * w + x0;
         const float *Lr, *Tr;
         if (j->f > 1 && row && j->edges) {
-            vol_row_edges_put(j, y, row, bcast, edges, &cached_Y0);
+            vol_row_edges_put(j, y, row, bcast, edges, defer, &cached_Y0);
             continue;
         } else if (j->f > 1 && row) {
             float *L = row + 12 * lw, *T = L + n;

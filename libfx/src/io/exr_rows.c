@@ -124,10 +124,10 @@ void fx_exr_rows_close(fx_exr_rows *r)
 
 typedef struct band_job {
     fx_exr_rows *r;
-    int band_rows, bands;
-    fx_exr_band_fn fn;
+    int step, offset, bands;
+    fx_exr_row_fn fn;
     void *user;
-    float *scratch;   /* per worker: band_rows x width */
+    float *scratch;   /* per worker: one row of width floats */
     size_t *replaced; /* per band */
     fx_exr_job_error err;
     atomic_int done;
@@ -193,24 +193,17 @@ static void band_range(void *user, int begin, int end, int worker)
 {
     band_job *j = user;
     fx_exr_rows *r = j->r;
-    float *rows = j->scratch + (size_t)worker * (size_t)j->band_rows * (size_t)r->width;
+    float *row = j->scratch + (size_t)worker * (size_t)r->width;
     fx_exr_clear_error(); /* this thread's OpenEXR message: never a stale one */
     for (int b = begin; b < end; b++) {
         if (!fx_exr_job_should_run(&j->err, b))
             continue;
-        const int y0 = b * j->band_rows;
-        const int n = y0 + j->band_rows <= r->height ? j->band_rows : r->height - y0;
-        size_t bad = 0;
-        int ok = 1;
-        for (int i = 0; i < n && ok; i++) {
-            size_t k = read_row(j, b, r->dw[1] + y0 + i, rows + (size_t)i * (size_t)r->width);
-            ok = k != (size_t)-1;
-            bad += ok ? k : 0;
-        }
-        if (!ok)
+        const long long y = (long long)b * j->step + j->offset;
+        const size_t k = read_row(j, b, r->dw[1] + (int)(y < r->height ? y : r->height - 1), row);
+        if (k == (size_t)-1)
             continue;
-        j->replaced[b] = bad;
-        j->fn(j->user, b, rows, n, worker);
+        j->replaced[b] = k;
+        j->fn(j->user, b, row, worker);
         int done = atomic_fetch_add(&j->done, 1) + 1;
         /* progress (and cancellation) from the calling thread only: it is worker 0 */
         if (worker == 0 && done - j->reported >= 16) {
@@ -221,20 +214,22 @@ static void band_range(void *user, int begin, int end, int worker)
     }
 }
 
-fx_result fx_exr_rows_read(fx_exr_rows *r, int band_rows, fx_exr_band_fn fn, void *user, size_t *replaced)
+fx_result fx_exr_rows_read_sampled(fx_exr_rows *r, int step, int offset, fx_exr_row_fn fn, void *user,
+                                   size_t *replaced)
 {
     *replaced = 0;
-    if (band_rows < 1)
-        band_rows = 1;
+    if (step < 1 || offset < 0 || offset >= step)
+        return fx_fail(r->ctx, FX_ERR_INVALID_ARGUMENT, "'%s': row %d of every %d", r->f.path, offset, step);
     band_job j;
     memset(&j, 0, sizeof j);
     j.r = r;
-    j.band_rows = band_rows;
-    j.bands = (r->height + band_rows - 1) / band_rows;
+    j.step = step;
+    j.offset = offset;
+    j.bands = (int)(((long long)r->height + step - 1) / step);
     j.fn = fn;
     j.user = user;
     const int workers = fx_parallel_workers(r->ctx);
-    j.scratch = fx_mem_alloc((size_t)workers * (size_t)band_rows * (size_t)r->width * sizeof(float));
+    j.scratch = fx_mem_alloc((size_t)workers * (size_t)r->width * sizeof(float));
     j.replaced = fx_mem_calloc((size_t)j.bands, sizeof *j.replaced);
     if (!j.scratch || !j.replaced) {
         fx_mem_free(j.scratch);

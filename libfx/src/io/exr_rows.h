@@ -1,7 +1,8 @@
-/* Reading one pass of an EXR band by band, without the whole pass in memory: a caller
- * that keeps only a reduction of it (the light view at draft's resolution, scene/aux_map.h)
- * gets each band of rows in a small per-worker scratch that stays in cache, and never
- * touches a frame-sized buffer (on a first frame its fresh pages cost more than the read).
+/* Reading one row in every `step` of a pass of an EXR, without the whole pass in memory: a
+ * caller that keeps only a reduction of it (the light view at draft's resolution,
+ * scene/aux_map.h) gets each row in a small per-worker scratch that stays in cache, reads
+ * only the rows it keeps, and never touches a frame-sized buffer (on a first frame its
+ * fresh pages cost more than the read).
  *
  * Only the layout Blender's add-on writes streams: one scanline part, uncompressed, the
  * pass one float channel without subsampling, on a little-endian host. Anything else
@@ -30,12 +31,15 @@ typedef struct fx_exr_rows_info {
 fx_result fx_exr_rows_open(fx_context *ctx, const char *path, const char *pass, fx_exr_rows **out,
                            fx_exr_rows_info *info);
 
-/* fn(user, band, rows, nrows, worker) for each band of `band_rows` rows (the last may have
- * fewer): rows holds nrows x width floats, top row first, in worker's scratch (fn may
- * overwrite it). Bands run on the context's threads in any order; what fn computes must not
- * depend on `worker`. *replaced: how many non-finite values were made finite. */
-typedef void (*fx_exr_band_fn)(void *user, int band, float *rows, int nrows, int worker);
-fx_result fx_exr_rows_read(fx_exr_rows *r, int band_rows, fx_exr_band_fn fn, void *user, size_t *replaced);
+/* fn(user, band, row, worker) for each band of `step` rows: its row `offset` (0 <= offset <
+ * step; the pass's last row when the last band is shorter), width floats in worker's scratch
+ * (fn may overwrite it). Only those rows are read: a reduction that keeps one row in `step`
+ * reads 1 / step of the pass. Bands run on the context's threads in any order; what fn
+ * computes must not depend on `worker`. *replaced: how many non-finite values of the rows
+ * read were made finite. */
+typedef void (*fx_exr_row_fn)(void *user, int band, float *row, int worker);
+fx_result fx_exr_rows_read_sampled(fx_exr_rows *r, int step, int offset, fx_exr_row_fn fn, void *user,
+                                   size_t *replaced);
 
 void fx_exr_rows_close(fx_exr_rows *r);
 

@@ -227,41 +227,33 @@ static float row_least(float *row, int n, float znear, float range)
     return least(row, (size_t)n);
 }
 
-/* Each row's least normalised value (depth_min is the full map's) and the band's kept row
- * normalised at the kept texels only (norm_rows' arithmetic: the same bits): a point
- * sample (fx_shadow_map_sample_offset). */
-FX_CLONES_VECTORIZE void fx_shadow_map_reduced_band(fx_shadow_map *sm, int band, float *raw, int nrows,
-                                                    int raw_width)
+/* Row Y of the map from its kept raw row (raw_width floats; normalised in place where its
+ * least value overflows): the kept texels normalised (norm_rows' arithmetic: the same bits),
+ * a point sample (fx_shadow_map_sample_offset), and the row's least normalised value over
+ * every texel of it. */
+FX_CLONES_VECTORIZE void fx_shadow_map_reduced_row(fx_shadow_map *sm, int Y, float *row, int raw_width)
 {
     const int k = sm->factor, w = sm->width;
     const int s = fx_shadow_map_sample_offset(k);
     const float znear = sm->znear, range = sm->zfar - sm->znear;
-    const int keep = s < nrows ? s : nrows - 1; /* the last band may be short */
-    float *out = sm->depth + (size_t)band * w;
+    float *out = sm->depth + (size_t)Y * w;
     if (!(range > 1e-20f)) { /* as fx_shadow_map_norm: z = 0 */
         memset(out, 0, (size_t)w * sizeof(float));
-        sm->row_min[band] = 0.0f;
+        sm->row_min[Y] = 0.0f;
         return;
     }
-    float m = 1.0f;
-    for (int i = 0; i < nrows; i++) {
-        float *row = raw + (size_t)i * raw_width;
-        if (i == keep) {
-            const int inside = (raw_width - 1 - s) / k + 1; /* kept texels inside the row */
-            if (k == 2)
-                for (int X = 0; X < inside; X++)
-                    out[X] = row[2 * X + s];
-            else
-                for (int X = 0; X < inside; X++)
-                    out[X] = row[k * X + s];
-            for (int X = inside; X < w; X++)
-                out[X] = row[raw_width - 1];
-        }
-        const float r = row_least(row, raw_width, znear, range);
-        m = r < m ? r : m;
-    }
+    const int inside = (raw_width - 1 - s) / k + 1; /* kept texels inside the row */
+    if (k == 2)
+        for (int X = 0; X < inside; X++)
+            out[X] = row[2 * X + s];
+    else
+        for (int X = 0; X < inside; X++)
+            out[X] = row[k * X + s];
+    for (int X = inside; X < w; X++)
+        out[X] = row[raw_width - 1];
     norm_span_in_place(out, w, znear, range);
-    sm->row_min[band] = m;
+    const float m = row_least(row, raw_width, znear, range);
+    sm->row_min[Y] = m < 1.0f ? m : 1.0f;
 }
 
 void fx_shadow_map_reduced_end(fx_shadow_map *sm)
@@ -275,18 +267,19 @@ typedef struct reduced_job {
     const float *raw;
     fx_shadow_map *sm;
     int raw_width, raw_height;
-    float *scratch; /* per worker: factor raw rows */
+    float *scratch; /* per worker: one raw row */
 } reduced_job;
 
-static void reduced_bands(void *user, int b0, int b1, int worker)
+static void reduced_rows(void *user, int Y0, int Y1, int worker)
 {
     reduced_job *j = user;
-    const int k = j->sm->factor;
-    float *rows = j->scratch + (size_t)worker * k * j->raw_width;
-    for (int b = b0; b < b1; b++) {
-        const int y0 = b * k, n = y0 + k <= j->raw_height ? k : j->raw_height - y0;
-        memcpy(rows, j->raw + (size_t)y0 * j->raw_width, (size_t)n * j->raw_width * sizeof(float));
-        fx_shadow_map_reduced_band(j->sm, b, rows, n, j->raw_width);
+    const int k = j->sm->factor, s = fx_shadow_map_sample_offset(k);
+    float *row = j->scratch + (size_t)worker * j->raw_width;
+    for (int Y = Y0; Y < Y1; Y++) {
+        const long long y = (long long)k * Y + s;
+        memcpy(row, j->raw + (size_t)(y < j->raw_height ? y : j->raw_height - 1) * j->raw_width,
+               (size_t)j->raw_width * sizeof(float));
+        fx_shadow_map_reduced_row(j->sm, Y, row, j->raw_width);
     }
 }
 
@@ -297,13 +290,13 @@ fx_result fx_shadow_map_build_reduced(fx_context *ctx, const float *raw_depth, i
     if (r)
         return r;
     const int workers = fx_parallel_workers(ctx);
-    float *scratch = fx_mem_alloc((size_t)workers * factor * width * sizeof(float));
+    float *scratch = fx_mem_alloc((size_t)workers * width * sizeof(float));
     if (!scratch) {
         fx_shadow_map_free(out);
         return fx_fail(ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for a reduced shadow map", where);
     }
     reduced_job j = {raw_depth, out, width, height, scratch};
-    fx_parallel_for_worker(ctx, out->height, 1, reduced_bands, &j);
+    fx_parallel_for_worker(ctx, out->height, 1, reduced_rows, &j);
     fx_mem_free(scratch);
     fx_shadow_map_reduced_end(out);
     return FX_OK;

@@ -74,20 +74,22 @@ fx_result fx_shadow_map_build_in_place(fx_context *ctx, float *raw_depth, int wi
  * resolution (god_rays' volumetric march at draft): texel (X, Y) of the ceil(width /
  * factor) x ceil(height / factor) map is the full map's texel (f X + o, f Y + o), o =
  * fx_shadow_map_sample_offset(f) (clamped to the map), bit for bit, and depth_min is the
- * full map's (the least of every texel, not only the kept ones). A point sample, not the
+ * least of every texel of the kept rows (f Y + o): the rows between are never read. A
+ * point sample, not the
  * block's least or mean: on the Greek bath at half resolution the least (nearest occluder)
  * narrowed the shafts, the gaps between occluders (MAE against the reference 3.1e-2,
  * 1.9e-2 for the mean, 1.1e-2 for the point sample, 9.2e-3 at full resolution;
  * docs/effects/god_rays.md); a point sample widens neither occluders nor gaps, and keeps
  * a one-texel feature at one phase in f. The reader must address the kept texels' centres
- * (fx_view_reduce_sampled). Built band by band (f rows of raw depth -> one row of the
- * map), so the view's full map never exists: _begin allocates the map, _band (any thread,
- * each band once) normalises the band's raw rows in place (raw_width floats each) and
- * writes its row, _end takes depth_min. Moments are not offered on it. */
+ * (fx_view_reduce_sampled). Built row by row (the kept raw row -> one row of the map), so
+ * the view's full map never exists: _begin allocates the map, _row (any thread, each row
+ * once) takes the kept raw row (raw_width floats, normalised in place where its least
+ * value overflows) and writes map row Y, _end takes depth_min. Moments are not offered on
+ * it. */
 static inline int fx_shadow_map_sample_offset(int factor) { return factor > 1 ? (factor - 1) / 2 : 0; }
 fx_result fx_shadow_map_reduced_begin(fx_context *ctx, int width, int height, int factor, float znear, float zfar,
                                       fx_shadow_map *out, const char *where);
-void fx_shadow_map_reduced_band(fx_shadow_map *sm, int band, float *raw, int nrows, int raw_width);
+void fx_shadow_map_reduced_row(fx_shadow_map *sm, int Y, float *row, int raw_width);
 void fx_shadow_map_reduced_end(fx_shadow_map *sm);
 /* The same from a whole raw depth (a view that cannot be read band by band). */
 fx_result fx_shadow_map_build_reduced(fx_context *ctx, const float *raw_depth, int width, int height, int factor,

@@ -32,10 +32,10 @@ typedef struct fx_aux_map {
 fx_result fx_aux_map_acquire(const fx_frame *f, const char *name, int derivative_bias, int filter, float width,
                              const char *where, fx_aux_map *out);
 /* The view's normalised depth reduced by `factor` per axis (math/shadow_map.h: every
- * factor-th texel each way, depth_min the full map's; no moments), for a reader that needs
- * less than the view's resolution (god_rays' volumetric march at draft). Read band by band
- * without ever holding the full map when the view's EXR allows it (io/exr_rows.h: what the
- * add-on writes), else read whole and reduced: the same bits. out->av's view and size are
+ * factor-th texel each way, depth_min the kept rows' least; no moments), for a reader that
+ * needs less than the view's resolution (god_rays' volumetric march at draft). Only the kept
+ * rows are read, without ever holding the full map, when the view's EXR allows it
+ * (io/exr_rows.h: what the add-on writes), else read whole and reduced: the same bits. out->av's view and size are
  * the reduced map's (fx_view_reduce_sampled: its pixel coordinates address the kept
  * texels). An entry of its own, keyed by the factor: a stack whose vsm_shadows reads the
  * full view gets both maps. factor <= 1: fx_aux_map_acquire's. */

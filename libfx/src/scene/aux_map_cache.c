@@ -191,17 +191,17 @@ typedef struct reduce_ctx {
     int raw_width;
 } reduce_ctx;
 
-static void reduce_band_exact(void *user, int band, float *rows, int nrows, int worker)
+static void reduce_row(void *user, int Y, float *row, int worker)
 {
     (void)worker;
     const reduce_ctx *c = user;
-    fx_shadow_map_reduced_band(c->sm, band, rows, nrows, c->raw_width);
+    fx_shadow_map_reduced_row(c->sm, Y, row, c->raw_width);
 }
 
-/* Entry e as the view's depth reduced by factor per axis: streamed band by band from its
- * EXR into the reduced map when the file allows it (no frame-sized buffer is ever touched:
- * on a first frame their fresh pages cost more than the read), else read whole and
- * reduced; the same bits either way. Its view addresses the kept texels
+/* Entry e as the view's depth reduced by factor per axis: only its kept rows read from its
+ * EXR, straight into the reduced map, when the file allows it (no frame-sized buffer is
+ * ever touched: on a first frame their fresh pages cost more than the read), else read
+ * whole and reduced; the same bits either way. Its view addresses the kept texels
  * (fx_view_reduce_sampled). */
 static fx_result entry_build_reduced(const fx_frame *f, const char *name, int factor, const char *where,
                                      aux_entry *e)
@@ -216,7 +216,8 @@ static fx_result entry_build_reduced(const fx_frame *f, const char *name, int fa
         size_t bad = 0;
         r = fx_shadow_map_reduced_begin(f->ctx, av->width, av->height, factor, zn, zf, &e->sm, where);
         if (!r)
-            r = fx_exr_rows_read(rows, factor, reduce_band_exact, &(reduce_ctx){&e->sm, av->width}, &bad);
+            r = fx_exr_rows_read_sampled(rows, factor, fx_shadow_map_sample_offset(factor), reduce_row,
+                                         &(reduce_ctx){&e->sm, av->width}, &bad);
         if (!r)
             fx_shadow_map_reduced_end(&e->sm);
         if (!r && bad)
