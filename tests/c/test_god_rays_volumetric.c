@@ -744,9 +744,9 @@ static void test_reduced_map(fx_context *ctx)
                     const float ey = (fy - (float)o - 0.5f) / (float)k + 0.5f;
                     CHECK(fabsf(rx - ex) < 1e-3f && fabsf(ry - ey) < 1e-3f && rd == fd);
                 }
-                fx_aux_map_release(ctx, &red);
+                fx_aux_map_release(&red);
             }
-            fx_aux_map_release(ctx, &full);
+            fx_aux_map_release(&full);
             fx_frame_free(f);
         }
     }

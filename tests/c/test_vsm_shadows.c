@@ -854,6 +854,57 @@ static void test_cache(void)
 }
 
 
+/* A stack run in one context on frames read by another (a reader context and a context per
+ * render thread): the maps live in the frames' context's cache and go back to it when the
+ * run ends, so that cache stays within its limit: with room for one map, views 1, 2, 1
+ * build three times, as in one context. (Released through the running context, view 1's
+ * entry stayed in use: view 2's map was not cached and the third run reused view 1's.) */
+static void test_cache_cross_context(void)
+{
+    float h[N * N];
+    fx_context *writer = NULL;
+    fx_context_new(&writer, 1);
+    for (int i = 0; i < N * N; i++)
+        h[i] = (i % N) > N / 3 ? 2.0f : 0.0f;
+    /* each write_light_view empties its folder: the first view moves to a folder of its own */
+    char written[600], path1[600];
+    snprintf(written, sizeof written, "%s", write_light_view(writer, h, "cross1"));
+    snprintf(path1, sizeof path1, "%s/cross1.exr", tu_tmpdir("vsm_cross_context"));
+    CHECK(rename(written, path1) == 0);
+    for (int i = 0; i < N * N; i++)
+        h[i] = (i % N) > 2 * N / 3 ? 2.0f : 0.0f;
+    const char *p2 = write_light_view(writer, h, "cross2");
+    fx_context_free(writer);
+    for (int cross = 0; cross < 2; cross++) {
+        fx_context *reader = NULL, *runner = NULL;
+        fx_context_new(&reader, 2);
+        fx_context_new(&runner, 2);
+        /* room for one view's entry, not two (the cache counts a depth map's entry as 3
+         * floats a texel and the view) */
+        const uint64_t entry = (uint64_t)N * N * 3 * sizeof(float) + sizeof(fx_aux_view);
+        CHECK_OK(reader, fx_context_set_aux_cache(reader, entry * 3 / 2));
+        fx_frame *f1 = floor_frame(reader, path1), *f2 = floor_frame(reader, p2);
+        fx_context *run_in = cross ? runner : reader;
+        float *o[3];
+        for (int k = 0; k < 3; k++) /* views 1, 2, 1 */
+            o[k] = run_vsm(run_in, k == 1 ? f2 : f1, "pcf", "box_sat", 5.0f, 0.3f, 0.01f);
+        long built = 0, reused = 0;
+        fx_aux_cache_stats(reader, &built, &reused);
+        CHECK(built == 3 && reused == 0);
+        CHECK(o[0] && o[1] && o[2] && memcmp(o[0], o[2], N * N * 4 * sizeof(float)) == 0 &&
+              memcmp(o[0], o[1], N * N * 4 * sizeof(float)) != 0);
+        if (built != 3 || reused != 0)
+            fprintf(stderr, "cache across contexts (%s): built %ld, reused %ld\n", cross ? "two" : "one", built,
+                    reused);
+        for (int k = 0; k < 3; k++)
+            free(o[k]);
+        fx_frame_free(f1);
+        fx_frame_free(f2);
+        fx_context_free(runner);
+        fx_context_free(reader); /* frees the entries (leak-checked under ASan) */
+    }
+}
+
 /* The box filter (separable running sums in double) gives the SAT's box means on odd
  * sizes, 1x1, 1xN and radii beyond the map; the moments' reduction levels are the block
  * means of the moments (partial blocks at the far borders) with finite lookups. */
@@ -1208,6 +1259,7 @@ int main(void)
     test_share_modes(ctx);
     test_migration(ctx);
     test_cache();
+    test_cache_cross_context();
     test_box_and_levels(ctx);
     test_map_level_effect(ctx);
     test_screen_downsample(ctx);

@@ -999,7 +999,7 @@ static fx_result vol_light(const fx_effect_run *run, const god_rays_params *p, f
     if (r != FX_OK)
         return r;
     if (!map->av->view.orthographic) {
-        fx_aux_map_release(run->ctx, map);
+        fx_aux_map_release(map);
         return fx_fail(run->ctx, FX_ERR_BAD_PARAM,
                        "%s: method volumetric: the light view '%s' is not orthographic (a sun's is)", where,
                        map->av->name);
@@ -1088,7 +1088,7 @@ static fx_result run_volumetric(const fx_effect_run *run, const god_rays_params 
         fx_mem_free(ct);
     }
     fx_buffer_put(run->ctx, buf, bytes);
-    fx_aux_map_release(run->ctx, &map);
+    fx_aux_map_release(&map);
     return r;
 }
 

@@ -30,7 +30,7 @@ static inline fx_result fx_rain_effect_begin(const fx_effect_run *run, int need_
         return r;
     *dbg = fx_effect_debug_pass(run, debug_pass, 1, &r);
     if (!*dbg && r) {
-        fx_rain_map_free(run->ctx, rm);
+        fx_rain_map_free(rm);
         return r;
     }
     return FX_OK;
@@ -39,7 +39,7 @@ static inline fx_result fx_rain_effect_begin(const fx_effect_run *run, int need_
 /* Gives the rain map back and returns r (the effect's result). */
 static inline fx_result fx_rain_effect_end(const fx_effect_run *run, fx_rain_map *rm, fx_result r)
 {
-    fx_rain_map_free(run->ctx, rm);
+    fx_rain_map_free(rm);
     return r;
 }
 

@@ -1526,7 +1526,7 @@ static fx_result probe_load_one(const fx_effect_run *run, const ssr_frame *F, co
     if (!r && !pm->av->panorama) {
         fx_warn(run->ctx, "%s: aux view '%s' is not a panorama (\"panorama\": \"equirect\"): missed rays take "
                 "the mirror's texture", run->where, name);
-        fx_aux_map_release(run->ctx, pm);
+        fx_aux_map_release(pm);
         return FX_OK;
     }
     if (r) {
@@ -1617,7 +1617,7 @@ static fx_result ssr_planar_load(const fx_effect_run *run, ssr_job *j, fx_aux_ma
             snprintf(msg, sizeof msg, "%s", r ? fx_context_error(run->ctx) : "it has no colour pass or no \"plane\"");
             fx_warn(run->ctx, "%s: no planar mirror view '%s' (%s): the trace and the fallback serve", run->where,
                     name, msg);
-            fx_aux_map_release(run->ctx, &pm[k]);
+            fx_aux_map_release(&pm[k]);
             continue;
         }
         j->planar[j->planar_count++] = pm[k].av;
@@ -1712,9 +1712,9 @@ out:
     fx_mask_free(surfaces);
     fx_depth_pyramid_free(run->ctx, &pyr);
     for (int k = 0; k < PROBES_MAX; k++)
-        fx_aux_map_release(run->ctx, &probe_maps[k]);
+        fx_aux_map_release(&probe_maps[k]);
     for (int k = 0; k < PLANAR_VIEWS_MAX; k++)
-        fx_aux_map_release(run->ctx, &planar_maps[k]);
+        fx_aux_map_release(&planar_maps[k]);
     return r;
 }
 

@@ -1027,7 +1027,7 @@ static fx_result vsm_process(const fx_effect_run *run)
 done:
     fx_buffer_put(run->ctx, vm, vm_bytes);
     fx_buffer_put(run->ctx, lo, lo_bytes);
-    fx_aux_map_release(run->ctx, &map);
+    fx_aux_map_release(&map);
     return r;
 }
 

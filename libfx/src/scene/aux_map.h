@@ -25,6 +25,8 @@ typedef struct fx_aux_map {
     const fx_shadow_map *sm; /* normalised depth; moments only when a filter asked for them;
                               * a map filtered from moments has moments only (depth NULL) */
     int cached;              /* 1: came from (or went into) the cache; 0: private */
+    fx_context *ctx;         /* the frame's context, whose cache holds it: release goes there
+                              * whichever context runs the stack */
 } fx_aux_map;
 
 /* filter < 0 or width <= 1: no moments are made (PCF and the hard test read only the
@@ -35,9 +37,9 @@ fx_result fx_aux_map_acquire(const fx_frame *f, const char *name, int derivative
  * factor-th texel each way, depth_min the kept rows' least; no moments), for a reader that
  * needs less than the view's resolution (god_rays' volumetric march at draft). Only the kept
  * rows are read, without ever holding the full map, when the view's EXR allows it
- * (io/exr_rows.h: what the add-on writes), else read whole and reduced: the same bits. out->av's view and size are
- * the reduced map's (fx_view_reduce_sampled: its pixel coordinates address the kept
- * texels). An entry of its own, keyed by the factor: a stack whose vsm_shadows reads the
+ * (io/exr_rows.h: what the add-on writes), else read whole and reduced: the same bits.
+ * out->av's view and size are the reduced map's (fx_view_reduce_sampled: its pixel
+ * coordinates address the kept texels). An entry of its own, keyed by the factor: a stack whose vsm_shadows reads the
  * full view gets both maps. factor <= 1: fx_aux_map_acquire's. */
 fx_result fx_aux_map_acquire_reduced(const fx_frame *f, const char *name, int factor, const char *where,
                                      fx_aux_map *out);
@@ -46,7 +48,8 @@ fx_result fx_aux_map_acquire_reduced(const fx_frame *f, const char *name, int fa
  * batch or a live session decodes each probe once. out->av stays valid until release;
  * out->sm is only the handle release needs. */
 fx_result fx_aux_view_acquire(const fx_frame *f, const char *name, const char *where, fx_aux_map *out);
-void fx_aux_map_release(fx_context *ctx, fx_aux_map *m);
+/* Gives the map back to the cache of the context it was acquired from (m->ctx). */
+void fx_aux_map_release(fx_aux_map *m);
 /* Counters since the context was made: maps built and maps reused (tests, benches). */
 void fx_aux_cache_stats(const fx_context *ctx, long *built, long *reused);
 

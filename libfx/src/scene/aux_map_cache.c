@@ -169,7 +169,7 @@ static fx_result entry_from_base(const fx_frame *f, const char *name, int bias, 
     float *copy = fx_mem_alloc(floats * sizeof(float));
     if (!e->av || !copy) {
         fx_mem_free(copy);
-        fx_aux_map_release(f->ctx, &base);
+        fx_aux_map_release(&base);
         return fx_fail(f->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for aux view '%s'", where, name);
     }
     *e->av = *base.av; /* its camera and name; no frame, depth or colour of its own */
@@ -179,7 +179,7 @@ static fx_result entry_from_base(const fx_frame *f, const char *name, int bias, 
     e->sm = *base.sm;
     e->sm.depth = moments ? NULL : copy;
     e->sm.moments = moments ? copy : NULL;
-    fx_aux_map_release(f->ctx, &base);
+    fx_aux_map_release(&base);
     r = fx_shadow_map_filter(f->ctx, &e->sm, (fx_shadow_filter)filter, width, where);
     e->bytes = ((e->sm.depth ? (uint64_t)e->sm.width * e->sm.height : 0) +
                 (e->sm.moments ? (uint64_t)e->sm.mwidth * e->sm.mheight * 2 : 0)) * sizeof(float) + sizeof *e->av;
@@ -357,6 +357,7 @@ static fx_result acquire(const fx_frame *f, const char *name, int derivative_bia
                 out->av = c->e[i].av;
                 out->sm = &c->e[i].sm;
                 out->cached = 1;
+                out->ctx = ctx;
                 fx_mem_free(key);
                 return FX_OK;
             }
@@ -381,6 +382,7 @@ static fx_result acquire(const fx_frame *f, const char *name, int derivative_bia
         out->av = e->av;
         out->sm = &e->sm;
         out->cached = 1;
+        out->ctx = ctx;
         return FX_OK;
     }
     fx_mem_free(key);
@@ -394,6 +396,7 @@ static fx_result acquire(const fx_frame *f, const char *name, int derivative_bia
     out->av = e->av;
     out->sm = &e->sm;
     out->cached = 0;
+    out->ctx = ctx;
     return FX_OK;
 }
 
@@ -414,10 +417,11 @@ fx_result fx_aux_view_acquire(const fx_frame *f, const char *name, const char *w
     return acquire(f, name, 0, AUX_RAW_VIEW, 0.0f, 1, where, out);
 }
 
-void fx_aux_map_release(fx_context *ctx, fx_aux_map *m)
+void fx_aux_map_release(fx_aux_map *m)
 {
     if (!m || !m->sm)
         return;
+    fx_context *ctx = m->ctx;
     if (m->cached) {
         struct fx_aux_cache *c = ctx ? ctx->aux_cache : NULL;
         /* by the view's address: an entry's own moves when an eviction compacts the table */

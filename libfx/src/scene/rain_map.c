@@ -36,7 +36,7 @@ fx_result fx_rain_map_load(const fx_frame *f, float soft_width_metres, const cha
         /* the texel size is known once the map is read: the filtered map is a second entry */
         fx_aux_map filtered;
         r = fx_aux_map_acquire(f, FX_AUX_RAIN_MAP, 0, FX_SHADOW_FILTER_BOX_SAT, width, where, &filtered);
-        fx_aux_map_release(f->ctx, &out->map);
+        fx_aux_map_release(&out->map);
         if (r)
             return r;
         out->map = filtered;
@@ -48,10 +48,10 @@ fx_result fx_rain_map_load(const fx_frame *f, float soft_width_metres, const cha
     return FX_OK;
 }
 
-void fx_rain_map_free(fx_context *ctx, fx_rain_map *rm)
+void fx_rain_map_free(fx_rain_map *rm)
 {
     if (!rm)
         return;
-    fx_aux_map_release(ctx, &rm->map);
+    fx_aux_map_release(&rm->map);
     memset(rm, 0, sizeof *rm);
 }

@@ -26,7 +26,7 @@ int fx_aux_needs_rain_map(const void *params, struct fx_aux_need *out, int max);
 /* Loads the frame's rain map (through the context's cache, scene/aux_map.h); soft_width
  * metres > 0 also filters its moments (box, SAT) over that width for fx_rain_map_soft. */
 fx_result fx_rain_map_load(const fx_frame *f, float soft_width_metres, const char *where, fx_rain_map *out);
-void fx_rain_map_free(fx_context *ctx, fx_rain_map *rm);
+void fx_rain_map_free(fx_rain_map *rm);
 
 /* 1: exposed, 0: under cover (hard test at the nearest texel). */
 static inline float fx_rain_map_exposed(const fx_rain_map *rm, fx_vec3 p)
