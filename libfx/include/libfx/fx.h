@@ -177,9 +177,9 @@ FX_API void fx_frame_windows(const fx_frame *f, int data_window[4], int display_
 /* Adds (or replaces) a pass; data is copied (NULL: zeros). channels 1..4. */
 FX_API fx_result fx_frame_add_pass(fx_frame *f, const char *name, int channels, const float *data);
 /* Borrowed pointer to a pass's pixels, writable; FX_ERR_MISSING_PASS if absent.
- * Frames of one context share unchanged pixels (an empty stack's output holds its
- * input's Combined; fx_frame_copy_passes shares): a pass asked for here gets its own
- * copy first if another frame holds it, and is never shared from then on. */
+ * Frames share unchanged pixels, in one context or across contexts (an empty stack's
+ * output holds its input's Combined; fx_frame_copy_passes shares): a pass asked for here
+ * gets its own copy first if another frame holds it, and is never shared from then on. */
 FX_API fx_result fx_frame_pass(const fx_frame *f, const char *name, float **data, int *channels);
 /* Read-only pointer to a pass's pixels, never copied; valid until f is freed or the
  * pass replaced. Prefer it to fx_frame_pass for reading. */
@@ -307,7 +307,9 @@ FX_API void fx_stack_set_debug_outputs(fx_stack *s, int enabled);
 /* Runs the enabled effects in order on `in` (never modified) and returns a new frame
  * with the result as "Combined", plus the debug passes when enabled. The output has
  * in's windows, camera, time and metadata; other passes are not copied (see
- * fx_frame_copy_passes). */
+ * fx_frame_copy_passes). The output belongs to the stack's context, which may differ
+ * from in's (a reader context and one per render thread): its buffers go back to the
+ * stack's context when it is freed, and it outlives in and in's context. */
 FX_API fx_result fx_stack_run(fx_stack *s, const fx_frame *in, fx_frame **out);
 /* fx_stack_run for a caller done with `in` (a one-frame command, a render handler): the
  * stack may write the result over in's Combined, so effects that can work in place (per-
@@ -318,7 +320,7 @@ FX_API fx_result fx_stack_run_consume(fx_stack *s, fx_frame *in, int keep_passes
 /* Per-effect wall time of the last run: [{"index": 0, "effect": "pixelate", "ms": 1.2}, ...] */
 FX_API fx_result fx_stack_timings_json(const fx_stack *s, char **out_json);
 /* Gives dst every pass of src that dst does not have (to keep input passes in an
- * output): shared, not copied, when both frames have one context. */
+ * output): shared, not copied (the frames may be of two contexts). */
 FX_API fx_result fx_frame_copy_passes(fx_frame *dst, const fx_frame *src);
 
 /* ---- Auxiliary views (shadows and rain) -----------------------------------

@@ -14,7 +14,9 @@
 #include <string.h>
 
 struct fx_pixels {
-    atomic_int holders; /* passes pointing here, in any frames of one context */
+    atomic_int holders; /* passes pointing here, in any frames (a stack's output shares its
+                           input's passes, and may be of another context: the last holder
+                           returns the buffer to its own frame's context's store) */
     float *data;
     size_t bytes;
 };
@@ -227,7 +229,9 @@ fx_result fx_frame_share_pass(fx_frame *dst, const char *name, const fx_frame *s
 {
     if (!dst || !src || !sp || dst->width != src->width || dst->height != src->height)
         return fx_fail(dst ? dst->ctx : NULL, FX_ERR_INVALID_ARGUMENT, "fx_frame_share_pass: frames differ in size");
-    if (dst->ctx != src->ctx || sp->handed_out || !sp->pixels) {
+    /* frames of different contexts share too: the count is atomic, and the last holder
+     * returns the buffer to its own frame's context's store */
+    if (sp->handed_out || !sp->pixels) {
         fx_result r = fx_frame_add_pass(dst, name, sp->channels, sp->data);
         if (!r)
             fx_frame_find_pass(dst, name)->from_half = sp->from_half;
@@ -468,10 +472,15 @@ const char *fx_frame_meta(const fx_frame *f, const char *key)
 
 fx_result fx_frame_new_like(const fx_frame *f, fx_frame **out)
 {
-    if (!f || !out)
+    return fx_frame_new_like_in(f ? f->ctx : NULL, f, out);
+}
+
+fx_result fx_frame_new_like_in(fx_context *ctx, const fx_frame *f, fx_frame **out)
+{
+    if (!f || !out || !ctx)
         return FX_ERR_INVALID_ARGUMENT;
     fx_frame *o;
-    fx_result r = fx_frame_new(f->ctx, f->width, f->height, &o);
+    fx_result r = fx_frame_new(ctx, f->width, f->height, &o);
     if (r)
         return r;
     memcpy(o->data_window, f->data_window, sizeof o->data_window);

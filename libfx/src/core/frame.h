@@ -57,8 +57,9 @@ fx_pass *fx_frame_find_pass(const fx_frame *f, const char *name);
 fx_result fx_frame_alloc_pass(fx_frame *f, const char *name, int channels, float **out);
 /* Takes ownership of `data`: width*height*channels floats from fx_mem_alloc or fx_buffer_get. */
 fx_result fx_frame_adopt_pass(fx_frame *f, const char *name, int channels, float *data);
-/* Gives dst a pass named `name` holding src_pass's pixels: shared when both frames have
- * one context and the pass was never handed out writable, else copied. Same sizes only. */
+/* Gives dst a pass named `name` holding src_pass's pixels: shared when the pass was never
+ * handed out writable (in any two frames, of one context or two), else copied. Same sizes
+ * only. */
 fx_result fx_frame_share_pass(fx_frame *dst, const char *name, const fx_frame *src, const fx_pass *src_pass);
 /* Takes the pixels of f's pass `name` out of the frame (the pass is removed) when the pass
  * alone holds them: the caller owns them (fx_mem_free or fx_buffer_put). NULL when there is
@@ -68,6 +69,8 @@ float *fx_frame_take_pass_data(fx_frame *f, const char *name);
 int fx_frame_pixels_holders(const fx_pass *p);
 /* New frame with f's size, windows, camera, time, metadata and proxy factor, no passes. */
 fx_result fx_frame_new_like(const fx_frame *f, fx_frame **out);
+/* The same, in context ctx (its buffer store takes the new frame's buffers back). */
+fx_result fx_frame_new_like_in(fx_context *ctx, const fx_frame *f, fx_frame **out);
 
 /* Replaces NaN with 0 and +-Inf with +-FLT_MAX in place; returns how many were replaced.
  * Runs in parallel on ctx's pool. */
