@@ -24,6 +24,8 @@ struct fx_exr_rows {
     int32_t lines;  /* scanlines per chunk */
     size_t line;    /* bytes of one scanline of all channels */
     size_t offset;  /* the pass's channel's byte offset in a scanline */
+    uint64_t first; /* one-line chunks of the pass alone: where the first chunk's header is
+                       (0: not that layout), see read_row_direct */
 };
 
 /* Whether part 0 holds the pass's channel in the layout exr_rows.h streams. */
@@ -105,6 +107,10 @@ fx_result fx_exr_rows_open(fx_context *ctx, const char *path, const char *pass, 
         fx_mem_free(r);
         return FX_OK;
     }
+    exr_chunk_info_t ci;
+    if (r->lines == 1 && r->offset == 0 && r->line == (size_t)r->width * sizeof(float) &&
+        exr_read_scanline_chunk_info(f->exr, 0, r->dw[1], &ci) == EXR_ERR_SUCCESS && ci.data_offset >= 8)
+        r->first = ci.data_offset - 8;
     info->width = r->width;
     info->height = r->height;
     memcpy(info->data_window, pt->dw, sizeof info->data_window);
@@ -134,9 +140,33 @@ typedef struct band_job {
     int reported;
 } band_job;
 
-/* Row y (file coordinates) into dst: the pass's bytes of its scanline, with one pread, then
- * made finite as the reader does. Returns the values replaced, or (size_t)-1 on failure. */
-static size_t read_row(band_job *j, int band, int y, float *dst)
+/* Row y by one pread of its chunk, header and pixels, where a file of one-line chunks of
+ * the pass alone (what the add-on writes) puts it when its chunks follow each other in
+ * order: r->first + (y - ymin) (8 + line). That it is there is not taken on trust: the
+ * header must name line y and hold line bytes. hdr: 8 bytes, then the row (line bytes).
+ * Returns 1 when the row was there, 0 when not (read it the way the chunk table says). */
+static int read_row_direct(fx_exr_rows *r, int y, unsigned char *hdr)
+{
+    if (!r->first)
+        return 0;
+    const uint64_t at = r->first + (uint64_t)(y - r->dw[1]) * (8 + r->line);
+    const size_t want = 8 + r->line;
+    size_t got = 0;
+    while (got < want) {
+        long long n = fx_os_pread(r->fd, (char *)hdr + got, want - got, at + got);
+        if (n <= 0)
+            return 0;
+        got += (size_t)n;
+    }
+    int32_t line_y, bytes; /* little-endian (streamable) */
+    memcpy(&line_y, hdr, 4);
+    memcpy(&bytes, hdr + 4, 4);
+    return line_y == y && bytes >= 0 && (size_t)bytes == r->line;
+}
+
+/* Row y (file coordinates) into dst as the chunk table says: the pass's bytes of its
+ * scanline, with one pread. 0, or -1 on failure (reported in the job). */
+static int read_row_by_table(band_job *j, int band, int y, float *dst)
 {
     fx_exr_rows *r = j->r;
     const int y0 = r->dw[1] + (y - r->dw[1]) / r->lines * r->lines; /* its chunk's first line */
@@ -146,7 +176,7 @@ static size_t read_row(band_job *j, int band, int y, float *dst)
     if (rv != EXR_ERR_SUCCESS) {
         snprintf(what, sizeof what, "part 0, scanlines from %d", y0);
         fx_exr_job_fail_exr(&j->err, band, r->f.path, rv, what);
-        return (size_t)-1;
+        return -1;
     }
     /* never trust the chunk table: the chunk must be the lines it says, whole */
     if (ci.width != r->width || ci.height <= 0 || ci.height > r->lines || ci.start_y != y0 ||
@@ -154,7 +184,7 @@ static size_t read_row(band_job *j, int band, int y, float *dst)
         snprintf(what, sizeof what, "part 0, scanlines from %d", y0);
         fx_exr_job_fail(&j->err, band, FX_ERR_BAD_FILE, "'%s': %s: chunk of %dx%d (%llu bytes) does not fit",
                         r->f.path, what, ci.width, ci.height, (unsigned long long)ci.packed_size);
-        return (size_t)-1;
+        return -1;
     }
     const uint64_t at = ci.data_offset + (uint64_t)(y - y0) * r->line + r->offset;
     const size_t want = (size_t)r->width * sizeof(float);
@@ -165,10 +195,21 @@ static size_t read_row(band_job *j, int band, int y, float *dst)
             snprintf(what, sizeof what, "part 0, scanlines from %d", y0);
             fx_exr_job_fail(&j->err, band, n < 0 ? FX_ERR_IO : FX_ERR_BAD_FILE, "'%s': %s: %s", r->f.path, what,
                             n < 0 ? strerror(errno) : "the file ends inside the chunk");
-            return (size_t)-1;
+            return -1;
         }
         got += (size_t)n;
     }
+    return 0;
+}
+
+/* Row y (file coordinates) into dst, then made finite as the reader does. Returns the values
+ * replaced, or (size_t)-1 on failure. dst has 8 bytes of scratch before it (read_row_direct:
+ * one pread, not two, per row). */
+static size_t read_row(band_job *j, int band, int y, float *dst)
+{
+    fx_exr_rows *r = j->r;
+    if (!read_row_direct(r, y, (unsigned char *)dst - 8) && read_row_by_table(j, band, y, dst) < 0)
+        return (size_t)-1;
     /* finite as a rule: tested 4 lanes at a time, fixed one by one only when not */
     v4i fin = {-1, -1, -1, -1};
     int x = 0;
@@ -193,7 +234,7 @@ static void band_range(void *user, int begin, int end, int worker)
 {
     band_job *j = user;
     fx_exr_rows *r = j->r;
-    float *row = j->scratch + (size_t)worker * (size_t)r->width;
+    float *row = j->scratch + (size_t)worker * ((size_t)r->width + 4) + 4; /* 8 bytes before it: the header */
     fx_exr_clear_error(); /* this thread's OpenEXR message: never a stale one */
     for (int b = begin; b < end; b++) {
         if (!fx_exr_job_should_run(&j->err, b))
@@ -229,7 +270,7 @@ fx_result fx_exr_rows_read_sampled(fx_exr_rows *r, int step, int offset, fx_exr_
     j.fn = fn;
     j.user = user;
     const int workers = fx_parallel_workers(r->ctx);
-    j.scratch = fx_mem_alloc((size_t)workers * (size_t)r->width * sizeof(float));
+    j.scratch = fx_mem_alloc((size_t)workers * ((size_t)r->width + 4) * sizeof(float));
     j.replaced = fx_mem_calloc((size_t)j.bands, sizeof *j.replaced);
     if (!j.scratch || !j.replaced) {
         fx_mem_free(j.scratch);
