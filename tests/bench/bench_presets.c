@@ -295,11 +295,11 @@ static uint64_t hash_rgba(const float *p, size_t n)
 
 /* Runs the recipe on f: one warm-up (its Combined copied to *keep if asked), then timed
  * runs. Returns the median ms and the runs taken in *runs_out. */
-/* The input read once per context (g_frames[t] by g_ctxs[t]): a stack that runs on a
- * frame another context read gives its result's buffers back to that context's store and
- * takes fresh pages for every run (its aux views too): the 1-thread column, timed in the
- * second context, was 3-10x slow (god_rays' volumetric draft at 1080p: 118 ms against 10 ms
- * in the context that read the frame). */
+/* The input read once per context (g_frames[t] by g_ctxs[t]), so each thread count is
+ * timed on a frame of its own context, as a one-context caller runs. (Until the library's
+ * fix of 2026-12-03, a stack run on a frame another context read gave its result's buffers
+ * to that context's store and took fresh pages every run: the 1-thread column, timed in the
+ * second context, was 3-10x slow.) */
 static fx_context *g_ctxs[4];
 static fx_frame *g_frames[4];
 static int g_nframes;
