@@ -666,7 +666,7 @@ static void test_upsample_cell4(void)
 }
 
 /* A light view of w x h raw depths written with `compression` ("none": the layout that
- * streams band by band, io/exr_rows.h; "zip": read whole). */
+ * streams row by row, io/exr_rows.h; "zip": read whole). */
 static const char *write_raw_view(fx_context *ctx, const float *d, int w, int h, const char *name,
                                   const char *compression)
 {
@@ -756,12 +756,12 @@ static void test_reduced_map(fx_context *ctx)
 /* A stack where vsm_shadows reads the full light view and god_rays draft the reduced one:
  * each gets its own map (the cache keys the factor), so the stack gives the bits of a
  * context without the cache, frame after frame; draft gives the same bits for 1 and 2
- * threads with the view read band by band. */
+ * threads with the view's kept rows read alone. */
 static void test_reduced_stack(fx_context *ctx)
 {
     double entry = 0;
     const char *zip = write_light_view(ctx, &entry);
-    /* the same view, uncompressed (the add-on's layout: read band by band) */
+    /* the same view, uncompressed (the add-on's layout: its kept rows read alone) */
     fx_frame *lv = NULL;
     CHECK_OK(ctx, fx_frame_read_exr(ctx, zip, NULL, &lv));
     const fx_pass *lp = lv ? fx_frame_find_pass(lv, "Depth") : NULL;
@@ -832,17 +832,13 @@ static void test_rows_damaged(fx_context *ctx)
     float d[37 * 23];
     for (int i = 0; i < w * h; i++)
         d[i] = 5.0f + (float)(i % 11);
-    const char *good = write_raw_view(ctx, d, w, h, "damaged_src", "none");
-    FILE *in = fopen(good, "rb");
-    CHECK(in != NULL);
-    if (!in)
+    size_t size = 0;
+    unsigned char *bytes = (unsigned char *)tu_slurp(write_raw_view(ctx, d, w, h, "damaged_src", "none"), &size);
+    CHECK(bytes != NULL);
+    if (!bytes)
         return;
-    fseek(in, 0, SEEK_END);
-    const long n = ftell(in);
-    fseek(in, 0, SEEK_SET);
-    unsigned char *bytes = malloc((size_t)n), *copy = malloc((size_t)n);
-    CHECK(fread(bytes, 1, (size_t)n, in) == (size_t)n);
-    fclose(in);
+    const long n = (long)size;
+    unsigned char *copy = malloc(size);
     char path[600];
     snprintf(path, sizeof path, "%s/damaged_rows.exr", tu_tmpdir("god_rays_volumetric"));
     const long body = n - (long)h * (8 + w * 4) - 8L * h; /* the chunk table's start */
@@ -910,16 +906,12 @@ static void test_rows_out_of_order(fx_context *ctx)
     for (int i = 0; i < w * h; i++)
         d[i] = 5.0f + (float)i * 0.25f;
     const char *path = write_raw_view(ctx, d, w, h, "swapped", "none");
-    FILE *in = fopen(path, "rb");
-    CHECK(in != NULL);
-    if (!in)
+    size_t size = 0;
+    unsigned char *bytes = (unsigned char *)tu_slurp(path, &size);
+    CHECK(bytes != NULL);
+    if (!bytes)
         return;
-    fseek(in, 0, SEEK_END);
-    const long n = ftell(in);
-    fseek(in, 0, SEEK_SET);
-    unsigned char *bytes = malloc((size_t)n);
-    CHECK(fread(bytes, 1, (size_t)n, in) == (size_t)n);
-    fclose(in);
+    const long n = (long)size;
     const long chunk = 8 + 4L * w, table = n - (long)h * chunk - 8L * h;
     for (int swapped = 0; swapped < 2; swapped++) {
         if (swapped) { /* chunks 1 and 2 change places, and so do their offsets */

@@ -592,6 +592,16 @@ static void add_probe(fx_context *ctx, fx_frame *f, const char *name, const char
     et_add_probe(ctx, f, name, path, m);
 }
 
+/* The probe the end-to-end tests attach: beside the mirror, 0.4 m in front of it. */
+static const double PROBE_POS[3] = { 0.0, 2.6, 1.5 };
+
+/* Writes that probe (w x h) as dir/probe.exr; its path into path (600 bytes). */
+static void write_room_probe(fx_context *ctx, const char *dir, int w, int h, char path[600])
+{
+    snprintf(path, 600, "%s/probe.exr", dir);
+    write_probe(ctx, path, PROBE_POS, w, h, 0);
+}
+
 static int has_pass(const fx_frame *f, const char *name)
 {
     float *d;
@@ -666,10 +676,8 @@ static void test_end_to_end(fx_context *ctx)
 
     /* with the probe beside the mirror */
     char path[600];
-    snprintf(path, sizeof path, "%s/probe.exr", dir);
-    const double ppos[3] = { 0.0, 2.6, 1.5 };
-    write_probe(ctx, path, ppos, 256, 128, 0);
-    add_probe(ctx, f, pname, path, ppos);
+    write_room_probe(ctx, dir, 256, 128, path);
+    add_probe(ctx, f, pname, path, PROBE_POS);
     fx_context_clear_warnings(ctx);
     CHECK_OK(ctx, fx_stack_run(s, f, &o_probe));
     CHECK(fx_context_warning_count(ctx) == 0);
@@ -924,9 +932,10 @@ static void test_pano_footprint(void)
  * than one lookup per pixel, and must not touch a pixel off the mirror. */
 #define BEND 2.5
 /* ssr_mirror at final over f (mask: the stack's mask JSON, footprint on or off), with the
- * probe written at `path` (placed at pos) attached under the name the stack asks for. */
+ * room's probe written at `path` (write_room_probe) attached under the name the stack asks
+ * for. */
 static fx_frame *run_final_with_probe(fx_context *ctx, fx_frame *f, const char *mask, int footprint,
-                                      const char *path, const double pos[3])
+                                      const char *path)
 {
     fx_stack *s = et_stack(ctx, "ssr_mirror");
     CHECK_OK(ctx, fx_stack_set_mask_json(s, 0, mask));
@@ -939,7 +948,7 @@ static fx_frame *run_final_with_probe(fx_context *ctx, fx_frame *f, const char *
     if (at)
         snprintf(pname, 19, "%s", at + 1);
     fx_free(req);
-    add_probe(ctx, f, pname, path, pos);
+    add_probe(ctx, f, pname, path, PROBE_POS);
     fx_frame *o = NULL;
     CHECK_OK(ctx, fx_stack_run(s, f, &o));
     fx_stack_free(s);
@@ -1014,13 +1023,11 @@ static void test_footprint(fx_context *ctx)
                 want[i * 3 + k] = (float)acc[k];
         }
     char path[600];
-    snprintf(path, sizeof path, "%s/probe.exr", dir);
-    const double ppos[3] = { 0.0, 2.6, 1.5 };
-    write_probe(ctx, path, ppos, 1024, 512, 0);
+    write_room_probe(ctx, dir, 1024, 512, path);
     double err[2];
     fx_frame *out[2] = { NULL, NULL };
     for (int on = 0; on < 2; on++) {
-        out[on] = run_final_with_probe(ctx, f, "{\"material_index\": 1}", on, path, ppos);
+        out[on] = run_final_with_probe(ctx, f, "{\"material_index\": 1}", on, path);
         err[on] = mirror_mae(f, out[on], want);
     }
     printf("convex mirror over 8 cm stripes, MAE against the pixels' exact mean: one lookup %.4f, footprint %.4f\n",
@@ -1254,12 +1261,10 @@ static void test_edge_coverage(fx_context *ctx)
     }
     add_post_crypto(f, ima, px, cov);
     char path[600];
-    snprintf(path, sizeof path, "%s/probe.exr", dir);
-    const double ppos[3] = { 0.0, 2.6, 1.5 };
-    write_probe(ctx, path, ppos, 256, 128, 0);
+    write_room_probe(ctx, dir, 256, 128, path);
     double err[2];
     for (int on = 0; on < 2; on++) {
-        fx_frame *o = run_final_with_probe(ctx, f, "{\"material\": \"Mirror\"}", on, path, ppos);
+        fx_frame *o = run_final_with_probe(ctx, f, "{\"material\": \"Mirror\"}", on, path);
         const float *oc = et_combined(o);
         double e = 0;
         for (int y = 0; oc && y < FH; y++) {
@@ -1277,6 +1282,16 @@ static void test_edge_coverage(fx_context *ctx)
     CHECK(err[1] < 0.03 && err[1] < 0.4 * err[0]);
     fx_frame_free(f);
     free(want), free(truth);
+}
+
+/* The horizontal unit vector (sx, sy, 0) at right angles to normal n: a face meeting the
+ * mirror at 90 degrees along a vertical edge (a card's front and its edge). */
+static void across_normal(const float n[3], float *sx, float *sy)
+{
+    float x = -n[1], y = n[0], l = sqrtf(x * x + y * y);
+    if (l < 1e-3f)
+        x = 1.0f, y = 0.0f, l = 1.0f;
+    *sx = x / l, *sy = y / l;
 }
 
 /* A covered mirror pixel whose Normal blends two faces (a card's front and its edge: Cycles'
@@ -1301,21 +1316,16 @@ static void test_edge_normal(fx_context *ctx)
         size_t i = (size_t)y * FW + px;
         if (ima[i] != 1)
             continue;
-        float *n = nor + i * 3;
-        /* a unit vector at right angles to the mirror's normal; the pixel holds 0.6 of the mirror */
-        float sx = -n[1], sy = n[0], sz = 0.0f, l = sqrtf(sx * sx + sy * sy);
-        if (l < 1e-3f)
-            sx = 1.0f, sy = 0.0f, l = 1.0f;
-        n[0] = 0.6f * n[0] + 0.4f * sx / l, n[1] = 0.6f * n[1] + 0.4f * sy / l, n[2] = 0.6f * n[2] + 0.4f * sz;
+        float *n = nor + i * 3, sx, sy;
+        across_normal(n, &sx, &sy); /* the pixel holds 0.6 of the mirror, 0.4 of a face at right angles */
+        n[0] = 0.6f * n[0] + 0.4f * sx, n[1] = 0.6f * n[1] + 0.4f * sy, n[2] = 0.6f * n[2];
         edge++;
     }
     char path[600];
-    snprintf(path, sizeof path, "%s/probe.exr", dir);
-    const double ppos[3] = { 0.0, 2.6, 1.5 };
-    write_probe(ctx, path, ppos, 256, 128, 0);
+    write_room_probe(ctx, dir, 256, 128, path);
     double err[2], err_beside[2];
     for (int on = 0; on < 2; on++) {
-        fx_frame *o = run_final_with_probe(ctx, f, "{\"material_index\": 1}", on, path, ppos);
+        fx_frame *o = run_final_with_probe(ctx, f, "{\"material_index\": 1}", on, path);
         const float *oc = et_combined(o);
         double e = 0, eb = 0;
         beside = 0;
@@ -1366,11 +1376,8 @@ static void test_two_faces(fx_context *ctx)
     for (int y = 0; y < FH; y++) {
         if (ima[(size_t)y * FW + px] != 1 || ima[(size_t)y * FW + px + 3] != 1)
             continue;
-        float *n = nor + ((size_t)y * FW + px) * 3;
-        float sx = -n[1], sy = n[0], l = sqrtf(sx * sx + sy * sy);
-        if (l < 1e-3f)
-            sx = 1.0f, sy = 0.0f, l = 1.0f;
-        sx /= l, sy /= l;
+        float *n = nor + ((size_t)y * FW + px) * 3, sx, sy;
+        across_normal(n, &sx, &sy);
         n[0] = 0.6f * n[0] + 0.4f * sx, n[1] = 0.6f * n[1] + 0.4f * sy, n[2] = 0.6f * n[2];
         for (int x = px + 1; x <= px + 3; x++) {
             float *m = nor + ((size_t)y * FW + x) * 3;
@@ -1379,10 +1386,8 @@ static void test_two_faces(fx_context *ctx)
         rows++;
     }
     char path[600];
-    snprintf(path, sizeof path, "%s/probe.exr", dir);
-    const double ppos[3] = { 0.0, 2.6, 1.5 };
-    write_probe(ctx, path, ppos, 256, 128, 0);
-    fx_frame *o = run_final_with_probe(ctx, f, "{\"material_index\": 1}", 1, path, ppos);
+    write_room_probe(ctx, dir, 256, 128, path);
+    fx_frame *o = run_final_with_probe(ctx, f, "{\"material_index\": 1}", 1, path);
     const float *oc = et_combined(o);
     double e_mix = 0, e_one = 0, apart = 0;
     for (int y = 0; oc && y < FH; y++) {
@@ -1434,12 +1439,10 @@ static void test_edge_differentials(fx_context *ctx)
     }
     add_post_crypto(f, ima, px, 0.5f);
     char path[600];
-    snprintf(path, sizeof path, "%s/probe.exr", dir);
-    const double ppos[3] = { 0.0, 2.6, 1.5 };
-    write_probe(ctx, path, ppos, 256, 128, 0);
+    write_room_probe(ctx, dir, 256, 128, path);
     double err[2];
     for (int on = 0; on < 2; on++) {
-        fx_frame *o = run_final_with_probe(ctx, f, "{\"material\": \"Mirror\"}", on, path, ppos);
+        fx_frame *o = run_final_with_probe(ctx, f, "{\"material\": \"Mirror\"}", on, path);
         const float *oc = et_combined(o);
         double e = 0;
         int n = 0;

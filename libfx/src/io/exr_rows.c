@@ -1,4 +1,4 @@
-/* Reading one pass band by band: see exr_rows.h. */
+/* Reading one row in every `step` of a pass: see exr_rows.h. */
 #include "io/exr_rows.h"
 
 #include "core/context.h"

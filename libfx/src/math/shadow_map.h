@@ -91,7 +91,7 @@ fx_result fx_shadow_map_reduced_begin(fx_context *ctx, int width, int height, in
                                       fx_shadow_map *out, const char *where);
 void fx_shadow_map_reduced_row(fx_shadow_map *sm, int Y, float *row, int raw_width);
 void fx_shadow_map_reduced_end(fx_shadow_map *sm);
-/* The same from a whole raw depth (a view that cannot be read band by band). */
+/* The same from a whole raw depth (a view that cannot be read row by row). */
 fx_result fx_shadow_map_build_reduced(fx_context *ctx, const float *raw_depth, int width, int height, int factor,
                                       float znear, float zfar, fx_shadow_map *out, const char *where);
 /* Filters the moments with a box (width rounded to an odd number of texels) or a Gaussian

@@ -56,7 +56,7 @@ typedef struct fx_aux_view {
  * the EXR has no Depth pass, and the reader's errors. */
 fx_result fx_aux_view_load(const fx_frame *f, const char *name, const char *where, fx_aux_view **out);
 void fx_aux_view_free(fx_aux_view *v);
-/* The same for a map built band by band (scene/aux_map.h): when the view's EXR streams its
+/* The same for a map built row by row (scene/aux_map.h): when the view's EXR streams its
  * Depth pass (io/exr_rows.h), *rows is that stream and the view's frame has its windows and
  * camera but no pass (depth NULL); otherwise *rows is NULL and the view is loaded whole. */
 struct fx_exr_rows;

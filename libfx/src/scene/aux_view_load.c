@@ -140,7 +140,7 @@ static fx_result read_whole(fx_context *ctx, fx_aux_view *av, const char *name, 
     return FX_OK;
 }
 
-/* fx_aux_view_load; with rows (a light view's map built band by band), the Depth pass is
+/* fx_aux_view_load; with rows (a light view's map built row by row), the Depth pass is
  * opened to stream when the file allows it (*rows set, the view's frame without passes). */
 static fx_result load(const fx_frame *f, const char *name, const char *where, fx_aux_view **out,
                       fx_exr_rows **rows)
