@@ -1137,7 +1137,7 @@ const fx_effect_class fx_effect_god_rays = {
         "{\"method\": \"polar\", \"polar_resolution\": 0.75, \"polar_levels\": 2, \"polar_downsample\": 2, "
         "\"volume_downsample\": 4, \"volume_steps\": 16, \"interleave\": 2}",
         "{\"method\": \"polar\", \"polar_resolution\": 0.5, \"polar_levels\": 2, \"polar_downsample\": 1, "
-        "\"volume_downsample\": 4, \"volume_steps\": 24, \"interleave\": 2}",
+        "\"volume_downsample\": 2, \"volume_steps\": 24, \"interleave\": 2}",
         "{\"method\": \"naive\", \"samples\": 2000, \"jitter\": false, "
         "\"volume_downsample\": 1, \"volume_steps\": 256, \"interleave\": 1}",
     },
