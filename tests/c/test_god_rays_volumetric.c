@@ -593,6 +593,98 @@ static void test_in_place_finite(fx_context *c2)
 /* The composite's 4-pixel upsamples (fx_volume_upsample_cell4 across cells,
  * fx_volume_upsample_same4 on one cell) give fx_volume_upsample's bits: random cells mixing alike depths, depth edges, background and thin objects (no
  * texel alike: the likest one), random tx/ty, including exact 0 and 1. */
+/* The march's sum, written out here in double: step i's visibility at s0 + (i + offset) h
+ * (the depth test at the 4 nearest texels, bilinear; rows alike in these maps, so only the
+ * columns matter), times its exact transmittance integral, the steps after the medium
+ * turns opaque left out, as the library does. */
+static double march_by_hand(const fx_shadow_map *sm, const fx_volume_ray *r, int steps, double offset, double sigma)
+{
+    const double h = ((double)r->s1 - r->s0) / steps, e1 = r->e1;
+    const double step_int = e1 * h > 1e-9 ? (1.0 - exp(-e1 * h)) / e1 : h;
+    double sum = 0.0;
+    for (int i = 0; i < steps; i++) {
+        const double od = r->e0 + e1 * (r->s0 + i * h);
+        if (!(exp(-od) > exp(-(double)FX_VOLUME_OPAQUE)))
+            break;
+        const double s = r->s0 + (i + offset) * h;
+        double px = r->px0 + s * r->dpx - 0.5, t = r->tn0 + s * r->dtn;
+        px = px < 0 ? 0 : px > sm->width - 1 ? sm->width - 1 : px;
+        const int x0 = (int)floor(px), x1 = x0 < sm->width - 1 ? x0 + 1 : x0;
+        const double tx = px - x0;
+        const double vis = (t <= sm->depth[x0] ? 1 - tx : 0) + (t <= sm->depth[x1] ? tx : 0);
+        sum += vis * exp(-od) * step_int;
+    }
+    return sigma * r->phase * r->len * sum;
+}
+
+/* fx_volume_march, four samples at a time, against march_by_hand at step counts that are
+ * and are not multiples of 4, two offsets, with and without extinction, on a map lit on
+ * one side and shaded on the other with a ramp between; a wholly lit ray against the
+ * closed form (the march is exact there); and a ray that turns opaque part way. */
+static void test_march_steps(void)
+{
+    enum { MW = 16, MH = 4 };
+    float depth[MW * MH];
+    for (int y = 0; y < MH; y++)
+        for (int x = 0; x < MW; x++) /* shaded (the surface at -1) left, lit right, between: in part */
+            depth[y * MW + x] = x < 6 ? -1.0f : x >= 10 ? 1.0f : -0.9f + 0.3f * (float)(x - 6);
+    fx_shadow_map sm = {0};
+    sm.width = MW;
+    sm.height = MH;
+    sm.znear = 0.0f;
+    sm.zfar = 10.0f;
+    sm.depth = depth;
+    fx_volume v = {0};
+    v.sm = &sm;
+    v.sigma = 0.3f;
+    fx_volume_ray r = {0};
+    r.s0 = 1.0f;
+    r.s1 = 7.0f;
+    r.len = 1.25f;
+    r.px0 = -1.0f; /* across the whole map, off both ends */
+    r.dpx = 2.6f;
+    r.py0 = 2.0f;
+    r.tn0 = -0.3f; /* the normalised depth climbs through the ramp's tests */
+    r.dtn = 0.05f;
+    r.phase = 0.2f;
+    static const int steps[] = {1, 2, 3, 4, 5, 7, 13, 24, 257};
+    double worst = 0.0;
+    for (int e = 0; e < 2; e++)
+        for (int k = 0; k < (int)(sizeof steps / sizeof steps[0]); k++)
+            for (int o = 0; o < 2; o++) {
+                r.e0 = e ? 0.4f : 0.0f;
+                r.e1 = e ? 0.35f : 0.0f;
+                const double off = o ? 0.13 : 0.5;
+                const double want = march_by_hand(&sm, &r, steps[k], off, v.sigma);
+                const double got = fx_volume_march(&v, &r, steps[k], (float)off);
+                const double rel = fabs(got - want) / (want + 1e-9);
+                worst = rel > worst || rel != rel ? rel : worst;
+                if (!(rel < 2e-5))
+                    fprintf(stderr, "march: %d steps, offset %.2f, extinction %d: %.7g, by hand %.7g\n", steps[k], off,
+                            e, got, want);
+            }
+    CHECK(worst < 2e-5);
+    /* wholly lit: sigma p len (exp(-(e0 + e1 s0)) - exp(-(e0 + e1 s1))) / e1, any steps;
+     * past the map's last column and row (AddressSanitizer: no read beyond them) */
+    r.tn0 = -0.95f;
+    r.dtn = 0.0f;
+    r.px0 = 11.0f;
+    r.dpx = 1.0f;
+    r.py0 = 10.0f;
+    r.e0 = 0.4f;
+    r.e1 = 0.35f;
+    const double lit = v.sigma * r.phase * r.len * (exp(-(0.4 + 0.35 * 1.0)) - exp(-(0.4 + 0.35 * 7.0))) / 0.35;
+    for (int k = 0; k < (int)(sizeof steps / sizeof steps[0]); k++)
+        CHECK(fabs(fx_volume_march(&v, &r, steps[k], 0.5f) - lit) < 2e-5 * lit);
+    /* opaque part way: the optical depth passes FX_VOLUME_OPAQUE at s = 4 */
+    r.e0 = 0.0f;
+    r.e1 = FX_VOLUME_OPAQUE / 4.0f;
+    for (int k = 0; k < (int)(sizeof steps / sizeof steps[0]); k++) {
+        const double want = march_by_hand(&sm, &r, steps[k], 0.5, v.sigma);
+        CHECK(fabs(fx_volume_march(&v, &r, steps[k], 0.5f) - want) < 2e-5 * want);
+    }
+}
+
 static void test_upsample_cell4(void)
 {
     enum { LW = 9, LH = 3 };
@@ -959,6 +1051,7 @@ int main(void)
     test_slanted_plane(ctx);
     test_extremes_errors(ctx);
     test_in_place_finite(ctx);
+    test_march_steps();
     test_upsample_cell4();
     test_reduced_map(ctx);
     test_reduced_stack(ctx);
