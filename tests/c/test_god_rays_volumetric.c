@@ -845,6 +845,51 @@ static void test_reduced_map(fx_context *ctx)
     free(d);
 }
 
+/* A reduced map built again (the aux cache off, or a new light view every frame) takes the
+ * previous map's buffer back from the context's store instead of fresh pages, and is built
+ * over it whole: view B read into view A's old buffer is B's map in a context that never
+ * held A. 1024 x 1024 at factor 2: a 1 MiB map, the store's least. */
+static void test_reduced_map_recycled(void)
+{
+    enum { N = 1024 };
+    float *d = malloc((size_t)N * N * sizeof(float));
+    fx_context *plain = NULL, *fresh = NULL;
+    fx_context_new(&plain, 2);
+    fx_context_new(&fresh, 2);
+    CHECK_OK(plain, fx_context_set_aux_cache(plain, 0));
+    CHECK_OK(fresh, fx_context_set_aux_cache(fresh, 0));
+    /* one view at a time: write_raw_view's folder is made afresh at each call */
+    fx_aux_map a, b, want;
+    const float *first = NULL;
+    for (int v = 0; v < 2; v++) {
+        for (int i = 0; i < N * N; i++)
+            d[i] = v ? 9.0f - (float)(i % 977) * 0.004f : 3.0f + (float)((i * 31) % 499) * 0.01f;
+        const char *path = write_raw_view(plain, d, N, N, v ? "recycled_b" : "recycled_a", "none");
+        fx_frame *f = scene_frame(plain, path, "SUN", 0.0f);
+        if (v == 0) {
+            CHECK_OK(plain, fx_aux_map_acquire_reduced(f, "light:Sun", 2, "test", &a));
+            first = a.sm ? a.sm->depth : NULL;
+            fx_aux_map_release(&a);
+            fx_frame_free(f);
+            continue;
+        }
+        fx_frame *ff = scene_frame(fresh, path, "SUN", 0.0f);
+        CHECK_OK(plain, fx_aux_map_acquire_reduced(f, "light:Sun", 2, "test", &b));
+        CHECK_OK(fresh, fx_aux_map_acquire_reduced(ff, "light:Sun", 2, "test", &want));
+        fx_frame_free(f);
+        fx_frame_free(ff);
+    }
+    CHECK(b.sm && first && b.sm->depth == first); /* the store's buffer, no fresh pages */
+    CHECK(b.sm && want.sm && b.sm->width == N / 2 && want.sm->height == N / 2 &&
+          memcmp(b.sm->depth, want.sm->depth, (size_t)(N / 2) * (N / 2) * sizeof(float)) == 0 &&
+          b.sm->depth_min == want.sm->depth_min);
+    fx_aux_map_release(&b);
+    fx_aux_map_release(&want);
+    fx_context_free(plain);
+    fx_context_free(fresh);
+    free(d);
+}
+
 /* A stack where vsm_shadows reads the full light view and god_rays draft the reduced one:
  * each gets its own map (the cache keys the factor), so the stack gives the bits of a
  * context without the cache, frame after frame; draft gives the same bits for 1 and 2
@@ -1055,6 +1100,7 @@ int main(void)
     test_upsample_cell4();
     test_reduced_map(ctx);
     test_reduced_stack(ctx);
+    test_reduced_map_recycled();
     test_rows_damaged(ctx);
     test_rows_out_of_order(ctx);
     fx_context_free(ctx);

@@ -50,6 +50,13 @@ void *fx_buffer_get(fx_context *ctx, size_t bytes)
     return p ? p : fx_mem_alloc(bytes);
 }
 
+void *fx_buffer_get_whole(fx_context *ctx, size_t bytes)
+{
+    size_t got = 0;
+    void *p = ctx && bytes >= BUFFER_MIN ? take(ctx, bytes, 1, &got) : NULL;
+    return p ? p : fx_mem_alloc_whole(bytes);
+}
+
 void *fx_buffer_get_at_least(fx_context *ctx, size_t bytes, size_t *capacity)
 {
     size_t got = 0;

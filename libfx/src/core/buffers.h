@@ -21,6 +21,9 @@ void *fx_buffer_get(fx_context *ctx, size_t bytes);
  * need not fault in a fresh one while a larger buffer of the frame sits idle), else a new
  * one. *capacity: its real size, to give back to fx_buffer_put (0 on failure). */
 void *fx_buffer_get_at_least(fx_context *ctx, size_t bytes, size_t *capacity);
+/* As fx_buffer_get, but a new buffer comes as whole huge pages from 256 KiB up
+ * (fx_mem_alloc_whole): for maps that are faulted in row by row as they are built. */
+void *fx_buffer_get_whole(fx_context *ctx, size_t bytes);
 void fx_buffer_put(fx_context *ctx, void *p, size_t bytes);
 void fx_buffers_free(fx_context *ctx);
 

@@ -179,8 +179,10 @@ fx_result fx_shadow_map_reduced_begin(fx_context *ctx, int width, int height, in
     if (r)
         return r;
     /* whole huge pages from 256 KiB up: a first frame's 1080p light view at half resolution
-     * (1.6 MB) faulted 380 small pages here, 3-4 ms of system time; one huge page ~1 ms */
-    out->depth = fx_mem_alloc_whole(n * sizeof(float));
+     * (1.6 MB) faulted 380 small pages here, 3-4 ms of system time; one huge page ~1 ms. A
+     * map built again (the aux cache off, or a new light view each frame) takes the last
+     * one's buffer back from the store (the aux cache puts it there): no fresh page at all */
+    out->depth = fx_buffer_get_whole(ctx, n * sizeof(float));
     out->row_min = fx_mem_alloc((size_t)h * sizeof(float));
     if (!out->depth || !out->row_min) {
         fx_shadow_map_free(out);
