@@ -12,7 +12,9 @@
  * Also: the dark band is darker than the lit air; 1 and 2 threads give the same bits (with
  * interleaving and the reduced grid); density 0 is the identity; outputs stay finite at
  * density 1e6 and anisotropy +-0.999 / +-1; clear errors without the light view, with a
- * point light, with a screen-space light and for NaN parameters. */
+ * point light, with a screen-space light and for NaN parameters; the march (four samples a
+ * turn) against its sum written out in double at any step count; a reduced map built again
+ * in the last one's buffer. */
 #include "fx_effect_test.h"
 #include "io/exr_rows.h"
 #include "math/hash.h"
@@ -590,9 +592,6 @@ static void test_in_place_finite(fx_context *c2)
     fx_context_free(nc);
 }
 
-/* The composite's 4-pixel upsamples (fx_volume_upsample_cell4 across cells,
- * fx_volume_upsample_same4 on one cell) give fx_volume_upsample's bits: random cells mixing alike depths, depth edges, background and thin objects (no
- * texel alike: the likest one), random tx/ty, including exact 0 and 1. */
 /* The march's sum, written out here in double: step i's visibility at s0 + (i + offset) h
  * (the depth test at the 4 nearest texels, bilinear; rows alike in these maps, so only the
  * columns matter), times its exact transmittance integral, the steps after the medium
@@ -685,6 +684,9 @@ static void test_march_steps(void)
     }
 }
 
+/* The composite's 4-pixel upsamples (fx_volume_upsample_cell4 across cells,
+ * fx_volume_upsample_same4 on one cell) give fx_volume_upsample's bits: random cells mixing alike depths, depth edges, background and thin objects (no
+ * texel alike: the likest one), random tx/ty, including exact 0 and 1. */
 static void test_upsample_cell4(void)
 {
     enum { LW = 9, LH = 3 };
@@ -859,7 +861,7 @@ static void test_reduced_map_recycled(void)
     CHECK_OK(plain, fx_context_set_aux_cache(plain, 0));
     CHECK_OK(fresh, fx_context_set_aux_cache(fresh, 0));
     /* one view at a time: write_raw_view's folder is made afresh at each call */
-    fx_aux_map a, b, want;
+    fx_aux_map a = {0}, b = {0}, want = {0};
     const float *first = NULL;
     for (int v = 0; v < 2; v++) {
         for (int i = 0; i < N * N; i++)
