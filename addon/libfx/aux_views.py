@@ -43,7 +43,8 @@ alpha threshold exactly as in the main render and cast leaf-shaped shadows.
   a facing pair in one entry: two; at most PLANAR_MAX), one view per plane
   (``planar:<key>``, ``planar:<key>#2``, ...): the scene seen by the camera mirrored
   in that plane (ssr_mirror's ``planar_view``, the ``reference`` preset), at the
-  render's size and 4x its samples (or ``libfx_planar_samples``), colour + Depth,
+  render's size and 4x its samples (or ``libfx_planar_samples``), only over the
+  plane's mirror (a render border: planar_border), colour + Depth,
   with the entry's mirrors as perfect mirrors (the other plane's mirror reflects the
   room again) and the plane's own mirror objects and the objects wholly behind the
   plane hidden from the camera (they still cast shadows and bounce light); each entry
@@ -553,6 +554,9 @@ def _render_probe(scene, spec, objs, path, sky=True):
         r = aux.render
         r.engine = "CYCLES"
         r.resolution_x, r.resolution_y, r.resolution_percentage = spec["width"], spec["height"], 100
+        if spec.get("border"):   # a planar view: only the mirror's region is looked up
+            r.use_border, r.use_crop_to_border = True, False
+            r.border_min_x, r.border_min_y, r.border_max_x, r.border_max_y = spec["border"]
         r.film_transparent = False
         r.use_compositing = True
         r.filepath = os.path.join(os.path.dirname(path), "")
@@ -654,6 +658,36 @@ def _planes(objs, mats, cam_pos):
     return out
 
 
+PLANAR_BORDER_PX = 4   # around a planar view's region: its bilinear lookups' neighbours, and rounding
+
+
+def planar_border(objs, world_to_camera, proj, width, height):
+    """The part of a planar view that ssr_mirror looks up: the box [x0, y0, x1, y1] (0..1,
+    from the bottom left, Blender's render border) around the mirror objects' bounding
+    boxes as the view's camera sees them, PLANAR_BORDER_PX wider each way; None (the whole
+    view) when a corner is not in front of that camera or the box covers most of the view.
+    The view renders only this region (Cycles' border, not cropped): a mirror that covers
+    a tenth of the frame costs about a tenth of a render."""
+    xs, ys = [], []
+    for ob in objs:
+        for c in ob.bound_box:
+            q = world_to_camera @ (ob.matrix_world @ Vector(c)).to_4d()
+            h = proj @ q
+            if not (h.w > 1e-6):
+                return None
+            xs.append(0.5 * (h.x / h.w + 1.0))
+            ys.append(0.5 * (h.y / h.w + 1.0))
+    if not xs:
+        return None
+    mx, my = PLANAR_BORDER_PX / max(1, width), PLANAR_BORDER_PX / max(1, height)
+    box = [max(0.0, min(xs) - mx), max(0.0, min(ys) - my), min(1.0, max(xs) + mx), min(1.0, max(ys) + my)]
+    if not (box[0] < box[2] and box[1] < box[3]):
+        return None   # off the view: nothing there to look up, and an empty border is no render
+    if (box[2] - box[0]) * (box[3] - box[1]) > 0.8:
+        return None
+    return box
+
+
 def planar_specs(scene, view):
     """One mirrored camera per plane of the mirror (a flat mirror: one; a facing pair in
     one entry: two): its matrices, the plane, what it hides. Each view shows the entry's
@@ -695,10 +729,11 @@ def planar_specs(scene, view):
                 corners = [ob.matrix_world @ Vector(v) for v in ob.bound_box]
                 if all(n.dot(p) - d < -1e-4 for p in corners):
                     behind.append(ob.name)
+        border = planar_border([bpy.data.objects[name] for name in on_plane], mw.inverted(), Matrix(proj), rw, rh)
         specs.append({
             "name": planar_view_name(view["name"], k), "kind": "planar", "width": rw, "height": rh,
             "samples": samples, "matrix_world": [list(row) for row in mw],
-            "world_to_camera": [list(row) for row in mw.inverted()], "projection": proj,
+            "world_to_camera": [list(row) for row in mw.inverted()], "projection": proj, "border": border,
             "clip_start": float(cam.data.clip_start), "clip_end": float(cam.data.clip_end),
             "hidden": on_plane, "mirrors": [o.name for o in objs], "behind": sorted(behind),
             "plane": [n.x, n.y, n.z, d],

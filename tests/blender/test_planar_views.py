@@ -7,13 +7,15 @@ mirror gets none (NotPlanar), a single flat card one. The library's side (each p
 looks up its own plane's view) is tests/c/test_planar_views.c."""
 import json
 
+import numpy as np
+
 import addon_testlib as T
 
 OK = "LIBFX-TEST-OK"
 
 SCRIPT = T.PRELUDE + r"""
 import json, math, os
-from mathutils import Vector
+from mathutils import Matrix, Vector
 from libfx import aux_views
 scene = bpy.context.scene
 for ob in list(bpy.data.objects):
@@ -67,6 +69,35 @@ for s in specs:
     paths.append(path)
 for ob in (left, right, behind):
     assert ob.visible_camera, ob.name + ": visibility not restored"
+# the border: every point of a view's own mirror that the camera sees (ray cast through a
+# grid of the render's pixels) lands inside it; the first view again without its border
+dg = bpy.context.evaluated_depsgraph_get()
+covered = {}
+for s in specs:
+    W2C, P = Matrix(s["world_to_camera"]), Matrix(s["projection"])
+    seen = outside = 0
+    for j in range(36):
+        for i in range(64):
+            ndc = Vector(((i + 0.5) / 32.0 - 1.0, (j + 0.5) / 18.0 - 1.0))
+            frame = cam.data.view_frame(scene=scene)   # top-right, bottom-right, bottom-left, top-left
+            local = Vector((frame[2].x + (frame[0].x - frame[2].x) * (ndc.x + 1) / 2,
+                            frame[2].y + (frame[0].y - frame[2].y) * (ndc.y + 1) / 2, frame[0].z))
+            d = (cam.matrix_world.to_3x3() @ local).normalized()
+            hit, loc, _, _, ob, _ = scene.ray_cast(dg, cam.matrix_world.translation, d)
+            if not hit or ob.name not in s["hidden"]:
+                continue
+            h = P @ (W2C @ loc.to_4d())
+            u, v = 0.5 * (h.x / h.w + 1.0), 0.5 * (h.y / h.w + 1.0)
+            b = s["border"]
+            seen += 1
+            outside += not (b and b[0] <= u <= b[2] and b[1] <= v <= b[3])
+    covered[s["name"]] = [seen, outside, s["border"]]
+out["covered"] = covered
+# the view of the mirror the camera sees most of (the other one is off the frame here)
+k = max(range(len(specs)), key=lambda k: covered[specs[k]["name"]][0])
+full = os.path.join(os.environ["PLANAR_OUT"], "full.exr")
+aux_views._render_probe(scene, dict(specs[k], border=None), objs, full)
+out["full"] = [full, paths[k], specs[k]["border"]]
 assert left.material_slots[0].material.name == "Mirror" and right.material_slots[0].material.name == "Mirror"
 out["paths"] = paths
 # one flat card: one view, the need's own name
@@ -118,5 +149,21 @@ def test_planar_views_per_plane(blender, library, tmp_path):
     for p in res["paths"]:
         exr = T.Exr(p)
         assert (exr.width, exr.height) == (64, 36)
+    # each view renders only its mirror's region (Cycles' border): every mirror point the
+    # camera sees lies in it, the region is a part of the view, and its pixels are the
+    # whole view's (the same samples)
+    for name, (seen, outside, border) in res["covered"].items():
+        assert outside == 0 and (border[2] - border[0]) * (border[3] - border[1]) < 0.6, (name, seen, outside, border)
+    assert max(c[0] for c in res["covered"].values()) > 100, res["covered"]
+    full_path, border_path, b = res["full"]
+    full, part = T.Exr(full_path).get("Combined", "RGB"), T.Exr(border_path).get("Combined", "RGB")
+    x0, x1 = int(b[0] * 64) + 1, int(b[2] * 64) - 1
+    y0, y1 = 36 - int(b[3] * 36) + 1, 36 - int(b[1] * 36) - 1   # the border from the bottom, rows from the top
+    assert x1 - x0 > 4 and y1 - y0 > 4, b
+    assert np.array_equal(full[y0:y1, x0:x1], part[y0:y1, x0:x1]), np.abs(full - part)[y0:y1, x0:x1].max()
+    # outside it, nothing was rendered (the full view has the room there)
+    away = np.ones((36, 64), bool)
+    away[max(0, y0 - 3):y1 + 3, max(0, x0 - 3):x1 + 3] = False
+    assert away.sum() > 500 and not part[away].any() and full[away].any(), b
     assert res["single"] == ["planar:k"]
     assert res["curved"].startswith("not planar"), res["curved"]

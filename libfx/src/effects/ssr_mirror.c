@@ -182,9 +182,9 @@ static const fx_param_def ssr_param_defs[] = {
               "Flat mirrors: the reflection is the add-on's render from the camera mirrored in the "
               "mirror's plane (exact; one more render per mirror plane). Worth turning on for a flat "
               "mirror at final too: on the truth scenes it removed 89-92 % of the mirror error where "
-              "final's trace + probe removed 85-86 %, for one Cycles render per plane (about 2x the "
-              "probe's render time). Pixels off that plane, glossy, bent or cel mirrors, and a frame "
-              "without that view keep the trace and the fallback"),
+              "final's trace + probe removed 85-86 %, for one Cycles render per plane (of the mirror's "
+              "region only: 0.4-0.8x the probe's render time there). Pixels off that plane, glossy, "
+              "bent or cel mirrors, and a frame without that view keep the trace and the fallback"),
     FX_P_BOOL(ssr_params, footprint, "footprint", 1,
               "Filter the reflection over each pixel's footprint (ray differentials, Igehy 1999): a "
               "curved or distant mirror shows the room smaller than the frame does, and one lookup per "
