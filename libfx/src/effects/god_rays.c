@@ -1061,8 +1061,8 @@ static fx_result run_volumetric(const fx_effect_run *run, const god_rays_params 
         double frame_no = fx_effect_scene_frame(run);
         int fr = isfinite(frame_no) && fabs(frame_no) < 2e9 ? (int)floor(frame_no) : 0;
         unsigned rot = fx_hash4(fr, p->seed, 0x766f6c, 0);
-        fx_volume_scatter_lo(run->ctx, &vol, dp->data, w, h, f, p->volume_steps, p->interleave, rot, buf,
-                             buf + ln, buf + 2 * ln, buf + 3 * ln);
+        fx_volume_scatter_lo(run->ctx, &vol, dp->data, w, h, f, p->volume_steps, p->interleave, rot, &run->roi,
+                             buf, buf + ln, buf + 2 * ln, buf + 3 * ln);
         /* the march scatters with the grey sigma; each channel scatters by its own colour */
         const float cm = vol_color_mean(p), e = L.energy;
         const float kc[3] = {p->volume_color[0] / cm, p->volume_color[1] / cm, p->volume_color[2] / cm};

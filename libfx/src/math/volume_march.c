@@ -249,6 +249,8 @@ typedef struct lo_job {
     const fx_volume *v;
     const float *depth;
     int w, h, f, steps, n, lw, lh;
+    int mx0, mx1, my0; /* the texels marched: columns [mx0, mx1), rows from my0 */
+    int gx0, gx1, gy0; /* the texels gathered (interleave > 1) */
     int mult;         /* the strata's permutation: k -> (k mult + rot) mod n^2 */
     unsigned rot;
     float *lo, *lo_t, *lo_depth, *out;
@@ -258,10 +260,10 @@ static void march_rows(void *user, int y0, int y1)
 {
     const lo_job *j = user;
     const int n = j->n, nn = n * n;
-    for (int Y = y0; Y < y1; Y++) {
+    for (int Y = j->my0 + y0; Y < j->my0 + y1; Y++) {
         int y = Y * j->f + j->f / 2;
         y = y < j->h ? y : j->h - 1;
-        for (int X = 0; X < j->lw; X++) {
+        for (int X = j->mx0; X < j->mx1; X++) {
             int x = X * j->f + j->f / 2;
             x = x < j->w ? x : j->w - 1;
             float d = j->depth[(size_t)y * j->w + x];
@@ -287,8 +289,8 @@ static void gather_rows(void *user, int y0, int y1)
 {
     const lo_job *j = user;
     const int n = j->n, lw = j->lw, lh = j->lh;
-    for (int Y = y0; Y < y1; Y++)
-        for (int X = 0; X < lw; X++) {
+    for (int Y = j->gy0 + y0; Y < j->gy0 + y1; Y++)
+        for (int X = j->gx0; X < j->gx1; X++) {
             const float d = j->lo_depth[(size_t)Y * lw + X], inv = 10.0f / d;
             float s = 0.0f, ws = 0.0f;
             for (int b = 0; b < n; b++) {
@@ -317,9 +319,21 @@ static int gcd(int a, int b)
     return a;
 }
 
+/* The texels [*a, *b) of a grid of n that pixels [p0, p1) read (each pixel its texel and
+ * the next one: fx_volume_lo_coord), `margin` more each way, within the grid. */
+static void lo_span(int p0, int p1, int factor, int n, int margin, int *a, int *b)
+{
+    int t0 = 0, t1 = 0;
+    float u;
+    fx_volume_lo_coord(p0, factor, n, &t0, &u);
+    fx_volume_lo_coord(p1 - 1, factor, n, &t1, &u);
+    *a = t0 - margin > 0 ? t0 - margin : 0;
+    *b = t1 + 2 + margin < n ? t1 + 2 + margin : n;
+}
+
 void fx_volume_scatter_lo(fx_context *ctx, const fx_volume *v, const float *depth, int w, int h, int factor,
-                          int steps, int interleave, unsigned rotate, float *lo, float *lo_t, float *lo_depth,
-                          float *tmp)
+                          int steps, int interleave, unsigned rotate, const fx_rect *roi, float *lo, float *lo_t,
+                          float *lo_depth, float *tmp)
 {
     lo_job j;
     memset(&j, 0, sizeof j);
@@ -344,9 +358,29 @@ void fx_volume_scatter_lo(fx_context *ctx, const fx_volume *v, const float *dept
     j.lo = j.n > 1 ? tmp : lo;
     j.lo_depth = lo_depth;
     j.lo_t = lo_t;
-    fx_parallel_for(ctx, j.lh, fx_grain_for(ctx, j.lh), march_rows, &j);
+    /* only the texels the roi's pixels read, and around them the gather's block: a
+     * masked entry marches its mask's part of the frame (the texels it reads are the
+     * whole frame's bit for bit) */
+    const fx_rect whole = {0, 0, w, h}, *r = roi && roi->x1 > roi->x0 && roi->y1 > roi->y0 ? roi : &whole;
+    int my1 = 0, gy1 = 0;
+    lo_span(r->x0, r->x1, j.f, j.lw, 0, &j.gx0, &j.gx1);
+    lo_span(r->y0, r->y1, j.f, j.lh, 0, &j.gy0, &gy1);
+    lo_span(r->x0, r->x1, j.f, j.lw, j.n, &j.mx0, &j.mx1);
+    lo_span(r->y0, r->y1, j.f, j.lh, j.n, &j.my0, &my1);
+    fx_parallel_for(ctx, my1 - j.my0, fx_grain_for(ctx, my1 - j.my0), march_rows, &j);
     if (j.n > 1) {
         j.out = lo;
-        fx_parallel_for(ctx, j.lh, fx_grain_for(ctx, j.lh), gather_rows, &j);
+        fx_parallel_for(ctx, gy1 - j.gy0, fx_grain_for(ctx, gy1 - j.gy0), gather_rows, &j);
     }
+    /* the texels no pixel reads: defined (no light, nothing dimmed, background), as the
+     * composite's row set-up reads whole rows */
+    if (j.gx0 > 0 || j.gx1 < j.lw || j.gy0 > 0 || gy1 < j.lh)
+        for (int Y = 0; Y < j.lh; Y++)
+            for (int X = 0; X < j.lw; X++)
+                if (Y < j.gy0 || Y >= gy1 || X < j.gx0 || X >= j.gx1) {
+                    const size_t i = (size_t)Y * j.lw + X;
+                    lo[i] = 0.0f;
+                    lo_t[i] = 1.0f;
+                    lo_depth[i] = FX_VOLUME_BG_DEPTH;
+                }
 }

@@ -29,6 +29,7 @@
 #define LIBFX_MATH_VOLUME_MARCH_H
 
 #include "core/context.h"
+#include "core/rect.h"
 #include "core/simd4.h"
 #include "math/camera.h"
 #include "math/shadow_map.h"
@@ -125,11 +126,13 @@ float fx_volume_behind_at(const fx_volume *v, float x, float y, float depth);
  * marches with its own offset, a fixed permutation of the block's strata turned by
  * `rotate`) gathered back by a depth-aware box of the block's size. lo (lw x lh) gets the
  * result, lo_t the transmittance, lo_depth the texels' depths (background:
- * FX_VOLUME_BG_DEPTH). tmp: lw x lh floats of scratch (interleave > 1). */
+ * FX_VOLUME_BG_DEPTH). tmp: lw x lh floats of scratch (interleave > 1). roi (NULL: the
+ * whole frame): only the texels its pixels read (fx_volume_lo_coord: a pixel's texel and the
+ * next) are valid, the same as the whole frame's. */
 #define FX_VOLUME_BG_DEPTH 1e10f
 void fx_volume_scatter_lo(fx_context *ctx, const fx_volume *v, const float *depth, int w, int h, int factor,
-                          int steps, int interleave, unsigned rotate, float *lo, float *lo_t, float *lo_depth,
-                          float *tmp);
+                          int steps, int interleave, unsigned rotate, const fx_rect *roi, float *lo, float *lo_t,
+                          float *lo_depth, float *tmp);
 
 static inline int fx_volume_lo_size(int n, int factor) { return (n + factor - 1) / factor; }
 
