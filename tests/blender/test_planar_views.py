@@ -2,9 +2,11 @@
 lie in two planes (a facing pair, one material) gets two planar views, named
 "planar:<key>" and "planar:<key>#2", each with its own plane, the camera mirrored in that
 plane, and only that plane's mirror hidden from its camera; each view renders (the
-mirrors shown as perfect mirrors, materials and visibility restored after); a curved
-mirror gets none (NotPlanar), a single flat card one. The library's side (each pixel
-looks up its own plane's view) is tests/c/test_planar_views.c."""
+mirrors shown as perfect mirrors, materials and visibility restored after) over its
+mirror's region only (a render border holding every mirror point the camera sees, its
+pixels the whole view's, nothing rendered outside); a curved mirror gets none
+(NotPlanar), a single flat card one. The library's side (each pixel looks up its own
+plane's view) is tests/c/test_planar_views.c."""
 import json
 
 import numpy as np
