@@ -72,8 +72,9 @@ for s in specs:
 for ob in (left, right, behind):
     assert ob.visible_camera, ob.name + ": visibility not restored"
 # the border: every point of a view's own mirror that the camera sees (ray cast through a
-# grid of the render's pixels) lands inside it; the first view again without its border
+# grid of the render's pixels) lands inside it; then one view again without its border
 dg = bpy.context.evaluated_depsgraph_get()
+frame = cam.data.view_frame(scene=scene)   # top-right, bottom-right, bottom-left, top-left
 covered = {}
 for s in specs:
     W2C, P = Matrix(s["world_to_camera"]), Matrix(s["projection"])
@@ -81,7 +82,6 @@ for s in specs:
     for j in range(36):
         for i in range(64):
             ndc = Vector(((i + 0.5) / 32.0 - 1.0, (j + 0.5) / 18.0 - 1.0))
-            frame = cam.data.view_frame(scene=scene)   # top-right, bottom-right, bottom-left, top-left
             local = Vector((frame[2].x + (frame[0].x - frame[2].x) * (ndc.x + 1) / 2,
                             frame[2].y + (frame[0].y - frame[2].y) * (ndc.y + 1) / 2, frame[0].z))
             d = (cam.matrix_world.to_3x3() @ local).normalized()
