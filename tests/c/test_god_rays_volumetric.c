@@ -690,6 +690,7 @@ static void test_march_steps(void)
     r.tn0 = -0.3f; /* the normalised depth climbs through the ramp's tests */
     r.dtn = 0.05f;
     r.phase = 0.2f;
+    CHECK(FX_VOLUME_OPAQUE_T == expf(-FX_VOLUME_OPAQUE)); /* the march's stop, a constant */
     static const int steps[] = {1, 2, 3, 4, 5, 7, 13, 24, 257};
     double worst = 0.0;
     for (int e = 0; e < 2; e++)

@@ -520,7 +520,7 @@ static fx_result rain_process(const fx_effect_run *run)
         else
             r = fx_mask_build(run->ctx, &spec, run->frame, where, &cover);
         if (r)
-            return fx_rain_effect_end(run, &j.rm, r);
+            return fx_rain_effect_end(&j.rm, r);
         j.cover = cover;
         j.camera_covered = 1;
     }
@@ -551,13 +551,13 @@ static fx_result rain_process(const fx_effect_run *run)
         fx_mem_free(j.bcov);
         if (!ok) {
             fx_mask_free(cover);
-            return fx_rain_effect_end(run, &j.rm, fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where));
+            return fx_rain_effect_end(&j.rm, fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where));
         }
     } else {
         fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), rain_rows, &j);
     }
     fx_mask_free(cover);
-    return fx_rain_effect_end(run, &j.rm, FX_OK);
+    return fx_rain_effect_end(&j.rm, FX_OK);
 }
 
 const fx_effect_class fx_effect_rain = {

@@ -37,7 +37,7 @@ static inline fx_result fx_rain_effect_begin(const fx_effect_run *run, int need_
 }
 
 /* Gives the rain map back and returns r (the effect's result). */
-static inline fx_result fx_rain_effect_end(const fx_effect_run *run, fx_rain_map *rm, fx_result r)
+static inline fx_result fx_rain_effect_end(fx_rain_map *rm, fx_result r)
 {
     fx_rain_map_free(rm);
     return r;

@@ -357,7 +357,7 @@ static fx_result splash_process(const fx_effect_run *run)
     const int n = p->downsample;
     if (n <= 1 || roi->x1 - roi->x0 < 2 || rows < 2) {
         fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), splash_rows, &j);
-        return fx_rain_effect_end(run, &j.rm, FX_OK);
+        return fx_rain_effect_end(&j.rm, FX_OK);
     }
     splash_lattice l = { n, (roi->x1 - roi->x0 - 1 + n - 1) / n + 1, (rows - 1 + n - 1) / n + 1, NULL, NULL, NULL, NULL };
     const size_t nodes = (size_t)l.nx * l.ny, cells = (size_t)(l.nx - 1) * (l.ny - 1);
@@ -366,7 +366,7 @@ static fx_result splash_process(const fx_effect_run *run)
     const size_t bytes = (nodes + cells + (size_t)(l.ny - 1)) * 4 + nodes;
     unsigned char *block = fx_buffer_get(run->ctx, bytes);
     if (!block)
-        return fx_rain_effect_end(run, &j.rm,
+        return fx_rain_effect_end(&j.rm,
                                   fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory for the lattice", run->where));
     l.v = (float *)block;
     l.cell = (int *)(block + nodes * 4);
@@ -378,7 +378,7 @@ static fx_result splash_process(const fx_effect_run *run)
     interp_job ij = { &j, &l };
     fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), interp_rows, &ij);
     fx_buffer_put(run->ctx, block, bytes);
-    return fx_rain_effect_end(run, &j.rm, FX_OK);
+    return fx_rain_effect_end(&j.rm, FX_OK);
 }
 
 const fx_effect_class fx_effect_rain_splashes = {

@@ -559,11 +559,11 @@ static fx_result wet_process(const fx_effect_run *run)
         fx_mem_free(j.smooth);
         fx_mem_free(j.spans);
         if (!ok)
-            return fx_rain_effect_end(run, &j.rm, fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where));
+            return fx_rain_effect_end(&j.rm, fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory", where));
     } else {
         fx_parallel_for(run->ctx, rows, fx_grain_for(run->ctx, rows), wet_rows, &j);
     }
-    return fx_rain_effect_end(run, &j.rm, FX_OK);
+    return fx_rain_effect_end(&j.rm, FX_OK);
 }
 
 const fx_effect_class fx_effect_wet_surfaces = {

@@ -177,7 +177,7 @@ FX_CLONES float fx_volume_march(const fx_volume *v, const fx_volume_ray *r, int 
     float od = r->e0 + r->e1 * r->s0;
     if (!(od < FX_VOLUME_OPAQUE))
         return 0.0f;
-    const float stop = 4.2483543e-18f; /* expf(-FX_VOLUME_OPAQUE) */
+    const float stop = FX_VOLUME_OPAQUE_T;
     const lit_map m = { v->sm->depth, v->sm->width, v->sm->height, V4((float)(v->sm->width - 1)),
                         V4((float)(v->sm->height - 1)) };
     /* the sample positions in the light view (texel centres at + 0.5: the bilinear's

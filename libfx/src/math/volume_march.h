@@ -41,6 +41,8 @@
 #define FX_VOLUME_MAX_G 0.999f
 /* Above this optical depth a sample adds nothing (exp(-40) ~ 4e-18): the march stops. */
 #define FX_VOLUME_OPAQUE 40.0f
+/* expf(-FX_VOLUME_OPAQUE), as a constant for the march's loop (test_march_steps checks it) */
+#define FX_VOLUME_OPAQUE_T 4.2483543e-18f
 
 typedef struct fx_volume {
     const fx_view *cam;        /* the frame's camera */
