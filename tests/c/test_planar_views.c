@@ -132,10 +132,63 @@ static void run_check(fx_context *ctx, fx_stack *s, const fx_frame *f, float a, 
         fx_frame_free(o);
 }
 
+/* The planar view a recipe asks the add-on for (fx_stack_required_aux_views): none at
+ * draft and preview, at the render's samples at final (samples_scale 1), 4x at reference;
+ * an explicit planar_samples wins; a glossy mirror reads none. A recipe of params_version 2
+ * that turned planar_view on itself rendered it at 4x: it keeps 4 (ssr_migrate). */
+static void check_need(fx_context *ctx, const char *recipe, const char *want)
+{
+    fx_stack *s = NULL;
+    char *req = NULL;
+    CHECK_OK(ctx, fx_stack_new(ctx, &s));
+    CHECK_OK(ctx, fx_stack_load_json(s, recipe));
+    CHECK_OK(ctx, fx_stack_required_aux_views(s, &req));
+    const char *at = req ? strstr(req, "\"kind\":\"planar\"") : NULL;
+    const char *scale = at ? strstr(at, "\"samples_scale\":") : NULL;
+    char got[16] = "none";
+    if (scale)
+        snprintf(got, sizeof got, "%.4s", scale + strlen("\"samples_scale\":"));
+    else if (at)
+        snprintf(got, sizeof got, "unset");
+    if (strncmp(got, want, strlen(want)) != 0 || (strcmp(want, "none") && !scale))
+        printf("planar need of %s: %s, want %s (%s)\n", recipe, got, want, req ? req : "-");
+    CHECK(strncmp(got, want, strlen(want)) == 0);
+    fx_free(req);
+    fx_stack_free(s);
+}
+
+static void test_planar_needs(fx_context *ctx)
+{
+    static const char *const q[] = { "draft", "preview", "final", "reference" };
+    static const char *const want[] = { "none", "none", "1", "4" };
+    char r[400];
+    for (int k = 0; k < 4; k++) {
+        snprintf(r, sizeof r,
+                 "{\"version\": 1, \"quality\": \"%s\", \"effects\": [{\"effect\": \"ssr_mirror\", "
+                 "\"params_version\": 3, \"mask\": {\"material\": \"M\"}}]}",
+                 q[k]);
+        check_need(ctx, r, want[k]);
+    }
+    const char *tail = "\"mask\": {\"material\": \"M\"}}]}";
+    snprintf(r, sizeof r, "{\"version\": 1, \"quality\": \"final\", \"effects\": [{\"effect\": \"ssr_mirror\", "
+                          "\"params_version\": 3, \"params\": {\"planar_samples\": 2}, %s", tail);
+    check_need(ctx, r, "2");
+    snprintf(r, sizeof r, "{\"version\": 1, \"quality\": \"final\", \"effects\": [{\"effect\": \"ssr_mirror\", "
+                          "\"params_version\": 3, \"params\": {\"glossiness\": 2}, %s", tail);
+    check_need(ctx, r, "none");
+    snprintf(r, sizeof r, "{\"version\": 1, \"quality\": \"preview\", \"effects\": [{\"effect\": \"ssr_mirror\", "
+                          "\"params_version\": 2, \"params\": {\"planar_view\": true}, %s", tail);
+    check_need(ctx, r, "4");
+    snprintf(r, sizeof r, "{\"version\": 1, \"quality\": \"final\", \"effects\": [{\"effect\": \"ssr_mirror\", "
+                          "\"params_version\": 2, %s", tail);
+    check_need(ctx, r, "1");
+}
+
 int main(void)
 {
     fx_context *ctx = NULL;
     fx_context_new(&ctx, 2);
+    test_planar_needs(ctx);
     const char *dir = tu_tmpdir("planar_views");
     char pa[600], pb[600];
     snprintf(pa, sizeof pa, "%s/plane_a.exr", dir);

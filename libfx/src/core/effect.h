@@ -121,6 +121,8 @@ typedef struct fx_aux_need {
     int per_mask;               /* 1: a view of this entry's mask (a mirror's probe): the stack
                                    appends the entry's mask key (fx_effect_run.mask_key) to
                                    name and lists the mask, so the add-on knows where to render */
+    float samples_scale;        /* > 0: the view's samples per pixel as a multiple of the render's
+                                   (a planar view: ssr_mirror's planar_samples); 0: the add-on's own */
 } fx_aux_need;
 
 /* Everything process() gets. */

@@ -813,6 +813,8 @@ fx_result fx_stack_required_aux_views(const fx_stack *s, char **out_json)
             if (!item || !cJSON_AddStringToObject(item, "name", need[k].name) ||
                 !cJSON_AddStringToObject(item, "kind", need[k].kind) ||
                 (strcmp(need[k].kind, "light") == 0 && !cJSON_AddStringToObject(item, "light", need[k].light)) ||
+                (need[k].samples_scale > 0.0f &&
+                 !cJSON_AddNumberToObject(item, "samples_scale", need[k].samples_scale)) ||
                 (mask && !cJSON_AddItemToObject(item, "mask", mask))) {
                 if (mask && (!item || cJSON_GetObjectItemCaseSensitive(item, "mask") != mask))
                     cJSON_Delete(mask);

@@ -21,7 +21,7 @@
  * rendered, failed): a warning and the texture fallback; debug pass "fallback_<name>"
  * names the one in use and holds its weight per pixel.
  *
- * Planar views (planar_view, the reference preset): for a flat mirror the add-on renders
+ * Planar views (planar_view, the final and reference presets): for a flat mirror the add-on renders
  * the scene from the camera mirrored in the mirror's plane (aux view "planar:<mask key>",
  * with the plane); for a mirror whose faces lie in a few planes (a facing pair in one
  * entry) one view per plane ("planar:<mask key>", "...#2", up to PLANAR_VIEWS_MAX). A
@@ -100,6 +100,7 @@ typedef struct ssr_params {
     int hiz;
     int probe_steps;
     int planar_view;
+    float planar_samples;
     int footprint;
 } ssr_params;
 
@@ -180,11 +181,15 @@ static const fx_param_def ssr_param_defs[] = {
              "(geometric, 2 cm to max_distance; then refine bisections)"),
     FX_P_BOOL(ssr_params, planar_view, "planar_view", 0,
               "Flat mirrors: the reflection is the add-on's render from the camera mirrored in the "
-              "mirror's plane (exact; one more render per mirror plane). Worth turning on for a flat "
-              "mirror at final too: on the truth scenes it removed 89-92 % of the mirror error where "
-              "final's trace + probe removed 85-86 %, for one Cycles render per plane (of the mirror's "
-              "region only: 0.4-0.8x the probe's render time there). Pixels off that plane, glossy, "
-              "bent or cel mirrors, and a frame without that view keep the trace and the fallback"),
+              "mirror's plane (exact, view-dependent shading included; one more Cycles render per mirror "
+              "plane, of the mirror's region only: about the mirror's share of the main render at "
+              "planar_samples 1). final and reference turn it on: on the truth scenes the trace + probe "
+              "alone removed 85-86 % of the mirror error and left the room's gloss wrong where the "
+              "mirror shows the floor. Pixels off that plane, glossy, bent or cel mirrors, and a frame "
+              "without that view keep the trace and the fallback"),
+    FX_P_FLOAT(ssr_params, planar_samples, "planar_samples", 1.0, 0.0625, 64.0, 0.25, 4.0, "factor",
+               "planar_view: the view's samples per pixel as a multiple of the render's (1: the reflection "
+               "is as noisy as the scene it shows, as a true mirror's; reference: 4)"),
     FX_P_BOOL(ssr_params, footprint, "footprint", 1,
               "Filter the reflection over each pixel's footprint (ray differentials, Igehy 1999): a "
               "curved or distant mirror shows the room smaller than the frame does, and one lookup per "
@@ -1736,19 +1741,29 @@ static int ssr_aux_views(const void *params, fx_aux_need *out, int max)
         snprintf(out[n].name, sizeof out[n].name, "%s", FX_AUX_PLANAR);
         out[n].kind = "planar";
         out[n].per_mask = 1;
+        out[n].samples_scale = p->planar_samples;
         n++;
     }
     return n;
 }
 
 /* params_version 2 added footprint (default on): a recipe of version 1 keeps one lookup per
- * pixel (footprint off) unless it names one. Silent: its output is the same as before. */
+ * pixel (footprint off) unless it names one. Silent: its output is the same as before.
+ * params_version 3 added planar_samples (default 1): a planar view used to render at 4x
+ * the render's samples, so a recipe of version 2 that turns planar_view on itself keeps 4
+ * unless it names planar_samples (the same view, the same output; the presets set theirs). */
 static fx_result ssr_migrate(int from_version, cJSON *params, char *note, size_t note_size)
 {
     (void)note;
     (void)note_size;
-    if (from_version == 1 && params && !cJSON_GetObjectItemCaseSensitive(params, "footprint") &&
+    if (!params)
+        return FX_OK;
+    if (from_version == 1 && !cJSON_GetObjectItemCaseSensitive(params, "footprint") &&
         !cJSON_AddBoolToObject(params, "footprint", 0))
+        return FX_ERR_OUT_OF_MEMORY;
+    if (from_version == 2 && cJSON_IsTrue(cJSON_GetObjectItemCaseSensitive(params, "planar_view")) &&
+        !cJSON_GetObjectItemCaseSensitive(params, "planar_samples") &&
+        !cJSON_AddNumberToObject(params, "planar_samples", 4))
         return FX_ERR_OUT_OF_MEMORY;
     return FX_OK;
 }
@@ -1766,9 +1781,11 @@ const fx_effect_class fx_effect_ssr_mirror = {
         "{\"max_steps\": 96, \"stride\": 1.5, \"growth\": 1.04, \"refine\": 6, \"resolution_scale\": 0.5, "
         "\"retrace_edges\": true, \"footprint\": false}",
         "{\"max_steps\": 96, \"stride\": 1.5, \"growth\": 1.04, \"refine\": 6, \"resolution_scale\": 1, "
-        "\"fallback\": \"probe\", \"probe_steps\": 48, \"footprint\": true}",
+        "\"fallback\": \"probe\", \"probe_steps\": 48, \"planar_view\": true, \"planar_samples\": 1, "
+        "\"footprint\": true}",
         "{\"max_steps\": 4096, \"stride\": 1, \"growth\": 1, \"refine\": 10, \"resolution_scale\": 1, "
-        "\"fallback\": \"probe\", \"probe_steps\": 160, \"planar_view\": true, \"footprint\": true}",
+        "\"fallback\": \"probe\", \"probe_steps\": 160, \"planar_view\": true, \"planar_samples\": 4, "
+        "\"footprint\": true}",
     },
     .passes = ssr_passes,
     .aux_views = ssr_aux_views,
@@ -1776,6 +1793,6 @@ const fx_effect_class fx_effect_ssr_mirror = {
     .halo = ssr_halo,
     .validate = ssr_validate,
     .process = ssr_process,
-    .params_version = 2,
+    .params_version = 3,
     .migrate = ssr_migrate,
 };
