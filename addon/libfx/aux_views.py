@@ -42,8 +42,9 @@ alpha threshold exactly as in the main render and cast leaf-shaped shadows.
 - ``planar:<key>``: for a mirror whose faces lie in a few planes (a flat mirror: one;
   a facing pair in one entry: two; at most PLANAR_MAX), one view per plane
   (``planar:<key>``, ``planar:<key>#2``, ...): the scene seen by the camera mirrored
-  in that plane (ssr_mirror's ``planar_view``, the ``reference`` preset), at the
-  render's size and 4x its samples (or ``libfx_planar_samples``), only over the
+  in that plane (ssr_mirror's ``planar_view``: the ``final`` and ``reference`` presets), at the
+  render's size and samples times the need's samples_scale (ssr_mirror's planar_samples:
+  1 at final, 4 at reference; or ``libfx_planar_samples``), only over the
   plane's mirror (a render border: planar_border), colour + Depth,
   with the entry's mirrors as perfect mirrors (the other plane's mirror reflects the
   room again) and the plane's own mirror objects and the objects wholly behind the
@@ -688,6 +689,14 @@ def planar_border(objs, world_to_camera, proj, width, height):
     return box
 
 
+def planar_samples(scene, view):
+    """A planar view's samples per pixel: the need's samples_scale (ssr_mirror's
+    planar_samples: 1 at final, the reflection as noisy as the scene it shows, as a true
+    mirror's; 4 at reference) times the render's, or the scene's libfx_planar_samples."""
+    scale = float(view.get("samples_scale") or 1.0)
+    return int(scene.get("libfx_planar_samples") or max(1, round(scale * max(1, scene.cycles.samples))))
+
+
 def planar_specs(scene, view):
     """One mirrored camera per plane of the mirror (a flat mirror: one; a facing pair in
     one entry: two): its matrices, the plane, what it hides. Each view shows the entry's
@@ -708,9 +717,7 @@ def planar_specs(scene, view):
                                   scale_y=r.pixel_aspect_y)
     proj = [list(row) for row in proj]
     proj[0][2] = -proj[0][2]                          # the lens shift, mirrored with x
-    # the view is the mirror's whole reflection at the converged preset: 4x the scene's
-    # samples, so its noise is half the render's
-    samples = int(scene.get("libfx_planar_samples") or 4 * max(1, scene.cycles.samples))
+    samples = planar_samples(scene, view)
     specs = []
     for k, (n, d, _, on_plane) in enumerate(planes):
         if n.dot(cam_pos) - d <= 0:
@@ -774,16 +781,18 @@ def _prepare_probe(scene, spec, path, meta_path):
 
 
 def _view_specs(scene, view):
-    """The renders one needed probe or planar view takes: [spec] (planar: one per plane;
-    none, with a log line, for a mirror that is not flat)."""
+    """The renders one needed probe or planar view takes: ([spec], None) (planar: one per
+    plane), or ([], reason) for a mirror that is not flat (logged): the sidecar then lists
+    the view as absent with that reason, so ssr_mirror uses the trace and the probe there
+    without warning of a missing view."""
     if view["kind"] != "planar":
-        return probe_specs(scene, view)
+        return probe_specs(scene, view), None
     try:
-        return planar_specs(scene, view)
+        return planar_specs(scene, view), None
     except NotPlanar as e:
-        log("no planar view '%s': the mirror is not flat (%s); ssr_mirror uses the trace and the "
-            "probe there" % (view["name"], e))
-        return []
+        reason = "the mirror is not flat (%s)" % e
+        log("no planar view '%s': %s; ssr_mirror uses the trace and the probe there" % (view["name"], reason))
+        return [], reason
 
 
 def _file_name(view_name):
@@ -986,13 +995,21 @@ def prepare(scene, frames):
     entries = []
     for view in views:
         if view["kind"] in ("probe", "planar"):
+            absent = None
             try:
-                specs = _view_specs(scene, view)
+                specs, absent = _view_specs(scene, view)
             except Exception as e:  # a probe is an improvement, never a reason to fail the frame
                 log("warning: the %s view '%s' could not be placed (%s): ssr_mirror falls back to %s"
                     % (view["kind"], view["name"], e,
                        "the mirror's texture" if view["kind"] == "probe" else "the trace and the probe"))
                 specs = []
+            if absent:   # listed, so that F12 finds it on disk too (from_disk); an older view goes
+                base = "%slibfx_aux_%s" % (scene_setup.output_prefix(scene), _file_name(view["name"]))
+                entry = {"name": view["name"], "absent": absent}
+                _store_entry(base + ".json", entry)
+                entries.append(entry)
+                if os.path.exists(base + ".exr"):
+                    os.remove(base + ".exr")
             for spec in specs:
                 path = "%slibfx_aux_%s.exr" % (scene_setup.output_prefix(scene), _file_name(spec["name"]))
                 meta_path = path[:-4] + ".json"
@@ -1001,7 +1018,7 @@ def prepare(scene, frames):
                     continue
                 _store_entry(meta_path, entry)
                 entries.append(entry)
-            _drop_stale_planes(scene, view, {s["name"] for s in specs})
+            _drop_stale_planes(scene, view, {s["name"] for s in specs} | ({view["name"]} if absent else set()))
             continue
         if view["kind"] == "water":
             entries.append(_prepare_water(scene, view, frames))

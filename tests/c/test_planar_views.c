@@ -184,6 +184,52 @@ static void test_planar_needs(fx_context *ctx)
     check_need(ctx, r, "1");
 }
 
+/* A planar view listed as absent (the add-on found the mirror not flat): the run takes
+ * the trace as with no planar_view, with no warning; a frame without the entry warns.
+ * Malformed absent entries are refused, naming the entry. */
+static void test_absent_view(fx_context *ctx, const char *name)
+{
+    fx_frame *f = pair_frame(ctx), *o_abs = NULL, *o_off = NULL, *o_missing = NULL;
+    fx_stack *s = et_stack(ctx, "ssr_mirror");
+    CHECK_OK(ctx, fx_stack_set_mask_json(s, 0, "{\"material_index\": 1}"));
+    CHECK_OK(ctx, fx_stack_set_quality(s, FX_QUALITY_FINAL));
+    fx_context_clear_warnings(ctx);
+    CHECK_OK(ctx, fx_stack_run(s, f, &o_missing));
+    int warned = 0;
+    for (int k = 0; k < fx_context_warning_count(ctx); k++)
+        warned += tu_contains(fx_context_warning(ctx, k), "no planar mirror view");
+    CHECK(warned == 1);
+    char json[400];
+    snprintf(json, sizeof json, "{\"aux_views\": [{\"name\": \"%s\", \"absent\": \"the mirror is not flat\"}]}",
+             name);
+    CHECK_OK(ctx, fx_frame_apply_sidecar(f, json));
+    fx_context_clear_warnings(ctx);
+    CHECK_OK(ctx, fx_stack_run(s, f, &o_abs));
+    warned = 0; /* (the missing probe still warns) */
+    for (int k = 0; k < fx_context_warning_count(ctx); k++)
+        warned += tu_contains(fx_context_warning(ctx, k), "no planar mirror view");
+    CHECK(warned == 0);
+    CHECK_OK(ctx, fx_stack_set_int(s, 0, "planar_view", 0));
+    CHECK_OK(ctx, fx_stack_run(s, f, &o_off));
+    const float *a = et_combined(o_abs), *b = et_combined(o_off), *c = et_combined(o_missing);
+    CHECK(a && b && c && memcmp(a, b, (size_t)W * H * 4 * sizeof(float)) == 0);
+    CHECK(a && c && memcmp(a, c, (size_t)W * H * 4 * sizeof(float)) == 0);
+    static const char *const bad[] = {
+        "{\"aux_views\": [{\"name\": \"planar:x\", \"absent\": \"\"}]}",
+        "{\"aux_views\": [{\"name\": \"planar:x\", \"absent\": 1}]}",
+        "{\"aux_views\": [{\"name\": \"planar:x\", \"absent\": \"r\", \"path\": \"/tmp/v.exr\"}]}",
+    };
+    for (int k = 0; k < 3; k++) {
+        fx_result r = fx_frame_apply_sidecar(f, bad[k]);
+        CHECK(r == FX_ERR_BAD_RECIPE && tu_contains(fx_context_error(ctx), "'planar:x'") &&
+              tu_contains(fx_context_error(ctx), "absent"));
+        if (r != FX_ERR_BAD_RECIPE)
+            printf("absent entry %d accepted\n", k);
+    }
+    fx_frame_free(o_abs), fx_frame_free(o_off), fx_frame_free(o_missing), fx_frame_free(f);
+    fx_stack_free(s);
+}
+
 int main(void)
 {
     fx_context *ctx = NULL;
@@ -209,6 +255,7 @@ int main(void)
     if (at)
         snprintf(name, 20, "%s", at + 1); /* "planar:" and 12 hex digits */
     fx_free(req);
+    test_absent_view(ctx, name);
     snprintf(name2, sizeof name2, "%s#2", name);
     snprintf(name3, sizeof name3, "%s#3", name);
 

@@ -1566,6 +1566,14 @@ static fx_result ssr_probe_load(const fx_effect_run *run, ssr_job *j, const ssr_
             snprintf(name, sizeof name, FX_AUX_PROBE "%s", run->mask_key ? run->mask_key : "");
         else
             snprintf(name, sizeof name, FX_AUX_PROBE "%s#%d", run->mask_key ? run->mask_key : "", k + 1);
+        /* not rendered on purpose (the add-on found the mirror not flat): the trace and the
+         * fallback serve, and nothing is wrong */
+        int absent = fx_aux_view_absent(run->frame, name);
+        if (absent < 0)
+            return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory reading the frame's aux views",
+                           run->where);
+        if (absent)
+            break;
         if (k > 0) {
             int has = fx_aux_view_has(run->frame, name);
             if (has < 0)
@@ -1606,6 +1614,14 @@ static fx_result ssr_planar_load(const fx_effect_run *run, ssr_job *j, fx_aux_ma
             snprintf(name, sizeof name, FX_AUX_PLANAR "%s", run->mask_key ? run->mask_key : "");
         else
             snprintf(name, sizeof name, FX_AUX_PLANAR "%s#%d", run->mask_key ? run->mask_key : "", k + 1);
+        /* not rendered on purpose (the add-on found the mirror not flat): the trace and the
+         * fallback serve, and nothing is wrong */
+        int absent = fx_aux_view_absent(run->frame, name);
+        if (absent < 0)
+            return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory reading the frame's aux views",
+                           run->where);
+        if (absent)
+            break;
         if (k > 0) {
             int has = fx_aux_view_has(run->frame, name);
             if (has < 0)

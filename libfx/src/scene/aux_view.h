@@ -21,7 +21,11 @@
  * (a perspective view with colour and Depth), with "plane": [nx, ny, nz, d], the world
  * plane n . x = d of the mirror (n towards the main camera). A mirror whose faces lie in
  * several planes (a facing pair in one entry) has one such view per plane:
- * "planar:<key>", then "planar:<key>#2", "planar:<key>#3", ... */
+ * "planar:<key>", then "planar:<key>#2", "planar:<key>#3", ...
+ *
+ * An entry {"name", "absent": reason} says the view was asked for and not rendered on
+ * purpose (the add-on's planar view of a curved mirror): effects that read it only where
+ * it helps pass over it without a warning. */
 #ifndef LIBFX_SCENE_AUX_VIEW_H
 #define LIBFX_SCENE_AUX_VIEW_H
 
@@ -62,8 +66,13 @@ void fx_aux_view_free(fx_aux_view *v);
 struct fx_exr_rows;
 fx_result fx_aux_view_open_rows(const fx_frame *f, const char *name, const char *where, fx_aux_view **out,
                                 struct fx_exr_rows **rows);
-/* 1 when frame f carries a view named exactly `name`, 0 when not, -1 out of memory. */
+/* 1 when frame f lists a view named exactly `name` (rendered or absent), 0 when not, -1
+ * out of memory. */
 int fx_aux_view_has(const fx_frame *f, const char *name);
+/* 1 when frame f lists `name` as {"name", "absent": reason}: the add-on was asked for it
+ * and did not render it on purpose (a planar view of a mirror that is not flat); loading
+ * it fails with that reason. 0 otherwise, -1 out of memory. */
+int fx_aux_view_absent(const fx_frame *f, const char *name);
 /* The frame's entry for view `name` (matched as fx_aux_view_load does) as unformatted JSON,
  * and its path; NULL with the error recorded in *res when there is none. Freed with
  * cJSON_free. */

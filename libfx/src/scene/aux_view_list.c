@@ -10,7 +10,8 @@
 #include <string.h>
 
 static const char *const view_keys[] = {"name", "path", "world_to_camera", "projection",
-                                        "clip_start", "clip_end", "orthographic", "kind", "signature", "panorama", "mask", "plane"};
+                                        "clip_start", "clip_end", "orthographic", "kind", "signature", "panorama", "mask", "plane",
+                                        "absent"};
 
 fx_result fx_aux_views_check(fx_context *ctx, const cJSON *list)
 {
@@ -21,11 +22,25 @@ fx_result fx_aux_views_check(fx_context *ctx, const cJSON *list)
     cJSON_ArrayForEach(v, list) {
         const cJSON *name = cJSON_GetObjectItemCaseSensitive(v, "name");
         const cJSON *path = cJSON_GetObjectItemCaseSensitive(v, "path");
+        const cJSON *absent = cJSON_GetObjectItemCaseSensitive(v, "absent");
+        /* "absent": a view the add-on was asked for and did not render, and why (a planar
+         * view of a mirror that is not flat): a name and that reason, nothing else */
+        if (cJSON_IsObject(v) && cJSON_IsString(name) && name->valuestring[0] &&
+            strlen(name->valuestring) < FX_NAME_MAX && absent) {
+            if (!cJSON_IsString(absent) || !absent->valuestring[0] || cJSON_GetArraySize(v) != 2)
+                return fx_fail(ctx, FX_ERR_BAD_RECIPE,
+                               "sidecar: aux_views[%d] ('%s'): an \"absent\" view has its name and the reason "
+                               "(a non-empty string) only",
+                               i, name->valuestring);
+            i++;
+            continue;
+        }
         if (!cJSON_IsObject(v) || !cJSON_IsString(name) || !name->valuestring[0] ||
             strlen(name->valuestring) >= FX_NAME_MAX || !cJSON_IsString(path) || !path->valuestring[0] ||
             strlen(path->valuestring) >= 1024)
             return fx_fail(ctx, FX_ERR_BAD_RECIPE,
-                           "sidecar: aux_views[%d] needs a \"name\" (< %d bytes) and a \"path\" (an EXR with a Depth pass)",
+                           "sidecar: aux_views[%d] needs a \"name\" (< %d bytes) and a \"path\" (an EXR with a Depth pass), "
+                           "or the \"absent\" reason",
                            i, FX_NAME_MAX);
         const cJSON *item;
         cJSON_ArrayForEach(item, v) {
@@ -35,7 +50,7 @@ fx_result fx_aux_views_check(fx_context *ctx, const cJSON *list)
             if (!known)
                 return fx_fail(ctx, FX_ERR_BAD_RECIPE,
                                "sidecar: aux_views[%d] ('%s'): unknown key \"%s\" (known: name, path, world_to_camera, "
-                               "projection, clip_start, clip_end, orthographic, kind, signature, panorama, mask, plane)",
+                               "projection, clip_start, clip_end, orthographic, kind, signature, panorama, mask, plane, absent)",
                                i, name->valuestring, item->string);
         }
         const cJSON *pano = cJSON_GetObjectItemCaseSensitive(v, "panorama");

@@ -85,7 +85,8 @@ char *fx_aux_view_entry(const fx_frame *f, const char *name, const char *where, 
     return out;
 }
 
-int fx_aux_view_has(const fx_frame *f, const char *name)
+/* 1 when the frame lists `name` as one with a path, 2 as "absent", 0 not at all, -1 out of memory. */
+static int listed(const fx_frame *f, const char *name)
 {
     const char *text = fx_frame_meta(f, FX_AUX_META_KEY);
     unsigned long failures = fx_mem_failure_count();
@@ -96,10 +97,23 @@ int fx_aux_view_has(const fx_frame *f, const char *name)
     const cJSON *v;
     cJSON_ArrayForEach(v, list) {
         const cJSON *n = cJSON_GetObjectItemCaseSensitive(v, "name");
-        found |= cJSON_IsString(n) && strcmp(n->valuestring, name) == 0;
+        if (!found && cJSON_IsString(n) && strcmp(n->valuestring, name) == 0)
+            found = cJSON_GetObjectItemCaseSensitive(v, "absent") ? 2 : 1;
     }
     cJSON_Delete(list);
     return found;
+}
+
+int fx_aux_view_has(const fx_frame *f, const char *name)
+{
+    int k = listed(f, name);
+    return k > 0 ? 1 : k;
+}
+
+int fx_aux_view_absent(const fx_frame *f, const char *name)
+{
+    int k = listed(f, name);
+    return k < 0 ? -1 : k == 2;
 }
 
 /* The view's EXR read whole: its Depth pass, and a probe's colour and sky made finite.
@@ -173,6 +187,14 @@ static fx_result load(const fx_frame *f, const char *name, const char *where, fx
                        "Blender add-on renders it when the stack needs it (fx_stack_required_aux_views) and "
                        "lists it in the scene sidecar's \"aux_views\"",
                        where, name, prefix_only ? "*" : "", names[0] ? names : "none");
+    }
+    const cJSON *absent = cJSON_GetObjectItemCaseSensitive(found, "absent");
+    if (cJSON_IsString(absent)) {
+        fx_result r = fx_fail(ctx, FX_ERR_NO_AUX_VIEW, "%s needs the auxiliary view '%s', which was not rendered: %s",
+                              where, cJSON_GetObjectItemCaseSensitive(found, "name")->valuestring,
+                              absent->valuestring);
+        cJSON_Delete(list);
+        return r;
     }
     fx_camera cam;
     char err[256];
