@@ -44,7 +44,7 @@ alpha threshold exactly as in the main render and cast leaf-shaped shadows.
   (``planar:<key>``, ``planar:<key>#2``, ...): the scene seen by the camera mirrored
   in that plane (ssr_mirror's ``planar_view``: the ``final`` and ``reference`` presets), at the
   render's size and samples times the need's samples_scale (ssr_mirror's planar_samples:
-  1 at final, 4 at reference; or ``libfx_planar_samples``), only over the
+  2 at final, 4 at reference; or ``libfx_planar_samples``), only over the
   plane's mirror (a render border: planar_border), colour + Depth,
   with the entry's mirrors as perfect mirrors (the other plane's mirror reflects the
   room again) and the plane's own mirror objects and the objects wholly behind the
@@ -691,8 +691,8 @@ def planar_border(objs, world_to_camera, proj, width, height):
 
 def planar_samples(scene, view):
     """A planar view's samples per pixel: the need's samples_scale (ssr_mirror's
-    planar_samples: 1 at final, the reflection as noisy as the scene it shows, as a true
-    mirror's; 4 at reference) times the render's, or the scene's libfx_planar_samples."""
+    planar_samples: 2 at final, 4 at reference) times the render's, or the scene's
+    libfx_planar_samples."""
     scale = float(view.get("samples_scale") or 1.0)
     return int(scene.get("libfx_planar_samples") or max(1, round(scale * max(1, scene.cycles.samples))))
 

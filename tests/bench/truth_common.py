@@ -290,14 +290,14 @@ def flat_mask(passes):
     return flat
 
 
-def run_presets(recipe, passes, side, outdir, tag, runs=3, frame=1, debug=False):
-    """`libfx run -q P -v` at each preset: {preset: (image, median ms of `runs`)}. The ms
-    is the CLI's own effects time (-v), 2 threads."""
+def run_presets(recipe, passes, side, outdir, tag, runs=3, frame=1, debug=False, presets=PRESETS):
+    """`libfx run -q P -v` at each preset (of `presets`): {preset: (image, median ms of
+    `runs`)}. The ms is the CLI's own effects time (-v), 2 threads."""
     res = {}
     rec_path = os.path.join(outdir, "%s_recipe.json" % tag)
     with open(rec_path, "w") as f:
         json.dump(recipe, f)
-    for q in PRESETS:
+    for q in presets:
         out = os.path.join(outdir, "%s_%s.exr" % (tag, q))
         ts = []
         for _ in range(runs):

@@ -32,9 +32,10 @@ The two truths render with --truth-spp samples (default 64: their seed-to-seed n
 the floor no method can go under; 16 spp put it at 0.033-0.045, a fifth of the input's
 error). The input's batch render also renders the reflection probe the `final` preset
 asks for (issue 14); its time, from the add-on's log, is reported apart. Each preset
-runs as shipped (draft/preview: screen space only; final: + probe; reference: + probe +
-planar view) and with the other fallback ("<preset>, no probe": fallback texture, the
-planar view stays at reference; "<preset> + probe").
+runs as shipped (draft/preview: screen space only; final: + probe + planar view at the
+input's samples; reference: + probe + planar view at 4x, from an input rendered at
+reference) and with the other fallback ("<preset>, no probe": fallback texture, the
+planar view stays at final and reference; "<preset> + probe").
 """
 import json
 import os
@@ -155,13 +156,19 @@ def main():
     for v in a.variants.split(","):
         blend = d / ("truth_mirrors_%s.blend" % v)
         p = os.path.join(a.out, "m_%s_" % v)
-        # the input through the add-on with the stack at `reference`, so that it renders
-        # every view a preset may ask for (the probe for final and reference, the planar
-        # view for reference); the presets then run on these passes and this sidecar
-        ref_recipe = os.path.join(a.out, "m_recipe_reference.json")
-        with open(ref_recipe, "w") as f:
-            json.dump(dict(recipe, quality="reference"), f)
-        passes, side, log = batch_logged(blend, p + "inref_", a.res, a.spp, ref_recipe, probe, expr=lamb)
+        # the input through the add-on with the stack at `final` and again at `reference`,
+        # so that each renders the views its preset asks for (final: the probe and the
+        # planar view at the render's samples; reference: the probe and the planar view at
+        # 4x); draft, preview and final run on the first passes and sidecar, reference on
+        # the second (the same seed: the same Combined)
+        ins = {}
+        for q in ("final", "reference"):
+            rec = os.path.join(a.out, "m_recipe_%s.json" % q)
+            with open(rec, "w") as f:
+                json.dump(dict(recipe, quality=q), f)
+            ins[q] = batch_logged(blend, p + ("in%s_" % q[:3]), a.res, a.spp, rec, probe, expr=lamb)
+        passes, side, log = ins["final"]
+        log_ref = ins["reference"][2]
         truth_expr = lamb + C.truth_expr("mirrors")
         tpass, _, _ = C.batch(blend, p + "truth_", a.res, a.truth_spp, expr=truth_expr, recipe=noop)
         t2pass, _, _ = C.batch(blend, p + "truth2_", a.res, a.truth_spp, expr=truth_expr, recipe=noop, seed=17)
@@ -171,17 +178,24 @@ def main():
         # input's pixels (from other pixels) have independent noise, as this render's has
         # (the same seed would share the truth's samples and score 2.5-4.6 points higher)
         t16pass, _, _ = C.batch(blend, p + "truth%d_" % a.spp, a.res, a.spp, expr=truth_expr, recipe=noop, seed=5)
-        probes = PROBE_LOG.findall(log)
+        probes = PROBE_LOG.findall(log) + [v for v in PROBE_LOG.findall(log_ref) if v[0].startswith("planar:")]
         region = C.T.crypto_support(C.T.Exr(passes), "CryptoMaterial", ["Mirror"])
         truth, truth2, plain = C.rgb(tpass), C.rgb(t2pass), C.rgb(passes)
         same_spp = C.error_row("Cycles mirror at %d spp" % a.spp, C.rgb(t16pass), None, truth, region)
         same_spp_local = local_worse(C.rgb(t16pass), plain, truth, region)
-        outs = C.run_presets(recipe, passes, side, a.out, "m_%s" % v, runs=a.runs)
+        def presets(rec, tag):
+            """Each preset on the input rendered for it: reference on its own views."""
+            out = C.run_presets(rec, passes, side, a.out, tag, runs=a.runs, presets=C.PRESETS[:3])
+            out.update(C.run_presets(rec, ins["reference"][0], ins["reference"][1], a.out, tag, runs=a.runs,
+                                     presets=("reference",)))
+            return out
+        outs = presets(recipe, "m_%s" % v)
         rows = C.rows_for(truth, truth2, plain, outs, region)
         local = {q: local_worse(outs[q][0], plain, truth, region) for q in C.PRESETS}
-        # the other fallback at each preset ("no probe": fallback texture; reference keeps its planar view)
-        tex = C.run_presets(with_fallback(recipe, "texture"), passes, side, a.out, "m_%s_ss" % v, runs=a.runs)
-        prb = C.run_presets(with_fallback(recipe, "probe"), passes, side, a.out, "m_%s_probe" % v, runs=a.runs)
+        # the other fallback at each preset ("no probe": fallback texture; final and reference keep
+        # their planar views)
+        tex = presets(with_fallback(recipe, "texture"), "m_%s_ss" % v)
+        prb = presets(with_fallback(recipe, "probe"), "m_%s_probe" % v)
         for q in C.PRESETS:
             if q in ("final", "reference"):
                 rows.append(C.error_row("%s, no probe" % q, tex[q][0], tex[q][1], truth, region))
@@ -219,8 +233,8 @@ def main():
             md.append("Eevee + probes: its light cache (a reflection cubemap over the room; no reflection plane: "
                       "truth_common.EEVEE_PROBES) baked in %.1f s, apart from the render's ms\n" % bake)
         if not probes:
-            md.append("views: reused from an earlier run or not rendered (see %sinref_batch.log)\n" % p)
-        for line in log.splitlines():
+            md.append("views: reused from an earlier run or not rendered (see %sinfin_batch.log and inref_)\n" % p)
+        for line in (log + log_ref).splitlines():
             if "no planar view" in line or "failed to render" in line:
                 md.append(line.strip() + "\n")
         print("\n".join(md[-3:]), flush=True)

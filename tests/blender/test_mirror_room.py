@@ -1,7 +1,7 @@
 """The mirror room renders headless through the add-on with its ssr_mirror stack (every
 mirror kind) and each mirror region changes as its entry specifies. At final (the recipe's
-quality) each flat, sharp mirror gets its planar view at the render's own samples
-(ssr_mirror's planar_samples 1), the curved ones are listed as absent, and no missing view
+quality) each flat, sharp mirror gets its planar view at twice the render's samples
+(ssr_mirror's planar_samples 2), the curved ones are listed as absent, and no missing view
 is warned of."""
 import re
 
@@ -23,11 +23,11 @@ def test_mirror_room_ssr(blender, library, tmp_path):
     out = proc.stdout + proc.stderr
     assert proc.returncode == 0, out[-5000:]
     # planar views: the flat mirrors that are sharp, plain or with a colour operator but not
-    # cel (blurred, cel and bent read none), each plane of the pair its own, 1x the samples
+    # cel (blurred, cel and bent read none), each plane of the pair its own, 2x the samples
     planar = re.findall(r"planar '[^']+' at the plane of (.+?) rendered (\d+)x(\d+) \((\d+) samples\)", out)
     assert sorted(p[0] for p in planar) == ["Mirror_Clear", "Mirror_FacingA", "Mirror_FacingB", "Mirror_Fresnel",
                                             "Mirror_Grayscale", "Mirror_Low", "Mirror_Sepia"], planar
-    assert all(p[1:] == ("320", "180", "4") for p in planar), planar
+    assert all(p[1:] == ("320", "180", "8") for p in planar), planar
     aux = T.read_json(tmp_path / "mr_libfx.0001.camera.json")["aux_views"]
     absent = [v for v in aux if "absent" in v]
     assert len(absent) == 2 and all("not flat" in v["absent"] and v["name"].startswith("planar:") for v in absent), \

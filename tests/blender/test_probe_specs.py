@@ -65,6 +65,8 @@ with open(os.environ["STALE_RECIPE"], encoding="utf-8") as f:
 scene.render.filepath = os.environ["STALE_OUT"] + "/f_"
 scene["libfx_probe_size"] = 32        # a thumbnail probe: the test is about its files
 scene["libfx_probe_samples"] = 1
+scene["libfx_planar_samples"] = 1     # final's planar view renders too: small and cheap
+scene.render.resolution_percentage = 10
 need = [v for v in aux_views.needed(scene) if v["kind"] == "probe"][0]
 prefix = scene_setup.output_prefix(scene)
 stale = {}
@@ -76,8 +78,8 @@ for k in (1, 2):                    # what a facing pair left there: "#2" and "#
             f.write(json.dumps({"name": name, "path": base + ".exr", "kind": "probe"}) if ext == ".json" else "x")
     stale[name] = base
 entries = aux_views.prepare(scene, [1])
-print("PREPARED " + json.dumps(sorted(e["name"] for e in entries)))
-print("DISK " + json.dumps(sorted(e["name"] for e in aux_views.from_disk(scene))))
+print("PREPARED " + json.dumps(sorted(e["name"] for e in entries if e["name"].startswith("probe:"))))
+print("DISK " + json.dumps(sorted(e["name"] for e in aux_views.from_disk(scene) if e["name"].startswith("probe:"))))
 print("LEFT " + json.dumps(sorted(n for n, b in stale.items() if os.path.exists(b + ".json") or os.path.exists(b + ".exr"))))
 print("NEED " + json.dumps(need["name"]))
 print("LIBFX-TEST-OK")

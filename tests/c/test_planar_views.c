@@ -133,7 +133,7 @@ static void run_check(fx_context *ctx, fx_stack *s, const fx_frame *f, float a, 
 }
 
 /* The planar view a recipe asks the add-on for (fx_stack_required_aux_views): none at
- * draft and preview, at the render's samples at final (samples_scale 1), 4x at reference;
+ * draft and preview, at twice the render's samples at final (samples_scale 2), 4x at reference;
  * an explicit planar_samples wins; a glossy mirror reads none. A recipe of params_version 2
  * that turned planar_view on itself rendered it at 4x: it keeps 4 (ssr_migrate). */
 static void check_need(fx_context *ctx, const char *recipe, const char *want)
@@ -160,7 +160,7 @@ static void check_need(fx_context *ctx, const char *recipe, const char *want)
 static void test_planar_needs(fx_context *ctx)
 {
     static const char *const q[] = { "draft", "preview", "final", "reference" };
-    static const char *const want[] = { "none", "none", "1", "4" };
+    static const char *const want[] = { "none", "none", "2", "4" };
     char r[400];
     for (int k = 0; k < 4; k++) {
         snprintf(r, sizeof r,
@@ -171,8 +171,8 @@ static void test_planar_needs(fx_context *ctx)
     }
     const char *tail = "\"mask\": {\"material\": \"M\"}}]}";
     snprintf(r, sizeof r, "{\"version\": 1, \"quality\": \"final\", \"effects\": [{\"effect\": \"ssr_mirror\", "
-                          "\"params_version\": 3, \"params\": {\"planar_samples\": 2}, %s", tail);
-    check_need(ctx, r, "2");
+                          "\"params_version\": 3, \"params\": {\"planar_samples\": 3}, %s", tail);
+    check_need(ctx, r, "3");
     snprintf(r, sizeof r, "{\"version\": 1, \"quality\": \"final\", \"effects\": [{\"effect\": \"ssr_mirror\", "
                           "\"params_version\": 3, \"params\": {\"glossiness\": 2}, %s", tail);
     check_need(ctx, r, "none");
@@ -181,7 +181,7 @@ static void test_planar_needs(fx_context *ctx)
     check_need(ctx, r, "4");
     snprintf(r, sizeof r, "{\"version\": 1, \"quality\": \"final\", \"effects\": [{\"effect\": \"ssr_mirror\", "
                           "\"params_version\": 2, %s", tail);
-    check_need(ctx, r, "1");
+    check_need(ctx, r, "2");
 }
 
 /* A planar view listed as absent (the add-on found the mirror not flat): the run takes
