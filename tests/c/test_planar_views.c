@@ -66,17 +66,26 @@ static fx_frame *pair_frame(fx_context *ctx)
     return f;
 }
 
-/* A flat-colour view EXR (colour + Depth 5 m) at `path`. */
-static void write_view(fx_context *ctx, const char *path, float r, float g, float b)
+/* A flat-colour view EXR (colour + Depth 50 m: the room lies beyond both planes) at
+ * `path`; columns [band0, band1) instead hold a blue surface 2 m from the camera: between
+ * the mirrored camera and plane A (4 m), what a frame's back behind the mirror is. */
+static void write_view_band(fx_context *ctx, const char *path, float r, float g, float b, int band0, int band1)
 {
     size_t n = (size_t)W * H;
     float *rgba = malloc(n * 4 * sizeof(float)), *dep = malloc(n * sizeof(float));
     for (size_t i = 0; i < n; i++) {
-        rgba[i * 4] = r, rgba[i * 4 + 1] = g, rgba[i * 4 + 2] = b, rgba[i * 4 + 3] = 1;
-        dep[i] = 5.0f;
+        int in_band = (int)(i % W) >= band0 && (int)(i % W) < band1;
+        rgba[i * 4] = in_band ? 0 : r, rgba[i * 4 + 1] = in_band ? 0 : g, rgba[i * 4 + 2] = in_band ? 1 : b;
+        rgba[i * 4 + 3] = 1;
+        dep[i] = in_band ? 2.0f : 50.0f;
     }
     et_write_view(ctx, path, W, H, rgba, dep);
     free(rgba), free(dep);
+}
+
+static void write_view(fx_context *ctx, const char *path, float r, float g, float b)
+{
+    write_view_band(ctx, path, r, g, b, 0, 0);
 }
 
 /* One planar view entry: the frame's own camera, the given plane. */
@@ -230,6 +239,39 @@ static void test_absent_view(fx_context *ctx, const char *name)
     fx_stack_free(s);
 }
 
+/* A view that shows, over columns 10-13, a surface between the mirrored camera and the
+ * plane: the mirror pixels whose lookup (or its neighbours) falls there keep the trace
+ * (debug "planar" 0) and show none of its blue; every other pixel of plane A takes the view. */
+static void test_behind_plane(fx_context *ctx, const char *name, const double plane_a[4])
+{
+    const char *dir = tu_tmpdir("planar_views_band");
+    char pa[600];
+    snprintf(pa, sizeof pa, "%s/plane_a_band.exr", dir);
+    write_view_band(ctx, pa, 1.0f, 0.0f, 0.0f, 10, 14);
+    fx_frame *f = pair_frame(ctx), *o = NULL;
+    fx_stack *s = et_stack(ctx, "ssr_mirror");
+    CHECK_OK(ctx, fx_stack_set_mask_json(s, 0, "{\"material_index\": 1}"));
+    CHECK_OK(ctx, fx_stack_set_quality(s, FX_QUALITY_REFERENCE));
+    fx_stack_set_debug_outputs(s, 1);
+    CHECK_OK(ctx, add_view(ctx, f, name, pa, plane_a));
+    CHECK_OK(ctx, fx_stack_run(s, f, &o));
+    float *pl = NULL, *rgb = NULL;
+    int c = 0, wrong = 0, blue = 0;
+    CHECK(o && fx_frame_pass(o, "fx0_ssr_mirror_planar", &pl, &c) == FX_OK);
+    CHECK(o && fx_frame_pass(o, "Combined", &rgb, &c) == FX_OK);
+    for (int y = 0; pl && rgb && y < H; y++)
+        for (int x = 0; x < W / 2; x++) {
+            size_t i = (size_t)y * W + x;
+            int near_band = x >= 8 && x <= 14; /* the taps x-1 .. x+2 meet columns 10-13 */
+            wrong += pl[i] != (near_band ? 0.0f : 1.0f);
+            blue += rgb[i * 4 + 2] > 0.5f;
+        }
+    printf("a surface behind plane A over columns 10-13: %d pixels wrongly looked up, %d blue\n", wrong, blue);
+    CHECK(wrong == 0 && blue == 0);
+    fx_frame_free(o), fx_frame_free(f);
+    fx_stack_free(s);
+}
+
 int main(void)
 {
     fx_context *ctx = NULL;
@@ -256,6 +298,7 @@ int main(void)
         snprintf(name, 20, "%s", at + 1); /* "planar:" and 12 hex digits */
     fx_free(req);
     test_absent_view(ctx, name);
+    test_behind_plane(ctx, name, plane_a);
     snprintf(name2, sizeof name2, "%s#2", name);
     snprintf(name3, sizeof name3, "%s#3", name);
 

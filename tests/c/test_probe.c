@@ -765,7 +765,7 @@ static void write_planar(fx_context *ctx, const char *path, float w2c_out[16], f
             double t = box_exit(p0, d, &wall);
             double q[3] = { p0[0] + t * d[0], p0[1] + t * d[1], p0[2] + t * d[2] };
             room_colour(q, wall, rgba + i * 4);
-            dep[i] = (float)((t0 + t) / sqrt(v[0] * v[0] + v[1] * v[1] + 1));
+            dep[i] = (float)(t0 + t); /* planar depth: d = R v is v rotated, v.z = -1 */
         }
     et_write_view(ctx, path, FW, FH, rgba, dep);
     free(rgba), free(dep);

@@ -870,6 +870,27 @@ static void ray_colour(const ssr_job *j, fx_vec3 ro, fx_vec3 rd, float px, float
     }
 }
 
+/* Whether planar view pv shows, around (px, py), only what lies beyond the mirror point
+ * at depth dd (the mirror's side of the plane): the mirrored camera stands behind the
+ * plane, and a surface between it and the plane (a frame's back, behind the mirror's face,
+ * that no object test can hide: one frame object spans the room) is nothing the mirror
+ * reflects. The bilinear taps and their neighbours (Depth is not anti-aliased, the colour
+ * is: a pixel beside such a surface holds part of it) must lie beyond the plane, within
+ * 1 mm + 0.1 %; otherwise the pixel keeps the trace and the fallback. */
+static int planar_in_front(const fx_aux_view *pv, float px, float py, float dd)
+{
+    const float near = dd * (1.0f - 1e-3f) - 1e-3f;
+    int x0 = (int)floorf(px - 0.5f), y0 = (int)floorf(py - 0.5f);
+    for (int y = y0 - 1; y <= y0 + 2; y++)
+        for (int x = x0 - 1; x <= x0 + 2; x++) {
+            int cx = x < 0 ? 0 : x >= pv->width ? pv->width - 1 : x;
+            int cy = y < 0 ? 0 : y >= pv->height ? pv->height - 1 : y;
+            if (!(pv->depth[(size_t)cy * pv->width + cx] >= near))
+                return 0;
+        }
+    return 1;
+}
+
 /* The colour of mirror pixel (x, y) at view position pos in the planar view of its plane:
  * 1 + that view's index, or 0 when the pixel lies on none of the views' planes (or
  * projects outside its view). */
@@ -900,7 +921,7 @@ static int planar_colour(const ssr_job *j, int x, int y, fx_vec3 pos, float rgb[
     const fx_aux_view *pv = j->planar[best];
     float px, py, dd;
     if (!fx_aux_view_project(pv, wp, &px, &py, &dd) || !(px >= 0.0f && px <= (float)pv->width) ||
-        !(py >= 0.0f && py <= (float)pv->height))
+        !(py >= 0.0f && py <= (float)pv->height) || !planar_in_front(pv, px, py, dd))
         return 0;
     sample_bilinear(pv->color, pv->width, pv->height, px, py, rgb);
     return best + 1;
