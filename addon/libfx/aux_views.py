@@ -374,8 +374,21 @@ def _mirror_normals(ob, mats):
                     and slot_mat[poly.material_index] not in mats)]
 
 
-def probe_spec(scene, view):
-    """Where the probe of `view` goes, its size and its camera matrices."""
+def stack_mirrors(scene, views):
+    """The objects of every mirror entry of the stack (the masks of its probe and planar
+    needs): the views show them all as perfect mirrors, as the truth renders show the
+    sharp kinds (make_mirror_reference.py); with their own materials, the pair's planar
+    views showed the opposite wall's mirrors as their grey backing."""
+    names = set()
+    for v in views:
+        if v["kind"] in ("probe", "planar"):
+            names.update(o.name for o in mask_objects(scene, v.get("mask") or {}))
+    return sorted(names)
+
+
+def probe_spec(scene, view, mirrors=()):
+    """Where the probe of `view` goes, its size and its camera matrices; it shows its
+    entry's objects and `mirrors` (stack_mirrors) as perfect mirrors."""
     mask = view.get("mask") or {}
     objs = mask_objects(scene, mask)
     cam = scene.camera
@@ -415,12 +428,12 @@ def probe_spec(scene, view):
         "name": view["name"], "kind": "probe", "width": width, "height": width // 2, "samples": samples,
         "matrix_world": [list(row) for row in mw], "world_to_camera": [list(row) for row in mw.inverted()],
         "clip_start": 0.0, "clip_end": clip_end, "hidden": [o.name for o in objs], "where": where,
-        "mirrors": "perfect",   # how the probe shows the entry's mirrors (part of the signature)
+        "mirrors": sorted({o.name for o in objs} | set(mirrors)),   # shown as perfect mirrors
         "sky": PROBE_SKY_LAYER,  # the world alone as a second layer (part of the signature)
     }
 
 
-def probe_specs(scene, view):
+def probe_specs(scene, view, mirrors=()):
     """The probes of a need: one (probe_spec), or, for a mirror whose planes face different
     ways (a facing pair in one entry: the single probe would sit between them, in the
     room's middle, far from what either mirror's rays start from), one per plane, each
@@ -428,7 +441,7 @@ def probe_specs(scene, view):
     "probe:<key>#2", ...; ssr_mirror takes for each mirror point the nearest probe in front
     of it). A curved mirror, a Light Probe in the scene, or planes that face one way keep
     the one probe."""
-    base = probe_spec(scene, view)
+    base = probe_spec(scene, view, mirrors)
     mask = view.get("mask") or {}
     objs = mask_objects(scene, mask)
     cam = scene.camera
@@ -530,10 +543,14 @@ def _render_probe(scene, spec, objs, path, sky=True):
             cam_data.clip_start = spec["clip_start"]
         cam_data.clip_end = spec["clip_end"]
         cam.matrix_world = Matrix(spec["matrix_world"])
-        # the views see the entry's mirrors as perfect mirrors: a mirror of a facing pair
-        # reflects the other one (and what that one reflects); a flat or convex mirror never
-        # looks up its own direction; the room is lit with the mirror in it, as in Cycles
-        for name in spec["hidden"] if spec["kind"] == "probe" else spec.get("mirrors", []):
+        # the views see the stack's mirrors as perfect mirrors: a mirror of a facing pair
+        # reflects the other one (and what that one reflects), the opposite wall's mirrors
+        # reflect the room; a flat or convex mirror never looks up its own direction; the
+        # room is lit with the mirrors in it, as in Cycles
+        listed = spec.get("mirrors")
+        shown = (set(listed) if isinstance(listed, list) else set()) | \
+            (set(spec["hidden"]) if spec["kind"] == "probe" else set())
+        for name in sorted(shown):
             ob = bpy.data.objects.get(name)
             if ob is None:
                 continue
@@ -697,12 +714,12 @@ def planar_samples(scene, view):
     return int(scene.get("libfx_planar_samples") or max(1, round(scale * max(1, scene.cycles.samples))))
 
 
-def planar_specs(scene, view):
+def planar_specs(scene, view, mirrors=()):
     """One mirrored camera per plane of the mirror (a flat mirror: one; a facing pair in
     one entry: two): its matrices, the plane, what it hides. Each view shows the entry's
-    mirrors as perfect mirrors (the other plane's mirror reflects the room again, as
-    Cycles' mirror does) and hides from its camera the mirror objects on its own plane and
-    what stands wholly behind that plane."""
+    mirrors and `mirrors` (stack_mirrors) as perfect mirrors (the other plane's mirror
+    reflects the room again, as Cycles' mirror does) and hides from its camera the mirror
+    objects on its own plane and what stands wholly behind that plane."""
     mask = view.get("mask") or {}
     objs = mask_objects(scene, mask)
     cam = scene.camera
@@ -742,7 +759,7 @@ def planar_specs(scene, view):
             "samples": samples, "matrix_world": [list(row) for row in mw],
             "world_to_camera": [list(row) for row in mw.inverted()], "projection": proj, "border": border,
             "clip_start": float(cam.data.clip_start), "clip_end": float(cam.data.clip_end),
-            "hidden": on_plane, "mirrors": [o.name for o in objs], "behind": sorted(behind),
+            "hidden": on_plane, "mirrors": sorted({o.name for o in objs} | set(mirrors)), "behind": sorted(behind),
             "plane": [n.x, n.y, n.z, d],
             "where": "the plane of %s" % ", ".join(on_plane[:4]),
         })
@@ -780,15 +797,15 @@ def _prepare_probe(scene, spec, path, meta_path):
             "kind": "probe", "panorama": "equirect", "signature": sig}
 
 
-def _view_specs(scene, view):
+def _view_specs(scene, view, mirrors=()):
     """The renders one needed probe or planar view takes: ([spec], None) (planar: one per
     plane), or ([], reason) for a mirror that is not flat (logged): the sidecar then lists
     the view as absent with that reason, so ssr_mirror uses the trace and the probe there
     without warning of a missing view."""
     if view["kind"] != "planar":
-        return probe_specs(scene, view), None
+        return probe_specs(scene, view, mirrors), None
     try:
-        return planar_specs(scene, view), None
+        return planar_specs(scene, view, mirrors), None
     except NotPlanar as e:
         reason = "the mirror is not flat (%s)" % e
         log("no planar view '%s': %s; ssr_mirror uses the trace and the probe there" % (view["name"], reason))
@@ -992,12 +1009,13 @@ def prepare(scene, frames):
     if not views:
         return []
     objs = casters(scene)
+    mirrors = stack_mirrors(scene, views)
     entries = []
     for view in views:
         if view["kind"] in ("probe", "planar"):
             absent = None
             try:
-                specs, absent = _view_specs(scene, view)
+                specs, absent = _view_specs(scene, view, mirrors)
             except Exception as e:  # a probe is an improvement, never a reason to fail the frame
                 log("warning: the %s view '%s' could not be placed (%s): ssr_mirror falls back to %s"
                     % (view["kind"], view["name"], e,

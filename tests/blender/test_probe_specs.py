@@ -100,3 +100,39 @@ def test_a_batch_run_removes_the_probes_of_planes_gone(blender, library, tmp_pat
     assert got["PREPARED"] == [got["NEED"]], text[-3000:]
     assert got["DISK"] == [got["NEED"]], text[-3000:]   # the fresh probe, and only it
     assert got["LEFT"] == [], text[-3000:]
+
+
+ROOM = T.PRELUDE + r"""
+import json, os
+from libfx import aux_views, recipe
+scene = bpy.context.scene
+with open(os.environ["ROOM_RECIPE"], encoding="utf-8") as f:
+    recipe.from_recipe(scene, f.read())   # final: a probe per entry, a planar view per flat one
+views = aux_views.needed(scene)
+mirrors = aux_views.stack_mirrors(scene, views)
+pair = next(v for v in views if v["kind"] == "planar" and "Mirror_FacingA" in str(v["mask"]))
+clear = next(v for v in views if v["kind"] == "probe" and "Mirror_Clear" in str(v["mask"]))
+specs, _ = aux_views._view_specs(scene, pair, mirrors)
+probes, _ = aux_views._view_specs(scene, clear, mirrors)
+alone, _ = aux_views._view_specs(scene, clear)
+print("ROOM " + json.dumps({"stack": mirrors, "planar": [s["mirrors"] for s in specs],
+                            "probe": [s["mirrors"] for s in probes], "alone": [s["mirrors"] for s in alone]}))
+print("LIBFX-TEST-OK")
+"""
+
+
+def test_views_show_every_mirror_of_the_stack(blender, library):
+    """The mirror room at final: the pair's planar views and the clear mirror's probe show
+    every mirror entry's objects as perfect mirrors (aux_views.stack_mirrors; how they
+    render is test_probe_view's), not only their own entry's."""
+    blend = T.SCENES_DIR / "mirror_room" / "mirror_room.blend"
+    proc = T.run_blender([], blend=str(blend), python_expr=ROOM,
+                         env=dict(T.addon_env(library), ROOM_RECIPE=str(blend.parent / "recipe.json")), timeout=300)
+    text = proc.stdout + proc.stderr
+    assert proc.returncode == 0 and OK in proc.stdout, text[-4000:]
+    got = json.loads(next(x for x in proc.stdout.splitlines() if x.startswith("ROOM "))[len("ROOM "):])
+    want = ["Mirror_BentIn", "Mirror_BentOut", "Mirror_Blurred", "Mirror_Cel", "Mirror_Clear", "Mirror_FacingA",
+            "Mirror_FacingB", "Mirror_Fresnel", "Mirror_Grayscale", "Mirror_Low", "Mirror_Sepia"]
+    assert got["stack"] == want, got["stack"]
+    assert got["planar"] == [want, want] and got["probe"] == [want], got
+    assert got["alone"] == [["Mirror_Clear"]], got["alone"]

@@ -8,7 +8,8 @@ tests/c/test_probe.c checks the library against the same statement):
   (checked on a floor 1 m below: depth = 1 / cos(angle from straight down)), not a
   planar depth;
 - the mirror objects named in the probe's spec render as perfect mirrors in the probe
-  (the yellow cube at -X shows the red cube at +X) and get their materials back;
+  (the yellow cube at -X, its entry's mirror, shows the red cube at +X; the white one at
+  -Y, another entry's, the green one at +Y) and get their materials back;
 - colour comes with the Depth (the File Output node's Image), rows as the library reads
   them (top row = up);
 - its Sky layer is the world alone: the world's colour in every direction, no object
@@ -69,13 +70,15 @@ floor.data.materials.append(emissive("grey", (0.2, 0.2, 0.2)))
 mw = Matrix.Translation((0, 0, 0)) @ Euler((math.pi / 2, 0, 0)).to_matrix().to_4x4()
 spec = {"name": "probe:test", "kind": "probe", "width": 256, "height": 128, "samples": 4,
         "matrix_world": [list(r) for r in mw], "world_to_camera": [list(r) for r in mw.inverted()],
-        "clip_start": 0.0, "clip_end": 1000.0, "hidden": ["Hidden"], "where": "test"}
+        "clip_start": 0.0, "clip_end": 1000.0, "hidden": ["Hidden"], "where": "test",
+        "mirrors": ["MinusY"]}   # another entry's mirror (aux_views.stack_mirrors)
 objs = aux_views._probe_scene_objects(scene)
 path = os.environ["PROBE_OUT"]
 aux_views._render_probe(scene, spec, objs, path)
 assert os.path.exists(path)
 assert bpy.data.objects["Hidden"].visible_camera, "the mirror's visibility was not restored"
 assert bpy.data.objects["Hidden"].material_slots[0].material.name == "yellow", "the mirror's material was not restored"
+assert bpy.data.objects["MinusY"].material_slots[0].material.name == "white", "the other mirror's material was not restored"
 print("LIBFX-TEST-OK")
 """
 
@@ -118,8 +121,9 @@ def test_probe_conventions(blender, library, tmp_path):
     assert xy == (192, 64) and c[0] > 0.5 and c[1] < 0.2 and c[2] < 0.2, (xy, c)
     c, d, xy = colour_at((0, 0, 1))     # +Z: the top rows, blue
     assert xy[1] < 4 and c[2] > 0.5 and c[0] < 0.2, (xy, c)
-    c, d, xy = colour_at((0, -1, 0))    # -Y: the seam, white
-    assert (xy[0] < 2 or xy[0] > w - 3) and c.min() > 0.5, (xy, c)
+    c, d, xy = colour_at((0, -1, 0))    # -Y: the seam; the white cube, another entry's mirror
+    assert (xy[0] < 2 or xy[0] > w - 3) and c[1] > 0.5 and c[0] < 0.2 and c[2] < 0.2, \
+        ("the other entry's mirror does not reflect the green cube", xy, c)
     c, d, xy = colour_at((-1, 0, 0))    # -X: the "mirror" cube, a perfect mirror: the red cube
     assert c[0] > 0.5 and c[1] < 0.2 and c[2] < 0.2, ("the mirror does not reflect the red cube", c)
     # radial depth on the floor 1 m below: 1 / cos(angle from straight down)
