@@ -46,12 +46,13 @@ alpha threshold exactly as in the main render and cast leaf-shaped shadows.
   render's size and samples times the need's samples_scale (ssr_mirror's planar_samples:
   2 at final, 4 at reference; or ``libfx_planar_samples``), only over the
   plane's mirror (a render border: planar_border), colour + Depth,
-  with the entry's mirrors as perfect mirrors (the other plane's mirror reflects the
-  room again) and the plane's own mirror objects and the objects wholly behind the
-  plane hidden from the camera (they still cast shadows and bounce light); each entry
-  carries its plane and ssr_mirror looks each pixel up in its own plane's view. A
-  mirror that is not flat (a curved one) gets no view: a log line, and ssr_mirror
-  keeps the trace and the probe there.
+  with every mirror entry's objects as perfect mirrors (the other plane's mirror reflects
+  the room again; stack_mirrors) and the plane's own mirror objects and the objects
+  wholly behind the plane hidden from the camera (they still cast shadows and bounce
+  light); each entry carries its plane and ssr_mirror looks each pixel up in its own
+  plane's view. A mirror that is not flat (a curved one) gets no view: a log line, and
+  the sidecar lists the view as absent with the reason (ssr_mirror keeps the trace and
+  the probe there, without a warning).
 
 A view is rendered once and reused while its signature (camera, resolution, the
 light, every linked object's transform, mesh size and materials) does not

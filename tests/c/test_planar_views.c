@@ -88,8 +88,18 @@ static void write_view(fx_context *ctx, const char *path, float r, float g, floa
     write_view_band(ctx, path, r, g, b, 0, 0);
 }
 
-/* One planar view entry: the frame's own camera, the given plane. */
+/* One planar view entry: the frame's own camera, the given plane; window: "" or the
+ * entry's ", \"window\": [...]" (the file holds a region of the view). */
+static int add_view_window(fx_context *ctx, fx_frame *f, const char *name, const char *path, const double pl[4],
+                           const char *window);
+
 static int add_view(fx_context *ctx, fx_frame *f, const char *name, const char *path, const double pl[4])
+{
+    return add_view_window(ctx, f, name, path, pl, "");
+}
+
+static int add_view_window(fx_context *ctx, fx_frame *f, const char *name, const char *path, const double pl[4],
+                           const char *window)
 {
     fx_camera c;
     camera(&c);
@@ -102,8 +112,8 @@ static int add_view(fx_context *ctx, fx_frame *f, const char *name, const char *
     for (int i = 0; i < 16; i++)
         n += snprintf(json + n, sizeof json - n, "%s%.9g", i ? ", " : "", c.projection[i]);
     snprintf(json + n, sizeof json - n,
-             "], \"clip_start\": 0.1, \"clip_end\": 100, \"kind\": \"planar\", \"plane\": [%.9g, %.9g, %.9g, %.9g]}]}",
-             pl[0], pl[1], pl[2], pl[3]);
+             "], \"clip_start\": 0.1, \"clip_end\": 100, \"kind\": \"planar\", \"plane\": [%.9g, %.9g, %.9g, %.9g]%s}]}",
+             pl[0], pl[1], pl[2], pl[3], window);
     return fx_frame_apply_sidecar(f, json);
 }
 
@@ -272,6 +282,56 @@ static void test_behind_plane(fx_context *ctx, const char *name, const double pl
     fx_stack_free(s);
 }
 
+/* A view rendered cropped to its region (the add-on's planar views: "window": [x0, y0, W,
+ * H]): a 24x28 file for columns 4-27 and rows 2-29 of the 64x32 view. Plane A's pixels
+ * that look up inside it take it, the others keep the trace; a window the file does not
+ * fit in is refused with a warning naming it. */
+static void test_cropped_view(fx_context *ctx, const char *name, const double plane_a[4])
+{
+    const char *dir = tu_tmpdir("planar_views_crop");
+    char pa[600];
+    snprintf(pa, sizeof pa, "%s/plane_a_crop.exr", dir);
+    enum { CW = 24, CH = 28 };
+    float *rgba = malloc((size_t)CW * CH * 4 * sizeof(float)), *dep = malloc((size_t)CW * CH * sizeof(float));
+    for (size_t i = 0; i < (size_t)CW * CH; i++) {
+        rgba[i * 4] = 1, rgba[i * 4 + 1] = 0, rgba[i * 4 + 2] = 0, rgba[i * 4 + 3] = 1;
+        dep[i] = 50.0f;
+    }
+    et_write_view(ctx, pa, CW, CH, rgba, dep);
+    free(rgba), free(dep);
+    fx_frame *f = pair_frame(ctx), *o = NULL;
+    fx_stack *s = et_stack(ctx, "ssr_mirror");
+    CHECK_OK(ctx, fx_stack_set_mask_json(s, 0, "{\"material_index\": 1}"));
+    CHECK_OK(ctx, fx_stack_set_quality(s, FX_QUALITY_REFERENCE));
+    fx_stack_set_debug_outputs(s, 1);
+    CHECK_OK(ctx, add_view_window(ctx, f, name, pa, plane_a, ", \"window\": [4, 2, 64, 32]"));
+    CHECK_OK(ctx, fx_stack_run(s, f, &o));
+    float *pl = NULL;
+    int c = 0, wrong = 0;
+    CHECK(o && fx_frame_pass(o, "fx0_ssr_mirror_planar", &pl, &c) == FX_OK);
+    for (int y = 0; pl && y < H; y++)
+        for (int x = 0; x < W / 2; x++)
+            wrong += pl[(size_t)y * W + x] != ((x >= 4 && x <= 27 && y >= 2 && y <= 29) ? 1.0f : 0.0f);
+    printf("a view cropped to columns 4-27, rows 2-29: %d pixels wrongly looked up\n", wrong);
+    CHECK(wrong == 0);
+    fx_frame_free(o);
+    o = NULL;
+    /* the file does not fit: 4 + 24 > 27 */
+    CHECK_OK(ctx, add_view_window(ctx, f, name, pa, plane_a, ", \"window\": [4, 2, 27, 32]"));
+    fx_context_clear_warnings(ctx);
+    CHECK_OK(ctx, fx_stack_run(s, f, &o));
+    int warned = 0;
+    for (int k = 0; k < fx_context_warning_count(ctx); k++)
+        warned += tu_contains(fx_context_warning(ctx, k), "no planar mirror view") &&
+                  tu_contains(fx_context_warning(ctx, k), "do not fit its \"window\" of 27x32");
+    CHECK(warned == 1);
+    /* a window of fractions: refused with the sidecar */
+    CHECK(add_view_window(ctx, f, name, pa, plane_a, ", \"window\": [4.5, 2, 64, 32]") == FX_ERR_BAD_RECIPE &&
+          tu_contains(fx_context_error(ctx), "\"window\" must be 4 whole numbers"));
+    fx_frame_free(o), fx_frame_free(f);
+    fx_stack_free(s);
+}
+
 int main(void)
 {
     fx_context *ctx = NULL;
@@ -299,6 +359,7 @@ int main(void)
     fx_free(req);
     test_absent_view(ctx, name);
     test_behind_plane(ctx, name, plane_a);
+    test_cropped_view(ctx, name, plane_a);
     snprintf(name2, sizeof name2, "%s#2", name);
     snprintf(name3, sizeof name3, "%s#3", name);
 

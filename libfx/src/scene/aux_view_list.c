@@ -11,7 +11,7 @@
 
 static const char *const view_keys[] = {"name", "path", "world_to_camera", "projection",
                                         "clip_start", "clip_end", "orthographic", "kind", "signature", "panorama", "mask", "plane",
-                                        "absent"};
+                                        "absent", "window"};
 
 fx_result fx_aux_views_check(fx_context *ctx, const cJSON *list)
 {
@@ -50,7 +50,7 @@ fx_result fx_aux_views_check(fx_context *ctx, const cJSON *list)
             if (!known)
                 return fx_fail(ctx, FX_ERR_BAD_RECIPE,
                                "sidecar: aux_views[%d] ('%s'): unknown key \"%s\" (known: name, path, world_to_camera, "
-                               "projection, clip_start, clip_end, orthographic, kind, signature, panorama, mask, plane, absent)",
+                               "projection, clip_start, clip_end, orthographic, kind, signature, panorama, mask, plane, absent, window)",
                                i, name->valuestring, item->string);
         }
         const cJSON *pano = cJSON_GetObjectItemCaseSensitive(v, "panorama");
@@ -67,6 +67,18 @@ fx_result fx_aux_views_check(fx_context *ctx, const cJSON *list)
             return fx_fail(ctx, FX_ERR_BAD_RECIPE,
                            "sidecar: aux_views[%d] ('%s'): \"plane\" must be 4 finite numbers [nx, ny, nz, d] "
                            "(the world plane n . x = d)", i, name->valuestring);
+        const cJSON *win = cJSON_GetObjectItemCaseSensitive(v, "window");
+        int win_ok = !win || (cJSON_IsArray(win) && cJSON_GetArraySize(win) == 4);
+        for (int k = 0; win && win_ok && k < 4; k++) {
+            const cJSON *e = cJSON_GetArrayItem(win, k);
+            win_ok = cJSON_IsNumber(e) && e->valuedouble == (double)(int)e->valuedouble && e->valuedouble >= (k < 2 ? 0 : 1) &&
+                     e->valuedouble <= 1048576;
+        }
+        if (!win_ok)
+            return fx_fail(ctx, FX_ERR_BAD_RECIPE,
+                           "sidecar: aux_views[%d] ('%s'): \"window\" must be 4 whole numbers [x0, y0, width, height] "
+                           "(x0, y0 >= 0: where the file's pixels sit in a width x height view)",
+                           i, name->valuestring);
         fx_camera cam;
         char err[256];
         if (!fx_camera_parse(v, 1, &cam, err, sizeof err))

@@ -154,6 +154,25 @@ static fx_result read_whole(fx_context *ctx, fx_aux_view *av, const char *name, 
     return FX_OK;
 }
 
+/* A view rendered cropped to a region ("window": [x0, y0, W, H]: its pixels are columns
+ * x0.. and rows y0.. (top down) of a W x H view, a planar view over its mirror's region):
+ * the file's pixels become the data window inside that display window, so the camera maps
+ * world points to the file's pixels (math/camera.h). */
+static fx_result place_window(fx_context *ctx, fx_aux_view *av, const int window[4], const char *name,
+                              const char *where)
+{
+    const int *dw = av->frame->data_window, *dp = av->frame->display_window;
+    const int w = av->width, h = av->height;
+    if (dw[0] != dp[0] || dw[1] != dp[1] || dw[2] != dp[2] || dw[3] != dp[3] || window[0] + w > window[2] ||
+        window[1] + h > window[3])
+        return fx_fail(ctx, FX_ERR_BAD_FILE,
+                       "%s: aux view '%s' (%s): its %dx%d pixels at (%d, %d) do not fit its \"window\" of %dx%d", where,
+                       name, av->path, w, h, window[0], window[1], window[2], window[3]);
+    const int data[4] = { window[0], window[1], window[0] + w - 1, window[1] + h - 1 };
+    const int display[4] = { 0, 0, window[2] - 1, window[3] - 1 };
+    return fx_frame_set_windows(av->frame, data, display);
+}
+
 /* fx_aux_view_load; with rows (a light view's map built row by row), the Depth pass is
  * opened to stream when the file allows it (*rows set, the view's frame without passes). */
 static fx_result load(const fx_frame *f, const char *name, const char *where, fx_aux_view **out,
@@ -219,6 +238,10 @@ static fx_result load(const fx_frame *f, const char *name, const char *where, fx
         for (int k = 0; av->has_plane && k < 4; k++)
             av->plane[k] /= n;
     }
+    int window[4] = { 0, 0, 0, 0 }; /* "window": [x0, y0, W, H], or W 0 */
+    const cJSON *win = cJSON_GetObjectItemCaseSensitive(found, "window");
+    for (int k = 0; cJSON_IsArray(win) && k < 4; k++)
+        window[k] = (int)cJSON_GetArrayItem(win, k)->valuedouble;
     cJSON_Delete(list);
     fx_result r = FX_OK;
     if (rows && !av->panorama) {
@@ -245,7 +268,13 @@ static fx_result load(const fx_frame *f, const char *name, const char *where, fx
     } else if (!rows || !*rows) {
         r = read_whole(ctx, av, name, where);
     }
+    if (!r && window[2] > 0)
+        r = place_window(ctx, av, window, name, where);
     if (r) {
+        if (rows && *rows) {
+            fx_exr_rows_close(*rows);
+            *rows = NULL;
+        }
         fx_aux_view_free(av);
         return r;
     }
