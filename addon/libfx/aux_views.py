@@ -63,6 +63,7 @@ import hashlib
 import json
 import math
 import os
+import struct
 import time
 
 import bpy
@@ -574,7 +575,7 @@ def _render_probe(scene, spec, objs, path, sky=True):
         r.engine = "CYCLES"
         r.resolution_x, r.resolution_y, r.resolution_percentage = spec["width"], spec["height"], 100
         if spec.get("border"):   # a planar view: only the mirror's region is looked up
-            r.use_border, r.use_crop_to_border = True, False
+            r.use_border, r.use_crop_to_border = True, bool(spec.get("crop"))
             r.border_min_x, r.border_min_y, r.border_max_x, r.border_max_y = spec["border"]
         r.film_transparent = False
         r.use_compositing = True
@@ -594,6 +595,12 @@ def _render_probe(scene, spec, objs, path, sky=True):
         vl.use_pass_z = True
         _render_view(scene, aux, path, [("Image", "Combined"), ("Depth", "Depth")],
                      "the %s render '%s'" % (spec["kind"], spec["name"]), layer_passes)
+        if spec.get("border") and spec.get("crop"):
+            got = _exr_size(path)
+            if list(got) != spec["crop"][2:]:
+                os.remove(path)
+                raise RuntimeError("the render cropped to its border is %dx%d, not the %dx%d of its window %s"
+                                   % (got[0], got[1], spec["crop"][2], spec["crop"][3], spec["window"]))
     finally:
         for ob in hidden:
             ob.visible_camera = True
@@ -707,6 +714,43 @@ def planar_border(objs, world_to_camera, proj, width, height):
     return box
 
 
+def planar_window(border, width, height):
+    """The render border `border` (planar_border) widened to whole pixels: (the border to
+    give Cycles, [x0, y0, width, height]: the columns x0.. and rows y0.. (top down) of the
+    width x height view that the render cropped to it holds, the sidecar's "window"). Each
+    edge sits a quarter pixel inside its pixel, so Blender's border-to-pixel conversion
+    gives that pixel whether it truncates or rounds; _render_probe checks the size."""
+    x0, x1 = int(math.floor(border[0] * width)), min(width, int(math.ceil(border[2] * width)))
+    y0, y1 = int(math.floor(border[1] * height)), min(height, int(math.ceil(border[3] * height)))
+
+    def edge(p, n):
+        return 1.0 if p >= n else (p + 0.25) / n
+    return ([edge(x0, width), edge(y0, height), edge(x1, width), edge(y1, height)],
+            [x0, height - y1, x1 - x0, y1 - y0], [x0, height - y1, width, height])
+
+
+def _exr_size(path):
+    """(width, height) of an EXR's data window, from its header (Blender writes one part)."""
+    with open(path, "rb") as f:
+        head = f.read(1 << 16)
+    if head[:4] != b"\x76\x2f\x31\x01":
+        raise ValueError("%s is not an OpenEXR file" % path)
+    pos = 8
+    while True:
+        end = head.index(b"\0", pos)
+        name, pos = head[pos:end], end + 1
+        if not name:
+            raise ValueError("%s has no dataWindow" % path)
+        end = head.index(b"\0", pos)
+        pos = end + 1
+        size = struct.unpack_from("<i", head, pos)[0]
+        pos += 4
+        if name == b"dataWindow":
+            x0, y0, x1, y1 = struct.unpack_from("<4i", head, pos)
+            return x1 - x0 + 1, y1 - y0 + 1
+        pos += size
+
+
 def planar_samples(scene, view):
     """A planar view's samples per pixel: the need's samples_scale (ssr_mirror's
     planar_samples: 2 at final, 4 at reference) times the render's, or the scene's
@@ -755,10 +799,14 @@ def planar_specs(scene, view, mirrors=()):
                 if all(n.dot(p) - d < -1e-4 for p in corners):
                     behind.append(ob.name)
         border = planar_border([bpy.data.objects[name] for name in on_plane], mw.inverted(), Matrix(proj), rw, rh)
+        crop = window = None
+        if border:   # rendered cropped to whole pixels: the file holds the region only
+            border, crop, window = planar_window(border, rw, rh)
         specs.append({
             "name": planar_view_name(view["name"], k), "kind": "planar", "width": rw, "height": rh,
             "samples": samples, "matrix_world": [list(row) for row in mw],
             "world_to_camera": [list(row) for row in mw.inverted()], "projection": proj, "border": border,
+            "crop": crop, "window": window,
             "clip_start": float(cam.data.clip_start), "clip_end": float(cam.data.clip_end),
             "hidden": on_plane, "mirrors": sorted({o.name for o in objs} | set(mirrors)), "behind": sorted(behind),
             "plane": [n.x, n.y, n.z, d],
@@ -791,7 +839,8 @@ def _prepare_probe(scene, spec, path, meta_path):
     if spec["kind"] == "planar":
         return {"name": spec["name"], "path": path, "world_to_camera": spec["world_to_camera"],
                 "projection": spec["projection"], "clip_start": spec["clip_start"], "clip_end": spec["clip_end"],
-                "orthographic": False, "kind": "planar", "plane": spec["plane"], "signature": sig}
+                "orthographic": False, "kind": "planar", "plane": spec["plane"], "signature": sig,
+                **({"window": spec["window"]} if spec.get("window") else {})}
     ident = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
     return {"name": spec["name"], "path": path, "world_to_camera": spec["world_to_camera"],
             "projection": ident, "clip_start": 0.0, "clip_end": spec["clip_end"], "orthographic": False,
