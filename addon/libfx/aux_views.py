@@ -45,7 +45,8 @@ alpha threshold exactly as in the main render and cast leaf-shaped shadows.
   in that plane (ssr_mirror's ``planar_view``: the ``final`` and ``reference`` presets), at the
   render's size and samples times the need's samples_scale (ssr_mirror's planar_samples:
   2 at final, 4 at reference; or ``libfx_planar_samples``), only over the
-  plane's mirror (a render border: planar_border), colour + Depth,
+  plane's mirror (a render border, the file cropped to it: planar_border, planar_window;
+  the entry's "window" places it in the view), colour + Depth,
   with every mirror entry's objects as perfect mirrors (the other plane's mirror reflects
   the room again; stack_mirrors) and the plane's own mirror objects and the objects
   wholly behind the plane hidden from the camera (they still cast shadows and bounce
@@ -692,8 +693,9 @@ def planar_border(objs, world_to_camera, proj, width, height):
     from the bottom left, Blender's render border) around the mirror objects' bounding
     boxes as the view's camera sees them, PLANAR_BORDER_PX wider each way; None (the whole
     view) when a corner is not in front of that camera or the box covers most of the view.
-    The view renders only this region (Cycles' border, not cropped; its pixels are the
-    whole view's): on the mirror truth scenes 1.1-3.7x faster than the whole view."""
+    The view renders only this region (Cycles' border, cropped to it: planar_window; its
+    pixels are the whole view's): on the mirror truth scenes 1.1-3.7x faster than the
+    whole view."""
     xs, ys = [], []
     for ob in objs:
         for c in ob.bound_box:
