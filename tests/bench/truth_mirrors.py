@@ -32,8 +32,8 @@ The two truths render with --truth-spp samples (default 64: their seed-to-seed n
 the floor no method can go under; 16 spp put it at 0.033-0.045, a fifth of the input's
 error). The input's batch render also renders the reflection probe the `final` preset
 asks for (issue 14); its time, from the add-on's log, is reported apart. Each preset
-runs as shipped (draft/preview: screen space only; final: + probe + planar view at the
-input's samples; reference: + probe + planar view at 4x, from an input rendered at
+runs as shipped (draft/preview: screen space only; final: + probe + planar view at 2x
+the input's samples; reference: + probe + planar view at 4x, from an input rendered at
 reference) and with the other fallback ("<preset>, no probe": fallback texture, the
 planar view stays at final and reference; "<preset> + probe").
 """
@@ -158,8 +158,8 @@ def main():
         p = os.path.join(a.out, "m_%s_" % v)
         # the input through the add-on with the stack at `final` and again at `reference`,
         # so that each renders the views its preset asks for (final: the probe and the
-        # planar view at the render's samples; reference: the probe and the planar view at
-        # 4x); draft, preview and final run on the first passes and sidecar, reference on
+        # planar view at 2x the render's samples; reference: the probe and the planar view
+        # at 4x); draft, preview and final run on the first passes and sidecar, reference on
         # the second (the same seed: the same Combined)
         ins = {}
         for q in ("final", "reference"):

@@ -59,8 +59,9 @@ def processed(stdout):
 
 def blender_saves(stdout):
     """The images Blender's render wrote ("Saved: '...'"; 5.x prefixes a time and a
-    category), leaving out libfx's passes files (3.4 does not print them)."""
-    return [p for p in re.findall(r"Saved: '([^']*)'", stdout) if "libfx_passes" not in p]
+    category), leaving out libfx's passes files and its aux views (the planar views follow
+    the camera, so a frame rendered again renders them again; 3.4 prints neither)."""
+    return [p for p in re.findall(r"Saved: '([^']*)'", stdout) if "libfx_passes" not in p and "libfx_aux_" not in p]
 
 
 def pixels(path):

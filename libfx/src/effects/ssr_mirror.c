@@ -1588,14 +1588,6 @@ static fx_result ssr_probe_load(const fx_effect_run *run, ssr_job *j, const ssr_
             snprintf(name, sizeof name, FX_AUX_PROBE "%s", run->mask_key ? run->mask_key : "");
         else
             snprintf(name, sizeof name, FX_AUX_PROBE "%s#%d", run->mask_key ? run->mask_key : "", k + 1);
-        /* not rendered on purpose (the add-on found the mirror not flat): the trace and the
-         * fallback serve, and nothing is wrong */
-        int absent = fx_aux_view_absent(run->frame, name);
-        if (absent < 0)
-            return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory reading the frame's aux views",
-                           run->where);
-        if (absent)
-            break;
         if (k > 0) {
             int has = fx_aux_view_has(run->frame, name);
             if (has < 0)
@@ -1625,8 +1617,9 @@ static fx_result ssr_probe_load(const fx_effect_run *run, ssr_job *j, const ssr_
 
 /* Process stage 0 (planar_view): the entry's mirrored-camera views, one per plane
  * ("planar:<key>", then "planar:<key>#2", ... while the frame has them), as j->planar.
- * A missing or unusable view (not rendered: a curved mirror, or failed): a warning, the
- * trace serves its pixels. pm[] receives the views, from the context's cache as the probe
+ * A view listed as absent (the add-on's word for a curved mirror): none, silently; a
+ * missing or unusable one (a CLI run without it, a failed render): a warning. The trace
+ * serves their pixels. pm[] receives the views, from the context's cache as the probe
  * (released by the caller). */
 static fx_result ssr_planar_load(const fx_effect_run *run, ssr_job *j, fx_aux_map pm[PLANAR_VIEWS_MAX])
 {
