@@ -550,9 +550,7 @@ def _render_probe(scene, spec, objs, path, sky=True):
         # reflects the other one (and what that one reflects), the opposite wall's mirrors
         # reflect the room; a flat or convex mirror never looks up its own direction; the
         # room is lit with the mirrors in it, as in Cycles
-        listed = spec.get("mirrors")
-        shown = (set(listed) if isinstance(listed, list) else set()) | \
-            (set(spec["hidden"]) if spec["kind"] == "probe" else set())
+        shown = set(spec.get("mirrors") or ()) | (set(spec["hidden"]) if spec["kind"] == "probe" else set())
         for name in sorted(shown):
             ob = bpy.data.objects.get(name)
             if ob is None:
@@ -575,8 +573,8 @@ def _render_probe(scene, spec, objs, path, sky=True):
         r = aux.render
         r.engine = "CYCLES"
         r.resolution_x, r.resolution_y, r.resolution_percentage = spec["width"], spec["height"], 100
-        if spec.get("border"):   # a planar view: only the mirror's region is looked up
-            r.use_border, r.use_crop_to_border = True, bool(spec.get("crop"))
+        if spec.get("border"):   # a planar view: only the mirror's region is looked up, cropped
+            r.use_border, r.use_crop_to_border = True, True
             r.border_min_x, r.border_min_y, r.border_max_x, r.border_max_y = spec["border"]
         r.film_transparent = False
         r.use_compositing = True
@@ -596,12 +594,12 @@ def _render_probe(scene, spec, objs, path, sky=True):
         vl.use_pass_z = True
         _render_view(scene, aux, path, [("Image", "Combined"), ("Depth", "Depth")],
                      "the %s render '%s'" % (spec["kind"], spec["name"]), layer_passes)
-        if spec.get("border") and spec.get("crop"):
+        if spec.get("border"):
             got = _exr_size(path)
             if list(got) != spec["crop"][2:]:
                 os.remove(path)
-                raise RuntimeError("the render cropped to its border is %dx%d, not the %dx%d of its window %s"
-                                   % (got[0], got[1], spec["crop"][2], spec["crop"][3], spec["window"]))
+                raise RuntimeError("the render cropped to its border is %dx%d, not the %dx%d at %s it was set to"
+                                   % (got[0], got[1], spec["crop"][2], spec["crop"][3], spec["crop"][:2]))
     finally:
         for ob in hidden:
             ob.visible_camera = True
@@ -718,17 +716,17 @@ def planar_border(objs, world_to_camera, proj, width, height):
 
 def planar_window(border, width, height):
     """The render border `border` (planar_border) widened to whole pixels: (the border to
-    give Cycles, [x0, y0, width, height]: the columns x0.. and rows y0.. (top down) of the
-    width x height view that the render cropped to it holds, the sidecar's "window"). Each
-    edge sits a quarter pixel inside its pixel, so Blender's border-to-pixel conversion
-    gives that pixel whether it truncates or rounds; _render_probe checks the size."""
+    give Cycles, [x0, y0, w, h]: the w x h pixels from column x0 and row y0 (top down) of
+    the width x height view that the render cropped to it holds). Each edge sits a quarter
+    pixel inside its pixel, so Blender's border-to-pixel conversion gives that pixel whether
+    it truncates or rounds; _render_probe checks the size."""
     x0, x1 = int(math.floor(border[0] * width)), min(width, int(math.ceil(border[2] * width)))
     y0, y1 = int(math.floor(border[1] * height)), min(height, int(math.ceil(border[3] * height)))
 
     def edge(p, n):
         return 1.0 if p >= n else (p + 0.25) / n
     return ([edge(x0, width), edge(y0, height), edge(x1, width), edge(y1, height)],
-            [x0, height - y1, x1 - x0, y1 - y0], [x0, height - y1, width, height])
+            [x0, height - y1, x1 - x0, y1 - y0])
 
 
 def _exr_size(path):
@@ -801,14 +799,14 @@ def planar_specs(scene, view, mirrors=()):
                 if all(n.dot(p) - d < -1e-4 for p in corners):
                     behind.append(ob.name)
         border = planar_border([bpy.data.objects[name] for name in on_plane], mw.inverted(), Matrix(proj), rw, rh)
-        crop = window = None
+        crop = None
         if border:   # rendered cropped to whole pixels: the file holds the region only
-            border, crop, window = planar_window(border, rw, rh)
+            border, crop = planar_window(border, rw, rh)
         specs.append({
             "name": planar_view_name(view["name"], k), "kind": "planar", "width": rw, "height": rh,
             "samples": samples, "matrix_world": [list(row) for row in mw],
             "world_to_camera": [list(row) for row in mw.inverted()], "projection": proj, "border": border,
-            "crop": crop, "window": window,
+            "crop": crop,
             "clip_start": float(cam.data.clip_start), "clip_end": float(cam.data.clip_end),
             "hidden": on_plane, "mirrors": sorted({o.name for o in objs} | set(mirrors)), "behind": sorted(behind),
             "plane": [n.x, n.y, n.z, d],
@@ -842,7 +840,7 @@ def _prepare_probe(scene, spec, path, meta_path):
         return {"name": spec["name"], "path": path, "world_to_camera": spec["world_to_camera"],
                 "projection": spec["projection"], "clip_start": spec["clip_start"], "clip_end": spec["clip_end"],
                 "orthographic": False, "kind": "planar", "plane": spec["plane"], "signature": sig,
-                **({"window": spec["window"]} if spec.get("window") else {})}
+                **({"window": spec["crop"][:2] + [spec["width"], spec["height"]]} if spec.get("border") else {})}
     ident = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
     return {"name": spec["name"], "path": path, "world_to_camera": spec["world_to_camera"],
             "projection": ident, "clip_start": 0.0, "clip_end": spec["clip_end"], "orthographic": False,

@@ -29,6 +29,13 @@ def test_mirror_room_ssr(blender, library, tmp_path):
                                             "Mirror_Grayscale", "Mirror_Low", "Mirror_Sepia"], planar
     assert all(p[1:] == ("320", "180", "8") for p in planar), planar
     aux = T.read_json(tmp_path / "mr_libfx.0001.camera.json")["aux_views"]
+    # each planar view file is its mirror's region, placed in the 320x180 view by its window
+    for v in aux:
+        if v["name"].startswith("planar:") and "absent" not in v:
+            x0, y0, w, h = v["window"]
+            exr = T.Exr(v["path"])
+            assert (w, h) == (320, 180) and x0 + exr.width <= w and y0 + exr.height <= h, (v["window"], exr.width)
+            assert exr.width * exr.height < 0.5 * w * h, (v["name"], exr.width, exr.height)
     absent = [v for v in aux if "absent" in v]
     assert len(absent) == 2 and all("not flat" in v["absent"] and v["name"].startswith("planar:") for v in absent), \
         absent

@@ -155,8 +155,13 @@ static void run_check(fx_context *ctx, fx_stack *s, const fx_frame *f, float a, 
  * draft and preview, at twice the render's samples at final (samples_scale 2), 4x at reference;
  * an explicit planar_samples wins; a glossy mirror reads none. A recipe of params_version 2
  * that turned planar_view on itself rendered it at 4x: it keeps 4 (ssr_migrate). */
-static void check_need(fx_context *ctx, const char *recipe, const char *want)
+static void check_need(fx_context *ctx, const char *quality, int version, const char *params, const char *want)
 {
+    char recipe[400];
+    snprintf(recipe, sizeof recipe,
+             "{\"version\": 1, \"quality\": \"%s\", \"effects\": [{\"effect\": \"ssr_mirror\", "
+             "\"params_version\": %d, \"params\": %s, \"mask\": {\"material\": \"M\"}}]}",
+             quality, version, params);
     fx_stack *s = NULL;
     char *req = NULL;
     CHECK_OK(ctx, fx_stack_new(ctx, &s));
@@ -180,27 +185,12 @@ static void test_planar_needs(fx_context *ctx)
 {
     static const char *const q[] = { "draft", "preview", "final", "reference" };
     static const char *const want[] = { "none", "none", "2", "4" };
-    char r[400];
-    for (int k = 0; k < 4; k++) {
-        snprintf(r, sizeof r,
-                 "{\"version\": 1, \"quality\": \"%s\", \"effects\": [{\"effect\": \"ssr_mirror\", "
-                 "\"params_version\": 3, \"mask\": {\"material\": \"M\"}}]}",
-                 q[k]);
-        check_need(ctx, r, want[k]);
-    }
-    const char *tail = "\"mask\": {\"material\": \"M\"}}]}";
-    snprintf(r, sizeof r, "{\"version\": 1, \"quality\": \"final\", \"effects\": [{\"effect\": \"ssr_mirror\", "
-                          "\"params_version\": 3, \"params\": {\"planar_samples\": 3}, %s", tail);
-    check_need(ctx, r, "3");
-    snprintf(r, sizeof r, "{\"version\": 1, \"quality\": \"final\", \"effects\": [{\"effect\": \"ssr_mirror\", "
-                          "\"params_version\": 3, \"params\": {\"glossiness\": 2}, %s", tail);
-    check_need(ctx, r, "none");
-    snprintf(r, sizeof r, "{\"version\": 1, \"quality\": \"preview\", \"effects\": [{\"effect\": \"ssr_mirror\", "
-                          "\"params_version\": 2, \"params\": {\"planar_view\": true}, %s", tail);
-    check_need(ctx, r, "4");
-    snprintf(r, sizeof r, "{\"version\": 1, \"quality\": \"final\", \"effects\": [{\"effect\": \"ssr_mirror\", "
-                          "\"params_version\": 2, %s", tail);
-    check_need(ctx, r, "2");
+    for (int k = 0; k < 4; k++)
+        check_need(ctx, q[k], 3, "{}", want[k]);
+    check_need(ctx, "final", 3, "{\"planar_samples\": 3}", "3");
+    check_need(ctx, "final", 3, "{\"glossiness\": 2}", "none");
+    check_need(ctx, "preview", 2, "{\"planar_view\": true}", "4");
+    check_need(ctx, "final", 2, "{}", "2");
 }
 
 /* A planar view listed as absent (the add-on found the mirror not flat): the run takes

@@ -1629,22 +1629,14 @@ static fx_result ssr_planar_load(const fx_effect_run *run, ssr_job *j, fx_aux_ma
             snprintf(name, sizeof name, FX_AUX_PLANAR "%s", run->mask_key ? run->mask_key : "");
         else
             snprintf(name, sizeof name, FX_AUX_PLANAR "%s#%d", run->mask_key ? run->mask_key : "", k + 1);
-        /* not rendered on purpose (the add-on found the mirror not flat): the trace and the
-         * fallback serve, and nothing is wrong */
-        int absent = fx_aux_view_absent(run->frame, name);
-        if (absent < 0)
+        int has = fx_aux_view_has(run->frame, name);
+        if (has < 0)
             return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory reading the frame's aux views",
                            run->where);
-        if (absent)
+        /* not rendered on purpose (the add-on found the mirror not flat): the trace and the
+         * fallback serve, and nothing is wrong; a later plane not listed: no more planes */
+        if (has == FX_AUX_ABSENT || (k > 0 && !has))
             break;
-        if (k > 0) {
-            int has = fx_aux_view_has(run->frame, name);
-            if (has < 0)
-                return fx_fail(run->ctx, FX_ERR_OUT_OF_MEMORY, "%s: out of memory reading the frame's aux views",
-                               run->where);
-            if (!has)
-                break;
-        }
         fx_result r = fx_aux_view_acquire(run->frame, name, run->where, &pm[k]);
         if (r == FX_ERR_OUT_OF_MEMORY)
             return r;

@@ -1519,7 +1519,7 @@ static void auto_cell(const fx_effect_run *run, const caustics_params *p, double
 {
     char name[FX_NAME_MAX];
     snprintf(name, sizeof name, "water:%.80s", p->water);
-    if (fx_aux_view_has(run->frame, name) != 1) {
+    if (fx_aux_view_has(run->frame, name) != FX_AUX_LISTED) {
         fx_warn(run->ctx, "%s: cell_scale auto: no aux view '%s' (the water's view from the Sun): the manual cell "
                 "(tile_size / sqrt(points)) is used", run->where, name);
         return;

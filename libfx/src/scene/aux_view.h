@@ -66,13 +66,12 @@ void fx_aux_view_free(fx_aux_view *v);
 struct fx_exr_rows;
 fx_result fx_aux_view_open_rows(const fx_frame *f, const char *name, const char *where, fx_aux_view **out,
                                 struct fx_exr_rows **rows);
-/* 1 when frame f lists a view named exactly `name` (rendered or absent), 0 when not, -1
- * out of memory. */
+/* Whether frame f lists a view named exactly `name`: FX_AUX_LISTED (with its file),
+ * FX_AUX_ABSENT ({"name", "absent": reason}: the add-on was asked for it and did not render
+ * it on purpose, a planar view of a mirror that is not flat; loading it fails with that
+ * reason), 0 not at all, -1 out of memory. */
+enum { FX_AUX_LISTED = 1, FX_AUX_ABSENT = 2 };
 int fx_aux_view_has(const fx_frame *f, const char *name);
-/* 1 when frame f lists `name` as {"name", "absent": reason}: the add-on was asked for it
- * and did not render it on purpose (a planar view of a mirror that is not flat); loading
- * it fails with that reason. 0 otherwise, -1 out of memory. */
-int fx_aux_view_absent(const fx_frame *f, const char *name);
 /* The frame's entry for view `name` (matched as fx_aux_view_load does) as unformatted JSON,
  * and its path; NULL with the error recorded in *res when there is none. Freed with
  * cJSON_free. */

@@ -71,8 +71,9 @@ fx_result fx_aux_views_check(fx_context *ctx, const cJSON *list)
         int win_ok = !win || (cJSON_IsArray(win) && cJSON_GetArraySize(win) == 4);
         for (int k = 0; win && win_ok && k < 4; k++) {
             const cJSON *e = cJSON_GetArrayItem(win, k);
-            win_ok = cJSON_IsNumber(e) && e->valuedouble == (double)(int)e->valuedouble && e->valuedouble >= (k < 2 ? 0 : 1) &&
-                     e->valuedouble <= 1048576;
+            /* the range first: (int) of a double out of range is undefined */
+            win_ok = cJSON_IsNumber(e) && e->valuedouble >= (k < 2 ? 0 : 1) && e->valuedouble <= 1048576 &&
+                     floor(e->valuedouble) == e->valuedouble;
         }
         if (!win_ok)
             return fx_fail(ctx, FX_ERR_BAD_RECIPE,

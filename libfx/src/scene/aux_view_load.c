@@ -85,8 +85,7 @@ char *fx_aux_view_entry(const fx_frame *f, const char *name, const char *where, 
     return out;
 }
 
-/* 1 when the frame lists `name` as one with a path, 2 as "absent", 0 not at all, -1 out of memory. */
-static int listed(const fx_frame *f, const char *name)
+int fx_aux_view_has(const fx_frame *f, const char *name)
 {
     const char *text = fx_frame_meta(f, FX_AUX_META_KEY);
     unsigned long failures = fx_mem_failure_count();
@@ -98,22 +97,10 @@ static int listed(const fx_frame *f, const char *name)
     cJSON_ArrayForEach(v, list) {
         const cJSON *n = cJSON_GetObjectItemCaseSensitive(v, "name");
         if (!found && cJSON_IsString(n) && strcmp(n->valuestring, name) == 0)
-            found = cJSON_GetObjectItemCaseSensitive(v, "absent") ? 2 : 1;
+            found = cJSON_GetObjectItemCaseSensitive(v, "absent") ? FX_AUX_ABSENT : FX_AUX_LISTED;
     }
     cJSON_Delete(list);
     return found;
-}
-
-int fx_aux_view_has(const fx_frame *f, const char *name)
-{
-    int k = listed(f, name);
-    return k > 0 ? 1 : k;
-}
-
-int fx_aux_view_absent(const fx_frame *f, const char *name)
-{
-    int k = listed(f, name);
-    return k < 0 ? -1 : k == 2;
 }
 
 /* The view's EXR read whole: its Depth pass, and a probe's colour and sky made finite.
